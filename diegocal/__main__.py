@@ -1,0 +1,3 @@
+from diegocal.cli import main
+
+main()

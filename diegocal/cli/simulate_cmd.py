@@ -1,0 +1,1 @@
+"""CLI: `diegocal simulate kinematics` (dynamics and pneumatics attach from their own modules)."""

@@ -1,0 +1,43 @@
+"""One error family for the whole library.
+
+The library raises these and never prints or exits; the CLI alone turns them into one line
+and a non-zero exit. Each subclasses a built-in so callers may catch the usual type too.
+"""
+
+
+class DiegocalError(Exception):
+    """Base of every error diegocal raises on purpose."""
+
+
+class InputFileError(DiegocalError, FileNotFoundError):
+    """A file the user named is missing or cannot be read."""
+
+
+class LogFormatError(DiegocalError, ValueError):
+    """A log file does not follow the diegocal log format (DESIGN.md, version 1)."""
+
+
+class MissingStreamError(DiegocalError, KeyError):
+    """A command needs a stream the log does not have."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class RobotConfigError(DiegocalError, ValueError):
+    """A robot directory (URDF + sensors.yaml) is invalid."""
+
+
+class UnknownNameError(DiegocalError, KeyError):
+    """A sensor, joint, marker or chamber name is not known to the robot."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+class NumericalError(DiegocalError, ArithmeticError):
+    """A numerical step failed (singular matrix, failed Cholesky); the message says what to change."""
+
+
+class FitError(DiegocalError, RuntimeError):
+    """A fit cannot proceed with the given data (too few samples, unobservable parameters)."""

@@ -1,0 +1,301 @@
+"""Reading and writing logs (HDF5, CSV) and YAML parameter files; the only code that opens files.
+
+Every write is atomic: content goes to a temporary file beside the target, which is renamed
+over it only once complete, so a crash never leaves a half-written output (DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import os
+import tempfile
+from pathlib import Path
+
+import h5py
+import numpy as np
+import yaml
+
+from diegocal.errors import InputFileError, LogFormatError
+from diegocal.io.log import FORMAT, VECTOR_STREAMS, VERSION, Log, Stream, Truth
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+CSV_HEADER_PREFIX = "# diegocal-log"
+AXES = ("x", "y", "z")
+
+
+# ----------------------------------------------------------------------------- atomic writes
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike):
+    """Yield a temporary path beside ``path``; rename it over ``path`` on success only."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; outputs should look like any other file
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def write_text(path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+# ----------------------------------------------------------------------------- YAML
+def _plain(obj):
+    """numpy scalars/arrays -> plain Python, recursively, so YAML stays readable."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def dump_yaml(data) -> str:
+    return yaml.safe_dump(_plain(data), sort_keys=False, default_flow_style=None, width=100)
+
+
+def save_yaml(data, path) -> None:
+    write_text(path, dump_yaml(data))
+
+
+def load_yaml(path) -> dict:
+    path = _existing(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise InputFileError(f"{path}: not valid YAML{where}") from None
+    if not isinstance(data, dict):
+        raise InputFileError(f"{path}: expected a YAML mapping at the top level")
+    return data
+
+
+# ----------------------------------------------------------------------------- logs
+def load_log(path) -> Log:
+    """Read a log from ``.h5`` or ``.csv``; one clear :class:`LogFormatError` when invalid."""
+    path = _existing(path)
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head == HDF5_SIGNATURE:
+        return _load_h5(path)
+    if path.suffix.lower() == ".csv":
+        return _load_csv(path)
+    raise LogFormatError(f"{path}: not a diegocal log (expected an HDF5 .h5 or a .csv file)")
+
+
+def save_log(log: Log, path) -> None:
+    """Write a log; the format follows the suffix (``.h5``/``.hdf5`` or ``.csv``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".h5", ".hdf5"):
+        with atomic_path(path) as tmp:
+            _save_h5(log, tmp)
+    elif suffix == ".csv":
+        with atomic_path(path) as tmp:
+            _save_csv(log, tmp)
+    else:
+        raise LogFormatError(f"{path}: unknown log suffix {suffix!r} (use .h5 or .csv)")
+
+
+def _existing(path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputFileError(f"{path}: is a directory, expected a file")
+    return path
+
+
+def _save_h5(log: Log, path: Path) -> None:
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["version"] = VERSION
+        if log.robot is not None:
+            f.attrs["robot"] = log.robot
+        if log.rate_hz is not None:
+            f.attrs["rate_hz"] = float(log.rate_hz)
+        f.create_dataset("time", data=log.time)
+        for name, stream in log.streams.items():
+            _write_stream(f.create_group(name), stream)
+        if log.truth is not None:
+            g = f.create_group("truth")
+            g.attrs["params"] = dump_yaml(log.truth.params)
+            g.attrs["effects"] = dump_yaml(log.truth.effects)
+            for name, stream in log.truth.signals.items():
+                _write_stream(g.create_group(name), stream)
+
+
+def _write_stream(group, stream: Stream) -> None:
+    group.create_dataset("names", data=np.array(stream.names, dtype=h5py.string_dtype()))
+    group.create_dataset("data", data=stream.data, compression="gzip", compression_opts=4, shuffle=True)
+
+
+def _read_stream(group, where: str) -> Stream:
+    if "names" not in group or "data" not in group:
+        raise LogFormatError(f"{where}: a stream group needs 'names' and 'data' datasets")
+    names = tuple(n.decode() if isinstance(n, bytes) else str(n) for n in group["names"][()])
+    data = np.asarray(group["data"][()])
+    if not np.issubdtype(data.dtype, np.number):
+        raise LogFormatError(f"{where}/data: expected numbers, got {data.dtype}")
+    return Stream(names, data.astype(np.float64, copy=False))
+
+
+def _load_h5(path: Path) -> Log:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
+    with f:
+        fmt = _attr_str(f.attrs.get("format"))
+        if fmt != FORMAT:
+            raise LogFormatError(f"{path}: format attribute is {fmt!r}, expected {FORMAT!r}")
+        version = f.attrs.get("version")
+        if version is None or int(version) != VERSION:
+            raise LogFormatError(f"{path}: log format version {version}, this diegocal reads version {VERSION}")
+        if "time" not in f:
+            raise LogFormatError(f"{path}: no /time dataset")
+        time = np.asarray(f["time"][()], dtype=np.float64)
+        streams = {}
+        truth = None
+        for key in f:
+            if key == "time":
+                continue
+            if key == "truth":
+                g = f["truth"]
+                signals = {k: _read_stream(g[k], f"{path}:/truth/{k}") for k in g}
+                truth = Truth(
+                    params=yaml.safe_load(_attr_str(g.attrs.get("params")) or "{}") or {},
+                    effects=yaml.safe_load(_attr_str(g.attrs.get("effects")) or "[]") or [],
+                    signals=signals,
+                )
+                continue
+            if not isinstance(f[key], h5py.Group):
+                raise LogFormatError(f"{path}: /{key} should be a stream group (names, data)")
+            streams[key] = _read_stream(f[key], f"{path}:/{key}")
+        robot = _attr_str(f.attrs.get("robot"))
+        rate = f.attrs.get("rate_hz")
+    try:
+        return Log(time=time, streams=streams, robot=robot or None,
+                   rate_hz=float(rate) if rate is not None else None, truth=truth)
+    except LogFormatError as exc:
+        raise LogFormatError(f"{path}: {exc}") from None
+
+
+def _attr_str(value) -> str | None:
+    if value is None:
+        return None
+    if isinstance(value, bytes):
+        return value.decode()
+    return str(value)
+
+
+# ----------------------------------------------------------------------------- CSV
+def _csv_header(log: Log) -> str:
+    fields = [f"version={VERSION}"]
+    if log.robot:
+        fields.append(f"robot={log.robot}")
+    if log.rate_hz is not None:
+        fields.append(f"rate_hz={log.rate_hz!r}")
+    return f"{CSV_HEADER_PREFIX} " + " ".join(fields)
+
+
+def _save_csv(log: Log, path: Path) -> None:
+    columns = ["time"]
+    blocks = [log.time[:, None]]
+    for name, stream in log.streams.items():
+        if name in VECTOR_STREAMS:
+            columns += [f"{name}.{n}.{a}" for n in stream.names for a in AXES]
+            blocks.append(stream.data.reshape(log.n_samples, -1))
+        else:
+            columns += [f"{name}.{n}" for n in stream.names]
+            blocks.append(stream.data)
+    table = np.hstack(blocks)
+    with open(path, "w") as fh:
+        fh.write(_csv_header(log) + "\n")
+        fh.write(",".join(columns) + "\n")
+        np.savetxt(fh, table, delimiter=",", fmt="%.17g")
+
+
+def _load_csv(path: Path) -> Log:
+    import pandas as pd
+
+    robot, rate = None, None
+    with open(path, errors="replace") as fh:
+        first = fh.readline().strip()
+    skip = 0
+    if first.startswith("#"):
+        skip = 1
+        if not first.startswith(CSV_HEADER_PREFIX):
+            raise LogFormatError(f"{path}: header comment is not '{CSV_HEADER_PREFIX} ...'")
+        meta = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX):].split() if "=" in f)
+        if meta.get("version", str(VERSION)) != str(VERSION):
+            raise LogFormatError(f"{path}: log format version {meta['version']}, this diegocal reads version {VERSION}")
+        robot = meta.get("robot")
+        rate = float(meta["rate_hz"]) if "rate_hz" in meta else None
+    try:
+        frame = pd.read_csv(path, skiprows=skip)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise LogFormatError(f"{path}: cannot parse CSV ({str(exc).splitlines()[0]})") from None
+    if "time" not in frame.columns:
+        raise LogFormatError(f"{path}: CSV has no 'time' column")
+    header = next(csv.reader([_nth_line(path, skip)]))
+    seen = set()
+    for col in header:
+        if col in seen:
+            raise LogFormatError(f"{path}: duplicate column {col!r}")
+        seen.add(col)
+    frame.columns = header
+    try:
+        table = frame.apply(pd.to_numeric, errors="raise").to_numpy(dtype=np.float64)
+    except (ValueError, TypeError):
+        raise LogFormatError(f"{path}: CSV holds non-numeric values") from None
+    columns = list(frame.columns)
+    time = table[:, 0]
+    order: dict[str, list[str]] = {}
+    index: dict[str, list[int]] = {}
+    for i, col in enumerate(columns[1:], start=1):
+        if "." not in col:
+            raise LogFormatError(f"{path}: column {col!r} is not '<stream>.<name>'")
+        stream, rest = col.split(".", 1)
+        if stream in VECTOR_STREAMS:
+            if rest[-2:] not in (".x", ".y", ".z"):
+                raise LogFormatError(f"{path}: column {col!r} should end in .x, .y or .z")
+            rest = rest[:-2]
+        order.setdefault(stream, [])
+        if not order[stream] or order[stream][-1] != rest or stream not in VECTOR_STREAMS:
+            order[stream].append(rest)
+        index.setdefault(stream, []).append(i)
+    streams = {}
+    for stream, names in order.items():
+        cols = table[:, index[stream]]
+        if stream in VECTOR_STREAMS:
+            if cols.shape[1] != 3 * len(names):
+                raise LogFormatError(f"{path}: stream '{stream}' needs x, y, z columns for every name")
+            cols = cols.reshape(len(time), len(names), 3)
+        streams[stream] = Stream(tuple(names), np.ascontiguousarray(cols))
+    try:
+        return Log(time=np.ascontiguousarray(time), streams=streams, robot=robot, rate_hz=rate)
+    except LogFormatError as exc:
+        raise LogFormatError(f"{path}: {exc}") from None
+
+
+def _nth_line(path: Path, n: int) -> str:
+    with open(path, errors="replace") as fh:
+        for i, line in enumerate(fh):
+            if i == n:
+                return line.rstrip("\n")
+    return ""

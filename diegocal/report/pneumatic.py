@@ -1,0 +1,1 @@
+"""Report section for pneumatic results (registers itself on import)."""

@@ -1,0 +1,47 @@
+"""Report sections: domain code registers how to recognise its result files and draw their pages.
+
+A section is ``(name, recognise, pages)``: ``recognise(path) -> bool`` says whether a result file
+(or directory) is this section's, ``pages(path, pdf, context)`` appends pages to an open
+:class:`matplotlib.backends.backend_pdf.PdfPages`. The report walks the results in the order the
+user gave them and uses the first section that recognises each.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class ReportContext:
+    """What every section may want to know: the robot directory, if the user named one."""
+
+    robot: Path | None = None
+
+
+@dataclass(frozen=True)
+class Section:
+    name: str
+    recognise: Callable[[Path], bool]
+    pages: Callable  # (path, pdf, context) -> None
+    describe: Callable[[Path], dict] = lambda path: {}  # title-page facts: {log, robot, command, created}
+
+
+SECTIONS: list[Section] = []
+
+
+def register_section(section: Section) -> Section:
+    """Add a section; later registrations of the same name replace earlier ones."""
+    SECTIONS[:] = [s for s in SECTIONS if s.name != section.name] + [section]
+    return section
+
+
+def section_for(path: Path) -> Section | None:
+    for s in SECTIONS:
+        try:
+            if s.recognise(path):
+                return s
+        except (OSError, ValueError):
+            continue
+    return None

@@ -1,0 +1,1 @@
+"""Report section for sgp results (registers itself on import)."""

@@ -1,0 +1,1 @@
+"""Report section for stac results (registers itself on import)."""

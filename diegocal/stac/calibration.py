@@ -1,0 +1,136 @@
+"""The calibration result: pot gains and biases, marker positions, mocap frame, noise levels.
+
+Its YAML form is the calib.yaml contract (issue #3; extend, never break)::
+
+    pots:    {NAME: {gain, bias, gain_se, bias_se}}
+    markers: {NAME: {link, xyz, xyz_se}}
+    mocap:   {R: 3x3, T: [x, y, z]}
+    sigma:   {pots, markers}
+    fit:     {cost, iterations, converged, seconds}
+
+Simulated logs store the true values in ``/truth`` attribute ``params`` in this same schema.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from diegocal.errors import InputFileError
+from diegocal.robot import Robot
+
+
+@dataclass(frozen=True)
+class FitInfo:
+    cost: float = float("nan")
+    iterations: int = 0
+    converged: bool = False
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Sensor parameters θ = [gain, bias, R, T0, d_1:M] (thesis eq. 2.10) with standard errors.
+
+    Attributes
+    ----------
+    pot_names : (P,) names, in the robot's sensors.yaml order
+    gain, bias : (P,) pot gain [V/rad or V/m] and bias [V]
+    gain_se, bias_se : (P,) standard errors (NaN when not estimated)
+    marker_names, marker_links : (M,)
+    marker_xyz : (M, 3) marker positions in their link frames, m
+    marker_xyz_se : (M, 3) standard errors, m
+    mocap_R : (3, 3) rotation from base link to mocap frame; mocap_T : (3,) translation, m
+    sigma_pots, sigma_markers : noise standard deviations (V, m), §2.3.5
+    method : 'stac' | 'classical' | 'ekf' | 'nominal'
+    """
+
+    pot_names: tuple[str, ...]
+    gain: np.ndarray
+    bias: np.ndarray
+    marker_names: tuple[str, ...]
+    marker_links: tuple[str, ...]
+    marker_xyz: np.ndarray
+    mocap_R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    mocap_T: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gain_se: np.ndarray | None = None
+    bias_se: np.ndarray | None = None
+    marker_xyz_se: np.ndarray | None = None
+    sigma_pots: float = float("nan")
+    sigma_markers: float = float("nan")
+    fit: FitInfo = field(default_factory=FitInfo)
+    method: str = "stac"
+
+    @classmethod
+    def nominal(cls, robot: Robot) -> Calibration:
+        """The 'manual calibration': sensors.yaml's nominal values, identity mocap frame."""
+        pots, markers = robot.sensors.pots, robot.sensors.markers
+        return cls(
+            pot_names=tuple(p.name for p in pots),
+            gain=np.array([p.gain for p in pots], dtype=float),
+            bias=np.array([p.bias for p in pots], dtype=float),
+            marker_names=tuple(m.name for m in markers),
+            marker_links=tuple(m.link for m in markers),
+            marker_xyz=np.array([m.xyz for m in markers], dtype=float).reshape(-1, 3),
+            method="nominal",
+        )
+
+    def to_dict(self) -> dict:
+        """The calib.yaml mapping."""
+        P, M = len(self.pot_names), len(self.marker_names)
+        gse = self.gain_se if self.gain_se is not None else np.full(P, np.nan)
+        bse = self.bias_se if self.bias_se is not None else np.full(P, np.nan)
+        xse = self.marker_xyz_se if self.marker_xyz_se is not None else np.full((M, 3), np.nan)
+        return {
+            "method": self.method,
+            "pots": {n: {"gain": float(self.gain[i]), "bias": float(self.bias[i]),
+                         "gain_se": _f(gse[i]), "bias_se": _f(bse[i])} for i, n in enumerate(self.pot_names)},
+            "markers": {n: {"link": self.marker_links[i], "xyz": [float(v) for v in self.marker_xyz[i]],
+                            "xyz_se": [_f(v) for v in xse[i]]} for i, n in enumerate(self.marker_names)},
+            "mocap": {"R": np.asarray(self.mocap_R, float).tolist(), "T": np.asarray(self.mocap_T, float).tolist()},
+            "sigma": {"pots": _f(self.sigma_pots), "markers": _f(self.sigma_markers)},
+            "fit": {"cost": _f(self.fit.cost), "iterations": int(self.fit.iterations),
+                    "converged": bool(self.fit.converged), "seconds": _f(self.fit.seconds)},
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "calib.yaml") -> Calibration:
+        try:
+            pots = data.get("pots") or {}
+            markers = data.get("markers") or {}
+            mocap = data.get("mocap") or {}
+            sigma = data.get("sigma") or {}
+            fit = data.get("fit") or {}
+            names = tuple(pots)
+            mnames = tuple(markers)
+            return cls(
+                pot_names=names,
+                gain=np.array([float(pots[n]["gain"]) for n in names]),
+                bias=np.array([float(pots[n]["bias"]) for n in names]),
+                gain_se=np.array([_nan(pots[n].get("gain_se")) for n in names]),
+                bias_se=np.array([_nan(pots[n].get("bias_se")) for n in names]),
+                marker_names=mnames,
+                marker_links=tuple(str(markers[n]["link"]) for n in mnames),
+                marker_xyz=np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(-1, 3),
+                marker_xyz_se=np.array([[_nan(v) for v in (markers[n].get("xyz_se") or [None] * 3)]
+                                        for n in mnames], dtype=float).reshape(-1, 3),
+                mocap_R=np.array(mocap.get("R", np.eye(3)), dtype=float).reshape(3, 3),
+                mocap_T=np.array(mocap.get("T", [0.0, 0.0, 0.0]), dtype=float).reshape(3),
+                sigma_pots=_nan(sigma.get("pots")),
+                sigma_markers=_nan(sigma.get("markers")),
+                fit=FitInfo(_nan(fit.get("cost")), int(fit.get("iterations", 0)),
+                            bool(fit.get("converged", False)), _nan(fit.get("seconds"))),
+                method=str(data.get("method", "stac")),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None
+
+
+def _f(v) -> float | None:
+    v = float(v)
+    return None if not np.isfinite(v) else v
+
+
+def _nan(v) -> float:
+    return float("nan") if v is None else float(v)
