@@ -1,1 +1,23 @@
-"""sim"""
+"""Data generators with ground truth in ``/truth`` and injectable, named effects."""
+
+from diegocal.sim.effects import (
+    VOCABULARY,
+    EffectError,
+    EffectRequest,
+    check_channel,
+    check_effects,
+    effect_record,
+    parse_effect,
+    parse_effects,
+)
+
+__all__ = [
+    "VOCABULARY",
+    "EffectError",
+    "EffectRequest",
+    "check_channel",
+    "check_effects",
+    "effect_record",
+    "parse_effect",
+    "parse_effects",
+]
