@@ -38,6 +38,10 @@ class EffectError(DiegocalError, ValueError):
     """An ``--effect`` request is malformed, unknown, or belongs to another domain."""
 
 
+class SimOptionError(DiegocalError, ValueError):
+    """A simulator option is out of range (negative duration, occlusion fraction >= 1, ...)."""
+
+
 @dataclass(frozen=True)
 class EffectRequest:
     """One requested effect: a cause id from :data:`VOCABULARY` and an optional channel.
