@@ -1,1 +1,60 @@
 """CLI: `diegocal simulate kinematics` (dynamics and pneumatics attach from their own modules)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from diegocal.cli.app import simulate_app
+from diegocal.cli.common import cli_errors, summary
+from diegocal.io import save_log
+from diegocal.robot import load_robot, resolve_robot_dir
+from diegocal.sim.effects import check_effects, parse_effects
+from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
+
+@simulate_app.command("kinematics")
+@cli_errors
+def simulate_kinematics_cmd(
+    output: Annotated[Path, typer.Option("--output", "-o", help="Log to write (.h5 or .csv).")],
+    robot: Annotated[str, typer.Option(help="Robot directory or bundled robot name.")] = "diego",
+    duration: Annotated[float, typer.Option(help="Session length, s (thesis: 250 s).")] = 250.0,
+    rate: Annotated[float, typer.Option(help="Sample rate of pots and markers, Hz.")] = 100.0,
+    seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
+    effect: Annotated[list[str] | None, typer.Option(
+        "--effect", metavar="NAME[:CHANNEL]",
+        help="Kinematic effect to inject (repeatable): link_offset, sensor_nonlinearity, "
+        "backlash, time_offset, marker_slip.")] = None,
+    occlusion: Annotated[float, typer.Option(help="Fraction of occluded marker samples.")] = 0.1,
+    occlusion_run: Annotated[float, typer.Option(help="Mean occlusion length, s.")] = 0.5,
+    gain_error: Annotated[float, typer.Option(help="True gain = nominal·(1 + U(±this)).")] = 0.2,
+    bias_error: Annotated[float, typer.Option(help="True bias error U(±this) rad · gain.")] = 0.3,
+    marker_offset: Annotated[float, typer.Option(
+        help="Mean distance of true markers from nominal, m.")] = 0.03,
+    pot_noise: Annotated[float, typer.Option(help="Pot noise standard deviation, V.")] = 0.005,
+    marker_noise: Annotated[float, typer.Option(help="Marker noise per axis, m.")] = 0.002,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
+) -> None:
+    """Simulate a kinematic calibration session (thesis §2.5.1) with truth in /truth."""
+    effects = check_effects(parse_effects(effect), "kinematics")
+    options = KinematicsOptions(
+        duration=duration, rate_hz=rate, effects=effects, occlusion=occlusion,
+        occlusion_run=occlusion_run, gain_error=gain_error, bias_error=bias_error,
+        marker_offset=marker_offset, pot_noise=pot_noise, marker_noise=marker_noise).check()
+    model = load_robot(resolve_robot_dir(robot, None))
+    log = simulate_kinematics(model, options, np.random.default_rng(seed))
+    save_log(log, output)
+    rows = [("robot", log.robot), ("samples", log.n_samples), ("duration (s)", log.duration)]
+    if log.has("pots"):
+        rows.append(("pots", len(log.streams["pots"].names)))
+    if log.has("markers"):
+        x = log.streams["markers"].data
+        rows += [("markers", x.shape[1]),
+                 ("occluded fraction", float(np.isnan(x[..., 0]).mean()))]
+    for e in log.truth.effects:
+        rows.append((f"effect {e['cause']}", e["channel"]))
+    rows.append(("written", str(output)))
+    summary("simulate kinematics", rows, quiet=quiet)

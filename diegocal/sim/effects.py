@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from diegocal.errors import DiegocalError, UnknownNameError
 
 #: Cause id -> domain, from DESIGN.md's diagnosis vocabulary.
@@ -126,5 +128,22 @@ def check_channel(request: EffectRequest, available, what: str) -> str:
 
 def effect_record(cause: str, channel: str | None, values: dict,
                   region: dict | None = None) -> dict:
-    """One ``/truth`` effects entry: ``{cause, channel, region, values}`` (DESIGN.md)."""
-    return {"cause": cause, "channel": channel, "region": region, "values": dict(values)}
+    """One ``/truth`` effects entry: ``{cause, channel, region, values}`` (DESIGN.md).
+
+    numpy values become plain floats and lists, so the record in memory equals the one read
+    back from a log file.
+    """
+    return {"cause": cause, "channel": channel, "region": _plain(region),
+            "values": _plain(dict(values))}
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj

@@ -1,0 +1,496 @@
+"""Kinematic calibration data with ground truth: pots and occluded markers (thesis §2.5.1, §2.6).
+
+The robot is hung by its base link from a crane (§2.5.1): every joint is driven by a PID
+controller toward random targets within its limits while pots and markers are recorded
+synchronously (100 Hz, 250 s for Diego San). Ground truth is drawn around the robot's nominal
+sensors.yaml values, as in the thesis' simulation experiments (§2.6):
+
+- pot gains ``gain = nominal · (1 + U(±gain_error))`` (encoders keep gain 1),
+- biases ``bias = nominal + gain · U(±bias_error)`` (rad of joint angle; scaled to the
+  transmission's spread for linear pots and tendons),
+- marker positions a few cm from the nominal ones (which may be link origins, §2.7.1),
+- a random mocap frame (R, T0).
+
+Readings follow the observation models of :mod:`diegocal.robot.observe` (eq. 2.11-2.20)::
+
+    p_t = gain · s(q_t) + bias + ε_p            ε_p ~ N(0, pot_noise²)             [V]
+    x_t = R (h_r(q_t) d + h_p(q_t)) + T0 + ε_x  ε_x ~ N(0, marker_noise² I₃)       [m]
+
+Markers are NaN over contiguous occlusion runs (a two-state Markov chain per marker).
+Kinematic effects from DESIGN.md's vocabulary are injected by name (:func:`plan_effects`) and
+recorded in ``/truth`` with their true values.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg import expm
+from scipy.spatial.transform import Rotation
+
+from diegocal.errors import RobotConfigError
+from diegocal.io import Log, Truth, make_stream
+from diegocal.robot import Robot, pot_transmission
+from diegocal.sim.effects import (
+    EffectRequest,
+    SimOptionError,
+    check_channel,
+    check_effects,
+    effect_record,
+)
+from diegocal.stac.calibration import Calibration
+
+#: Extra samples simulated on each side so a mocap clock offset has data to shift into.
+PAD = 16
+
+
+@dataclass(frozen=True)
+class KinematicsOptions:
+    """Options of :func:`simulate_kinematics` (the CLI parses its flags into one of these).
+
+    Attributes
+    ----------
+    duration : float, s (thesis: 250 s for Diego San)
+    rate_hz : float, sample rate of pots and markers, Hz (thesis: 100 Hz)
+    effects : tuple of EffectRequest, kinematic effects to inject
+    occlusion : float in [0, 0.95), target fraction of occluded marker samples
+    occlusion_run : float, mean length of one occlusion, s
+    gain_error : float, relative half-width of the true gain around the nominal one
+    bias_error : float, half-width of the true bias error, rad of joint angle
+    marker_offset : float, m, mean distance of the true marker positions from the nominal ones
+    pot_noise : float, standard deviation of pot noise, sensor units (V)
+    marker_noise : float, standard deviation of marker noise per axis, m
+    hold : (float, float), s, range of the time a joint holds one random target
+    """
+
+    duration: float = 250.0
+    rate_hz: float = 100.0
+    effects: tuple[EffectRequest, ...] = ()
+    occlusion: float = 0.1
+    occlusion_run: float = 0.5
+    gain_error: float = 0.2
+    bias_error: float = 0.3
+    marker_offset: float = 0.03
+    pot_noise: float = 0.005
+    marker_noise: float = 0.002
+    hold: tuple[float, float] = (0.5, 3.0)
+
+    @property
+    def n_samples(self) -> int:
+        return int(round(self.duration * self.rate_hz))
+
+    def check(self) -> KinematicsOptions:
+        """Validate ranges; raises :class:`SimOptionError` naming the bad option."""
+        if not np.isfinite(self.duration) or self.duration <= 0:
+            raise SimOptionError(f"duration must be positive, got {self.duration} s")
+        if not np.isfinite(self.rate_hz) or self.rate_hz <= 0:
+            raise SimOptionError(f"rate must be positive, got {self.rate_hz} Hz")
+        if self.n_samples < 2:
+            raise SimOptionError(
+                f"duration {self.duration} s at {self.rate_hz} Hz gives fewer than 2 samples")
+        if not 0.0 <= self.occlusion < 0.95:
+            raise SimOptionError(f"occlusion fraction must be in [0, 0.95), got {self.occlusion}")
+        if not self.occlusion_run > 0:
+            raise SimOptionError(f"occlusion run must be positive, got {self.occlusion_run} s")
+        for name in ("gain_error", "bias_error", "marker_offset", "pot_noise", "marker_noise"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise SimOptionError(f"{name.replace('_', '-')} must be >= 0, got {value}")
+        if self.gain_error >= 1:
+            raise SimOptionError(f"gain-error must be < 1 (a gain may not flip sign), "
+                                 f"got {self.gain_error}")
+        if not 0 < self.hold[0] <= self.hold[1]:
+            raise SimOptionError(f"hold must be 0 < low <= high, got {self.hold}")
+        check_effects(self.effects, "kinematics")
+        return self
+
+
+# ----------------------------------------------------------------------------- trajectory
+def joint_ranges(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """Usable joint ranges (n,), (n,): the URDF limits, or neutral ± π where they are unbounded."""
+    lo, hi = robot.lower.copy(), robot.upper.copy()
+    bad = ~np.isfinite(lo) | ~np.isfinite(hi) | (hi - lo > 4 * np.pi) | (hi <= lo)
+    mid = robot.neutral()
+    mid[bad] = 0.0
+    lo[bad], hi[bad] = mid[bad] - np.pi, mid[bad] + np.pi
+    return lo, hi
+
+
+def pid_trajectory(lower, upper, n_samples: int, rate_hz: float, rng: np.random.Generator,
+                   hold=(0.5, 3.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Joints driven by PID controllers toward random targets (thesis §2.5.1).
+
+    Each joint is a unit-inertia second-order plant under PID control,
+
+    .. math:: \\ddot q = k_p (r - q) + k_i \\int (r - q)\\,dt - k_d \\dot q,
+
+    with :math:`k_p = \\omega^2`, :math:`k_d = 2\\zeta\\omega`, :math:`k_i = 0.25\\omega^3`,
+    ω ~ U(2.5, 6) rad/s and ζ ~ U(0.7, 1) per joint (stable: k_d k_p > k_i). The closed loop is
+    discretised exactly (zero-order hold on the target) and stepped for all joints at once;
+    the limits act as hard stops. Targets r are uniform within the inner 90 % of each range
+    and held for U(hold) seconds.
+
+    Parameters
+    ----------
+    lower, upper : (n,) joint limits, rad or m
+    n_samples : int, T
+    rate_hz : float, Hz
+
+    Returns
+    -------
+    q : ndarray (T, n), rad or m;  qd : ndarray (T, n), rad/s or m/s
+    """
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    n = lower.size
+    dt = 1.0 / rate_hz
+    omega = rng.uniform(2.5, 6.0, n)
+    zeta = rng.uniform(0.7, 1.0, n)
+    kp, kd, ki = omega**2, 2 * zeta * omega, 0.25 * omega**3
+    # state x = [q, qd, ∫e]; x' = A x + B r
+    A = np.zeros((n, 3, 3))
+    A[:, 0, 1] = 1.0
+    A[:, 1, 0], A[:, 1, 1], A[:, 1, 2] = -kp, -kd, ki
+    A[:, 2, 0] = -1.0
+    B = np.stack([np.zeros(n), kp, np.ones(n)], axis=1)
+    aug = np.zeros((n, 4, 4))
+    aug[:, :3, :3], aug[:, :3, 3] = A * dt, B * dt
+    disc = np.stack([expm(a) for a in aug])
+    Ad, Bd = disc[:, :3, :3], disc[:, :3, 3]
+
+    span = upper - lower
+    targets = _random_targets(lower + 0.05 * span, upper - 0.05 * span, n_samples, rate_hz,
+                              rng, hold)
+    x = np.zeros((n, 3))
+    x[:, 0] = targets[0]
+    q = np.empty((n_samples, n))
+    qd = np.empty((n_samples, n))
+    for t in range(n_samples):
+        q[t], qd[t] = x[:, 0], x[:, 1]
+        x = np.einsum("nij,nj->ni", Ad, x) + Bd * targets[t][:, None]
+        hit = (x[:, 0] < lower) | (x[:, 0] > upper)
+        if hit.any():  # hard stop: clamp and lose the velocity
+            x[hit, 0] = np.clip(x[hit, 0], lower[hit], upper[hit])
+            x[hit, 1] = 0.0
+    return q, qd
+
+
+def _random_targets(lo, hi, n_samples, rate_hz, rng, hold) -> np.ndarray:
+    """(T, n) piecewise-constant targets: a new uniform target every U(hold) seconds per joint."""
+    n = lo.size
+    out = np.empty((n_samples, n))
+    k = int(n_samples / max(hold[0] * rate_hz, 1.0)) + 2
+    for j in range(n):
+        lengths = np.maximum(1, np.round(rng.uniform(hold[0], hold[1], k) * rate_hz)).astype(int)
+        values = rng.uniform(lo[j], hi[j], k)
+        out[:, j] = np.repeat(values, lengths)[:n_samples]
+    return out
+
+
+# ----------------------------------------------------------------------------- occlusion
+def occlusion_mask(n_samples: int, n_markers: int, fraction: float, mean_run: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """Occlusion runs from a two-state Markov chain per marker, vectorised over runs.
+
+    Occluded runs last Geometric(1/L) samples (mean L = ``mean_run`` samples); visible runs
+    Geometric(f / (L (1 - f))), so the stationary occluded fraction is f = ``fraction``. The
+    first state is drawn from the stationary distribution.
+
+    Returns
+    -------
+    ndarray of bool, shape (T, M): True where the marker is occluded.
+    """
+    mask = np.zeros((n_samples, n_markers), dtype=bool)
+    if fraction <= 0 or n_markers == 0:
+        return mask
+    L = max(float(mean_run), 1.0)
+    p_end_occ = 1.0 / L
+    p_end_vis = min(1.0, fraction / (L * (1.0 - fraction)))
+    n_runs = int(n_samples * min(p_end_occ, p_end_vis)) + 8
+    for m in range(n_markers):
+        state = bool(rng.random() < fraction)  # stationary start
+        chunks, filled = [], 0
+        while filled < n_samples:  # a chunk ends in the state opposite to the one it starts in
+            occ = rng.geometric(p_end_occ, n_runs)
+            vis = rng.geometric(p_end_vis, n_runs)
+            lengths = np.stack([occ, vis] if state else [vis, occ], axis=1).ravel()
+            chunks.append(np.repeat(np.tile([state, not state], n_runs), lengths))
+            filled += int(lengths.sum())
+        mask[:, m] = np.concatenate(chunks)[:n_samples]
+    return mask
+
+
+# ----------------------------------------------------------------------------- truth
+def _bias_scale(robot: Robot, s: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Units of s per rad of joint angle, per pot (P,): 1 for rotary pots and encoders; for
+    linear pots and tendons the ratio of the transmission's spread to the joints' median one."""
+    spread_q = float(np.median(np.std(q, axis=0))) or 1.0
+    scale = np.ones(len(robot.sensors.pots))
+    for i, p in enumerate(robot.sensors.pots):
+        if p.kind in ("linear", "tendon"):
+            scale[i] = (float(np.std(s[:, i])) or 1e-3) / spread_q
+    return scale
+
+
+def draw_truth(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray,
+               rng: np.random.Generator) -> Calibration:
+    """True sensor parameters around the nominal ones (see the module docstring).
+
+    ``s`` (T, P) is the transmission quantity and ``q`` (T, n) the joint angles of the run,
+    used only to scale bias errors of linear pots and tendons.
+    """
+    nominal = Calibration.nominal(robot)
+    P, M = len(nominal.pot_names), len(nominal.marker_names)
+    encoder = np.array([p.kind == "encoder" for p in robot.sensors.pots], dtype=bool)
+    gain = nominal.gain * (1.0 + rng.uniform(-options.gain_error, options.gain_error, P))
+    gain[encoder] = 1.0
+    offset = rng.uniform(-options.bias_error, options.bias_error, P) * _bias_scale(robot, s, q)
+    bias = nominal.bias + gain * offset
+    direction = rng.normal(size=(M, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    distance = options.marker_offset * rng.uniform(0.5, 1.5, (M, 1))
+    xyz = nominal.marker_xyz + direction * distance
+    R = Rotation.random(random_state=rng).as_matrix()
+    T = rng.uniform([-1.0, -1.0, 0.5], [1.0, 1.0, 1.5])
+    return Calibration(nominal.pot_names, gain, bias, nominal.marker_names, nominal.marker_links,
+                       xyz, mocap_R=R, mocap_T=T, sigma_pots=options.pot_noise,
+                       sigma_markers=options.marker_noise, method="truth")
+
+
+# ----------------------------------------------------------------------------- effects
+@dataclass
+class EffectPlan:
+    """Resolved effects: what the generator does differently, and the /truth records."""
+
+    records: list = field(default_factory=list)
+    joint_offsets: dict = field(default_factory=dict)  # joint -> (3,) m, in the parent frame
+    backlash: dict = field(default_factory=dict)  # pot index -> dead band width, units of s
+    nonlinear: dict = field(default_factory=dict)  # pot index -> (s0, c2)
+    shift: int = 0  # markers[t] observe q[t + shift]
+    slips: dict = field(default_factory=dict)  # marker index -> (sample, (3,) m)
+
+
+def _effect_rng(seed: int, request: EffectRequest) -> np.random.Generator:
+    """One generator per effect, keyed by its text: adding an effect never changes the others."""
+    return np.random.default_rng([seed, zlib.crc32(str(request).encode())])
+
+
+def observed_joints(robot: Robot) -> list[str]:
+    """Joints that move at least one marker or linear-pot anchor (in robot joint order)."""
+    links = [m.link for m in robot.sensors.markers]
+    links += [a.link for p in robot.sensors.pots if p.kind == "linear" for a in p.anchors]
+    model, out = robot.model, set()
+    for link in links:
+        j = model.frames[robot.frame_id(link)].parentJoint
+        while j > 0:
+            out.add(model.names[j])
+            j = model.parents[j]
+    return [n for n in robot.joint_names if n in out]
+
+
+def _default_channel(request: EffectRequest, robot: Robot, rng) -> str:
+    """A seeded choice of channel when the request names none."""
+    pots = robot.sensors.pots
+    analog = [p.name for p in pots if p.kind != "encoder"] or [p.name for p in pots]
+    choices = {
+        "link_offset": observed_joints(robot),
+        "sensor_nonlinearity": analog,
+        "backlash": analog,
+        "marker_slip": list(robot.sensors.marker_names),
+        "time_offset": ["markers"],
+    }[request.name]
+    if not choices:
+        raise RobotConfigError(f"effect '{request.name}': robot {robot.name!r} has nothing it "
+                               "can act on")
+    return str(choices[int(rng.integers(len(choices)))])
+
+
+def plan_effects(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray,
+                 gain: np.ndarray, seed: int) -> EffectPlan:
+    """Draw every requested effect's true values (seeded per effect) and its /truth record.
+
+    ``s`` (T, P) transmission quantities and ``q`` (T, n) joint angles of the effect-free run
+    set the scale of pot effects; ``gain`` (P,) the true pot gains.
+
+    - ``link_offset:JOINT``: the joint's origin moves by 5-10 mm (random direction).
+    - ``backlash:POT``: play operator of width 0.02-0.05 rad (equivalent) on s.
+    - ``sensor_nonlinearity:POT``: ``c2 (s - s0)²`` added, peak 5-10 % of the half-range.
+    - ``time_offset:markers``: markers[t] observe q(t + k/rate), |k| = 3..8 samples.
+    - ``marker_slip:MARKER``: the marker moves 1-3 cm on its link at 30-70 % of the run.
+    """
+    plan = EffectPlan()
+    pots, markers = robot.sensors.pot_names, robot.sensors.marker_names
+    scale = _bias_scale(robot, s, q)
+    T = options.n_samples
+    for req in options.effects:
+        rng = _effect_rng(seed, req)
+        req = EffectRequest(req.name, req.channel or _default_channel(req, robot, rng))
+        channel = req.channel
+        if req.name == "link_offset":
+            check_channel(req, robot.joint_names, "joint")
+            d = rng.normal(size=3)
+            d *= rng.uniform(0.005, 0.010) / np.linalg.norm(d)
+            plan.joint_offsets[channel] = d
+            values = {"dxyz": d, "frame": "joint origin, in the parent joint frame"}
+        elif req.name == "backlash":
+            i = pots.index(check_channel(req, pots, "pot"))
+            width = rng.uniform(0.02, 0.05) * scale[i]
+            plan.backlash[i] = width
+            values = {"width": width, "width_reading": abs(gain[i]) * width}
+        elif req.name == "sensor_nonlinearity":
+            i = pots.index(check_channel(req, pots, "pot"))
+            lo, hi = float(s[:, i].min()), float(s[:, i].max())
+            s0, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-9)
+            peak = rng.uniform(0.05, 0.10) * abs(gain[i]) * half * rng.choice([-1.0, 1.0])
+            plan.nonlinear[i] = (s0, peak / half**2)
+            values = {"form": "reading += c2 * (s - s0)**2", "s0": s0, "c2": peak / half**2,
+                      "peak": peak}
+        elif req.name == "time_offset":
+            check_channel(req, ["markers"], "clock (use time_offset:markers)")
+            k = int(rng.integers(3, 9)) * int(rng.choice([-1, 1]))
+            plan.shift = k
+            values = {"samples": k, "seconds": k / options.rate_hz,
+                      "convention": "markers[t] observe q(t + seconds)"}
+        else:  # marker_slip
+            m = markers.index(check_channel(req, markers, "marker"))
+            t_slip = int(rng.uniform(0.3, 0.7) * T)
+            d = rng.normal(size=3)
+            d *= rng.uniform(0.01, 0.03) / np.linalg.norm(d)
+            plan.slips[m] = (t_slip, d)
+            t0 = t_slip / options.rate_hz
+            values = {"sample": t_slip, "time": t0, "dxyz": d}
+            plan.records.append(effect_record(req.name, channel, values, region={
+                "variable": "time", "low": t0, "high": (T - 1) / options.rate_hz}))
+            continue
+        plan.records.append(effect_record(req.name, channel, values))
+    return plan
+
+
+def backlash(s: np.ndarray, width: float) -> np.ndarray:
+    """Play operator: the output (T,) follows ``s`` (T,) only once it leaves a dead band.
+
+    Moving up, the reading lags by width/2; moving down, it leads by width/2 — a
+    direction-dependent dead band (DESIGN.md ``backlash``). Starts centred on s[0].
+    """
+    out = np.empty_like(s)
+    y, h = float(s[0]), 0.5 * width
+    for t, v in enumerate(s.tolist()):
+        y = min(max(y, v - h), v + h)
+        out[t] = y
+    return out
+
+
+def offset_robot(robot: Robot, offsets: dict) -> Robot:
+    """A copy of ``robot`` whose named joints' origins are shifted by (3,) m vectors."""
+    if not offsets:
+        return robot
+    model = pin.Model(robot.model)
+    for joint, d in offsets.items():
+        jid = model.getJointId(joint)
+        placement = model.jointPlacements[jid].copy()
+        placement.translation = placement.translation + np.asarray(d, float)
+        model.jointPlacements[jid] = placement
+    return Robot(model, robot.sensors, robot.name, robot.directory)
+
+
+# ----------------------------------------------------------------------------- simulator
+def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random.Generator) -> Log:
+    """Simulate a kinematic calibration session (thesis §2.5.1) with ground truth.
+
+    Parameters
+    ----------
+    robot : Robot, with pots and/or markers in its sensors.yaml
+    options : KinematicsOptions
+    rng : numpy Generator; the same seed gives the same log, bit for bit
+
+    Returns
+    -------
+    Log with streams ``pots`` (T, P) [V] and ``markers`` (T, M, 3) [m, NaN when occluded], and
+    ``truth``: params = the true :class:`Calibration` as calib.yaml, effects = injected effects,
+    signals ``q`` (T, n) and ``qd`` (T, n) on the pots' clock.
+    """
+    options.check()
+    sensors = robot.sensors
+    if not sensors.pots and not sensors.markers:
+        raise RobotConfigError(f"robot {robot.name!r} has no pots and no markers: "
+                               "nothing to simulate")
+    T, rate = options.n_samples, options.rate_hz
+    seeds = rng.integers(0, 2**62, size=6)
+    traj_rng, truth_rng, pot_rng, marker_rng, occ_rng = (np.random.default_rng(s)
+                                                         for s in seeds[:5])
+
+    lower, upper = joint_ranges(robot)
+    q_ext, qd_ext = pid_trajectory(lower, upper, T + 2 * PAD, rate, traj_rng, options.hold)
+    q, qd = q_ext[PAD:PAD + T], qd_ext[PAD:PAD + T]
+    s_nominal = pot_transmission(robot, q) if sensors.pots else np.zeros((T, 0))
+    truth = draw_truth(robot, options, s_nominal, q, truth_rng)
+    plan = plan_effects(robot, options, s_nominal, q, truth.gain, int(seeds[5]))
+    gen = offset_robot(robot, plan.joint_offsets)
+
+    streams = {}
+    if sensors.pots:
+        s = pot_transmission(gen, q) if plan.joint_offsets else s_nominal.copy()
+        for i, width in plan.backlash.items():
+            s[:, i] = backlash(s[:, i], width)
+        p = truth.gain * s + truth.bias  # eq. 2.18-2.20
+        for i, (s0, c2) in plan.nonlinear.items():
+            p[:, i] += c2 * (s[:, i] - s0) ** 2
+        p += pot_rng.normal(0.0, options.pot_noise, p.shape)
+        streams["pots"] = make_stream(sensors.pot_names, p)
+    if sensors.markers:
+        q_mocap = q_ext[PAD + plan.shift: PAD + plan.shift + T]
+        x = marker_positions(gen, q_mocap, truth, plan.slips)
+        x += marker_rng.normal(0.0, options.marker_noise, x.shape)
+        mask = occlusion_mask(T, len(sensors.markers), options.occlusion,
+                              options.occlusion_run * rate, occ_rng)
+        x[mask] = np.nan
+        streams["markers"] = make_stream(sensors.marker_names, x)
+
+    signals = {"q": make_stream(robot.joint_names, q), "qd": make_stream(robot.joint_names, qd)}
+    name = robot.directory.name if robot.directory is not None else robot.name
+    return Log(time=np.arange(T) / rate, streams=streams, robot=name, rate_hz=rate,
+               truth=Truth(params=truth.to_dict(), effects=plan.records, signals=signals))
+
+
+def marker_positions(robot: Robot, q: np.ndarray, truth: Calibration,
+                     slips: dict | None = None) -> np.ndarray:
+    """Noise-free markers in the mocap frame (T, M, 3), m, thesis eq. 2.11-2.12.
+
+    ``slips`` maps a marker index to (sample, (3,) m): from that sample on, the marker sits
+    at ``xyz + dxyz`` on its link.
+    """
+    slips = slips or {}
+    links = list(truth.marker_links)
+    xyz = [truth.marker_xyz]
+    for m, (_, d) in slips.items():
+        links.append(truth.marker_links[m])
+        xyz.append((truth.marker_xyz[m] + d)[None])
+    xb = base_points(robot, q, links, np.vstack(xyz))
+    M = len(truth.marker_names)
+    for k, (m, (t_slip, _)) in enumerate(slips.items()):
+        xb[t_slip:, m] = xb[t_slip:, M + k]
+    return xb[:, :M] @ np.asarray(truth.mocap_R).T + np.asarray(truth.mocap_T)
+
+
+def base_points(robot: Robot, q: np.ndarray, links, xyz: np.ndarray) -> np.ndarray:
+    """Link-fixed points in the base frame (T, N, 3), m — :meth:`Robot.points`, batched.
+
+    One forward-kinematics pass per frame (Pinocchio), then the transforms of the few distinct
+    links are applied to all points at once with numpy.
+    """
+    q = robot.check_q(q)
+    model, data = robot.model, robot.data
+    fids = [robot.frame_id(link) for link in links]
+    unique = sorted(set(fids) | {robot.base_frame})
+    where = {f: i for i, f in enumerate(unique)}
+    H = np.empty((q.shape[0], len(unique), 4, 4))
+    for t in range(q.shape[0]):
+        pin.forwardKinematics(model, data, q[t])
+        for i, f in enumerate(unique):
+            H[t, i] = pin.updateFramePlacement(model, data, f).homogeneous
+    Hb = H[:, where[robot.base_frame]]
+    Hl = H[:, [where[f] for f in fids]]  # (T, N, 4, 4)
+    world = np.einsum("tnij,nj->tni", Hl[..., :3, :3], np.asarray(xyz, float)) + Hl[..., :3, 3]
+    return np.einsum("tji,tnj->tni", Hb[:, :3, :3], world - Hb[:, None, :3, 3])
