@@ -26,13 +26,16 @@ lint: $(STAMP)
 
 robots: $(STAMP)
 	$(BIN)/python scripts/make_robots.py robots
+	$(BIN)/python scripts/make_dynamics_robots.py robots
 
 sample-data: $(STAMP)
 	$(BIN)/python scripts/make_sample_data.py sample_data
 
+# The main job on the bundled sample data: calibrate, fit, predict held-out, report.
 demo: $(STAMP)
 	@mkdir -p $(OUT)
-	$(BIN)/python scripts/demo.py $(OUT)
+	$(DIEGOCAL) report sample_data/*.h5 -o $(OUT)/report.pdf
+	@echo "wrote $(OUT)/report.pdf"
 
 bench: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
@@ -40,3 +43,6 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(OUT) .pytest_cache
+
+# Domain fragments (e.g. the per-chamber pneumatic batch fit).
+-include mk/*.mk
