@@ -52,8 +52,17 @@ def _link(name: str, mass: float, com: tuple, inertia: dict) -> str:
     )
 
 
-def _joint(name: str, parent: str, child: str, xyz: tuple, axis: tuple, lower: float, upper: float,
-           effort: float = 100.0, velocity: float = 100.0) -> str:
+def _joint(
+    name: str,
+    parent: str,
+    child: str,
+    xyz: tuple,
+    axis: tuple,
+    lower: float,
+    upper: float,
+    effort: float = 100.0,
+    velocity: float = 100.0,
+) -> str:
     return (
         f'  <joint name="{name}" type="revolute">\n'
         f'    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
@@ -68,9 +77,12 @@ def _joint(name: str, parent: str, child: str, xyz: tuple, axis: tuple, lower: f
 def pendulum_urdf() -> str:
     m, length = 1.0, 0.5
     bob = {"ixx": 1e-4, "iyy": 1e-4, "izz": 1e-4}
-    return (HEADER.format(name="pendulum") + _link("bob", m, (0, 0, -length), bob)
-            + _joint("theta", "base_link", "bob", (0, 0, 0), (0, 1, 0), -PI, PI)
-            + "</robot>\n")
+    return (
+        HEADER.format(name="pendulum")
+        + _link("bob", m, (0, 0, -length), bob)
+        + _joint("theta", "base_link", "bob", (0, 0, 0), (0, 1, 0), -PI, PI)
+        + "</robot>\n"
+    )
 
 
 def reaction_wheel_urdf() -> str:
@@ -79,13 +91,24 @@ def reaction_wheel_urdf() -> str:
     disc_axis = 0.5 * wheel_m * wheel_r**2
     disc_across = 0.25 * wheel_m * wheel_r**2
     wheel = {"ixx": disc_across, "iyy": disc_axis, "izz": disc_across}
-    return (HEADER.format(name="reaction_wheel")
-            + _link("pole", pole_m, (0, 0, -pole_l / 2), _rod_inertia(pole_m, pole_l))
-            + _link("wheel", wheel_m, (0, 0, 0), wheel)
-            + _joint("pole", "base_link", "pole", (0, 0, 0), (0, 1, 0), -100.0, 100.0, effort=5.0)
-            + _joint("wheel", "pole", "wheel", (0, 0.03, -pole_l), (0, 1, 0), -1e4, 1e4,
-                     effort=2.0, velocity=1000.0)
-            + "</robot>\n")
+    return (
+        HEADER.format(name="reaction_wheel")
+        + _link("pole", pole_m, (0, 0, -pole_l / 2), _rod_inertia(pole_m, pole_l))
+        + _link("wheel", wheel_m, (0, 0, 0), wheel)
+        + _joint("pole", "base_link", "pole", (0, 0, 0), (0, 1, 0), -100.0, 100.0, effort=5.0)
+        + _joint(
+            "wheel",
+            "pole",
+            "wheel",
+            (0, 0.03, -pole_l),
+            (0, 1, 0),
+            -1e4,
+            1e4,
+            effort=2.0,
+            velocity=1000.0,
+        )
+        + "</robot>\n"
+    )
 
 
 def arm3_urdf() -> str:
@@ -99,8 +122,10 @@ def arm3_urdf() -> str:
     out += _joint("joint1", "base_link", "link1", (0, 0, 0), (0, 0, 1), -2.8, 2.8, effort=60.0)
     out += _joint("joint2", "link1", "link2", (0, 0, l1), (0, 1, 0), -2.0, 2.0, effort=60.0)
     out += _joint("joint3", "link2", "link3", (l2, 0, 0), (0, 1, 0), -0.3, 2.3, effort=30.0)
-    out += ('  <joint name="tool_fixed" type="fixed">\n    <parent link="link3"/>\n'
-            f'    <child link="tool"/>\n    <origin xyz="{l3:g} 0 0" rpy="0 0 0"/>\n  </joint>\n')
+    out += (
+        '  <joint name="tool_fixed" type="fixed">\n    <parent link="link3"/>\n'
+        f'    <child link="tool"/>\n    <origin xyz="{l3:g} 0 0" rpy="0 0 0"/>\n  </joint>\n'
+    )
     return out + "</robot>\n"
 
 

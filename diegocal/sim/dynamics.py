@@ -1,0 +1,383 @@
+"""Dynamics simulator: joint torques of any robot directory, with friction and injected effects.
+
+The measured torque of a prescribed trajectory is the inverse dynamics of thesis eq. (3.29),
+
+.. math::  \\tau = M(q)\\ddot q + C(q, \\dot q)\\dot q + \\tau^g(q) + \\eta_v \\dot q
+           + \\eta_c\\,\\mathrm{sign}(\\dot q) + \\tau^{\\text{eff}}(q, \\dot q)
+           + \\tau^{\\text{offset}} + \\varepsilon,
+
+(the thesis writes eq. 3.29 with the opposite sign convention for M, C and τ^g; we use Pinocchio's
+``rnea``, i.e. the torque the actuators apply), with ε ~ N(0, noise²) i.i.d. per sample and joint.
+Integrated trajectories (the reaction wheel's ``pole-down`` / ``pole-up``, thesis §3.4.2) drive the
+same true dynamics forward (``aba`` on τ minus friction and effects, RK4) and record the applied
+torque: the motor torque on actuated joints and the random disturbance torque on the passive pole
+(the thesis predicts accelerations, a forward model; diegocal's SGP predicts torques, so the pole's
+"torque" is the disturbance that the process noise of the thesis stands for).
+
+Effects (DESIGN.md vocabulary, domain ``dynamics``) are named with ``--effect NAME[:CHANNEL]``;
+their true values go to ``/truth`` effects as ``{cause, channel, region, values}``; the true
+friction and inertial parameters to ``/truth`` params. Nothing here reads ``/truth`` back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from diegocal.errors import NumericalError, RobotConfigError
+from diegocal.io import Log, Truth, make_stream
+from diegocal.sim.effects import SimOptionError, check_channel, check_effects, effect_record
+from diegocal.sim.trajectories import (
+    excitation,
+    figure_eight,
+    lqr_gain,
+    ou_noise,
+    rollout,
+    sum_of_sines,
+    time_base,
+)
+
+TRAJECTORIES = ("excitation", "figure8-horizontal", "figure8-vertical", "pole-down", "pole-up")
+#: Joint effects act on one joint's torque; ``payload`` on a link's inertia.
+JOINT_EFFECTS = (
+    "coulomb_friction",
+    "viscous_friction",
+    "position_friction",
+    "spring",
+    "torque_offset",
+)
+
+
+@dataclass(frozen=True)
+class DynamicsOptions:
+    """What to simulate. Torques in N·m, friction in N·m·s/rad and N·m, regions in rad.
+
+    ``viscous``/``coulomb``: one value for every joint, a per-joint sequence, or None for a
+    default scaled to the robot (10 % / 5 % of each joint's RMS rigid-body torque on a reference
+    excitation, times U(0.8, 1.2)). ``regions``: joint -> (low, high) where ``position_friction``
+    acts (default: thesis §3.1.1's [2, 2.5] rad on continuous-range joints, else the top 20 % of
+    the range, "near the limit" as in §3.4.4). ``drive``/``disturbance``: peak motor torque and
+    disturbance std for the integrated trajectories (None: scaled to the robot).
+    """
+
+    duration: float = 20.0
+    rate_hz: float = 100.0
+    trajectory: str = "excitation"
+    effects: tuple = ()
+    noise: float = 0.01
+    viscous: float | tuple | None = None
+    coulomb: float | tuple | None = None
+    regions: dict = field(default_factory=dict)
+    effect_scale: float = 1.0
+    drive: float | None = None
+    disturbance: float | None = None
+    figure8_size: tuple = (0.12, 0.06)
+    figure8_period: float = 4.0
+
+
+@dataclass(frozen=True)
+class EffectTerm:
+    """One injected joint effect: its truth record and which joint column ``j`` it adds to."""
+
+    cause: str
+    j: int
+    record: dict
+
+    def torque(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Added torque (T,) N·m on joint ``j`` for q, qd of shape (T, n)."""
+        v, qj, vj = self.record["values"], q[:, self.j], qd[:, self.j]
+        if self.cause == "coulomb_friction":
+            return v["coulomb"] * np.sign(vj)
+        if self.cause == "viscous_friction":
+            return v["viscous"] * vj
+        if self.cause == "spring":
+            return v["stiffness"] * (qj - v["rest"])
+        if self.cause == "position_friction":
+            r = self.record["region"]
+            inside = (qj >= r["low"]) & (qj <= r["high"])
+            return inside * (v["coulomb"] * np.sign(vj) + v["viscous"] * vj)
+        return np.zeros_like(qj)  # torque_offset: a sensor bias, no physical torque
+
+
+class TrueDynamics:
+    """The simulated robot's true dynamics: a (payload-modified) Pinocchio model, joint friction and
+    physical effect terms, plus the torque sensor's offset.
+
+    Attributes
+    ----------
+    model : pinocchio.Model, viscous (n,) N·m·s/rad, coulomb (n,) N·m, terms : list of EffectTerm,
+    offset (n,) N·m added to measured torques only, records : list of dict (/truth effects).
+    """
+
+    def __init__(self, model, viscous, coulomb, terms, offset, records):
+        self.model, self.data = model, model.createData()
+        self.viscous, self.coulomb = np.asarray(viscous, float), np.asarray(coulomb, float)
+        self.terms, self.offset, self.records = (
+            list(terms),
+            np.asarray(offset, float),
+            list(records),
+        )
+
+    def extra_torque(self, q, qd, smooth: bool = False) -> np.ndarray:
+        """Friction and effect torques (T, n) N·m; ``smooth`` drops the sign() terms."""
+        q, qd = np.atleast_2d(q), np.atleast_2d(qd)
+        out = self.viscous * qd + (0.0 if smooth else self.coulomb * np.sign(qd))
+        for t in self.terms:
+            if smooth and t.cause in ("coulomb_friction", "position_friction"):
+                continue
+            out[:, t.j] += t.torque(q, qd)
+        return out
+
+    def inverse(self, q, qd, qdd) -> np.ndarray:
+        """Applied joint torques (T, n) N·m: ``rnea`` + friction + effects (no sensor offset)."""
+        q, qd, qdd = (np.atleast_2d(np.asarray(a, float)) for a in (q, qd, qdd))
+        rb = np.array(
+            [pin.rnea(self.model, self.data, q[t], qd[t], qdd[t]) for t in range(q.shape[0])]
+        )
+        return rb + self.extra_torque(q, qd)
+
+    def forward(self, q, qd, tau, smooth: bool = False) -> np.ndarray:
+        """Accelerations (n,) rad/s² for one state and applied torque (n,): ``aba`` on τ − extra."""
+        extra = self.extra_torque(q[None], qd[None], smooth)[0]
+        return pin.aba(self.model, self.data, q, qd, np.asarray(tau, float) - extra).copy()
+
+    def linearise(self, q_eq: np.ndarray, actuated: np.ndarray, eps: float = 1e-6):
+        """A (2n, 2n), B (2n, m) of ẋ = A x + B u about (q_eq, 0), x = [q − q_eq, qd], by central
+        differences of the smooth true forward dynamics (sign() friction left out)."""
+        n = q_eq.size
+        A, B = np.zeros((2 * n, 2 * n)), np.zeros((2 * n, actuated.size))
+        A[:n, n:] = np.eye(n)
+        zero = np.zeros(n)
+        for i in range(2 * n):
+            d = np.zeros(2 * n)
+            d[i] = eps
+            plus = self.forward(q_eq + d[:n], d[n:], zero, smooth=True)
+            minus = self.forward(q_eq - d[:n], -d[n:], zero, smooth=True)
+            A[n:, i] = (plus - minus) / (2 * eps)
+        for k, j in enumerate(actuated):
+            u = np.zeros(n)
+            u[j] = eps
+            B[n:, k] = (self.forward(q_eq, zero, u, True) - self.forward(q_eq, zero, -u, True)) / (
+                2 * eps
+            )
+        return A, B
+
+
+def robot_scales(robot) -> tuple[np.ndarray, np.ndarray]:
+    """Per-joint RMS rigid-body torque (N·m) and RMS velocity (rad/s) on a fixed reference
+    excitation (20 s at 50 Hz, generator seeded 0: a property of the robot, not of the run)."""
+    ref = excitation(robot.lower, robot.upper, time_base(20.0, 50.0), np.random.default_rng(0))
+    data = robot.model.createData()
+    tau = np.array(
+        [
+            pin.rnea(robot.model, data, q, v, a)
+            for q, v, a in zip(ref.q, ref.qd, ref.qdd, strict=True)
+        ]
+    )
+    s = np.maximum(np.sqrt((tau**2).mean(0)), 1e-3)
+    return s, np.maximum(np.sqrt((ref.qd**2).mean(0)), 1e-3)
+
+
+def _per_joint(value, default: np.ndarray, n: int, what: str) -> np.ndarray:
+    if value is None:
+        return default
+    arr = (
+        np.broadcast_to(np.asarray(value, dtype=float), (n,))
+        if np.ndim(value) == 0
+        else np.asarray(value, float)
+    )
+    if arr.shape != (n,) or not np.isfinite(arr).all() or (arr < 0).any():
+        raise SimOptionError(
+            f"{what}: expected one non-negative value or {n} (one per joint), got {value!r}"
+        )
+    return arr.copy()
+
+
+def default_region(robot, j: int) -> tuple[float, float]:
+    """Default ``position_friction`` region of joint ``j`` (rad); see :class:`DynamicsOptions`."""
+    lo, hi = robot.lower[j], robot.upper[j]
+    if hi - lo >= 2 * np.pi - 1e-6:
+        return 2.0, 2.5
+    return float(hi - 0.2 * (hi - lo)), float(hi)
+
+
+def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator) -> TrueDynamics:
+    """Draw the true friction and build the injected effects (thesis §3.1.1, §3.4.4)."""
+    n = robot.n_joints
+    scale, vscale = robot_scales(robot)
+    viscous = _per_joint(
+        options.viscous, 0.1 * scale / vscale * rng.uniform(0.8, 1.2, n), n, "viscous"
+    )
+    coulomb = _per_joint(options.coulomb, 0.05 * scale * rng.uniform(0.8, 1.2, n), n, "coulomb")
+    model = robot.model.copy()
+    terms, records, offset = [], [], np.zeros(n)
+    g = options.effect_scale
+    for req in check_effects(options.effects, "dynamics"):
+        if req.name == "payload":
+            records.append(_add_payload(model, robot, req, rng, g))
+            continue
+        joint = (
+            check_channel(req, robot.joint_names, "joint")
+            if req.channel
+            else robot.joint_names[int(rng.integers(n))]
+        )
+        j = robot.joint_index(joint)
+        s, v = scale[j] * g, scale[j] / vscale[j] * g
+        region = None
+        if req.name == "coulomb_friction":
+            values = {"coulomb": 0.2 * s}
+        elif req.name == "viscous_friction":
+            values = {"viscous": 0.3 * v}
+        elif req.name == "position_friction":
+            low, high = options.regions.get(joint, default_region(robot, j))
+            if not low < high:
+                raise SimOptionError(
+                    f"position_friction region for {joint!r}: low must be < high, got {low}, {high}"
+                )
+            region = {"variable": f"q.{joint}", "low": float(low), "high": float(high)}
+            values = {"coulomb": 0.3 * s, "viscous": 0.3 * v}
+        elif req.name == "spring":
+            rest = float(robot.neutral()[j])
+            span = min(robot.upper[j] - robot.lower[j], 2 * np.pi)
+            values = {"stiffness": 0.4 * s / span, "rest": rest}
+        else:  # torque_offset
+            values = {"offset": 0.1 * s * float(rng.choice([-1.0, 1.0]))}
+            offset[j] += values["offset"]
+        values = {k: float(x) for k, x in values.items()}
+        rec = effect_record(req.name, joint, values, region)
+        records.append(rec)
+        terms.append(EffectTerm(req.name, j, rec))
+    return TrueDynamics(model, viscous, coulomb, terms, offset, records)
+
+
+def _add_payload(model: pin.Model, robot, req, rng, gain: float) -> dict:
+    """Add a point mass to a link of ``model`` (in place); default: the last link."""
+    bodies = {f.name: f for f in model.frames if f.type == pin.FrameType.BODY}
+    link = check_channel(req, list(bodies), "link") if req.channel else list(bodies)[-1]
+    frame = bodies[link]
+    total = sum(model.inertias[i].mass for i in range(1, model.njoints))
+    mass = gain * 0.1 * max(total, 1.0)
+    xyz = rng.uniform(-0.05, 0.05, 3)
+    lever = frame.placement.act(xyz)  # in the parent joint's frame
+    model.inertias[frame.parentJoint] += pin.Inertia(mass, lever, np.zeros((3, 3)))
+    return effect_record(
+        "payload",
+        link,
+        {"mass": float(mass), "x": float(xyz[0]), "y": float(xyz[1]), "z": float(xyz[2])},
+    )
+
+
+def _figure8(robot, options, time, rng, plane):
+    """Figure-eight of the last link, centred where the arm is part-folded (thesis Fig. 3.8)."""
+    model = robot.model
+    kinds = (pin.FrameType.BODY, pin.FrameType.FIXED_JOINT)
+    frame = [i for i, f in enumerate(model.frames) if f.type in kinds][-1]
+    frac = np.full(robot.n_joints, 0.65)
+    frac[0] = 0.5
+    q_c = robot.lower + frac * (robot.upper - robot.lower)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q_c)
+    centre = data.oMf[frame].translation + rng.uniform(-0.01, 0.01, 3)
+    size = np.asarray(options.figure8_size, float) * rng.uniform(0.9, 1.1)
+    period = options.figure8_period * rng.uniform(0.9, 1.1)
+    return figure_eight(model, frame, time, centre, q_c, plane, tuple(size), period)
+
+
+def _pole(robot, dyn: TrueDynamics, options, time, rng, up: bool):
+    """Reaction-wheel roll-outs (thesis §3.4.2): joint 0 is the passive pole, the others are motors.
+
+    pole-down: multi-sine motor torques of random frequencies from rest hanging down. pole-up:
+    LQR about the upright (q₀ = π) on the linearised TRUE dynamics, viscous friction included.
+    Both add an Ornstein-Uhlenbeck disturbance torque on the pole (the thesis's process noise).
+    """
+    n = robot.n_joints
+    if n < 2:
+        raise RobotConfigError(
+            f"trajectory pole-{'up' if up else 'down'} needs a passive pole joint and "
+            f"at least one motor; robot {robot.name!r} has {n} joint"
+        )
+    scale, _ = robot_scales(robot)
+    drive = options.drive if options.drive is not None else 0.6 * scale[0]
+    sigma = options.disturbance if options.disturbance is not None else 0.05 * scale[0]
+    dt = time[1] - time[0]
+    dist = ou_noise(time.size, 1, dt, sigma, 0.1, rng)[:, 0]
+    actuated = np.arange(1, n)
+    q0 = np.zeros(n)
+    if not up:
+        u, _, _ = sum_of_sines(time, n - 1, rng, drive, f_min=0.2, f_max=2.0)
+
+        def torque(k, q, qd):
+            return np.concatenate([[dist[k]], u[k]])
+
+        return rollout(dyn.forward, time, q0, q0, torque)
+    q_eq = q0.copy()
+    q_eq[0] = np.pi
+    A, B = dyn.linearise(q_eq, actuated)
+    Q = np.diag(np.concatenate([[100.0], np.full(n - 1, 1e-3), [10.0], np.full(n - 1, 1e-2)]))
+    R = np.eye(n - 1) / drive**2
+    K = lqr_gain(A, B, Q, R)
+    start = q_eq + np.concatenate([[rng.uniform(-0.05, 0.05)], np.zeros(n - 1)])
+
+    def torque(k, q, qd):
+        return np.concatenate([[dist[k]], -K @ np.concatenate([q - q_eq, qd])])
+
+    traj = rollout(dyn.forward, time, start, np.zeros(n), torque)
+    if np.abs(traj.q[:, 0] - np.pi).max() > 1.0:
+        raise NumericalError(
+            "pole-up: the LQR lost the balance; lower --disturbance or raise --drive"
+        )
+    return traj
+
+
+def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator) -> Log:
+    """Simulate a torque log of ``robot`` (streams q, qd, qdd, tau) with ground truth in /truth.
+
+    Returns
+    -------
+    Log with q (T, n) rad, qd (T, n) rad/s, qdd (T, n) rad/s², tau (T, n) N·m (measured: with
+    sensor offset and noise); truth params {model, joints, viscous, coulomb, inertial, noise},
+    truth effects, truth signal ``tau`` (noise-free measured torque).
+    """
+    if options.trajectory not in TRAJECTORIES:
+        raise SimOptionError(
+            f"unknown trajectory {options.trajectory!r}; known: {', '.join(TRAJECTORIES)}"
+        )
+    if not np.isfinite(options.noise) or options.noise < 0:
+        raise SimOptionError(f"noise must be a non-negative torque in N·m, got {options.noise}")
+    time = time_base(options.duration, options.rate_hz)
+    dyn = build_true_dynamics(robot, options, rng)
+    kind = options.trajectory
+    if kind == "excitation":
+        traj = excitation(robot.lower, robot.upper, time, rng)
+    elif kind.startswith("figure8-"):
+        traj = _figure8(robot, options, time, rng, kind.split("-")[1])
+    else:
+        traj = _pole(robot, dyn, options, time, rng, up=kind == "pole-up")
+    tau_phys = traj.tau if traj.tau is not None else dyn.inverse(traj.q, traj.qd, traj.qdd)
+    tau_clean = tau_phys + dyn.offset
+    tau = tau_clean + options.noise * rng.standard_normal(tau_clean.shape)
+    names = robot.joint_names
+    streams = {
+        k: make_stream(names, v)
+        for k, v in (("q", traj.q), ("qd", traj.qd), ("qdd", traj.qdd), ("tau", tau))
+    }
+    params = {
+        "model": "rigid_body+viscous+coulomb",
+        "joints": list(names),
+        "viscous": dict(zip(names, map(float, dyn.viscous), strict=True)),
+        "coulomb": dict(zip(names, map(float, dyn.coulomb), strict=True)),
+        "inertial": {
+            names[i - 1]: [float(x) for x in dyn.model.inertias[i].toDynamicParameters()]
+            for i in range(1, dyn.model.njoints)
+        },
+        "noise": {"tau": float(options.noise)},
+        "trajectory": kind,
+    }
+    truth = Truth(
+        params=params, effects=dyn.records, signals={"tau": make_stream(names, tau_clean)}
+    )
+    return Log(
+        time=time, streams=streams, robot=robot.name, rate_hz=float(options.rate_hz), truth=truth
+    )
