@@ -11,7 +11,15 @@ from diegocal.robot.observe import (
     predict_markers,
     predict_pots,
 )
-from diegocal.robot.sensors import POT_KINDS, Anchor, ChamberSpec, MarkerSpec, PotSpec, SensorConfig, parse_sensors
+from diegocal.robot.sensors import (
+    POT_KINDS,
+    Anchor,
+    ChamberSpec,
+    MarkerSpec,
+    PotSpec,
+    SensorConfig,
+    parse_sensors,
+)
 
 __all__ = [
     "BUNDLED_ROBOTS",

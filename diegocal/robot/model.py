@@ -42,12 +42,15 @@ class Robot:
     directory : Path or None
     """
 
-    def __init__(self, model: pin.Model, sensors: SensorConfig, name: str, directory: Path | None = None):
+    def __init__(
+        self, model: pin.Model, sensors: SensorConfig, name: str, directory: Path | None = None
+    ):
         for j in range(1, model.njoints):
             if model.joints[j].nq != 1 or model.joints[j].nv != 1:
                 raise RobotConfigError(
                     f"joint {model.names[j]!r} has {model.joints[j].nq} position coordinates; only "
-                    "one-DoF joints are supported (declare continuous joints as revolute with wide limits)"
+                    "one-DoF joints are supported (declare continuous joints as revolute with "
+                    "wide limits)"
                 )
         self.model = model
         self.data = model.createData()
@@ -58,6 +61,10 @@ class Robot:
         self._joint_index = {n: i for i, n in enumerate(self.joint_names)}
         self.lower = np.array(model.lowerPositionLimit, dtype=float)
         self.upper = np.array(model.upperPositionLimit, dtype=float)
+        if not model.existFrame(sensors.base_link):
+            raise RobotConfigError(
+                f"sensors.yaml: base_link {sensors.base_link!r} is not a link of robot {name!r}"
+            )
         self.base_frame = self.frame_id(sensors.base_link)
         self._check_sensor_names()
 
@@ -91,11 +98,17 @@ class Robot:
                 self.frame_id(m.link)
             except UnknownNameError as exc:
                 raise RobotConfigError(f"sensors.yaml: marker {m.name!r}: {exc}") from None
+        pots = set(self.sensors.pot_names)
         for c in self.sensors.chambers:
             try:
                 self.joint_index(c.joint)
             except UnknownNameError as exc:
                 raise RobotConfigError(f"sensors.yaml: chamber {c.name!r}: {exc}") from None
+            if c.volume_sensor not in pots and c.volume_sensor not in self._joint_index:
+                raise RobotConfigError(
+                    f"sensors.yaml: chamber {c.name!r}: volume_sensor {c.volume_sensor!r} "
+                    "is neither a pot nor a joint"
+                )
 
     # ------------------------------------------------------------------ checks
     def check_q(self, q) -> np.ndarray:
@@ -166,7 +179,8 @@ class Robot:
                 pw = data.oMf[fid].translation + r
                 Jw = J6[:3] - _skew(r) @ J6[3:]
                 if not base_fixed:
-                    # x_b = Rbᵀ (p_w − p_b): subtract base point velocity and the base rotation's effect
+                    # x_b = Rbᵀ (p_w − p_b): subtract the base point's velocity and the effect
+                    # of the base's rotation, d(Rbᵀ) v = Rbᵀ [v]× ω_b
                     rel = pw - base.translation
                     Jw = Jw - Jb[:3] + _skew(rel) @ Jb[3:]
                 x[t, k] = Rb.T @ (pw - base.translation)
@@ -214,7 +228,9 @@ def load_robot(directory) -> Robot:
     try:
         model = pin.buildModelFromUrdf(str(urdf))
     except (RuntimeError, ValueError) as exc:
-        raise RobotConfigError(f"{urdf}: Pinocchio cannot load it ({str(exc).splitlines()[0]})") from None
+        raise RobotConfigError(
+            f"{urdf}: Pinocchio cannot load it ({str(exc).splitlines()[0]})"
+        ) from None
     return Robot(model, sensors, name=model.name or directory.name, directory=directory)
 
 
@@ -234,4 +250,7 @@ def resolve_robot_dir(robot: str | Path | None, log_robot: str | None) -> Path:
     bundled = BUNDLED_ROBOTS / str(robot)
     if bundled.is_dir():
         return bundled
-    raise RobotConfigError(f"robot {str(robot)!r} not found (neither a directory nor a bundled robot in {BUNDLED_ROBOTS})")
+    raise RobotConfigError(
+        f"robot {str(robot)!r} not found (neither a directory nor a bundled robot in "
+        f"{BUNDLED_ROBOTS})"
+    )

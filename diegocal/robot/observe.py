@@ -34,12 +34,16 @@ def anchor_points(robot: Robot) -> PointSet:
 def marker_points(robot: Robot, xyz=None) -> PointSet:
     """The robot's markers as a point set; ``xyz`` (M, 3) overrides the nominal positions."""
     markers = robot.sensors.markers
-    xyz = np.array([m.xyz for m in markers], dtype=float).reshape(-1, 3) if xyz is None else np.asarray(xyz, float)
+    xyz = (
+        np.array([m.xyz for m in markers], dtype=float).reshape(-1, 3)
+        if xyz is None
+        else np.asarray(xyz, float)
+    )
     return PointSet(tuple(m.link for m in markers), xyz)
 
 
 def _linear_map(robot: Robot) -> np.ndarray:
-    """A (P, n) matrix with s(q) = A q for rotary, encoder and tendon pots (rows of linear pots are 0)."""
+    """(P, n) matrix A with s(q) = A q for rotary, encoder and tendon pots (linear pots: 0 rows)."""
     A = np.zeros((len(robot.sensors.pots), robot.n_joints))
     for i, p in enumerate(robot.sensors.pots):
         if p.kind in ("rotary", "encoder"):
@@ -103,6 +107,7 @@ def predict_markers(robot: Robot, q, xyz, mocap_R, mocap_T) -> np.ndarray:
 
 
 def markers_jacobian(robot: Robot, q, xyz, mocap_R) -> tuple[np.ndarray, np.ndarray]:
-    """Marker positions in the base frame (T, M, 3) and ∂x̂/∂q in the mocap frame (T, M, 3, n), eq. 2.23."""
+    """Marker positions in the base frame (T, M, 3), m, and ∂x̂/∂q in the mocap frame (T, M, 3, n),
+    m/rad; thesis eq. (2.23)."""
     xb, J = robot.points_jacobian(q, marker_points(robot, xyz))
     return xb, np.einsum("ij,tmjn->tmin", np.asarray(mocap_R), J)

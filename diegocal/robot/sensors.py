@@ -104,7 +104,9 @@ def parse_sensors(raw: dict, source: str = "sensors.yaml") -> SensorConfig:
     urdf = raw.get("urdf", "robot.urdf")
     base = raw.get("base_link")
     if not isinstance(base, str) or not base:
-        raise RobotConfigError(f"{source}: 'base_link' (the link the mocap frame is fixed to) is required")
+        raise RobotConfigError(
+            f"{source}: 'base_link' (the link the mocap frame is fixed to) is required"
+        )
     pots = tuple(_parse_list(raw, "pots", _parse_pot, source))
     markers = tuple(_parse_list(raw, "markers", _parse_marker, source))
     chambers = tuple(_parse_list(raw, "chambers", _parse_chamber, source))
@@ -160,10 +162,12 @@ def _xyz(value, label, what="xyz") -> np.ndarray:
 def _parse_pot(entry, label) -> PotSpec:
     kind = entry.get("kind")
     if kind not in POT_KINDS:
-        raise RobotConfigError(f"{label}: unknown kind {kind!r} (expected one of {', '.join(POT_KINDS)})")
+        raise RobotConfigError(
+            f"{label}: unknown kind {kind!r} (expected one of {', '.join(POT_KINDS)})"
+        )
     bias = _number(entry, "bias", label, 0.0)
     if kind == "encoder":
-        if "gain" in entry and float(entry["gain"]) != 1.0:
+        if "gain" in entry and _number(entry, "gain", label) != 1.0:
             raise RobotConfigError(f"{label}: an encoder's gain is fixed at 1")
         gain = 1.0
     else:
@@ -178,14 +182,18 @@ def _parse_pot(entry, label) -> PotSpec:
     if kind == "linear":
         anchors = entry.get("anchors")
         if not isinstance(anchors, list) or len(anchors) != 2:
-            raise RobotConfigError(f"{label}: linear pot needs two anchors [{{link, xyz}}, {{link, xyz}}]")
+            raise RobotConfigError(
+                f"{label}: linear pot needs two anchors [{{link, xyz}}, {{link, xyz}}]"
+            )
         parsed = []
         for j, a in enumerate(anchors):
             if not isinstance(a, dict) or not isinstance(a.get("link"), str):
                 raise RobotConfigError(f"{label}: anchors[{j}] needs 'link'")
             parsed.append(Anchor(a["link"], _xyz(a.get("xyz"), label, f"anchors[{j}].xyz")))
         if parsed[0].link == parsed[1].link:
-            raise RobotConfigError(f"{label}: both anchors are on link {parsed[0].link!r}; the length never changes")
+            raise RobotConfigError(
+                f"{label}: both anchors are on link {parsed[0].link!r}; the length never changes"
+            )
         return PotSpec(entry["name"], kind, gain, bias, anchors=tuple(parsed))
     arms = entry.get("moment_arms")
     if not isinstance(arms, dict) or not arms:
