@@ -1,0 +1,286 @@
+"""The kinematics simulator against its own observation models and its injected truth."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.io import load_log, save_log
+from diegocal.robot import load_robot, pot_transmission, predict_markers
+from diegocal.sim import (
+    EffectError,
+    KinematicsOptions,
+    SimOptionError,
+    parse_effects,
+    simulate_kinematics,
+)
+from diegocal.sim.kinematics import backlash, occlusion_mask
+from diegocal.stac.calibration import Calibration
+
+TINY = Path(__file__).parent / "fixtures" / "kin_tiny"
+ROBOTS = Path(__file__).resolve().parents[2] / "robots"
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(TINY)
+
+
+def simulate(robot, seed=7, **kw):
+    kw.setdefault("duration", 30.0)
+    if "effects" in kw:
+        kw["effects"] = parse_effects(kw["effects"])
+    return simulate_kinematics(robot, KinematicsOptions(**kw), np.random.default_rng(seed))
+
+
+@pytest.fixture(scope="module")
+def base(robot):
+    return simulate(robot)
+
+
+# ----------------------------------------------------------------------------- the model
+def test_pots_follow_true_gain_and_bias_within_noise(robot, base):
+    truth = Calibration.from_dict(base.truth.params)
+    q = base.truth.signals["q"].data
+    resid = base.streams["pots"].data - (truth.gain * pot_transmission(robot, q) + truth.bias)
+    assert abs(resid.mean()) < 5 * 0.005 / np.sqrt(resid.size)  # 5 standard errors
+    np.testing.assert_allclose(resid.std(axis=0), 0.005, rtol=0.1)
+
+
+def test_markers_follow_true_frame_and_positions_within_noise(robot, base):
+    truth = Calibration.from_dict(base.truth.params)
+    q = base.truth.signals["q"].data
+    pred = predict_markers(robot, q, truth.marker_xyz, truth.mocap_R, truth.mocap_T)
+    x = base.streams["markers"].data
+    seen = np.isfinite(x[..., 0])
+    resid = (x - pred)[seen]
+    np.testing.assert_allclose(resid.std(axis=0), 0.002, rtol=0.1)
+    assert np.abs(resid.mean(axis=0)).max() < 2e-4
+
+
+def test_truth_is_drawn_around_the_nominal_values(robot, base):
+    truth, nominal = Calibration.from_dict(base.truth.params), Calibration.nominal(robot)
+    ratio = truth.gain / nominal.gain
+    assert np.all(np.abs(ratio - 1) <= 0.2) and np.any(np.abs(ratio - 1) > 0.02)
+    assert truth.gain[robot.sensors.pot_names.index("slide")] == 1.0  # encoder gain stays 1
+    dist = np.linalg.norm(truth.marker_xyz - nominal.marker_xyz, axis=1)
+    assert np.all((dist >= 0.015 - 1e-12) & (dist <= 0.045 + 1e-12))
+    np.testing.assert_allclose(truth.mocap_R @ truth.mocap_R.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(truth.mocap_R) == pytest.approx(1.0)
+    assert base.truth.params["sigma"] == {"pots": 0.005, "markers": 0.002}
+
+
+def test_joints_move_over_their_range_within_limits(robot, base):
+    q = base.truth.signals["q"].data
+    assert np.all(q >= robot.lower - 1e-12) and np.all(q <= robot.upper + 1e-12)
+    covered = (q.max(0) - q.min(0)) / (robot.upper - robot.lower)
+    assert covered.min() > 0.4
+    qd = base.truth.signals["qd"].data
+    agree = np.abs(np.gradient(q, 0.01, axis=0) - qd) < 0.1  # apart from hard stops at limits
+    assert agree.mean() > 0.99
+
+
+def test_same_seed_same_file_other_seed_other_data(robot, base, tmp_path):
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    save_log(base, a)
+    save_log(simulate(robot), b)
+    assert a.read_bytes() == b.read_bytes()
+    other = simulate(robot, seed=8)
+    assert not np.allclose(other.streams["pots"].data, base.streams["pots"].data)
+    back = load_log(a)
+    assert back.truth.params == base.truth.params
+    np.testing.assert_array_equal(back.streams["markers"].data, base.streams["markers"].data)
+
+
+# ----------------------------------------------------------------------------- occlusion
+def test_occlusion_runs_hit_the_target_fraction():
+    mask = occlusion_mask(200_000, 8, 0.1, 50.0, np.random.default_rng(0))
+    # renewal theory: sd of one marker's fraction ~ 0.0064 here (400 occlusion cycles)
+    np.testing.assert_allclose(mask.mean(axis=0), 0.1, atol=0.03)
+    assert mask.mean() == pytest.approx(0.1, abs=0.01)
+    starts = (mask[1:] & ~mask[:-1]).sum(axis=0)
+    mean_run = mask.sum(axis=0) / np.maximum(starts, 1)
+    np.testing.assert_allclose(mean_run, 50.0, rtol=0.15)
+    assert not occlusion_mask(1000, 3, 0.0, 50.0, np.random.default_rng(0)).any()
+
+
+def test_log_markers_are_occluded_in_runs(base):
+    nan = np.isnan(base.streams["markers"].data)
+    assert (nan.all(axis=2) == nan.any(axis=2)).all()  # a marker is occluded on all axes at once
+    occ = nan[..., 0]
+    assert 0.03 < occ.mean() < 0.2
+    runs = (occ[1:] & ~occ[:-1]).sum() + occ[0].sum()
+    assert occ.sum() / runs > 20  # mean run 0.5 s = 50 samples, not isolated samples
+
+
+# ----------------------------------------------------------------------------- effects
+def _noise_free(**kw):
+    return dict(pot_noise=0.0, marker_noise=0.0, occlusion=0.0, **kw)
+
+
+@pytest.fixture(scope="module")
+def clean(robot):
+    return simulate(robot, **_noise_free())
+
+
+def _effect(log):
+    (record,) = log.truth.effects
+    return record
+
+
+def test_link_offset_moves_only_the_markers_below_that_joint(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["link_offset:shoulder"]))
+    d = np.array(_effect(log)["values"]["dxyz"])
+    assert 0.005 <= np.linalg.norm(d) <= 0.010
+    np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
+    shift = log.streams["markers"].data - clean.streams["markers"].data
+    names = robot.sensors.marker_names
+    for m in ("m_upper", "m_lower", "m_slider"):  # on the shoulder's subtree: shifted by |d|
+        np.testing.assert_allclose(np.linalg.norm(shift[:, names.index(m)], axis=1),
+                                   np.linalg.norm(d), rtol=1e-9)
+    for m in ("m_head", "m_finger"):
+        np.testing.assert_array_equal(shift[:, names.index(m)], 0.0)
+    R = Calibration.from_dict(log.truth.params).mocap_R  # waist is the base: shift = R d
+    np.testing.assert_allclose(shift[:, names.index("m_upper")], np.tile(R @ d, (log.n_samples, 1)),
+                               atol=1e-12)
+
+
+def test_link_offset_reaches_linear_pots_through_their_anchors(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["link_offset:neck_pitch"]))
+    diff = log.streams["pots"].data - clean.streams["pots"].data
+    changed = np.array(robot.sensors.pot_names)[np.abs(diff).max(0) > 1e-9]
+    assert set(changed) == {"neck_a", "neck_b"}
+
+
+def test_sensor_nonlinearity_adds_the_recorded_quadratic_to_one_pot(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["sensor_nonlinearity:flex"]))
+    v = _effect(log)["values"]
+    i = robot.sensors.pot_names.index("flex")
+    diff = log.streams["pots"].data - clean.streams["pots"].data
+    s = pot_transmission(robot, log.truth.signals["q"].data)[:, i]
+    np.testing.assert_allclose(diff[:, i], v["c2"] * (s - v["s0"]) ** 2, atol=1e-12)
+    assert np.abs(diff[:, i]).max() == pytest.approx(abs(v["peak"]), rel=1e-6)
+    np.testing.assert_array_equal(np.delete(diff, i, axis=1), 0.0)
+    np.testing.assert_array_equal(log.streams["markers"].data, clean.streams["markers"].data)
+
+
+def test_backlash_lags_the_reading_in_the_direction_of_motion(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["backlash:elbow"]))
+    v = _effect(log)["values"]
+    i = robot.sensors.pot_names.index("elbow")
+    truth = Calibration.from_dict(log.truth.params)
+    lag = (log.streams["pots"].data - clean.streams["pots"].data)[:, i] / truth.gain[i]  # rad
+    qd = log.truth.signals["qd"].data[:, robot.joint_index("elbow")]
+    half = 0.5 * v["width"]
+    assert np.abs(lag).max() <= half + 1e-12
+    up, down = qd > 0.2, qd < -0.2
+    # moving up the reading trails by half the band, moving down it leads; after a reversal it
+    # crosses the band, so the lag only ever decreases while moving up (increases moving down)
+    assert np.mean(np.isclose(lag[up], -half, atol=1e-9)) > 0.7
+    assert np.mean(np.isclose(lag[down], half, atol=1e-9)) > 0.7
+    step = np.diff(lag)
+    assert (step[up[1:]] <= 1e-12).all() and (step[down[1:]] >= -1e-12).all()
+    np.testing.assert_array_equal(np.delete(log.streams["pots"].data - clean.streams["pots"].data,
+                                            i, axis=1), 0.0)
+
+
+def test_backlash_operator_is_a_dead_band():
+    s = np.array([0.0, 0.01, 0.05, 0.1, 0.08, 0.06, 0.0])
+    np.testing.assert_allclose(backlash(s, 0.04), [0.0, 0.0, 0.03, 0.08, 0.08, 0.08, 0.02])
+
+
+def test_time_offset_shifts_the_mocap_clock_only(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["time_offset:markers"]))
+    k = _effect(log)["values"]["samples"]
+    assert 3 <= abs(k) <= 8
+    np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
+    a, b = log.streams["markers"].data, clean.streams["markers"].data
+    lo, hi = max(0, -k), log.n_samples - max(0, k)
+    np.testing.assert_allclose(a[lo:hi], b[lo + k: hi + k], atol=1e-12)
+    assert np.abs(a - b).max() > 1e-3
+
+
+def test_marker_slip_moves_one_marker_from_the_recorded_time(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["marker_slip:m_lower"]))
+    rec = _effect(log)
+    t0, d = rec["values"]["sample"], np.array(rec["values"]["dxyz"])
+    assert rec["region"]["low"] == pytest.approx(log.time[t0])
+    m = robot.sensors.marker_names.index("m_lower")
+    diff = log.streams["markers"].data - clean.streams["markers"].data
+    np.testing.assert_array_equal(diff[:t0], 0.0)
+    np.testing.assert_allclose(np.linalg.norm(diff[t0:, m], axis=1), np.linalg.norm(d), rtol=1e-9)
+    np.testing.assert_array_equal(np.delete(diff, m, axis=1), 0.0)
+    np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
+
+
+def test_effects_without_channel_pick_a_valid_one_reproducibly(robot):
+    a = simulate(robot, effects=["backlash", "link_offset", "marker_slip"], duration=5.0)
+    b = simulate(robot, effects=["backlash", "link_offset", "marker_slip"], duration=5.0)
+    assert a.truth.effects == b.truth.effects
+    by = {e["cause"]: e["channel"] for e in a.truth.effects}
+    assert by["backlash"] in robot.sensors.pot_names
+    assert by["link_offset"] in robot.joint_names
+    assert by["marker_slip"] in robot.sensors.marker_names
+
+
+def test_bad_effects_and_options_raise(robot):
+    with pytest.raises(EffectError, match="not a kinematics effect"):
+        simulate(robot, effects=["coulomb_friction:elbow"])
+    with pytest.raises(KeyError, match="not a joint"):
+        simulate(robot, effects=["link_offset:wrist"])
+    with pytest.raises(SimOptionError, match="duration"):
+        simulate(robot, duration=-1.0)
+    with pytest.raises(SimOptionError, match="occlusion"):
+        simulate(robot, occlusion=1.0)
+
+
+# ----------------------------------------------------------------------------- robots
+@pytest.mark.parametrize("name", ["finger", "diego"])
+def test_bundled_robots_simulate(name):
+    if not (ROBOTS / name / "sensors.yaml").exists():
+        pytest.skip(f"robots/{name} not generated")
+    robot = load_robot(ROBOTS / name)
+    log = simulate(robot, duration=3.0)
+    assert log.robot == name
+    assert log.streams["pots"].data.shape == (300, len(robot.sensors.pots))
+    truth = Calibration.from_dict(log.truth.params)
+    s = pot_transmission(robot, log.truth.signals["q"].data)
+    resid = log.streams["pots"].data - (truth.gain * s + truth.bias)
+    assert resid.std() == pytest.approx(0.005, rel=0.15)
+
+
+# ----------------------------------------------------------------------------- CLI
+runner = CliRunner()
+
+
+def test_cli_writes_a_log_with_truth(tmp_path):
+    out = tmp_path / "k.h5"
+    res = runner.invoke(app, ["simulate", "kinematics", "--robot", str(TINY), "-o", str(out),
+                              "--duration", "5", "--seed", "3", "--effect", "backlash:elbow",
+                              "--occlusion", "0.2", "--marker-noise", "0.001"])
+    assert res.exit_code == 0, res.output
+    log = load_log(out)
+    assert log.n_samples == 500 and log.robot == "kin_tiny"
+    assert log.truth.effects[0]["cause"] == "backlash"
+    assert log.truth.params["sigma"]["markers"] == 0.001
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--effect", "wobble"], "not a kinematics effect"),
+    (["--effect", "backlash:nope"], "'nope' is not a pot"),
+    (["--effect", "marker_slip:m99"], "'m99' is not a marker"),
+    (["--effect", "time_offset:pots"], "time_offset:markers"),
+    (["--duration", "-2"], "duration must be positive"),
+    (["--occlusion", "1.5"], "occlusion fraction"),
+    (["--robot", "/no/such/robot"], "not found"),
+])
+def test_cli_bad_input_is_one_clear_line(tmp_path, args, message):
+    base_args = ["simulate", "kinematics", "--robot", str(TINY), "-o", str(tmp_path / "x.h5"),
+                 "--duration", "1"]
+    res = runner.invoke(app, base_args + args)
+    assert res.exit_code != 0
+    assert message in res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "x.h5").exists()
