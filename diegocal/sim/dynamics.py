@@ -204,7 +204,12 @@ def default_region(robot, j: int) -> tuple[float, float]:
 
 
 def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator) -> TrueDynamics:
-    """Draw the true friction and build the injected effects (thesis §3.1.1, §3.4.4)."""
+    """Draw the true friction and build the injected effects (thesis §3.1.1, §3.4.4).
+
+    Friction and effects draw from separate child generators of ``rng``, so adding an effect
+    leaves the friction unchanged.
+    """
+    rng, effect_rng = rng.spawn(2)
     n = robot.n_joints
     scale, vscale = robot_scales(robot)
     viscous = _per_joint(
@@ -216,12 +221,12 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
     g = options.effect_scale
     for req in check_effects(options.effects, "dynamics"):
         if req.name == "payload":
-            records.append(_add_payload(model, robot, req, rng, g))
+            records.append(_add_payload(model, robot, req, effect_rng, g))
             continue
         joint = (
             check_channel(req, robot.joint_names, "joint")
             if req.channel
-            else robot.joint_names[int(rng.integers(n))]
+            else robot.joint_names[int(effect_rng.integers(n))]
         )
         j = robot.joint_index(joint)
         s, v = scale[j] * g, scale[j] / vscale[j] * g
@@ -243,7 +248,7 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
             span = min(robot.upper[j] - robot.lower[j], 2 * np.pi)
             values = {"stiffness": 0.4 * s / span, "rest": rest}
         else:  # torque_offset
-            values = {"offset": 0.1 * s * float(rng.choice([-1.0, 1.0]))}
+            values = {"offset": 0.1 * s * float(effect_rng.choice([-1.0, 1.0]))}
             offset[j] += values["offset"]
         values = {k: float(x) for k, x in values.items()}
         rec = effect_record(req.name, joint, values, region)
@@ -347,7 +352,9 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     if not np.isfinite(options.noise) or options.noise < 0:
         raise SimOptionError(f"noise must be a non-negative torque in N·m, got {options.noise}")
     time = time_base(options.duration, options.rate_hz)
-    dyn = build_true_dynamics(robot, options, rng)
+    # independent streams: adding an effect or noise changes nothing else
+    model_rng, rng, noise_rng = rng.spawn(3)
+    dyn = build_true_dynamics(robot, options, model_rng)
     kind = options.trajectory
     if kind == "excitation":
         traj = excitation(robot.lower, robot.upper, time, rng)
@@ -357,7 +364,7 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
         traj = _pole(robot, dyn, options, time, rng, up=kind == "pole-up")
     tau_phys = traj.tau if traj.tau is not None else dyn.inverse(traj.q, traj.qd, traj.qdd)
     tau_clean = tau_phys + dyn.offset
-    tau = tau_clean + options.noise * rng.standard_normal(tau_clean.shape)
+    tau = tau_clean + options.noise * noise_rng.standard_normal(tau_clean.shape)
     names = robot.joint_names
     streams = {
         k: make_stream(names, v)
