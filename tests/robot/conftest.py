@@ -113,6 +113,11 @@ def tiny_sensors():
 
 
 @pytest.fixture
+def tiny_urdf():
+    return TINY_URDF
+
+
+@pytest.fixture
 def robot_dir(tmp_path):
     """Write a robot directory (sensors mapping, URDF text) under tmp_path; returns its path."""
 
