@@ -196,7 +196,7 @@ GIMBALS = {
         "r_ankle_pitch",
         "r_ankle_roll",
         "r_foot",
-        (0, 0, -0.23),
+        (0, 0, -0.21),
         (-0.035, 0.03, 0.13),
         (-0.045, 0.03, -0.015),
     ),
@@ -205,7 +205,7 @@ GIMBALS = {
         "l_ankle_pitch",
         "l_ankle_roll",
         "l_foot",
-        (0, 0, -0.23),
+        (0, 0, -0.21),
         (-0.035, 0.03, 0.13),
         (-0.045, 0.03, -0.015),
     ),
@@ -243,8 +243,8 @@ def diego_spec() -> tuple[RobotSpec, dict, list]:
     L(Link("neck_base", 0.3, ("cyl", 0.035, 0.04), (0, 0, 0.02)))
     L(Link("neck_cross", 0.08, ("box", 0.025, 0.025, 0.015)))
     L(Link("neck", 0.4, ("cyl", 0.03, 0.06), (0, 0, 0.03)))
-    L(Link("head", 3.2, ("box", 0.20, 0.18, 0.22), (0.02, 0, 0.10)))
-    joint("neck_yaw", "chest", "neck_base", (0, 0, 0.20), "z", -1.2, 1.2, "small")
+    L(Link("head", 3.2, ("box", 0.20, 0.18, 0.20), (0.02, 0, 0.09)))
+    joint("neck_yaw", "chest", "neck_base", (0, 0, 0.18), "z", -1.2, 1.2, "small")
     joint("neck_pitch", "neck_base", "neck_cross", (0, 0, 0.04), "y", -0.5, 0.6, "small")
     joint("neck_roll", "neck_cross", "neck", (0, 0, 0), "x", -0.45, 0.45, "small")
     joint("head_pitch", "neck", "head", (0, 0, 0.06), "y", -0.4, 0.4, "small")
@@ -254,7 +254,7 @@ def diego_spec() -> tuple[RobotSpec, dict, list]:
         ("chest", (0.08, 0.04, 0.12)),
         ("neck_base", (0.035, 0.02, 0.02)),
         ("neck", (0.03, -0.02, 0.04)),
-        ("head", (0.09, 0.03, 0.10)),
+        ("head", (0.12, 0.03, 0.09)),
     ]
 
     for s, y in (("r", -1.0), ("l", 1.0)):
@@ -331,8 +331,8 @@ def diego_spec() -> tuple[RobotSpec, dict, list]:
         # leg (7): hip yaw/roll/pitch, knee, ankle gimbal (pitch, roll), toe
         L(Link(f"{s}_hip", 0.5, ("cyl", 0.04, 0.04), (0, 0, -0.02)))
         L(Link(f"{s}_hip_block", 0.35, ("box", 0.05, 0.05, 0.04)))
-        L(Link(f"{s}_thigh", 2.4, ("cyl", 0.05, 0.25), (0, 0, -0.125)))
-        L(Link(f"{s}_shank", 1.4, ("cyl", 0.04, 0.23), (0, 0, -0.115)))
+        L(Link(f"{s}_thigh", 2.4, ("cyl", 0.05, 0.23), (0, 0, -0.115)))
+        L(Link(f"{s}_shank", 1.4, ("cyl", 0.04, 0.21), (0, 0, -0.105)))
         L(Link(f"{s}_ankle", 0.1, ("box", 0.03, 0.03, 0.02)))
         L(Link(f"{s}_foot", 0.6, ("box", 0.14, 0.07, 0.04), (0.03, 0, -0.03)))
         L(Link(f"{s}_toes", 0.15, ("box", 0.04, 0.07, 0.02), (0.02, 0, 0.0)))
@@ -340,9 +340,9 @@ def diego_spec() -> tuple[RobotSpec, dict, list]:
         lo, hi = (-0.6, 0.3) if sign < 0 else (-0.3, 0.6)
         joint(f"{s}_hip_roll", f"{s}_hip", f"{s}_hip_block", (0, 0, -0.04), "x", lo, hi, "large")
         joint(f"{s}_hip_pitch", f"{s}_hip_block", f"{s}_thigh", (0, 0, 0), "y", -1.8, 0.5, "large")
-        joint(f"{s}_knee", f"{s}_thigh", f"{s}_shank", (0, 0, -0.25), "y", -0.05, 2.3, "large")
+        joint(f"{s}_knee", f"{s}_thigh", f"{s}_shank", (0, 0, -0.23), "y", -0.05, 2.3, "large")
         joint(
-            f"{s}_ankle_pitch", f"{s}_shank", f"{s}_ankle", (0, 0, -0.23), "y", -0.6, 0.5, "medium"
+            f"{s}_ankle_pitch", f"{s}_shank", f"{s}_ankle", (0, 0, -0.21), "y", -0.6, 0.5, "medium"
         )
         joint(f"{s}_ankle_roll", f"{s}_ankle", f"{s}_foot", (0, 0, 0), "x", -0.35, 0.35, "medium")
         joint(f"{s}_toe", f"{s}_foot", f"{s}_toes", (0.09, 0, -0.05), "y", -0.5, 0.5, "small")

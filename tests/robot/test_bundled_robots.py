@@ -91,6 +91,20 @@ def test_diego_structure(bundled):
     )
 
 
+def test_diego_is_130cm_tall(bundled):
+    """Standing height at q = 0 (all link frames aligned with the waist), from the link visuals."""
+    robot = bundled("diego")
+    links = ET.parse(robot.directory / "robot.urdf").getroot().findall("link")
+    origin = robot.link_poses(np.zeros(robot.n_joints), [link.get("name") for link in links])[1][0]
+    top, bottom = -np.inf, np.inf
+    for link, position in zip(links, origin, strict=True):
+        geometry = link.find("visual/geometry")[0]
+        centre = float(link.find("visual/origin").get("xyz").split()[2]) + position[2]
+        half = 0.5 * float(geometry.get("length") or geometry.get("size").split()[2])
+        top, bottom = max(top, centre + half), min(bottom, centre - half)
+    assert top - bottom == pytest.approx(1.30, abs=0.03)
+
+
 def test_diego_mass_is_35kg(bundled):
     robot = bundled("diego")
     total = sum(inertia.mass for inertia in robot.model.inertias)
