@@ -1,0 +1,327 @@
+"""The semi-parametric GP estimator on plain arrays (robot-agnostic), thesis §3.3.
+
+``SemiParametricGP(kernels, ...).fit(U, Y, F)`` learns hyperparameters by maximum marginal
+likelihood (ML-II, optionally with priors = MAP) with analytic gradients, from the heuristic
+initial values of §3.3.4, in log space with scipy's L-BFGS-B, then forms the posterior
+(:mod:`diegocal.sgp.gp`). Inputs are standardised and feature columns scaled to unit RMS
+internally; every attribute ending in ``_`` is in the caller's units.
+
+Use it directly for models whose features are not a robot's torque regressor (e.g. the
+forward reaction-wheel model of thesis eq. 3.28); :func:`diegocal.sgp.fit_dynamics` wraps it
+for inverse dynamics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.cluster.vq import kmeans2
+from scipy.optimize import minimize
+
+from diegocal.errors import FitError, NumericalError
+from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood
+from diegocal.sgp.kernels import is_amplitude, is_lengthscale
+
+LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
+
+
+@dataclass(frozen=True)
+class Guard:
+    """Guards against the GP part soaking up physics the parametric part explains (all optional).
+
+    Attributes
+    ----------
+    max_lengthscale : float or None
+        Upper bound on every length-scale, in units of the input's training std. A GP with
+        length-scales far beyond the data's spread is a global smooth function that competes
+        with the parametric model at equal likelihood; bounding it keeps Z local.
+    lengthscale_prior : (mean, std) or None
+        Gaussian prior on log ℓ (ℓ in units of the input's std): MAP instead of ML-II.
+    amplitude_prior : float or None
+        Std of a Gaussian prior on log(σ_z / s), s the std of the residual of the parametric-only
+        fit: keeps σ_z at the size of what the parametric model leaves unexplained.
+    validation_fraction : float
+        Fraction of the training samples (the last ones, in the given order) held out to judge
+        restarts; the chosen hyperparameters are then refit-free and the posterior uses all data.
+    """
+
+    max_lengthscale: float | None = None
+    lengthscale_prior: tuple[float, float] | None = None
+    amplitude_prior: float | None = None
+    validation_fraction: float = 0.0
+
+
+class SemiParametricGP:
+    """SGP regression with shared parameters W and one GP per output (thesis eq. 3.1-3.20).
+
+    Parameters
+    ----------
+    kernels : list of Kernel or None, one per output; None means no GP for that output (PR)
+    use_features : bool, False drops F (a zero-mean GP, thesis eq. 3.21)
+    fit_sigma_w : bool, optimise σ_w (True) or keep the §3.3.4 "large" initial value
+    restarts : int, extra optimisations from perturbed initial values (seeded)
+    seed : int
+    guard : Guard
+    inference : "exact" or "sparse" (DTC/VFE with ``n_inducing`` k-means inducing inputs)
+    n_inducing : int
+    hyper_max : int, hyperparameters are learnt on at most this many samples (random subset)
+    maxiter : int, L-BFGS-B iterations per start
+    min_noise : float, floor of σ_v relative to std(y_j)
+    """
+
+    def __init__(
+        self,
+        kernels,
+        *,
+        use_features: bool = True,
+        fit_sigma_w: bool = True,
+        restarts: int = 0,
+        seed: int = 0,
+        guard: Guard = Guard(),
+        inference: str = "exact",
+        n_inducing: int = 300,
+        hyper_max: int = 1000,
+        maxiter: int = 200,
+        min_noise: float = 1e-4,
+    ):
+        if inference not in ("exact", "sparse"):
+            raise ValueError(f"inference must be 'exact' or 'sparse', got {inference!r}")
+        self.kernels = list(kernels)
+        self.use_features = use_features
+        self.fit_sigma_w = fit_sigma_w
+        self.restarts = int(restarts)
+        self.seed = int(seed)
+        self.guard = guard
+        self.inference = inference
+        self.n_inducing = int(n_inducing)
+        self.hyper_max = int(hyper_max)
+        self.maxiter = int(maxiter)
+        self.min_noise = float(min_noise)
+
+    # ------------------------------------------------------------------ scaling
+    def _scale(self, U, F):
+        return (U - self.u_mean_) / self.u_std_, F / self.f_scale_
+
+    def _check(self, U, Y, F):
+        U, Y, F = (np.asarray(x, float) for x in (U, Y, F))
+        if U.ndim != 2 or Y.ndim != 2 or F.ndim != 3:
+            raise ValueError(
+                f"expected U (N, p), Y (N, n), F (N, n, m); got {U.shape}, {Y.shape}, {F.shape}"
+            )
+        if (
+            not (len(U) == len(Y) == len(F))
+            or F.shape[1] != Y.shape[1]
+            or Y.shape[1] != len(self.kernels)
+        ):
+            raise ValueError(
+                f"inconsistent shapes U {U.shape}, Y {Y.shape}, F {F.shape}, "
+                f"{len(self.kernels)} kernels"
+            )
+        if not self.use_features:
+            F = F[:, :, :0]
+        return U, Y, F
+
+    # ------------------------------------------------------------------ fit
+    def fit(
+        self,
+        U,
+        Y,
+        F,
+        hyperparameters: Hyperparameters | None = None,
+        inducing: np.ndarray | None = None,
+    ) -> SemiParametricGP:
+        """Learn hyperparameters (unless given) and the posterior.
+
+        U : (N, p) inputs; Y : (N, n) observations (y's unit); F : (N, n, m) features.
+        ``hyperparameters``/``inducing`` (scaled inputs, (M, p)) restore a saved fit exactly.
+        """
+        U, Y, F = self._check(U, Y, F)
+        N, n = Y.shape
+        if N < 3:
+            raise FitError(f"need at least 3 samples to fit, got {N}")
+        self.u_mean_ = U.mean(0)
+        self.u_std_ = np.where(U.std(0) > 0, U.std(0), 1.0)
+        rms = np.sqrt(np.mean(F**2, axis=(0, 1))) if F.shape[2] else np.zeros(0)
+        self.f_scale_ = np.where(rms > 0, rms, 1.0)
+        Us, Fs = self._scale(U, F)
+        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+        rng = np.random.default_rng(self.seed)
+        if hyperparameters is None:
+            hyperparameters = self._learn(Us, Y, Fs, rng)
+        self.hyper_ = hyperparameters
+        if (
+            inducing is None
+            and self.inference == "sparse"
+            and any(k is not None for k in self.kernels)
+        ):
+            inducing = self._inducing(Us, rng)
+        self.inducing_ = inducing
+        self.posterior_ = fit_posterior(self.kernels, Us, Y, Fs, hyperparameters, inducing)
+        w = self.posterior_.w_mean / self.f_scale_
+        cov = self.posterior_.w_cov / np.outer(self.f_scale_, self.f_scale_)
+        self.w_, self.w_cov_ = w, cov
+        self.log_likelihood_ = self.posterior_.log_likelihood
+        return self
+
+    def _inducing(self, Us, rng):
+        M = min(self.n_inducing, len(Us))
+        if M >= len(Us):
+            return Us.copy()
+        start = Us[rng.choice(len(Us), M, replace=False)]
+        centres, _ = kmeans2(Us, start, iter=10, minit="matrix", seed=rng)
+        return centres
+
+    def _initial(self, Us, Y, Fs) -> tuple[Hyperparameters, np.ndarray]:
+        """§3.3.4 heuristics: σ_v² = var(y)/100, σ_z² = var(y), ℓ = spread of u, σ_w large."""
+        Y.shape[1]
+        var = self.y_std_**2
+        resid = self._parametric_residual_std(Y, Fs)
+        thetas = []
+        for j, k in enumerate(self.kernels):
+            if k is None:
+                thetas.append(np.zeros(0))
+                continue
+            t = np.zeros(k.n_params)  # ℓ = 1 input std (the inputs are standardised)
+            for i, name in enumerate(k.names):
+                if is_amplitude(name):
+                    t[i] = 0.5 * np.log(var[j])
+            thetas.append(t)
+        sigma_w = 10.0 * float(np.max(self.y_std_))
+        has_gp = np.array([k is not None for k in self.kernels])
+        # noise: var/100 under a GP; the parametric residual when the GP is absent (PR)
+        sv = np.where(has_gp, 0.1 * self.y_std_, np.maximum(resid, 1e-3 * self.y_std_))
+        return Hyperparameters(np.log(sigma_w), np.log(sv), tuple(thetas)), resid
+
+    def _parametric_residual_std(self, Y, Fs):
+        if Fs.shape[2] == 0:
+            return self.y_std_.copy()
+        A = Fs.reshape(-1, Fs.shape[2])
+        w, *_ = np.linalg.lstsq(A, Y.reshape(-1), rcond=None)
+        r = Y - Fs @ w
+        return np.maximum(r.std(0), 1e-6 * self.y_std_)
+
+    def _bounds(self, hp0: Hyperparameters, resid):
+        n = len(self.kernels)
+        lo, hi = [], []
+        if self.fit_sigma_w and any(self._m_nonzero()):
+            lo.append(hp0.log_sigma_w - LOG_BOUND)
+            hi.append(hp0.log_sigma_w + LOG_BOUND)
+        else:
+            lo.append(hp0.log_sigma_w)
+            hi.append(hp0.log_sigma_w)
+        floor = np.log(self.min_noise * self.y_std_)
+        lo += list(floor)
+        hi += list(np.log(self.y_std_) + 2.0)
+        g = self.guard
+        for j in range(n):
+            k = self.kernels[j]
+            if k is None:
+                continue
+            for name in k.names:
+                if is_lengthscale(name):
+                    lo.append(np.log(1e-2))
+                    hi.append(np.log(g.max_lengthscale) if g.max_lengthscale else np.log(1e3))
+                else:
+                    lo.append(np.log(1e-6 * self.y_std_[j]))
+                    hi.append(np.log(self.y_std_[j]) + 3.0)
+        return list(zip(lo, hi, strict=True))
+
+    def _m_nonzero(self):
+        return [self.use_features]
+
+    def _prior(self, vec, sizes, resid):
+        """Negative log prior of the guard's priors, and its gradient (0 when no prior is set)."""
+        g = self.guard
+        val, grad = 0.0, np.zeros_like(vec)
+        k = 1 + len(self.kernels)
+        for j, kern in enumerate(self.kernels):
+            if kern is None:
+                continue
+            for i, name in enumerate(kern.names):
+                x = vec[k + i]
+                if is_lengthscale(name) and g.lengthscale_prior is not None:
+                    mu, sd = g.lengthscale_prior
+                    val += 0.5 * ((x - mu) / sd) ** 2
+                    grad[k + i] += (x - mu) / sd**2
+                elif is_amplitude(name) and g.amplitude_prior is not None:
+                    mu, sd = np.log(resid[j]), g.amplitude_prior
+                    val += 0.5 * ((x - mu) / sd) ** 2
+                    grad[k + i] += (x - mu) / sd**2
+            k += sizes[j]
+        return val, grad
+
+    def _learn(self, Us, Y, Fs, rng) -> Hyperparameters:
+        N = len(Us)
+        idx = np.arange(N)
+        if N > self.hyper_max:
+            idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
+        n_val = int(round(self.guard.validation_fraction * len(idx)))
+        fit_idx, val_idx = (idx[:-n_val], idx[-n_val:]) if n_val >= 2 else (idx, idx[:0])
+        U1, Y1, F1 = Us[fit_idx], Y[fit_idx], Fs[fit_idx]
+        hp0, resid = self._initial(U1, Y, Fs)
+        sizes = [0 if k is None else k.n_params for k in self.kernels]
+        bounds = self._bounds(hp0, resid)
+        x0 = np.clip(hp0.pack(), [b[0] for b in bounds], [b[1] for b in bounds])
+
+        def objective(vec):
+            try:
+                f, gr = negative_log_likelihood(vec, self.kernels, U1, Y1, F1, sizes)
+            except NumericalError:
+                return 1e25, np.zeros_like(vec)
+            pv, pg = self._prior(vec, sizes, resid)
+            return f + pv, gr + pg
+
+        starts = [x0] + [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(self.restarts)]
+        candidates = []
+        for s in starts:
+            s = np.clip(s, [b[0] for b in bounds], [b[1] for b in bounds])
+            res = minimize(
+                objective,
+                s,
+                jac=True,
+                method="L-BFGS-B",
+                bounds=bounds,
+                options={"maxiter": self.maxiter},
+            )
+            if np.isfinite(res.fun) and res.fun < 1e24:
+                candidates.append((res.fun, res.x))
+        if not candidates:
+            raise NumericalError(
+                "hyperparameter optimisation failed from every start; "
+                "raise min_noise or check the data for repeated samples"
+            )
+        self.n_starts_ = len(starts)
+        if len(val_idx) and len(candidates) > 1:
+            scores = []
+            for _, x in candidates:
+                hp = Hyperparameters.unpack(x, sizes)
+                try:
+                    post = fit_posterior(self.kernels, U1, Y1, F1, hp)
+                except NumericalError:
+                    scores.append(np.inf)
+                    continue
+                mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
+                scores.append(float(np.mean((mean - Y[val_idx]) ** 2 / self.y_std_**2)))
+            self.validation_scores_ = scores
+            best = int(np.argmin(scores))
+        else:
+            best = int(np.argmin([c[0] for c in candidates]))
+        self.objective_ = float(candidates[best][0])
+        return Hyperparameters.unpack(candidates[best][1], sizes)
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, U, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Posterior mean (Nq, n), latent variance (Nq, n) and parametric part f ŵ (Nq, n).
+
+        The observation's predictive variance adds ``noise_var_`` (n,) to the latent one.
+        """
+        U, F = np.asarray(U, float), np.asarray(F, float)
+        if not self.use_features:
+            F = F[:, :, :0]
+        Us, Fs = self._scale(U, F)
+        return self.posterior_.predict(Us, Fs)
+
+    @property
+    def noise_var_(self) -> np.ndarray:
+        return self.posterior_.noise_var

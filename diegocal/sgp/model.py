@@ -1,0 +1,382 @@
+"""Inverse-dynamics models of a robot: PR, GP, PRGP and SGP with one interface (thesis ch. 3).
+
+``fit_dynamics(log, robot, SGPOptions(kind=...))`` learns ``tau = f(u) W + Z(u) + V`` from a log
+with ``q``, ``qd``, ``qdd`` and ``tau`` streams, where ``u = [q, qd, qdd]`` and ``f`` is the
+robot's joint-torque regressor (+ friction) reduced to base parameters
+(:mod:`diegocal.sgp.regressor`). The kinds are the special cases of the SGP the thesis lists:
+
+- ``pr``: Bayesian linear regression on the regressor, Z ≡ 0 (thesis eq. 3.25, §3.3.3);
+- ``gp``: zero-mean GP per joint, no parametric part (eq. 3.21, §3.3.2);
+- ``prgp``: two stages, PR then a GP on its residuals (§3.4.1);
+- ``sgp``: W and Z jointly (eq. 3.1-3.20), optionally with the guard (:class:`Guard`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from diegocal.errors import FitError, MissingStreamError, UnknownNameError
+from diegocal.sgp.estimator import Guard, SemiParametricGP
+from diegocal.sgp.kernels import SquaredExponential, Subspace
+from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor
+
+KINDS = ("sgp", "pr", "gp", "prgp")
+INFERENCE = ("auto", "exact", "sparse")
+INPUT_STREAMS = ("q", "qd", "qdd")
+
+#: The guard's defaults (SGPOptions(guard=True)): local GP on (q, qd) only, bounded length-scales,
+#: a weak prior keeping σ_z near the parametric residual, restarts judged on held-out samples.
+DEFAULT_GUARD = Guard(
+    max_lengthscale=2.0, lengthscale_prior=(0.0, 1.0), amplitude_prior=1.0, validation_fraction=0.2
+)
+GUARD_GP_INPUTS = ("q", "qd")
+
+
+@dataclass(frozen=True)
+class SGPOptions:
+    """Options of :func:`fit_dynamics`, parsed once (STYLE.md: no option dicts).
+
+    Attributes
+    ----------
+    kind : "sgp" | "pr" | "gp" | "prgp"
+    friction : subset of ("viscous", "coulomb"); () = rigid body only
+    inference : "auto" (exact up to ``exact_max`` samples, else sparse) | "exact" | "sparse"
+    exact_max : int, the auto threshold in samples per joint
+    n_inducing : int, inducing inputs (k-means) for sparse inference
+    restarts : int, extra hyperparameter optimisations from perturbed starts
+    seed : int
+    jobs : int, reserved for parallel restarts (the fit is single-process today)
+    guard : bool, turn the SGP guard on (``guard_options``, GP on ``gp_inputs``); SGP only
+    guard_options : Guard or None, None = DEFAULT_GUARD
+    gp_inputs : streams the GP sees; None = (q, qd, qdd), or (q, qd) when the guard is on
+    hyper_max : int, hyperparameters are learnt on at most this many samples (random subset)
+    fit_sigma_w : bool, learn σ_w (True) or keep §3.3.4's large prior
+    maxiter : int, L-BFGS-B iterations per start
+    """
+
+    kind: str = "sgp"
+    friction: tuple = ("viscous", "coulomb")
+    inference: str = "auto"
+    exact_max: int = 3000
+    n_inducing: int = 300
+    restarts: int = 0
+    seed: int = 0
+    jobs: int = 1
+    guard: bool = True
+    guard_options: Guard | None = None
+    gp_inputs: tuple | None = None
+    hyper_max: int = 1000
+    fit_sigma_w: bool = True
+    maxiter: int = 200
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(
+                f"unknown model kind {self.kind!r}; expected one of {', '.join(KINDS)}"
+            )
+        if self.inference not in INFERENCE:
+            raise ValueError(
+                f"unknown inference {self.inference!r}; expected one of {', '.join(INFERENCE)}"
+            )
+        object.__setattr__(self, "friction", check_friction(self.friction))
+        if self.gp_inputs is not None:
+            bad = [s for s in self.gp_inputs if s not in INPUT_STREAMS]
+            if bad or not self.gp_inputs:
+                raise ValueError(
+                    f"gp_inputs must be a non-empty subset of {INPUT_STREAMS}, got {self.gp_inputs}"
+                )
+
+    @property
+    def guard_active(self) -> bool:
+        return self.guard and self.kind == "sgp"
+
+    def resolved_gp_inputs(self) -> tuple:
+        if self.gp_inputs is not None:
+            return tuple(self.gp_inputs)
+        return GUARD_GP_INPUTS if self.guard_active else INPUT_STREAMS
+
+    def to_dict(self) -> dict:
+        g = self.guard_options
+        return {
+            "kind": self.kind,
+            "friction": list(self.friction),
+            "inference": self.inference,
+            "exact_max": self.exact_max,
+            "n_inducing": self.n_inducing,
+            "restarts": self.restarts,
+            "seed": self.seed,
+            "jobs": self.jobs,
+            "guard": self.guard,
+            "guard_options": None
+            if g is None
+            else {
+                "max_lengthscale": g.max_lengthscale,
+                "lengthscale_prior": None
+                if g.lengthscale_prior is None
+                else list(g.lengthscale_prior),
+                "amplitude_prior": g.amplitude_prior,
+                "validation_fraction": g.validation_fraction,
+            },
+            "gp_inputs": None if self.gp_inputs is None else list(self.gp_inputs),
+            "hyper_max": self.hyper_max,
+            "fit_sigma_w": self.fit_sigma_w,
+            "maxiter": self.maxiter,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SGPOptions:
+        d = dict(d)
+        g = d.get("guard_options")
+        if g is not None:
+            lp = g.get("lengthscale_prior")
+            d["guard_options"] = Guard(
+                g.get("max_lengthscale"),
+                None if lp is None else tuple(lp),
+                g.get("amplitude_prior"),
+                g.get("validation_fraction", 0.0),
+            )
+        d["friction"] = tuple(d.get("friction", ()))
+        if d.get("gp_inputs") is not None:
+            d["gp_inputs"] = tuple(d["gp_inputs"])
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class TorquePrediction:
+    """Predicted joint torques (thesis eq. 3.8 and 3.20).
+
+    Attributes
+    ----------
+    names : tuple of str, joint names (columns)
+    tau : ndarray (T, n), posterior mean, N·m (N for prismatic joints)
+    tau_std : ndarray (T, n), predictive std of a *measured* torque (latent + noise σ_v)
+    tau_std_latent : ndarray (T, n), std of the noise-free torque X(q)
+    tau_parametric : ndarray (T, n), the parametric part f(u) ŵ alone (zeros for GP)
+    """
+
+    names: tuple
+    tau: np.ndarray
+    tau_std: np.ndarray
+    tau_std_latent: np.ndarray
+    tau_parametric: np.ndarray
+
+    def nmse(self, tau_measured: np.ndarray) -> np.ndarray:
+        """Normalised MSE per joint: mean squared error / variance of the measurement, (n,)."""
+        return nmse(self.tau, tau_measured)
+
+
+@dataclass(frozen=True)
+class ParametricEstimate:
+    """Identified base parameters (posterior mean) with standard errors, physical units."""
+
+    names: tuple
+    values: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray = field(repr=False)
+
+    def as_dict(self) -> dict:
+        return {
+            n: {"value": float(v), "std": float(s)}
+            for n, v, s in zip(self.names, self.values, self.std, strict=True)
+        }
+
+
+def nmse(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Normalised MSE per column (thesis §3.4.2: normalised by the target's variance)."""
+    var = np.var(truth, axis=0)
+    return np.mean((pred - truth) ** 2, axis=0) / np.where(var > 0, var, 1.0)
+
+
+def log_arrays(log, robot, need_tau: bool = True):
+    """q, qd, qdd (and tau) of a log in the robot's joint order, (T, n) each; one-line errors."""
+    out = []
+    for name in INPUT_STREAMS + (("tau",) if need_tau else ()):
+        s = log.stream(name, needed_by="sgp-fit" if need_tau else "sgp predict")
+        extra = [c for c in s.names if c not in robot.joint_names]
+        if extra:
+            raise UnknownNameError(
+                f"stream '{name}' has channel(s) {extra} that are not joints of robot "
+                f"{robot.name!r} (joints: {', '.join(robot.joint_names)})"
+            )
+        missing = [j for j in robot.joint_names if j not in s.names]
+        if missing:
+            raise MissingStreamError(
+                f"stream '{name}' lacks joint(s) {missing} of robot {robot.name!r}"
+            )
+        out.append(s.select(robot.joint_names).data)
+    return tuple(out)
+
+
+class DynamicsModel:
+    """A fitted inverse-dynamics model (PR, GP, PRGP or SGP) of one robot.
+
+    Learned attributes: ``parametric_`` (:class:`ParametricEstimate` or None for GP),
+    ``hyperparameters_`` (dict per joint, plus ``sigma_w``), ``nmse_in_sample_`` (n,).
+    """
+
+    def __init__(self, robot, options: SGPOptions):
+        self.robot = robot
+        self.options = options
+        self.joint_names = tuple(robot.joint_names)
+        n = robot.n_joints
+        self.input_names = tuple(f"{s}.{j}" for s in INPUT_STREAMS for j in self.joint_names)
+        gp_streams = options.resolved_gp_inputs()
+        self.gp_dims = np.array(
+            [INPUT_STREAMS.index(s) * n + i for s in gp_streams for i in range(n)]
+        )
+
+    # ------------------------------------------------------------------ building blocks
+    def features(self, q, qd, qdd) -> np.ndarray:
+        """Base regressor f(u): (T, n, r)."""
+        return self.base_.project(full_regressor(self.robot, q, qd, qdd, self.options.friction))
+
+    def _kernels(self):
+        return [
+            Subspace(self.gp_dims, SquaredExponential(len(self.gp_dims))) for _ in self.joint_names
+        ]
+
+    def _inference(self, N: int) -> str:
+        o = self.options
+        if o.inference == "auto":
+            return "exact" if N <= o.exact_max else "sparse"
+        return o.inference
+
+    def _estimator(self, kind: str, N: int, guard: bool) -> SemiParametricGP:
+        o = self.options
+        g = (o.guard_options or DEFAULT_GUARD) if guard else Guard()
+        kernels = [None] * len(self.joint_names) if kind == "pr" else self._kernels()
+        return SemiParametricGP(
+            kernels,
+            use_features=kind != "gp",
+            fit_sigma_w=o.fit_sigma_w,
+            restarts=o.restarts,
+            seed=o.seed,
+            guard=g,
+            inference=self._inference(N),
+            n_inducing=o.n_inducing,
+            hyper_max=o.hyper_max,
+            maxiter=o.maxiter,
+        )
+
+    # ------------------------------------------------------------------ fit
+    def fit_arrays(self, q, qd, qdd, tau, state: dict | None = None) -> DynamicsModel:
+        """Fit on arrays (T, n); ``state`` (:meth:`state`) restores a saved fit, no optimising."""
+        q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
+        o = self.options
+        T = len(q)
+        if state is not None:
+            self.base_ = BaseParameters.from_dict(state["base"])
+        else:
+            self.base_ = base_parameters(self.robot, o.friction, seed=o.seed)
+        r = self.base_.n_base
+        need = max(10, int(np.ceil((r + 1) / len(self.joint_names)))) if o.kind != "gp" else 10
+        if T < need:
+            raise FitError(
+                f"too few samples to fit a {o.kind} model: {T}, need at least {need} "
+                f"({r} base parameters, {len(self.joint_names)} joints)"
+            )
+        U = np.hstack([q, qd, qdd])
+        F = self.features(q, qd, qdd)
+        self.U_, self.tau_ = U, tau
+        st = state or {}
+        if o.kind == "prgp":
+            self.pr_ = self._estimator("pr", T, False).fit(
+                U, tau, F, st.get("hyper_pr"), st.get("inducing_pr")
+            )
+            resid = tau - self.pr_.predict(U, F)[0]
+            self.gp_ = self._estimator("gp", T, False).fit(
+                U, resid, F, st.get("hyper"), st.get("inducing")
+            )
+        else:
+            self.gp_ = self._estimator(o.kind, T, o.guard_active).fit(
+                U, tau, F, st.get("hyper"), st.get("inducing")
+            )
+        self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd).tau, tau)
+        return self
+
+    @property
+    def _param_est(self) -> SemiParametricGP | None:
+        return {
+            "pr": getattr(self, "gp_", None),
+            "sgp": getattr(self, "gp_", None),
+            "prgp": getattr(self, "pr_", None),
+        }.get(self.options.kind)
+
+    @property
+    def parametric_(self) -> ParametricEstimate | None:
+        est = self._param_est
+        if est is None:
+            return None
+        std = np.sqrt(np.maximum(np.diag(est.w_cov_), 0.0))
+        return ParametricEstimate(self.base_.names, est.w_.copy(), std, est.w_cov_.copy())
+
+    @property
+    def hyperparameters_(self) -> dict:
+        est = self.gp_
+        hp = est.hyper_
+        out = {"sigma_w": float(np.exp(hp.log_sigma_w)) if self.options.kind != "gp" else None}
+        names = [self.input_names[d] for d in self.gp_dims]
+        pr_noise = np.exp(self.pr_.hyper_.log_sigma_v) if self.options.kind == "prgp" else None
+        for j, joint in enumerate(self.joint_names):
+            entry = {"sigma_v": float(np.exp(hp.log_sigma_v[j]))}
+            if pr_noise is not None:
+                entry["sigma_v_pr"] = float(pr_noise[j])
+            if est.kernels[j] is not None:
+                th = hp.theta[j]
+                entry["sigma_z"] = float(np.exp(th[0]))
+                # length-scales back in the input's unit (inputs were standardised)
+                ell = np.exp(th[1:]) * est.u_std_[self.gp_dims]
+                entry["lengthscales"] = {nm: float(v) for nm, v in zip(names, ell, strict=True)}
+            out[joint] = entry
+        return out
+
+    # ------------------------------------------------------------------ predict
+    def predict_arrays(self, q, qd, qdd) -> TorquePrediction:
+        """Predict torques for states (T, n) each (rad, rad/s, rad/s²)."""
+        q, qd, qdd = (self.robot.check_q(x) for x in (q, qd, qdd))
+        U = np.hstack([q, qd, qdd])
+        F = self.features(q, qd, qdd)
+        mean, var, par = self.gp_.predict(U, F)
+        noise = self.gp_.noise_var_
+        if self.options.kind == "prgp":
+            m_pr, v_pr, par = self.pr_.predict(U, F)
+            mean, var = mean + m_pr, var + v_pr  # two independent stages: variances add
+        latent = np.sqrt(np.maximum(var, 0.0))
+        return TorquePrediction(self.joint_names, mean, np.sqrt(var + noise), latent, par)
+
+    def predict(self, log) -> TorquePrediction:
+        q, qd, qdd = log_arrays(log, self.robot, need_tau=False)
+        return self.predict_arrays(q, qd, qdd)
+
+    # ------------------------------------------------------------------ persistence
+    def state(self) -> dict:
+        """All needed to rebuild the posterior without optimising (:mod:`diegocal.sgp.store`)."""
+        st = {
+            "base": self.base_.to_dict(),
+            "hyper": self.gp_.hyper_,
+            "inducing": self.gp_.inducing_,
+        }
+        if self.options.kind == "prgp":
+            st["hyper_pr"], st["inducing_pr"] = self.pr_.hyper_, self.pr_.inducing_
+        return st
+
+    def save(self, directory, meta: dict | None = None) -> None:
+        from diegocal.sgp.store import save_model
+
+        save_model(self, directory, meta)
+
+
+def fit_dynamics(log, robot, options: SGPOptions = SGPOptions()) -> DynamicsModel:
+    """Fit an inverse-dynamics model (``options.kind``) to a log with q, qd, qdd and tau streams.
+
+    Fitting never reads ``log.truth``.
+    """
+    q, qd, qdd, tau = log_arrays(log.without_truth(), robot)
+    return DynamicsModel(robot, options).fit_arrays(q, qd, qdd, tau)
+
+
+def with_kind(options: SGPOptions, kind: str) -> SGPOptions:
+    """The same options for another model kind (for method comparisons)."""
+    return replace(options, kind=kind)

@@ -1,0 +1,147 @@
+"""Saving and loading fitted dynamics models: an ``sgp/`` directory (DESIGN.md).
+
+Layout::
+
+    sgp.yaml        summary: kind, joints, options, hyperparameters, base parameters with std
+                    errors, in-sample nMSE per joint, meta {log, robot, command, created}
+    model.npz       training set (u, tau), base-parameter map, packed hyperparameters,
+                    inducing inputs: enough to rebuild the posterior exactly without optimising
+    robot/          copy of the robot's URDF and sensors.yaml, so the model is self-contained
+
+Files are written atomically (:func:`diegocal.io.atomic_path`, :func:`diegocal.io.save_yaml`).
+(``np.savez``/``np.load`` of the arrays live here rather than in ``diegocal.io``, which has no
+array-bundle helper yet.)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from diegocal.errors import InputFileError
+from diegocal.io import atomic_path, load_yaml, save_yaml, write_text
+from diegocal.robot import load_robot
+from diegocal.sgp.gp import Hyperparameters
+
+FORMAT = "diegocal-sgp"
+VERSION = 1
+
+
+def _pack_hyper(prefix: str, hp: Hyperparameters | None, inducing, out: dict) -> None:
+    if hp is None:
+        return
+    out[f"{prefix}_vec"] = hp.pack()
+    out[f"{prefix}_sizes"] = np.array([t.size for t in hp.theta], dtype=int)
+    if inducing is not None:
+        out[f"{prefix}_inducing"] = inducing
+
+
+def _unpack_hyper(prefix: str, arrays) -> tuple[Hyperparameters | None, np.ndarray | None]:
+    if f"{prefix}_vec" not in arrays:
+        return None, None
+    hp = Hyperparameters.unpack(arrays[f"{prefix}_vec"], list(arrays[f"{prefix}_sizes"]))
+    ind = arrays[f"{prefix}_inducing"] if f"{prefix}_inducing" in arrays else None
+    return hp, ind
+
+
+def summary_dict(model, meta: dict | None = None) -> dict:
+    """The content of sgp.yaml."""
+    par = model.parametric_
+    est = model.gp_
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "kind": model.options.kind,
+        "robot": model.robot.name,
+        "joints": list(model.joint_names),
+        "n_samples": int(len(model.U_)),
+        "inference": est.inference,
+        "n_inducing": None if est.inducing_ is None else int(len(est.inducing_)),
+        "gp_inputs": [model.input_names[d] for d in model.gp_dims]
+        if model.options.kind != "pr"
+        else [],
+        "log_likelihood": float(est.log_likelihood_),
+        "nmse_in_sample": {
+            j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)
+        },
+        "hyperparameters": model.hyperparameters_,
+        "parameters": None if par is None else par.as_dict(),
+        "options": model.options.to_dict(),
+        "meta": dict(meta or {}),
+    }
+
+
+def save_model(model, directory, meta: dict | None = None) -> Path:
+    """Write ``directory/`` (sgp.yaml, model.npz, robot/); returns the directory."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    st = model.state()
+    arrays = {"u": model.U_, "tau": model.tau_}
+    arrays.update({f"base_{k}": np.asarray(v) for k, v in st["base"].items()})
+    _pack_hyper("hyper", st["hyper"], st["inducing"], arrays)
+    _pack_hyper("hyper_pr", st.get("hyper_pr"), st.get("inducing_pr"), arrays)
+    with atomic_path(directory / "model.npz") as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **arrays)
+    robot = model.robot
+    if robot.directory is not None:
+        src = Path(robot.directory)
+        urdf = robot.sensors.urdf
+        write_text(directory / "robot" / urdf, (src / urdf).read_text())
+        write_text(directory / "robot" / "sensors.yaml", (src / "sensors.yaml").read_text())
+    save_yaml(summary_dict(model, meta), directory / "sgp.yaml")
+    return directory
+
+
+def is_model_dir(path) -> bool:
+    path = Path(path)
+    return path.is_dir() and (path / "sgp.yaml").is_file()
+
+
+def load_summary(directory) -> dict:
+    directory = Path(directory)
+    if not is_model_dir(directory):
+        raise InputFileError(f"{directory}: not an sgp model directory (no sgp.yaml)")
+    data = load_yaml(directory / "sgp.yaml")
+    if data.get("format") != FORMAT:
+        raise InputFileError(
+            f"{directory}/sgp.yaml: format is {data.get('format')!r}, expected {FORMAT!r}"
+        )
+    return data
+
+
+def load_model(directory, robot=None):
+    """Rebuild a saved model: same predictions as the one saved (no optimisation is rerun).
+
+    ``robot`` (a Robot) overrides the copy stored in ``directory/robot``.
+    """
+    from diegocal.sgp.model import DynamicsModel, SGPOptions
+
+    directory = Path(directory)
+    summary = load_summary(directory)
+    npz = directory / "model.npz"
+    if not npz.is_file():
+        raise InputFileError(f"{directory}: no model.npz")
+    try:
+        with np.load(npz, allow_pickle=False) as f:
+            arrays = {k: f[k] for k in f.files}
+    except (OSError, ValueError) as exc:
+        raise InputFileError(f"{npz}: cannot read ({exc})") from None
+    if robot is None:
+        robot = load_robot(directory / "robot")
+    options = SGPOptions.from_dict(summary["options"])
+    model = DynamicsModel(robot, options)
+    n = robot.n_joints
+    u = arrays["u"]
+    q, qd, qdd = u[:, :n], u[:, n : 2 * n], u[:, 2 * n :]
+    hyper, inducing = _unpack_hyper("hyper", arrays)
+    hyper_pr, inducing_pr = _unpack_hyper("hyper_pr", arrays)
+    base = {k[5:]: arrays[k] for k in arrays if k.startswith("base_")}
+    state = {
+        "base": base,
+        "hyper": hyper,
+        "inducing": inducing,
+        "hyper_pr": hyper_pr,
+        "inducing_pr": inducing_pr,
+    }
+    return model.fit_arrays(q, qd, qdd, arrays["tau"], state=state)
