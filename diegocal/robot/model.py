@@ -120,6 +120,13 @@ class Robot:
             raise ValueError(f"q: expected shape (T, {self.n_joints}), got {q.shape}")
         return q
 
+    def _point_frames(self, points: PointSet) -> list[int]:
+        """Frame ids of the points' links, after checking ``xyz`` is (N, 3) for N links."""
+        xyz = np.asarray(points.xyz)
+        if xyz.shape != (len(points.links), 3):
+            raise ValueError(f"points.xyz: expected ({len(points.links)}, 3), got {xyz.shape}")
+        return [self.frame_id(link) for link in points.links]
+
     def neutral(self) -> np.ndarray:
         """A configuration inside the limits: 0 where allowed, else the middle of the range."""
         q = np.zeros(self.n_joints)
@@ -136,7 +143,7 @@ class Robot:
         ndarray of shape (T, N, 3), metres.
         """
         q = self.check_q(q)
-        fids = [self.frame_id(link) for link in points.links]
+        fids = self._point_frames(points)
         out = np.empty((q.shape[0], len(fids), 3))
         model, data = self.model, self.data
         for t in range(q.shape[0]):
@@ -159,7 +166,7 @@ class Robot:
         J : ndarray of shape (T, N, 3, n), metres per rad
         """
         q = self.check_q(q)
-        fids = [self.frame_id(link) for link in points.links]
+        fids = self._point_frames(points)
         n = self.n_joints
         x = np.empty((q.shape[0], len(fids), 3))
         jac = np.empty((q.shape[0], len(fids), 3, n))

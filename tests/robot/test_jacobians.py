@@ -118,3 +118,13 @@ def test_moving_base_points_jacobian(tiny_robot, sample_q):
     assert np.linalg.norm(jac[:, 0, :, slide], axis=-1).min() > 0.5  # m/m: l0 slides past the base
     # the world frame moves relative to the base under j0 as well
     assert np.linalg.norm(jac[:, 1, :, j0], axis=-1).min() > 1e-2
+
+
+def test_point_and_q_shapes_are_checked(tiny_robot):
+    q = tiny_robot.neutral()
+    with pytest.raises(ValueError, match=r"expected \(3, 3\), got \(2, 3\)"):
+        tiny_robot.points(q, PointSet(("l0", "arm", "hand"), np.zeros((2, 3))))
+    with pytest.raises(ValueError, match=r"expected shape \(T, 4\), got \(1, 3\)"):
+        tiny_robot.points_jacobian(q[:3], PointSet(("arm",), np.zeros((1, 3))))
+    with pytest.raises(ValueError, match="expected"):
+        predict_markers(tiny_robot, q, np.zeros((2, 3)), np.eye(3), np.zeros(3))
