@@ -35,6 +35,7 @@ from diegocal.errors import RobotConfigError
 from diegocal.io import Log, Truth, make_stream
 from diegocal.robot import Robot, pot_transmission
 from diegocal.sim.effects import (
+    EffectError,
     EffectRequest,
     SimOptionError,
     check_channel,
@@ -254,8 +255,9 @@ def draw_truth(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.nd
     xyz = nominal.marker_xyz + direction * distance
     R = Rotation.random(random_state=rng).as_matrix()
     T = rng.uniform([-1.0, -1.0, 0.5], [1.0, 1.0, 1.5])
-    return Calibration(nominal.pot_names, gain, bias, nominal.marker_names, nominal.marker_links,
-                       xyz, mocap_R=R, mocap_T=T, sigma_pots=options.pot_noise,
+    return Calibration(pot_names=nominal.pot_names, gain=gain, bias=bias,
+                       marker_names=nominal.marker_names, marker_links=nominal.marker_links,
+                       marker_xyz=xyz, mocap_R=R, mocap_T=T, sigma_pots=options.pot_noise,
                        sigma_markers=options.marker_noise, method="truth")
 
 
@@ -302,8 +304,8 @@ def _default_channel(request: EffectRequest, robot: Robot, rng) -> str:
         "time_offset": ["markers"],
     }[request.name]
     if not choices:
-        raise RobotConfigError(f"effect '{request.name}': robot {robot.name!r} has nothing it "
-                               "can act on")
+        raise EffectError(f"effect '{request.name}': robot {robot.name!r} has nothing it can "
+                          "act on")
     return str(choices[int(rng.integers(len(choices)))])
 
 

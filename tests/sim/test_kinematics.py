@@ -284,3 +284,25 @@ def test_cli_bad_input_is_one_clear_line(tmp_path, args, message):
     assert message in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "x.h5").exists()
+
+
+def _variant(tmp_path, keep_pots: bool, keep_markers: bool) -> Path:
+    import yaml
+
+    sensors = yaml.safe_load((TINY / "sensors.yaml").read_text())
+    sensors["pots"] = sensors["pots"] if keep_pots else []
+    sensors["markers"] = sensors["markers"] if keep_markers else []
+    (tmp_path / "robot.urdf").write_text((TINY / "robot.urdf").read_text())
+    (tmp_path / "sensors.yaml").write_text(yaml.safe_dump(sensors))
+    return tmp_path
+
+
+def test_robot_with_markers_only_or_no_sensors(tmp_path):
+    log = simulate(load_robot(_variant(tmp_path, False, True)), duration=2.0)
+    assert set(log.streams) == {"markers"}
+    with pytest.raises(EffectError, match="nothing it can act on"):
+        simulate(load_robot(_variant(tmp_path, False, True)), duration=2.0, effects=["backlash"])
+    bare = _variant(tmp_path, False, False)
+    res = runner.invoke(app, ["simulate", "kinematics", "--robot", str(bare),
+                              "-o", str(tmp_path / "x.h5"), "--duration", "1"])
+    assert res.exit_code != 0 and "nothing to simulate" in res.output
