@@ -93,16 +93,29 @@ class ThetaLayout:
 
     def pack(self, cal: Calibration) -> np.ndarray:
         rot = pin.log3(np.asarray(cal.mocap_R, float))
-        return np.concatenate([cal.gain[self.gain_pots], cal.bias[self.bias_pots], rot,
-                               cal.mocap_T, cal.marker_xyz.ravel()])
+        return np.concatenate(
+            [
+                cal.gain[self.gain_pots],
+                cal.bias[self.bias_pots],
+                rot,
+                cal.mocap_T,
+                cal.marker_xyz.ravel(),
+            ]
+        )
 
     def unpack(self, x: np.ndarray, template: Calibration) -> Calibration:
         gain, bias = template.gain.copy(), template.bias.copy()
         ng = len(self.gain_pots)
         gain[self.gain_pots] = x[:ng]
-        bias[self.bias_pots] = x[ng:self.n_pot_params]
-        return replace(template, gain=gain, bias=bias, mocap_R=pin.exp3(x[self.rot]),
-                       mocap_T=x[self.trans].copy(), marker_xyz=x[self.xyz].reshape(-1, 3).copy())
+        bias[self.bias_pots] = x[ng : self.n_pot_params]
+        return replace(
+            template,
+            gain=gain,
+            bias=bias,
+            mocap_R=pin.exp3(x[self.rot]),
+            mocap_T=x[self.trans].copy(),
+            marker_xyz=x[self.xyz].reshape(-1, 3).copy(),
+        )
 
     def standard_errors(self, se: np.ndarray, template: Calibration) -> Calibration:
         """Put packed standard errors (NaN = not estimated or unidentifiable) into a Calibration."""
@@ -110,9 +123,10 @@ class ThetaLayout:
         gse, bse = np.full(P, np.nan), np.full(P, np.nan)
         ng = len(self.gain_pots)
         gse[self.gain_pots] = se[:ng]
-        bse[self.bias_pots] = se[ng:self.n_pot_params]
-        return replace(template, gain_se=gse, bias_se=bse,
-                       marker_xyz_se=se[self.xyz].reshape(-1, 3))
+        bse[self.bias_pots] = se[ng : self.n_pot_params]
+        return replace(
+            template, gain_se=gse, bias_se=bse, marker_xyz_se=se[self.xyz].reshape(-1, 3)
+        )
 
 
 # ---------------------------------------------------------------------------------- markers
@@ -182,8 +196,14 @@ def nonlinear_pots(robot: Robot) -> tuple[str, ...]:
     return tuple(p.name for p in robot.sensors.pots if p.kind in NONLINEAR_KINDS)
 
 
-def joint_angles_from_pots(robot: Robot, cal: Calibration, pots: np.ndarray, q0=None,
-                           layout: ThetaLayout | None = None, max_steps: int = 30) -> PotInverse:
+def joint_angles_from_pots(
+    robot: Robot,
+    cal: Calibration,
+    pots: np.ndarray,
+    q0=None,
+    layout: ThetaLayout | None = None,
+    max_steps: int = 30,
+) -> PotInverse:
     """Solve ``gain · s(q) + bias = p`` for q in every frame (thesis eq. 2.2, 2.28).
 
     Rotary and encoder pots are inverted analytically; the remaining joints are solved by
@@ -245,11 +265,15 @@ def _check_coverage(robot: Robot, unknown: np.ndarray, nl: np.ndarray) -> None:
     seen = np.abs(ds[:, nl][:, :, unknown]).max(axis=(0, 1)) if len(nl) else np.zeros(len(unknown))
     blind = [robot.joint_names[j] for j, v in zip(unknown, seen, strict=True) if v < 1e-12]
     if blind:
-        raise FitError("classical calibration needs every joint read by a pot; "
-                       f"no pot reads: {', '.join(blind)}")
+        raise FitError(
+            "classical calibration needs every joint read by a pot; "
+            f"no pot reads: {', '.join(blind)}"
+        )
     if len(nl) < len(unknown):
-        raise FitError(f"classical calibration: {len(unknown)} joints depend on only "
-                       f"{len(nl)} linear/tendon pots")
+        raise FitError(
+            f"classical calibration: {len(unknown)} joints depend on only "
+            f"{len(nl)} linear/tendon pots"
+        )
 
 
 def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndarray:
@@ -268,8 +292,9 @@ def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndar
         dq = np.clip(-np.einsum("tkp,tp->tk", np.linalg.pinv(G), r), -0.3, 0.3)  # damped step
         new = np.clip(q[np.ix_(active, unknown)] + dq, lo, hi)
         if not np.isfinite(new).all():
-            raise NumericalError("solving linear/tendon pots for joint angles failed "
-                                 "(non-finite); check the gains")
+            raise NumericalError(
+                "solving linear/tendon pots for joint angles failed (non-finite); check the gains"
+            )
         moved = np.abs(new - q[np.ix_(active, unknown)]).max(axis=1)
         q[np.ix_(active, unknown)] = new
         active = active[moved > 1e-10]
@@ -279,8 +304,14 @@ def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndar
 
 
 # ---------------------------------------------------------------------------------- the fit
-def calibrate_classical(log: Log, robot: Robot, options: StacOptions | None = None, *,
-                        nonlinear: str = "refuse", q0=None) -> StacResult:
+def calibrate_classical(
+    log: Log,
+    robot: Robot,
+    options: StacOptions | None = None,
+    *,
+    nonlinear: str = "refuse",
+    q0=None,
+) -> StacResult:
     """Classical σp = 0 calibration: minimise eq. 2.29 over θ with q = q(p, θ) (thesis §2.4.2).
 
     Parameters
@@ -306,8 +337,10 @@ def calibrate_classical(log: Log, robot: Robot, options: StacOptions | None = No
         raise FitError(f"nonlinear={nonlinear!r}: expected one of {', '.join(_MODES)}")
     hard = nonlinear_pots(robot)
     if hard and nonlinear == "refuse":
-        raise FitError(f"classical calibration cannot handle linear/tendon pots: {', '.join(hard)}"
-                       "; use --method stac (or nonlinear='constrain': σp = 0 constraints)")
+        raise FitError(
+            f"classical calibration cannot handle linear/tendon pots: {', '.join(hard)}"
+            "; use --method stac (or nonlinear='constrain': σp = 0 constraints)"
+        )
     pots, markers = read_streams(log, robot, "classical calibration")
     started = time.perf_counter()
     nominal = replace(Calibration.nominal(robot), method="classical")
@@ -324,8 +357,9 @@ def calibrate_classical(log: Log, robot: Robot, options: StacOptions | None = No
         scale = options.huber_scale * max(np.sqrt(np.mean(res.fun**2)), 1e-9)
         res = problem.solve(res.x, options, "huber", scale)
     if not np.isfinite(res.x).all():
-        raise NumericalError("classical calibration diverged (non-finite parameters); "
-                             "check the nominal seed")
+        raise NumericalError(
+            "classical calibration diverged (non-finite parameters); check the nominal seed"
+        )
     fitted = layout.unpack(res.x, seed)
     inv = problem.inverse(res.x)
     dof = max(res.fun.size - np.linalg.matrix_rank(problem.normal_matrix(res.x)), 1)
@@ -333,8 +367,12 @@ def calibrate_classical(log: Log, robot: Robot, options: StacOptions | None = No
     se = packed_standard_errors(problem.normal_matrix(res.x), sigma)
     seconds = time.perf_counter() - started
     fitted = layout.standard_errors(se, fitted)
-    fitted = replace(fitted, sigma_pots=0.0, sigma_markers=sigma,
-                     fit=FitInfo(float(res.cost), int(res.nfev), bool(res.status > 0), seconds))
+    fitted = replace(
+        fitted,
+        sigma_pots=0.0,
+        sigma_markers=sigma,
+        fit=FitInfo(float(res.cost), int(res.nfev), bool(res.status > 0), seconds),
+    )
     record = IterationRecord(int(res.nfev), float(res.cost), 0.0, sigma, seconds)
     return StacResult(fitted, inv.q, (record,))
 
@@ -387,8 +425,11 @@ class _Problem:
         self.dense = self.visible.sum() * layout.size <= 4_000_000
         # sparsity of the marker-position block: row (t, m, c) -> column xyz.start + 3m + k
         rows = np.arange(T * M * 3).reshape(T, M, 3, 1).repeat(3, axis=3)
-        cols = (layout.xyz.start + 3 * np.arange(M)[None, :, None, None]
-                + np.arange(3)[None, None, None, :])
+        cols = (
+            layout.xyz.start
+            + 3 * np.arange(M)[None, :, None, None]
+            + np.arange(3)[None, None, None, :]
+        )
         self._xyz_rows, self._xyz_cols = rows.ravel(), np.broadcast_to(cols, rows.shape).ravel()
 
     def inverse(self, x) -> PotInverse:
@@ -414,22 +455,26 @@ class _Problem:
         self._evaluate(x)
         mm, lay = self._model, self.layout
         T, M = self.markers.shape[:2]
-        head = np.concatenate([
-            np.einsum("tmcn,tnk->tmck", mm.dq, self._inv.dtheta),  # pot params through q(p, θ)
-            mm.drot,
-            np.broadcast_to(np.eye(3), (T, M, 3, 3)),
-        ], axis=3).reshape(T * M * 3, -1)
+        head = np.concatenate(
+            [
+                np.einsum("tmcn,tnk->tmck", mm.dq, self._inv.dtheta),  # pot params through q(p, θ)
+                mm.drot,
+                np.broadcast_to(np.eye(3), (T, M, 3, 3)),
+            ],
+            axis=3,
+        ).reshape(T * M * 3, -1)
         vals = mm.dxyz.reshape(-1)
         if self.dense:
             J = np.zeros((T * M * 3, lay.size))
-            J[:, :lay.xyz.start] = head
+            J[:, : lay.xyz.start] = head
             J[self._xyz_rows, self._xyz_cols] = vals
             return J[self.visible]
         r, c = np.nonzero(head)
         rows = np.concatenate([r, self._xyz_rows])
         cols = np.concatenate([c, self._xyz_cols])
-        J = sparse.csr_matrix((np.concatenate([head[r, c], vals]), (rows, cols)),
-                              shape=(T * M * 3, lay.size))
+        J = sparse.csr_matrix(
+            (np.concatenate([head[r, c], vals]), (rows, cols)), shape=(T * M * 3, lay.size)
+        )
         return J[self.visible]
 
     def normal_matrix(self, x) -> np.ndarray:
@@ -439,12 +484,31 @@ class _Problem:
 
     def solve(self, x0, options: StacOptions, loss: str, f_scale: float):
         try:
+            # MINPACK's LM (its own QR, no threaded LAPACK SVD) when the Jacobian is dense and the
+            # loss plain; the trust-region reflective method for the sparse or robust cases
+            lm = self.dense and loss == "linear"
+            kw = (
+                {}
+                if lm
+                else {
+                    "loss": loss,
+                    "f_scale": f_scale,
+                    "tr_solver": "exact" if self.dense else "lsmr",
+                }
+            )
             return least_squares(
-                self.residual, x0, jac=self.jacobian, method="trf", x_scale="jac", loss=loss,
-                f_scale=f_scale, tr_solver="exact" if self.dense else "lsmr",
-                ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                self.residual,
+                x0,
+                jac=self.jacobian,
+                method="lm" if lm else "trf",
+                x_scale="jac",
+                ftol=1e-10,
+                xtol=1e-10,
+                gtol=1e-10,
                 max_nfev=max(4 * options.max_iterations, 20),
+                **kw,
             )
         except (np.linalg.LinAlgError, ValueError) as exc:
-            raise NumericalError(f"classical calibration failed ({exc}); "
-                                 "check the nominal seed and the data") from None
+            raise NumericalError(
+                f"classical calibration failed ({exc}); check the nominal seed and the data"
+            ) from None
