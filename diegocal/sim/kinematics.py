@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from diegocal.errors import RobotConfigError
 from diegocal.io import Log, Truth, make_stream
-from diegocal.robot import Robot, pot_transmission
+from diegocal.robot import PointSet, Robot, pot_transmission
 from diegocal.sim.effects import (
     EffectError,
     EffectRequest,
@@ -384,17 +384,23 @@ def backlash(s: np.ndarray, width: float) -> np.ndarray:
     return out
 
 
-def offset_robot(robot: Robot, offsets: dict) -> Robot:
-    """A copy of ``robot`` whose named joints' origins are shifted by (3,) m vectors."""
-    if not offsets:
-        return robot
+class BatchedRobot(Robot):
+    """A :class:`Robot` whose ``points`` is :func:`base_points` (same result, ~1.7x faster on
+    diego), so the library's observation models (``pot_transmission``) run batched too."""
+
+    def points(self, q, points: PointSet) -> np.ndarray:
+        return base_points(self, q, points.links, points.xyz)
+
+
+def offset_robot(robot: Robot, offsets: dict) -> BatchedRobot:
+    """A batched copy of ``robot`` whose named joints' origins are shifted by (3,) m vectors."""
     model = pin.Model(robot.model)
     for joint, d in offsets.items():
         jid = model.getJointId(joint)
         placement = model.jointPlacements[jid].copy()
         placement.translation = placement.translation + np.asarray(d, float)
         model.jointPlacements[jid] = placement
-    return Robot(model, robot.sensors, robot.name, robot.directory)
+    return BatchedRobot(model, robot.sensors, robot.name, robot.directory)
 
 
 # ----------------------------------------------------------------------------- simulator
@@ -426,7 +432,8 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
     lower, upper = joint_ranges(robot)
     q_ext, qd_ext = pid_trajectory(lower, upper, T + 2 * PAD, rate, traj_rng, options.hold)
     q, qd = q_ext[PAD:PAD + T], qd_ext[PAD:PAD + T]
-    s_nominal = pot_transmission(robot, q) if sensors.pots else np.zeros((T, 0))
+    fast = offset_robot(robot, {})
+    s_nominal = pot_transmission(fast, q) if sensors.pots else np.zeros((T, 0))
     truth = draw_truth(robot, options, s_nominal, q, truth_rng)
     plan = plan_effects(robot, options, s_nominal, q, truth.gain, int(seeds[5]))
     gen = offset_robot(robot, plan.joint_offsets)

@@ -306,3 +306,21 @@ def test_robot_with_markers_only_or_no_sensors(tmp_path):
     res = runner.invoke(app, ["simulate", "kinematics", "--robot", str(bare),
                               "-o", str(tmp_path / "x.h5"), "--duration", "1"])
     assert res.exit_code != 0 and "nothing to simulate" in res.output
+
+
+@pytest.mark.parametrize("base_link", ["waist", "lower"])  # root base, and a base that moves
+def test_batched_points_equal_the_library_loop(tmp_path, base_link):
+    import yaml
+
+    from diegocal.robot import marker_points
+    from diegocal.sim.kinematics import base_points
+
+    sensors = yaml.safe_load((TINY / "sensors.yaml").read_text())
+    sensors["base_link"] = base_link
+    (tmp_path / "robot.urdf").write_text((TINY / "robot.urdf").read_text())
+    (tmp_path / "sensors.yaml").write_text(yaml.safe_dump(sensors))
+    robot = load_robot(tmp_path)
+    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, (50, robot.n_joints))
+    pts = marker_points(robot, np.random.default_rng(2).normal(0, 0.05, (5, 3)))
+    np.testing.assert_allclose(base_points(robot, q, pts.links, pts.xyz), robot.points(q, pts),
+                               atol=1e-13)
