@@ -54,6 +54,9 @@ def corr(a, b) -> float:
 
 
 def main(data: Path) -> None:
+    if not (data / "tx40").is_dir():
+        print(f"no real-robot data at {data}; skipped")
+        return
     robot = load_robot(BUNDLED_ROBOTS / "tx40")
     start = time.perf_counter()
     log = load_tx40(data / "tx40")
