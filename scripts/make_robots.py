@@ -28,8 +28,16 @@ range; URDF effort = bore area x (supply - room) x moment arm.
 
 ``finger`` — a small tendon-driven finger (Fig. 2.3e, §2.5.2): base ``palm`` fixed, joints
 mcp_abd, mcp_flex, pip, dip; five tendons (kind tendon, moment arms fixed, spanning 2-3 joints),
-a rotary pot on mcp_abd and five markers on the phalanges; finger-sized geometry (cm) and masses
-(g). The tendon gains/biases are identifiable from the markers because the markers determine q.
+rotary (Hall-effect) pots on mcp_abd and dip, five markers on the phalanges; finger-sized geometry
+(cm) and masses (g). The markers determine q, so tendon gains are identifiable. Offsets are subtler:
+with marker positions and the mocap frame calibrated too, two joint zeros are gauge freedoms: dip
+(its markers all sit on its own child link; rotating them about its axis absorbs an offset) and
+mcp_abd (it moves every marker from a base-fixed axis; rotating the mocap frame absorbs an
+offset). One pot reading each must keep its nominal bias: the two Hall sensors take that role, so
+every tendon's gain and bias is identifiable. In diego the leaf joints (head_pitch, wrist rolls,
+toes) have rotary pots for the same reason; no diego joint moves every marker. tests/robot checks
+both robots' full calibration Jacobian (q, gain, bias, marker xyz, mocap frame) has full rank once
+those gauge biases are fixed.
 """
 
 from __future__ import annotations
@@ -491,10 +499,12 @@ def finger_sensors(spec: RobotSpec, rng: np.random.Generator):
         pots.append(
             {"name": name, "kind": "tendon", "moment_arms": arms, "gain": gain, "bias": bias}
         )
-    gain, bias = _gain_bias(rng, 0.6, 1.6, *limits["mcp_abd"])
-    pots.append(
-        {"name": "mcp_abd", "kind": "rotary", "joint": "mcp_abd", "gain": gain, "bias": bias}
-    )
+    for joint in (
+        "mcp_abd",
+        "dip",
+    ):  # Hall-effect joint sensors (the Shadow hand has one per joint)
+        gain, bias = _gain_bias(rng, 0.6, 1.6, *limits[joint])
+        pots.append({"name": joint, "kind": "rotary", "joint": joint, "gain": gain, "bias": bias})
     markers = [
         ("proximal", (0.012, 0.004, 0.010)),
         ("proximal", (0.034, -0.004, 0.010)),
