@@ -1,1 +1,150 @@
-"""CLI commands of this domain (attach to diegocal.cli.app.app / simulate_app)."""
+"""`diegocal sgp-fit LOG` and the `predict` handler for sgp/ model directories (thesis ch. 3).
+
+sgp-fit: parse → load the log and robot → :func:`diegocal.sgp.fit_dynamics` → save ``sgp/`` →
+summary table (in-sample nMSE per joint). predict: load the model → predict the log's torques →
+write a log with ``tau`` (predicted) and ``tau_std`` → nMSE per joint when the log has ``tau``.
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from diegocal.cli.app import app
+from diegocal.cli.common import cli_errors, default_output, fail, summary
+from diegocal.cli.predict_cmd import PredictOptions, register_predictor
+from diegocal.io import Log, load_log, make_stream, save_log
+from diegocal.robot import load_robot, resolve_robot_dir
+from diegocal.sgp import KINDS, SGPOptions, fit_dynamics, load_model, nmse
+from diegocal.sgp.model import INFERENCE, INPUT_STREAMS, log_arrays
+
+
+def _command() -> str:
+    args = sys.argv[1:]
+    return "diegocal " + " ".join(shlex.quote(a) for a in args) if args else "diegocal sgp-fit"
+
+
+def _friction(text: str) -> tuple[str, ...]:
+    parts = tuple(t.strip() for t in text.split(",") if t.strip())
+    if parts in ((), ("none",)):
+        return ()
+    bad = [p for p in parts if p not in ("viscous", "coulomb")]
+    if bad:
+        raise fail(f"--friction: unknown kind(s) {', '.join(bad)}; use viscous,coulomb or none")
+    return parts
+
+
+def _choice(name: str, value: str, allowed) -> str:
+    if value not in allowed:
+        raise fail(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+    return value
+
+
+@app.command("sgp-fit")
+@cli_errors
+def sgp_fit(
+    log: Annotated[Path, typer.Argument(help="Log with q, qd, qdd and tau streams (.h5 or .csv).")],
+    robot: Annotated[
+        str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")
+    ] = None,
+    model: Annotated[str, typer.Option("--model", "-m", help="sgp | pr | gp | prgp.")] = "sgp",
+    friction: Annotated[
+        str, typer.Option("--friction", help="Friction columns: viscous,coulomb | none.")
+    ] = "viscous,coulomb",
+    inference: Annotated[
+        str, typer.Option("--inference", help="auto | exact | sparse (auto: exact up to 3000).")
+    ] = "auto",
+    n_inducing: Annotated[int, typer.Option("--n-inducing", min=1)] = 300,
+    guard: Annotated[
+        bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")
+    ] = True,
+    gp_inputs: Annotated[
+        str | None, typer.Option("--gp-inputs", help="Streams the GP sees, e.g. q,qd.")
+    ] = None,
+    restarts: Annotated[int, typer.Option("--restarts", min=0)] = 0,
+    seed: Annotated[int, typer.Option("--seed")] = 0,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="Model directory [default: <log>.sgp/].")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Fit a torque model: parametric (rigid body + friction) part, GP part and hyperparameters."""
+    kind = _choice("--model", model, KINDS)
+    inf = _choice("--inference", inference, INFERENCE)
+    streams = None
+    if gp_inputs is not None:
+        streams = tuple(s.strip() for s in gp_inputs.split(",") if s.strip())
+        for s in streams:
+            _choice("--gp-inputs", s, INPUT_STREAMS)
+    opts = SGPOptions(
+        kind=kind,
+        friction=_friction(friction),
+        inference=inf,
+        n_inducing=n_inducing,
+        restarts=restarts,
+        seed=seed,
+        jobs=jobs,
+        guard=guard,
+        gp_inputs=streams,
+    )
+    data = load_log(log)
+    rob = load_robot(resolve_robot_dir(robot, data.robot))
+    fitted = fit_dynamics(data, rob, opts)
+    out = output or default_output(log, ".sgp")
+    meta = {
+        "log": str(log),
+        "robot": str(rob.directory or rob.name),
+        "command": _command(),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    fitted.save(out, meta)
+    rows = [
+        (f"nMSE in-sample {j}", float(v))
+        for j, v in zip(fitted.joint_names, fitted.nmse_in_sample_, strict=True)
+    ]
+    par = fitted.parametric_
+    rows = [
+        ("model", kind),
+        ("samples", len(fitted.U_)),
+        ("inference", fitted.gp_.inference),
+        ("base parameters", 0 if par is None else len(par.names)),
+    ] + rows
+    summary(f"sgp-fit → {out}", rows, quiet=quiet)
+
+
+def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
+    """`diegocal predict sgp/ LOG`: write predicted ``tau`` and ``tau_std`` as a log."""
+    data = load_log(log_path)
+    robot = load_robot(resolve_robot_dir(opts.robot, data.robot)) if opts.robot else None
+    model = load_model(model_path, robot=robot)
+    pred = model.predict(data)
+    names = model.joint_names
+    q, qd, qdd = log_arrays(data, model.robot, need_tau=False)
+    streams = {
+        "q": make_stream(names, q),
+        "qd": make_stream(names, qd),
+        "qdd": make_stream(names, qdd),
+        "tau": make_stream(names, pred.tau),
+        "tau_std": make_stream(names, pred.tau_std),
+    }
+    rows = [("model", model.options.kind), ("samples", data.n_samples)]
+    if data.has("tau"):
+        measured = data.stream("tau").select(names).data
+        streams["tau_measured"] = make_stream(names, measured)
+        err = nmse(pred.tau, measured)
+        inside = np.mean(np.abs(pred.tau - measured) <= 2 * pred.tau_std, axis=0)
+        rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, err, strict=True)]
+        rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, inside, strict=True)]
+    out = opts.output or default_output(log_path, ".prediction.h5")
+    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), out)
+    summary(f"predict → {out}", rows, quiet=opts.quiet)
+
+
+register_predictor("sgp", predict_sgp)

@@ -159,11 +159,10 @@ class SparseBlock:
         S = Kmm + self.Knm.T @ self.Knm / noise_var
         self.Ls, _ = cholesky(S, "inducing-point system K_mm + K_mn K_nm / σ_v²")
         N = len(U)
-        self._logdet = (
-            2.0 * np.sum(np.log(np.diag(self.Ls)))
-            - 2.0 * np.sum(np.log(np.diag(self.Lmm)))
-            + N * np.log(noise_var)
-        )
+        # log|Q + σ²I| = N log σ² + log|I + VᵀV/σ²| V = K_nm L_mm⁻ᵀ (stable; GPflow SGPR)
+        V = solve_triangular(self.Lmm, self.Knm.T, lower=True, check_finite=False)
+        LB, _ = cholesky(np.eye(len(inducing)) + V @ V.T / noise_var, "I + VᵀV/σ_v²")
+        self._logdet = 2.0 * np.sum(np.log(np.diag(LB))) + N * np.log(noise_var)
 
     def solve(self, B: np.ndarray) -> np.ndarray:
         s2 = self.noise_var
