@@ -343,7 +343,7 @@ def diego_spec() -> tuple[RobotSpec, dict, list]:
         L(Link(f"{s}_shank", 1.4, ("cyl", 0.04, 0.21), (0, 0, -0.105)))
         L(Link(f"{s}_ankle", 0.1, ("box", 0.03, 0.03, 0.02)))
         L(Link(f"{s}_foot", 0.6, ("box", 0.14, 0.07, 0.04), (0.03, 0, -0.03)))
-        L(Link(f"{s}_toes", 0.15, ("box", 0.04, 0.07, 0.02), (0.02, 0, 0.0)))
+        L(Link(f"{s}_toes", 0.15, ("box", 0.05, 0.07, 0.02), (0.025, 0, 0.0)))
         joint(f"{s}_hip_yaw", "waist", f"{s}_hip", (0, y * 0.07, -0.05), "z", -0.6, 0.6, "medium")
         lo, hi = (-0.6, 0.3) if sign < 0 else (-0.3, 0.6)
         joint(f"{s}_hip_roll", f"{s}_hip", f"{s}_hip_block", (0, 0, -0.04), "x", lo, hi, "large")
@@ -362,8 +362,8 @@ def diego_spec() -> tuple[RobotSpec, dict, list]:
             (f"{s}_hand", (0.025, y * 0.01, -0.07)),
             (f"{s}_hip", (0.04, y * 0.04, -0.01)),
             (f"{s}_thigh", (0.05, y * 0.02, -0.12)),
-            (f"{s}_foot", (0.08, y * 0.02, -0.03)),
-            (f"{s}_toes", (0.03, y * 0.02, 0.01)),
+            (f"{s}_foot", (0.08, y * 0.045, -0.035)),
+            (f"{s}_toes", (0.045, y * 0.025, 0.012)),
         ]
     # scale the masses to exactly 35 kg; the rounding remainder goes to the waist
     scale = TOTAL_MASS / sum(link.mass for link in spec.links)
