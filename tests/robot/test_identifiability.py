@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 from diegocal.robot import markers_jacobian, pots_jacobian
 
@@ -76,7 +77,10 @@ def calibration_jacobian(robot, q: np.ndarray) -> tuple[np.ndarray, dict]:
 
 
 def normalised_singular_values(J: np.ndarray) -> np.ndarray:
-    return np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
+    """Singular values of J with unit-norm columns (units differ: rad, V/rad, V, m)."""
+    # one BLAS thread: a small SVD on a shared, loaded machine is 50x slower with many
+    with threadpool_limits(1):
+        return np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
 
 
 @pytest.mark.parametrize("name", ["diego", "finger"])
