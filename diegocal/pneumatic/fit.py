@@ -1,0 +1,279 @@
+"""Next-step least squares for the 9-parameter model (thesis §4.5.3, the equation after 4.11).
+
+.. math:: c^* = \\arg\\min_c \\sum_t (p_{t+h} - \\hat p_{t+h}(p_t, u_t, v_t, \\dot v_t; c))^2
+
+with p̂ the exact step (4.7), bounds of Table 4.1 (plus ``|c6| < 1`` on the normalised volume
+coordinate), and an analytic Jacobian (:func:`diegocal.pneumatic.model.step_vector`) for
+scipy's ``trf``.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from diegocal.errors import DiegocalError, FitError
+
+try:  # BLAS threads only slow down trf's SVD of a tall, 9-column Jacobian (measured: ~5x)
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - optional
+    threadpool_limits = None
+from diegocal.pneumatic import params as P
+from diegocal.pneumatic.data import ChamberData
+from diegocal.pneumatic.model import step_vector
+from diegocal.pneumatic.params import ChamberParams
+from diegocal.pneumatic.predict import drift
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Options of a chamber fit, parsed once.
+
+    jacobian : "analytic" or "2-point" (finite differences; the reference in the bench)
+    starts : number of starting points (1 = Table 4.1's start values; more adds seeded random ones)
+    seed : seed of the random starting points
+    max_nfev : evaluation budget per start
+    drift_starts, horizon_s : the multi-step check stored with the fit (§4.5.4)
+    """
+
+    jacobian: str = "analytic"
+    starts: int = 1
+    seed: int = 0
+    max_nfev: int = 200
+    tol: float = 1e-10
+    drift_starts: int = 48
+    horizon_s: float = 2.0
+
+
+@dataclass(frozen=True)
+class ChamberFit:
+    """The fitted model of one chamber with its diagnostics.
+
+    params : ChamberParams (values, standard errors); cost : 0.5 * sum of squared residuals (pu²)
+    rmse : next-step RMS residual (pu); n_samples : residuals used; nfev : evaluations (best start)
+    drift_2s : open-loop RMS error at the horizon / (P_c - P_r) on the fitted log (§4.5.4)
+    drift_curve : that fraction every 0.1 s of horizon
+    start_costs : final cost from every start (multi-start spread; §4.5.3's convergence claim)
+    start_params : (starts, 9) parameters reached from every start
+    """
+
+    name: str
+    params: ChamberParams
+    cost: float
+    rmse: float
+    n_samples: int
+    nfev: int
+    drift_2s: float
+    drift_curve: list = field(default_factory=list)
+    start_costs: tuple = ()
+    start_params: np.ndarray | None = None
+
+    def to_dict(self) -> dict:
+        out = self.params.to_dict()
+        out.update(
+            cost=self.cost,
+            rmse=self.rmse,
+            n_samples=self.n_samples,
+            drift_2s=self.drift_2s,
+            drift_curve=self.drift_curve,
+        )
+        if len(self.start_costs) > 1:
+            out["start_costs"] = [float(c) for c in self.start_costs]
+        return out
+
+
+def volume_normalisation(v: np.ndarray) -> tuple[float, float]:
+    """(v_ref, v_scale): centre and half-range of the volume sensor on the fitting data.
+
+    A sensor that never moves (locked cylinder) gets scale 1: c4-c6 are then unidentifiable and
+    the fit reports NaN standard errors for them.
+    """
+    lo, hi = float(np.min(v)), float(np.max(v))
+    half = 0.5 * (hi - lo)
+    return 0.5 * (hi + lo), half if half > 1e-9 * max(1.0, abs(lo), abs(hi)) else 1.0
+
+
+class _Problem:
+    """Residuals and Jacobian of the next-step fit, sharing one evaluation per x."""
+
+    def __init__(self, data: ChamberData, nominal: ChamberParams):
+        sl = np.flatnonzero(data.steps)  # pairs (t, t+1) that do not straddle a gap
+        v, vd = nominal.volume_coordinate(data.v[sl], data.vd[sl])
+        self.args = (data.p[sl], data.u[sl], v, vd, np.diff(data.time)[sl])
+        self.target = data.p[sl + 1]
+        self.consts = (nominal.c_b, nominal.c_s, nominal.c_gamma)
+        self._x = None
+        self._cache = None
+
+    def _eval(self, x, jacobian: bool):
+        if (
+            self._x is not None
+            and np.array_equal(x, self._x)
+            and (self._cache[1] is not None or not jacobian)
+        ):
+            return self._cache
+        p, u, v, vd, h = self.args
+        out = step_vector(x, p, u, v, vd, h, *self.consts, jacobian=jacobian)
+        self._x, self._cache = np.array(x), out
+        return out
+
+    def residuals(self, x):
+        return self._eval(x, jacobian=True)[0] - self.target
+
+    def residuals_only(self, x):
+        return step_vector(x, *self.args, *self.consts, jacobian=False)[0] - self.target
+
+    def jacobian(self, x):
+        return self._eval(x, jacobian=True)[1]
+
+
+def start_points(
+    n: int, bounds: tuple[np.ndarray, np.ndarray], rng: np.random.Generator
+) -> np.ndarray:
+    """Start vectors (n, 9): Table 4.1's start values, then seeded random ones inside the bounds."""
+    lo, hi = bounds
+    x0 = [np.clip(P.start_vector(), lo + 1e-6, hi - 1e-6)]
+    for _ in range(n - 1):
+        x = np.array(
+            [
+                rng.uniform(4.0, 6.0),  # c1, V
+                np.exp(rng.uniform(np.log(0.3), np.log(5.0))),  # c2
+                rng.uniform(-0.5, 1.0),  # c3
+                rng.normal(0.0, 5.0),  # c4
+                rng.normal(0.0, 1.0),  # c5
+                0.0,  # c6 (drawn below)
+                np.exp(rng.uniform(np.log(2.0), np.log(100.0))),  # c7
+                rng.uniform(-0.5, 0.5),  # c8
+                np.exp(rng.uniform(np.log(0.01), np.log(0.5))),  # c9
+            ]
+        )
+        x[5] = rng.uniform(0.5 * lo[5], 0.5 * hi[5])
+        x0.append(np.clip(x, lo + 1e-6, hi - 1e-6))
+    return np.array(x0)
+
+
+def fit_chamber(data: ChamberData, options: FitOptions = FitOptions()) -> ChamberFit:
+    """Fit c1..c9 of one chamber by next-step least squares (thesis §4.5.3)."""
+    if threadpool_limits is None:
+        return _fit_chamber(data, options)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit_chamber(data, options)
+
+
+def _fit_chamber(data: ChamberData, options: FitOptions) -> ChamberFit:
+    v_ref, v_scale = volume_normalisation(data.v)
+    nominal = replace(ChamberParams.nominal(data.supply, data.room), v_ref=v_ref, v_scale=v_scale)
+    problem = _Problem(data, nominal)
+    lo, hi = P.lower_bounds(), P.upper_bounds()
+    rng = np.random.default_rng(options.seed)
+    if options.jacobian == "analytic":
+        fun, jac = problem.residuals, problem.jacobian
+    elif options.jacobian == "2-point":
+        fun, jac = problem.residuals_only, "2-point"
+    else:
+        raise FitError(f"unknown jacobian {options.jacobian!r} (expected 'analytic' or '2-point')")
+    runs = []
+    for x0 in start_points(max(1, options.starts), (lo, hi), rng):
+        try:
+            res = least_squares(
+                fun,
+                x0,
+                jac=jac,
+                bounds=(lo, hi),
+                method="trf",
+                x_scale="jac",
+                ftol=options.tol,
+                xtol=options.tol,
+                gtol=options.tol,
+                max_nfev=options.max_nfev,
+            )
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise FitError(f"chamber {data.name!r}: least squares failed ({exc})") from None
+        runs.append(res)
+    best = min(runs, key=lambda r: r.cost)
+    if not np.isfinite(best.cost):
+        raise FitError(f"chamber {data.name!r}: the fit diverged (non-finite cost)")
+    n = problem.target.size
+    J = problem.jacobian(best.x)
+    stderr = _stderr(J, best.cost, n)
+    fitted = nominal.from_vector(best.x, stderr)
+    dr = drift(fitted, data, options.drift_starts, options.horizon_s)
+    return ChamberFit(
+        name=data.name,
+        params=fitted,
+        cost=float(best.cost),
+        rmse=float(np.sqrt(2 * best.cost / n)),
+        n_samples=int(n),
+        nfev=int(best.nfev),
+        drift_2s=dr.final,
+        drift_curve=dr.curve(),
+        start_costs=tuple(float(r.cost) for r in runs),
+        start_params=np.array([r.x for r in runs]),
+    )
+
+
+def _stderr(J: np.ndarray, cost: float, n: int) -> np.ndarray:
+    """Standard errors sqrt(diag(s² (JᵀJ)⁻¹)), s² = 2 cost / (n - 9); NaN where not identifiable."""
+    dof = max(n - J.shape[1], 1)
+    s2 = 2.0 * cost / dof
+    _, sv, vt = np.linalg.svd(J, full_matrices=False)
+    keep = sv > sv[0] * 1e-12
+    inv = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    se = np.sqrt(np.maximum(np.diag(inv) * s2, 0.0))
+    if (~keep).any():
+        se[np.abs(vt[~keep]).max(axis=0) > 1e-3] = np.nan
+    return se
+
+
+@dataclass(frozen=True)
+class BatchFit:
+    """Fits of several chambers; ``skipped`` maps a chamber to why it was not fitted (one line)."""
+
+    fits: dict
+    skipped: dict
+
+
+def _fit_task(args):
+    data, options = args
+    try:
+        return data.name, fit_chamber(data, options), None
+    except DiegocalError as exc:
+        return data.name, None, str(exc)
+
+
+def fit_chambers(
+    datasets, options: FitOptions = FitOptions(), jobs: int = 1, progress=None
+) -> BatchFit:
+    """Fit independent chambers, in parallel processes when ``jobs > 1``.
+
+    Parameters
+    ----------
+    datasets : iterable of ChamberData
+    progress : optional callable(name) called as each chamber finishes
+    """
+    tasks = [(d, options) for d in datasets]
+    fits, skipped = {}, {}
+
+    def record(result):
+        name, fit, err = result
+        if fit is None:
+            skipped[name] = err
+        else:
+            fits[name] = fit
+        if progress is not None:
+            progress(name)
+
+    if jobs <= 1 or len(tasks) <= 1:
+        for t in tasks:
+            record(_fit_task(t))
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for result in pool.map(_fit_task, tasks):
+                record(result)
+    order = [d.name for d, _ in tasks]
+    return BatchFit(
+        {n: fits[n] for n in order if n in fits}, {n: skipped[n] for n in order if n in skipped}
+    )

@@ -1,0 +1,163 @@
+"""Named, bounded parameters of the 9-parameter valve-chamber model (thesis §4.4, Table 4.1).
+
+Parameters are named and carry units, bounds and standard errors (lmfit's ``Parameter``); they
+are packed into a vector only at the optimiser's door (:meth:`ChamberParams.vector`,
+:meth:`ChamberParams.from_vector`). ``v`` is the volume-sensor reading in its own unit
+(normalised, see :class:`ChamberParams`) and ``u`` the valve voltage in V; pressure is in the
+pressure stream's unit ("pu": kPa for the bundled robots).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from diegocal.errors import InputFileError
+
+#: c_gamma, the voltage range of the leaky regime, fixed globally by the thesis (§4.4), V.
+C_GAMMA = 0.1
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One free parameter: name, unit, bounds (Table 4.1 or ours, see ``note``), start value."""
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    start: float
+    meaning: str
+    note: str = ""
+
+
+#: The free parameters c1..c9 in order. Bounds from Table 4.1; c2 > 0 and c7 > 0 are ours:
+#: they fix the sign conventions (s increases with u, the rate r is positive) that the thesis
+#: states in words ("r() > 0", §4.3) but does not list in the table.
+SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec("c1", "V", 2.0, 8.0, 5.0, "valve-voltage origin (U_c + U_r)/2", "Table 4.1"),
+    ParamSpec("c2", "1/V", 1e-3, np.inf, 1.0, "valve-voltage scale B", "ours: > 0"),
+    ParamSpec("c3", "1/V^3", -1.0, np.inf, 0.0, "kink factor", "Table 4.1"),
+    ParamSpec("c4", "pu s", -np.inf, np.inf, 0.0, "ds/dvdot", ""),
+    ParamSpec("c5", "1", -np.inf, np.inf, 0.0, "dr/dvdot", ""),
+    ParamSpec(
+        "c6",
+        "1",
+        -0.98,
+        0.98,
+        0.0,
+        "volume-sensor scale",
+        "|c6| < 1 keeps 1 + c6 v' > 0 on the normalised travel v' in [-1, 1]",
+    ),
+    ParamSpec("c7", "1/(s V)", 1e-6, np.inf, 10.0, "B of eq. (4.3): rate per volt", "ours: > 0"),
+    ParamSpec("c8", "1", -1.0, 1.0, 0.0, "rate asymmetry", "Table 4.1"),
+    ParamSpec("c9", "V", 1e-6, np.inf, 0.05, "leakage (L_c + L_r)/2", "Table 4.1: > 0"),
+)
+NAMES: tuple[str, ...] = tuple(s.name for s in SPECS)
+N_PARAMS = len(SPECS)
+
+
+def lower_bounds() -> np.ndarray:
+    return np.array([s.lower for s in SPECS])
+
+
+def upper_bounds() -> np.ndarray:
+    return np.array([s.upper for s in SPECS])
+
+
+def start_vector() -> np.ndarray:
+    return np.array([s.start for s in SPECS])
+
+
+@dataclass(frozen=True)
+class ChamberParams:
+    """The model of one valve-chamber system: c1..c9 plus the fixed c_b, c_s, c_gamma (thesis §4.4).
+
+    Attributes
+    ----------
+    values : dict name -> float, the nine free parameters
+    c_b, c_s : pressure-sensor bias (P_c + P_r)/2 and scale (P_c - P_r)/2, in pressure units
+    c_gamma : leaky-regime voltage range, V (0.1 in the thesis)
+    stderr : dict name -> float, standard errors (NaN where unknown)
+    v_ref, v_scale : the model's volume coordinate is (v - v_ref) / v_scale (see below)
+
+    Volume coordinate. Eq. (4.10e) divides by ``1 + c6 v``: the "1" is the volume at v = 0 in
+    units of the sensor's bias (§4.4). With a raw pot reading, v = 0 may lie far outside the
+    travel (or where the extrapolated volume is negative); then the best c6 is infinite and
+    (c5, c6, c7) slide along their multiplicative invariance. We therefore feed the model the
+    reading centred and scaled on the fitting data's range, v' = (v - v_ref) / v_scale in
+    [-1, 1], where the volume is positive by construction, so |c6| < 1 is the physical range;
+    vdot is scaled alike. This is a fixed affine change of the sensor unit, not a new parameter.
+    """
+
+    values: dict
+    c_b: float
+    c_s: float
+    c_gamma: float = C_GAMMA
+    stderr: dict = field(default_factory=dict)
+    v_ref: float = 0.0
+    v_scale: float = 1.0
+
+    def volume_coordinate(self, v, vd):
+        """(v', v̇') = ((v - v_ref) / v_scale, v̇ / v_scale): the model's volume inputs."""
+        return (np.asarray(v) - self.v_ref) / self.v_scale, np.asarray(vd) / self.v_scale
+
+    @classmethod
+    def nominal(cls, supply: float, room: float, **values) -> ChamberParams:
+        """Start values of Table 4.1's parameters; c_b, c_s from the supply and room pressures."""
+        vals = {s.name: s.start for s in SPECS}
+        vals.update({k: float(v) for k, v in values.items()})
+        return cls(vals, c_b=0.5 * (supply + room), c_s=0.5 * (supply - room))
+
+    @property
+    def supply(self) -> float:
+        return self.c_b + self.c_s
+
+    @property
+    def room(self) -> float:
+        return self.c_b - self.c_s
+
+    def vector(self) -> np.ndarray:
+        """The nine free parameters packed in the order of :data:`NAMES` (the optimiser's door)."""
+        return np.array([float(self.values[n]) for n in NAMES])
+
+    def from_vector(self, x, stderr=None) -> ChamberParams:
+        vals = {n: float(v) for n, v in zip(NAMES, np.asarray(x, float), strict=True)}
+        se = {} if stderr is None else {n: float(v) for n, v in zip(NAMES, stderr, strict=True)}
+        return replace(self, values=vals, stderr=se)
+
+    def to_dict(self) -> dict:
+        out = {n: float(self.values[n]) for n in NAMES}
+        out.update(
+            c_b=float(self.c_b),
+            c_s=float(self.c_s),
+            c_gamma=float(self.c_gamma),
+            v_ref=float(self.v_ref),
+            v_scale=float(self.v_scale),
+        )
+        if self.stderr:
+            out["stderr"] = {n: float(self.stderr.get(n, np.nan)) for n in NAMES}
+        return out
+
+    @classmethod
+    def from_dict(cls, raw: dict, where: str = "chamber") -> ChamberParams:
+        if not isinstance(raw, dict):
+            raise InputFileError(f"{where}: expected a mapping of c1..c9, c_b, c_s")
+        missing = [k for k in (*NAMES, "c_b", "c_s") if k not in raw]
+        if missing:
+            raise InputFileError(f"{where}: missing {', '.join(missing)}")
+        try:
+            vals = {n: float(raw[n]) for n in NAMES}
+            se = {n: float(v) for n, v in (raw.get("stderr") or {}).items()}
+            return cls(
+                vals,
+                float(raw["c_b"]),
+                float(raw["c_s"]),
+                float(raw.get("c_gamma", C_GAMMA)),
+                se,
+                float(raw.get("v_ref", 0.0)),
+                float(raw.get("v_scale", 1.0)),
+            )
+        except (TypeError, ValueError):
+            raise InputFileError(f"{where}: parameters must be numbers") from None
