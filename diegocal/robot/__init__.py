@@ -1,5 +1,6 @@
 """Robot models: URDF through Pinocchio, sensors.yaml, observation models and their Jacobians."""
 
+from diegocal.robot.gauges import gauge_joints
 from diegocal.robot.model import BUNDLED_ROBOTS, PointSet, Robot, load_robot, resolve_robot_dir
 from diegocal.robot.observe import (
     anchor_points,
@@ -32,6 +33,7 @@ __all__ = [
     "Robot",
     "SensorConfig",
     "anchor_points",
+    "gauge_joints",
     "load_robot",
     "marker_points",
     "markers_jacobian",

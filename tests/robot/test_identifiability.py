@@ -1,16 +1,8 @@
-"""Are the bundled robots calibratable? The Jacobian of every observation (pots, markers) with
-respect to every unknown of STAC (thesis eq. 2.21: joint angles of each frame, pot gains and
-biases, marker positions, mocap rotation and translation) has full column rank, up to one known
-gauge freedom per joint of two kinds, each shifting the joint's zero and the biases of the pots
-that read it:
-
-* leaf gauge: every marker the joint moves sits on its own child link; rotating those markers
-  about its axis (d -> Rot(a, -δ) d) absorbs the offset;
-* root gauge: the joint hangs from the base (its axis is fixed in the base frame) and moves every
-  marker; rotating the mocap frame about its axis (R, T) absorbs the offset.
-
-Fixing one rotary pot's bias per gauge joint removes it, and nothing else is lost. The thesis
-does not discuss these gauges; the STAC code must fix them (or compare biases modulo them).
+"""Are the robots calibratable? The Jacobian of every observation (pots, markers) with respect
+to every unknown of STAC (thesis eq. 2.21: joint angles of each frame, pot gains and biases,
+marker positions, mocap rotation and translation) has full column rank, up to exactly the gauge
+freedoms :func:`diegocal.robot.gauge_joints` names (leaf and root gauges, see its module). Fixing
+one bias per gauge joint removes them, and nothing else is lost.
 """
 
 from __future__ import annotations
@@ -19,27 +11,15 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
 
-from diegocal.robot import markers_jacobian, pots_jacobian
+from diegocal.robot import gauge_joints, load_robot, markers_jacobian, pots_jacobian
 
 EXPECTED_GAUGES = {
-    "diego": {"head_pitch", "r_wrist_roll", "l_wrist_roll", "r_toe", "l_toe"},
-    "finger": {"dip", "mcp_abd"},
+    "diego": {"head_pitch", "r_wrist_roll", "l_wrist_roll", "r_toe", "l_toe"},  # leaves
+    "finger": {"dip", "mcp_abd"},  # leaf, root
+    "tiny": set(),  # its linear pots span slide and j3, which breaks their gauges
+    # without them: slide is upstream of the base and moves only the l0 marker (leaf, far side)
+    "tiny_no_linear": {"slide", "j3"},
 }
-
-
-def gauge_joints(robot) -> list[int]:
-    """Indices of the leaf-gauge and root-gauge joints (module docstring); fixed base only."""
-    model = robot.model
-    assert robot._base_is_fixed()
-    marker_joint = [model.frames[robot.frame_id(m.link)].parentJoint for m in robot.sensors.markers]
-    out = []
-    for k in range(1, model.njoints):
-        moved = [j for j in marker_joint if k in list(model.supports[j])]
-        leaf = moved and all(j == k for j in moved)
-        root = model.parents[k] == 0 and len(moved) == len(marker_joint)
-        if leaf or root:
-            out.append(k - 1)
-    return out
 
 
 def _skew(v):
@@ -83,24 +63,40 @@ def normalised_singular_values(J: np.ndarray) -> np.ndarray:
         return np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
 
 
-@pytest.mark.parametrize("name", ["diego", "finger"])
-def test_calibration_identifiable_up_to_gauges(name, bundled, sample_q):
-    robot = bundled(name)
+def bias_to_fix(robot, joint: str) -> int:
+    """A pot reading ``joint`` whose bias removes its gauge: rotary/encoder first, else tendon."""
+    readers = [i for i, p in enumerate(robot.sensors.pots) if joint in p.joints]
+    readers.sort(key=lambda i: robot.sensors.pots[i].kind == "tendon")
+    assert readers, joint
+    return readers[0]
+
+
+@pytest.mark.parametrize("name", ["diego", "finger", "tiny", "tiny_no_linear"])
+def test_calibration_identifiable_up_to_gauges(
+    name, bundled, tiny_robot, sample_q, robot_dir, tiny_sensors
+):
+    if name == "tiny_no_linear":
+        tiny_sensors["pots"] = [p for p in tiny_sensors["pots"] if p["kind"] != "linear"]
+        robot = load_robot(robot_dir(tiny_sensors))
+    else:
+        robot = tiny_robot if name == "tiny" else bundled(name)
     gauges = gauge_joints(robot)
-    assert {robot.joint_names[k] for k in gauges} == EXPECTED_GAUGES[name]
-    # each gauge joint is read by a rotary pot, whose bias is the one to fix
-    fixed = []
-    for k in gauges:
-        readers = [
-            i
-            for i, p in enumerate(robot.sensors.pots)
-            if p.kind == "rotary" and p.joint == robot.joint_names[k]
-        ]
-        assert readers, robot.joint_names[k]
-        fixed.append(readers[0])
+    assert set(gauges) == EXPECTED_GAUGES[name]
+    fixed = [bias_to_fix(robot, joint) for joint in gauges]
+    if "tiny" not in name:  # the bundled robots have a rotary pot on every gauge joint
+        assert all(robot.sensors.pots[i].kind == "rotary" for i in fixed)
 
     q = sample_q(robot, np.random.default_rng(5), 6)
     J, col = calibration_jacobian(robot, q)
+    # a joint upstream of the base that no pot reads moves nothing relative to the base (tiny's j0):
+    # its angle is not a calibration unknown at all
+    inert = np.flatnonzero(np.linalg.norm(J, axis=0) == 0)
+    expected_inert = (
+        [t * robot.n_joints + robot.joint_index("j0") for t in range(6)] if "tiny" in name else []
+    )
+    np.testing.assert_array_equal(inert, expected_inert)
+    J = np.delete(J, inert, axis=1)
+    col = {key: c - len(inert) for key, c in col.items()}
     free = normalised_singular_values(J)
     # with every bias free the Jacobian loses exactly one direction per gauge joint ...
     assert (free < 1e-9).sum() == len(gauges)
