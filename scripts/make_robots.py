@@ -545,7 +545,7 @@ def main(argv: list[str]) -> int:
         out / "finger",
         finger,
         "finger: tendon-driven finger (thesis Fig. 2.3e, §2.5.2). By scripts/make_robots.py.\n"
-        "Tendon gains in V/m of excursion (moment arms in m, fixed); rotary pot in V/rad.",
+        "Tendon gains in V/m of excursion (moment arms in m, fixed); Hall pots in V/rad.",
         "palm",
         *finger_sensors(finger, rng),
     )
