@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 DIEGOCAL := $(BIN)/diegocal
 OUT := out
 
-.PHONY: demo test bench lint sample-data robots clean
+.PHONY: demo test bench lint sample-data robots real-data clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,10 @@ sample-data: $(STAMP)
 	$(BIN)/python scripts/make_sample_data.py sample_data
 
 # The main job on the bundled sample data: calibrate, fit, predict held-out, report.
+# The real TX40 and TIAGo logs of ../shared/data/real, converted to diegocal logs (not committed).
+real-data: $(STAMP)
+	$(BIN)/python scripts/convert_real.py out/real
+
 demo: $(STAMP)
 	@mkdir -p $(OUT)
 	$(DIEGOCAL) report sample_data/*.h5 -o $(OUT)/report.pdf

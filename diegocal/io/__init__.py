@@ -1,17 +1,29 @@
 """Log files (HDF5, CSV), YAML parameter files and validation: the only code that opens files."""
 
-from diegocal.io.files import atomic_path, dump_yaml, load_log, load_yaml, save_log, save_yaml, write_text
+from diegocal.io.files import (
+    atomic_path,
+    dump_yaml,
+    load_log,
+    load_yaml,
+    save_log,
+    save_yaml,
+    write_text,
+)
 from diegocal.io.log import JOINT_STREAMS, Log, Stream, Truth, check_log, make_stream
+from diegocal.io.real import RealOptions, load_tiago, load_tx40
 
 __all__ = [
     "JOINT_STREAMS",
     "Log",
+    "RealOptions",
     "Stream",
     "Truth",
     "atomic_path",
     "check_log",
     "dump_yaml",
     "load_log",
+    "load_tiago",
+    "load_tx40",
     "load_yaml",
     "make_stream",
     "save_log",
