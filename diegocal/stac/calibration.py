@@ -8,6 +8,10 @@ Its YAML form is the calib.yaml contract (issue #3; extend, never break)::
     sigma:   {pots, markers}
     fit:     {cost, iterations, converged, seconds}
 
+Extensions written by STAC (optional on read): ``sigma.by_group`` (noise level per sensor type,
+§2.3.5), ``fit.history`` (per-iteration cost and noise levels), ``meta: {log, robot, command,
+created}`` and ``prediction`` (cross-sensor MAE table of ``diegocal predict``, Tables 2.1-2.2).
+
 Simulated logs store the true values in ``/truth`` attribute ``params`` in this same schema.
 """
 
@@ -44,6 +48,9 @@ class Calibration:
     mocap_R : (3, 3) rotation from base link to mocap frame; mocap_T : (3,) translation, m
     sigma_pots, sigma_markers : noise standard deviations (V, m), §2.3.5
     method : 'stac' | 'classical' | 'ekf' | 'nominal'
+    sigma_by_group : noise level per sensor type ('rotary', 'linear', 'tendon', 'encoder', 'markers')
+    history : per-iteration records as dicts {iteration, cost, sigma_pots, sigma_markers, seconds}
+    meta : {log, robot, command, created}, where the calibration came from
     """
 
     pot_names: tuple[str, ...]
@@ -61,6 +68,9 @@ class Calibration:
     sigma_markers: float = float("nan")
     fit: FitInfo = field(default_factory=FitInfo)
     method: str = "stac"
+    sigma_by_group: dict = field(default_factory=dict)
+    history: tuple = ()
+    meta: dict = field(default_factory=dict)
 
     @classmethod
     def nominal(cls, robot: Robot) -> Calibration:
@@ -82,17 +92,47 @@ class Calibration:
         gse = self.gain_se if self.gain_se is not None else np.full(P, np.nan)
         bse = self.bias_se if self.bias_se is not None else np.full(P, np.nan)
         xse = self.marker_xyz_se if self.marker_xyz_se is not None else np.full((M, 3), np.nan)
-        return {
+        out = {
             "method": self.method,
-            "pots": {n: {"gain": float(self.gain[i]), "bias": float(self.bias[i]),
-                         "gain_se": _f(gse[i]), "bias_se": _f(bse[i])} for i, n in enumerate(self.pot_names)},
-            "markers": {n: {"link": self.marker_links[i], "xyz": [float(v) for v in self.marker_xyz[i]],
-                            "xyz_se": [_f(v) for v in xse[i]]} for i, n in enumerate(self.marker_names)},
-            "mocap": {"R": np.asarray(self.mocap_R, float).tolist(), "T": np.asarray(self.mocap_T, float).tolist()},
+            "pots": {
+                n: {
+                    "gain": float(self.gain[i]),
+                    "bias": float(self.bias[i]),
+                    "gain_se": _f(gse[i]),
+                    "bias_se": _f(bse[i]),
+                }
+                for i, n in enumerate(self.pot_names)
+            },
+            "markers": {
+                n: {
+                    "link": self.marker_links[i],
+                    "xyz": [float(v) for v in self.marker_xyz[i]],
+                    "xyz_se": [_f(v) for v in xse[i]],
+                }
+                for i, n in enumerate(self.marker_names)
+            },
+            "mocap": {
+                "R": np.asarray(self.mocap_R, float).tolist(),
+                "T": np.asarray(self.mocap_T, float).tolist(),
+            },
             "sigma": {"pots": _f(self.sigma_pots), "markers": _f(self.sigma_markers)},
-            "fit": {"cost": _f(self.fit.cost), "iterations": int(self.fit.iterations),
-                    "converged": bool(self.fit.converged), "seconds": _f(self.fit.seconds)},
+            "fit": {
+                "cost": _f(self.fit.cost),
+                "iterations": int(self.fit.iterations),
+                "converged": bool(self.fit.converged),
+                "seconds": _f(self.fit.seconds),
+            },
         }
+        if self.sigma_by_group:
+            out["sigma"]["by_group"] = {k: _f(v) for k, v in self.sigma_by_group.items()}
+        if self.history:
+            out["fit"]["history"] = [
+                {k: (_f(v) if isinstance(v, float) else v) for k, v in h.items()}
+                for h in self.history
+            ]
+        if self.meta:
+            out["meta"] = dict(self.meta)
+        return out
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "calib.yaml") -> Calibration:
@@ -112,19 +152,32 @@ class Calibration:
                 bias_se=np.array([_nan(pots[n].get("bias_se")) for n in names]),
                 marker_names=mnames,
                 marker_links=tuple(str(markers[n]["link"]) for n in mnames),
-                marker_xyz=np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(-1, 3),
-                marker_xyz_se=np.array([[_nan(v) for v in (markers[n].get("xyz_se") or [None] * 3)]
-                                        for n in mnames], dtype=float).reshape(-1, 3),
+                marker_xyz=np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(
+                    -1, 3
+                ),
+                marker_xyz_se=np.array(
+                    [[_nan(v) for v in (markers[n].get("xyz_se") or [None] * 3)] for n in mnames],
+                    dtype=float,
+                ).reshape(-1, 3),
                 mocap_R=np.array(mocap.get("R", np.eye(3)), dtype=float).reshape(3, 3),
                 mocap_T=np.array(mocap.get("T", [0.0, 0.0, 0.0]), dtype=float).reshape(3),
                 sigma_pots=_nan(sigma.get("pots")),
                 sigma_markers=_nan(sigma.get("markers")),
-                fit=FitInfo(_nan(fit.get("cost")), int(fit.get("iterations", 0)),
-                            bool(fit.get("converged", False)), _nan(fit.get("seconds"))),
+                fit=FitInfo(
+                    _nan(fit.get("cost")),
+                    int(fit.get("iterations", 0)),
+                    bool(fit.get("converged", False)),
+                    _nan(fit.get("seconds")),
+                ),
                 method=str(data.get("method", "stac")),
+                sigma_by_group={str(k): _nan(v) for k, v in (sigma.get("by_group") or {}).items()},
+                history=tuple(dict(h) for h in (fit.get("history") or ())),
+                meta=dict(data.get("meta") or {}),
             )
         except (KeyError, TypeError, ValueError) as exc:
-            raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None
+            raise InputFileError(
+                f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})"
+            ) from None
 
 
 def _f(v) -> float | None:

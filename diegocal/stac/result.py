@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +46,13 @@ class StacOptions:
     loss : 'linear' (Gaussian, eq. 2.21) or 'huber' (robust to mocap outliers/swapped labels)
     huber_scale : residual (in sigmas) where the Huber loss turns linear
     jobs : worker processes for the per-frame q-phase
+    schedule : STAC q-phase schedule, 'lm-iter' (default), 'lm-batch' or 'bfgs' (thesis §2.6.1)
+    q_steps : LM steps per alternation in 'lm-iter'
+    batch_size : frames per batched normal-equation solve
+    marker_seed : 'origin' (markers start at their link origins, §2.7.1) or 'nominal' (sensors.yaml)
+    joint : try a joint Gauss-Newton step on (q, pot gains/biases) each iteration (joint_step.py)
+    anderson : depth of the Anderson acceleration of the alternation (0 = plain alternation)
+    on_iteration : optional callback(iteration, Calibration) after each outer iteration (benchmarks)
     """
 
     max_iterations: int = 50
@@ -54,3 +62,10 @@ class StacOptions:
     jobs: int = 1
     seed: int = 0
     quiet: bool = True
+    schedule: str = "lm-iter"
+    q_steps: int = 1
+    batch_size: int = 1000
+    marker_seed: str = "origin"
+    anderson: int = 0
+    joint: bool = True
+    on_iteration: Callable | None = None

@@ -1,0 +1,289 @@
+"""The STAC observation model over a log: data, parameters θ and batched evaluation (thesis §2.3).
+
+:class:`Observation` binds a log's ``pots`` (T, P) and ``markers`` (T, M, 3) streams to the
+robot's sensors, checks names and observability once, and evaluates for a batch of frames
+the quantities both phases need: the pot transmission s(q) (eq. 2.18-2.20, with ∂s/∂q for
+eq. 2.22) and the pose of every marker's link (eq. 2.11, with the point Jacobian of eq. 2.23).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from diegocal.errors import FitError, UnknownNameError
+from diegocal.io import Log
+from diegocal.robot import PointSet, Robot, anchor_points
+from diegocal.stac.calibration import Calibration
+from diegocal.stac.kinematics_batch import BatchKinematics
+
+#: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
+MARKERS = "markers"
+
+
+@dataclass(frozen=True)
+class Params:
+    """θ = [gain, bias, R, T0, d_1:M] (thesis eq. 2.10) for the sensors present in the log.
+
+    gain, bias : (P,) V/rad (V/m) and V; xyz : (M, 3) marker positions in link frames, m;
+    R : (3, 3) base -> mocap rotation; T : (3,) translation, m.
+    """
+
+    gain: np.ndarray
+    bias: np.ndarray
+    xyz: np.ndarray
+    R: np.ndarray
+    T: np.ndarray
+
+
+@dataclass(frozen=True)
+class State:
+    """What the p-phase needs at fixed q: s (T, P) and marker link poses Rl (T, M, 3, 3), pl (T, M, 3)."""
+
+    s: np.ndarray
+    Rl: np.ndarray
+    pl: np.ndarray
+
+
+class Observation:
+    """A log's pot and marker data bound to a robot.
+
+    Parameters
+    ----------
+    log : Log with ``pots`` (T, P) in V and/or ``markers`` (T, M, 3) in m (NaN = occluded)
+    robot : Robot
+    need : which streams are required ('pots', 'markers'); a missing one raises MissingStreamError
+    needed_by : command name for error messages
+    """
+
+    def __init__(self, log: Log, robot: Robot, need=("pots", "markers"), needed_by: str = "stac"):
+        self.robot = robot
+        self.kin = BatchKinematics(robot)
+        specs = {p.name: (i, p) for i, p in enumerate(robot.sensors.pots)}
+        mspecs = {m.name: (i, m) for i, m in enumerate(robot.sensors.markers)}
+        T = log.n_samples
+        if "pots" in need or log.has("pots"):
+            st = log.stream("pots", needed_by=needed_by)
+            _check_names(st.names, specs, "pot", robot)
+            self.pot_index = np.array([specs[n][0] for n in st.names], dtype=int)
+            self.pots = st.data
+        else:
+            self.pot_index, self.pots = np.zeros(0, dtype=int), np.zeros((T, 0))
+        if "markers" in need or log.has("markers"):
+            st = log.stream("markers", needed_by=needed_by)
+            _check_names(st.names, mspecs, "marker", robot)
+            self.marker_index = np.array([mspecs[n][0] for n in st.names], dtype=int)
+            self.markers = st.data
+        else:
+            self.marker_index, self.markers = np.zeros(0, dtype=int), np.zeros((T, 0, 3))
+        self.valid = np.isfinite(self.markers).all(axis=-1)  # (T, M)
+        self.pot_specs = [robot.sensors.pots[i] for i in self.pot_index]
+        self.marker_specs = [robot.sensors.markers[i] for i in self.marker_index]
+        self.pot_names = tuple(p.name for p in self.pot_specs)
+        self.marker_names = tuple(m.name for m in self.marker_specs)
+        self.marker_links = tuple(m.link for m in self.marker_specs)
+        self.kinds = np.array([p.kind for p in self.pot_specs], dtype=object)
+        self.groups = tuple(dict.fromkeys(list(self.kinds))) + (
+            (MARKERS,) if len(self.marker_index) else ()
+        )
+        self.A = _linear_map(robot, self.pot_specs)  # (P, n): s = A q for rotary/encoder/tendon
+        self.linear = np.flatnonzero(self.kinds == "linear")
+        full = anchor_points(robot)
+        lin_all = [i for i, p in enumerate(robot.sensors.pots) if p.kind == "linear"]
+        rows = [2 * lin_all.index(self.pot_index[i]) + k for i in self.linear for k in (0, 1)]
+        self.anchors = PointSet(tuple(full.links[r] for r in rows), full.xyz[rows].reshape(-1, 3))
+        self.n_frames = T
+        self.fixed_bias = np.zeros(len(self.pot_index), dtype=bool)
+
+    @property
+    def n_pots(self) -> int:
+        return len(self.pot_index)
+
+    @property
+    def n_markers(self) -> int:
+        return len(self.marker_index)
+
+    # ------------------------------------------------------------------ checks
+    def check_observable(self) -> None:
+        """Every pot must move some marker, else its gain and bias cannot be told from q (§2.5.1)."""
+        if self.n_markers == 0:
+            raise FitError("STAC needs markers: the log's 'markers' stream has no channels")
+        moving = [self.kin.moves(link) for link in self.marker_links]
+        if not any(moving):
+            raise FitError(
+                f"every marker is on a link fixed to the base link {self.robot.sensors.base_link!r}: joint angles "
+                "and pot gains/biases are unobservable; put markers on moving links"
+            )
+        if not self.valid.any(axis=0).all():
+            dead = [
+                n for n, ok in zip(self.marker_names, self.valid.any(axis=0), strict=True) if not ok
+            ]
+            raise FitError(f"markers never seen (all NaN) in the log: {', '.join(dead)}")
+        joints, _, _ = self.kin.link_info(self.marker_links)
+        seen = self.kin._anc[joints].any(axis=0) & ~self.kin._anc[self.kin.base_joint]
+        for p in self.pot_specs:
+            cols = np.flatnonzero(self.A[self.pot_specs.index(p)]) if p.kind != "linear" else None
+            if cols is not None and len(cols) and not seen[cols].any():
+                names = ", ".join(self.robot.joint_names[c] for c in cols)
+                raise FitError(
+                    f"pot {p.name!r}: no marker moves with joint(s) {names}; its gain/bias is unobservable"
+                )
+        self.fixed_bias = self._gauge_biases(joints)
+        if self.n_frames < 10:
+            raise FitError(f"too few samples for STAC: {self.n_frames} (need at least 10)")
+
+    def _gauge_biases(self, marker_joints: np.ndarray) -> np.ndarray:
+        """Pots whose bias is fixed at nominal to remove a gauge freedom: (P,) bool.
+
+        When every marker moved by joint k sits on k's own child link, an offset δ of q_k is
+        exactly absorbed by rotating those markers about k's axis (d → Rot(a, −δ) d) and shifting
+        the biases of the pots that read q_k (b → b − gain · r · δ): the likelihood is flat along
+        it (leaf gauge). When a joint hangs from a fixed base and moves every marker, rotating the
+        mocap frame about its axis does the same (root gauge). The first rotary/encoder pot (else
+        tendon) reading such a joint keeps its nominal bias.
+        """
+        anc = self.kin._anc
+        kin = self.kin
+        fixed = np.zeros(self.n_pots, dtype=bool)
+        for k in range(self.robot.n_joints):
+            moved = anc[marker_joints, k]
+            if not moved.any():
+                continue
+            leaf = (marker_joints[moved] == k + 1).all()
+            root = (
+                kin.base_joint == 0 and kin.parent[k] < 0 and moved.all() and not kin.prismatic[k]
+            )
+            if not (leaf or root):
+                continue
+            readers = [j for j in np.flatnonzero(self.A[:, k]) if self.kinds[j] != "linear"]
+            readers.sort(key=lambda j: self.kinds[j] == "tendon")
+            if readers:
+                fixed[readers[0]] = True
+        return fixed
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(self, q: np.ndarray, xyz: np.ndarray | None = None):
+        """Transmission and marker link poses for a batch q (B, n).
+
+        Returns (s (B, P), ds (B, P, n) or None, Rl (B, M, 3, 3), pl (B, M, 3), Jx (B, M, 3, n) or None);
+        the Jacobians are computed when ``xyz`` (M, 3), the marker positions they are taken at, is given.
+        """
+        poses = self.kin.joint_poses(q)
+        s = q @ self.A.T
+        ds = None if xyz is None else np.broadcast_to(self.A, (q.shape[0], *self.A.shape)).copy()
+        if len(self.linear):
+            if xyz is None:
+                x = self.kin.points(poses, self.anchors)
+            else:
+                x, J = self.kin.points_jacobian(poses, self.anchors)
+            d = x[:, 1::2] - x[:, 0::2]
+            length = np.linalg.norm(d, axis=-1)
+            s[:, self.linear] = length  # eq. 2.19-2.20
+            if xyz is not None:
+                ds[:, self.linear] = np.einsum(
+                    "bkc,bkcn->bkn", d / length[..., None], J[:, 1::2] - J[:, 0::2]
+                )
+        Rl, pl = self.kin.link_poses(poses, self.marker_links)
+        Jx = None
+        if xyz is not None and self.n_markers:
+            _, Jx = self.kin.points_jacobian(poses, PointSet(self.marker_links, xyz))
+        return s, ds, Rl, pl, Jx
+
+    def state(self, q: np.ndarray, batch: int = 2000) -> State:
+        """s(q) and link poses for every frame, in batches."""
+        parts = [self.evaluate(q[i : i + batch]) for i in range(0, q.shape[0], batch)]
+        return State(
+            np.concatenate([p[0] for p in parts]),
+            np.concatenate([p[2] for p in parts]),
+            np.concatenate([p[3] for p in parts]),
+        )
+
+    # ------------------------------------------------------------------ parameters
+    def nominal(self, marker_seed: str = "origin") -> Params:
+        """Seed θ: sensors.yaml gains/biases; markers at link origins (§2.7.1) or nominal; R = I."""
+        xyz = np.array([m.xyz for m in self.marker_specs], float).reshape(-1, 3)
+        if marker_seed == "origin":
+            xyz = np.zeros_like(xyz)
+        return Params(
+            np.array([p.gain for p in self.pot_specs], float),
+            np.array([p.bias for p in self.pot_specs], float),
+            xyz,
+            np.eye(3),
+            np.zeros(3),
+        )
+
+    def to_calibration(
+        self, params: Params, se: dict, sigma: dict, method: str, fit=None
+    ) -> Calibration:
+        """A full-robot Calibration: sensors absent from the log keep their nominal values (SE NaN)."""
+        nom = Calibration.nominal(self.robot)
+        gain, bias, xyz = nom.gain.copy(), nom.bias.copy(), nom.marker_xyz.copy()
+        gse, bse = np.full(len(gain), np.nan), np.full(len(gain), np.nan)
+        xse = np.full(xyz.shape, np.nan)
+        gain[self.pot_index], bias[self.pot_index], xyz[self.marker_index] = (
+            params.gain,
+            params.bias,
+            params.xyz,
+        )
+        if se:
+            gse[self.pot_index], bse[self.pot_index], xse[self.marker_index] = (
+                se["gain"],
+                se["bias"],
+                se["xyz"],
+            )
+        pots_sigma = [sigma[k] for k in self.groups if k != MARKERS]
+        cal = replace(
+            nom,
+            gain=gain,
+            bias=bias,
+            marker_xyz=xyz,
+            gain_se=gse,
+            bias_se=bse,
+            marker_xyz_se=xse,
+            mocap_R=params.R,
+            mocap_T=params.T,
+            method=method,
+            sigma_pots=float(np.sqrt(np.mean(np.square(pots_sigma))))
+            if pots_sigma
+            else float("nan"),
+            sigma_markers=float(sigma.get(MARKERS, np.nan)),
+            sigma_by_group={k: float(v) for k, v in sigma.items()},
+        )
+        return cal if fit is None else replace(cal, fit=fit)
+
+    def params_from(self, cal: Calibration) -> Params:
+        """θ for this log's sensors from a calibration (pots/markers looked up by name)."""
+        pi = {n: i for i, n in enumerate(cal.pot_names)}
+        mi = {n: i for i, n in enumerate(cal.marker_names)}
+        for names, index, what in ((self.pot_names, pi, "pot"), (self.marker_names, mi, "marker")):
+            missing = [n for n in names if n not in index]
+            if missing:
+                raise UnknownNameError(f"calibration has no {what} {missing[0]!r} (the log has it)")
+        return Params(
+            np.array([cal.gain[pi[n]] for n in self.pot_names]),
+            np.array([cal.bias[pi[n]] for n in self.pot_names]),
+            np.array([cal.marker_xyz[mi[n]] for n in self.marker_names]).reshape(-1, 3),
+            np.asarray(cal.mocap_R, float),
+            np.asarray(cal.mocap_T, float),
+        )
+
+
+def _check_names(names, specs, what, robot) -> None:
+    unknown = [n for n in names if n not in specs]
+    if unknown:
+        raise UnknownNameError(
+            f"log {what} {unknown[0]!r} is not in {robot.name}'s sensors.yaml"
+            + (f" ({len(unknown)} unknown {what}s)" if len(unknown) > 1 else "")
+        )
+
+
+def _linear_map(robot: Robot, specs) -> np.ndarray:
+    A = np.zeros((len(specs), robot.n_joints))
+    for i, p in enumerate(specs):
+        if p.kind in ("rotary", "encoder"):
+            A[i, robot.joint_index(p.joint)] = 1.0
+        elif p.kind == "tendon":
+            for joint, arm in p.moment_arms.items():
+                A[i, robot.joint_index(joint)] = arm
+    return A

@@ -1,0 +1,123 @@
+"""STAC p-phase: sensor parameters in closed form with the joint angles fixed (thesis §2.3.1-2.3.2).
+
+* mocap frame (R, T0) by Procrustes / Kabsch (eq. 2.13-2.16). The thesis's eq. (2.15),
+  ``R = sign(det Σ) V Uᵀ``, is not a reflection guard (det Σ ≥ 0 always: Σ holds singular
+  values). We use the standard Kabsch form ``R = V diag(1, 1, det(V Uᵀ)) Uᵀ``, which returns
+  the best proper rotation even when the data would prefer a reflection.
+* marker positions d_m: mean of the observed marker in its link frame (eq. 2.17); NaN
+  (occluded) samples are skipped; with robust weights the mean is weighted.
+* pot gain/bias: linear least squares on the transmission s(q) (eq. 2.18-2.20), bias only for
+  encoders (gain fixed at 1). Standard errors from the normal equations and the residual sigma.
+
+The two marker blocks are alternated a few times (each is the exact minimiser given the other).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from diegocal.errors import NumericalError
+from diegocal.stac.model import Observation, Params, State
+
+
+@dataclass(frozen=True)
+class PhaseResult:
+    """θ after a p-phase and the standard errors: gain, bias (P,), xyz (M, 3)."""
+
+    params: Params
+    se: dict
+
+
+def kabsch(xb: np.ndarray, x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted rigid fit x ≈ R xb + T (eq. 2.13-2.16, reflection-safe Kabsch form).
+
+    xb, x : (N, 3) points in base and mocap frames, m; w : (N,) non-negative weights.
+    Returns R (3, 3) and T (3,).
+    """
+    sw = w.sum()
+    if sw <= 0:
+        raise NumericalError("Procrustes: no valid marker sample (all occluded?)")
+    cb = (w[:, None] * xb).sum(0) / sw  # eq. 2.13
+    cx = (w[:, None] * x).sum(0) / sw
+    S = ((xb - cb) * w[:, None]).T @ (x - cx)  # eq. 2.14: U Σ Vᵀ
+    U, _, Vt = np.linalg.svd(S)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T  # replaces eq. 2.15 (see module docstring)
+    return R, cx - R @ cb  # eq. 2.16
+
+
+def marker_means(obs: Observation, st: State, R, T, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 2.17: d_m = weighted mean of h_r⁻¹ (R⁻¹ (x − T0) − h_p) over frames; returns d (M, 3), SE (M, 3)."""
+    xb = np.nan_to_num(obs.markers - T) @ R  # R⁻¹ (x − T0), row form
+    local = np.einsum("tmji,tmj->tmi", st.Rl, xb - st.pl)  # h_rᵀ (… − h_p)
+    sw = w.sum(0)  # (M,)
+    d = (w[..., None] * local).sum(0) / sw[:, None]
+    n = (w > 0).sum(0)
+    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(
+        sw[:, None] * (n[:, None] - 1) / n[:, None], 1e-300
+    )
+    se = np.sqrt(var * (w**2).sum(0)[:, None]) / sw[:, None]
+    return d, se
+
+
+def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inner: int = 4):
+    """Alternate Procrustes (R, T0) and marker means d a few times; returns (R, T, d, d_se)."""
+    R, T, d = params.R, params.T, params.xyz
+    flat_w = w.reshape(-1)
+    for _ in range(inner):
+        xb = np.einsum("tmij,mj->tmi", st.Rl, d) + st.pl
+        R, T = kabsch(xb.reshape(-1, 3), np.nan_to_num(obs.markers).reshape(-1, 3), flat_w)
+        d, se = marker_means(obs, st, R, T, w)
+    return R, T, d, se
+
+
+def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray):
+    """Eq. 2.18-2.20 by weighted linear least squares per pot; w (T, P) robust weights.
+
+    Returns gain, bias, gain_se, bias_se (P,). Encoders: gain 1, bias = mean(p − s). Pots in
+    ``obs.fixed_bias`` (gauge, see Observation._gauge_biases) keep ``bias0`` and fit the gain only.
+    SE: σ̂² (Xᵀ W X)⁻¹ with σ̂² = Σ w r² / (N − k), the usual LS covariance with q held fixed.
+    """
+    P = obs.n_pots
+    gain, bias, gse, bse = np.ones(P), np.zeros(P), np.full(P, np.nan), np.full(P, np.nan)
+    for j in range(P):
+        s, p, wj = st.s[:, j], obs.pots[:, j], w[:, j]
+        sw = wj.sum()
+        if obs.fixed_bias[j]:
+            bias[j] = bias0[j]
+            if obs.kinds[j] != "encoder":
+                ss = (wj * s * s).sum()
+                gain[j] = (wj * s * (p - bias0[j])).sum() / ss
+                r = p - gain[j] * s - bias0[j]
+                gse[j] = np.sqrt((wj * r * r).sum() / max(sw - 1, 1) / ss)
+            continue
+        if obs.kinds[j] == "encoder":
+            bias[j] = (wj * (p - s)).sum() / sw
+            r = p - s - bias[j]
+            bse[j] = np.sqrt((wj * r * r).sum() / max(sw - 1, 1) / sw)
+            continue
+        X = np.stack([s, np.ones_like(s)], axis=1)
+        XtW = X.T * wj
+        N = XtW @ X
+        if np.linalg.cond(N) > 1e12:
+            raise NumericalError(
+                f"pot {obs.pot_names[j]!r}: its transmission does not vary in the log; "
+                "record motion of its joint(s) to calibrate it"
+            )
+        gain[j], bias[j] = np.linalg.solve(N, XtW @ p)
+        r = p - X @ np.array([gain[j], bias[j]])
+        s2 = (wj * r * r).sum() / max(sw - 2, 1)
+        cov = s2 * np.linalg.inv(N)
+        gse[j], bse[j] = np.sqrt(np.diag(cov))
+    return gain, bias, gse, bse
+
+
+def p_phase(
+    obs: Observation, st: State, params: Params, w_pots: np.ndarray, w_markers: np.ndarray
+) -> PhaseResult:
+    """All sensor parameters at fixed q (thesis eq. 2.6: independent sub-problems per sensor)."""
+    R, T, d, dse = markers_fit(obs, st, params, w_markers)
+    gain, bias, gse, bse = pots_fit(obs, st, w_pots, params.bias)
+    return PhaseResult(Params(gain, bias, d, R, T), {"gain": gse, "bias": bse, "xyz": dse})
