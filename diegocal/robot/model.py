@@ -135,63 +135,72 @@ class Robot:
         return q
 
     # ------------------------------------------------------------------ kinematics
+    def _point_chain(self, points: PointSet) -> tuple[list[int], np.ndarray, np.ndarray]:
+        """Per point: its frame id, its ``xyz`` (N, 3) in that frame, m, and the (N, n) mask of
+        the joints that move it (its support, Pinocchio order)."""
+        fids = self._point_frames(points)
+        model = self.model
+        mask = np.zeros((len(fids), self.n_joints))
+        for k, f in enumerate(fids):
+            mask[k, [i - 1 for i in model.supports[model.frames[f].parentJoint] if i > 0]] = 1.0
+        return fids, np.asarray(points.xyz, dtype=float).reshape(-1, 3), mask
+
+    def _world_points(self, fids: list[int], xyz: np.ndarray) -> np.ndarray:
+        """World positions (N, 3) from ``data.oMf`` (frame placements already updated)."""
+        oMf = self.data.oMf
+        return np.array([oMf[f].act(x) for f, x in zip(fids, xyz, strict=True)]).reshape(-1, 3)
+
     def points(self, q, points: PointSet) -> np.ndarray:
-        """Positions of link-fixed points in the base frame.
+        """Positions of link-fixed points in the base frame: ``base_T_world @ world_T_link @ xyz``.
 
         Returns
         -------
         ndarray of shape (T, N, 3), metres.
         """
         q = self.check_q(q)
-        fids = self._point_frames(points)
+        fids, xyz, _ = self._point_chain(points)
         out = np.empty((q.shape[0], len(fids), 3))
-        model, data = self.model, self.data
         for t in range(q.shape[0]):
-            pin.framesForwardKinematics(model, data, q[t])
-            base = data.oMf[self.base_frame]
-            for k, fid in enumerate(fids):
-                out[t, k] = base.actInv(data.oMf[fid].act(points.xyz[k]))
+            pin.framesForwardKinematics(self.model, self.data, q[t])
+            base = self.data.oMf[self.base_frame]
+            out[t] = (self._world_points(fids, xyz) - base.translation) @ base.rotation
         return out
 
     def points_jacobian(self, q, points: PointSet) -> tuple[np.ndarray, np.ndarray]:
         """Positions and position Jacobians of link-fixed points, in the base frame.
 
-        From Pinocchio's frame Jacobians (thesis eq. 2.23): for a point at r = R d on a frame with
-        world Jacobian [J_v; J_ω] (LOCAL_WORLD_ALIGNED), ∂x/∂q = J_v − [r]× J_ω, then rotated
-        into the base frame (minus the base's own motion when the base is not the root).
+        Thesis eq. (2.23) through Pinocchio's joint Jacobians: ``data.J`` holds every joint's
+        motion axis as a spatial velocity [v_O; ω] at the world origin, so a point at p (world)
+        moved by joint i has ∂p/∂q_i = v_O,i + ω_i × p = (J_v − [p]× J_ω)_i, for the joints that
+        support its link only. In the base frame, x = R_bᵀ (p − p_b): when joints also move the
+        base link (the base is not the URDF root) ∂x/∂q = R_bᵀ (∂p/∂q − ∂p_b/∂q + [p − p_b]× J_ω,b).
 
         Returns
         -------
         x : ndarray of shape (T, N, 3), metres
-        J : ndarray of shape (T, N, 3, n), metres per rad
+        J : ndarray of shape (T, N, 3, n), metres per rad (per metre for prismatic joints)
         """
         q = self.check_q(q)
-        fids = self._point_frames(points)
-        n = self.n_joints
-        x = np.empty((q.shape[0], len(fids), 3))
-        jac = np.empty((q.shape[0], len(fids), 3, n))
+        fids, xyz, mask = self._point_chain(points)
         model, data = self.model, self.data
-        lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        base_fixed = self._base_is_fixed()
+        base_joint = model.frames[self.base_frame].parentJoint
+        base_mask = np.zeros(self.n_joints)
+        base_mask[[i - 1 for i in model.supports[base_joint] if i > 0]] = 1.0
+        x = np.empty((q.shape[0], len(fids), 3))
+        jac = np.empty((q.shape[0], len(fids), 3, self.n_joints))
         for t in range(q.shape[0]):
-            pin.computeJointJacobians(model, data, q[t])
+            J = pin.computeJointJacobians(model, data, q[t])  # (6, n), world frame; runs FK
             pin.updateFramePlacements(model, data)
+            lin, ang = J[:3], J[3:]
+            pw = self._world_points(fids, xyz)
+            Jp = (lin - _cross_columns(pw, ang)) * mask[:, None, :]
             base = data.oMf[self.base_frame]
-            Rb = base.rotation
-            if not base_fixed:
-                Jb = pin.getFrameJacobian(model, data, self.base_frame, lwa)
-            for k, fid in enumerate(fids):
-                J6 = pin.getFrameJacobian(model, data, fid, lwa)
-                r = data.oMf[fid].rotation @ points.xyz[k]
-                pw = data.oMf[fid].translation + r
-                Jw = J6[:3] - _skew(r) @ J6[3:]
-                if not base_fixed:
-                    # x_b = Rbᵀ (p_w − p_b): subtract the base point's velocity and the effect
-                    # of the base's rotation, d(Rbᵀ) v = Rbᵀ [v]× ω_b
-                    rel = pw - base.translation
-                    Jw = Jw - Jb[:3] + _skew(rel) @ Jb[3:]
-                x[t, k] = Rb.T @ (pw - base.translation)
-                jac[t, k] = Rb.T @ Jw
+            if base_joint > 0:
+                Jb_ang = ang * base_mask
+                Jb_lin = (lin - _cross_columns(base.translation[None], ang)[0]) * base_mask
+                Jp = Jp - Jb_lin + _cross_columns(pw - base.translation, Jb_ang)
+            x[t] = (pw - base.translation) @ base.rotation
+            jac[t] = base.rotation.T @ Jp
         return x, jac
 
     def link_poses(self, q, links) -> tuple[np.ndarray, np.ndarray]:
@@ -214,8 +223,17 @@ class Robot:
         return self.model.frames[self.base_frame].parentJoint == 0
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+def _cross_columns(p: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """p_k × a_i for points p (N, 3) and columns a (3, n): (N, 3, n), i.e. [p_k]× a."""
+    p = p[:, :, None]
+    return np.stack(
+        (
+            p[:, 1] * a[2] - p[:, 2] * a[1],
+            p[:, 2] * a[0] - p[:, 0] * a[2],
+            p[:, 0] * a[1] - p[:, 1] * a[0],
+        ),
+        axis=1,
+    )
 
 
 def load_robot(directory) -> Robot:
