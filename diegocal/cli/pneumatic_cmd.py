@@ -1,1 +1,222 @@
-"""CLI commands of this domain (attach to diegocal.cli.app.app / simulate_app)."""
+"""CLI of the pneumatic domain (thesis ch. 4): `pneumatic-fit`, `pneumatic-merge`,
+`simulate pneumatics` and the ``pneumatic`` predictor of `predict`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from diegocal.cli.app import app, simulate_app
+from diegocal.cli.common import cli_errors, default_output, errors, summary
+from diegocal.cli.predict_cmd import PredictOptions, register_predictor
+from diegocal.errors import DiegocalError, FitError, InputFileError
+from diegocal.io import Log, load_log, load_yaml, make_stream, save_log, save_yaml
+from diegocal.pneumatic.data import chamber_data, extract
+from diegocal.pneumatic.files import load_model, merge_models, model_dict
+from diegocal.pneumatic.fit import FitOptions, fit_chambers
+from diegocal.pneumatic.predict import drift, predict_with_resets
+from diegocal.robot import load_robot, resolve_robot_dir
+from diegocal.sim.effects import check_effects, parse_effects
+from diegocal.sim.pneumatics import EXPERIMENTS, PneumaticSimOptions, simulate_pneumatics
+
+
+@app.command("pneumatic-fit")
+@cli_errors
+def pneumatic_fit(
+    log: Annotated[Path, typer.Argument(help="Log with pressure, valve and pots streams.")],
+    chamber: Annotated[
+        list[str] | None, typer.Option("--chamber", "-c", help="Chamber to fit (repeatable).")
+    ] = None,
+    all_chambers: Annotated[
+        bool, typer.Option("--all", help="Fit every chamber of the robot.")
+    ] = False,
+    robot: Annotated[
+        Path | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option("-o", "--output", help="pneumatic.yaml [default: LOG.pneumatic.yaml]."),
+    ] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Parallel processes.")] = 1,
+    starts: Annotated[
+        int, typer.Option(min=1, help="Starting points per chamber (multi-start).")
+    ] = 1,
+    seed: Annotated[int, typer.Option(help="Seed of the random starting points.")] = 0,
+    fd_jacobian: Annotated[
+        bool, typer.Option("--fd-jacobian", help="Finite-difference Jacobian (reference).")
+    ] = False,
+    steady_state: Annotated[
+        Path | None,
+        typer.Option(
+            "--steady-state", help="Locked-cylinder sweep log, kept for the report (Fig. 4.10)."
+        ),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Fit the 9-parameter valve-chamber model (thesis §4.5.3) by next-step least squares."""
+    if all_chambers == bool(chamber):
+        raise InputFileError("name the chambers to fit: --chamber NAME (repeatable) or --all")
+    if steady_state is not None and not steady_state.exists():
+        raise InputFileError(f"{steady_state}: no such file")
+    data = load_log(log)
+    rob = load_robot(resolve_robot_dir(robot, data.robot))
+    names = list(rob.sensors.chamber_names) if all_chambers else list(dict.fromkeys(chamber))
+    if not names:
+        raise InputFileError(f"robot {rob.name!r} has no chambers in sensors.yaml")
+    datasets, skipped = [], {}
+    for name in names:
+        try:
+            datasets.append(chamber_data(data, rob.sensors, name))
+        except DiegocalError as exc:
+            if not all_chambers:
+                raise
+            skipped[name] = str(exc)
+    options = FitOptions(
+        jacobian="2-point" if fd_jacobian else "analytic", starts=starts, seed=seed
+    )
+    batch = fit_chambers(datasets, options, jobs=jobs)
+    batch.skipped.update(skipped)
+    for name, reason in batch.skipped.items():
+        errors.print(f"[yellow]warning:[/] chamber {name} not fitted: {reason}", highlight=False)
+    if not batch.fits:
+        first = next(iter(batch.skipped.values()), "no chamber")
+        raise FitError(f"no chamber could be fitted ({first})")
+    meta = {"log": str(Path(log).resolve()), "robot": str(rob.directory or rob.name)}
+    if steady_state is not None:
+        meta["steady_state_log"] = str(steady_state.resolve())
+    out = output or default_output(log, ".pneumatic.yaml")
+    save_yaml(model_dict(batch, rob.sensors, options, meta), out)
+    drifts = np.array([f.drift_2s for f in batch.fits.values()])
+    rows = [("chambers fitted", len(batch.fits)), ("skipped", len(batch.skipped))]
+    if len(batch.fits) <= 8:
+        rows += [
+            (f"{n}: rmse / drift 2 s", f"{f.rmse:.3g} / {f.drift_2s:.1%}")
+            for n, f in batch.fits.items()
+        ]
+    rows += [
+        ("2-s drift median / max (of Pc-Pr)", f"{np.median(drifts):.1%} / {drifts.max():.1%}"),
+        ("chambers with drift < 4% / < 10%", f"{(drifts < 0.04).sum()} / {(drifts < 0.10).sum()}"),
+        ("written", str(out)),
+    ]
+    summary("pneumatic-fit", rows, quiet=quiet)
+
+
+@app.command("pneumatic-merge")
+@cli_errors
+def pneumatic_merge(
+    files: Annotated[list[Path], typer.Argument(help="pneumatic.yaml files to merge.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Merged pneumatic.yaml.")],
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Merge per-chamber pneumatic.yaml files (from `make -j`) into one."""
+    merged = merge_models([load_yaml(f) for f in files], files)
+    save_yaml(merged, output)
+    rows = [("files", len(files)), ("chambers", len(merged["chambers"])), ("written", str(output))]
+    summary("pneumatic-merge", rows, quiet=quiet)
+
+
+@simulate_app.command("pneumatics")
+@cli_errors
+def simulate_pneumatics_cmd(
+    output: Annotated[Path, typer.Option("--output", "-o", help="Log to write (.h5 or .csv).")],
+    robot: Annotated[str, typer.Option(help="Robot directory or bundled robot name.")] = "diego",
+    duration: Annotated[float, typer.Option(help="Length of each session, s.")] = 60.0,
+    experiment: Annotated[
+        str,
+        typer.Option(
+            help=f"{' or '.join(EXPERIMENTS)}: flailing (§4.5.3) or locked sweep (§4.5.2)."
+        ),
+    ] = "dynamic",
+    seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
+    effect: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--effect",
+            metavar="NAME[:CHAMBER]",
+            help="Pneumatic effect (repeatable): valve_delay, chamber_leak, supply_droop, "
+            "pressure_offset.",
+        ),
+    ] = None,
+    sessions: Annotated[
+        int, typer.Option(min=1, help="Independent sessions, simulated together.")
+    ] = 1,
+    substeps: Annotated[int, typer.Option(min=1, help="Integration steps per 10 ms tick.")] = 20,
+    pressure_noise: Annotated[float, typer.Option(help="Pressure noise (averaged), kPa.")] = 0.3,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
+) -> None:
+    """Simulate valve-chamber systems with the thin-plate physics (thesis §4.2), truth in /truth."""
+    effects = check_effects(parse_effects(effect), "pneumatics")
+    options = PneumaticSimOptions(
+        duration=duration,
+        experiment=experiment,
+        effects=effects,
+        seed=seed,
+        sessions=sessions,
+        substeps=substeps,
+        pressure_noise=pressure_noise,
+    )
+    model = load_robot(resolve_robot_dir(robot, None))
+    log = simulate_pneumatics(model, options)
+    save_log(log, output)
+    p = log.streams["pressure"].data
+    rows = [
+        ("robot", log.robot),
+        ("experiment", experiment),
+        ("chambers", p.shape[1]),
+        ("samples", log.n_samples),
+        ("pressure range (kPa)", f"{p.min():.0f} - {p.max():.0f}"),
+    ]
+    rows += [(f"effect {e['cause']}", e["channel"]) for e in log.truth.effects]
+    rows.append(("written", str(output)))
+    summary("simulate pneumatics", rows, quiet=quiet)
+
+
+def predict_pneumatic(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
+    """`predict pneumatic.yaml LOG`: open-loop pressure from u, v, vdot (§4.5.4), reset every 2 s;
+    prints the 2-s drift per chamber (Fig. 4.13's figure of merit)."""
+    model = load_model(model_path)
+    log = load_log(log_path)
+    pred, rows, drifts = {}, [], []
+    for name, ch in model.chambers.items():
+        raw = ch.raw
+        data = extract(
+            log, name, ch.volume_sensor, ch.params.supply, ch.params.room, check_span=False
+        )
+        pred[name] = predict_with_resets(ch.params, data)
+        d = drift(ch.params, data)
+        drifts.append(d.final)
+        rows.append((name, f"{raw.get('drift_2s', float('nan')):.1%}", f"{d.final:.1%}"))
+    names = list(pred)
+    out = opts.output or default_output(log_path, ".prediction.h5")
+    result = Log(
+        log.time,
+        {"pressure": make_stream(names, np.column_stack([pred[n] for n in names]))},
+        robot=log.robot,
+        rate_hz=log.rate_hz,
+    )
+    save_log(result, out)
+    drifts = np.array(drifts)
+    if len(rows) > 12:
+        rows = sorted(rows, key=lambda r: -float(r[2].rstrip("%")))[:10]
+        rows.append(("...", "", ""))
+    rows += [
+        ("median / max", "", f"{np.median(drifts):.1%} / {drifts.max():.1%}"),
+        (
+            "< 4% / < 10% of chambers",
+            "",
+            f"{(drifts < 0.04).sum()} / {(drifts < 0.10).sum()} of {drifts.size}",
+        ),
+        ("written", "", str(out)),
+    ]
+    summary(
+        "predict pneumatic: RMS error 2 s after the last measurement, fraction of Pc - Pr",
+        rows,
+        columns=("chamber", "fit log", "this log"),
+        quiet=opts.quiet,
+    )
+
+
+register_predictor("pneumatic", predict_pneumatic)

@@ -91,18 +91,32 @@ def forward_rate(time: np.ndarray, x: np.ndarray) -> np.ndarray:
 def chamber_data(
     log: Log, sensors: SensorConfig, name: str, check_span: bool = True
 ) -> ChamberData:
-    """Extract and validate one chamber's u, p, v, vdot from ``log``.
+    """Extract and validate one chamber's u, p, v, vdot from ``log`` (chamber from sensors.yaml).
 
     Raises UnknownNameError (chamber or channel unknown), MissingStreamError (no pressure,
     valve or pots stream), LogFormatError (voltage outside the valve's range) and FitError
     (too few samples; pressure that never moves, so the model is unidentifiable).
     """
     spec = chamber_spec(sensors, name)
-    who = "pneumatic-fit"
+    valve_range = tuple(spec.extra.get("valve_range", VALVE_RANGE))
+    return extract(log, name, spec.volume_sensor, spec.supply, spec.room, valve_range, check_span)
+
+
+def extract(
+    log: Log,
+    name: str,
+    volume_sensor: str,
+    supply: float,
+    room: float,
+    valve_range=VALVE_RANGE,
+    check_span: bool = True,
+) -> ChamberData:
+    """:func:`chamber_data` with the chamber's facts given directly (as pneumatic.yaml has them)."""
+    who = "pneumatic models"
     p = _channel(log, "pressure", name, who)
     u = _channel(log, "valve", name, who)
-    v = _channel(log, "pots", spec.volume_sensor, who)
-    lo, hi = spec.extra.get("valve_range", VALVE_RANGE)
+    v = _channel(log, "pots", volume_sensor, who)
+    lo, hi = valve_range
     bad = (u < lo) | (u > hi)
     if bad.any():
         i = int(np.argmax(bad))
@@ -113,12 +127,12 @@ def chamber_data(
     if log.n_samples < MIN_SAMPLES:
         raise FitError(f"chamber {name!r}: {log.n_samples} samples; need at least {MIN_SAMPLES}")
     span = float(np.ptp(p))
-    if check_span and span < MIN_PRESSURE_SPAN * (spec.supply - spec.room):
+    if check_span and span < MIN_PRESSURE_SPAN * (supply - room):
         raise FitError(
             f"chamber {name!r}: pressure spans only {span:.3g} (< {MIN_PRESSURE_SPAN:.0%} of "
             f"supply - room); the valve never moved it, so its model is unidentifiable"
         )
-    return ChamberData(name, log.time, u, p, v, forward_rate(log.time, v), spec.supply, spec.room)
+    return ChamberData(name, log.time, u, p, v, forward_rate(log.time, v), supply, room)
 
 
 def _channel(log: Log, stream: str, channel: str, who: str) -> np.ndarray:

@@ -437,3 +437,37 @@ def _check_options(o: PneumaticSimOptions) -> None:
         raise SimOptionError(f"substeps must be >= 1, got {o.substeps}")
     if o.pressure_noise < 0 or o.pot_noise < 0:
         raise SimOptionError("noise levels must be non-negative")
+
+
+def simulate_parametric(log: Log, sensors, params: dict, noise: float, seed: int) -> Log:
+    """Replace the log's pressure by the 9-parameter model's own output (identifiability tests).
+
+    p_{t+1} = step(p_t, u_t, v_t, vdot_t; c) + N(0, noise²) (thesis eq. 4.7) from room pressure,
+    with u, v (the volume sensors) and vdot (their forward difference) taken from ``log``.
+    ``params`` maps chamber names to :class:`~diegocal.pneumatic.params.ChamberParams`; other
+    chambers are dropped. /truth records them in the pneumatic.yaml schema.
+    """
+    from diegocal.pneumatic.data import chamber_data
+    from diegocal.pneumatic.model import step
+
+    rng = np.random.default_rng(seed)
+    names = list(params)
+    out = np.empty((log.n_samples, len(names)))
+    for k, name in enumerate(names):
+        d = chamber_data(log, sensors, name, check_span=False)
+        c = params[name]
+        p = out[:, k]
+        p[0] = d.room
+        h = np.diff(d.time)
+        eps = rng.normal(0.0, noise, d.n_samples)
+        for t in range(d.n_samples - 1):
+            p[t + 1] = step(c, p[t], d.u[t], d.v[t], d.vd[t], h[t]) + eps[t]
+    truth = Truth(
+        params={"model": "parametric", "chambers": {n: params[n].to_dict() for n in names}},
+        effects=[],
+        signals=dict(log.truth.signals) if log.truth else {},
+    )
+    streams = dict(log.streams)
+    streams["pressure"] = make_stream(names, out)
+    streams["valve"] = log.streams["valve"].select(names)
+    return Log(log.time, streams, robot=log.robot, rate_hz=log.rate_hz, truth=truth)
