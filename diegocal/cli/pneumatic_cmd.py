@@ -62,6 +62,8 @@ def pneumatic_fit(
     if steady_state is not None and not steady_state.exists():
         raise InputFileError(f"{steady_state}: no such file")
     data = load_log(log)
+    for stream in ("pressure", "valve", "pots"):  # log-level problems fail the whole command
+        data.stream(stream, needed_by="pneumatic-fit")
     rob = load_robot(resolve_robot_dir(robot, data.robot))
     names = list(rob.sensors.chamber_names) if all_chambers else list(dict.fromkeys(chamber))
     if not names:
