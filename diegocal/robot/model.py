@@ -40,6 +40,10 @@ class Robot:
     sensors : SensorConfig
     name : str
     directory : Path or None
+
+    ``points``, ``points_jacobian`` and ``link_poses`` work on a Pinocchio ``Data`` of their own
+    per call, so one Robot may serve several threads (``--jobs``); ``self.data`` is a spare one
+    for callers' own Pinocchio calls.
     """
 
     def __init__(
@@ -145,9 +149,10 @@ class Robot:
             mask[k, [i - 1 for i in model.supports[model.frames[f].parentJoint] if i > 0]] = 1.0
         return fids, np.asarray(points.xyz, dtype=float).reshape(-1, 3), mask
 
-    def _world_points(self, fids: list[int], xyz: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _world_points(data: pin.Data, fids: list[int], xyz: np.ndarray) -> np.ndarray:
         """World positions (N, 3) from ``data.oMf`` (frame placements already updated)."""
-        oMf = self.data.oMf
+        oMf = data.oMf
         return np.array([oMf[f].act(x) for f, x in zip(fids, xyz, strict=True)]).reshape(-1, 3)
 
     def points(self, q, points: PointSet) -> np.ndarray:
@@ -160,10 +165,11 @@ class Robot:
         q = self.check_q(q)
         fids, xyz, _ = self._point_chain(points)
         out = np.empty((q.shape[0], len(fids), 3))
+        data = self.model.createData()  # per call: concurrent calls (threads) never share it
         for t in range(q.shape[0]):
-            pin.framesForwardKinematics(self.model, self.data, q[t])
-            base = self.data.oMf[self.base_frame]
-            out[t] = (self._world_points(fids, xyz) - base.translation) @ base.rotation
+            pin.framesForwardKinematics(self.model, data, q[t])
+            base = data.oMf[self.base_frame]
+            out[t] = (self._world_points(data, fids, xyz) - base.translation) @ base.rotation
         return out
 
     def points_jacobian(self, q, points: PointSet) -> tuple[np.ndarray, np.ndarray]:
@@ -182,7 +188,7 @@ class Robot:
         """
         q = self.check_q(q)
         fids, xyz, mask = self._point_chain(points)
-        model, data = self.model, self.data
+        model, data = self.model, self.model.createData()
         base_joint = model.frames[self.base_frame].parentJoint
         base_mask = np.zeros(self.n_joints)
         base_mask[[i - 1 for i in model.supports[base_joint] if i > 0]] = 1.0
@@ -192,7 +198,7 @@ class Robot:
             J = pin.computeJointJacobians(model, data, q[t])  # (6, n), world frame; runs FK
             pin.updateFramePlacements(model, data)
             lin, ang = J[:3], J[3:]
-            pw = self._world_points(fids, xyz)
+            pw = self._world_points(data, fids, xyz)
             Jp = (lin - _cross_columns(pw, ang)) * mask[:, None, :]
             base = data.oMf[self.base_frame]
             if base_joint > 0:
@@ -209,11 +215,12 @@ class Robot:
         fids = [self.frame_id(link) for link in links]
         rot = np.empty((q.shape[0], len(fids), 3, 3))
         pos = np.empty((q.shape[0], len(fids), 3))
+        data = self.model.createData()
         for t in range(q.shape[0]):
-            pin.framesForwardKinematics(self.model, self.data, q[t])
-            base = self.data.oMf[self.base_frame]
+            pin.framesForwardKinematics(self.model, data, q[t])
+            base = data.oMf[self.base_frame]
             for k, fid in enumerate(fids):
-                rel = base.actInv(self.data.oMf[fid])
+                rel = base.actInv(data.oMf[fid])
                 rot[t, k] = rel.rotation
                 pos[t, k] = rel.translation
         return rot, pos

@@ -7,6 +7,8 @@ prismatic joint.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -128,3 +130,26 @@ def test_point_and_q_shapes_are_checked(tiny_robot):
         tiny_robot.points_jacobian(q[:3], PointSet(("arm",), np.zeros((1, 3))))
     with pytest.raises(ValueError, match="expected"):
         predict_markers(tiny_robot, q, np.zeros((2, 3)), np.eye(3), np.zeros(3))
+
+
+def test_kinematics_is_thread_safe(bundled, sample_q):
+    """Concurrent calls on one Robot (``--jobs`` with threads) give the sequential results."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    robot = bundled("diego")
+    points = PointSet(
+        tuple(m.link for m in robot.sensors.markers),
+        np.array([m.xyz for m in robot.sensors.markers]),
+    )
+    batches = [sample_q(robot, np.random.default_rng(20 + i), 30) for i in range(12)]
+    expected = [robot.points_jacobian(q, points) for q in batches]
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads often, so shared state would show
+    try:
+        with ThreadPoolExecutor(max_workers=4) as pool:
+            got = list(pool.map(lambda q: robot.points_jacobian(q, points), batches))
+    finally:
+        sys.setswitchinterval(interval)
+    for (x0, j0), (x1, j1) in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(x0, x1)
+        np.testing.assert_array_equal(j0, j1)
