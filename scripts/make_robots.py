@@ -14,7 +14,7 @@ chest) and the two ankles (the classic two-cylinder ankle). The other 30 joints 
 with gear-transmitted rotary pots (Fig. 2.5b): nominal gain 0.6-1.6 V/rad and a bias that puts mid
 range near 2.5 V. 24 markers sit on every other link counting from the base (§2.5.1), moved one
 link outward where that link is a gimbal cross (no room for a marker there) and with the branch
-link ``chest`` and the end links (head, hands, toes) added so no joint is left unobserved. Nominal
+link ``chest`` and the even-depth end links (head, hands) added: every joint is observed. Nominal
 marker positions are a rough CAD guess (on the link surface, 2-9 cm off the link origin), not the
 link origin: a marker at the origin of the last link of a chain lies on its joint axis. Frames:
 x forward, y left, z up; q = 0 stands upright with the arms hanging. Links are uniform cylinders
