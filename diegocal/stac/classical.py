@@ -30,6 +30,7 @@ angles, as a classical method would; every other parameter starts at its nominal
 from __future__ import annotations
 
 import time
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -37,9 +38,9 @@ import pinocchio as pin
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from diegocal.errors import FitError, NumericalError
+from diegocal.errors import DiegocalError, FitError, NumericalError
 from diegocal.io import Log
-from diegocal.robot import Robot, markers_jacobian, pot_transmission_jacobian
+from diegocal.robot import PointSet, Robot, anchor_points, marker_points
 from diegocal.stac.calibration import Calibration, FitInfo
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 
@@ -129,6 +130,64 @@ class ThetaLayout:
         )
 
 
+# ---------------------------------------------------------------------------------- kinematics
+_BATCH: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _batch(robot: Robot):
+    """STAC's frame-vectorised kinematics for ``robot`` (cached), or None where unavailable.
+
+    It is tested to equal Robot.points/points_jacobian; Robot's per-frame Pinocchio loop is
+    the fallback (same numbers, ~10-50× slower at thesis size).
+    """
+    if robot not in _BATCH:
+        try:
+            from diegocal.stac.kinematics_batch import BatchKinematics
+
+            _BATCH[robot] = BatchKinematics(robot)
+        except (ImportError, DiegocalError):
+            _BATCH[robot] = None
+    return _BATCH[robot]
+
+
+def points_jacobian(robot: Robot, q: np.ndarray, points: PointSet):
+    """Points (T, N, 3) m and ∂/∂q (T, N, 3, n) in the base frame (thesis eq. 2.23)."""
+    bk = _batch(robot)
+    if bk is None:
+        return robot.points_jacobian(q, points)
+    return bk.points_jacobian(bk.joint_poses(q), points)
+
+
+def link_rotations(robot: Robot, q: np.ndarray, links) -> np.ndarray:
+    """Rotation of each link in the base frame: (T, L, 3, 3)."""
+    bk = _batch(robot)
+    if bk is None:
+        return robot.link_poses(q, links)[0]
+    return bk.link_poses(bk.joint_poses(q), links)[0]
+
+
+def transmission_jacobian(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """s(q) (T, P) and ∂s/∂q (T, P, n) of every pot (eq. 2.18-2.20, 2.22); as
+    :func:`diegocal.robot.pot_transmission_jacobian`, with the batched anchor kinematics."""
+    q = robot.check_q(q)
+    P, n = len(robot.sensors.pots), robot.n_joints
+    A = np.zeros((P, n))
+    for i, p in enumerate(robot.sensors.pots):
+        if p.kind in ("rotary", "encoder"):
+            A[i, robot.joint_index(p.joint)] = 1.0
+        for joint, arm in p.moment_arms.items():
+            A[i, robot.joint_index(joint)] = arm
+    s, ds = q @ A.T, np.broadcast_to(A, (q.shape[0], P, n)).copy()
+    linear = [i for i, p in enumerate(robot.sensors.pots) if p.kind == "linear"]
+    if linear:
+        x, J = points_jacobian(robot, q, anchor_points(robot))
+        d = x[:, 1::2] - x[:, 0::2]
+        length = np.linalg.norm(d, axis=-1)  # eq. 2.19-2.20: L(q)
+        s[:, linear] = length
+        ds[:, linear] = np.einsum("tkc,tkcn->tkn", d / length[..., None], J[:, 1::2] - J[:, 0::2])
+    return s, ds
+
+
 # ---------------------------------------------------------------------------------- markers
 @dataclass(frozen=True)
 class MarkerModel:
@@ -149,14 +208,15 @@ class MarkerModel:
 def marker_model(robot: Robot, q: np.ndarray, cal: Calibration) -> MarkerModel:
     """Evaluate :class:`MarkerModel` for calibration ``cal``; ``q`` (T, n) rad."""
     R = np.asarray(cal.mocap_R, float)
-    xb, dq = markers_jacobian(robot, q, cal.marker_xyz, R)
+    xb, dq = points_jacobian(robot, q, marker_points(robot, cal.marker_xyz))
+    dq = np.einsum("ij,tmjn->tmin", R, dq)  # eq. 2.23 in the mocap frame
     x = xb @ R.T + cal.mocap_T
     Jr = pin.Jexp3(pin.log3(R))
     skew = np.zeros(xb.shape + (3,))
     skew[..., 0, 1], skew[..., 0, 2], skew[..., 1, 2] = -xb[..., 2], xb[..., 1], -xb[..., 0]
     skew[..., 1, 0], skew[..., 2, 0], skew[..., 2, 1] = xb[..., 2], -xb[..., 1], xb[..., 0]
     drot = -np.einsum("ij,tmjk,kl->tmil", R, skew, Jr)
-    rot_link, _ = robot.link_poses(q, cal.marker_links)
+    rot_link = link_rotations(robot, q, cal.marker_links)
     dxyz = np.einsum("ij,tmjk->tmik", R, rot_link)
     return MarkerModel(x, dq, drot, dxyz)
 
@@ -243,7 +303,7 @@ def joint_angles_from_pots(
             dtheta[:, j, col_bias[i]] = -1.0 / gain[i]
     if len(unknown):
         # implicit function theorem on r(q, θ) = gain·s(q) + bias − p = 0 for the nl pots
-        s, ds = pot_transmission_jacobian(robot, q)
+        s, ds = transmission_jacobian(robot, q)
         G = ds[:, nl] * gain[nl][None, :, None]  # (T, Pnl, n)
         rhs = np.einsum("tpk,tkc->tpc", G[:, :, known], dtheta[:, known])
         for r, i in enumerate(nl):
@@ -261,7 +321,7 @@ def _check_coverage(robot: Robot, unknown: np.ndarray, nl: np.ndarray) -> None:
     lo = np.where(np.isfinite(robot.lower), robot.lower, -1.0)
     hi = np.where(np.isfinite(robot.upper), robot.upper, 1.0)
     probe = lo + (hi - lo) * rng.uniform(0.3, 0.7, size=(2, robot.n_joints))
-    _, ds = pot_transmission_jacobian(robot, probe)
+    _, ds = transmission_jacobian(robot, probe)
     seen = np.abs(ds[:, nl][:, :, unknown]).max(axis=(0, 1)) if len(nl) else np.zeros(len(unknown))
     blind = [robot.joint_names[j] for j, v in zip(unknown, seen, strict=True) if v < 1e-12]
     if blind:
@@ -286,7 +346,7 @@ def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndar
     lo, hi = robot.lower[unknown], robot.upper[unknown]
     active = np.arange(q.shape[0])
     for _ in range(max_steps):
-        s, ds = pot_transmission_jacobian(robot, q[active])
+        s, ds = transmission_jacobian(robot, q[active])
         r = gain[nl] * s[:, nl] + bias[nl] - pots[active][:, nl]
         G = ds[:, nl][:, :, unknown] * gain[nl][None, :, None]
         dq = np.clip(-np.einsum("tkp,tp->tk", np.linalg.pinv(G), r), -0.3, 0.3)  # damped step
@@ -348,7 +408,7 @@ def calibrate_classical(
     if q0 is not None:
         q0 = np.broadcast_to(np.asarray(q0, float), (pots.shape[0], robot.n_joints))
     inv = joint_angles_from_pots(robot, nominal, pots, q0=q0)
-    xb = robot.points(inv.q, _points(robot, nominal.marker_xyz))
+    xb = points_jacobian(robot, inv.q, marker_points(robot, nominal.marker_xyz))[0]
     R0, T0 = kabsch(xb.reshape(-1, 3), markers.reshape(-1, 3))  # eq. 2.13-2.16 seed
     seed = replace(nominal, mocap_R=R0, mocap_T=T0)
     problem = _Problem(robot, layout, seed, pots, markers, inv.q)
@@ -404,12 +464,6 @@ def packed_standard_errors(JtJ: np.ndarray, sigma: float, tol: float = 1e-10) ->
     in_null = (V[:, ~keep] ** 2).sum(axis=1) > 1e-6
     se[in_null | dead] = np.nan
     return se
-
-
-def _points(robot: Robot, xyz):
-    from diegocal.robot import marker_points
-
-    return marker_points(robot, xyz)
 
 
 class _Problem:

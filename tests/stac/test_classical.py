@@ -225,3 +225,18 @@ def test_standard_errors_flag_the_null_space():
     assert np.isnan(se[:2]).all() and np.isclose(
         se[2], np.sqrt(np.linalg.inv(J[:, 1:].T @ J[:, 1:])[1, 1])
     )
+
+
+@pytest.mark.parametrize("name", ["finger", "diego"])
+def test_batched_transmission_equals_the_robot_route(name):
+    """transmission_jacobian (batched anchors) = diegocal.robot.pot_transmission_jacobian."""
+    from diegocal.robot import pot_transmission_jacobian
+    from diegocal.stac.classical import transmission_jacobian
+
+    robot = load_robot(BUNDLED_ROBOTS / name)
+    rng = np.random.default_rng(0)
+    q = robot.lower + (robot.upper - robot.lower) * rng.uniform(0.1, 0.9, (5, robot.n_joints))
+    s, ds = transmission_jacobian(robot, q)
+    s_ref, ds_ref = pot_transmission_jacobian(robot, q)
+    np.testing.assert_allclose(s, s_ref, atol=1e-12)
+    np.testing.assert_allclose(ds, ds_ref, atol=1e-12)
