@@ -356,7 +356,7 @@ def _valve_commands(options, cyl, n_ticks, rng):
     t = np.arange(n_ticks) / options.rate_hz
     wobble, _ = smooth_random(rng, t, C, 0.1, 3.0)
     w = anta + co + own + 0.4 * wobble
-    return np.clip(5.0 + 2.2 * np.tanh(w), U_LOW, U_HIGH)
+    return np.clip(5.0 + 2.0 * np.tanh(0.7 * w), U_LOW, U_HIGH)
 
 
 def _effects(options, names, u, dt_tick, rng):
