@@ -42,14 +42,21 @@ class Guard:
         Std of a Gaussian prior on log(σ_z / s), s the std of the residual of the parametric-only
         fit: keeps σ_z at the size of what the parametric model leaves unexplained.
     validation_fraction : float
-        Fraction of the training samples (the last ones, in the given order) held out to judge
-        restarts; the chosen hyperparameters are then refit-free and the posterior uses all data.
+        Fraction of the training samples (the last ones, in time order) held out to judge the
+        starts; the winner is then polished on all samples, and the posterior uses all data.
+    restarts : int
+        Extra starts (on top of the estimator's ``restarts``) judged on the validation split.
+    fix_sigma_w : bool
+        Keep σ_w at §3.3.4's "large number" (a flat prior on W: no shrinkage of the physical
+        parameters towards 0, which would hand their share of the torque to the GP).
     """
 
     max_lengthscale: float | None = None
     lengthscale_prior: tuple[float, float] | None = None
     amplitude_prior: float | None = None
     validation_fraction: float = 0.0
+    restarts: int = 0
+    fix_sigma_w: bool = False
 
 
 class SemiParametricGP:
@@ -187,7 +194,8 @@ class SemiParametricGP:
                 if is_amplitude(name):
                     t[i] = 0.5 * np.log(var[j])
             thetas.append(t)
-        sigma_w = 10.0 * float(np.max(self.y_std_))
+        # "some large number": 10 × std(y) in unit-RMS feature coordinates; 1000 × when fixed (flat)
+        sigma_w = (1e3 if self.guard.fix_sigma_w else 10.0) * float(np.max(self.y_std_))
         has_gp = np.array([k is not None for k in self.kernels])
         # noise: var/100 under a GP; the parametric residual when the GP is absent (PR)
         sv = np.where(has_gp, 0.1 * self.y_std_, np.maximum(resid, 1e-3 * self.y_std_))
@@ -204,7 +212,7 @@ class SemiParametricGP:
     def _bounds(self, hp0: Hyperparameters, resid):
         n = len(self.kernels)
         lo, hi = [], []
-        if self.fit_sigma_w and any(self._m_nonzero()):
+        if self.fit_sigma_w and not self.guard.fix_sigma_w and self.use_features:
             lo.append(hp0.log_sigma_w - LOG_BOUND)
             hi.append(hp0.log_sigma_w + LOG_BOUND)
         else:
@@ -227,9 +235,6 @@ class SemiParametricGP:
                     hi.append(np.log(self.y_std_[j]) + 3.0)
         return list(zip(lo, hi, strict=True))
 
-    def _m_nonzero(self):
-        return [self.use_features]
-
     def _prior(self, vec, sizes, resid):
         """Negative log prior of the guard's priors, and its gradient (0 when no prior is set)."""
         g = self.guard
@@ -251,64 +256,89 @@ class SemiParametricGP:
             k += sizes[j]
         return val, grad
 
-    def _learn(self, Us, Y, Fs, rng) -> Hyperparameters:
-        N = len(Us)
-        idx = np.arange(N)
-        if N > self.hyper_max:
-            idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
-        n_val = int(round(self.guard.validation_fraction * len(idx)))
-        fit_idx, val_idx = (idx[:-n_val], idx[-n_val:]) if n_val >= 2 else (idx, idx[:0])
-        U1, Y1, F1 = Us[fit_idx], Y[fit_idx], Fs[fit_idx]
-        hp0, resid = self._initial(U1, Y, Fs)
-        sizes = [0 if k is None else k.n_params for k in self.kernels]
-        bounds = self._bounds(hp0, resid)
-        x0 = np.clip(hp0.pack(), [b[0] for b in bounds], [b[1] for b in bounds])
+    def _starts(self, x0, bounds, sizes, rng, n_extra):
+        """§3.3.4's start, then a short-length-scale start (ℓ = 0.3 input std), then random ones."""
+        lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
+        starts = [x0]
+        if n_extra >= 1:
+            short = x0.copy()
+            k = 1 + len(self.kernels)
+            for kern, size in zip(self.kernels, sizes, strict=True):
+                if kern is not None:
+                    for i, name in enumerate(kern.names):
+                        if is_lengthscale(name):
+                            short[k + i] = np.log(0.3)
+                k += size
+            starts.append(short)
+        starts += [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(n_extra - 1)]
+        return [np.clip(s, lo, hi) for s in starts]
 
+    def _optimise(self, start, bounds, sizes, resid, U, Y, F, maxiter):
         def objective(vec):
             try:
-                f, gr = negative_log_likelihood(vec, self.kernels, U1, Y1, F1, sizes)
+                f, gr = negative_log_likelihood(vec, self.kernels, U, Y, F, sizes)
             except NumericalError:
                 return 1e25, np.zeros_like(vec)
             pv, pg = self._prior(vec, sizes, resid)
             return f + pv, gr + pg
 
-        starts = [x0] + [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(self.restarts)]
-        candidates = []
-        for s in starts:
-            s = np.clip(s, [b[0] for b in bounds], [b[1] for b in bounds])
-            res = minimize(
-                objective,
-                s,
-                jac=True,
-                method="L-BFGS-B",
-                bounds=bounds,
-                options={"maxiter": self.maxiter},
-            )
-            if np.isfinite(res.fun) and res.fun < 1e24:
-                candidates.append((res.fun, res.x))
+        res = minimize(objective, start, jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": maxiter})
+        ok = np.isfinite(res.fun) and res.fun < 1e24
+        return (float(res.fun), res.x) if ok else None
+
+    def _learn(self, Us, Y, Fs, rng) -> Hyperparameters:
+        """ML-II (or MAP with the guard's priors) from several starts.
+
+        Without validation the best objective wins. With ``guard.validation_fraction`` and
+        several starts, each start is optimised on the first part of the (sub)sample, the one
+        with the lowest nMSE on the held-out last part wins, and it is polished on all of it.
+        """
+        N = len(Us)
+        idx = np.arange(N)
+        if N > self.hyper_max:
+            idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
+        hp0, resid = self._initial(Us[idx], Y, Fs)
+        sizes = [0 if k is None else k.n_params for k in self.kernels]
+        bounds = self._bounds(hp0, resid)
+        lo, hi = [b[0] for b in bounds], [b[1] for b in bounds]
+        has_gp = any(k is not None for k in self.kernels)
+        n_extra = self.restarts + (self.guard.restarts if has_gp else 0)
+        x0 = np.clip(hp0.pack(), lo, hi)
+        starts = self._starts(x0, bounds, sizes, rng, n_extra if has_gp else 0)
+        self.n_starts_ = len(starts)
+        n_val = int(round(self.guard.validation_fraction * len(idx)))
+        validate = len(starts) > 1 and n_val >= 2
+        fit_idx, val_idx = (idx[:-n_val], idx[-n_val:]) if validate else (idx, idx[:0])
+        U1, Y1, F1 = Us[fit_idx], Y[fit_idx], Fs[fit_idx]
+        candidates = [c for s in starts
+                      if (c := self._optimise(s, bounds, sizes, resid, U1, Y1, F1, self.maxiter))]
         if not candidates:
             raise NumericalError(
                 "hyperparameter optimisation failed from every start; "
                 "raise min_noise or check the data for repeated samples"
             )
-        self.n_starts_ = len(starts)
-        if len(val_idx) and len(candidates) > 1:
-            scores = []
-            for _, x in candidates:
-                hp = Hyperparameters.unpack(x, sizes)
-                try:
-                    post = fit_posterior(self.kernels, U1, Y1, F1, hp)
-                except NumericalError:
-                    scores.append(np.inf)
-                    continue
-                mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
-                scores.append(float(np.mean((mean - Y[val_idx]) ** 2 / self.y_std_**2)))
-            self.validation_scores_ = scores
-            best = int(np.argmin(scores))
-        else:
-            best = int(np.argmin([c[0] for c in candidates]))
-        self.objective_ = float(candidates[best][0])
-        return Hyperparameters.unpack(candidates[best][1], sizes)
+        if not validate:
+            best = min(candidates, key=lambda c: c[0])
+            self.objective_ = best[0]
+            return Hyperparameters.unpack(best[1], sizes)
+        scores = []
+        for _, x in candidates:
+            try:
+                post = fit_posterior(self.kernels, U1, Y1, F1, Hyperparameters.unpack(x, sizes))
+            except NumericalError:
+                scores.append(np.inf)
+                continue
+            mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
+            scores.append(float(np.mean((mean - Y[val_idx]) ** 2 / self.y_std_**2)))
+        self.validation_scores_ = scores
+        chosen = candidates[int(np.argmin(scores))][1]
+        polished = self._optimise(
+            chosen, bounds, sizes, resid, Us[idx], Y[idx], Fs[idx], self.maxiter
+        )
+        x = polished[1] if polished else chosen
+        self.objective_ = polished[0] if polished else float("nan")
+        return Hyperparameters.unpack(x, sizes)
 
     # ------------------------------------------------------------------ predict
     def predict(self, U, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

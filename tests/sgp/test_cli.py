@@ -1,0 +1,124 @@
+"""`diegocal sgp-fit` and `diegocal predict sgp/`: end to end, and one-line errors on bad input."""
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.io import Log, load_log, load_yaml, make_stream, save_log
+
+runner = CliRunner()
+
+
+def one_line_error(result) -> str:
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output
+    lines = [line for line in result.output.strip().splitlines() if line.strip()]
+    assert len(lines) == 1, result.output
+    return lines[0]
+
+
+@pytest.fixture
+def logs(arm2, simulate, tmp_path):
+    train, _ = simulate(arm2, T=120, seed=0)
+    test, _ = simulate(arm2, T=60, seed=1)
+    paths = tmp_path / "train.h5", tmp_path / "test.h5"
+    save_log(train, paths[0])
+    save_log(test, paths[1])
+    return paths
+
+
+def test_fit_and_predict_end_to_end(logs, arm2_dir):
+    train, test = logs
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-m", "pr", "-q"])
+    assert r.exit_code == 0, r.output
+    model_dir = train.with_name("train.sgp")  # DESIGN.md default: <log stem>.sgp/
+    summary = load_yaml(model_dir / "sgp.yaml")
+    assert summary["kind"] == "pr" and set(summary["meta"]) == {
+        "log",
+        "robot",
+        "command",
+        "created",
+    }
+    assert set(summary["nmse_in_sample"]) == {"shoulder", "elbow"}
+    assert all(v < 0.05 for v in summary["nmse_in_sample"].values())
+    out = test.with_name("pred.h5")
+    r = runner.invoke(app, ["predict", str(model_dir), str(test), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "nMSE shoulder" in r.output
+    pred = load_log(out)
+    assert pred.stream("tau").data.shape == (60, 2) and np.all(pred.stream("tau_std").data > 0)
+    measured = load_log(test).stream("tau").data
+    err = np.mean((pred.stream("tau").data - measured) ** 2, 0) / np.var(measured, 0)
+    assert np.all(err < 0.05)
+
+
+def test_sgp_fit_writes_hyperparameters(logs, arm2_dir, tmp_path):
+    train, _ = logs
+    out = tmp_path / "m.sgp"
+    args = ["sgp-fit", str(train), "--robot", str(arm2_dir), "--friction", "none", "-o", str(out)]
+    r = runner.invoke(app, args + ["-q"])
+    assert r.exit_code == 0, r.output
+    s = load_yaml(out / "sgp.yaml")
+    assert s["kind"] == "sgp" and s["options"]["friction"] == []
+    assert "lengthscales" in s["hyperparameters"]["elbow"]
+    assert not any(n.endswith((".fv", ".fc")) for n in s["parameters"])
+
+
+def _without(log, stream):
+    return Log(log.time, {k: v for k, v in log.streams.items() if k != stream}, robot=log.robot)
+
+
+@pytest.mark.parametrize("stream", ["tau", "qdd"])
+def test_missing_stream_is_named(arm2, simulate, arm2_dir, tmp_path, stream):
+    log, _ = simulate(arm2, T=30, seed=0)
+    path = tmp_path / "bad.h5"
+    save_log(_without(log, stream), path)
+    line = one_line_error(runner.invoke(app, ["sgp-fit", str(path), "--robot", str(arm2_dir)]))
+    assert f"'{stream}'" in line and "sgp-fit" in line
+
+
+def test_joint_not_in_robot(arm2, simulate, arm2_dir, tmp_path):
+    log, _ = simulate(arm2, T=30, seed=0)
+    renamed = {k: make_stream(["shoulder", "wrist"], v.data) for k, v in log.streams.items()}
+    path = tmp_path / "bad.h5"
+    save_log(Log(log.time, renamed), path)
+    line = one_line_error(runner.invoke(app, ["sgp-fit", str(path), "--robot", str(arm2_dir)]))
+    assert "wrist" in line and "not joints" in line
+
+
+def test_too_few_samples(arm2, simulate, arm2_dir, tmp_path):
+    log, _ = simulate(arm2, T=5, seed=0)
+    path = tmp_path / "short.h5"
+    save_log(log, path)
+    line = one_line_error(runner.invoke(app, ["sgp-fit", str(path), "--robot", str(arm2_dir)]))
+    assert "too few samples" in line
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "needle"),
+    [
+        ("--model", "nn", "--model"),
+        ("--friction", "stiction", "--friction"),
+        ("--inference", "magic", "--inference"),
+        ("--gp-inputs", "tau", "--gp-inputs"),
+    ],
+)
+def test_bad_option_values(logs, arm2_dir, option, value, needle):
+    train, _ = logs
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), option, value])
+    assert needle in one_line_error(r)
+
+
+def test_log_without_robot_needs_robot_option(arm2, simulate, tmp_path):
+    log, _ = simulate(arm2, T=30, seed=0)
+    path = tmp_path / "anon.h5"
+    save_log(Log(log.time, log.streams), path)
+    assert "--robot" in one_line_error(runner.invoke(app, ["sgp-fit", str(path)]))
+
+
+def test_predict_with_a_directory_that_is_not_a_model(logs, tmp_path):
+    _, test = logs
+    empty = tmp_path / "empty.sgp"
+    empty.mkdir()
+    assert "sgp.yaml" in one_line_error(runner.invoke(app, ["predict", str(empty), str(test)]))
