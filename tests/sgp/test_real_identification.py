@@ -1,0 +1,84 @@
+"""PR and SGP identified on real TX40 torques, judged on a held-out part of the same run.
+
+A short window of the Stäubli TX40 excitation (shared/data/real, converted by
+:func:`diegocal.io.real.load_tx40`): train on its first 4 s (every 4th sample, 50 Hz), predict the
+next 2 s at the full 200 Hz. Skipped when the data are absent. The full comparison (both TX40
+splits, TIAGo, nominal rigid body) is bench/bench_real_identification.py.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diegocal.io import Log, make_stream
+from diegocal.robot import BUNDLED_ROBOTS, load_robot
+from diegocal.sgp import SGPOptions, fit_dynamics, nmse
+
+REPO = Path(__file__).resolve().parents[2]
+DATA = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+pytestmark = pytest.mark.skipif(not (DATA / "tx40").is_dir(), reason=f"no real data at {DATA}")
+
+TRAIN = (0.5, 4.5)  # s, training window (the arm moves from 0 to about 7.4 s)
+TEST = (4.5, 6.5)  # s, held out
+STRIDE = 4  # training subsampling: 200 Hz -> 50 Hz, 200 samples
+#: SGP may lose at most this much held-out nMSE to PR on any joint (fraction of the held-out
+#: torque variance), and at most SGP_RMSE_MARGIN in pooled RMSE.
+SGP_NMSE_MARGIN = 0.05
+SGP_RMSE_MARGIN = 1.10
+
+
+def _window(log: Log, lo: float, hi: float, stride: int = 1) -> Log:
+    idx = np.flatnonzero((log.time >= lo) & (log.time < hi))[::stride]
+    streams = {k: make_stream(s.names, s.data[idx]) for k, s in log.streams.items()}
+    return Log(log.time[idx], streams, robot=log.robot, rate_hz=log.rate_hz / stride)
+
+
+@pytest.fixture(scope="module")
+def tx40():
+    from diegocal.io.real import load_tx40
+
+    robot = load_robot(BUNDLED_ROBOTS / "tx40")
+    log = load_tx40(DATA / "tx40")
+    train, test = _window(log, *TRAIN, STRIDE), _window(log, *TEST)
+    measured = test.stream("tau").select(robot.joint_names).data
+    return robot, train, test, measured
+
+
+@pytest.fixture(scope="module")
+def pr(tx40):
+    robot, train, test, _ = tx40
+    return fit_dynamics(train, robot, SGPOptions(kind="pr")).predict(test)
+
+
+def _rmse(tau, measured) -> float:
+    return float(np.sqrt(np.mean((tau - measured) ** 2)))
+
+
+def test_pr_beats_zero_and_mean_predictors_on_held_out_torques(tx40, pr):
+    robot, train, _, measured = tx40
+    train_mean = train.stream("tau").select(robot.joint_names).data.mean(axis=0)
+    mean_pred = np.broadcast_to(train_mean, measured.shape)
+    err = nmse(pr.tau, measured)
+    assert (err < nmse(mean_pred, measured)).all(), err
+    assert (err < nmse(np.zeros_like(measured), measured)).all(), err
+    # the rigid-body + friction model explains most of the torque of the big joints
+    assert (err[:4] < 0.2).all(), err
+    assert _rmse(pr.tau, measured) < 0.3 * _rmse(mean_pred, measured)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="SGP defaults on low-passed real torques: ML-II drives sigma_v to its 1e-4*std floor, "
+    "the GP interpolates the training trajectory (in-sample nMSE ~0) and held-out nMSE explodes; "
+    "see bench/bench_real_identification.py ('SGP floor' row). Remove this mark once fixed.",
+)
+def test_sgp_is_not_worse_than_pr_on_held_out_torques(tx40, pr):
+    robot, train, test, measured = tx40
+    sgp = fit_dynamics(train, robot, SGPOptions(kind="sgp")).predict(test)
+    e_sgp, e_pr = nmse(sgp.tau, measured), nmse(pr.tau, measured)
+    assert (e_sgp <= e_pr + SGP_NMSE_MARGIN).all(), (e_sgp, e_pr)
+    assert _rmse(sgp.tau, measured) <= SGP_RMSE_MARGIN * _rmse(pr.tau, measured)
