@@ -15,8 +15,8 @@ from pathlib import Path
 
 from diegocal.io import load_log, save_log
 
-KINEMATICS_SECONDS = 15.0  # 10 s to calibrate, 5 s held out
-HELDOUT_SECONDS = 5.0
+KINEMATICS_SECONDS = 12.0  # 8 s to calibrate, 4 s held out
+HELDOUT_SECONDS = 4.0
 
 
 def diegocal(*args: str) -> None:
@@ -33,7 +33,9 @@ def main(out: Path) -> None:
     save_log(log.slice(0, split), out / "diego_kinematics.h5")
     save_log(log.slice(split, log.n_samples), out / "diego_kinematics_heldout.h5")
     session.unlink()
-    diegocal("simulate", "dynamics", "--robot", "arm3", "--duration", "30", "--seed", "1",
+    diegocal("simulate", "pneumatics", "--robot", "diego", "--duration", "8", "--seed", "1",
+             "-o", str(out / "diego_pneumatics.h5"))
+    diegocal("simulate", "dynamics", "--robot", "arm3", "--duration", "20", "--seed", "1",
              "--trajectory", "figure8-horizontal", "--effect", "position_friction:joint3",
              "-o", str(out / "arm3_dynamics.h5"))
 
