@@ -37,9 +37,17 @@ from diegocal.sim.trajectories import (
     rollout,
     sum_of_sines,
     time_base,
+    whirl,
 )
 
-TRAJECTORIES = ("excitation", "figure8-horizontal", "figure8-vertical", "pole-down", "pole-up")
+TRAJECTORIES = (
+    "excitation",
+    "whirl",
+    "figure8-horizontal",
+    "figure8-vertical",
+    "pole-down",
+    "pole-up",
+)
 #: Joint effects act on one joint's torque; ``payload`` on a link's inertia.
 JOINT_EFFECTS = (
     "coulomb_friction",
@@ -358,6 +366,8 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     kind = options.trajectory
     if kind == "excitation":
         traj = excitation(robot.lower, robot.upper, time, rng)
+    elif kind == "whirl":
+        traj = whirl(robot.lower, robot.upper, time, rng)
     elif kind.startswith("figure8-"):
         traj = _figure8(robot, options, time, rng, kind.split("-")[1])
     else:

@@ -107,6 +107,34 @@ def excitation(
     return JointTrajectory(time, centre + stretch * x, stretch * xd, stretch * xdd)
 
 
+def whirl(
+    lower: np.ndarray,
+    upper: np.ndarray,
+    time: np.ndarray,
+    rng: np.random.Generator,
+    speed: float = np.pi,
+    variation: float = 0.6,
+    f_max: float = 0.5,
+) -> JointTrajectory:
+    """Continuous rotation in one direction of every joint with a range of at least 2π (others get
+    :func:`excitation`): q = wrap(φ₀ + ω t + Σ a_k sin(2π f_k t + φ_k)) into [lower, lower + 2π).
+
+    ω = ``speed`` rad/s; the multi-sine's velocity stays within ±``variation``·ω, so qd > 0 at all
+    times. A pendulum driven round and round passes a position-dependent friction in one direction
+    only, so the friction acts like a position-dependent torque (thesis §3.1.1's irregularity).
+    """
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    out = excitation(lower, upper, time, rng)
+    q, qd, qdd = out.q.copy(), out.qd.copy(), out.qdd.copy()
+    for j in np.flatnonzero((upper - lower) >= WIDE_RANGE - 1e-6):
+        x, xd, xdd = sum_of_sines(time, 1, rng, 1.0, f_max=f_max)
+        gain = variation * speed / max(np.abs(xd).max(), 1e-12)
+        raw = rng.uniform(0, 2 * np.pi) + speed * time + gain * x[:, 0]
+        q[:, j] = lower[j] + np.mod(raw - lower[j], 2 * np.pi)
+        qd[:, j], qdd[:, j] = speed + gain * xd[:, 0], gain * xdd[:, 0]
+    return JointTrajectory(time, q, qd, qdd)
+
+
 def figure_eight(
     model: pin.Model,
     frame: int,

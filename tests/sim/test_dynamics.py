@@ -265,3 +265,21 @@ def test_pole_up_needs_two_joints(tmp_path):
 def test_replace_keeps_options_frozen():
     opts = DynamicsOptions()
     assert replace(opts, noise=0.0).noise == 0.0 and opts.noise == 0.01
+
+
+def test_whirl_turns_one_way_and_wraps_into_the_limits():
+    robot = load_robot(BUNDLED_ROBOTS / "pendulum")
+    opts = dict(trajectory="whirl", duration=10.0, viscous=0.0, coulomb=0.0)
+    log = _sim(robot, effects=("position_friction",), **opts)
+    q, qd, qdd, tau = _signals(log)
+    assert (qd > 0).all()
+    assert (q >= robot.lower).all() and (q < robot.lower + 2 * np.pi).all()
+    assert np.histogram(q, bins=6, range=(-np.pi, np.pi))[0].min() > 0.1 * len(q) / 6
+    # one direction only: inside the region the friction is a constant (Coulomb) + viscous push
+    (rec,) = log.truth.effects
+    v, inside = rec["values"], (q[:, 0] >= 2.0) & (q[:, 0] <= 2.5)
+    extra = tau[:, 0] - _rnea(robot, q, qd, qdd)[:, 0]
+    np.testing.assert_allclose(
+        extra[inside], v["coulomb"] + v["viscous"] * qd[inside, 0], atol=1e-10
+    )
+    np.testing.assert_allclose(extra[~inside], 0.0, atol=1e-10)

@@ -1,0 +1,127 @@
+"""Shared machinery of the SGP experiments (thesis §3.4): fit every method on one training log,
+score it on held-out logs per test set, region and joint, and print tables.
+
+Scores compare predictions with the *noise-free* simulated torque (``/truth`` signal ``tau``, read
+here for evaluation only — the fits never see it): nMSE = mean squared error / variance of that
+torque over the whole test log (thesis §3.4.2 normalises by the target's variance; using the whole
+log's variance keeps regions of one log comparable). Coverage is the fraction of *measured* torques
+inside the predicted 95 % interval mean ± 1.96 σ (σ = ``tau_std``, measurement noise included).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from diegocal.io import Log, make_stream
+from diegocal.sgp import SGPOptions, fit_dynamics
+
+#: Method label -> (SGPOptions.kind, guard). "SGP" is the guarded SGP; the unguarded one is the
+#: plain ML-II SGP the guard is measured against.
+METHODS = {
+    "PR": ("pr", False),
+    "GP": ("gp", False),
+    "PRGP": ("prgp", False),
+    "SGP": ("sgp", True),
+    "SGP-noguard": ("sgp", False),
+}
+
+
+@dataclass(frozen=True)
+class Score:
+    """One cell: a method's error on one joint of one region of one test log."""
+
+    experiment: str
+    seed: int
+    method: str
+    test: str
+    region: str
+    joint: str
+    nmse: float
+    coverage: float
+    n: int
+
+
+def select(log: Log, mask: np.ndarray) -> Log:
+    """The samples of ``log`` where ``mask`` (T,) is true, truth signals included."""
+    streams = {k: make_stream(s.names, s.data[mask]) for k, s in log.streams.items()}
+    truth = log.truth
+    if truth is not None:
+        sig = {k: make_stream(s.names, s.data[mask]) for k, s in truth.signals.items()}
+        truth = replace(truth, signals=sig)
+    return Log(
+        time=log.time[mask], streams=streams, robot=log.robot, rate_hz=log.rate_hz, truth=truth
+    )
+
+
+def score(
+    pred, log: Log, regions: dict, experiment: str, seed: int, method: str, test: str
+) -> list:
+    """Scores of a :class:`~diegocal.sgp.TorquePrediction` on ``log`` for each region mask (T,)."""
+    clean = log.truth.signals["tau"].data
+    measured = log.streams["tau"].data
+    var = np.var(clean, axis=0)
+    inside = np.abs(measured - pred.tau) <= 1.96 * pred.tau_std
+    out = []
+    for region, mask in regions.items():
+        if not mask.any():
+            continue
+        err = ((pred.tau[mask] - clean[mask]) ** 2).mean(axis=0) / var
+        cov = inside[mask].mean(axis=0)
+        for j, joint in enumerate(log.streams["tau"].names):
+            out.append(
+                Score(
+                    experiment,
+                    seed,
+                    method,
+                    test,
+                    region,
+                    joint,
+                    float(err[j]),
+                    float(cov[j]),
+                    int(mask.sum()),
+                )
+            )
+    return out
+
+
+def run_methods(
+    train: Log, tests: dict, robot, base: SGPOptions, experiment: str, seed: int, methods=None
+) -> list:
+    """Fit each method on ``train`` and score it on ``tests`` (name -> (log, {region: mask}))."""
+    out = []
+    for label in methods or METHODS:
+        kind, guard = METHODS[label]
+        model = fit_dynamics(train, robot, replace(base, kind=kind, guard=guard, seed=seed))
+        for name, (log, regions) in tests.items():
+            out.extend(score(model.predict(log), log, regions, experiment, seed, label, name))
+    return out
+
+
+def aggregate(scores, field: str = "nmse", reduce=np.mean) -> dict:
+    """(method, test, region, joint) -> reduced value of ``field`` over seeds."""
+    groups = defaultdict(list)
+    for s in scores:
+        groups[(s.method, s.test, s.region, s.joint)].append(getattr(s, field))
+    return {k: float(reduce(v)) for k, v in groups.items()}
+
+
+def table(scores, field: str = "nmse", reduce=np.mean, title: str = "", methods=None) -> str:
+    """A plain-text table: one row per (test, region, joint), one column per method; the best
+    (lowest nMSE, or coverage closest to 0.95) of each row is starred."""
+    agg = aggregate(scores, field, reduce)
+    methods = [m for m in (methods or METHODS) if any(k[0] == m for k in agg)]
+    rows = sorted(
+        {k[1:] for k in agg}, key=lambda r: [(s.test, s.region, s.joint) for s in scores].index(r)
+    )
+    head = f"{'test':<12}{'region':<16}{'joint':<8}" + "".join(f"{m:>13}" for m in methods)
+    lines = [title, head, "-" * len(head)] if title else [head, "-" * len(head)]
+    for r in rows:
+        vals = [agg.get((m,) + r, np.nan) for m in methods]
+        key = np.abs(np.array(vals) - 0.95) if field == "coverage" else np.array(vals)
+        best = int(np.nanargmin(key))
+        cells = "".join(f"{v:>12.4g}{'*' if i == best else ' '}" for i, v in enumerate(vals))
+        lines.append(f"{r[0]:<12}{r[1]:<16}{r[2]:<8}" + cells)
+    return "\n".join(lines)
