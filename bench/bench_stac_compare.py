@@ -299,16 +299,16 @@ def plot_fig27(counts, seeds, noises, totals, path: Path):
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="3x3 grid and a 60 s diego session")
+    ap.add_argument("--quick", action="store_true", help="3x3 grid and a 40 s diego session")
     ap.add_argument(
-        "--duration", type=float, default=None, help="diego session length, s (default 150)"
+        "--duration", type=float, default=None, help="diego session length, s (default 100)"
     )
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", choices=("table", "grid"), default=None)
     args = ap.parse_args(argv)
     if args.duration is None:
-        args.duration = 60.0 if args.quick else 150.0
+        args.duration = 40.0 if args.quick else 100.0
     if args.only != "grid":
         table22(args)
     if args.only != "table":

@@ -339,7 +339,7 @@ def _check_coverage(robot: Robot, unknown: np.ndarray, nl: np.ndarray) -> None:
 def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndarray:
     """Per-frame Gauss-Newton on the nl-pot constraints for the joints in ``unknown``.
 
-    Frames leave the iteration once their step is below 1e-10 rad; a frame whose solution lies
+    Frames leave the iteration once their step is below 1e-9 rad; a frame whose solution lies
     past a joint limit (noise near a singular gimbal pose) stops at the limit after max_steps.
     """
     q = q.copy()
@@ -349,7 +349,14 @@ def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndar
         s, ds = transmission_jacobian(robot, q[active])
         r = gain[nl] * s[:, nl] + bias[nl] - pots[active][:, nl]
         G = ds[:, nl][:, :, unknown] * gain[nl][None, :, None]
-        dq = np.clip(-np.einsum("tkp,tp->tk", np.linalg.pinv(G), r), -0.3, 0.3)  # damped step
+        if G.shape[1] == G.shape[2]:  # as many pots as joints (gimbals): Newton
+            try:
+                step = np.linalg.solve(G, r[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                step = np.einsum("tkp,tp->tk", np.linalg.pinv(G), r)
+        else:  # more pots than joints: Gauss-Newton
+            step = np.einsum("tkp,tp->tk", np.linalg.pinv(G), r)
+        dq = np.clip(-step, -0.3, 0.3)  # damped: the gimbal lengths are far from linear
         new = np.clip(q[np.ix_(active, unknown)] + dq, lo, hi)
         if not np.isfinite(new).all():
             raise NumericalError(
@@ -357,7 +364,7 @@ def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndar
             )
         moved = np.abs(new - q[np.ix_(active, unknown)]).max(axis=1)
         q[np.ix_(active, unknown)] = new
-        active = active[moved > 1e-10]
+        active = active[moved > 1e-9]
         if not len(active):
             break
     return q
@@ -556,9 +563,9 @@ class _Problem:
                 jac=self.jacobian,
                 method="lm" if lm else "trf",
                 x_scale="jac",
-                ftol=1e-10,
-                xtol=1e-10,
-                gtol=1e-10,
+                ftol=1e-8,
+                xtol=1e-8,
+                gtol=1e-8,
                 max_nfev=max(4 * options.max_iterations, 20),
                 **kw,
             )
