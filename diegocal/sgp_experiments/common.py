@@ -10,6 +10,7 @@ inside the predicted 95 % interval mean ± 1.96 σ (σ = ``tau_std``, measuremen
 
 from __future__ import annotations
 
+import time
 from collections import defaultdict
 from dataclasses import dataclass, replace
 
@@ -42,6 +43,7 @@ class Score:
     nmse: float
     coverage: float
     n: int
+    fit_s: float = 0.0
 
 
 def select(log: Log, mask: np.ndarray) -> Log:
@@ -94,9 +96,12 @@ def run_methods(
     out = []
     for label in methods or METHODS:
         kind, guard = METHODS[label]
+        start = time.perf_counter()
         model = fit_dynamics(train, robot, replace(base, kind=kind, guard=guard, seed=seed))
+        fit_s = time.perf_counter() - start
         for name, (log, regions) in tests.items():
-            out.extend(score(model.predict(log), log, regions, experiment, seed, label, name))
+            cells = score(model.predict(log), log, regions, experiment, seed, label, name)
+            out.extend(replace(c, fit_s=fit_s) for c in cells)
     return out
 
 

@@ -1,0 +1,111 @@
+"""The thesis's SGP experiments (ch. 3) on simulated robots, full versions: tables of held-out nMSE
+per method, the SGP guard across seeds, and 95 %-interval coverage on data-poor test sets.
+
+    .venv/bin/python bench/bench_sgp_experiments.py [--seeds 5] [--only pendulum,wheel,arm3]
+                                                    [--quick]
+
+Methods: PR (parametric, eq. 3.25), GP (eq. 3.21), PRGP (two-stage, §3.4.1), SGP (joint, with the
+guard of diegocal.sgp), SGP-noguard (plain ML-II SGP). nMSE is against the noise-free simulated
+torque, normalised by its variance over the test log; coverage is of the measured torque. The
+fit time column is the reference for the methods' cost, measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from diegocal.sgp_experiments import (
+    ArmConfig,
+    PendulumConfig,
+    WheelConfig,
+    aggregate,
+    run_arm3,
+    run_pendulum,
+    run_reaction_wheel,
+    table,
+)
+
+#: Experiment -> (runner, full config, quick config, data-poor (test, region) cells).
+EXPERIMENTS = {
+    "pendulum": (
+        run_pendulum,
+        PendulumConfig(),
+        PendulumConfig(train_s=8.0, test_s=6.0),
+        [("whirl", "sparse [-2,0]")],
+    ),
+    "wheel": (
+        run_reaction_wheel,
+        WheelConfig(),
+        WheelConfig(train_s=3.0, test_s=3.0),
+        [("pole-up", "all")],
+    ),
+    "arm3": (run_arm3, ArmConfig(), ArmConfig(train_s=8.0, test_s=4.0), [("vertical", "all")]),
+}
+
+
+def guard_table(scores, poor) -> str:
+    """Guard on (SGP) vs off (SGP-noguard) in the data-poor cells: mean and worst seed."""
+    mean = aggregate(scores, "nmse", np.mean)
+    worst = aggregate(scores, "nmse", np.max)
+    cols = "".join(f"{c:>10}" for c in ("mean on", "mean off", "worst on", "worst off"))
+    head = f"{'test':<10}{'region':<16}{'joint':<8}" + cols
+    lines = [head, "-" * len(head)]
+    for key in sorted({k[1:] for k in mean if (k[1], k[2]) in poor}):
+        on, off = ("SGP",) + key, ("SGP-noguard",) + key
+        if on in mean and off in mean:
+            lines.append(
+                f"{key[0]:<10}{key[1]:<16}{key[2]:<8}{mean[on]:>10.4g}{mean[off]:>10.4g}"
+                f"{worst[on]:>10.4g}{worst[off]:>10.4g}"
+            )
+    return "\n".join(lines)
+
+
+def fit_times(scores) -> str:
+    per = {}
+    for s in scores:
+        per.setdefault(s.method, {})[(s.seed,)] = s.fit_s
+    return "  ".join(f"{m} {np.mean(list(v.values())):.1f}s" for m, v in per.items())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--only", default="pendulum,wheel,arm3")
+    ap.add_argument("--quick", action="store_true", help="reduced sizes (the tests' scale)")
+    args = ap.parse_args()
+    seeds = tuple(range(args.seeds))
+    for name in args.only.split(","):
+        run, full, quick, poor = EXPERIMENTS[name]
+        start = time.perf_counter()
+        scores = run(seeds=seeds, cfg=quick if args.quick else full)
+        wall = time.perf_counter() - start
+        print(
+            f"\n=== {name}: {len(seeds)} seeds, {wall:.0f} s; "
+            f"mean fit time per method: {fit_times(scores)}"
+        )
+        print(
+            table(scores, "nmse", np.mean, title=f"{name}: held-out nMSE, mean over seeds (* best)")
+        )
+        print()
+        print(table(scores, "nmse", np.max, title=f"{name}: held-out nMSE, worst seed"))
+        print()
+        print(f"{name}: SGP guard, nMSE in the data-poor cells over {len(seeds)} seeds")
+        print(guard_table(scores, poor))
+        print()
+        poor_scores = [s for s in scores if (s.test, s.region) in poor]
+        print(
+            table(
+                poor_scores,
+                "coverage",
+                np.mean,
+                title=f"{name}: coverage of the 95 % interval on the data-poor test set "
+                "(* closest to 0.95)",
+            )
+        )
+
+
+if __name__ == "__main__":
+    main()
