@@ -1,0 +1,107 @@
+"""PR, GP, PRGP and SGP against simulator ground truth, on held-out data; save/load; sparse."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from diegocal.sgp import SGPOptions, fit_dynamics, load_model, nmse
+
+BUMP = (1, 0.0, 1.2, 1.5)  # extra viscous friction on the elbow for q ∈ (0, 1.2) rad: unmodelled
+
+
+def _data(arm2, simulate):
+    train, _ = simulate(arm2, T=250, seed=0, bump=BUMP)
+    test, clean = simulate(arm2, T=250, seed=1, bump=BUMP)
+    return train, test, clean
+
+
+def test_sgp_beats_pr_on_held_out_data_with_an_unmodelled_effect(arm2, simulate):
+    train, test, clean = _data(arm2, simulate)
+    pr = fit_dynamics(train, arm2, SGPOptions(kind="pr")).predict(test)
+    sgp = fit_dynamics(train, arm2, SGPOptions(kind="sgp")).predict(test)
+    e_pr, e_sgp = nmse(pr.tau, clean), nmse(sgp.tau, clean)
+    assert e_sgp[1] < 0.5 * e_pr[1], (e_pr, e_sgp)  # the elbow, where the bump acts
+    assert e_sgp[0] < 1.5 * e_pr[0] + 1e-3  # and no worse on the shoulder
+    # calibrated uncertainty: measured torques inside ±2σ about 95 % of the time
+    measured = test.stream("tau").data
+    inside = np.mean(np.abs(sgp.tau - measured) <= 2 * sgp.tau_std, axis=0)
+    assert np.all(inside > 0.85) and np.all(inside <= 1.0)
+    assert np.all(sgp.tau_std > sgp.tau_std_latent)
+
+
+@pytest.mark.parametrize("kind", ["gp", "prgp"])
+def test_baselines_predict_held_out_data(arm2, simulate, kind):
+    train, test, clean = _data(arm2, simulate)
+    model = fit_dynamics(train, arm2, SGPOptions(kind=kind))
+    pred = model.predict(test)
+    assert pred.tau.shape == clean.shape and np.all(pred.tau_std > 0)
+    assert (model.parametric_ is None) == (kind == "gp")
+    err = nmse(pred.tau, clean)
+    if kind == "gp":  # no physics: fine where the data are, clearly worse than the SGP
+        assert np.all(err < 0.3)
+    else:  # two stages: at least as good as PR alone
+        pr = fit_dynamics(train, arm2, SGPOptions(kind="pr")).predict(test)
+        assert np.all(err <= 1.02 * nmse(pr.tau, clean) + 1e-4)
+
+
+def test_uncertainty_grows_away_from_the_training_data(arm2, simulate):
+    """Thesis §3.5.1: the SGP knows that it does not know."""
+    train, _, _ = _data(arm2, simulate)
+    model = fit_dynamics(train, arm2, SGPOptions(kind="sgp", guard=False))
+    q, qd, qdd = (train.stream(s).data[:50] for s in ("q", "qd", "qdd"))
+    near = model.predict_arrays(q, qd, qdd).tau_std_latent
+    far = model.predict_arrays(q, qd + 8.0, qdd).tau_std_latent  # velocities never seen
+    assert np.all(far.mean(0) > 2 * near.mean(0))
+
+
+@pytest.mark.parametrize("kind", ["sgp", "prgp"])
+def test_save_load_round_trip(arm2, simulate, tmp_path, kind):
+    train, test, _ = _data(arm2, simulate)
+    model = fit_dynamics(train, arm2, SGPOptions(kind=kind))
+    model.save(tmp_path / "m.sgp", meta={"log": "train.h5"})
+    back = load_model(tmp_path / "m.sgp")
+    a, b = model.predict(test), back.predict(test)
+    np.testing.assert_allclose(b.tau, a.tau, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(b.tau_std, a.tau_std, rtol=1e-9, atol=1e-10)
+    assert back.hyperparameters_ == model.hyperparameters_
+
+
+def test_sparse_close_to_exact_on_the_same_data(arm2, simulate, tmp_path):
+    train, test, clean = _data(arm2, simulate)
+    exact = fit_dynamics(train, arm2, SGPOptions(kind="sgp", inference="exact"))
+    # auto switches to sparse above exact_max; same hyperparameter learning, DTC posterior
+    opts = SGPOptions(kind="sgp", inference="auto", exact_max=100, n_inducing=60)
+    sparse = fit_dynamics(train, arm2, opts)
+    assert exact.gp_.inference == "exact" and sparse.gp_.inference == "sparse"
+    e_exact = nmse(exact.predict(test).tau, clean)
+    e_sparse = nmse(sparse.predict(test).tau, clean)
+    assert np.all(e_sparse < 1.5 * e_exact + 2e-3), (e_exact, e_sparse)
+    sparse.save(tmp_path / "s.sgp")
+    back = load_model(tmp_path / "s.sgp").predict(test)
+    np.testing.assert_allclose(back.tau, sparse.predict(test).tau, rtol=1e-8, atol=1e-9)
+
+
+def test_guard_switches_gp_inputs_and_bounds(arm2, simulate):
+    train, _, _ = _data(arm2, simulate)
+    on = fit_dynamics(train, arm2, SGPOptions(kind="sgp", guard=True, maxiter=30))
+    off = fit_dynamics(train, arm2, SGPOptions(kind="sgp", guard=False, maxiter=30))
+    ell_on = on.hyperparameters_["elbow"]["lengthscales"]
+    ell_off = off.hyperparameters_["elbow"]["lengthscales"]
+    assert not any(k.startswith("qdd.") for k in ell_on)
+    assert any(k.startswith("qdd.") for k in ell_off)
+    # flat prior on W: σ_w stays at 1000 × std(y); starts judged on a validation split
+    y_std = train.stream("tau").data.std(0).max()
+    assert on.hyperparameters_["sigma_w"] == pytest.approx(1e3 * y_std, rel=1e-9)
+    assert off.hyperparameters_["sigma_w"] < 1e2 * y_std
+    assert on.gp_.n_starts_ == 3 and len(on.gp_.validation_scores_) == 3
+    assert off.gp_.n_starts_ == 2 and not hasattr(off.gp_, "validation_scores_")
+    explicit = replace(SGPOptions(kind="sgp", guard=False), gp_inputs=("q",))
+    assert explicit.resolved_gp_inputs() == ("q",)
+
+
+def test_bad_options_raise():
+    with pytest.raises(ValueError, match="unknown model kind"):
+        SGPOptions(kind="nn")
+    with pytest.raises(ValueError, match="friction"):
+        SGPOptions(friction=("stiction",))
