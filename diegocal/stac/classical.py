@@ -386,7 +386,7 @@ def calibrate_classical(
     log : Log with ``pots`` (T, P) V and ``markers`` (T, M, 3) m (NaN = occluded); never its truth
     robot : Robot
     options : StacOptions; uses ``max_iterations`` (4× of it bounds the function evaluations),
-        ``loss`` ('huber': a second pass with the Huber loss at ``huber_scale`` marker sigmas)
+        ``loss`` ('huber': a second pass with the Huber loss at ``huber_scale`` robust sigmas)
     nonlinear : 'refuse' (default) | 'constrain' | 'nominal': what to do with linear/tendon pots
         (see the module docstring)
     q0 : optional (n,) or (T, n) starting joint angles for the joints solved numerically
@@ -421,7 +421,8 @@ def calibrate_classical(
     problem = _Problem(robot, layout, seed, pots, markers, inv.q)
     res = problem.solve(layout.pack(seed), options, "linear", 1.0)
     if options.loss == "huber":
-        scale = options.huber_scale * max(np.sqrt(np.mean(res.fun**2)), 1e-9)
+        # the Huber corner at huber_scale robust sigmas (MAD of the least-squares residuals)
+        scale = options.huber_scale * max(1.4826 * np.median(np.abs(res.fun)), 1e-9)
         res = problem.solve(res.x, options, "huber", scale)
     if not np.isfinite(res.x).all():
         raise NumericalError(

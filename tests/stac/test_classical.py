@@ -240,3 +240,18 @@ def test_batched_transmission_equals_the_robot_route(name):
     s_ref, ds_ref = pot_transmission_jacobian(robot, q)
     np.testing.assert_allclose(s, s_ref, atol=1e-12)
     np.testing.assert_allclose(ds, ds_ref, atol=1e-12)
+
+
+def test_huber_loss_resists_marker_outliers(rotary_robot, rotary_logs):
+    """loss='huber' (a second pass at huber_scale sigmas) beats plain least squares on outliers."""
+    train, _, truth = rotary_logs
+    mk = train.streams["markers"].data.copy()
+    rng = np.random.default_rng(9)
+    bad = rng.random(mk.shape[:2]) < 0.03  # 3 % mislabelled/ghost markers, 5-10 cm off
+    mk[bad] += rng.uniform(0.05, 0.1, (bad.sum(), 3)) * rng.choice([-1, 1], (bad.sum(), 3))
+    log = train.without_truth().with_streams(markers=replace(train.streams["markers"], data=mk))
+    errs = {}
+    for loss in ("linear", "huber"):
+        cal = calibrate_classical(log, rotary_robot, StacOptions(loss=loss)).calibration
+        errs[loss] = np.mean(np.abs(cal.gain - truth.gain))
+    assert errs["huber"] < 0.5 * errs["linear"], errs
