@@ -255,3 +255,37 @@ def test_huber_loss_resists_marker_outliers(rotary_robot, rotary_logs):
         cal = calibrate_classical(log, rotary_robot, StacOptions(loss=loss)).calibration
         errs[loss] = np.mean(np.abs(cal.gain - truth.gain))
     assert errs["huber"] < 0.5 * errs["linear"], errs
+
+
+def test_cli_method_classical_end_to_end(tmp_path, rotary_robot, rotary_logs):
+    """`diegocal stac LOG --method classical` writes calib.yaml near the truth; bad input fails."""
+    from typer.testing import CliRunner
+
+    from diegocal.cli import app
+    from diegocal.io import load_yaml, save_log
+
+    train, _, truth = rotary_logs
+    path = tmp_path / "train.h5"
+    save_log(train, path)
+    out = tmp_path / "c.calib.yaml"
+    args = ["stac", str(path), "--robot", str(rotary_robot.directory), "--method", "classical"]
+    res = CliRunner().invoke(app, [*args, "-o", str(out), "--quiet"])
+    assert res.exit_code == 0, res.output
+    cal = Calibration.from_dict(load_yaml(out))
+    assert cal.method == "classical"
+    assert np.max(np.abs(cal.gain - truth.gain) / truth.gain) < 0.02
+    no_markers = tmp_path / "pots_only.h5"
+    save_log(replace(train, streams={"pots": train.streams["pots"]}), no_markers)
+    res = CliRunner().invoke(
+        app,
+        [
+            "stac",
+            str(no_markers),
+            "--robot",
+            str(rotary_robot.directory),
+            "--method",
+            "classical",
+            "--quiet",
+        ],
+    )
+    assert res.exit_code != 0 and "no 'markers' stream" in res.output

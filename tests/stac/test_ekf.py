@@ -124,3 +124,22 @@ def test_bad_noise_options_and_seed_sd(rotary_robot):
         calibrate_ekf(log, rotary_robot, ekf=EkfOptions(sigma_markers=0.0))
     with pytest.raises(FitError, match="seed_sd: expected shape"):
         calibrate_ekf(log, rotary_robot, seed_sd=np.ones(3))
+
+
+def test_cli_method_ekf_end_to_end(tmp_path, rotary_robot):
+    """`diegocal stac LOG --method ekf` writes calib.yaml (method ekf) with the filter estimate."""
+    from typer.testing import CliRunner
+
+    from diegocal.cli import app
+    from diegocal.io import load_yaml, save_log
+
+    log = synth.simulate(rotary_robot, n_frames=60, seed=8, **NOISE)
+    path = tmp_path / "ekf.h5"
+    save_log(log, path)
+    out = tmp_path / "ekf.calib.yaml"
+    args = ["stac", str(path), "--robot", str(rotary_robot.directory), "--method", "ekf", "--quiet"]
+    res = CliRunner().invoke(app, [*args, "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    cal = Calibration.from_dict(load_yaml(out))
+    assert cal.method == "ekf" and cal.gain.shape == (len(rotary_robot.sensors.pots),)
+    assert np.isfinite(cal.gain).all()
