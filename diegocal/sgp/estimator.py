@@ -13,6 +13,7 @@ for inverse dynamics.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +76,7 @@ class SemiParametricGP:
     hyper_max : int, hyperparameters are learnt on at most this many samples (random subset)
     maxiter : int, L-BFGS-B iterations per start
     min_noise : float, floor of σ_v relative to std(y_j)
+    jobs : int, optimise the starts in this many threads
     """
 
     def __init__(
@@ -91,6 +93,7 @@ class SemiParametricGP:
         hyper_max: int = 1000,
         maxiter: int = 200,
         min_noise: float = 1e-4,
+        jobs: int = 1,
     ):
         if inference not in ("exact", "sparse"):
             raise ValueError(f"inference must be 'exact' or 'sparse', got {inference!r}")
@@ -105,6 +108,7 @@ class SemiParametricGP:
         self.hyper_max = int(hyper_max)
         self.maxiter = int(maxiter)
         self.min_noise = float(min_noise)
+        self.jobs = max(1, int(jobs))
 
     # ------------------------------------------------------------------ scaling
     def _scale(self, U, F):
@@ -282,8 +286,14 @@ class SemiParametricGP:
             pv, pg = self._prior(vec, sizes, resid)
             return f + pv, gr + pg
 
-        res = minimize(objective, start, jac=True, method="L-BFGS-B", bounds=bounds,
-                       options={"maxiter": maxiter})
+        res = minimize(
+            objective,
+            start,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=bounds,
+            options={"maxiter": maxiter},
+        )
         ok = np.isfinite(res.fun) and res.fun < 1e24
         return (float(res.fun), res.x) if ok else None
 
@@ -311,8 +321,18 @@ class SemiParametricGP:
         validate = len(starts) > 1 and n_val >= 2
         fit_idx, val_idx = (idx[:-n_val], idx[-n_val:]) if validate else (idx, idx[:0])
         U1, Y1, F1 = Us[fit_idx], Y[fit_idx], Fs[fit_idx]
-        candidates = [c for s in starts
-                      if (c := self._optimise(s, bounds, sizes, resid, U1, Y1, F1, self.maxiter))]
+
+        def run(s):
+            return self._optimise(s, bounds, sizes, resid, U1, Y1, F1, self.maxiter)
+
+        if (
+            self.jobs > 1 and len(starts) > 1
+        ):  # independent starts in threads (LAPACK drops the GIL)
+            with ThreadPoolExecutor(max_workers=self.jobs) as pool:
+                results = list(pool.map(run, starts))
+        else:
+            results = [run(s) for s in starts]
+        candidates = [c for c in results if c]
         if not candidates:
             raise NumericalError(
                 "hyperparameter optimisation failed from every start; "

@@ -30,8 +30,14 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #: is exactly linear in qdd), W has a flat prior (σ_w fixed large: no shrinkage handing physics
 #: to the GP), σ_z has a prior at the size of the parametric fit's residual, log ℓ a weak prior,
 #: and an extra start is judged on a held-out 20 % of the training samples.
-DEFAULT_GUARD = Guard(max_lengthscale=None, lengthscale_prior=(0.0, 1.5), amplitude_prior=0.5,
-                      validation_fraction=0.2, restarts=1, fix_sigma_w=True)
+DEFAULT_GUARD = Guard(
+    max_lengthscale=None,
+    lengthscale_prior=(0.0, 1.5),
+    amplitude_prior=0.5,
+    validation_fraction=0.2,
+    restarts=1,
+    fix_sigma_w=True,
+)
 GUARD_GP_INPUTS = ("q", "qd")
 
 
@@ -48,7 +54,7 @@ class SGPOptions:
     n_inducing : int, inducing inputs (k-means) for sparse inference
     restarts : int, extra hyperparameter starts (the first: short length-scales; then random)
     seed : int
-    jobs : int, reserved for parallel restarts (the fit is single-process today)
+    jobs : int, hyperparameter starts optimised in parallel threads
     guard : bool, turn the SGP guard on (``guard_options``, GP on ``gp_inputs``); SGP only
     guard_options : Guard or None, None = DEFAULT_GUARD
     gp_inputs : streams the GP sees; None = (q, qd, qdd), or (q, qd) when the guard is on
@@ -247,6 +253,7 @@ class DynamicsModel:
             n_inducing=o.n_inducing,
             hyper_max=o.hyper_max,
             maxiter=o.maxiter,
+            jobs=o.jobs,
         )
 
     # ------------------------------------------------------------------ fit
