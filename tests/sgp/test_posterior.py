@@ -89,3 +89,15 @@ def test_sparse_with_few_inducing_points_is_an_approximation():
     sparse = fit_posterior(kernels, U, Y, F, hp, inducing=U[:5]).predict(Uq, Fq)
     assert not np.allclose(exact[0], sparse[0], atol=1e-6)  # the test above is not vacuous
     assert np.all(sparse[1] >= 0)
+
+
+def test_failed_cholesky_raises_numerical_error_with_a_hint():
+    import pytest
+
+    from diegocal.errors import NumericalError
+    from diegocal.sgp.gp import cholesky
+
+    with pytest.raises(NumericalError, match="min_noise"):
+        cholesky(-np.eye(3), "test matrix")
+    L, jitter = cholesky(np.ones((4, 4)), "rank-one matrix")  # repeated inputs: jitter rescues it
+    assert jitter > 0 and np.allclose(L @ L.T, np.ones((4, 4)), atol=1e-3)
