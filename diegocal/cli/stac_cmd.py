@@ -1,1 +1,187 @@
-"""CLI commands of this domain (attach to diegocal.cli.app.app / simulate_app)."""
+"""`diegocal stac LOG` (thesis ch. 2) and the calib.yaml predictor of `diegocal predict`."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from diegocal.cli.app import app
+from diegocal.cli.common import cli_errors, default_output, summary
+from diegocal.cli.predict_cmd import PredictOptions, register_predictor
+from diegocal.errors import FitError
+from diegocal.io import load_log, load_yaml, make_stream, save_log, save_yaml
+from diegocal.io.log import Log
+from diegocal.robot import Robot, load_robot, resolve_robot_dir
+from diegocal.stac.calibration import Calibration
+from diegocal.stac.result import StacOptions, StacResult
+
+METHODS = ("stac", "classical", "ekf", "nominal")
+
+
+def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> StacResult:
+    """Dispatch to the calibration method; classical/EKF are imported lazily."""
+    if method == "stac":
+        from diegocal.stac.stac import calibrate
+
+        return calibrate(log, robot, options)
+    if method == "nominal":
+        from diegocal.stac.model import Observation
+        from diegocal.stac.stac import initial_q
+
+        obs = Observation(log, robot)
+        cal = Calibration.nominal(robot)
+        return StacResult(cal, initial_q(obs, obs.params_from(cal), options))
+    try:
+        if method == "classical":
+            from diegocal.stac.classical import calibrate_classical
+
+            return calibrate_classical(log, robot, options, nonlinear="constrain")
+        if method == "ekf":
+            from diegocal.stac.ekf import calibrate_ekf
+
+            return calibrate_ekf(log, robot, options)
+    except ImportError:
+        raise FitError(f"method {method!r} is not available in this build") from None
+    raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
+
+
+def q_log_path(calib_path: Path) -> Path:
+    """``<stem>.q.h5`` beside calib.yaml (``x.calib.yaml`` -> ``x.q.h5``)."""
+    name = calib_path.name
+    for suffix in (".calib.yaml", ".yaml", ".yml"):
+        if name.endswith(suffix):
+            return calib_path.with_name(name[: -len(suffix)] + ".q.h5")
+    return calib_path.with_name(name + ".q.h5")
+
+
+@app.command("stac")
+@cli_errors
+def stac(
+    log: Annotated[Path, typer.Argument(help="Log with pots and markers streams.")],
+    robot: Annotated[
+        str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")
+    ] = None,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="calib.yaml [default: <log>.calib.yaml].")
+    ] = None,
+    method: Annotated[str, typer.Option(help="stac | classical | ekf | nominal.")] = "stac",
+    loss: Annotated[
+        str, typer.Option(help="linear (Gaussian, eq. 2.21) | huber (robust).")
+    ] = "linear",
+    max_iterations: Annotated[int, typer.Option("--max-iterations", min=1)] = 50,
+    schedule: Annotated[
+        str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")
+    ] = "lm-iter",
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the q-phase.")] = 1,
+    seed: Annotated[int, typer.Option(help="Random seed (STAC itself is deterministic).")] = 0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
+    if method not in METHODS:
+        raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
+    data = load_log(log)
+    model = load_robot(resolve_robot_dir(robot, data.robot))
+    options = StacOptions(
+        max_iterations=max_iterations,
+        loss=loss,
+        jobs=jobs,
+        seed=seed,
+        quiet=quiet,
+        schedule=schedule,
+    )
+    result = run_method(method, data.without_truth(), model, options)
+    out = output or default_output(log, ".calib.yaml")
+    meta = {
+        "log": str(Path(log).resolve()),
+        "robot": str(model.directory or model.name),
+        "command": " ".join(["diegocal", *sys.argv[1:]]) if sys.argv else "diegocal stac",
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    cal = replace(result.calibration, meta=meta)
+    save_yaml(cal.to_dict(), out)
+    qpath = q_log_path(Path(out))
+    save_log(
+        Log(
+            data.time,
+            {"q": make_stream(model.joint_names, result.q)},
+            robot=data.robot,
+            rate_hz=data.rate_hz,
+        ),
+        qpath,
+    )
+    rows = [
+        ("method", cal.method),
+        ("frames", data.n_samples),
+        ("pots", len(cal.pot_names)),
+        ("markers", len(cal.marker_names)),
+        ("iterations", cal.fit.iterations),
+        ("converged", str(cal.fit.converged)),
+        ("cost", cal.fit.cost),
+        ("seconds", cal.fit.seconds),
+    ]
+    rows += [(f"σ {g}", v) for g, v in cal.sigma_by_group.items()]
+    rows += [("calibration", str(out)), ("joint angles", str(qpath))]
+    summary(f"stac {Path(log).name}", rows, quiet=quiet)
+
+
+def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
+    """`diegocal predict calib.yaml LOG --from pots --to markers` (thesis §2.7.2)."""
+    from diegocal.stac.predict import predict
+
+    cal = Calibration.from_dict(load_yaml(model_path), source=str(model_path))
+    data = load_log(log_path)
+    model = load_robot(resolve_robot_dir(opts.robot, data.robot))
+    pred = predict(
+        data.without_truth(),
+        model,
+        cal,
+        opts.sensors_from,
+        opts.sensors_to,
+        StacOptions(jobs=opts.jobs, quiet=opts.quiet, seed=opts.seed),
+    )
+    out = opts.output or default_output(log_path, ".prediction.h5")
+    streams = {"q": make_stream(model.joint_names, pred.q)}
+    if pred.pot_names:
+        streams["pots"] = make_stream(pred.pot_names, pred.pots)
+    if pred.marker_names:
+        streams["markers"] = make_stream(pred.marker_names, pred.markers)
+    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), out)
+    _record_prediction(model_path, log_path, pred)
+    unit = {"markers": "m"}
+    rows = [(f"{t} ({unit.get(t, 'sensor unit')})", pred.mae[t]) for t in pred.targets]
+    summary(
+        f"cross-sensor prediction MAE from {'+'.join(pred.sources)} (thesis Tables 2.1-2.2)",
+        rows + [("prediction", str(out))],
+        columns=("target", "MAE"),
+        quiet=opts.quiet,
+    )
+
+
+def _record_prediction(model_path: Path, log_path: Path, pred) -> None:
+    """Add the MAE row to calib.yaml's ``prediction`` list (the report's cross-sensor table)."""
+    data = load_yaml(model_path)
+    rows = [
+        r
+        for r in data.get("prediction") or []
+        if not (
+            r.get("log") == str(Path(log_path).resolve()) and r.get("from") == list(pred.sources)
+        )
+    ]
+    rows.append(
+        {
+            "log": str(Path(log_path).resolve()),
+            "from": list(pred.sources),
+            "mae": {k: float(v) for k, v in pred.mae.items() if np.isfinite(v)},
+        }
+    )
+    data["prediction"] = rows
+    save_yaml(data, model_path)
+
+
+register_predictor("calib", predict_calib)

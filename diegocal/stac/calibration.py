@@ -48,7 +48,7 @@ class Calibration:
     mocap_R : (3, 3) rotation from base link to mocap frame; mocap_T : (3,) translation, m
     sigma_pots, sigma_markers : noise standard deviations (V, m), §2.3.5
     method : 'stac' | 'classical' | 'ekf' | 'nominal'
-    sigma_by_group : noise level per sensor type ('rotary', 'linear', 'tendon', 'encoder', 'markers')
+    sigma_by_group : noise level per sensor type (rotary, linear, tendon, encoder, markers)
     history : per-iteration records as dicts {iteration, cost, sigma_pots, sigma_markers, seconds}
     meta : {log, robot, command, created}, where the calibration came from
     """

@@ -6,7 +6,7 @@ the joint placements and axes from the Pinocchio model once and then evaluates, 
 at once, the chain of 3x3 products ``world_T_joint[j] = world_T_joint[parent] @ placement[j] @
 motion(q_j)``. The point Jacobian columns are the standard geometric ones (thesis eq. 2.23):
 
-.. math:: \\partial x / \\partial q_j = a_j \\times (x - o_j) \\ (revolute), \\quad a_j \\ (prismatic)
+.. math:: \\partial x / \\partial q_j = a_j \\times (x - o_j) \\ (revolute), \\quad a_j \\ (prism.)
 
 for every joint j that is an ancestor of the point's link, with ``a_j`` the joint axis and
 ``o_j`` its origin, everything expressed in the base frame. When joints also move the base

@@ -39,7 +39,7 @@ class Params:
 
 @dataclass(frozen=True)
 class State:
-    """What the p-phase needs at fixed q: s (T, P) and marker link poses Rl (T, M, 3, 3), pl (T, M, 3)."""
+    """The p-phase's input at fixed q: s (T, P), marker link poses Rl (T, M, 3, 3), pl (T, M, 3)."""
 
     s: np.ndarray
     Rl: np.ndarray
@@ -94,6 +94,14 @@ class Observation:
         rows = [2 * lin_all.index(self.pot_index[i]) + k for i in self.linear for k in (0, 1)]
         self.anchors = PointSet(tuple(full.links[r] for r in rows), full.xyz[rows].reshape(-1, 3))
         self.n_frames = T
+        # q is projected onto the joint limits widened by a margin: a joint's zero is only known up
+        # to its pot's bias error (and exactly so for gauge joints, see _gauge_biases), so the
+        # tracked angles may legitimately sit past the nominal URDF limit by that much
+        lo, hi = robot.lower.copy(), robot.upper.copy()
+        bad = ~np.isfinite(lo) | ~np.isfinite(hi)
+        lo[bad], hi[bad] = -np.inf, np.inf
+        margin = np.where(bad, 0.0, 0.25 * (hi - lo) + np.where(self.kin.prismatic, 0.0, 0.3))
+        self.lower, self.upper = lo - margin, hi + margin
         self.fixed_bias = np.zeros(len(self.pot_index), dtype=bool)
 
     @property
@@ -106,14 +114,14 @@ class Observation:
 
     # ------------------------------------------------------------------ checks
     def check_observable(self) -> None:
-        """Every pot must move some marker, else its gain and bias cannot be told from q (§2.5.1)."""
+        """Every pot must move some marker, else its gain/bias cannot be told from q (§2.5.1)."""
         if self.n_markers == 0:
             raise FitError("STAC needs markers: the log's 'markers' stream has no channels")
         moving = [self.kin.moves(link) for link in self.marker_links]
         if not any(moving):
             raise FitError(
-                f"every marker is on a link fixed to the base link {self.robot.sensors.base_link!r}: joint angles "
-                "and pot gains/biases are unobservable; put markers on moving links"
+                "every marker is on a link fixed to the base link "
+                f"{self.robot.sensors.base_link!r}: joint angles and pot gains/biases are unobservable; put markers on moving links"
             )
         if not self.valid.any(axis=0).all():
             dead = [
@@ -127,7 +135,8 @@ class Observation:
             if cols is not None and len(cols) and not seen[cols].any():
                 names = ", ".join(self.robot.joint_names[c] for c in cols)
                 raise FitError(
-                    f"pot {p.name!r}: no marker moves with joint(s) {names}; its gain/bias is unobservable"
+                    f"pot {p.name!r}: no marker moves with joint(s) {names}; "
+                    "its gain/bias is unobservable"
                 )
         self.fixed_bias = self._gauge_biases(joints)
         if self.n_frames < 10:
@@ -166,8 +175,9 @@ class Observation:
     def evaluate(self, q: np.ndarray, xyz: np.ndarray | None = None):
         """Transmission and marker link poses for a batch q (B, n).
 
-        Returns (s (B, P), ds (B, P, n) or None, Rl (B, M, 3, 3), pl (B, M, 3), Jx (B, M, 3, n) or None);
-        the Jacobians are computed when ``xyz`` (M, 3), the marker positions they are taken at, is given.
+        Returns (s (B, P), ds (B, P, n) or None, Rl (B, M, 3, 3), pl (B, M, 3),
+        Jx (B, M, 3, n) or None); the Jacobians are computed when ``xyz`` (M, 3), the marker
+        positions they are taken at, is given.
         """
         poses = self.kin.joint_poses(q)
         s = q @ self.A.T
@@ -216,7 +226,7 @@ class Observation:
     def to_calibration(
         self, params: Params, se: dict, sigma: dict, method: str, fit=None
     ) -> Calibration:
-        """A full-robot Calibration: sensors absent from the log keep their nominal values (SE NaN)."""
+        """A full-robot Calibration: sensors absent from the log keep nominal values (SE NaN)."""
         nom = Calibration.nominal(self.robot)
         gain, bias, xyz = nom.gain.copy(), nom.bias.copy(), nom.marker_xyz.copy()
         gse, bse = np.full(len(gain), np.nan), np.full(len(gain), np.nan)

@@ -49,7 +49,10 @@ def kabsch(xb: np.ndarray, x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np
 
 
 def marker_means(obs: Observation, st: State, R, T, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 2.17: d_m = weighted mean of h_r⁻¹ (R⁻¹ (x − T0) − h_p) over frames; returns d (M, 3), SE (M, 3)."""
+    """Eq. 2.17: d_m = weighted mean of h_r⁻¹ (R⁻¹ (x − T0) − h_p) over frames.
+
+    Returns d (M, 3) and its standard error (M, 3), m.
+    """
     xb = np.nan_to_num(obs.markers - T) @ R  # R⁻¹ (x − T0), row form
     local = np.einsum("tmji,tmj->tmi", st.Rl, xb - st.pl)  # h_rᵀ (… − h_p)
     sw = w.sum(0)  # (M,)

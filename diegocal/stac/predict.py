@@ -55,7 +55,8 @@ def _groups(names, obs: Observation, what: str) -> set[str]:
     missing = sorted(out - present)
     if missing:
         raise FitError(
-            f"--{what} {', '.join(missing)}: the log has no sensors of that type (it has {', '.join(obs.groups)})"
+            f"--{what} {', '.join(missing)}: the log has no sensors of that type "
+            f"(it has {', '.join(obs.groups)})"
         )
     return out
 
@@ -66,10 +67,11 @@ def predict(
     calibration: Calibration,
     sources=("pots",),
     targets=("markers",),
-    options: StacOptions = StacOptions(),
+    options: StacOptions | None = None,
     max_steps: int = 40,
 ) -> Prediction:
-    """Track q from ``sources`` with the calibration fixed and predict ``targets`` (thesis §2.7.2)."""
+    """Track q from ``sources`` with the calibration fixed; predict ``targets`` (thesis §2.7.2)."""
+    options = options or StacOptions()
     obs = Observation(log, robot, need=(), needed_by="predict")
     src = _groups(sources, obs, "from")
     tgt = _groups(targets, obs, "to")

@@ -51,7 +51,7 @@ def irls_weight(z: np.ndarray, loss: str, k: float) -> np.ndarray:
 
 
 def residuals(obs: Observation, params: Params, noise: Noise, s, Rl, pl, pots, markers, valid):
-    """Standardised residuals of a batch: pots (B, P), markers' norms (B, M) and vectors (B, M, 3)."""
+    """Standardised residuals of a batch: pots (B, P), marker norms (B, M) and vectors (B, M, 3)."""
     zp = (params.gain * s + params.bias - pots) / noise.sig_p
     xb = np.einsum("bmij,mj->bmi", Rl, params.xyz) + pl
     rx = np.where(
@@ -84,6 +84,7 @@ def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarr
     c0 = np.zeros(B)
     parts = {}
     wp = np.zeros_like(zp)
+    J = w3 = None
     if noise.use_pots and obs.n_pots:
         Jp = ds * (params.gain / noise.sig_p)[None, :, None]  # eq. 2.22
         wp = irls_weight(zp, noise.loss, noise.huber)
@@ -101,7 +102,8 @@ def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarr
         H += parts[MARKERS]
         g += np.einsum("brn,br->bn", J, w3 * rx.reshape(B, -1))
         c0 += rho(zx, noise.loss, noise.huber).sum(1)
-    return H, g, c0, (s, Rl, pl), redundancy(H, parts), (ds, wp, zp)
+    extra = {"ds": ds, "wp": wp, "zp": zp, "Jx": J, "wx": w3, "rx": rx, "valid": valid}
+    return H, g, c0, (s, Rl, pl), redundancy(H, parts), extra
 
 
 def redundancy(H: np.ndarray, parts: dict) -> dict:
@@ -119,7 +121,7 @@ def redundancy(H: np.ndarray, parts: dict) -> dict:
 
 
 def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl):
-    lo, hi = obs.robot.lower, obs.robot.upper
+    lo, hi = obs.lower, obs.upper
     H, g, c0, (s, Rl, pl), red, _ = normal_equations(obs, params, noise, q, sl)
     q, lam = q[sl], lam[sl]
     pots, markers, valid = obs.pots[sl], obs.markers[sl], obs.valid[sl]
@@ -152,7 +154,8 @@ def q_step(
 ):
     """One LM step on every frame.
 
-    Returns (q (T, n), λ (T,), State at the new q, cost (T,), redundancy {group: Σ tr_g} at the old q).
+    Returns (q (T, n), λ (T,), State at the new q, cost (T,), redundancy {group: Σ tr_g} at
+    the old q).
     """
     slices = [slice(i, min(i + batch, q.shape[0])) for i in range(0, q.shape[0], batch)]
     if jobs > 1 and len(slices) > 1:

@@ -12,7 +12,7 @@ from diegocal.stac.calibration import Calibration
 
 @dataclass(frozen=True)
 class IterationRecord:
-    """One outer iteration: total cost (negative log-likelihood up to a constant), noise levels, time."""
+    """One outer iteration: cost (negative log-likelihood up to a constant), noise levels, time."""
 
     iteration: int
     cost: float

@@ -35,7 +35,7 @@ from diegocal.errors import FitError
 from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac.calibration import FitInfo
-from diegocal.stac.joint_step import joint_step
+from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.pphase import p_phase
 from diegocal.stac.qphase import Noise, normal_equations, pot_sigmas, q_step, rho
@@ -43,7 +43,6 @@ from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 
 SCHEDULES = ("lm-iter", "lm-batch", "bfgs")
 LOSSES = ("linear", "huber")
-SIGMA_SETTLE = 1e-3  # relative cost change at fixed σ below which σ is re-estimated
 
 
 def check_options(options: StacOptions) -> None:
@@ -73,7 +72,7 @@ def initial_q(
     for j in direct:
         col = robot.joint_index(obs.pot_specs[j].joint)
         q[:, col] = np.clip(
-            (obs.pots[:, j] - params.bias[j]) / params.gain[j], robot.lower[col], robot.upper[col]
+            (obs.pots[:, j] - params.bias[j]) / params.gain[j], obs.lower[col], obs.upper[col]
         )
     if len(direct) < use.sum():
         scale = np.where(use, np.maximum(np.std(obs.pots, axis=0), 1e-6), np.inf)
@@ -140,7 +139,7 @@ def _update_sigma(obs, params, st, used) -> dict:
     return {g: max(v, 1e-9) for g, v in new.items()}
 
 
-def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> StacResult:
+def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> StacResult:
     """STAC (thesis §2.2-2.3): calibrate pots, markers and the mocap frame; track q.
 
     Parameters
@@ -154,6 +153,7 @@ def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> S
     StacResult with the Calibration (values, standard errors, σ per type, cost history) and
     q (T, n) rad, the tracked joint angles.
     """
+    options = options or StacOptions()
     check_options(options)
     t0 = time.perf_counter()
     obs = Observation(log, robot)
@@ -166,7 +166,9 @@ def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> S
     ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
     params = ph.params
     history: list[IterationRecord] = []
-    converged, prev, prev_fixed = False, np.inf, np.inf
+    converged, prev = False, np.inf
+    n_obs = obs.pots.size + 3 * int(obs.valid.sum())
+    aitken = _SigmaAitken()
     lam = np.full(obs.n_frames, 1e-2)
     bfgs = _BfgsSchedule(obs, options) if options.schedule == "bfgs" else None
     accel = Anderson(options.anderson) if options.anderson and bfgs is None else None
@@ -175,14 +177,16 @@ def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> S
         noise = _noise(obs, sigma, options)
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
-            q_j, used = joint_step(obs, params, noise, q, lam, options.batch_size)
-            st_j = obs.state(q_j, options.batch_size)
+            params_j, used, _ = theta_step(obs, params, noise, q, lam)
+            q_j, lam_j, st_j, _, _ = q_step(
+                obs, params_j, noise, q, lam, options.batch_size, options.jobs
+            )
             ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
             cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
             if os.environ.get("STAC_DEBUG"):
                 print("joint", it, cost_j - cost)
             if cost_j < cost:
-                q, st, ph, cost, stepped = q_j, st_j, ph_j, cost_j, True
+                q, lam, st, ph, cost, stepped = q_j, lam_j, st_j, ph_j, cost_j, True
         if not stepped:
             q_old = q
             if bfgs is not None:
@@ -202,7 +206,7 @@ def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> S
             ):  # Anderson extrapolation of the (q -> q-phase(p-phase(q))) fixed point
                 q_mix = accel.mix(q_old, q)
                 if q_mix is not None:
-                    q_mix = np.clip(q_mix, robot.lower, robot.upper)
+                    q_mix = np.clip(q_mix, obs.lower, obs.upper)
                     st_mix = obs.state(q_mix, options.batch_size)
                     ph_mix = p_phase(obs, st_mix, params, *weights(obs, params, st_mix, noise))
                     cost_mix = total_cost(obs, ph_mix.params, st_mix, noise, sigma)
@@ -211,14 +215,11 @@ def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> S
                     else:
                         accel.reset()
         params = ph.params
-        settled = abs(prev_fixed - cost) < SIGMA_SETTLE * max(abs(cost), obs.n_frames)
-        prev_fixed = cost
-        if settled:  # §2.3.5, once (q, θ) have settled for the current σ
-            sigma = _update_sigma(obs, params, st, used)
-            cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
-            prev_fixed = np.inf
-            if accel is not None:
-                accel.reset()
+        raw = _update_sigma(obs, params, st, used)  # §2.3.5, every iteration
+        sigma = aitken.push(raw)
+        cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
+        if accel is not None:
+            accel.reset()
         history.append(
             IterationRecord(
                 it,
@@ -230,12 +231,18 @@ def calibrate(log: Log, robot: Robot, options: StacOptions = StacOptions()) -> S
         )
         if options.on_iteration is not None:
             options.on_iteration(it, obs.to_calibration(params, ph.se, sigma, "stac"))
-        if abs(prev - cost) < options.tolerance * max(abs(cost), obs.n_frames):
+        # converged when the cost (nats) moves by less than 10 x tolerance per reading
+        if abs(prev - cost) < 10 * options.tolerance * n_obs:
             converged = True
             break
         prev = cost
+    # standard errors with q marginalised (Schur complement at the solution), not the p-phase's
+    # conditional-on-q ones, which ignore the joint-angle uncertainty
+    se = ph.se
+    if obs.n_pots:
+        _, _, se = theta_step(obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames))
     fit = FitInfo(history[-1].cost, len(history), converged, time.perf_counter() - t0)
-    cal = obs.to_calibration(params, ph.se, sigma, "stac", fit)
+    cal = obs.to_calibration(params, se, sigma, "stac", fit)
     cal = _with_history(cal, history)
     return StacResult(cal, q, tuple(history))
 
@@ -261,6 +268,32 @@ def _with_history(cal, history):
             for h in history
         ),
     )
+
+
+class _SigmaAitken:
+    """Aitken Δ² extrapolation of the σ fixed-point iteration (§2.3.5), on log σ per type.
+
+    σ_g² = RSS_g / (N_g − tr_g) converges linearly, slowly when one type dominates the joint
+    angles (ratio ~0.8 per iteration on the finger). When three successive raw values shrink
+    geometrically (ratio r in (0, 0.9)) the limit s₂ + Δ₂ r / (1 − r) is used instead.
+    """
+
+    def __init__(self):
+        self.hist: list[dict] = []
+
+    def push(self, raw: dict) -> dict:
+        self.hist = (self.hist + [raw])[-3:]
+        if len(self.hist) < 3:
+            return raw
+        out = dict(raw)
+        for g in raw:
+            s0, s1, s2 = (np.log(h[g]) for h in self.hist)
+            d1, d2 = s1 - s0, s2 - s1
+            if d1 != 0 and 0 < d2 / d1 < 0.9:
+                r = d2 / d1
+                out[g] = float(np.exp(s2 + d2 * r / (1 - r)))
+        self.hist = []  # restart from raw values after an extrapolation
+        return out
 
 
 class Anderson:
@@ -309,7 +342,7 @@ class _BfgsSchedule:
         from scipy.optimize import minimize
 
         obs, T, n = self.obs, self.obs.n_frames, self.obs.robot.n_joints
-        bounds = list(zip(np.tile(obs.robot.lower, T), np.tile(obs.robot.upper, T), strict=True))
+        bounds = list(zip(np.tile(obs.lower, T), np.tile(obs.upper, T), strict=True))
 
         def parts(x):
             return [

@@ -182,7 +182,7 @@ def smooth_q(robot, n_frames: int, rate_hz: float, rng) -> np.ndarray:
 
 
 def true_calibration(robot, rng, gain_err=0.2, bias_err=0.3) -> Calibration:
-    """Gains off by up to ±gain_err, biases by up to ±bias_err rad (in the pot's units), random mocap pose."""
+    """Gains off by up to ±gain_err, biases by up to ±bias_err rad (pot units), random mocap."""
     nom = Calibration.nominal(robot)
     kinds = [p.kind for p in robot.sensors.pots]
     scale = np.array(
@@ -224,8 +224,11 @@ def simulate(
     rng = np.random.default_rng(seed)
     truth = truth or true_calibration(robot, rng)
     q = smooth_q(robot, n_frames, rate_hz, rng)
-    pots = predict_pots(robot, q, truth.gain, truth.bias) + rng.normal(
-        0, sigma_pots, (n_frames, len(truth.gain))
+    tendon = np.array([p.kind == "tendon" for p in robot.sensors.pots])
+    noise = np.where(tendon, 0.04 * sigma_pots, sigma_pots)  # tendons read metres, not volts
+    pots = (
+        predict_pots(robot, q, truth.gain, truth.bias)
+        + rng.normal(0, 1, (n_frames, len(truth.gain))) * noise
     )
     mk = predict_markers(robot, q, truth.marker_xyz, truth.mocap_R, truth.mocap_T)
     mk = mk + rng.normal(0, sigma_markers, mk.shape)
