@@ -14,12 +14,13 @@ import argparse
 import resource
 import sys
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
 
 from diegocal.io import load_log, save_log
-from diegocal.pneumatic import FitOptions, chamber_data, drift, fit_chambers
+from diegocal.pneumatic import FitOptions, chamber_data, drift, fit_chamber, fit_chambers
 from diegocal.pneumatic.params import NAMES
 from diegocal.robot import load_robot
 from diegocal.sim.pneumatics import PneumaticSimOptions, simulate_pneumatics
@@ -34,6 +35,24 @@ def peak_rss_mb() -> tuple[float, float]:
         resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / k,
         resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / k,
     )
+
+
+def cpu_seconds() -> float:
+    """User + system CPU time of this process and its finished children, s."""
+    me, kids = (
+        resource.getrusage(resource.RUSAGE_SELF),
+        resource.getrusage(resource.RUSAGE_CHILDREN),
+    )
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def traced_peak_mb(data) -> float:
+    """Peak memory allocated (tracemalloc, numpy included) by one chamber's fit, MB."""
+    tracemalloc.start()
+    fit_chamber(data, FitOptions())
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 2**20
 
 
 def simulate(robot, sessions: int, seed: int, cache: Path | None):
@@ -77,14 +96,15 @@ def main() -> None:
     ):
         if jac == "2-point" and args.skip_fd:
             continue
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), cpu_seconds()
         batch = fit_chambers(datasets, FitOptions(jacobian=jac), jobs=args.jobs)
-        wall = time.perf_counter() - t
+        wall, cpu = time.perf_counter() - t, cpu_seconds() - cpu
         nfev = np.median([f.nfev for f in batch.fits.values()])
         rows.append(
             (
                 label,
                 wall,
+                cpu,
                 len(batch.fits),
                 nfev,
                 *peak_rss_mb(),
@@ -95,14 +115,24 @@ def main() -> None:
             fits = batch.fits
     print(f"\n== fit: {len(names)} chambers x {log.n_samples} samples, --jobs {args.jobs}")
     print(
-        f"{'method':<32}{'wall s':>8}{'fitted':>8}{'nfev':>6}{'RSS main MB':>13}"
-        f"{'RSS worker MB':>15}"
-        f"{'median cost':>13}"
+        f"{'method':<32}{'wall s':>8}{'CPU s':>8}{'fitted':>8}{'nfev':>6}{'RSS main MB':>13}"
+        f"{'RSS worker MB':>15}{'median cost':>13}"
     )
     for r in rows:
-        print(f"{r[0]:<32}{r[1]:8.1f}{r[2]:8d}{r[3]:6.0f}{r[4]:13.0f}{r[5]:15.0f}{r[6]:13.4g}")
+        print(
+            f"{r[0]:<32}{r[1]:8.1f}{r[2]:8.1f}{r[3]:8d}{r[4]:6.0f}{r[5]:13.0f}{r[6]:15.0f}"
+            f"{r[7]:13.4g}"
+        )
     if len(rows) == 2:
-        print(f"speed-up of the analytic Jacobian: {rows[1][1] / rows[0][1]:.1f}x")
+        print(f"analytic Jacobian: {rows[1][2] / rows[0][2]:.1f}x less CPU than finite differences")
+    print(
+        f"CPU per chamber (analytic): {rows[0][2] / len(names):.2f} s; an idle 2-core machine "
+        f"needs about {rows[0][2] / 2:.0f} s wall for all {len(names)} (wall above: shared machine)"
+    )
+    print(f"peak memory of one chamber's fit (tracemalloc): {traced_peak_mb(datasets[0]):.0f} MB")
+    print(
+        "(RSS includes the training log held by the main process and inherited by forked workers)"
+    )
 
     d_fit = np.array([fits[n].drift_2s for n in names])
     d_held = np.array(
