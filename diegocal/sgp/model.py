@@ -61,6 +61,7 @@ class SGPOptions:
     hyper_max : int, hyperparameters are learnt on at most this many samples (random subset)
     fit_sigma_w : bool, learn σ_w (True) or keep §3.3.4's large prior
     maxiter : int, L-BFGS-B iterations per start
+    min_noise : float, floor of σ_v relative to std(tau_j) (raise it for real, noisy torques)
     """
 
     kind: str = "sgp"
@@ -77,6 +78,7 @@ class SGPOptions:
     hyper_max: int = 1000
     fit_sigma_w: bool = True
     maxiter: int = 200
+    min_noise: float = 1e-4
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -121,6 +123,7 @@ class SGPOptions:
             "hyper_max": self.hyper_max,
             "fit_sigma_w": self.fit_sigma_w,
             "maxiter": self.maxiter,
+            "min_noise": self.min_noise,
         }
 
     @classmethod
@@ -254,6 +257,7 @@ class DynamicsModel:
             hyper_max=o.hyper_max,
             maxiter=o.maxiter,
             jobs=o.jobs,
+            min_noise=o.min_noise,
         )
 
     # ------------------------------------------------------------------ fit
