@@ -32,13 +32,13 @@ sample-data: $(STAMP)
 	$(BIN)/python scripts/make_sample_data.py sample_data
 
 # The main job on the bundled sample data: calibrate, fit, predict held-out, report.
-# The real TX40 and TIAGo logs of ../shared/data/real, converted to diegocal logs (not committed).
-real-data: $(STAMP)
-	$(BIN)/python scripts/convert_real.py out/real
-
 demo: $(STAMP)
 	@mkdir -p $(OUT)
-	$(DIEGOCAL) report sample_data/*.h5 -o $(OUT)/report.pdf
+	$(DIEGOCAL) stac sample_data/diego_kinematics.h5 -o $(OUT)/calib.yaml --quiet
+	$(DIEGOCAL) predict $(OUT)/calib.yaml sample_data/diego_kinematics_heldout.h5 --from pots --to markers -o $(OUT)/kinematics_prediction.h5
+	$(DIEGOCAL) pneumatic-fit sample_data/diego_pneumatics.h5 --all --jobs 2 -o $(OUT)/pneumatic.yaml --quiet
+	$(DIEGOCAL) sgp-fit sample_data/arm3_dynamics.h5 --model sgp -o $(OUT)/arm3.sgp --quiet
+	$(DIEGOCAL) report sample_data/diego_kinematics.h5 $(OUT)/calib.yaml $(OUT)/pneumatic.yaml $(OUT)/arm3.sgp -o $(OUT)/report.pdf
 	@echo "wrote $(OUT)/report.pdf"
 
 bench: $(STAMP)
