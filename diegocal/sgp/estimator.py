@@ -185,7 +185,6 @@ class SemiParametricGP:
 
     def _initial(self, Us, Y, Fs) -> tuple[Hyperparameters, np.ndarray]:
         """§3.3.4 heuristics: σ_v² = var(y)/100, σ_z² = var(y), ℓ = spread of u, σ_w large."""
-        Y.shape[1]
         var = self.y_std_**2
         resid = self._parametric_residual_std(Y, Fs)
         thetas = []
@@ -213,7 +212,7 @@ class SemiParametricGP:
         r = Y - Fs @ w
         return np.maximum(r.std(0), 1e-6 * self.y_std_)
 
-    def _bounds(self, hp0: Hyperparameters, resid):
+    def _bounds(self, hp0: Hyperparameters):
         n = len(self.kernels)
         lo, hi = [], []
         if self.fit_sigma_w and not self.guard.fix_sigma_w and self.use_features:
@@ -310,7 +309,7 @@ class SemiParametricGP:
             idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
         hp0, resid = self._initial(Us[idx], Y, Fs)
         sizes = [0 if k is None else k.n_params for k in self.kernels]
-        bounds = self._bounds(hp0, resid)
+        bounds = self._bounds(hp0)
         lo, hi = [b[0] for b in bounds], [b[1] for b in bounds]
         has_gp = any(k is not None for k in self.kernels)
         n_extra = self.restarts + (self.guard.restarts if has_gp else 0)
