@@ -127,7 +127,7 @@ def make_log(robot, q, qd, qdd, tau, t=None):
     return Log(t, streams, robot=robot.name)
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def simulate():
     """simulate(robot, T, seed, noise=0.05, bump=None) -> (log, clean torque (T, n))."""
 

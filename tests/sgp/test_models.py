@@ -5,21 +5,42 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from diegocal.sgp import SGPOptions, fit_dynamics, load_model, nmse
+from diegocal.sgp import DynamicsModel, SGPOptions, fit_dynamics, load_model, nmse
 
 BUMP = (1, 0.0, 1.2, 1.5)  # extra viscous friction on the elbow for q ∈ (0, 1.2) rad: unmodelled
 
 
-def _data(arm2, simulate):
+@pytest.fixture(scope="module")
+def case(arm2, simulate):
+    """Training log, held-out log (another excitation) and its noise-free torques, with a bump."""
     train, _ = simulate(arm2, T=250, seed=0, bump=BUMP)
     test, clean = simulate(arm2, T=250, seed=1, bump=BUMP)
     return train, test, clean
 
 
-def test_sgp_beats_pr_on_held_out_data_with_an_unmodelled_effect(arm2, simulate):
-    train, test, clean = _data(arm2, simulate)
-    pr = fit_dynamics(train, arm2, SGPOptions(kind="pr")).predict(test)
-    sgp = fit_dynamics(train, arm2, SGPOptions(kind="sgp")).predict(test)
+@pytest.fixture(scope="module")
+def fitted(arm2, case):
+    """fitted(name) -> model, fitted once per module (pr, gp, prgp, sgp, sgp-noguard)."""
+    cache = {}
+    options = {
+        "pr": SGPOptions(kind="pr"),
+        "gp": SGPOptions(kind="gp"),
+        "prgp": SGPOptions(kind="prgp"),
+        "sgp": SGPOptions(kind="sgp"),
+        "sgp-noguard": SGPOptions(kind="sgp", guard=False),
+    }
+
+    def get(name):
+        if name not in cache:
+            cache[name] = fit_dynamics(case[0], arm2, options[name])
+        return cache[name]
+
+    return get
+
+
+def test_sgp_beats_pr_on_held_out_data_with_an_unmodelled_effect(case, fitted):
+    _, test, clean = case
+    pr, sgp = fitted("pr").predict(test), fitted("sgp").predict(test)
     e_pr, e_sgp = nmse(pr.tau, clean), nmse(sgp.tau, clean)
     assert e_sgp[1] < 0.5 * e_pr[1], (e_pr, e_sgp)  # the elbow, where the bump acts
     assert e_sgp[0] < 1.5 * e_pr[0] + 1e-3  # and no worse on the shoulder
@@ -31,9 +52,9 @@ def test_sgp_beats_pr_on_held_out_data_with_an_unmodelled_effect(arm2, simulate)
 
 
 @pytest.mark.parametrize("kind", ["gp", "prgp"])
-def test_baselines_predict_held_out_data(arm2, simulate, kind):
-    train, test, clean = _data(arm2, simulate)
-    model = fit_dynamics(train, arm2, SGPOptions(kind=kind))
+def test_baselines_predict_held_out_data(case, fitted, kind):
+    _, test, clean = case
+    model = fitted(kind)
     pred = model.predict(test)
     assert pred.tau.shape == clean.shape and np.all(pred.tau_std > 0)
     assert (model.parametric_ is None) == (kind == "gp")
@@ -41,14 +62,14 @@ def test_baselines_predict_held_out_data(arm2, simulate, kind):
     if kind == "gp":  # no physics: fine where the data are, clearly worse than the SGP
         assert np.all(err < 0.3)
     else:  # two stages: at least as good as PR alone
-        pr = fit_dynamics(train, arm2, SGPOptions(kind="pr")).predict(test)
+        pr = fitted("pr").predict(test)
         assert np.all(err <= 1.02 * nmse(pr.tau, clean) + 1e-4)
 
 
-def test_uncertainty_grows_away_from_the_training_data(arm2, simulate):
+def test_uncertainty_grows_away_from_the_training_data(case, fitted):
     """Thesis §3.5.1: the SGP knows that it does not know."""
-    train, _, _ = _data(arm2, simulate)
-    model = fit_dynamics(train, arm2, SGPOptions(kind="sgp", guard=False))
+    train = case[0]
+    model = fitted("sgp-noguard")
     q, qd, qdd = (train.stream(s).data[:50] for s in ("q", "qd", "qdd"))
     near = model.predict_arrays(q, qd, qdd).tau_std_latent
     far = model.predict_arrays(q, qd + 8.0, qdd).tau_std_latent  # velocities never seen
@@ -56,9 +77,9 @@ def test_uncertainty_grows_away_from_the_training_data(arm2, simulate):
 
 
 @pytest.mark.parametrize("kind", ["sgp", "prgp"])
-def test_save_load_round_trip(arm2, simulate, tmp_path, kind):
-    train, test, _ = _data(arm2, simulate)
-    model = fit_dynamics(train, arm2, SGPOptions(kind=kind))
+def test_save_load_round_trip(case, fitted, tmp_path, kind):
+    test = case[1]
+    model = fitted(kind)
     model.save(tmp_path / "m.sgp", meta={"log": "train.h5"})
     back = load_model(tmp_path / "m.sgp")
     a, b = model.predict(test), back.predict(test)
@@ -67,12 +88,14 @@ def test_save_load_round_trip(arm2, simulate, tmp_path, kind):
     assert back.hyperparameters_ == model.hyperparameters_
 
 
-def test_sparse_close_to_exact_on_the_same_data(arm2, simulate, tmp_path):
-    train, test, clean = _data(arm2, simulate)
-    exact = fit_dynamics(train, arm2, SGPOptions(kind="sgp", inference="exact"))
-    # auto switches to sparse above exact_max; same hyperparameter learning, DTC posterior
-    opts = SGPOptions(kind="sgp", inference="auto", exact_max=100, n_inducing=60)
-    sparse = fit_dynamics(train, arm2, opts)
+def test_sparse_close_to_exact_on_the_same_data(arm2, case, fitted, tmp_path):
+    train, test, clean = case
+    exact = fitted("sgp")
+    # auto switches to sparse above exact_max: same hyperparameters, DTC posterior (150 inducing)
+    opts = SGPOptions(kind="sgp", inference="auto", exact_max=100, n_inducing=150)
+    arrays = [train.stream(s).data for s in ("q", "qd", "qdd", "tau")]
+    state = {"base": exact.base_.to_dict(), "hyper": exact.gp_.hyper_}
+    sparse = DynamicsModel(arm2, opts).fit_arrays(*arrays, state=state)
     assert exact.gp_.inference == "exact" and sparse.gp_.inference == "sparse"
     e_exact = nmse(exact.predict(test).tau, clean)
     e_sparse = nmse(sparse.predict(test).tau, clean)
@@ -82,10 +105,9 @@ def test_sparse_close_to_exact_on_the_same_data(arm2, simulate, tmp_path):
     np.testing.assert_allclose(back.tau, sparse.predict(test).tau, rtol=1e-8, atol=1e-9)
 
 
-def test_guard_switches_gp_inputs_and_bounds(arm2, simulate):
-    train, _, _ = _data(arm2, simulate)
-    on = fit_dynamics(train, arm2, SGPOptions(kind="sgp", guard=True, maxiter=30))
-    off = fit_dynamics(train, arm2, SGPOptions(kind="sgp", guard=False, maxiter=30))
+def test_guard_switches_gp_inputs_and_priors(case, fitted):
+    train = case[0]
+    on, off = fitted("sgp"), fitted("sgp-noguard")
     ell_on = on.hyperparameters_["elbow"]["lengthscales"]
     ell_off = off.hyperparameters_["elbow"]["lengthscales"]
     assert not any(k.startswith("qdd.") for k in ell_on)
