@@ -15,11 +15,16 @@ sampled pressures by less than the sensor noise and that a Radau reference agree
 Sensors as in §4.5: pressures and pots are sampled fast and averaged over each 10 ms tick (the
 average of the sub-step trajectory, trapezoid rule) plus white noise of the averaged reading.
 
-Joints are moved by their cylinders (:class:`JointLoops`: a 1-DoF inertia and damping per joint,
-stopped at the ends of its travel) under a PD controller on the joint angle with random jumping
-references plus co-contraction and per-valve exploration, its commands clipped to 3-7 V (§4.5.3:
-"a simple PID controller W.R.T the potentiometer reading ... explore the state-space as
-violently as possible").
+Mechanics are not simulated (§4.2, "Independence from the Mechanics": given v and v̇ the pressure
+does not depend on them): the joints follow a violent band-limited random motion inside their
+limits and the valve commands (3-7 V, §4.5) are random steps and sweeps that explore the whole
+command range (§4.5.3: "explore the state-space as violently as possible"). So this is not the
+thesis's PID-driven flailing: a sealed chamber can be compressed above the supply pressure
+(rarely: ~0.05 % of samples above 650 kPa), which a real joint would resist. A variant with a
+1-DoF mechanics per joint driven by its pistons under a PD controller was tried: the closed
+loop makes trajectories sensitive to the step size (halving it moves samples by ~2 kPa RMS after
+3 s, through the timing of joint-limit hits), and the 9-parameter model's 2-s drift rose to a
+median of 5.5 % (max 12 %) of Pc - Pr; see the final report of this work.
 
 Chamber geometry keys (sensors.yaml ``chambers:``, all optional; defaults in brackets):
 ``side`` [+1 for *.flex, -1 otherwise], ``bore_area`` [2e-4 m²], ``stroke`` [0.04 m],
@@ -156,6 +161,25 @@ def random_valves(n: int, rng: np.random.Generator) -> ValveGeometry:
     )
 
 
+def smooth_random(rng, t, n, f_lo=0.05, f_hi=2.5, k=8):
+    """Band-limited random signals (sum of k sines, log-uniform frequencies) at times t (T,): (T, n)
+    values with unit-ish std, and their time derivative."""
+    f = np.exp(rng.uniform(np.log(f_lo), np.log(f_hi), (k, n)))
+    a = rng.normal(0.0, 1.0, (k, n)) * np.sqrt(2.0 / k)
+    ph = rng.uniform(0, 2 * np.pi, (k, n))
+    arg = 2 * np.pi * f[None] * t[:, None, None] + ph[None]
+    return np.einsum("tkn,kn->tn", np.sin(arg), a), np.einsum(
+        "tkn,kn->tn", np.cos(arg), a * 2 * np.pi * f
+    )
+
+
+def random_steps(rng, n_ticks, n, mean_hold, std):
+    """Piecewise-constant random levels (n_ticks, n), held for exponential durations (ticks)."""
+    switch = rng.random((n_ticks, n)) < 1.0 / mean_hold
+    levels = rng.normal(0.0, std, (n_ticks + 1, n))
+    return levels[np.cumsum(switch, axis=0), np.arange(n)]
+
+
 def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
     """Simulate every chamber of ``robot``; returns a log with pressure, valve, pots and /truth."""
     _check_options(options)
@@ -169,52 +193,54 @@ def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
     room = np.array([c.room for c in robot.sensors.chambers]) * KPA
     n_ticks = int(round(options.duration * options.rate_hz))
     dt_tick = 1.0 / options.rate_hz
-    dt = dt_tick / options.substeps
-    loop = joint_loops(robot, cyl, locked=options.experiment == "steady-state")
-    plan = _plan(options, loop, cyl, n_ticks, S, rng)  # references and exploration, (n_ticks, S, .)
-    effects, lag, delayed, leak, droop, droop_shared, offset = _effects(
-        options, names, dt_tick, rng
-    )
-    # Sessions and chambers are independent: pressures are (S*C,) flat columns, joints (S, J).
+    n_sub = options.substeps
+    t_tick = np.arange(n_ticks + 1) * dt_tick
+    q_fns = [_joint_motion(robot, cyl, options, rng) for _ in range(S)]
+    # (n_ticks, S, C): the command held over each tick, per session
+    u = np.stack([_valve_commands(options, cyl, n_ticks, rng) for _ in range(S)], axis=1)
+    effects, u_spool, leak, droop, droop_shared, offset = _effects(options, names, u, dt_tick, rng)
+    # Sessions and chambers are independent: integrate them together as S*C flat columns.
     flat = lambda x: np.broadcast_to(x, (S, C)).ravel()  # noqa: E731
     supply_f, room_f, droop_f = flat(supply), flat(room), flat(droop)
     p = room_f.copy()
-    q = np.broadcast_to(loop.mid, (S, loop.mid.size)).copy()
-    qd = np.zeros_like(q)
     p_avg = np.empty((n_ticks + 1, S * C))
     p_avg[0] = p
-    q_log = np.empty((n_ticks + 1, S, loop.mid.size))
-    q_log[0] = q
-    u_log = np.empty((n_ticks, S, C))
     m_supply = np.zeros(S * C)
-    for i in range(n_ticks):
-        u_log[i] = _controller(options, loop, cyl, plan, i, q, qd)  # §4.5.3: PD on the pots
-        u_spool = u_log[i].copy()
-        u_spool[:, delayed] = u_log[max(i - lag, 0)][:, delayed]
-        a_c, a_r = valve.areas(u_spool)
-        a_c, a_r = a_c.ravel(), (a_r + leak).ravel()
-        acc = np.zeros(S * C)
-        for _ in range(options.substeps):
-            vol, vol_rate = (x.ravel() for x in cyl.volume(q[:, loop.col], qd[:, loop.col]))
-            # supply droop: kPa per g/s = 1e6 Pa per kg/s, on the session's total or own flow
-            flow = np.repeat(m_supply.reshape(S, C).sum(1), C) if droop_shared else m_supply
-            p, mean, m_supply = _substep(
-                p, a_c, a_r, supply_f - droop_f * flow * 1e6, room_f, vol, vol_rate, dt, gas
-            )
-            acc += mean
-            q, qd = loop.step(q, qd, (p - room_f).reshape(S, C), cyl, dt)
-        p_avg[i + 1] = acc / options.substeps
-        q_log[i + 1] = q
+    chunk = 250
+    for t0 in range(0, n_ticks, chunk):
+        t1 = min(t0 + chunk, n_ticks)
+        ts = (
+            t_tick[t0] + (np.arange((t1 - t0) * n_sub) + 0.5) * dt_tick / n_sub
+        )  # sub-step midpoints
+        q, qd = (np.stack(x, axis=1) for x in zip(*(fn(ts) for fn in q_fns), strict=True))
+        vol, vol_rate = (x.reshape(t1 - t0, n_sub, S * C) for x in cyl.volume(q, qd))
+        for i in range(t1 - t0):
+            a_c, a_r = valve.areas(u_spool[t0 + i])
+            a_c, a_r = a_c.ravel(), (a_r + leak).ravel()
+            acc = np.zeros(S * C)
+            for k in range(n_sub):
+                # supply droop: kPa per g/s = 1e6 Pa per kg/s, on the session's total or own flow
+                flow = np.repeat(m_supply.reshape(S, C).sum(1), C) if droop_shared else m_supply
+                p, mean, m_supply = _substep(
+                    p,
+                    a_c,
+                    a_r,
+                    supply_f - droop_f * flow * 1e6,
+                    room_f,
+                    vol[i, k],
+                    vol_rate[i, k],
+                    dt_tick / n_sub,
+                    gas,
+                )
+                acc += mean
+            p_avg[t0 + i + 1] = acc / n_sub
     # Sessions follow each other in the log, separated by a SESSION_GAP_S gap in time.
-    t_tick = np.arange(n_ticks + 1) * dt_tick
     time = np.concatenate([k * (options.duration + SESSION_GAP_S) + t_tick for k in range(S)])
-    q_true = np.broadcast_to(robot.neutral(), (n_ticks + 1, S, robot.n_joints)).copy()
-    q_true[..., loop.joints] = q_log
-    q_true = q_true.transpose(1, 0, 2).reshape(-1, robot.n_joints)
+    q_true = np.concatenate([fn(t_tick)[0] for fn in q_fns])
     pressure_true = p_avg.reshape(n_ticks + 1, S, C).transpose(1, 0, 2).reshape(-1, C) / KPA
     pressure = pressure_true + offset + rng.normal(0.0, options.pressure_noise, pressure_true.shape)
     # the command sent at each sample (the last one of a session repeated)
-    valve_log = np.concatenate([np.vstack([u_log[:, k], u_log[-1:, k]]) for k in range(S)])
+    valve_log = np.concatenate([np.vstack([u[:, k], u[-1:, k]]) for k in range(S)])
     pots = _pots(robot, q_true, options, rng)
     truth = Truth(
         params={
@@ -222,8 +248,7 @@ def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
             "gas": gas.to_dict(),
             "experiment": options.experiment,
             "sessions": S,
-            "substeps": options.substeps,
-            "joints": loop.to_dict(robot),
+            "substeps": n_sub,
             "valves": {n: _valve_dict(valve, i) for i, n in enumerate(names)},
         },
         effects=effects,
@@ -232,119 +257,17 @@ def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
             "pressure": make_stream(names, pressure_true),
         },
     )
-    streams = {
-        "pressure": make_stream(names, pressure),
-        "valve": make_stream(names, valve_log),
-        "pots": pots,
-    }
-    return Log(time, streams, robot=robot.name, rate_hz=options.rate_hz, truth=truth)
-
-
-@dataclass(frozen=True)
-class JointLoops:
-    """The chamber-driven joints: a 1-DoF mechanics each, driven by their chambers' pistons.
-
-    I q̈ = Σ_c side_c · arm_c · A_c · (p_c - P_r) - b q̇, stopped (q̇ = 0) at the ends of the
-    travel allowed by the joint limits and the strokes. Arrays (J,) unless noted; SI units.
-    The thesis ignores the mechanics (§4.2: given v, v̇ the pressure is independent of them);
-    we simulate this minimal version so that a joint is moved by its pressures, not prescribed,
-    and a sealed chamber cannot be compressed without bound.
-    """
-
-    joints: np.ndarray  # robot joint index of each loop
-    col: np.ndarray  # (C,) loop of each chamber
-    mid: np.ndarray
-    half: np.ndarray  # allowed travel: mid ± half (rad or m)
-    inertia: np.ndarray  # kg m²
-    damping: np.ndarray  # N m s
-    torque_gain: np.ndarray  # (C, J) side · arm · bore_area of chamber c on its joint, N m per Pa
-
-    def step(self, q, qd, dp, cyl, dt):
-        """Semi-implicit Euler over dt for (S, J) states with gauge pressures dp (S, C), Pa."""
-        tau = dp @ self.torque_gain
-        qd = qd + dt * (tau - self.damping * qd) / self.inertia
-        q = q + dt * qd
-        lo, hi = self.mid - self.half, self.mid + self.half
-        stop = ((q <= lo) & (qd < 0)) | ((q >= hi) & (qd > 0))
-        return np.clip(q, lo, hi), np.where(stop, 0.0, qd)
-
-    def to_dict(self, robot) -> dict:
-        return {
-            robot.joint_names[j]: {
-                "inertia": float(self.inertia[k]),
-                "damping": float(self.damping[k]),
-            }
-            for k, j in enumerate(self.joints)
-        }
-
-
-def joint_loops(robot: Robot, cyl: Cylinders, locked: bool = False) -> JointLoops:
-    """Mechanics of every chamber-driven joint (defaults: 0.02 kg m², 0.2 N m s; chamber keys
-    ``inertia``/``damping`` override). ``locked`` clamps them (the steady-state experiment)."""
-    joints = np.unique(cyl.joint_index)
-    col = np.searchsorted(joints, cyl.joint_index)
-    mid, half, inertia, damping = (np.zeros(joints.size) for _ in range(4))
-    for k, j in enumerate(joints):
-        sel = np.flatnonzero(cyl.joint_index == j)
-        lo, hi = robot.lower[j], robot.upper[j]
-        lim = 0.5 * (hi - lo) if np.isfinite(hi - lo) and hi > lo else 1.0
-        mid[k] = cyl.mid[sel[0]]
-        half[k] = 0.98 * min(lim, float(np.min(0.5 * cyl.stroke[sel] / cyl.moment_arm[sel])))
-        extra = robot.sensors.chambers[sel[0]].extra
-        inertia[k] = float(extra.get("inertia", 0.02))
-        damping[k] = float(extra.get("damping", 0.2))
-    if locked:
-        half[:] = 0.0  # §4.3.1: cylinders locked in place
-    gain = np.zeros((cyl.side.size, joints.size))
-    gain[np.arange(cyl.side.size), col] = cyl.side * cyl.moment_arm * cyl.bore_area
-    return JointLoops(joints, col, mid, half, inertia, damping, gain)
-
-
-def _plan(options, loop, cyl, n_ticks, S, rng) -> dict:
-    """Random references and exploration levels for the controller, (n_ticks, S, J or C)."""
-    J, C = loop.mid.size, cyl.side.size
-    return {
-        "ref": loop.mid
-        + loop.half
-        * rng.uniform(-1, 1, (n_ticks, S, J))[
-            _held(rng, n_ticks, S, J, 40), np.arange(S)[:, None], np.arange(J)
-        ],
-        "co": 0.5
-        * rng.normal(size=(n_ticks, S, J))[
-            _held(rng, n_ticks, S, J, 100), np.arange(S)[:, None], np.arange(J)
-        ],
-        "own": 0.5
-        * rng.normal(size=(n_ticks, S, C))[
-            _held(rng, n_ticks, S, C, 20), np.arange(S)[:, None], np.arange(C)
-        ],
-        "phase": rng.uniform(0, 0.1, (S, C)),
-    }
-
-
-def _held(rng, n_ticks, S, n, mean_hold):
-    """Tick indices (n_ticks, S, n) of piecewise-constant random holds (exponential durations)."""
-    switch = rng.random((n_ticks, S, n)) < 1.0 / mean_hold
-    switch[0] = True
-    idx = np.where(switch, np.arange(n_ticks)[:, None, None], 0)
-    return np.maximum.accumulate(idx, axis=0)
-
-
-def _controller(options, loop, cyl, plan, i, q, qd):
-    """Valve commands (S, C) in [3, 7] V at tick i.
-
-    dynamic (§4.5.3): a PD law on the joint (pot) error to a random, often jumping reference,
-    antagonistic between the two chambers of a joint, plus co-contraction and per-valve
-    exploration so that the whole command range is visited ("as violently as possible").
-    steady-state (§4.5.2): a slow 3 -> 7 -> 3 V triangle, each valve with its own phase.
-    """
-    if options.experiment == "steady-state":
-        n = int(round(options.duration * options.rate_hz))
-        t = i / max(n - 1, 1) + plan["phase"]
-        return U_LOW + (U_HIGH - U_LOW) * (1.0 - np.abs(1.0 - 2.0 * (t % 1.0)))
-    half = np.maximum(loop.half, 1e-9)
-    drive = 4.0 * (plan["ref"][i] - q) / half - 0.4 * qd / half  # normalised PD
-    w = cyl.side * drive[:, loop.col] + plan["co"][i][:, loop.col] + plan["own"][i]
-    return np.clip(5.0 + 2.0 * np.tanh(1.4 * w), U_LOW, U_HIGH)
+    return Log(
+        time,
+        {
+            "pressure": make_stream(names, pressure),
+            "valve": make_stream(names, valve_log),
+            "pots": pots,
+        },
+        robot=robot.name,
+        rate_hz=options.rate_hz,
+        truth=truth,
+    )
 
 
 def _rate(p, a_c, a_r, supply, room, vol, vol_rate, gas):
@@ -395,13 +318,59 @@ def _substep(p, a_c, a_r, supply, room, vol, vol_rate, dt, gas):
     return np.maximum(p + dt * g * phi1, 1.0), p + dt * g * phi2, m_supply
 
 
-def _effects(options, names, dt_tick, rng):
-    """Parse the requested effects into arrays: (records, valve lag in ticks, delayed chambers
-    (C,) bool, leak area (C,) m², droop gain (C,) kPa per g/s, whether the droop follows the
-    total supply flow, pressure offset (C,) kPa)."""
+def _joint_motion(robot, cyl, options, rng):
+    """q(t), qd(t) for all joints: chamber joints move violently inside their limits and strokes."""
+    n = robot.n_joints
+    q0 = robot.neutral()
+    half = np.zeros(n)
+    mid = q0.copy()
+    for j in np.unique(cyl.joint_index):
+        sel = cyl.joint_index == j
+        lo, hi = robot.lower[j], robot.upper[j]
+        lim = 0.5 * (hi - lo) if np.isfinite(hi - lo) and hi > lo else 1.0
+        mid[j] = cyl.mid[sel][0]
+        half[j] = 0.9 * min(lim, float(np.min(0.5 * cyl.stroke[sel] / cyl.moment_arm[sel])))
+    if options.experiment == "steady-state":
+        half[:] = 0.0  # locked cylinders (§4.3.1)
+    f = np.exp(rng.uniform(np.log(0.05), np.log(2.5), (8, n)))
+    a = rng.normal(0.0, 1.0, (8, n)) * np.sqrt(2.0 / 8) * 1.3
+    ph = rng.uniform(0, 2 * np.pi, (8, n))
+
+    def q_fn(t):
+        arg = 2 * np.pi * f[None] * t[:, None, None] + ph[None]
+        raw = np.einsum("tkn,kn->tn", np.sin(arg), a)
+        draw = np.einsum("tkn,kn->tn", np.cos(arg), a * 2 * np.pi * f)
+        th = np.tanh(raw)
+        return mid + half * th, half * (1 - th**2) * draw
+
+    return q_fn
+
+
+def _valve_commands(options, cyl, n_ticks, rng):
+    """Commands (n_ticks, C) in [3, 7] V: antagonistic + co-contraction + per-valve random steps."""
+    C = cyl.side.size
+    if options.experiment == "steady-state":
+        # §4.5.2: a slow triangle 3 -> 7 -> 3 V, each valve with its own phase.
+        t = np.arange(n_ticks)[:, None] / max(n_ticks - 1, 1) + rng.uniform(0, 0.1, C)[None]
+        tri = 1.0 - np.abs(1.0 - 2.0 * (t % 1.0))
+        return U_LOW + (U_HIGH - U_LOW) * tri
+    joints = np.unique(cyl.joint_index)
+    col = np.searchsorted(joints, cyl.joint_index)
+    anta = random_steps(rng, n_ticks, joints.size, 30, 1.3)[:, col] * cyl.side
+    co = random_steps(rng, n_ticks, joints.size, 100, 0.6)[:, col]
+    own = random_steps(rng, n_ticks, C, 20, 0.8)
+    t = np.arange(n_ticks) / options.rate_hz
+    wobble, _ = smooth_random(rng, t, C, 0.1, 3.0)
+    w = anta + co + own + 0.4 * wobble
+    return np.clip(5.0 + 2.0 * np.tanh(0.7 * w), U_LOW, U_HIGH)
+
+
+def _effects(options, names, u, dt_tick, rng):
+    """Apply the requested effects; returns (records, spool command, leak area (m²), droop gain
+    (kPa per g/s), whether the droop follows the total supply flow, pressure offset (kPa))."""
     C = len(names)
-    delayed, leak, droop, offset = np.zeros(C, bool), np.zeros(C), np.zeros(C), np.zeros(C)
-    records, shared, lag = [], False, 0
+    u_spool, leak, droop, offset = u.copy(), np.zeros(C), np.zeros(C), np.zeros(C)
+    records, shared = [], False
     for req in check_effects(options.effects, "pneumatics"):
         values = dict(EFFECT_DEFAULTS[req.name])
         if req.name == "supply_droop" and req.channel is None:
@@ -412,17 +381,18 @@ def _effects(options, names, dt_tick, rng):
                 check_channel(req, names, "chamber") if req.channel else names[int(rng.integers(C))]
             )
             sel = np.array([n == channel for n in names])
-        if req.name == "valve_delay":  # the spool answers the command late
+        if req.name == "valve_delay":
             lag = max(1, int(round(values["delay_s"] / dt_tick)))
-            delayed |= sel
-        elif req.name == "chamber_leak":  # an always-open orifice to the room
+            delayed = np.vstack([np.repeat(u[:1], lag, axis=0), u[:-lag]])
+            u_spool[..., sel] = delayed[..., sel]
+        elif req.name == "chamber_leak":
             leak[sel] += values["area_m2"]
         elif req.name == "supply_droop":
             droop[sel] = values["kpa_per_g_s"]
-        elif req.name == "pressure_offset":  # the sensor's zero drifted
+        elif req.name == "pressure_offset":
             offset[sel] += values["offset"]
         records.append(effect_record(req.name, channel, values))
-    return records, lag, delayed, leak, droop, shared, offset
+    return records, u_spool, leak, droop, shared, offset
 
 
 def _pots(robot, q, options, rng):
