@@ -33,16 +33,16 @@ EXPERIMENTS = {
     "pendulum": (
         run_pendulum,
         PendulumConfig(),
-        PendulumConfig(train_s=8.0, test_s=6.0),
+        PendulumConfig(train_s=6.0, test_s=4.0),
         [("whirl", "sparse [-2,0]")],
     ),
     "wheel": (
         run_reaction_wheel,
         WheelConfig(),
-        WheelConfig(train_s=3.0, test_s=3.0),
+        WheelConfig(train_s=2.0, test_s=2.0),
         [("pole-up", "all")],
     ),
-    "arm3": (run_arm3, ArmConfig(), ArmConfig(train_s=8.0, test_s=4.0), [("vertical", "all")]),
+    "arm3": (run_arm3, ArmConfig(), ArmConfig(train_s=6.0, test_s=3.0), [("vertical", "all")]),
 }
 
 

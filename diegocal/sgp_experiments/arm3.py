@@ -24,12 +24,12 @@ CABLE = (1.35, 2.3)
 
 @dataclass(frozen=True)
 class ArmConfig:
-    train_s: float = 16.0
-    test_s: float = 8.0
+    train_s: float = 10.0
+    test_s: float = 6.0
     rate_hz: float = 20.0
     noise: float = 0.01
     cable: float = 2.0
-    sgp: SGPOptions = SGPOptions(friction=("viscous", "coulomb"), maxiter=100)
+    sgp: SGPOptions = SGPOptions(friction=("viscous", "coulomb"), maxiter=60)
 
 
 def arm_data(robot, seed: int, cfg: ArmConfig):

@@ -30,13 +30,13 @@ class PendulumConfig:
     """Sizes and levels. ``train_s``/``test_s`` s at ``rate_hz``; ``noise`` N·m; ``bump`` scales
     the irregularity (1 = the simulator's default, 0.3 × RMS torque)."""
 
-    train_s: float = 14.0
-    test_s: float = 10.0
+    train_s: float = 10.0
+    test_s: float = 8.0
     rate_hz: float = 25.0
     sparse_keep: float = 0.05
     bump: float = 3.0
     noise: float = 0.02
-    sgp: SGPOptions = SGPOptions(friction=(), maxiter=100)
+    sgp: SGPOptions = SGPOptions(friction=(), maxiter=60)
 
 
 def pendulum_data(robot, seed: int, cfg: PendulumConfig):

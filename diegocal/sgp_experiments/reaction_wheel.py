@@ -3,8 +3,8 @@
 True dynamics: rigid body + viscous friction on both axes (eq. 3.27's 10 parameters); the fitted
 parametric part omits friction (eq. 3.28's 6 parameters → ``SGPOptions(friction=())``). Training:
 ``pole-down`` (multi-sine motor torque of random frequencies; the thesis used 1000 steps at
-100 Hz, we simulate at 100 Hz and keep every 2nd sample of 6 s, 300 samples, so that each fit
-stays under a minute on a shared 2-core machine). Tests: another ``pole-down`` log (dense
+100 Hz, we simulate at 100 Hz and keep every 2nd sample of 4 s, 200 samples, so that the whole
+bench runs in the time a shared 2-core machine allows). Tests: another ``pole-down`` log (dense
 training data) and a ``pole-up`` log balanced by
 LQR on the true linearised dynamics (sparse: far from every training sample).
 
@@ -28,12 +28,12 @@ from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
 @dataclass(frozen=True)
 class WheelConfig:
-    train_s: float = 6.0
-    test_s: float = 6.0
+    train_s: float = 4.0
+    test_s: float = 4.0
     rate_hz: float = 100.0
     decimate: int = 2
     noise: float = 0.002
-    sgp: SGPOptions = SGPOptions(friction=(), maxiter=100)
+    sgp: SGPOptions = SGPOptions(friction=(), maxiter=60)
 
 
 def wheel_data(robot, seed: int, cfg: WheelConfig):
