@@ -50,21 +50,21 @@ def write_text(path, text: str) -> None:
 
 
 # ----------------------------------------------------------------------------- YAML
-def _plain(obj):
+def to_plain(obj):
     """numpy scalars/arrays -> plain Python, recursively, so YAML stays readable."""
     if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
+        return {str(k): to_plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
+        return [to_plain(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
+        return to_plain(obj.tolist())
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
 
 
 def dump_yaml(data) -> str:
-    return yaml.safe_dump(_plain(data), sort_keys=False, default_flow_style=None, width=100)
+    return yaml.safe_dump(to_plain(data), sort_keys=False, default_flow_style=None, width=100)
 
 
 def save_yaml(data, path) -> None:

@@ -10,9 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from diegocal.errors import DiegocalError, UnknownNameError
+from diegocal.io.files import to_plain
 
 #: Cause id -> domain, from DESIGN.md's diagnosis vocabulary.
 VOCABULARY: dict[str, str] = {
@@ -133,17 +132,5 @@ def effect_record(cause: str, channel: str | None, values: dict,
     numpy values become plain floats and lists, so the record in memory equals the one read
     back from a log file.
     """
-    return {"cause": cause, "channel": channel, "region": _plain(region),
-            "values": _plain(dict(values))}
-
-
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
+    return {"cause": cause, "channel": channel, "region": to_plain(region),
+            "values": to_plain(dict(values))}
