@@ -77,7 +77,7 @@ def marker_mae(robot, cal: Calibration, pots, markers) -> tuple[float, np.ndarra
 
 def table22(args) -> list[tuple]:
     robot = load_robot(BUNDLED_ROBOTS / "diego")
-    opts = KinematicsOptions(duration=args.duration, rate_hz=20.0)
+    opts = KinematicsOptions(duration=args.duration, rate_hz=20.0, pot_noise=args.pot_noise)
     log = simulate_kinematics(robot, opts, np.random.default_rng(args.seed))
     split = int(0.7 * log.n_samples)
     train, test = log.slice(0, split).without_truth(), log.slice(split, log.n_samples)
@@ -86,7 +86,8 @@ def table22(args) -> list[tuple]:
     q_true = test.truth.signals["q"].data
     print(
         f"\n(a) Table 2.2 on simulated diego: {log.n_samples} frames at 20 Hz "
-        f"({split} train / {log.n_samples - split} held out), seed {args.seed}"
+        f"({split} train / {log.n_samples - split} held out), seed {args.seed}, "
+        f"pot noise {args.pot_noise} V"
     )
     nominal = Calibration.nominal(robot)
     tr_pots, tr_mk = train.streams["pots"].data, train.streams["markers"].data
@@ -305,6 +306,9 @@ def main(argv=None) -> None:
     )
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--pot-noise", type=float, default=0.005, help="Table 2.2 pot noise, V (default 0.005)"
+    )
     ap.add_argument("--only", choices=("table", "grid"), default=None)
     args = ap.parse_args(argv)
     if args.duration is None:
