@@ -50,6 +50,11 @@ class Guard:
     fix_sigma_w : bool
         Keep σ_w at §3.3.4's "large number" (a flat prior on W: no shrinkage of the physical
         parameters towards 0, which would hand their share of the torque to the GP).
+    max_amplitude : float or None
+        Upper bound on σ_z in units of the parametric-only fit's residual std: Z models the
+        *deviations* from the parametric model (thesis §3.3), so it may not grow to the size of
+        the physics. Without it the marginal likelihood may prefer a long-length-scale GP that
+        carries a whole parametric term (its Occam penalty is lower than W's under a flat prior).
     """
 
     max_lengthscale: float | None = None
@@ -58,6 +63,7 @@ class Guard:
     validation_fraction: float = 0.0
     restarts: int = 0
     fix_sigma_w: bool = False
+    max_amplitude: float | None = None
 
 
 class SemiParametricGP:
@@ -212,7 +218,7 @@ class SemiParametricGP:
         r = Y - Fs @ w
         return np.maximum(r.std(0), 1e-6 * self.y_std_)
 
-    def _bounds(self, hp0: Hyperparameters):
+    def _bounds(self, hp0: Hyperparameters, resid):
         n = len(self.kernels)
         lo, hi = [], []
         if self.fit_sigma_w and not self.guard.fix_sigma_w and self.use_features:
@@ -235,7 +241,10 @@ class SemiParametricGP:
                     hi.append(np.log(g.max_lengthscale) if g.max_lengthscale else np.log(1e3))
                 else:
                     lo.append(np.log(1e-6 * self.y_std_[j]))
-                    hi.append(np.log(self.y_std_[j]) + 3.0)
+                    top = np.log(self.y_std_[j]) + 3.0
+                    if g.max_amplitude is not None and is_amplitude(name) and self.use_features:
+                        top = min(top, np.log(g.max_amplitude * resid[j]))
+                    hi.append(top)
         return list(zip(lo, hi, strict=True))
 
     def _prior(self, vec, sizes, resid):
@@ -259,21 +268,29 @@ class SemiParametricGP:
             k += sizes[j]
         return val, grad
 
-    def _starts(self, x0, bounds, sizes, rng, n_extra):
-        """§3.3.4's start, then a short-length-scale start (ℓ = 0.3 input std), then random ones."""
+    def _starts(self, x0, bounds, sizes, resid, rng, n_extra):
+        """Starts: §3.3.4's; a short-length-scale one (ℓ = 0.3 input std); a parametric-first
+        one (σ_z and σ_v at the parametric fit's residual: the basin where W carries the
+        physics); then random perturbations of §3.3.4's."""
         lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
-        starts = [x0]
-        if n_extra >= 1:
-            short = x0.copy()
+
+        def variant(ell=None, amp=None):
+            x = x0.copy()
             k = 1 + len(self.kernels)
-            for kern, size in zip(self.kernels, sizes, strict=True):
+            for j, (kern, size) in enumerate(zip(self.kernels, sizes, strict=True)):
                 if kern is not None:
+                    if amp is not None:
+                        x[1 + j] = np.log(amp[j] / 3.0)
                     for i, name in enumerate(kern.names):
-                        if is_lengthscale(name):
-                            short[k + i] = np.log(0.3)
+                        if is_lengthscale(name) and ell is not None:
+                            x[k + i] = np.log(ell)
+                        elif is_amplitude(name) and amp is not None:
+                            x[k + i] = np.log(amp[j])
                 k += size
-            starts.append(short)
-        starts += [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(n_extra - 1)]
+            return x
+
+        starts = [x0, variant(ell=0.3), variant(amp=resid)][: 1 + n_extra]
+        starts += [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(n_extra - 2)]
         return [np.clip(s, lo, hi) for s in starts]
 
     def _optimise(self, start, bounds, sizes, resid, U, Y, F, maxiter):
@@ -309,12 +326,12 @@ class SemiParametricGP:
             idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
         hp0, resid = self._initial(Us[idx], Y, Fs)
         sizes = [0 if k is None else k.n_params for k in self.kernels]
-        bounds = self._bounds(hp0)
+        bounds = self._bounds(hp0, resid)
         lo, hi = [b[0] for b in bounds], [b[1] for b in bounds]
         has_gp = any(k is not None for k in self.kernels)
         n_extra = self.restarts + (self.guard.restarts if has_gp else 0)
         x0 = np.clip(hp0.pack(), lo, hi)
-        starts = self._starts(x0, bounds, sizes, rng, n_extra if has_gp else 0)
+        starts = self._starts(x0, bounds, sizes, resid, rng, n_extra if has_gp else 0)
         self.n_starts_ = len(starts)
         n_val = int(round(self.guard.validation_fraction * len(idx)))
         validate = len(starts) > 1 and n_val >= 2

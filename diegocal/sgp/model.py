@@ -28,8 +28,8 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 
 #: The guard's defaults (SGPOptions(guard=True)): the GP sees (q, qd) only (the rigid-body model
 #: is exactly linear in qdd), W has a flat prior (σ_w fixed large: no shrinkage handing physics
-#: to the GP), σ_z has a prior at the size of the parametric fit's residual, log ℓ a weak prior,
-#: and an extra start is judged on a held-out 20 % of the training samples.
+#: to the GP), σ_z has a prior at the size of the parametric fit's residual and may not exceed
+#: twice it, log ℓ a weak prior, and the starts are judged on a held-out 20 % of the samples.
 DEFAULT_GUARD = Guard(
     max_lengthscale=None,
     lengthscale_prior=(0.0, 1.5),
@@ -37,6 +37,7 @@ DEFAULT_GUARD = Guard(
     validation_fraction=0.2,
     restarts=1,
     fix_sigma_w=True,
+    max_amplitude=2.0,
 )
 GUARD_GP_INPUTS = ("q", "qd")
 
