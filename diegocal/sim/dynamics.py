@@ -68,6 +68,8 @@ class DynamicsOptions:
     acts (default: thesis §3.1.1's [2, 2.5] rad on continuous-range joints, else the top 20 % of
     the range, "near the limit" as in §3.4.4). ``drive``/``disturbance``: peak motor torque and
     disturbance std for the integrated trajectories (None: scaled to the robot).
+    ``figure8_size``: the figure-eight's half-width and half-height as fractions of the chain
+    length from the first joint to the last link (arm3: 1.0 m); ``figure8_period`` s.
     """
 
     duration: float = 20.0
@@ -81,7 +83,7 @@ class DynamicsOptions:
     effect_scale: float = 1.0
     drive: float | None = None
     disturbance: float | None = None
-    figure8_size: tuple = (0.12, 0.06)
+    figure8_size: tuple = (0.12, 0.06)  # fractions of the arm's reach
     figure8_period: float = 4.0
 
 
@@ -141,9 +143,7 @@ class TrueDynamics:
     def inverse(self, q, qd, qdd) -> np.ndarray:
         """Applied joint torques (T, n) N·m: ``rnea`` + friction + effects (no sensor offset)."""
         q, qd, qdd = (np.atleast_2d(np.asarray(a, float)) for a in (q, qd, qdd))
-        rb = np.array(
-            [pin.rnea(self.model, self.data, q[t], qd[t], qdd[t]) for t in range(q.shape[0])]
-        )
+        rb = np.array([pin.rnea(self.model, self.data, q[t], qd[t], qdd[t]) for t in range(q.shape[0])])
         return rb + self.extra_torque(q, qd)
 
     def forward(self, q, qd, tau, smooth: bool = False) -> np.ndarray:
@@ -167,9 +167,7 @@ class TrueDynamics:
         for k, j in enumerate(actuated):
             u = np.zeros(n)
             u[j] = eps
-            B[n:, k] = (self.forward(q_eq, zero, u, True) - self.forward(q_eq, zero, -u, True)) / (
-                2 * eps
-            )
+            B[n:, k] = (self.forward(q_eq, zero, u, True) - self.forward(q_eq, zero, -u, True)) / (2 * eps)
         return A, B
 
 
@@ -178,12 +176,7 @@ def robot_scales(robot) -> tuple[np.ndarray, np.ndarray]:
     excitation (20 s at 50 Hz, generator seeded 0: a property of the robot, not of the run)."""
     ref = excitation(robot.lower, robot.upper, time_base(20.0, 50.0), np.random.default_rng(0))
     data = robot.model.createData()
-    tau = np.array(
-        [
-            pin.rnea(robot.model, data, q, v, a)
-            for q, v, a in zip(ref.q, ref.qd, ref.qdd, strict=True)
-        ]
-    )
+    tau = np.array([pin.rnea(robot.model, data, q, v, a) for q, v, a in zip(ref.q, ref.qd, ref.qdd, strict=True)])
     s = np.maximum(np.sqrt((tau**2).mean(0)), 1e-3)
     return s, np.maximum(np.sqrt((ref.qd**2).mean(0)), 1e-3)
 
@@ -191,15 +184,9 @@ def robot_scales(robot) -> tuple[np.ndarray, np.ndarray]:
 def _per_joint(value, default: np.ndarray, n: int, what: str) -> np.ndarray:
     if value is None:
         return default
-    arr = (
-        np.broadcast_to(np.asarray(value, dtype=float), (n,))
-        if np.ndim(value) == 0
-        else np.asarray(value, float)
-    )
+    arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)) if np.ndim(value) == 0 else np.asarray(value, float)
     if arr.shape != (n,) or not np.isfinite(arr).all() or (arr < 0).any():
-        raise SimOptionError(
-            f"{what}: expected one non-negative value or {n} (one per joint), got {value!r}"
-        )
+        raise SimOptionError(f"{what}: expected one non-negative value or {n} (one per joint), got {value!r}")
     return arr.copy()
 
 
@@ -220,9 +207,7 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
     rng, effect_rng = rng.spawn(2)
     n = robot.n_joints
     scale, vscale = robot_scales(robot)
-    viscous = _per_joint(
-        options.viscous, 0.1 * scale / vscale * rng.uniform(0.8, 1.2, n), n, "viscous"
-    )
+    viscous = _per_joint(options.viscous, 0.1 * scale / vscale * rng.uniform(0.8, 1.2, n), n, "viscous")
     coulomb = _per_joint(options.coulomb, 0.05 * scale * rng.uniform(0.8, 1.2, n), n, "coulomb")
     model = robot.model.copy()
     terms, records, offset = [], [], np.zeros(n)
@@ -246,9 +231,7 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
         elif req.name == "position_friction":
             low, high = options.regions.get(joint, default_region(robot, j))
             if not low < high:
-                raise SimOptionError(
-                    f"position_friction region for {joint!r}: low must be < high, got {low}, {high}"
-                )
+                raise SimOptionError(f"position_friction region for {joint!r}: low must be < high, got {low}, {high}")
             region = {"variable": f"q.{joint}", "low": float(low), "high": float(high)}
             values = {"coulomb": 0.3 * s, "viscous": 0.3 * v}
         elif req.name == "spring":
@@ -292,8 +275,15 @@ def _figure8(robot, options, time, rng, plane):
     q_c = robot.lower + frac * (robot.upper - robot.lower)
     data = model.createData()
     pin.framesForwardKinematics(model, data, q_c)
-    centre = data.oMf[frame].translation + rng.uniform(-0.01, 0.01, 3)
-    size = np.asarray(options.figure8_size, float) * rng.uniform(0.9, 1.1)
+    # sizes are fractions of the chain's length from the first joint to the frame (1.0 m for arm3)
+    reach = np.linalg.norm(model.frames[frame].placement.translation)
+    j = model.frames[frame].parentJoint
+    while model.parents[j] > 0:
+        reach += np.linalg.norm(model.jointPlacements[j].translation)
+        j = model.parents[j]
+    reach = max(reach, 1e-3)
+    centre = data.oMf[frame].translation + reach * rng.uniform(-0.01, 0.01, 3)
+    size = reach * np.asarray(options.figure8_size, float) * rng.uniform(0.9, 1.1)
     period = options.figure8_period * rng.uniform(0.9, 1.1)
     return figure_eight(model, frame, time, centre, q_c, plane, tuple(size), period)
 
@@ -338,9 +328,7 @@ def _pole(robot, dyn: TrueDynamics, options, time, rng, up: bool):
 
     traj = rollout(dyn.forward, time, start, np.zeros(n), torque)
     if np.abs(traj.q[:, 0] - np.pi).max() > 1.0:
-        raise NumericalError(
-            "pole-up: the LQR lost the balance; lower --disturbance or raise --drive"
-        )
+        raise NumericalError("pole-up: the LQR lost the balance; lower --disturbance or raise --drive")
     return traj
 
 
@@ -354,9 +342,7 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     truth effects, truth signal ``tau`` (noise-free measured torque).
     """
     if options.trajectory not in TRAJECTORIES:
-        raise SimOptionError(
-            f"unknown trajectory {options.trajectory!r}; known: {', '.join(TRAJECTORIES)}"
-        )
+        raise SimOptionError(f"unknown trajectory {options.trajectory!r}; known: {', '.join(TRAJECTORIES)}")
     if not np.isfinite(options.noise) or options.noise < 0:
         raise SimOptionError(f"noise must be a non-negative torque in N·m, got {options.noise}")
     time = time_base(options.duration, options.rate_hz)
@@ -376,10 +362,7 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     tau_clean = tau_phys + dyn.offset
     tau = tau_clean + options.noise * noise_rng.standard_normal(tau_clean.shape)
     names = robot.joint_names
-    streams = {
-        k: make_stream(names, v)
-        for k, v in (("q", traj.q), ("qd", traj.qd), ("qdd", traj.qdd), ("tau", tau))
-    }
+    streams = {k: make_stream(names, v) for k, v in (("q", traj.q), ("qd", traj.qd), ("qdd", traj.qdd), ("tau", tau))}
     params = {
         "model": "rigid_body+viscous+coulomb",
         "joints": list(names),
@@ -392,9 +375,5 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
         "noise": {"tau": float(options.noise)},
         "trajectory": kind,
     }
-    truth = Truth(
-        params=params, effects=dyn.records, signals={"tau": make_stream(names, tau_clean)}
-    )
-    return Log(
-        time=time, streams=streams, robot=robot.name, rate_hz=float(options.rate_hz), truth=truth
-    )
+    truth = Truth(params=params, effects=dyn.records, signals={"tau": make_stream(names, tau_clean)})
+    return Log(time=time, streams=streams, robot=robot.name, rate_hz=float(options.rate_hz), truth=truth)

@@ -116,9 +116,7 @@ def test_payload_changes_rigid_body_torque_like_a_point_mass(arm3):
     v = rec["values"]
     model = arm3.model.copy()
     jid = model.frames[[f.name for f in model.frames].index("link3")].parentJoint
-    model.inertias[jid] += pin.Inertia(
-        v["mass"], np.array([v["x"], v["y"], v["z"]]), np.zeros((3, 3))
-    )
+    model.inertias[jid] += pin.Inertia(v["mass"], np.array([v["x"], v["y"], v["z"]]), np.zeros((3, 3)))
     data = model.createData()
     q, qd, qdd, tau = _signals(log)
     rb_new = np.array([pin.rnea(model, data, *x) for x in zip(q, qd, qdd, strict=True)])
@@ -135,9 +133,7 @@ def test_rollouts_are_consistent_with_inverse_dynamics(wheel, trajectory):
     p = log.truth.params
     visc = np.array([p["viscous"][j] for j in wheel.joint_names])
     coul = np.array([p["coulomb"][j] for j in wheel.joint_names])
-    np.testing.assert_allclose(
-        tau, _rnea(wheel, q, qd, qdd) + visc * qd + coul * np.sign(qd), atol=1e-9
-    )
+    np.testing.assert_allclose(tau, _rnea(wheel, q, qd, qdd) + visc * qd + coul * np.sign(qd), atol=1e-9)
     # the integration is right: q is the integral of qd (trapezoid at 100 Hz, small error) and
     # qd that of qdd (the LQR loop is fast for 100 Hz: a loose check, catches sign or scale slips)
     dt = 0.01
@@ -170,9 +166,7 @@ def test_figure_eights_are_different_planes(arm3):
     assert np.ptp(pv[:, 1]) < 1e-6 and np.ptp(pv[:, 2]) > 0.05
     # qd is the derivative of q
     qh = h.streams["q"].data
-    np.testing.assert_allclose(
-        np.gradient(qh, 0.02, axis=0)[1:-1], h.streams["qd"].data[1:-1], atol=0.02
-    )
+    np.testing.assert_allclose(np.gradient(qh, 0.02, axis=0)[1:-1], h.streams["qd"].data[1:-1], atol=0.02)
 
 
 def test_options_are_validated(arm3):
@@ -279,7 +273,12 @@ def test_whirl_turns_one_way_and_wraps_into_the_limits():
     (rec,) = log.truth.effects
     v, inside = rec["values"], (q[:, 0] >= 2.0) & (q[:, 0] <= 2.5)
     extra = tau[:, 0] - _rnea(robot, q, qd, qdd)[:, 0]
-    np.testing.assert_allclose(
-        extra[inside], v["coulomb"] + v["viscous"] * qd[inside, 0], atol=1e-10
-    )
+    np.testing.assert_allclose(extra[inside], v["coulomb"] + v["viscous"] * qd[inside, 0], atol=1e-10)
     np.testing.assert_allclose(extra[~inside], 0.0, atol=1e-10)
+
+
+def test_figure_eight_scales_to_a_small_robot():
+    finger = load_robot(BUNDLED_ROBOTS / "finger")
+    log = _sim(finger, trajectory="figure8-vertical", duration=2.0, rate_hz=50.0)
+    q = log.streams["q"].data
+    assert (q >= finger.lower).all() and (q <= finger.upper).all() and np.ptp(q, axis=0).max() > 0.05
