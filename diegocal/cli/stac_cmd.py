@@ -64,20 +64,14 @@ def q_log_path(calib_path: Path) -> Path:
 @cli_errors
 def stac(
     log: Annotated[Path, typer.Argument(help="Log with pots and markers streams.")],
-    robot: Annotated[
-        str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")
-    ] = None,
+    robot: Annotated[str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
     output: Annotated[
         Path | None, typer.Option("-o", "--output", help="calib.yaml [default: <log>.calib.yaml].")
     ] = None,
     method: Annotated[str, typer.Option(help="stac | classical | ekf | nominal.")] = "stac",
-    loss: Annotated[
-        str, typer.Option(help="linear (Gaussian, eq. 2.21) | huber (robust).")
-    ] = "linear",
+    loss: Annotated[str, typer.Option(help="linear (Gaussian, eq. 2.21) | huber (robust).")] = "linear",
     max_iterations: Annotated[int, typer.Option("--max-iterations", min=1)] = 50,
-    schedule: Annotated[
-        str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")
-    ] = "lm-iter",
+    schedule: Annotated[str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")] = "lm-iter",
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the q-phase.")] = 1,
     seed: Annotated[int, typer.Option(help="Random seed (STAC itself is deterministic).")] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
@@ -169,9 +163,7 @@ def _record_prediction(model_path: Path, log_path: Path, pred) -> None:
     rows = [
         r
         for r in data.get("prediction") or []
-        if not (
-            r.get("log") == str(Path(log_path).resolve()) and r.get("from") == list(pred.sources)
-        )
+        if not (r.get("log") == str(Path(log_path).resolve()) and r.get("from") == list(pred.sources))
     ]
     rows.append(
         {

@@ -43,9 +43,7 @@ def plot_cost(cal: Calibration, ax=None):
     ax.set_yscale("log")
     ax.set_xlabel("iteration")
     ax.set_ylabel("cost − min + 1")
-    ax.set_title(
-        f"Convergence ({cal.method}, {cal.fit.iterations} iterations, {cal.fit.seconds:.1f} s)"
-    )
+    ax.set_title(f"Convergence ({cal.method}, {cal.fit.iterations} iterations, {cal.fit.seconds:.1f} s)")
     return ax
 
 
@@ -117,9 +115,7 @@ def skeleton(cal: Calibration, robot) -> dict:
     Rl, pl = kin.link_poses(poses, names)
     nominal = np.array([m.xyz for m in robot.sensors.markers], float).reshape(-1, 3)
     index = {n: i for i, n in enumerate(cal.marker_names)}
-    fitted = np.array(
-        [cal.marker_xyz[index[m.name]] if m.name in index else m.xyz for m in robot.sensors.markers]
-    )
+    fitted = np.array([cal.marker_xyz[index[m.name]] if m.name in index else m.xyz for m in robot.sensors.markers])
     to_base = lambda d: np.einsum("mij,mj->mi", Rl[0], d) + pl[0]  # noqa: E731
     return {
         "links": links,
@@ -158,9 +154,7 @@ def param_lines(cal: Calibration) -> list[str]:
     gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
     bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
     for i, n in enumerate(cal.pot_names):
-        lines.append(
-            f"{n:<20}{cal.gain[i]:>10.4f}{gse[i]:>10.2g}{cal.bias[i]:>10.4f}{bse[i]:>10.2g}"
-        )
+        lines.append(f"{n:<20}{cal.gain[i]:>10.4f}{gse[i]:>10.2g}{cal.bias[i]:>10.4f}{bse[i]:>10.2g}")
     return lines
 
 
@@ -195,9 +189,7 @@ def pages(path: Path, pdf, context: ReportContext) -> None:
         axes[0, 0].set_title("marker positions, side view (Figs. 2.8-2.9)")
         axes[0, 1].set_title("front view")
     else:
-        axes[0, 0].text(
-            0.1, 0.5, "robot directory not found: no skeleton", transform=axes[0, 0].transAxes
-        )
+        axes[0, 0].text(0.1, 0.5, "robot directory not found: no skeleton", transform=axes[0, 0].transAxes)
     if cal.history:
         plot_cost(cal, axes[1, 0])
         plot_sigma(cal, axes[1, 1])

@@ -127,8 +127,7 @@ class Calibration:
             out["sigma"]["by_group"] = {k: _f(v) for k, v in self.sigma_by_group.items()}
         if self.history:
             out["fit"]["history"] = [
-                {k: (_f(v) if isinstance(v, float) else v) for k, v in h.items()}
-                for h in self.history
+                {k: (_f(v) if isinstance(v, float) else v) for k, v in h.items()} for h in self.history
             ]
         if self.meta:
             out["meta"] = dict(self.meta)
@@ -152,9 +151,7 @@ class Calibration:
                 bias_se=np.array([_nan(pots[n].get("bias_se")) for n in names]),
                 marker_names=mnames,
                 marker_links=tuple(str(markers[n]["link"]) for n in mnames),
-                marker_xyz=np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(
-                    -1, 3
-                ),
+                marker_xyz=np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(-1, 3),
                 marker_xyz_se=np.array(
                     [[_nan(v) for v in (markers[n].get("xyz_se") or [None] * 3)] for n in mnames],
                     dtype=float,
@@ -175,9 +172,7 @@ class Calibration:
                 meta=dict(data.get("meta") or {}),
             )
         except (KeyError, TypeError, ValueError) as exc:
-            raise InputFileError(
-                f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})"
-            ) from None
+            raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None
 
 
 def _f(v) -> float | None:

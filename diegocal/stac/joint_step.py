@@ -61,6 +61,22 @@ def _theta_jacobian(obs: Observation, params: Params, noise: Noise, s, Rl, pl, v
     return J
 
 
+def _theta_transpose_times(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
+    """J_θᵀ v summed over frames (Nθ,) without forming J_θ; v (B, P + 3M), invalid rows zero."""
+    P, M = obs.n_pots, obs.n_markers
+    vp = v[:, :P] / noise.sig_p
+    out = [np.einsum("bp,bp->p", vp, s), vp.sum(0)]
+    if M:
+        vx = v[:, P:].reshape(-1, M, 3) / noise.sig_x
+        y = (np.einsum("bmij,mj->bmi", Rl, params.xyz) + pl) @ params.R.T  # R x_b
+        out.append(np.einsum("bmki,lk,bml->mi", Rl, params.R, vx).ravel())  # (R h_r)ᵀ v
+        out.append(np.cross(y, vx).sum((0, 1)))  # (−[y]×)ᵀ v = y × v
+        out.append(vx.sum((0, 1)))
+    else:
+        out += [np.zeros(0), np.zeros(3), np.zeros(3)]
+    return np.concatenate(out)
+
+
 def theta_step(
     obs: Observation,
     params: Params,
@@ -68,7 +84,7 @@ def theta_step(
     q: np.ndarray,
     lam: np.ndarray,
     batch: int = 500,
-    max_frames: int = 1500,
+    max_frames: int = 400,
 ) -> tuple[Params, dict, dict]:
     """θ + Δθ from the reduced (Schur) system, the q-phase redundancy per sensor type and the
     standard errors of θ with q marginalised: ``{"gain", "bias" (P,), "xyz" (M, 3)}`` from the
@@ -94,19 +110,18 @@ def theta_step(
             w[:, :P], r[:, :P] = ex["wp"], ex["zp"]
         if noise.use_markers and M:
             Jq[:, P:], w[:, P:], r[:, P:] = ex["Jx"], ex["wx"], ex["rx"].reshape(B, -1)
-        Jt = _theta_jacobian(obs, params, noise, s, Rl, pl, ex["valid"])
         diag = np.einsum("bii->bi", H)
-        Hd = H + (lam[sl, None] * diag + 1e-9 * (1.0 + diag.max(1, keepdims=True)))[
-            ..., None
-        ] * np.eye(n)
+        Hd = H + (lam[sl, None] * diag + 1e-9 * (1.0 + diag.max(1, keepdims=True)))[..., None] * np.eye(n)
         u = np.linalg.solve(Hd, g[..., None])[..., 0]  # H⁻¹ g
-        WJt = Jt * w[..., None]
-        rhs += np.einsum("bkn,bk->n", WJt, np.einsum("bkn,bn->bk", Jq, u) - r)  # Bᵀ H⁻¹ g − g_θ
+        v = w * (np.einsum("bkn,bn->bk", Jq, u) - r)
+        rhs += _theta_transpose_times(obs, params, noise, s, Rl, pl, v)  # Bᵀ H⁻¹ g − g_θ
         pick = np.arange(sl.start, sl.stop) % stride == 0
         if pick.any():
-            Bt = np.swapaxes(Jq[pick], 1, 2) @ WJt[pick]  # (b, n, Nθ)
+            Jt = _theta_jacobian(obs, params, noise, s[pick], Rl[pick], pl[pick], ex["valid"][pick])
+            WJt = Jt * w[pick][..., None]
+            Bt = np.swapaxes(Jq[pick], 1, 2) @ WJt  # (b, n, Nθ)
             X = np.linalg.solve(Hd[pick], Bt)
-            Wp, Jp = WJt[pick].reshape(-1, N), Jt[pick].reshape(-1, N)
+            Wp, Jp = WJt.reshape(-1, N), Jt.reshape(-1, N)
             S += stride * (Wp.T @ Jp - Bt.reshape(-1, N).T @ X.reshape(-1, N))
     free = free_mask(obs)
     A = S[np.ix_(free, free)]

@@ -58,12 +58,8 @@ class BatchKinematics:
         self.robot = robot
         self.n = robot.n_joints
         self.parent = np.array([model.parents[j] - 1 for j in range(1, model.njoints)], dtype=int)
-        self.place_R = np.array(
-            [model.jointPlacements[j].rotation for j in range(1, model.njoints)]
-        ).reshape(-1, 3, 3)
-        self.place_p = np.array(
-            [model.jointPlacements[j].translation for j in range(1, model.njoints)]
-        ).reshape(-1, 3)
+        self.place_R = np.array([model.jointPlacements[j].rotation for j in range(1, model.njoints)]).reshape(-1, 3, 3)
+        self.place_p = np.array([model.jointPlacements[j].translation for j in range(1, model.njoints)]).reshape(-1, 3)
         self.local_axis = np.zeros((self.n, 3))
         self.prismatic = np.zeros(self.n, dtype=bool)
         for j in range(1, model.njoints):
@@ -76,9 +72,7 @@ class BatchKinematics:
                 self.local_axis[j - 1] = np.asarray(jm.extract().axis, float)
                 self.prismatic[j - 1] = kind.startswith("Prismatic")
             else:
-                raise RobotConfigError(
-                    f"joint {model.names[j]!r}: joint type {kind} is not supported by STAC"
-                )
+                raise RobotConfigError(f"joint {model.names[j]!r}: joint type {kind} is not supported by STAC")
         if np.any(self.parent >= np.arange(self.n)):
             raise RobotConfigError("joint order is not topological (a parent after its child)")
         # ancestors[j, k]: joint k moves the child link of joint j (k is j or an ancestor of j)

@@ -84,9 +84,7 @@ class Observation:
         self.marker_names = tuple(m.name for m in self.marker_specs)
         self.marker_links = tuple(m.link for m in self.marker_specs)
         self.kinds = np.array([p.kind for p in self.pot_specs], dtype=object)
-        self.groups = tuple(dict.fromkeys(list(self.kinds))) + (
-            (MARKERS,) if len(self.marker_index) else ()
-        )
+        self.groups = tuple(dict.fromkeys(list(self.kinds))) + ((MARKERS,) if len(self.marker_index) else ())
         self.A = _linear_map(robot, self.pot_specs)  # (P, n): s = A q for rotary/encoder/tendon
         self.linear = np.flatnonzero(self.kinds == "linear")
         full = anchor_points(robot)
@@ -121,12 +119,11 @@ class Observation:
         if not any(moving):
             raise FitError(
                 "every marker is on a link fixed to the base link "
-                f"{self.robot.sensors.base_link!r}: joint angles and pot gains/biases are unobservable; put markers on moving links"
+                f"{self.robot.sensors.base_link!r}: joint angles and pot gains/biases are "
+                "unobservable; put markers on moving links"
             )
         if not self.valid.any(axis=0).all():
-            dead = [
-                n for n, ok in zip(self.marker_names, self.valid.any(axis=0), strict=True) if not ok
-            ]
+            dead = [n for n, ok in zip(self.marker_names, self.valid.any(axis=0), strict=True) if not ok]
             raise FitError(f"markers never seen (all NaN) in the log: {', '.join(dead)}")
         joints, _, _ = self.kin.link_info(self.marker_links)
         seen = self.kin._anc[joints].any(axis=0) & ~self.kin._anc[self.kin.base_joint]
@@ -134,10 +131,7 @@ class Observation:
             cols = np.flatnonzero(self.A[self.pot_specs.index(p)]) if p.kind != "linear" else None
             if cols is not None and len(cols) and not seen[cols].any():
                 names = ", ".join(self.robot.joint_names[c] for c in cols)
-                raise FitError(
-                    f"pot {p.name!r}: no marker moves with joint(s) {names}; "
-                    "its gain/bias is unobservable"
-                )
+                raise FitError(f"pot {p.name!r}: no marker moves with joint(s) {names}; its gain/bias is unobservable")
         self.fixed_bias = self._gauge_biases(joints)
         if self.n_frames < 10:
             raise FitError(f"too few samples for STAC: {self.n_frames} (need at least 10)")
@@ -160,9 +154,7 @@ class Observation:
             if not moved.any():
                 continue
             leaf = (marker_joints[moved] == k + 1).all()
-            root = (
-                kin.base_joint == 0 and kin.parent[k] < 0 and moved.all() and not kin.prismatic[k]
-            )
+            root = kin.base_joint == 0 and kin.parent[k] < 0 and moved.all() and not kin.prismatic[k]
             if not (leaf or root):
                 continue
             readers = [j for j in np.flatnonzero(self.A[:, k]) if self.kinds[j] != "linear"]
@@ -191,9 +183,7 @@ class Observation:
             length = np.linalg.norm(d, axis=-1)
             s[:, self.linear] = length  # eq. 2.19-2.20
             if xyz is not None:
-                ds[:, self.linear] = np.einsum(
-                    "bkc,bkcn->bkn", d / length[..., None], J[:, 1::2] - J[:, 0::2]
-                )
+                ds[:, self.linear] = np.einsum("bkc,bkcn->bkn", d / length[..., None], J[:, 1::2] - J[:, 0::2])
         Rl, pl = self.kin.link_poses(poses, self.marker_links)
         Jx = None
         if xyz is not None and self.n_markers:
@@ -223,9 +213,7 @@ class Observation:
             np.zeros(3),
         )
 
-    def to_calibration(
-        self, params: Params, se: dict, sigma: dict, method: str, fit=None
-    ) -> Calibration:
+    def to_calibration(self, params: Params, se: dict, sigma: dict, method: str, fit=None) -> Calibration:
         """A full-robot Calibration: sensors absent from the log keep nominal values (SE NaN)."""
         nom = Calibration.nominal(self.robot)
         gain, bias, xyz = nom.gain.copy(), nom.bias.copy(), nom.marker_xyz.copy()
@@ -254,9 +242,7 @@ class Observation:
             mocap_R=params.R,
             mocap_T=params.T,
             method=method,
-            sigma_pots=float(np.sqrt(np.mean(np.square(pots_sigma))))
-            if pots_sigma
-            else float("nan"),
+            sigma_pots=float(np.sqrt(np.mean(np.square(pots_sigma)))) if pots_sigma else float("nan"),
             sigma_markers=float(sigma.get(MARKERS, np.nan)),
             sigma_by_group={k: float(v) for k, v in sigma.items()},
         )

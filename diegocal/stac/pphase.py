@@ -58,9 +58,7 @@ def marker_means(obs: Observation, st: State, R, T, w: np.ndarray) -> tuple[np.n
     sw = w.sum(0)  # (M,)
     d = (w[..., None] * local).sum(0) / sw[:, None]
     n = (w > 0).sum(0)
-    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(
-        sw[:, None] * (n[:, None] - 1) / n[:, None], 1e-300
-    )
+    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(sw[:, None] * (n[:, None] - 1) / n[:, None], 1e-300)
     se = np.sqrt(var * (w**2).sum(0)[:, None]) / sw[:, None]
     return d, se
 
@@ -117,9 +115,7 @@ def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray):
     return gain, bias, gse, bse
 
 
-def p_phase(
-    obs: Observation, st: State, params: Params, w_pots: np.ndarray, w_markers: np.ndarray
-) -> PhaseResult:
+def p_phase(obs: Observation, st: State, params: Params, w_pots: np.ndarray, w_markers: np.ndarray) -> PhaseResult:
     """All sensor parameters at fixed q (thesis eq. 2.6: independent sub-problems per sensor)."""
     R, T, d, dse = markers_fit(obs, st, params, w_markers)
     gain, bias, gse, bse = pots_fit(obs, st, w_pots, params.bias)

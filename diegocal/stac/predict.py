@@ -47,16 +47,13 @@ def _groups(names, obs: Observation, what: str) -> set[str]:
     out = set()
     for n in names:
         if n not in SENSOR_TYPES:
-            raise FitError(
-                f"unknown sensor type {n!r} in --{what} (expected one of {', '.join(SENSOR_TYPES)})"
-            )
+            raise FitError(f"unknown sensor type {n!r} in --{what} (expected one of {', '.join(SENSOR_TYPES)})")
         out |= set(obs.kinds) if n == "pots" else {n}
     present = set(obs.groups)
     missing = sorted(out - present)
     if missing:
         raise FitError(
-            f"--{what} {', '.join(missing)}: the log has no sensors of that type "
-            f"(it has {', '.join(obs.groups)})"
+            f"--{what} {', '.join(missing)}: the log has no sensors of that type (it has {', '.join(obs.groups)})"
         )
     return out
 
@@ -81,9 +78,7 @@ def predict(
         if not np.isfinite(sig.get(g, np.nan)):
             sig[g] = calibration.sigma_markers if g == MARKERS else calibration.sigma_pots
         if not np.isfinite(sig.get(g, np.nan)):
-            sig[g] = (
-                0.002 if g == MARKERS else 0.01
-            )  # an uncalibrated (nominal) model: typical noise
+            sig[g] = 0.002 if g == MARKERS else 0.01  # an uncalibrated (nominal) model: typical noise
     sig_p = np.array([sig[k] if k in src else np.inf for k in obs.kinds], dtype=float)
     noise = Noise(
         sig_p,

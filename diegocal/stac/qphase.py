@@ -54,9 +54,7 @@ def residuals(obs: Observation, params: Params, noise: Noise, s, Rl, pl, pots, m
     """Standardised residuals of a batch: pots (B, P), marker norms (B, M) and vectors (B, M, 3)."""
     zp = (params.gain * s + params.bias - pots) / noise.sig_p
     xb = np.einsum("bmij,mj->bmi", Rl, params.xyz) + pl
-    rx = np.where(
-        valid[..., None], (xb @ params.R.T + params.T - np.nan_to_num(markers)) / noise.sig_x, 0.0
-    )
+    rx = np.where(valid[..., None], (xb @ params.R.T + params.T - np.nan_to_num(markers)) / noise.sig_x, 0.0)
     return zp, np.linalg.norm(rx, axis=-1), rx
 
 

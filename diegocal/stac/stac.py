@@ -43,24 +43,25 @@ from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 
 SCHEDULES = ("lm-iter", "lm-batch", "bfgs")
 LOSSES = ("linear", "huber")
+#: σ is re-estimated only once the cost at fixed σ moves by less than this (relative). Updating
+#: it every iteration while θ is still far off lets the per-type σ of the pots chase the pot
+#: residuals to zero (the likelihood is unbounded there: one pot per joint can be fitted exactly),
+#: a collapse seen on the test robots; waiting for (q, θ) to settle avoids it.
+SIGMA_SETTLE = 1e-3
 
 
 def check_options(options: StacOptions) -> None:
     if options.loss not in LOSSES:
         raise FitError(f"unknown loss {options.loss!r} (expected one of {', '.join(LOSSES)})")
     if options.schedule not in SCHEDULES:
-        raise FitError(
-            f"unknown schedule {options.schedule!r} (expected one of {', '.join(SCHEDULES)})"
-        )
+        raise FitError(f"unknown schedule {options.schedule!r} (expected one of {', '.join(SCHEDULES)})")
     if options.marker_seed not in ("origin", "nominal"):
         raise FitError(f"unknown marker seed {options.marker_seed!r} (expected origin or nominal)")
     if options.max_iterations < 1:
         raise FitError("max_iterations must be at least 1")
 
 
-def initial_q(
-    obs: Observation, params: Params, options: StacOptions, use: np.ndarray | None = None
-) -> np.ndarray:
+def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.ndarray | None = None) -> np.ndarray:
     """q (T, n) from the pots: invert rotary/encoder pots; LM on the pots for the rest.
 
     ``use`` (P,) bool restricts the pots used (default: all).
@@ -71,9 +72,7 @@ def initial_q(
     direct = [j for j, p in enumerate(obs.pot_specs) if p.kind in ("rotary", "encoder") and use[j]]
     for j in direct:
         col = robot.joint_index(obs.pot_specs[j].joint)
-        q[:, col] = np.clip(
-            (obs.pots[:, j] - params.bias[j]) / params.gain[j], obs.lower[col], obs.upper[col]
-        )
+        q[:, col] = np.clip((obs.pots[:, j] - params.bias[j]) / params.gain[j], obs.lower[col], obs.upper[col])
     if len(direct) < use.sum():
         scale = np.where(use, np.maximum(np.std(obs.pots, axis=0), 1e-6), np.inf)
         noise = Noise(scale, 1.0, use_markers=False)
@@ -102,9 +101,7 @@ def weights(obs: Observation, params: Params, st: State, noise: Noise):
     if noise.loss == "huber":
         from diegocal.stac.qphase import irls_weight, residuals
 
-        zp, zx, _ = residuals(
-            obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid
-        )
+        zp, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
         wp = irls_weight(zp, "huber", noise.huber)
         wx = irls_weight(zx, "huber", noise.huber) * obs.valid
     return wp, wx
@@ -118,9 +115,7 @@ def total_cost(obs: Observation, params: Params, st: State, noise: Noise, sigma:
     c = 0.0
     for g, sg in sigma.items():
         if g == MARKERS:
-            c += rho(zx[obs.valid], noise.loss, noise.huber).sum() + 3 * obs.valid.sum() * np.log(
-                sg
-            )
+            c += rho(zx[obs.valid], noise.loss, noise.huber).sum() + 3 * obs.valid.sum() * np.log(sg)
         else:
             z = zp[:, obs.kinds == g]
             c += rho(z, noise.loss, noise.huber).sum() + z.size * np.log(sg)
@@ -166,9 +161,8 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
     ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
     params = ph.params
     history: list[IterationRecord] = []
-    converged, prev = False, np.inf
+    converged, prev, prev_fixed = False, np.inf, np.inf
     n_obs = obs.pots.size + 3 * int(obs.valid.sum())
-    aitken = _SigmaAitken()
     lam = np.full(obs.n_frames, 1e-2)
     bfgs = _BfgsSchedule(obs, options) if options.schedule == "bfgs" else None
     accel = Anderson(options.anderson) if options.anderson and bfgs is None else None
@@ -178,9 +172,7 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
             params_j, used, _ = theta_step(obs, params, noise, q, lam)
-            q_j, lam_j, st_j, _, _ = q_step(
-                obs, params_j, noise, q, lam, options.batch_size, options.jobs
-            )
+            q_j, lam_j, st_j, _, _ = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs)
             ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
             cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
             if os.environ.get("STAC_DEBUG"):
@@ -194,16 +186,12 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
             else:
                 steps = options.q_steps if options.schedule == "lm-iter" else 30
                 for _ in range(steps):
-                    q, lam, st, _, used = q_step(
-                        obs, params, noise, q, lam, options.batch_size, options.jobs
-                    )
+                    q, lam, st, _, used = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs)
                     if options.schedule == "lm-batch" and np.all(lam >= 1e3):
                         break
             ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
             cost = total_cost(obs, ph.params, st, noise, sigma)
-            if (
-                accel is not None
-            ):  # Anderson extrapolation of the (q -> q-phase(p-phase(q))) fixed point
+            if accel is not None:  # Anderson extrapolation of the (q -> q-phase(p-phase(q))) fixed point
                 q_mix = accel.mix(q_old, q)
                 if q_mix is not None:
                     q_mix = np.clip(q_mix, obs.lower, obs.upper)
@@ -215,9 +203,12 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
                     else:
                         accel.reset()
         params = ph.params
-        raw = _update_sigma(obs, params, st, used)  # §2.3.5, every iteration
-        sigma = aitken.push(raw)
-        cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
+        settled = abs(prev_fixed - cost) < SIGMA_SETTLE * max(abs(cost), 1.0)
+        prev_fixed = cost
+        if settled:  # §2.3.5, once (q, θ) have settled for the current σ (see SIGMA_SETTLE)
+            sigma = _update_sigma(obs, params, st, used)
+            cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
+            prev_fixed = np.inf
         if accel is not None:
             accel.reset()
         history.append(
@@ -270,32 +261,6 @@ def _with_history(cal, history):
     )
 
 
-class _SigmaAitken:
-    """Aitken Δ² extrapolation of the σ fixed-point iteration (§2.3.5), on log σ per type.
-
-    σ_g² = RSS_g / (N_g − tr_g) converges linearly, slowly when one type dominates the joint
-    angles (ratio ~0.8 per iteration on the finger). When three successive raw values shrink
-    geometrically (ratio r in (0, 0.9)) the limit s₂ + Δ₂ r / (1 − r) is used instead.
-    """
-
-    def __init__(self):
-        self.hist: list[dict] = []
-
-    def push(self, raw: dict) -> dict:
-        self.hist = (self.hist + [raw])[-3:]
-        if len(self.hist) < 3:
-            return raw
-        out = dict(raw)
-        for g in raw:
-            s0, s1, s2 = (np.log(h[g]) for h in self.hist)
-            d1, d2 = s1 - s0, s2 - s1
-            if d1 != 0 and 0 < d2 / d1 < 0.9:
-                r = d2 / d1
-                out[g] = float(np.exp(s2 + d2 * r / (1 - r)))
-        self.hist = []  # restart from raw values after an extrapolation
-        return out
-
-
 class Anderson:
     """Anderson acceleration (type II, depth m) of the fixed-point map q -> G(q).
 
@@ -346,9 +311,7 @@ class _BfgsSchedule:
 
         def parts(x):
             return [
-                normal_equations(
-                    obs, params, noise, x.reshape(T, n), slice(i, i + self.options.batch_size)
-                )
+                normal_equations(obs, params, noise, x.reshape(T, n), slice(i, i + self.options.batch_size))
                 for i in range(0, T, self.options.batch_size)
             ]
 

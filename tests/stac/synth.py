@@ -93,15 +93,11 @@ def make_tree_robot(directory, chains=SMALL_CHAINS, seed: int = 0, markers_on_ba
                     {
                         "name": f"m_{child}",
                         "link": "waist" if markers_on_base else child,
-                        "xyz": (rng.choice([-1, 1], 3) * rng.uniform(0.03, 0.06, 3))
-                        .round(4)
-                        .tolist(),
+                        "xyz": (rng.choice([-1, 1], 3) * rng.uniform(0.03, 0.06, 3)).round(4).tolist(),
                     }
                 )
             parent = child
-    urdf = (
-        '<?xml version="1.0"?>\n<robot name="synth">\n' + "\n".join(links + joints) + "\n</robot>\n"
-    )
+    urdf = '<?xml version="1.0"?>\n<robot name="synth">\n' + "\n".join(links + joints) + "\n</robot>\n"
     directory.mkdir(parents=True, exist_ok=True)
     write_text(directory / "robot.urdf", urdf)
     save_yaml(
@@ -155,11 +151,7 @@ def make_finger_robot(directory, seed: int = 0):
         for n in ("prox", "mid", "dist")
         for i in range(2)
     ]
-    urdf = (
-        '<?xml version="1.0"?>\n<robot name="finger">\n'
-        + "\n".join(links + joints)
-        + "\n</robot>\n"
-    )
+    urdf = '<?xml version="1.0"?>\n<robot name="finger">\n' + "\n".join(links + joints) + "\n</robot>\n"
     directory.mkdir(parents=True, exist_ok=True)
     write_text(directory / "robot.urdf", urdf)
     save_yaml(
@@ -185,9 +177,7 @@ def true_calibration(robot, rng, gain_err=0.2, bias_err=0.3) -> Calibration:
     """Gains off by up to ±gain_err, biases by up to ±bias_err rad (pot units), random mocap."""
     nom = Calibration.nominal(robot)
     kinds = [p.kind for p in robot.sensors.pots]
-    scale = np.array(
-        [{"rotary": 1.0, "encoder": 1.0, "linear": 0.01, "tendon": 0.01}[k] for k in kinds]
-    )
+    scale = np.array([{"rotary": 1.0, "encoder": 1.0, "linear": 0.01, "tendon": 0.01}[k] for k in kinds])
     gain = nom.gain * (1 + rng.uniform(-gain_err, gain_err, len(kinds)))
     gain[np.array(kinds) == "encoder"] = 1.0
     bias = nom.bias + rng.uniform(-bias_err, bias_err, len(kinds)) * scale * np.abs(nom.gain)
@@ -226,10 +216,7 @@ def simulate(
     q = smooth_q(robot, n_frames, rate_hz, rng)
     tendon = np.array([p.kind == "tendon" for p in robot.sensors.pots])
     noise = np.where(tendon, 0.04 * sigma_pots, sigma_pots)  # tendons read metres, not volts
-    pots = (
-        predict_pots(robot, q, truth.gain, truth.bias)
-        + rng.normal(0, 1, (n_frames, len(truth.gain))) * noise
-    )
+    pots = predict_pots(robot, q, truth.gain, truth.bias) + rng.normal(0, 1, (n_frames, len(truth.gain))) * noise
     mk = predict_markers(robot, q, truth.marker_xyz, truth.mocap_R, truth.mocap_T)
     mk = mk + rng.normal(0, sigma_markers, mk.shape)
     if occlusion:

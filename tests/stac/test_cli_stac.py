@@ -106,9 +106,7 @@ def test_log_without_markers(logs, tree_dir, tmp_path):
 
 def test_log_without_pots(logs, tree_dir, tmp_path):
     _, log = logs
-    out = _bad(
-        tmp_path, Log(log.time, {"markers": log.streams["markers"]}, robot=log.robot), tree_dir
-    )
+    out = _bad(tmp_path, Log(log.time, {"markers": log.streams["markers"]}, robot=log.robot), tree_dir)
     assert "no 'pots' stream" in out
 
 
@@ -116,20 +114,14 @@ def test_unknown_pot_and_marker_names(logs, tree_dir, tmp_path):
     _, log = logs
     p = log.streams["pots"]
     renamed = synth.make_stream(("bogus",) + p.names[1:], p.data)
-    assert "'bogus' is not in" in _bad(
-        tmp_path, log.with_streams(pots=renamed).without_truth(), tree_dir
-    )
+    assert "'bogus' is not in" in _bad(tmp_path, log.with_streams(pots=renamed).without_truth(), tree_dir)
     m = log.streams["markers"]
     renamed = synth.make_stream(m.names[:-1] + ("m_ghost",), m.data)
-    assert "'m_ghost' is not in" in _bad(
-        tmp_path, log.with_streams(markers=renamed).without_truth(), tree_dir
-    )
+    assert "'m_ghost' is not in" in _bad(tmp_path, log.with_streams(markers=renamed).without_truth(), tree_dir)
 
 
 def test_markers_all_on_base_are_unobservable(tmp_path):
-    rdir = synth.make_tree_robot(
-        tmp_path / "base_robot", synth.SMALL_CHAINS, seed=1, markers_on_base=True
-    )
+    rdir = synth.make_tree_robot(tmp_path / "base_robot", synth.SMALL_CHAINS, seed=1, markers_on_base=True)
     log = synth.simulate(synth.load(rdir), 50, seed=1)
     out = _bad(tmp_path, log, rdir)
     assert "unobservable" in out
