@@ -44,7 +44,7 @@ class Guard:
         fit: keeps σ_z at the size of what the parametric model leaves unexplained.
     validation_fraction : float
         Fraction of the training samples (the last ones, in time order) held out to judge the
-        starts; the winner is then polished on all samples, and the posterior uses all data.
+        starts and a parametric-only fallback, per output; the posterior then uses all data.
     restarts : int
         Extra starts (on top of the estimator's ``restarts``) judged on the validation split.
     fix_sigma_w : bool
@@ -123,18 +123,9 @@ class SemiParametricGP:
     def _check(self, U, Y, F):
         U, Y, F = (np.asarray(x, float) for x in (U, Y, F))
         if U.ndim != 2 or Y.ndim != 2 or F.ndim != 3:
-            raise ValueError(
-                f"expected U (N, p), Y (N, n), F (N, n, m); got {U.shape}, {Y.shape}, {F.shape}"
-            )
-        if (
-            not (len(U) == len(Y) == len(F))
-            or F.shape[1] != Y.shape[1]
-            or Y.shape[1] != len(self.kernels)
-        ):
-            raise ValueError(
-                f"inconsistent shapes U {U.shape}, Y {Y.shape}, F {F.shape}, "
-                f"{len(self.kernels)} kernels"
-            )
+            raise ValueError(f"expected U (N, p), Y (N, n), F (N, n, m); got {U.shape}, {Y.shape}, {F.shape}")
+        if not (len(U) == len(Y) == len(F)) or F.shape[1] != Y.shape[1] or Y.shape[1] != len(self.kernels):
+            raise ValueError(f"inconsistent shapes U {U.shape}, Y {Y.shape}, F {F.shape}, {len(self.kernels)} kernels")
         if not self.use_features:
             F = F[:, :, :0]
         return U, Y, F
@@ -167,11 +158,7 @@ class SemiParametricGP:
         if hyperparameters is None:
             hyperparameters = self._learn(Us, Y, Fs, rng)
         self.hyper_ = hyperparameters
-        if (
-            inducing is None
-            and self.inference == "sparse"
-            and any(k is not None for k in self.kernels)
-        ):
+        if inducing is None and self.inference == "sparse" and any(k is not None for k in self.kernels):
             inducing = self._inducing(Us, rng)
         self.inducing_ = inducing
         self.posterior_ = fit_posterior(self.kernels, Us, Y, Fs, hyperparameters, inducing)
@@ -317,8 +304,9 @@ class SemiParametricGP:
         """ML-II (or MAP with the guard's priors) from several starts.
 
         Without validation the best objective wins. With ``guard.validation_fraction`` and
-        several starts, each start is optimised on the first part of the (sub)sample, the one
-        with the lowest nMSE on the held-out last part wins, and it is polished on all of it.
+        several starts, each start is optimised on the first part of the (sub)sample and scored
+        by its nMSE on the held-out last part, per output, next to a parametric-only fallback
+        (σ_z at its floor); each output keeps the hyperparameters that score best.
         """
         N = len(Us)
         idx = np.arange(N)
@@ -341,9 +329,7 @@ class SemiParametricGP:
         def run(s):
             return self._optimise(s, bounds, sizes, resid, U1, Y1, F1, self.maxiter)
 
-        if (
-            self.jobs > 1 and len(starts) > 1
-        ):  # independent starts in threads (LAPACK drops the GIL)
+        if self.jobs > 1 and len(starts) > 1:  # independent starts in threads (LAPACK drops the GIL)
             with ThreadPoolExecutor(max_workers=self.jobs) as pool:
                 results = list(pool.map(run, starts))
         else:
@@ -358,22 +344,36 @@ class SemiParametricGP:
             best = min(candidates, key=lambda c: c[0])
             self.objective_ = best[0]
             return Hyperparameters.unpack(best[1], sizes)
-        scores = []
-        for _, x in candidates:
+        # the parametric-only fallback: σ_z at its floor, σ_v at the parametric residual
+        fallback = x0.copy()
+        k = 1 + len(self.kernels)
+        for j, (kern, size) in enumerate(zip(self.kernels, sizes, strict=True)):
+            fallback[1 + j] = np.log(resid[j])
+            for i, name in enumerate(kern.names if kern is not None else ()):
+                if is_amplitude(name):
+                    fallback[k + i] = lo[k + i]
+            k += size
+        xs = [x for _, x in candidates] + [np.clip(fallback, lo, hi)]
+        scores = np.full((len(xs), Y.shape[1]), np.inf)
+        for c, x in enumerate(xs):
             try:
                 post = fit_posterior(self.kernels, U1, Y1, F1, Hyperparameters.unpack(x, sizes))
             except NumericalError:
-                scores.append(np.inf)
                 continue
             mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
-            scores.append(float(np.mean((mean - Y[val_idx]) ** 2 / self.y_std_**2)))
-        self.validation_scores_ = scores
-        chosen = candidates[int(np.argmin(scores))][1]
-        polished = self._optimise(
-            chosen, bounds, sizes, resid, Us[idx], Y[idx], Fs[idx], self.maxiter
-        )
-        x = polished[1] if polished else chosen
-        self.objective_ = polished[0] if polished else float("nan")
+            scores[c] = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
+        self.validation_scores_ = scores  # (starts + fallback, n): held-out nMSE per output
+        # per output, the hyperparameters (its σ_v and kernel) of the start that predicts the
+        # held-out samples best; the fallback wins where the GP does not help (SGP → PR there)
+        best = np.argmin(scores, axis=0)
+        self.fallback_ = tuple(bool(b == len(xs) - 1) for b in best)
+        x = xs[int(np.argmin(scores.mean(1)))].copy()
+        k = 1 + len(self.kernels)
+        for j, size in enumerate(sizes):
+            x[1 + j] = xs[best[j]][1 + j]
+            x[k : k + size] = xs[best[j]][k : k + size]
+            k += size
+        self.objective_ = float("nan")
         return Hyperparameters.unpack(x, sizes)
 
     # ------------------------------------------------------------------ predict
