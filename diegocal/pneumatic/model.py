@@ -20,9 +20,6 @@ import numpy as np
 
 from diegocal.pneumatic.params import ChamberParams
 
-#: Largest -r h allowed in the exponential, so a transiently negative rate cannot overflow.
-MAX_GROWTH = 30.0
-
 
 @dataclass(frozen=True)
 class ModelTerms:
@@ -100,14 +97,19 @@ def step_vector(x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian: bool = True):
 
     Returns (p_next, J) with p_next of the samples' shape and J = d p_next / d c, shape (T, 9)
     (None unless ``jacobian``).
+
+    The rate is used as max(r, 0): §4.3 defines r() > 0 (a rate of convergence to s), but
+    (4.10e) can turn negative where c5 vdot < -c7 k; a negative rate would make the step an
+    exponential divergence from s, which no chamber does. Where r < 0 the pressure is held.
     """
     t = terms(x, u, v, vd, c_b, c_s, c_gamma, jacobian)
-    e = np.exp(np.minimum(-t.r * h, MAX_GROWTH))
+    r = np.maximum(t.r, 0.0)
+    e = np.exp(-r * h)
     p_next = t.s + (p - t.s) * e
     if not jacobian:
         return p_next, None
     d_s = 1.0 - e  # d p_next / d s
-    d_r = np.where(-t.r * h < MAX_GROWTH, -h * (p - t.s) * e, 0.0)  # d p_next / d r
+    d_r = np.where(t.r > 0.0, -h * (p - t.s) * e, 0.0)  # d p_next / d r (0 where clamped)
     jac = d_s[..., None] * t.ds + d_r[..., None] * t.dr
     return p_next, jac
 

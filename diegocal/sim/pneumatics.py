@@ -19,8 +19,10 @@ Mechanics are not simulated (§4.2, "Independence from the Mechanics": given v a
 does not depend on them): the joints follow a violent band-limited random motion inside their
 limits and the valve commands (3-7 V, §4.5) are random steps and sweeps that explore the whole
 command range (§4.5.3: "explore the state-space as violently as possible"). So this is not the
-thesis's PID-driven flailing: a sealed chamber can be compressed above the supply pressure
-(rarely: ~0.05 % of samples above 650 kPa), which a real joint would resist. A variant with a
+thesis's PID-driven flailing: a sealed chamber can be compressed above the supply pressure,
+which a real joint would resist; the motion is kept moderate (components up to 1.5 Hz) so that
+this stays within a few kPa (an earlier, harsher motion reached 1000 kPa and the model, whose
+s() lives between P_r and P_c, could not follow it). A variant with a
 1-DoF mechanics per joint driven by its pistons under a PD controller was tried: the closed
 loop makes trajectories sensitive to the step size (halving it moves samples by ~2 kPa RMS after
 3 s, through the timing of joint-limit hits), and the 9-parameter model's 2-s drift rose to a
@@ -332,8 +334,8 @@ def _joint_motion(robot, cyl, options, rng):
         half[j] = 0.9 * min(lim, float(np.min(0.5 * cyl.stroke[sel] / cyl.moment_arm[sel])))
     if options.experiment == "steady-state":
         half[:] = 0.0  # locked cylinders (§4.3.1)
-    f = np.exp(rng.uniform(np.log(0.05), np.log(2.5), (8, n)))
-    a = rng.normal(0.0, 1.0, (8, n)) * np.sqrt(2.0 / 8) * 1.3
+    f = np.exp(rng.uniform(np.log(0.05), np.log(1.5), (8, n)))
+    a = rng.normal(0.0, 1.0, (8, n)) * np.sqrt(2.0 / 8) * 0.9
     ph = rng.uniform(0, 2 * np.pi, (8, n))
 
     def q_fn(t):
