@@ -54,7 +54,9 @@ def gauge_free_markers(robot, log) -> np.ndarray:
 
 def schedules(seed: int = 0) -> None:
     robot = load_robot(resolve_robot_dir("finger", None))
-    opts = KinematicsOptions(duration=2.0, rate_hz=100.0, occlusion=0.0)
+    # 200 well-spread configurations as in §2.6.1 ("200 random joint angles"): 100 s of PID
+    # motion sampled at 2 Hz (2 s at 100 Hz would barely move the joints)
+    opts = KinematicsOptions(duration=100.0, rate_hz=2.0, occlusion=0.0)
     log = simulate_kinematics(robot, opts, np.random.default_rng(seed))
     truth = Calibration.from_dict(log.truth.params)
     free = gauge_free_markers(robot, log)
