@@ -16,9 +16,7 @@ from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 @pytest.fixture(scope="module")
 def log():
     robot = load_robot(BUNDLED_ROBOTS / "arm3")
-    return simulate_dynamics(
-        robot, DynamicsOptions(duration=4.0, noise=0.05), np.random.default_rng(0)
-    )
+    return simulate_dynamics(robot, DynamicsOptions(duration=4.0, noise=0.05), np.random.default_rng(0))
 
 
 def _pred(log, tau, std):
@@ -31,9 +29,7 @@ def test_select_keeps_streams_and_truth_aligned(log):
     sub = select(log, mask)
     assert sub.n_samples == mask.sum()
     np.testing.assert_array_equal(sub.streams["q"].data, log.streams["q"].data[mask])
-    np.testing.assert_array_equal(
-        sub.truth.signals["tau"].data, log.truth.signals["tau"].data[mask]
-    )
+    np.testing.assert_array_equal(sub.truth.signals["tau"].data, log.truth.signals["tau"].data[mask])
 
 
 def test_perfect_mean_and_wrong_predictions_score_as_expected(log):
@@ -71,10 +67,7 @@ def test_regions_are_scored_separately_with_the_whole_log_variance(log):
 
 
 def test_table_stars_the_best_method_per_row():
-    rows = [
-        Score("e", 0, m, "t", "r", "j", v, c, 10)
-        for m, v, c in (("PR", 0.5, 0.5), ("SGP", 0.1, 0.9))
-    ]
+    rows = [Score("e", 0, m, "t", "r", "j", v, c, 10) for m, v, c in (("PR", 0.5, 0.5), ("SGP", 0.1, 0.9))]
     text = table(rows, "nmse")
     assert "0.1*" in text and "0.5*" not in text
     assert "0.9*" in table(rows, "coverage")
