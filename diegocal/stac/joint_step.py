@@ -84,7 +84,7 @@ def theta_step(
     q: np.ndarray,
     lam: np.ndarray,
     batch: int = 500,
-    max_frames: int = 400,
+    max_frames: int = 250,
 ) -> tuple[Params, dict, dict]:
     """θ + Δθ from the reduced (Schur) system, the q-phase redundancy per sensor type and the
     standard errors of θ with q marginalised: ``{"gain", "bias" (P,), "xyz" (M, 3)}`` from the

@@ -94,7 +94,7 @@ def predict(
         q = np.tile(robot.neutral(), (obs.n_frames, 1))
     lam = np.full(obs.n_frames, 1e-2)
     for _ in range(max_steps):
-        q, lam, st, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs)
+        q, lam, st, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
         if np.all(lam >= 1e3):
             break
     pots = params.gain * st.s + params.bias

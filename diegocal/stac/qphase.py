@@ -69,7 +69,7 @@ def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarra
     return c
 
 
-def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarray, sl: slice):
+def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarray, sl: slice, want_red: bool = True):
     """JᵀWJ (B, n, n), gradient JᵀW r (B, n), per-frame cost (B,), the evaluation at q[sl] and the
     redundancy of each sensor type (dict, summed over the batch; see :func:`redundancy`)."""
     q = q[sl]
@@ -101,7 +101,7 @@ def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarr
         g += np.einsum("brn,br->bn", J, w3 * rx.reshape(B, -1))
         c0 += rho(zx, noise.loss, noise.huber).sum(1)
     extra = {"ds": ds, "wp": wp, "zp": zp, "Jx": J, "wx": w3, "rx": rx, "valid": valid}
-    return H, g, c0, (s, Rl, pl), redundancy(H, parts), extra
+    return H, g, c0, (s, Rl, pl), redundancy(H, parts) if want_red else {}, extra
 
 
 def redundancy(H: np.ndarray, parts: dict) -> dict:
@@ -118,9 +118,9 @@ def redundancy(H: np.ndarray, parts: dict) -> dict:
     return {g: float(np.einsum("bij,bji->", Hi, Hg)) for g, Hg in parts.items()}
 
 
-def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl):
+def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_red=True):
     lo, hi = obs.lower, obs.upper
-    H, g, c0, (s, Rl, pl), red, _ = normal_equations(obs, params, noise, q, sl)
+    H, g, c0, (s, Rl, pl), red, _ = normal_equations(obs, params, noise, q, sl, want_red)
     q, lam = q[sl], lam[sl]
     pots, markers, valid = obs.pots[sl], obs.markers[sl], obs.valid[sl]
     n = q.shape[1]
@@ -149,18 +149,19 @@ def q_step(
     lam: np.ndarray,
     batch: int = 1000,
     jobs: int = 1,
+    want_red: bool = True,
 ):
     """One LM step on every frame.
 
     Returns (q (T, n), λ (T,), State at the new q, cost (T,), redundancy {group: Σ tr_g} at
-    the old q).
+    the old q; empty unless ``want_red``: it costs one n x n inverse per frame).
     """
     slices = [slice(i, min(i + batch, q.shape[0])) for i in range(0, q.shape[0], batch)]
     if jobs > 1 and len(slices) > 1:
         with ThreadPoolExecutor(jobs) as pool:
-            parts = list(pool.map(lambda sl: _step_batch(obs, params, noise, q, lam, sl), slices))
+            parts = list(pool.map(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red), slices))
     else:
-        parts = [_step_batch(obs, params, noise, q, lam, sl) for sl in slices]
+        parts = [_step_batch(obs, params, noise, q, lam, sl, want_red) for sl in slices]
     q_new = np.concatenate([p[0] for p in parts])
     lam_new = np.concatenate([p[1] for p in parts])
     st = State(*(np.concatenate([p[2][k] for p in parts]) for k in range(3)))

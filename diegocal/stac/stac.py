@@ -84,7 +84,7 @@ def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.nd
         noise = Noise(scale, 1.0, use_markers=False)
         lam = np.full(obs.n_frames, 1e-2)
         for _ in range(10):
-            q, lam, _, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs)
+            q, lam, _, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
     return q
 
 
@@ -178,7 +178,9 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
             params_j, used, _ = theta_step(obs, params, noise, q, lam)
-            q_j, lam_j, st_j, _, _ = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs)
+            q_j, lam_j, st_j, _, _ = q_step(
+                obs, params_j, noise, q, lam, options.batch_size, options.jobs, want_red=False
+            )
             ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
             cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
             if os.environ.get("STAC_DEBUG"):
