@@ -2,8 +2,10 @@
 
 A short window of the Stäubli TX40 excitation (shared/data/real, converted by
 :func:`diegocal.io.real.load_tx40`): train on its first 4 s (every 4th sample, 50 Hz), predict the
-next 2 s at the full 200 Hz. Skipped when the data are absent. The full comparison (both TX40
-splits, TIAGo, nominal rigid body) is bench/bench_real_identification.py.
+next 2 s at the full 200 Hz. Skipped when the data are absent. PR must beat the zero and the
+training-mean predictors on every joint; the SGP (library defaults, and with a noise floor) may
+lose at most SGP_NMSE_MARGIN of held-out nMSE to PR on any joint and 10 % in pooled RMSE. The full
+comparison (both TX40 splits, TIAGo, nominal rigid body) is bench/bench_real_identification.py.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ STRIDE = 4  # training subsampling: 200 Hz -> 50 Hz, 200 samples
 #: torque variance), and at most SGP_RMSE_MARGIN in pooled RMSE.
 SGP_NMSE_MARGIN = 0.05
 SGP_RMSE_MARGIN = 1.10
+NOISE_FLOOR = 0.2  # SGPOptions.min_noise: σ_v ≥ NOISE_FLOOR · std(τ_j)
 
 
 def _window(log: Log, lo: float, hi: float, stride: int = 1) -> Log:
@@ -70,15 +73,21 @@ def test_pr_beats_zero_and_mean_predictors_on_held_out_torques(tx40, pr):
     assert _rmse(pr.tau, measured) < 0.3 * _rmse(mean_pred, measured)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="SGP defaults on low-passed real torques: ML-II drives sigma_v to its 1e-4*std floor, "
-    "the GP interpolates the training trajectory (in-sample nMSE ~0) and held-out nMSE explodes; "
-    "see bench/bench_real_identification.py ('SGP floor' row). Remove this mark once fixed.",
-)
-def test_sgp_is_not_worse_than_pr_on_held_out_torques(tx40, pr):
-    robot, train, test, measured = tx40
-    sgp = fit_dynamics(train, robot, SGPOptions(kind="sgp")).predict(test)
+def _check_not_worse(sgp, pr, measured):
     e_sgp, e_pr = nmse(sgp.tau, measured), nmse(pr.tau, measured)
     assert (e_sgp <= e_pr + SGP_NMSE_MARGIN).all(), (e_sgp, e_pr)
     assert _rmse(sgp.tau, measured) <= SGP_RMSE_MARGIN * _rmse(pr.tau, measured)
+
+
+def test_sgp_with_a_noise_floor_is_not_worse_than_pr_on_held_out_torques(tx40, pr):
+    # σ_v ≥ 0.2 std(τ_j): the low-passed torques are not white-noise observations; with the
+    # default floor (1e-4) ML-II can drive σ_v down until the GP interpolates the training run
+    robot, train, test, measured = tx40
+    model = fit_dynamics(train, robot, SGPOptions(kind="sgp", min_noise=NOISE_FLOOR))
+    _check_not_worse(model.predict(test), pr, measured)
+
+
+def test_sgp_defaults_are_not_worse_than_pr_on_held_out_torques(tx40, pr):
+    robot, train, test, measured = tx40
+    sgp = fit_dynamics(train, robot, SGPOptions(kind="sgp")).predict(test)
+    _check_not_worse(sgp, pr, measured)
