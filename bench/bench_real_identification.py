@@ -250,10 +250,10 @@ def main(argv=None) -> int:
         results = baselines(split) + [fit_predict(split, m, args.seed) for m in methods]
         report(split, results)
     if not args.no_floor:
-        print(f"\nSGP floor = the SGP with σ_v ≥ {NOISE_FLOOR}·std(τ_j) (library default 1e-4): "
-              "on these low-passed torques the default SGP's ML-II drives σ_v to its floor and "
-              "the GP interpolates the training trajectory (in-sample nMSE ≈ 0), which can ruin "
-              "held-out predictions; the floor is SGPOptions(min_noise=...), not a default.")
+        print(f"\nSGP floor = the SGP with σ_v ≥ {NOISE_FLOOR}·std(τ_j), SGPOptions(min_noise=...); "
+              "the default floor is 1e-4·std. These torques are low-passed (not white noise): "
+              "with a tiny floor ML-II can shrink σ_v until the GP interpolates the training run "
+              "(in-sample nMSE ≈ 0) and extrapolates badly; compare the in-sample column.")
     return 0
 
 
