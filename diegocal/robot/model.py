@@ -84,6 +84,9 @@ class Robot:
             raise UnknownNameError(f"robot {self.name!r} has no joint {name!r}") from None
 
     def frame_id(self, link: str) -> int:
+        """Pinocchio frame id of a link (its BODY frame: a joint may share the link's name)."""
+        if self.model.existFrame(link, pin.FrameType.BODY):
+            return self.model.getFrameId(link, pin.FrameType.BODY)
         if not self.model.existFrame(link):
             raise UnknownNameError(f"robot {self.name!r} has no link {link!r}")
         return self.model.getFrameId(link)
