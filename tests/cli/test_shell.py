@@ -5,6 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
 from diegocal.io import Log, make_stream, save_log
 
 runner = CliRunner()
@@ -20,14 +21,6 @@ def log_file(tmp_path):
     path = tmp_path / "run.h5"
     save_log(log, path)
     return path
-
-
-def one_line_error(result) -> str:
-    assert result.exit_code != 0
-    assert "Traceback" not in result.output
-    lines = [line for line in result.output.strip().splitlines() if line.strip()]
-    assert len(lines) == 1, result.output
-    return lines[0]
 
 
 def test_inspect_describes_streams_and_occlusion(log_file):

@@ -5,17 +5,10 @@ import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
 from diegocal.io import Log, load_log, load_yaml, make_stream, save_log
 
 runner = CliRunner()
-
-
-def one_line_error(result) -> str:
-    assert result.exit_code != 0
-    assert "Traceback" not in result.output
-    lines = [line for line in result.output.strip().splitlines() if line.strip()]
-    assert len(lines) == 1, result.output
-    return lines[0]
 
 
 @pytest.fixture
