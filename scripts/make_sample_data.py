@@ -35,7 +35,7 @@ def main(out: Path) -> None:
     session.unlink()
     diegocal("simulate", "pneumatics", "--robot", "diego", "--duration", "8", "--seed", "1",
              "-o", str(out / "diego_pneumatics.h5"))
-    diegocal("simulate", "dynamics", "--robot", "arm3", "--duration", "20", "--seed", "1",
+    diegocal("simulate", "dynamics", "--robot", "arm3", "--duration", "8", "--rate", "50", "--seed", "1",
              "--trajectory", "figure8-horizontal", "--effect", "position_friction:joint3",
              "-o", str(out / "arm3_dynamics.h5"))
 
