@@ -26,18 +26,53 @@ def diegocal(*args: str) -> None:
 def main(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     session = out / "_diego_session.h5"
-    diegocal("simulate", "kinematics", "--robot", "diego", "--duration", str(KINEMATICS_SECONDS),
-             "--seed", "1", "-o", str(session))
+    diegocal(
+        "simulate",
+        "kinematics",
+        "--robot",
+        "diego",
+        "--duration",
+        str(KINEMATICS_SECONDS),
+        "--seed",
+        "1",
+        "-o",
+        str(session),
+    )
     log = load_log(session)
     split = log.n_samples - int(round(HELDOUT_SECONDS * (log.rate_hz or 100.0)))
     save_log(log.slice(0, split), out / "diego_kinematics.h5")
     save_log(log.slice(split, log.n_samples), out / "diego_kinematics_heldout.h5")
     session.unlink()
-    diegocal("simulate", "pneumatics", "--robot", "diego", "--duration", "8", "--seed", "1",
-             "-o", str(out / "diego_pneumatics.h5"))
-    diegocal("simulate", "dynamics", "--robot", "arm3", "--duration", "8", "--rate", "50", "--seed", "1",
-             "--trajectory", "figure8-horizontal", "--effect", "position_friction:joint3",
-             "-o", str(out / "arm3_dynamics.h5"))
+    diegocal(
+        "simulate",
+        "pneumatics",
+        "--robot",
+        "diego",
+        "--duration",
+        "8",
+        "--seed",
+        "1",
+        "-o",
+        str(out / "diego_pneumatics.h5"),
+    )
+    diegocal(
+        "simulate",
+        "dynamics",
+        "--robot",
+        "arm3",
+        "--duration",
+        "8",
+        "--rate",
+        "50",
+        "--seed",
+        "1",
+        "--trajectory",
+        "figure8-horizontal",
+        "--effect",
+        "position_friction:joint3",
+        "-o",
+        str(out / "arm3_dynamics.h5"),
+    )
 
 
 if __name__ == "__main__":

@@ -17,10 +17,13 @@ from diegocal.io.describe import describe_log
 def inspect(log: Annotated[Path, typer.Argument(help="A diegocal log (.h5 or .csv).")]) -> None:
     """Describe a log: streams, channel names, duration, rate, occlusion per marker."""
     s = describe_log(load_log(log))
-    console.print(f"[bold]{log}[/]  robot={s.robot or '-'}  samples={s.n_samples}  "
-                  f"duration={s.duration:.3f} s  rate={s.rate_hz:.4g} Hz"
-                  + (f" (nominal {s.nominal_rate_hz:g})" if s.nominal_rate_hz else "")
-                  + ("  [truth: yes]" if s.has_truth else ""), highlight=False)
+    console.print(
+        f"[bold]{log}[/]  robot={s.robot or '-'}  samples={s.n_samples}  "
+        f"duration={s.duration:.3f} s  rate={s.rate_hz:.4g} Hz"
+        + (f" (nominal {s.nominal_rate_hz:g})" if s.nominal_rate_hz else "")
+        + ("  [truth: yes]" if s.has_truth else ""),
+        highlight=False,
+    )
     for st in s.streams:
         table = Table(title=f"{st.name}  {st.shape}", title_justify="left")
         for col in ("channel", "min", "max", "NaN %" if st.name != "markers" else "occluded %"):

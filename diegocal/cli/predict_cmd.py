@@ -60,7 +60,9 @@ def predict(
     model: Annotated[Path, typer.Argument(help="calib.yaml, pneumatic.yaml or an sgp/ model directory.")],
     log: Annotated[Path, typer.Argument(help="Held-out log to predict.")],
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Where to write the prediction.")] = None,
-    sensors_from: Annotated[str, typer.Option("--from", help="STAC: sensor types to track from (comma list).")] = "pots",
+    sensors_from: Annotated[
+        str, typer.Option("--from", help="STAC: sensor types to track from (comma list).")
+    ] = "pots",
     sensors_to: Annotated[str, typer.Option("--to", help="STAC: sensor types to predict (comma list).")] = "markers",
     robot: Annotated[Path | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,

@@ -189,8 +189,13 @@ def _load_h5(path: Path) -> Log:
         robot = _attr_str(f.attrs.get("robot"))
         rate = f.attrs.get("rate_hz")
     try:
-        return Log(time=time, streams=streams, robot=robot or None,
-                   rate_hz=float(rate) if rate is not None else None, truth=truth)
+        return Log(
+            time=time,
+            streams=streams,
+            robot=robot or None,
+            rate_hz=float(rate) if rate is not None else None,
+            truth=truth,
+        )
     except LogFormatError as exc:
         raise LogFormatError(f"{path}: {exc}") from None
 
@@ -241,7 +246,7 @@ def _load_csv(path: Path) -> Log:
         skip = 1
         if not first.startswith(CSV_HEADER_PREFIX):
             raise LogFormatError(f"{path}: header comment is not '{CSV_HEADER_PREFIX} ...'")
-        meta = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX):].split() if "=" in f)
+        meta = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX) :].split() if "=" in f)
         if meta.get("version", str(VERSION)) != str(VERSION):
             raise LogFormatError(f"{path}: log format version {meta['version']}, this diegocal reads version {VERSION}")
         robot = meta.get("robot")

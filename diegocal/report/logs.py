@@ -15,8 +15,14 @@ LOG_SUFFIXES = (".h5", ".hdf5", ".csv")
 
 
 def summary_lines(s: LogSummary) -> list[str]:
-    lines = [f"robot: {s.robot or '-'}", f"samples: {s.n_samples}", f"duration: {s.duration:.3f} s",
-             f"rate: {s.rate_hz:.4g} Hz", f"ground truth (/truth): {'yes' if s.has_truth else 'no'}", ""]
+    lines = [
+        f"robot: {s.robot or '-'}",
+        f"samples: {s.n_samples}",
+        f"duration: {s.duration:.3f} s",
+        f"rate: {s.rate_hz:.4g} Hz",
+        f"ground truth (/truth): {'yes' if s.has_truth else 'no'}",
+        "",
+    ]
     for st in s.streams:
         lines.append(f"{st.name}: {len(st.names)} channels, shape {st.shape}")
         if st.name == "markers":
@@ -45,7 +51,11 @@ def plot_stream(log, name: str, ax=None, max_channels: int = 12):
     for k in range(min(max_channels, len(s.names))):
         ax.plot(log.time, data[:, k], lw=0.6, label=s.names[k])
     ax.set_xlabel("time [s]")
-    ax.set_title(f"{name}" + (" (|x|)" if s.data.ndim == 3 else "") + (f", first {max_channels}" if len(s.names) > max_channels else ""))
+    ax.set_title(
+        f"{name}"
+        + (" (|x|)" if s.data.ndim == 3 else "")
+        + (f", first {max_channels}" if len(s.names) > max_channels else "")
+    )
     if len(s.names) <= max_channels:
         ax.legend(ncol=3, fontsize=6)
     return ax
@@ -56,7 +66,7 @@ def log_pages(path: Path, pdf, context) -> None:
     save_page(pdf, text_page(f"Log: {path.name}", summary_lines(describe_log(log))))
     names = list(log.streams)
     for start in range(0, len(names), 4):
-        chunk = names[start:start + 4]
+        chunk = names[start : start + 4]
         fig, axes = page(len(chunk), 1, title=f"Log: {path.name}: streams")
         for ax, name in zip(axes[:, 0], chunk, strict=True):
             plot_stream(log, name, ax=ax)

@@ -29,7 +29,9 @@ def write_report(results, out, context: ReportContext | None = None, command: st
             raise InputFileError(f"{r}: no such file or directory")
         section = section_for(r)
         if section is None:
-            raise InputFileError(f"{r}: not a result diegocal can report (a log, calib.yaml, pneumatic.yaml or sgp/ model)")
+            raise InputFileError(
+                f"{r}: not a result diegocal can report (a log, calib.yaml, pneumatic.yaml or sgp/ model)"
+            )
         plan.append((r, section))
     with atomic_path(out) as tmp, PdfPages(tmp) as pdf:
         save_page(pdf, text_page("diegocal report", _title_lines(plan, context, command)))
@@ -42,8 +44,12 @@ def write_report(results, out, context: ReportContext | None = None, command: st
 
 
 def _title_lines(plan, context: ReportContext, command: str) -> list[str]:
-    now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-    lines = [f"command:  {command}", f"created:  {now}", f"diegocal: {__version__}  (Python {platform.python_version()})"]
+    now = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    lines = [
+        f"command:  {command}",
+        f"created:  {now}",
+        f"diegocal: {__version__}  (Python {platform.python_version()})",
+    ]
     if context.robot is not None:
         lines.append(f"robot:    {context.robot}")
     lines += ["", "results:"]

@@ -8,17 +8,25 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 PAGE_SIZE = (8.27, 11.69)  # A4 portrait, inches
-COLORS = {"measured": "0.2", "model": "tab:blue", "truth": "tab:green", "baseline": "tab:orange",
-          "residual": "tab:red", "band": "tab:blue"}
+COLORS = {
+    "measured": "0.2",
+    "model": "tab:blue",
+    "truth": "tab:green",
+    "baseline": "tab:orange",
+    "residual": "tab:red",
+    "band": "tab:blue",
+}
 
-plt.rcParams.update({
-    "font.size": 8,
-    "axes.titlesize": 9,
-    "axes.grid": True,
-    "grid.alpha": 0.3,
-    "legend.fontsize": 7,
-    "figure.dpi": 100,
-})
+plt.rcParams.update(
+    {
+        "font.size": 8,
+        "axes.titlesize": 9,
+        "axes.grid": True,
+        "grid.alpha": 0.3,
+        "legend.fontsize": 7,
+        "figure.dpi": 100,
+    }
+)
 
 
 def axes_or_new(ax=None, figsize=(6, 4)):

@@ -16,8 +16,12 @@ def log_file(tmp_path):
     T = 50
     markers = np.random.default_rng(0).normal(size=(T, 2, 3))
     markers[10:20, 1] = np.nan  # an occlusion run
-    log = Log(np.arange(T) * 0.01, {"pots": make_stream(["p1", "p2"], np.ones((T, 2))),
-                                    "markers": make_stream(["m1", "m2"], markers)}, robot="diego", rate_hz=100.0)
+    log = Log(
+        np.arange(T) * 0.01,
+        {"pots": make_stream(["p1", "p2"], np.ones((T, 2))), "markers": make_stream(["m1", "m2"], markers)},
+        robot="diego",
+        rate_hz=100.0,
+    )
     path = tmp_path / "run.h5"
     save_log(log, path)
     return path
@@ -31,10 +35,13 @@ def test_inspect_describes_streams_and_occlusion(log_file):
     assert "p1" in result.output
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "no such file"),
-    (b"not a log at all", "not a diegocal log"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (None, "no such file"),
+        (b"not a log at all", "not a diegocal log"),
+    ],
+)
 def test_inspect_bad_files(tmp_path, content, message):
     path = tmp_path / "x.dat"
     if content is not None:

@@ -64,9 +64,11 @@ def test_hdf5_and_csv_hold_the_same_content(tmp_path, log):
 
 
 def test_truth_round_trips_in_hdf5(tmp_path):
-    truth = Truth(params={"pots": {"p": {"gain": 1.2, "bias": 0.1}}},
-                  effects=[{"cause": "backlash", "channel": "p", "values": {"width": 0.02}}],
-                  signals={"q": make_stream(["j1"], np.arange(3.0)[:, None])})
+    truth = Truth(
+        params={"pots": {"p": {"gain": 1.2, "bias": 0.1}}},
+        effects=[{"cause": "backlash", "channel": "p", "values": {"width": 0.02}}],
+        signals={"q": make_stream(["j1"], np.arange(3.0)[:, None])},
+    )
     log = Log(np.arange(3) * 0.1, {"pots": make_stream(["p"], np.ones((3, 1)))}, truth=truth)
     save_log(log, tmp_path / "t.h5")
     back = load_log(tmp_path / "t.h5")
@@ -88,8 +90,14 @@ def good_log(T=4):
         (lambda: Log(np.array([0.0, np.nan, 0.1]), {}), "NaN"),
         (lambda: Log(np.arange(3.0), {"pots": Stream(("a",), np.zeros((4, 1)))}), "expected data of shape (3, 1)"),
         (lambda: Log(np.arange(3.0), {"pots": make_stream(["a", "a"], np.zeros((3, 2)))}), "duplicate channel names"),
-        (lambda: Log(np.arange(3.0), {"pots": make_stream(["a"], [[0.0], [np.nan], [1.0]])}), "NaN or infinite value at sample 1"),
-        (lambda: Log(np.arange(3.0), {"markers": make_stream(["m"], np.zeros((3, 1, 4)))}), "expected data of shape (3, 1, 3)"),
+        (
+            lambda: Log(np.arange(3.0), {"pots": make_stream(["a"], [[0.0], [np.nan], [1.0]])}),
+            "NaN or infinite value at sample 1",
+        ),
+        (
+            lambda: Log(np.arange(3.0), {"markers": make_stream(["m"], np.zeros((3, 1, 4)))}),
+            "expected data of shape (3, 1, 3)",
+        ),
         (lambda: Log(np.array([]), {}), "no samples"),
     ],
 )
