@@ -122,7 +122,7 @@ def full(frames: int, seed: int = 0) -> None:
         print(f"{name:<12}{wall:>9.1f}{rss:>14.0f}{cal.fit.iterations:>7}{gerr:>14.4f}{rmse:>12.4f}")
     buf = io.StringIO()
     pstats.Stats(prof, stream=buf).sort_stats("cumulative").print_stats(
-        "stac/(stac|qphase|pphase|joint_step|kinematics_batch|model).py", 18
+        "(stac/(stac|qphase|pphase|joint_step|model)|robot/batch).py", 18
     )
     print("\nwhere STAC's time goes (cumulative seconds):")
     print("\n".join(line for line in buf.getvalue().splitlines() if "stac/" in line or "cumtime" in line))

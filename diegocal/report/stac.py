@@ -105,7 +105,7 @@ def plot_residual_hist(residuals: np.ndarray, label: str, unit: str, ax=None):
 # ----------------------------------------------------------------------------- data
 def skeleton(cal: Calibration, robot) -> dict:
     """Link origins at the neutral pose and nominal/fitted markers in the base frame."""
-    from diegocal.stac.kinematics_batch import BatchKinematics
+    from diegocal.robot.batch import BatchKinematics
 
     kin = BatchKinematics(robot)
     poses = kin.joint_poses(robot.neutral()[None])

@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 from diegocal.errors import RobotConfigError
 from diegocal.io import Log, Truth, make_stream
 from diegocal.robot import PointSet, Robot, pot_transmission
+from diegocal.robot.batch import BatchKinematics
 from diegocal.sim.effects import (
     EffectError,
     EffectRequest,
@@ -385,8 +386,8 @@ def backlash(s: np.ndarray, width: float) -> np.ndarray:
 
 
 class BatchedRobot(Robot):
-    """A :class:`Robot` whose ``points`` is :func:`base_points` (same result, ~1.7x faster on
-    diego), so the library's observation models (``pot_transmission``) run batched too."""
+    """A :class:`Robot` whose ``points`` is :func:`base_points` (same result, vectorised over
+    frames), so the library's observation models (``pot_transmission``) run batched too."""
 
     def points(self, q, points: PointSet) -> np.ndarray:
         return base_points(self, q, points.links, points.xyz)
@@ -484,22 +485,7 @@ def marker_positions(robot: Robot, q: np.ndarray, truth: Calibration,
 
 
 def base_points(robot: Robot, q: np.ndarray, links, xyz: np.ndarray) -> np.ndarray:
-    """Link-fixed points in the base frame (T, N, 3), m — :meth:`Robot.points`, batched.
-
-    One forward-kinematics pass per frame (Pinocchio), then the transforms of the few distinct
-    links are applied to all points at once with numpy.
-    """
-    q = robot.check_q(q)
-    model, data = robot.model, robot.data
-    fids = [robot.frame_id(link) for link in links]
-    unique = sorted(set(fids) | {robot.base_frame})
-    where = {f: i for i, f in enumerate(unique)}
-    H = np.empty((q.shape[0], len(unique), 4, 4))
-    for t in range(q.shape[0]):
-        pin.forwardKinematics(model, data, q[t])
-        for i, f in enumerate(unique):
-            H[t, i] = pin.updateFramePlacement(model, data, f).homogeneous
-    Hb = H[:, where[robot.base_frame]]
-    Hl = H[:, [where[f] for f in fids]]  # (T, N, 4, 4)
-    world = np.einsum("tnij,nj->tni", Hl[..., :3, :3], np.asarray(xyz, float)) + Hl[..., :3, 3]
-    return np.einsum("tji,tnj->tni", Hb[:, :3, :3], world - Hb[:, None, :3, 3])
+    """Link-fixed points in the base frame (T, N, 3), m — :meth:`Robot.points`, vectorised over
+    frames by :class:`diegocal.robot.batch.BatchKinematics`."""
+    kin = BatchKinematics(robot)
+    return kin.points(kin.joint_poses(robot.check_q(q)), PointSet(tuple(links), np.asarray(xyz, float)))

@@ -142,7 +142,7 @@ def _batch(robot: Robot):
     """
     if robot not in _BATCH:
         try:
-            from diegocal.stac.kinematics_batch import BatchKinematics
+            from diegocal.robot.batch import BatchKinematics
 
             _BATCH[robot] = BatchKinematics(robot)
         except (ImportError, DiegocalError):

@@ -15,8 +15,8 @@ import numpy as np
 from diegocal.errors import FitError, UnknownNameError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
+from diegocal.robot.batch import BatchKinematics
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.kinematics_batch import BatchKinematics
 
 #: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
 MARKERS = "markers"

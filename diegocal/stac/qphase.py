@@ -9,7 +9,7 @@ with ρ(z) = z²/2 (Gaussian, eq. 2.21) or Huber's loss. One Levenberg-Marquardt
 the batched normal equations ``(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀW r`` are solved with
 ``np.linalg.solve`` on (B, n, n), the step is projected onto the joint limits, and each frame
 keeps its own damping λ_t (accept: λ/3, reject: λ·4). Jacobians are eq. 2.22 (pots) and eq. 2.23
-(markers) from :mod:`diegocal.stac.kinematics_batch`. Batches run in threads (``jobs``): numpy
+(markers) from :mod:`diegocal.robot.batch`. Batches run in threads (``jobs``): numpy
 releases the GIL in the heavy products, and no robot model is pickled.
 """
 

@@ -6,7 +6,7 @@ import synth
 
 from diegocal.io import load_yaml, save_yaml
 from diegocal.robot import anchor_points, load_robot, marker_points
-from diegocal.stac.kinematics_batch import BatchKinematics
+from diegocal.robot.batch import BatchKinematics
 
 
 def _check(robot, seed):

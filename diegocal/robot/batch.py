@@ -1,4 +1,4 @@
-"""Forward kinematics and point Jacobians vectorised over frames (the STAC inner loop).
+"""Forward kinematics and point Jacobians vectorised over frames (the STAC inner loop, the simulator).
 
 :meth:`diegocal.robot.Robot.points_jacobian` calls Pinocchio once per frame from Python, which
 dominates a STAC run at thesis size (25,000 frames x 38 joints). :class:`BatchKinematics` reads
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from diegocal.errors import RobotConfigError
-from diegocal.robot import PointSet, Robot
+from diegocal.robot.model import PointSet, Robot
 
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
