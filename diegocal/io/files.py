@@ -97,6 +97,20 @@ def load_log(path) -> Log:
     raise LogFormatError(f"{path}: not a diegocal log (expected an HDF5 .h5 or a .csv file)")
 
 
+def log_robot(path) -> str | None:
+    """The robot a log names, read from its header only (no stream is loaded)."""
+    path = _existing(path)
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head == HDF5_SIGNATURE:
+        with h5py.File(path, "r") as f:
+            return _attr_str(f.attrs.get("robot")) or None
+    with open(path, errors="replace") as fh:
+        first = fh.readline().strip()
+    fields = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX) :].split() if "=" in f)
+    return fields.get("robot") if first.startswith(CSV_HEADER_PREFIX) else None
+
+
 def save_log(log: Log, path) -> None:
     """Write a log; the format follows the suffix (``.h5``/``.hdf5`` or ``.csv``)."""
     path = Path(path)

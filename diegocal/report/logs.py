@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.io import load_log
+from diegocal.io.files import log_robot
 from diegocal.io.describe import LogSummary, describe_log
 from diegocal.report.registry import Section, register_section
 from diegocal.report.style import axes_or_new, page, save_page, text_page
@@ -74,7 +75,7 @@ def log_pages(path: Path, pdf, context) -> None:
 
 
 def _describe(path: Path) -> dict:
-    return {"log": str(path), "robot": load_log(path).robot}
+    return {"log": str(path), "robot": log_robot(path)}
 
 
 register_section(Section("log", lambda p: p.suffix.lower() in LOG_SUFFIXES and p.is_file(), log_pages, _describe))
