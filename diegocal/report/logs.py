@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.io import load_log
-from diegocal.io.files import log_robot
 from diegocal.io.describe import LogSummary, describe_log
+from diegocal.io.files import log_robot
 from diegocal.report.registry import Section, register_section
 from diegocal.report.style import axes_or_new, page, save_page, text_page
 

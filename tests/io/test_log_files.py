@@ -176,3 +176,14 @@ def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError):
         save_log(good_log(), tmp_path / "out.h5")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".csv"])
+def test_log_robot_reads_the_header_only(tmp_path, suffix):
+    from diegocal.io.files import log_robot
+
+    log = Log(np.arange(3) * 0.1, {"pots": make_stream(["p"], np.ones((3, 1)))}, robot="arm3")
+    save_log(log, tmp_path / f"a{suffix}")
+    assert log_robot(tmp_path / f"a{suffix}") == "arm3"
+    save_log(good_log(), tmp_path / f"b{suffix}")
+    assert log_robot(tmp_path / f"b{suffix}") is None
