@@ -32,7 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, lapack, solve_triangular
+from scipy.linalg import blas, cho_solve, lapack, solve_triangular
 
 from diegocal.errors import NumericalError
 from diegocal.sgp.kernels import Kernel
@@ -41,24 +41,49 @@ LOG_2PI = float(np.log(2.0 * np.pi))
 JITTERS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)  # relative to the mean diagonal
 
 
-def cholesky(A: np.ndarray, what: str = "covariance") -> tuple[np.ndarray, float]:
-    """Lower Cholesky factor of a symmetric positive-definite matrix, with growing jitter.
+def factor(A: np.ndarray, what: str = "covariance") -> tuple[np.ndarray, float]:
+    """Cholesky factor of a symmetric positive-definite matrix, computed in A's own memory.
 
-    Returns (L, jitter added). Raises :class:`NumericalError` with a hint when even the
-    largest jitter fails (as scikit-learn does for its failed Cholesky).
+    Returns (L, jitter added): ``L`` is Fortran-ordered and only its lower triangle is the
+    factor (the strict upper triangle still holds A's entries; LAPACK's potrs/potri and
+    ``solve_triangular(..., lower=True)`` never read it). No copy, no ``np.tril`` pass: this is
+    the likelihood's hot path. A is overwritten. The jitter grows as in :func:`cholesky`.
     """
-    scale = float(np.mean(np.diag(A))) if A.size else 1.0
+    N = len(A)
+    if N == 0:
+        return np.asfortranarray(A), 0.0
+    c = A.T if A.flags.c_contiguous else np.asfortranarray(A)  # A symmetric: Aᵀ = A, F-ordered
+    diag = np.diagonal(c).copy()
+    scale = float(np.mean(diag))
     for rel in JITTERS:
-        try:
-            c, _ = cho_factor(A + (rel * scale) * np.eye(len(A)), lower=True, check_finite=True)
-            return np.tril(c), rel * scale
-        except (np.linalg.LinAlgError, ValueError):
-            continue
+        if rel:  # restore A's lower triangle from the untouched upper one, add jitter
+            c = np.where(np.tri(N, k=-1, dtype=bool), c.T, c).T  # symmetric: .T is F-ordered
+            c[np.diag_indices(N)] = diag + rel * scale
+        L, info = lapack.dpotrf(c, lower=1, clean=0, overwrite_a=1)
+        if info == 0 and np.all(np.isfinite(np.diagonal(L))):
+            return L, rel * scale
+        c = L
     raise NumericalError(
-        f"Cholesky of the {what} ({len(A)}×{len(A)}) failed even with jitter "
+        f"Cholesky of the {what} ({N}×{N}) failed even with jitter "
         f"{JITTERS[-1]:g}×mean diagonal; the noise level is too small for the data or the inputs "
         "repeat: raise the noise floor (min_noise), remove duplicate samples or use fewer samples"
     )
+
+
+def cholesky(A: np.ndarray, what: str = "covariance") -> tuple[np.ndarray, float]:
+    """Lower Cholesky factor of a symmetric positive-definite matrix, with growing jitter.
+
+    Returns (L, jitter added), L lower-triangular (zeros above the diagonal); A is not modified.
+    Raises :class:`NumericalError` with a hint when even the largest jitter fails (as
+    scikit-learn does for its failed Cholesky).
+    """
+    L, jitter = factor(np.array(A, dtype=float, order="F"), what)
+    return np.tril(L), jitter
+
+
+def symmetric_from_lower(C: np.ndarray) -> np.ndarray:
+    """The full symmetric matrix whose lower triangle is C's (one pass, new array)."""
+    return np.where(np.tri(len(C), dtype=bool), C, C.T)
 
 
 @dataclass(frozen=True)
@@ -91,34 +116,56 @@ class Hyperparameters:
 
 # ----------------------------------------------------------------------------- per-output blocks
 class ExactBlock:
-    """``A = K_z + σ_v² I`` factorised exactly (Cholesky), one output."""
+    """``A = K_z + σ_v² I`` factorised exactly (Cholesky), one output.
 
-    def __init__(self, kernel: Kernel | None, U: np.ndarray, theta: np.ndarray, noise_var: float):
+    ``keep_kernel`` keeps ``K_z`` (attribute ``K``) for the likelihood gradient, so the kernel
+    is evaluated once per likelihood call.
+    """
+
+    def __init__(
+        self,
+        kernel: Kernel | None,
+        U: np.ndarray,
+        theta: np.ndarray,
+        noise_var: float,
+        keep_kernel: bool = False,
+    ):
         self.kernel, self.U, self.theta, self.noise_var = kernel, U, theta, noise_var
         N = len(U)
+        self.K = None
         if kernel is None:
             self.L = None
             self._logdet = N * np.log(noise_var)
         else:
-            A = kernel(U, U, theta)
+            K = kernel(U, U, theta)
+            A = K.copy() if keep_kernel else K
             A[np.diag_indices(N)] += noise_var
-            self.L, _ = cholesky(A, "SGP covariance K_z + σ_v² I")
-            self._logdet = 2.0 * np.sum(np.log(np.diag(self.L)))
+            self.K = K if keep_kernel else None
+            self.L, _ = factor(A, "SGP covariance K_z + σ_v² I")  # lower triangle only
+            self._logdet = 2.0 * np.sum(np.log(np.diagonal(self.L)))
 
     def solve(self, B: np.ndarray) -> np.ndarray:
         if self.L is None:
             return B / self.noise_var
-        return cho_solve((self.L, True), B, check_finite=False)
+        x, _ = lapack.dpotrs(self.L, B, lower=1)
+        return x
 
     def logdet(self) -> float:
         return self._logdet
 
-    def inverse(self) -> np.ndarray:
-        """A⁻¹ from the Cholesky factor (LAPACK potri: a third of the cost of solving with I)."""
-        inv, info = lapack.dpotri(self.L, lower=1)
+    def inverse_lower(self, overwrite: bool = False) -> np.ndarray:
+        """A⁻¹ in the lower triangle of an F-ordered array (LAPACK potri, no symmetrising);
+        ``overwrite`` reuses the factor's memory (the block cannot solve afterwards)."""
+        inv, info = lapack.dpotri(self.L, lower=1, overwrite_c=int(overwrite))
         if info != 0:
-            return self.solve(np.eye(len(self.U)))
-        return np.tril(inv) + np.tril(inv, -1).T
+            raise NumericalError(f"inverting the SGP covariance failed (LAPACK potri info={info})")
+        if overwrite:
+            self.L = None
+        return inv
+
+    def inverse(self) -> np.ndarray:
+        """A⁻¹ (N, N), symmetric."""
+        return symmetric_from_lower(self.inverse_lower())
 
     def finalize(self, alpha: np.ndarray, F: np.ndarray) -> None:
         self.alpha, self.F = alpha, F
@@ -130,7 +177,7 @@ class ExactBlock:
             return np.zeros(Nq), np.zeros(Nq), np.zeros((Nq, m))
         kq = self.kernel(Uq, self.U, self.theta)  # (Nq, N)
         v = solve_triangular(self.L, kq.T, lower=True, check_finite=False)
-        Ainv_k = solve_triangular(self.L.T, v, lower=False, check_finite=False)
+        Ainv_k = solve_triangular(self.L, v, lower=True, trans="T", check_finite=False)
         var = self.kernel.diag(Uq, self.theta) - np.sum(v * v, axis=0)
         return kq @ self.alpha, np.maximum(var, 0.0), Ainv_k.T @ self.F
 
@@ -177,12 +224,8 @@ class SparseBlock:
         return self._logdet
 
     def finalize(self, alpha: np.ndarray, F: np.ndarray) -> None:
-        self.gamma = cho_solve(
-            (self.Lmm, True), self.Knm.T @ alpha, check_finite=False
-        )  # K_mm⁻¹ K_mn α
-        self.H = (
-            cho_solve((self.Ls, True), self.Knm.T @ F, check_finite=False) / self.noise_var
-        )  # S⁻¹ K_mn F / σ²
+        self.gamma = cho_solve((self.Lmm, True), self.Knm.T @ alpha, check_finite=False)  # K_mm⁻¹ K_mn α
+        self.H = cho_solve((self.Ls, True), self.Knm.T @ F, check_finite=False) / self.noise_var  # S⁻¹ K_mn F / σ²
 
     def predict(self, Uq: np.ndarray):
         Kqm = self.kernel(Uq, self.Z, self.theta)
@@ -233,8 +276,11 @@ def _shared_w(blocks, Y, F, sigma_w2):
     """Solve the shared-W system. Returns a_j, G_j lists, B, b, M Cholesky, ŵ, α (N, n)."""
     N, n = Y.shape
     m = F.shape[2]
-    a = [blk.solve(Y[:, j]) for j, blk in enumerate(blocks)]
-    G = [blk.solve(F[:, j]) for j, blk in enumerate(blocks)] if m else [np.zeros((N, 0))] * n
+    a, G = [], []
+    for j, blk in enumerate(blocks):  # one solve per block for [y_j, F_j]
+        S = blk.solve(np.column_stack([Y[:, j], F[:, j]]))
+        a.append(S[:, 0])
+        G.append(S[:, 1:])
     B = sum(F[:, j].T @ G[j] for j in range(n)) if m else np.zeros((0, 0))
     b = sum(F[:, j].T @ a[j] for j in range(n)) if m else np.zeros(0)
     if m:
@@ -247,9 +293,7 @@ def _shared_w(blocks, Y, F, sigma_w2):
     return a, G, B, b, LM, w, alpha
 
 
-def fit_posterior(
-    kernels, U, Y, F, hp: Hyperparameters, inducing: np.ndarray | None = None
-) -> Posterior:
+def fit_posterior(kernels, U, Y, F, hp: Hyperparameters, inducing: np.ndarray | None = None) -> Posterior:
     """Posterior for fixed hyperparameters; ``inducing`` (M, p) switches GP blocks to DTC/VFE."""
     N, n = Y.shape
     noise = np.exp(2.0 * hp.log_sigma_v)
@@ -274,16 +318,19 @@ def fit_posterior(
 def negative_log_likelihood(vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool = True):
     """−log p(y | hyperparameters) and its gradient w.r.t. the packed log-hyperparameters.
 
-    Gradient: ``∂(−log p)/∂θ = −½ tr((α αᵀ − K⁻¹) ∂K/∂θ)`` (R&W eq. 5.9), evaluated block by block:
-    ``(K⁻¹)_jj = A_j⁻¹ − G_j M⁻¹ G_jᵀ`` with ``G_j = A_j⁻¹ F_j``; for σ_w,
-    ``∂K/∂log σ_w = 2 σ_w² F Fᵀ`` gives ``−σ_w² (|Fᵀα|² − tr(Fᵀ K⁻¹ F))``,
-    ``Fᵀ K⁻¹ F = B − B M⁻¹ B``.
+    Gradient: ``∂(−log p)/∂θ = −½ tr(W_j ∂A_j/∂θ)`` with ``W = α αᵀ − K⁻¹`` (R&W eq. 5.9),
+    evaluated block by block: ``(K⁻¹)_jj = A_j⁻¹ − G_j M⁻¹ G_jᵀ`` with ``G_j = A_j⁻¹ F_j``, so
+    ``W_j = V Vᵀ − A_j⁻¹`` with ``V = [α_j, G_j L_M⁻ᵀ]`` (one potri and one syrk per block);
+    the kernel contracts W_j with all its parameter derivatives at once
+    (:meth:`Kernel.weighted_gradient`). For σ_w, ``∂K/∂log σ_w = 2 σ_w² F Fᵀ`` gives
+    ``−σ_w² (|Fᵀα|² − tr(Fᵀ K⁻¹ F))``, ``Fᵀ K⁻¹ F = B − B M⁻¹ B``.
+    Cost per output: one Cholesky and one potri of N×N (N³ flops) plus O(N² (m + p)).
     """
     hp = Hyperparameters.unpack(vec, sizes)
     N, n = Y.shape
     m = F.shape[2]
     noise = np.exp(2.0 * hp.log_sigma_v)
-    blocks = [ExactBlock(kernels[j], U, hp.theta[j], noise[j]) for j in range(n)]
+    blocks = [ExactBlock(kernels[j], U, hp.theta[j], noise[j], keep_kernel=grad) for j in range(n)]
     sw2 = np.exp(2.0 * hp.log_sigma_w)
     a, G, B, b, LM, w, alpha = _shared_w(blocks, Y, F, sw2)
     logdet = sum(blk.logdet() for blk in blocks)
@@ -299,17 +346,21 @@ def negative_log_likelihood(vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool
         tr_FKF = np.trace(B) - np.sum(B * MinvB.T)
         g[0] = -sw2 * (Ftalpha @ Ftalpha - tr_FKF)
     k = 1 + n
-    for j, blk in enumerate(blocks):
-        al = alpha[:, j]
-        GMinv = cho_solve((LM, True), G[j].T, check_finite=False).T if m else G[j]
+    for j in range(n):
+        blk, al = blocks[j], alpha[:, j]
+        blocks[j] = None  # free each block's N×N arrays once its gradient is done
+        # G M⁻¹ Gᵀ = H Hᵀ, H = G L_M⁻ᵀ
+        H = solve_triangular(LM, G[j].T, lower=True, check_finite=False).T if m else G[j]
         if blk.L is None:  # A = σ² I
-            tr_Kinv = N / noise[j] - np.sum(G[j] * GMinv)
+            tr_Kinv = N / noise[j] - np.sum(H * H)
             g[1 + j] = -noise[j] * (al @ al - tr_Kinv)
             continue
-        Kinv_jj = blk.inverse() - G[j] @ GMinv.T
-        Wm = np.outer(al, al) - Kinv_jj
-        g[1 + j] = -noise[j] * np.trace(Wm)
-        for p, dK in enumerate(blk.kernel.gradients(U, hp.theta[j])):
-            g[k + p] = -0.5 * np.sum(Wm * dK)
+        V = np.asfortranarray(np.column_stack([al, H]))
+        # lower triangle of W = V Vᵀ − A⁻¹, in the factor's memory
+        Wl = blas.dsyrk(1.0, V, beta=-1.0, c=blk.inverse_lower(overwrite=True), lower=1, overwrite_c=1)
+        g[1 + j] = -noise[j] * np.trace(Wl)  # ∂A/∂log σ_v = 2σ_v² I
+        Wm = symmetric_from_lower(Wl)
+        del Wl
+        g[k : k + sizes[j]] = -0.5 * blk.kernel.weighted_gradient(U, U, hp.theta[j], Wm, blk.K)
         k += sizes[j]
     return nll, g

@@ -4,7 +4,10 @@ Small objects in the style of tinygp (STYLE.md): a kernel evaluates a pair of in
 composes with ``+`` and ``*``, and :class:`Subspace` makes one act on a subset of the inputs.
 Hyperparameters live outside the kernel, as a float vector ``theta`` of *log* values (the
 optimiser's door); :meth:`Kernel.gradients` yields ``∂K/∂theta_p`` one matrix at a time so the
-marginal-likelihood gradient needs only O(N²) extra memory.
+marginal-likelihood gradient needs only O(N²) extra memory. The likelihood itself uses
+:meth:`Kernel.weighted_gradient`, the contraction ``Σ_ab W_ab ∂K_ab/∂theta_p`` for all ``p`` at
+once, which the squared-exponential kernel evaluates with one matrix product and no per-parameter
+N×N matrix.
 """
 
 from __future__ import annotations
@@ -33,6 +36,18 @@ class Kernel:
     def gradients(self, X: np.ndarray, theta: np.ndarray) -> Iterator[np.ndarray]:
         """Yield ``∂K(X, X)/∂theta_p`` (N, N) for p = 0 .. n_params-1."""
         raise NotImplementedError
+
+    def weighted_gradient(self, X1, X2, theta, W, K=None) -> np.ndarray:
+        """``Σ_ab W_ab ∂k(X1, X2)_ab/∂theta_p`` for every p: shape (n_params,).
+
+        W (N1, N2) is the weight (the likelihood's ``α αᵀ − K⁻¹``); K (N1, N2), when given,
+        is ``k(X1, X2, theta)`` already evaluated (saves a kernel evaluation). This default
+        contracts the dense :meth:`gradients`, so it serves only ``X1 is X2``; kernels
+        override it with a closed form that also serves cross-covariances (sparse inference).
+        """
+        if X1 is not X2:
+            raise NotImplementedError(f"{type(self).__name__} has no cross-covariance gradient")
+        return np.array([np.sum(W * dK) for dK in self.gradients(X1, theta)])
 
     def __add__(self, other: Kernel) -> Kernel:
         return Sum(self, other)
@@ -63,9 +78,14 @@ class SquaredExponential(Kernel):
         return np.asarray(X, float) / np.exp(theta[1:])
 
     def __call__(self, X1, X2, theta):
-        A, B = self._scaled(X1, theta), self._scaled(X2, theta)
-        d2 = (A * A).sum(1)[:, None] + (B * B).sum(1)[None, :] - 2.0 * A @ B.T
-        return np.exp(2.0 * theta[0]) * np.exp(-0.5 * np.maximum(d2, 0.0))
+        A = self._scaled(X1, theta)
+        B = A if X2 is X1 else self._scaled(X2, theta)
+        # log k = log σ_z² - |a - b|²/2 = a·b + (log σ_z² - |a|²/2) - |b|²/2, in place
+        G = A @ B.T
+        G += (2.0 * theta[0] - 0.5 * np.einsum("ij,ij->i", A, A))[:, None]
+        G -= 0.5 * np.einsum("ij,ij->i", B, B)[None, :]
+        np.minimum(G, 2.0 * theta[0], out=G)  # |a - b|² ≥ 0 despite rounding
+        return np.exp(G, out=G)
 
     def diag(self, X, theta):
         return np.full(len(X), np.exp(2.0 * theta[0]))
@@ -77,6 +97,23 @@ class SquaredExponential(Kernel):
         for d in range(self.n_dims):
             diff = A[:, d][:, None] - A[:, d][None, :]
             yield K * diff * diff  # ∂/∂ log ℓ_d
+
+    def weighted_gradient(self, X1, X2, theta, W, K=None):
+        """Closed form: with ``P = W ∘ K`` and scaled inputs ``a = x/ℓ``,
+        ``∂K_ab/∂log ℓ_d = K_ab (a_d - b_d)²`` gives
+        ``Σ_ab P_ab (a_d - b_d)² = Σ_a r_a a_d² + Σ_b c_b b_d² - 2 Σ_a a_d (P b_d)_a``
+        (r, c the row and column sums of P): one (N1, N2) × (N2, p+1) product for all d."""
+        if K is None:
+            K = self(X1, X2, theta)
+        A = self._scaled(X1, theta)
+        B = A if X2 is X1 else self._scaled(X2, theta)
+        P = W * K
+        PB = P @ np.hstack([B, np.ones((len(B), 1))])  # [P b_1 .. P b_p, r]
+        r, c = PB[:, -1], P.sum(axis=0)
+        out = np.empty(1 + self.n_dims)
+        out[0] = 2.0 * np.sum(r)  # ∂K/∂log σ_z = 2K
+        out[1:] = r @ (A * A) + c @ (B * B) - 2.0 * np.sum(A * PB[:, :-1], axis=0)
+        return out
 
 
 class Constant(Kernel):
@@ -93,6 +130,9 @@ class Constant(Kernel):
     def gradients(self, X, theta):
         yield np.full((len(X), len(X)), 2.0 * np.exp(2.0 * theta[0]))
 
+    def weighted_gradient(self, X1, X2, theta, W, K=None):
+        return np.array([2.0 * np.exp(2.0 * theta[0]) * np.sum(W)])
+
 
 class Subspace(Kernel):
     """A kernel acting on the input columns ``dims`` only (tinygp ``transforms.Subspace``)."""
@@ -102,14 +142,21 @@ class Subspace(Kernel):
         self.kernel = kernel
         self.names = kernel.names
 
+    def _select(self, X1, X2):
+        S1 = np.asarray(X1)[:, self.dims]
+        return S1, (S1 if X2 is X1 else np.asarray(X2)[:, self.dims])  # keep k(X, X) symmetric
+
     def __call__(self, X1, X2, theta):
-        return self.kernel(np.asarray(X1)[:, self.dims], np.asarray(X2)[:, self.dims], theta)
+        return self.kernel(*self._select(X1, X2), theta)
 
     def diag(self, X, theta):
         return self.kernel.diag(np.asarray(X)[:, self.dims], theta)
 
     def gradients(self, X, theta):
         yield from self.kernel.gradients(np.asarray(X)[:, self.dims], theta)
+
+    def weighted_gradient(self, X1, X2, theta, W, K=None):
+        return self.kernel.weighted_gradient(*self._select(X1, X2), theta, W, K)
 
 
 class Sum(Kernel):
@@ -135,6 +182,10 @@ class Sum(Kernel):
         yield from self.k1.gradients(X, t1)
         yield from self.k2.gradients(X, t2)
 
+    def weighted_gradient(self, X1, X2, theta, W, K=None):
+        t1, t2 = self._split(theta)
+        return np.concatenate([self.k1.weighted_gradient(X1, X2, t1, W), self.k2.weighted_gradient(X1, X2, t2, W)])
+
 
 class Product(Sum):
     """``k1 * k2`` (elementwise); ``theta = [theta1, theta2]``."""
@@ -154,6 +205,17 @@ class Product(Sum):
             yield g * K2
         for g in self.k2.gradients(X, t2):
             yield K1 * g
+
+    def weighted_gradient(self, X1, X2, theta, W, K=None):
+        # ∂(K1 ∘ K2) = ∂K1 ∘ K2 + K1 ∘ ∂K2: each factor sees the weight W ∘ (the other factor)
+        t1, t2 = self._split(theta)
+        K1, K2 = self.k1(X1, X2, t1), self.k2(X1, X2, t2)
+        return np.concatenate(
+            [
+                self.k1.weighted_gradient(X1, X2, t1, W * K2, K1),
+                self.k2.weighted_gradient(X1, X2, t2, W * K1, K2),
+            ]
+        )
 
 
 def is_lengthscale(name: str) -> bool:

@@ -57,3 +57,35 @@ def test_composite_kernel_gradient(compose):
     a, b = Subspace([0], SquaredExponential(1)), Subspace([1, 2], SquaredExponential(2))
     k = a + Constant() if compose == "sum" else a * b
     _check([k], U, Y, F, rng)
+
+
+def _kernel_zoo():
+    se = SquaredExponential(3)
+    sub = Subspace([0, 2], SquaredExponential(2))
+    return {
+        "se": se,
+        "subspace": sub,
+        "sum": sub + Constant(),
+        "product": Subspace([0], SquaredExponential(1)) * Subspace([1, 2], SquaredExponential(2)),
+    }
+
+
+@pytest.mark.parametrize("name", ["se", "subspace", "sum", "product"])
+def test_weighted_gradient_equals_dense_contraction(name):
+    """Σ_ab W_ab ∂K_ab/∂θ_p: the closed form equals contracting the dense derivatives (X1 = X2)
+    and central finite differences of Σ W ∘ k(X1, X2) (cross-covariances, sparse inference)."""
+    k = _kernel_zoo()[name]
+    rng = np.random.default_rng(3)
+    X, Z = rng.standard_normal((30, 3)), rng.standard_normal((7, 3))
+    theta = rng.normal(0, 0.4, k.n_params)
+    W = rng.standard_normal((30, 30))
+    W = W + W.T
+    dense = np.array([np.sum(W * dK) for dK in k.gradients(X, theta)])
+    np.testing.assert_allclose(k.weighted_gradient(X, X, theta, W), dense, rtol=1e-10, atol=1e-10)
+    Wc = rng.standard_normal((30, 7))
+    eps, fd = 1e-6, np.zeros(k.n_params)
+    for p in range(k.n_params):
+        e = np.zeros(k.n_params)
+        e[p] = eps
+        fd[p] = np.sum(Wc * (k(X, Z, theta + e) - k(X, Z, theta - e))) / (2 * eps)
+    np.testing.assert_allclose(k.weighted_gradient(X, Z, theta, Wc), fd, rtol=1e-6, atol=1e-8)
