@@ -14,7 +14,22 @@ link (the base is not the URDF root) a joint that moves both the point and the b
 their relative position unchanged, and one that moves only the base contributes with the
 opposite sign: the column is ``(anc_point - anc_base) * a_j x (x - o_j)``.
 
-The tests check that this equals ``Robot.points`` and ``Robot.points_jacobian`` (two routes agree).
+For Gauss-Newton on many points (the STAC q-phase) the dense (B, N, 3, n) Jacobian is mostly
+zeros: a point moves only with the joints of its chain. Writing each joint's motion as a twist
+ξ_j = (ω_j, v_j) (ω = a_j, v = o_j × a_j for a revolute joint; ω = 0, v = a_j for a prismatic
+one), the column is ``v_j + ω_j × x``, and :meth:`BatchKinematics.points_normal` sums
+``Σ_m w_m J_mᵀ J_m`` and ``Σ_m J_mᵀ f_m`` over the points without forming J, as the composite
+rigid-body algorithm sums link inertias: each point acts as a point mass w_m at x_m, the
+masses below joint k are accumulated once (mass, first and second moments), and
+
+.. math:: H_{jk} = s_j s_k\\, ξ_j^T \\hat G_k ξ_k, \\qquad
+          \\hat G_k ξ = (c_k × v + (\\mathrm{tr} Q_k - Q_k) ω,\\ μ_k v + ω × c_k)
+
+for k the deeper of the two joints (the points that both move are those that the deeper one
+moves); s_j = ±1 is the column sign above.
+
+The tests check that these equal ``Robot.points`` and ``Robot.points_jacobian`` (two routes
+agree), and that the summed forms equal the dense Jacobian's products.
 """
 
 from __future__ import annotations
@@ -43,6 +58,20 @@ class Poses:
     axis: np.ndarray
     root_R: np.ndarray
     root_p: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Structure:
+    """Which joints move which points: sign (N, n) ∈ {−1, 0, 1}, D = |sign| (N, n), the sign of
+    each joint's column (n,), and the sign s_j s_k of H[j, k] (n, n) where joint k moves a subset
+    of j's points (``coeff_nested``) and where j moves a strict subset of k's (``coeff_other``);
+    zero where they move no point in common."""
+
+    sign: np.ndarray
+    D: np.ndarray
+    sign_joint: np.ndarray
+    coeff_nested: np.ndarray
+    coeff_other: np.ndarray
 
 
 class BatchKinematics:
@@ -85,10 +114,31 @@ class BatchKinematics:
         self.base_joint = base.parentJoint  # 0 = the root: the base does not move
         self.base_R = np.asarray(base.placement.rotation)
         self.base_p = np.asarray(base.placement.translation)
+        # per joint, the constant right factor of joint_poses: [P, P K, P K², p_place, P a] (3, 11);
+        # root joints start from the base frame when the base does not move (base_T_world fixed)
+        self._chain = np.zeros((self.n, 3, 11))
+        for j in range(self.n):
+            K = _skew(self.local_axis[j])
+            P, pp = self.place_R[j], self.place_p[j]
+            if self.parent[j] < 0 and self.base_joint == 0:
+                P, pp = self.base_R.T @ P, self.base_R.T @ (pp - self.base_p)
+            self._chain[j] = np.concatenate([P, P @ K, P @ K @ K, pp[:, None], (P @ self.local_axis[j])[:, None]], 1)
+        self._chain_t = np.ascontiguousarray(np.swapaxes(self._chain, 1, 2))
+        self._links: dict = {}
+        self._at_joint: dict = {}
+        self._structure: dict = {}
 
     # ------------------------------------------------------------------ links
     def link_info(self, links) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Parent joint index (L,) (Pinocchio numbering, 0 = root), placement R (L,3,3), p (L,3)."""
+        key = tuple(links)
+        if key not in self._links:
+            self._links[key] = self._link_info(key)
+            _, R, p = self._links[key]
+            self._at_joint[key] = bool(np.all(R == np.eye(3)) and np.all(p == 0.0))
+        return self._links[key]
+
+    def _link_info(self, links):
         model = self.robot.model
         fids = [self.robot.frame_id(link) for link in links]
         joint = np.array([model.frames[f].parentJoint for f in fids], dtype=int)
@@ -103,42 +153,79 @@ class BatchKinematics:
 
     # ------------------------------------------------------------------ forward kinematics
     def joint_poses(self, q: np.ndarray) -> Poses:
-        """World->joint chain for a batch, re-expressed in the base frame. q: (B, n) rad or m."""
+        """World->joint chain for a batch, re-expressed in the base frame. q: (B, n) rad or m.
+
+        Per joint one (3B, 3) x (3, 11) product: ``R_parent @ [P, P K, P K², p_place, P a]``
+        (P the placement rotation, K the axis' cross-product matrix), then Rodrigues' formula
+        ``R_j = R_parent P (I + sin q K + (1 − cos q) K²)`` elementwise.
+        """
         q = np.asarray(q, float)
-        B = q.shape[0]
-        R = np.empty((B, self.n, 3, 3))
-        p = np.empty((B, self.n, 3))
-        for j in range(self.n):
-            a = self.local_axis[j]
-            if self.parent[j] < 0:
-                Rp, pp = self.place_R[j][None], self.place_p[j][None]
+        B, n = q.shape[0], self.n
+        R = np.empty((n, 3, 3, B))  # component-major while chaining: rows of B are contiguous
+        p = np.empty((n, 3, B))
+        sin, cos = np.sin(q.T), 1.0 - np.cos(q.T)
+        for j in range(n):
+            par = self.parent[j]
+            if par < 0:
+                X = self._chain[j][..., None]
+                pp = X[:, 9]
             else:
-                Rp = R[:, self.parent[j]] @ self.place_R[j]
-                pp = R[:, self.parent[j]] @ self.place_p[j] + p[:, self.parent[j]]
+                X = self._chain_t[j] @ R[par]  # (3, 11, B): R_parent @ [P, PK, PK², p, Pa]
+                pp = X[:, 9] + p[par]
             if self.prismatic[j]:
-                R[:, j] = Rp
-                p[:, j] = pp + (Rp @ a) * q[:, j, None]
+                R[j] = X[:, 0:3]
+                p[j] = pp + X[:, 10] * q[:, j]
             else:
-                R[:, j] = Rp @ _rotation(a, q[:, j])
-                p[:, j] = pp
-        # base frame: base_T_world = (world_T_joint[b] @ placement)^-1
-        if self.base_joint == 0:
-            Rb = np.broadcast_to(self.base_R, (B, 3, 3))
-            pb = np.broadcast_to(self.base_p, (B, 3))
-        else:
+                R[j] = X[:, 0:3] + sin[j] * X[:, 3:6] + cos[j] * X[:, 6:9]
+                p[j] = pp
+        R = R.transpose(3, 0, 1, 2)
+        p = p.transpose(2, 0, 1)
+        if self.base_joint == 0:  # the chain started in the base frame (see __init__)
+            Rout, pout = np.ascontiguousarray(R), np.ascontiguousarray(p)
+            RbT = np.broadcast_to(self.base_R.T, (B, 3, 3))
+            root_p = np.broadcast_to(-self.base_R.T @ self.base_p, (B, 3))
+        else:  # base_T_world = (world_T_joint[b] @ placement)^-1
             Rb = R[:, self.base_joint - 1] @ self.base_R
             pb = R[:, self.base_joint - 1] @ self.base_p + p[:, self.base_joint - 1]
-        RbT = np.swapaxes(Rb, -1, -2)
-        Rout = RbT[:, None] @ R
-        pout = np.einsum("bij,bnj->bni", RbT, p - pb[:, None])
-        axis = (Rout @ self.local_axis[None, :, :, None])[..., 0]
-        return Poses(Rout, pout, axis, np.ascontiguousarray(RbT), -(RbT @ pb[..., None])[..., 0])
+            RbT = np.swapaxes(Rb, -1, -2)
+            Rout = RbT[:, None] @ R
+            pout = np.einsum("bij,bnj->bni", RbT, p - pb[:, None])
+            root_p = -(RbT @ pb[..., None])[..., 0]
+        axis = np.einsum("bnij,nj->bni", Rout, self.local_axis)
+        return Poses(Rout, pout, axis, np.ascontiguousarray(RbT), np.ascontiguousarray(root_p))
+
+    def twists(self, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
+        """Joint twists in the base frame: ω (B, n, 3) and v (B, n, 3), so that a point x on a
+        link the joint moves has velocity ``v + ω × x`` per unit joint speed (eq. 2.23)."""
+        xi = self._twists(poses)
+        return xi[:3].transpose(1, 2, 0), xi[3:].transpose(1, 2, 0)
+
+    def _twists(self, poses: Poses) -> np.ndarray:
+        """Twists component-major: (6, B, n) = (ω_x, ω_y, ω_z, v_x, v_y, v_z)."""
+        a, o = poses.axis, poses.p
+        xi = np.empty((6, *a.shape[:2]))
+        for i in range(3):
+            xi[i] = a[..., i]
+        j, k = 1, 2
+        for i in range(3):  # v = o × a
+            np.multiply(o[..., j], a[..., k], out=xi[3 + i])
+            xi[3 + i] -= o[..., k] * a[..., j]
+            j, k = k, i
+        if self.prismatic.any():
+            xi[3:, :, self.prismatic] = xi[:3, :, self.prismatic]
+            xi[:3, :, self.prismatic] = 0.0
+        return xi
 
     def link_poses(self, poses: Poses, links) -> tuple[np.ndarray, np.ndarray]:
         """Rotation (B, L, 3, 3) and origin (B, L, 3) of each link in the base frame."""
         joint, Rl, pl = self.link_info(links)
         B = poses.R.shape[0]
-        Rj, pj = self._joint_or_root(poses, joint, B)
+        if np.all(joint > 0):
+            Rj, pj = poses.R[:, joint - 1], poses.p[:, joint - 1]
+        else:
+            Rj, pj = self._joint_or_root(poses, joint, B)
+        if self._at_joint[tuple(links)]:  # link frames at their joints' frames (as URDF links are)
+            return Rj, pj
         return Rj @ Rl, (Rj @ pl[None, :, :, None])[..., 0] + pj
 
     def points(self, poses: Poses, points: PointSet) -> np.ndarray:
@@ -158,6 +245,78 @@ class BatchKinematics:
         J = np.swapaxes(cols * sign[None, :, :, None], -1, -2)
         return x, J
 
+    def points_normal(
+        self, poses: Poses, x: np.ndarray, links, w: np.ndarray, f: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Gauss-Newton sums over points without their Jacobians J_m (3, n) (eq. 2.23).
+
+        x : (B, N, 3) points in the base frame, m, on ``links`` (N,); w : (B, N) weights;
+        f : (B, N, 3) per-point vectors. Returns ``Σ_m w_m J_mᵀ J_m`` (B, n, n) and
+        ``Σ_m J_mᵀ f_m`` (B, n), accumulated as point masses per joint (module docstring).
+        """
+        st = self._points_structure(links)
+        B, N = x.shape[:2]
+        xs = [x[..., i] for i in range(3)]
+        fs = [f[..., i] for i in range(3)]
+        wx = [w * xi for xi in xs]
+        mom = np.empty((16, B, N))  # mass μ, first moment c, second moment Q (6), Σ f, Σ x × f
+        mom[0] = w
+        mom[1:4] = wx
+        for r, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            np.multiply(wx[i], xs[j], out=mom[4 + r])
+        mom[10:13] = fs
+        for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+            np.multiply(xs[j], fs[k], out=mom[13 + i])
+            mom[13 + i] -= xs[k] * fs[j]
+        acc = (mom.reshape(16 * B, N) @ st.D).reshape(16, B, self.n)  # summed over the points each joint moves
+        xi = self._twists(poses)
+        om, v = xi[:3], xi[3:]
+        mu, c = acc[0], acc[1:4]
+        xx, yy, zz, xy, xz, yz = acc[4:10]
+        Y = np.empty((6, B, self.n))  # Ĝ_k ξ_k = (c × v + (tr Q − Q) ω, μ v + ω × c)
+        Y[0] = (yy + zz) * om[0] - xy * om[1] - xz * om[2] + c[1] * v[2] - c[2] * v[1]
+        Y[1] = (xx + zz) * om[1] - xy * om[0] - yz * om[2] + c[2] * v[0] - c[0] * v[2]
+        Y[2] = (xx + yy) * om[2] - xz * om[0] - yz * om[1] + c[0] * v[1] - c[1] * v[0]
+        Y[3] = mu * v[0] + om[1] * c[2] - om[2] * c[1]
+        Y[4] = mu * v[1] + om[2] * c[0] - om[0] * c[2]
+        Y[5] = mu * v[2] + om[0] * c[1] - om[1] * c[0]
+        Hc = xi.transpose(1, 2, 0) @ Y.transpose(1, 0, 2)  # Hc[j, k] = ξ_j · Ĝ_k ξ_k
+        H = Hc * st.coeff_nested  # right where k moves a subset of j's points; else H[j, k] = Hc[k, j]
+        H += np.swapaxes(Hc * st.coeff_other.T, 1, 2)
+        g = (om * acc[13:16]).sum(0) + (v * acc[10:13]).sum(0)  # ξ_k · Σ (x × f, f)
+        return H, g * st.sign_joint
+
+    def points_velocity(self, poses: Poses, x: np.ndarray, links, u: np.ndarray) -> np.ndarray:
+        """J_m u (B, N, 3) for points x (B, N, 3) on ``links`` and joint vectors u (B, n)."""
+        st = self._points_structure(links)
+        B, N = x.shape[:2]
+        omega, v = self.twists(poses)
+        tw = np.concatenate([omega, v], axis=2) * u[..., None]  # (B, n, 6)
+        sw = (np.ascontiguousarray(tw.transpose(0, 2, 1)).reshape(B * 6, self.n) @ st.sign.T).reshape(B, 6, N)
+        return sw[:, 3:].transpose(0, 2, 1) + np.cross(sw[:, :3].transpose(0, 2, 1), x)
+
+    def points_project(self, poses: Poses, x: np.ndarray, links, f: np.ndarray) -> np.ndarray:
+        """f_mᵀ J_m (B, N, n): each point's Jacobian projected on a direction f (B, N, 3)."""
+        st = self._points_structure(links)
+        omega, v = self.twists(poses)
+        wrench = np.concatenate([np.cross(x, f), f], axis=2)  # ξ · (x × f, f) = f · (v + ω × x)
+        return (wrench @ np.concatenate([omega, v], axis=2).transpose(0, 2, 1)) * st.sign
+
+    def _points_structure(self, links) -> _Structure:
+        key = tuple(links)
+        if key not in self._structure:
+            joint, _, _ = self.link_info(key)
+            sign = self._anc[joint].astype(float) - self._anc[self.base_joint].astype(float)  # (N, n)
+            D = sign != 0
+            share = (D.T.astype(float) @ D) > 0
+            nested = ~((D.T.astype(float) @ ~D) > 0).T  # nested[j, k]: D_k ⊆ D_j (k the deeper)
+            if np.any(share & ~nested & ~nested.T):
+                raise RobotConfigError("kinematic tree expected: two joints move overlapping point sets")
+            sj = np.where(self._anc[self.base_joint], -1.0, 1.0)
+            coeff = np.outer(sj, sj) * share
+            self._structure[key] = _Structure(sign, D.astype(float), sj, coeff * nested, coeff * ~nested)
+        return self._structure[key]
+
     def _joint_or_root(self, poses: Poses, joint: np.ndarray, B: int):
         """Pose of Pinocchio joint indices (0 = root, expressed in the base frame) for a batch."""
         Rj = np.empty((B, len(joint), 3, 3))
@@ -171,9 +330,19 @@ class BatchKinematics:
         return Rj, pj
 
 
-def _rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula for a fixed unit axis (3,) and angles (B,): (B, 3, 3)."""
-    x, y, z = axis
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+def _skew(a: np.ndarray) -> np.ndarray:
+    """Cross-product matrix [a]× (3, 3) of a (3,)."""
+    x, y, z = a
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product along axis 1 of component-major arrays (B, 3, n)."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )

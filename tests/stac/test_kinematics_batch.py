@@ -1,4 +1,6 @@
-"""Two routes agree: vectorised kinematics equals Robot.points / points_jacobian (Pinocchio)."""
+"""Two routes agree: vectorised kinematics equals Robot.points / points_jacobian (Pinocchio), and
+the Jacobian-free sums (points_normal, points_velocity, points_project) equal the products of the
+Pinocchio Jacobian."""
 
 import numpy as np
 import pytest
@@ -22,11 +24,24 @@ def _check(robot, seed):
         np.testing.assert_allclose(x, robot.points(q, pts), atol=1e-12)
         np.testing.assert_allclose(x, x_ref, atol=1e-12)
         np.testing.assert_allclose(J, J_ref, atol=1e-12)
+        _check_sums(kin, poses, x, pts.links, J_ref, rng)
     links = list(robot.sensors.marker_names and [m.link for m in robot.sensors.markers])
     R_ref, p_ref = robot.link_poses(q, links)
     R, p = kin.link_poses(poses, links)
     np.testing.assert_allclose(R, R_ref, atol=1e-12)
     np.testing.assert_allclose(p, p_ref, atol=1e-12)
+
+
+def _check_sums(kin, poses, x, links, J, rng):
+    """Σ w JᵀJ, Σ Jᵀf, J u and fᵀJ without J equal the dense products (Pinocchio's J)."""
+    w = rng.uniform(0.0, 2.0, x.shape[:2])
+    f = rng.normal(size=x.shape)
+    u = rng.normal(size=(x.shape[0], J.shape[-1]))
+    H, g = kin.points_normal(poses, x, links, w, f)
+    np.testing.assert_allclose(H, np.einsum("bmcj,bm,bmck->bjk", J, w, J), atol=1e-12)
+    np.testing.assert_allclose(g, np.einsum("bmcj,bmc->bj", J, f), atol=1e-12)
+    np.testing.assert_allclose(kin.points_velocity(poses, x, links, u), np.einsum("bmcj,bj->bmc", J, u), atol=1e-12)
+    np.testing.assert_allclose(kin.points_project(poses, x, links, f), np.einsum("bmcj,bmc->bmj", J, f), atol=1e-12)
 
 
 def test_tree_robot_matches_pinocchio(tree_robot):
@@ -51,3 +66,20 @@ def test_moves_detects_links_fixed_to_base(tree_robot):
     kin = BatchKinematics(tree_robot)
     assert not kin.moves("waist")
     assert kin.moves("arm0")
+
+
+def test_link_frame_off_its_joint(tree_dir, tmp_path):
+    """A link on a fixed joint (Pinocchio merges it into its parent's joint, with a placement that is
+    not the identity), and a marker on it, take the general route."""
+    urdf = (tree_dir / "robot.urdf").read_text()
+    tool = (
+        '<link name="tool"/><joint name="tool_mount" type="fixed"><parent link="arm3"/><child link="tool"/>'
+        '<origin xyz="0.05 0.01 -0.02" rpy="0.3 -0.2 0.1"/></joint>'
+    )
+    (tmp_path / "robot.urdf").write_text(urdf.replace("</robot>", tool + "</robot>"))
+    cfg = load_yaml(tree_dir / "sensors.yaml")
+    cfg["markers"].append({"name": "m_tool", "link": "tool", "xyz": [0.01, 0.02, 0.03]})
+    save_yaml(cfg, tmp_path / "sensors.yaml")
+    robot = load_robot(tmp_path)
+    _check(robot, 3)
+    assert not np.allclose(BatchKinematics(robot).link_info(["tool"])[1], np.eye(3))
