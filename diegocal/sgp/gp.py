@@ -167,6 +167,23 @@ class ExactBlock:
         """A⁻¹ (N, N), symmetric."""
         return symmetric_from_lower(self.inverse_lower())
 
+    def penalty(self) -> float:
+        return 0.0
+
+    def nll_gradient(self, alpha: np.ndarray, H: np.ndarray) -> tuple[float, np.ndarray]:
+        """∂(−log p)/∂(log σ_v, kernel θ) of this block: ``−½ tr(W ∂A)`` with
+        ``W = V Vᵀ − A⁻¹``, ``V = [α, H]`` (one potri and one syrk; the factor's memory is
+        reused, so the block cannot solve afterwards)."""
+        s2 = self.noise_var
+        if self.L is None:  # A = σ² I
+            return -s2 * (alpha @ alpha + np.sum(H * H) - len(alpha) / s2), np.zeros(0)
+        V = np.asfortranarray(np.column_stack([alpha, H]))
+        Wl = blas.dsyrk(1.0, V, beta=-1.0, c=self.inverse_lower(overwrite=True), lower=1, overwrite_c=1)
+        g_noise = -s2 * np.trace(Wl)  # ∂A/∂log σ_v = 2σ_v² I
+        Wm = symmetric_from_lower(Wl)
+        del Wl
+        return g_noise, -0.5 * self.kernel.weighted_gradient(self.U, self.U, self.theta, Wm, self.K)
+
     def finalize(self, alpha: np.ndarray, F: np.ndarray) -> None:
         self.alpha, self.F = alpha, F
 
@@ -183,10 +200,13 @@ class ExactBlock:
 
 
 class SparseBlock:
-    """DTC/VFE inducing-point approximation ``A ≈ Q + σ_v² I``, ``Q = K_nm K_mm⁻¹ K_mn``.
+    """Inducing-point approximation ``A ≈ Q + σ_v² I``, ``Q = K_nm K_mm⁻¹ K_mn`` (DTC/VFE).
 
-    Solves with the Woodbury identity in O(N M²); predictive variance uses the exact prior
-    variance k(q, q) (the DTC/VFE predictive, not the degenerate Q(q, q)).
+    In the stable form of GPflow's SGPR: ``V = L_mm⁻¹ K_mn`` (M, N), ``Q = Vᵀ V``,
+    ``B = I + V Vᵀ/σ_v²``, so ``A⁻¹ = I/σ² − Vᵀ B⁻¹ V/σ⁴`` and ``log|A| = N log σ² + log|B|``:
+    O(N M²). The likelihood is Titsias's collapsed variational (VFE) bound, the Gaussian one
+    minus ``tr(K_nn − Q)/(2σ_v²)`` (:meth:`penalty`); the predictive variance uses the exact
+    prior variance k(q, q) (the DTC/VFE predictive, not the degenerate Q(q, q)).
     """
 
     def __init__(
@@ -196,43 +216,77 @@ class SparseBlock:
         theta: np.ndarray,
         noise_var: float,
         inducing: np.ndarray,
+        keep_kernel: bool = False,
     ):
-        self.kernel, self.U, self.theta, self.noise_var, self.Z = (
-            kernel,
-            U,
-            theta,
-            noise_var,
-            inducing,
-        )
+        self.kernel, self.U, self.theta, self.noise_var, self.Z = kernel, U, theta, noise_var, inducing
         Kmm = kernel(inducing, inducing, theta)
-        self.Lmm, _ = cholesky(Kmm, "inducing-point covariance K_mm")
-        self.Knm = kernel(U, inducing, theta)
-        S = Kmm + self.Knm.T @ self.Knm / noise_var
-        self.Ls, _ = cholesky(S, "inducing-point system K_mm + K_mn K_nm / σ_v²")
-        N = len(U)
-        # log|Q + σ²I| = N log σ² + log|I + VᵀV/σ²| V = K_nm L_mm⁻ᵀ (stable; GPflow SGPR)
-        V = solve_triangular(self.Lmm, self.Knm.T, lower=True, check_finite=False)
-        LB, _ = cholesky(np.eye(len(inducing)) + V @ V.T / noise_var, "I + VᵀV/σ_v²")
-        self._logdet = 2.0 * np.sum(np.log(np.diag(LB))) + N * np.log(noise_var)
+        self.Kmm = Kmm.copy() if keep_kernel else None
+        self.Lmm, _ = factor(Kmm, "inducing-point covariance K_mm")
+        Kmn = kernel(inducing, U, theta)  # (M, N)
+        self.Kmn = Kmn if keep_kernel else None
+        self.V = solve_triangular(self.Lmm, Kmn, lower=True, check_finite=False)
+        self.VVt = self.V @ self.V.T
+        Bm = self.VVt / noise_var
+        Bm[np.diag_indices(len(Bm))] += 1.0
+        self.LB, _ = factor(Bm, "inducing-point system I + V Vᵀ/σ_v²")
+        self._logdet = 2.0 * np.sum(np.log(np.diagonal(self.LB))) + len(U) * np.log(noise_var)
+        # tr(K_nn − Q) ≥ 0: how much prior variance the inducing inputs miss
+        self.trace_gap = max(float(np.sum(kernel.diag(U, theta)) - np.sum(self.V * self.V)), 0.0)
+
+    def _Binv(self, X):
+        x, _ = lapack.dpotrs(self.LB, X, lower=1)
+        return x
 
     def solve(self, B: np.ndarray) -> np.ndarray:
         s2 = self.noise_var
-        inner = cho_solve((self.Ls, True), self.Knm.T @ B, check_finite=False)
-        return B / s2 - self.Knm @ inner / (s2 * s2)
+        return B / s2 - self.V.T @ self._Binv(self.V @ B) / (s2 * s2)
 
     def logdet(self) -> float:
         return self._logdet
 
+    def penalty(self) -> float:
+        """VFE's ``tr(K_nn − Q)/(2σ_v²)``, subtracted from the log likelihood."""
+        return self.trace_gap / (2.0 * self.noise_var)
+
     def finalize(self, alpha: np.ndarray, F: np.ndarray) -> None:
-        self.gamma = cho_solve((self.Lmm, True), self.Knm.T @ alpha, check_finite=False)  # K_mm⁻¹ K_mn α
-        self.H = cho_solve((self.Ls, True), self.Knm.T @ F, check_finite=False) / self.noise_var  # S⁻¹ K_mn F / σ²
+        s2 = self.noise_var
+        # K_mm⁻¹ K_mn α = L_mm⁻ᵀ V α; S⁻¹ K_mn F / σ² = L_mm⁻ᵀ B⁻¹ V F / σ² (S = L_mm B L_mmᵀ)
+        self.gamma = solve_triangular(self.Lmm, self.V @ alpha, lower=True, trans="T", check_finite=False)
+        self.H = solve_triangular(self.Lmm, self._Binv(self.V @ F), lower=True, trans="T", check_finite=False) / s2
 
     def predict(self, Uq: np.ndarray):
         Kqm = self.kernel(Uq, self.Z, self.theta)
         a = solve_triangular(self.Lmm, Kqm.T, lower=True, check_finite=False)
-        b = solve_triangular(self.Ls, Kqm.T, lower=True, check_finite=False)
+        b = solve_triangular(self.LB, a, lower=True, check_finite=False)  # S = L_mm B L_mmᵀ
         var = self.kernel.diag(Uq, self.theta) - np.sum(a * a, 0) + np.sum(b * b, 0)
         return Kqm @ self.gamma, np.maximum(var, 0.0), Kqm @ self.H
+
+    def nll_gradient(self, alpha: np.ndarray, H: np.ndarray) -> tuple[float, np.ndarray]:
+        """∂(−VFE bound)/∂(log σ_v, kernel θ) of this block, never forming N×N.
+
+        With ``W = α αᵀ − (K⁻¹)_jj`` (``(K⁻¹)_jj = A⁻¹ − H Hᵀ``), ``W' = W + I/σ²`` and
+        ``R = K_mm⁻¹ K_mn``: ``∂Q = ∂K_nm R + Rᵀ ∂K_mn − Rᵀ ∂K_mm R`` gives
+        ``−½ tr(W' ∂Q) = −⟨W' Rᵀ, ∂K_nm⟩ + ½⟨R W' Rᵀ, ∂K_mm⟩``, plus ``∂ tr K_nn/(2σ²)``;
+        in ``W' Rᵀ = α (Rα)ᵀ + H (RH)ᵀ + Vᵀ B⁻¹ V Rᵀ/σ⁴`` the ``I/σ²`` of A⁻¹ and of W' cancel.
+        """
+        s2, N, M = self.noise_var, len(self.U), len(self.Z)
+        LBinv = solve_triangular(self.LB, np.eye(M), lower=True, check_finite=False)
+        tr_Ainv = (N - M + np.sum(LBinv * LBinv)) / s2  # A⁻¹ = I/σ² − Vᵀ B⁻¹ V/σ⁴
+        trW = alpha @ alpha + np.sum(H * H) - tr_Ainv
+        g_noise = -s2 * trW - self.trace_gap / s2
+        Rt = np.column_stack([alpha, H])  # [α, H] and R [α, H] (M, 1 + m)
+        RX = solve_triangular(self.Lmm, self.V @ Rt, lower=True, trans="T", check_finite=False)
+        RVt = solve_triangular(self.Lmm, self.VVt, lower=True, trans="T", check_finite=False)  # R Vᵀ
+        C = self._Binv(RVt.T) / (s2 * s2)  # B⁻¹ V Rᵀ/σ⁴ (M, M)
+        Et = RX @ Rt.T + C.T @ self.V  # (W' Rᵀ)ᵀ (M, N)
+        RWR = RX @ RX.T + RVt @ C  # R W' Rᵀ (M, M)
+        k = self.kernel
+        g_theta = (
+            -k.weighted_gradient(self.Z, self.U, self.theta, Et, self.Kmn)
+            + 0.5 * k.weighted_gradient(self.Z, self.Z, self.theta, RWR, self.Kmm)
+            + k.weighted_diag_gradient(self.U, self.theta, np.full(N, 0.5 / s2))
+        )
+        return g_noise, g_theta
 
 
 # ----------------------------------------------------------------------------- shared W
@@ -293,50 +347,62 @@ def _shared_w(blocks, Y, F, sigma_w2):
     return a, G, B, b, LM, w, alpha
 
 
-def fit_posterior(kernels, U, Y, F, hp: Hyperparameters, inducing: np.ndarray | None = None) -> Posterior:
-    """Posterior for fixed hyperparameters; ``inducing`` (M, p) switches GP blocks to DTC/VFE."""
+def _blocks(kernels, U, hp: Hyperparameters, noise, inducing, keep_kernel=False) -> list:
+    return [
+        SparseBlock(k, U, hp.theta[j], noise[j], inducing, keep_kernel)
+        if k is not None and inducing is not None
+        else ExactBlock(k, U, hp.theta[j], noise[j], keep_kernel)
+        for j, k in enumerate(kernels)
+    ]
+
+
+def _log_likelihood(blocks, Y, m, sw2, LM, alpha) -> float:
+    """log p(y) (eq. 3.13-3.15 via Woodbury); minus VFE's trace penalty for sparse blocks."""
     N, n = Y.shape
+    logdet = sum(blk.logdet() for blk in blocks)
+    if m:
+        logdet += m * np.log(sw2) + 2.0 * np.sum(np.log(np.diag(LM)))
+    penalty = sum(blk.penalty() for blk in blocks)
+    return -0.5 * float(np.sum(Y * alpha)) - 0.5 * logdet - 0.5 * N * n * LOG_2PI - penalty
+
+
+def fit_posterior(kernels, U, Y, F, hp: Hyperparameters, inducing: np.ndarray | None = None) -> Posterior:
+    """Posterior for fixed hyperparameters; ``inducing`` (M, p) switches GP blocks to DTC/VFE
+    (then ``log_likelihood`` is the VFE bound)."""
     noise = np.exp(2.0 * hp.log_sigma_v)
-    blocks = []
-    for j in range(n):
-        if kernels[j] is not None and inducing is not None:
-            blocks.append(SparseBlock(kernels[j], U, hp.theta[j], noise[j], inducing))
-        else:
-            blocks.append(ExactBlock(kernels[j], U, hp.theta[j], noise[j]))
+    blocks = _blocks(kernels, U, hp, noise, inducing)
     sw2 = np.exp(2.0 * hp.log_sigma_w)
     _, _, _, _, LM, w, alpha = _shared_w(blocks, Y, F, sw2)
     for j, blk in enumerate(blocks):
         blk.finalize(alpha[:, j], F[:, j])
-    m = F.shape[2]
-    logdet = sum(blk.logdet() for blk in blocks)
-    if m:
-        logdet += m * np.log(sw2) + 2.0 * np.sum(np.log(np.diag(LM)))
-    ll = -0.5 * float(np.sum(Y * alpha)) - 0.5 * logdet - 0.5 * N * n * LOG_2PI
+    ll = _log_likelihood(blocks, Y, F.shape[2], sw2, LM, alpha)
     return Posterior(blocks, w, LM, noise, float(ll))
 
 
-def negative_log_likelihood(vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool = True):
+def negative_log_likelihood(
+    vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool = True, inducing: np.ndarray | None = None
+):
     """−log p(y | hyperparameters) and its gradient w.r.t. the packed log-hyperparameters.
 
     Gradient: ``∂(−log p)/∂θ = −½ tr(W_j ∂A_j/∂θ)`` with ``W = α αᵀ − K⁻¹`` (R&W eq. 5.9),
-    evaluated block by block: ``(K⁻¹)_jj = A_j⁻¹ − G_j M⁻¹ G_jᵀ`` with ``G_j = A_j⁻¹ F_j``, so
-    ``W_j = V Vᵀ − A_j⁻¹`` with ``V = [α_j, G_j L_M⁻ᵀ]`` (one potri and one syrk per block);
-    the kernel contracts W_j with all its parameter derivatives at once
-    (:meth:`Kernel.weighted_gradient`). For σ_w, ``∂K/∂log σ_w = 2 σ_w² F Fᵀ`` gives
-    ``−σ_w² (|Fᵀα|² − tr(Fᵀ K⁻¹ F))``, ``Fᵀ K⁻¹ F = B − B M⁻¹ B``.
-    Cost per output: one Cholesky and one potri of N×N (N³ flops) plus O(N² (m + p)).
+    evaluated block by block: ``(K⁻¹)_jj = A_j⁻¹ − G_j M⁻¹ G_jᵀ = A_j⁻¹ − H_j H_jᵀ`` with
+    ``G_j = A_j⁻¹ F_j``, ``H_j = G_j L_M⁻ᵀ`` (each block's ``nll_gradient``; the kernel contracts
+    W_j with all its parameter derivatives at once, :meth:`Kernel.weighted_gradient`).
+    For σ_w, ``∂K/∂log σ_w = 2 σ_w² F Fᵀ`` gives ``−σ_w² (|Fᵀα|² − tr(Fᵀ K⁻¹ F))``,
+    ``Fᵀ K⁻¹ F = B − B M⁻¹ B``.
+
+    Exact (``inducing`` None): per output one Cholesky and one potri of N×N (N³ flops) plus
+    O(N² (m + p)). With ``inducing`` (M, p) (fixed, scaled inputs): the negative VFE bound of
+    :class:`SparseBlock` and its gradient in O(N M² + N M (m + p)) per output, no N×N matrix.
     """
     hp = Hyperparameters.unpack(vec, sizes)
     N, n = Y.shape
     m = F.shape[2]
     noise = np.exp(2.0 * hp.log_sigma_v)
-    blocks = [ExactBlock(kernels[j], U, hp.theta[j], noise[j], keep_kernel=grad) for j in range(n)]
+    blocks = _blocks(kernels, U, hp, noise, inducing, keep_kernel=grad)
     sw2 = np.exp(2.0 * hp.log_sigma_w)
     a, G, B, b, LM, w, alpha = _shared_w(blocks, Y, F, sw2)
-    logdet = sum(blk.logdet() for blk in blocks)
-    if m:
-        logdet += m * np.log(sw2) + 2.0 * np.sum(np.log(np.diag(LM)))
-    nll = 0.5 * float(np.sum(Y * alpha)) + 0.5 * logdet + 0.5 * N * n * LOG_2PI
+    nll = -_log_likelihood(blocks, Y, m, sw2, LM, alpha)
     if not grad:
         return nll
     g = np.zeros_like(vec)
@@ -347,20 +413,8 @@ def negative_log_likelihood(vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool
         g[0] = -sw2 * (Ftalpha @ Ftalpha - tr_FKF)
     k = 1 + n
     for j in range(n):
-        blk, al = blocks[j], alpha[:, j]
-        blocks[j] = None  # free each block's N×N arrays once its gradient is done
-        # G M⁻¹ Gᵀ = H Hᵀ, H = G L_M⁻ᵀ
+        blk, blocks[j] = blocks[j], None  # free each block's arrays once its gradient is done
         H = solve_triangular(LM, G[j].T, lower=True, check_finite=False).T if m else G[j]
-        if blk.L is None:  # A = σ² I
-            tr_Kinv = N / noise[j] - np.sum(H * H)
-            g[1 + j] = -noise[j] * (al @ al - tr_Kinv)
-            continue
-        V = np.asfortranarray(np.column_stack([al, H]))
-        # lower triangle of W = V Vᵀ − A⁻¹, in the factor's memory
-        Wl = blas.dsyrk(1.0, V, beta=-1.0, c=blk.inverse_lower(overwrite=True), lower=1, overwrite_c=1)
-        g[1 + j] = -noise[j] * np.trace(Wl)  # ∂A/∂log σ_v = 2σ_v² I
-        Wm = symmetric_from_lower(Wl)
-        del Wl
-        g[k : k + sizes[j]] = -0.5 * blk.kernel.weighted_gradient(U, U, hp.theta[j], Wm, blk.K)
+        g[1 + j], g[k : k + sizes[j]] = blk.nll_gradient(alpha[:, j], H)
         k += sizes[j]
     return nll, g

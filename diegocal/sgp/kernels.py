@@ -49,6 +49,13 @@ class Kernel:
             raise NotImplementedError(f"{type(self).__name__} has no cross-covariance gradient")
         return np.array([np.sum(W * dK) for dK in self.gradients(X1, theta)])
 
+    def weighted_diag_gradient(self, X, theta, w) -> np.ndarray:
+        """``Σ_a w_a ∂k(x_a, x_a)/∂theta_p`` for every p: shape (n_params,); w (N,)."""
+        out = np.zeros(self.n_params)
+        for x, wa in zip(np.asarray(X), w, strict=True):
+            out += wa * np.array([dK[0, 0] for dK in self.gradients(x[None], theta)])
+        return out
+
     def __add__(self, other: Kernel) -> Kernel:
         return Sum(self, other)
 
@@ -115,6 +122,11 @@ class SquaredExponential(Kernel):
         out[1:] = r @ (A * A) + c @ (B * B) - 2.0 * np.sum(A * PB[:, :-1], axis=0)
         return out
 
+    def weighted_diag_gradient(self, X, theta, w):
+        out = np.zeros(1 + self.n_dims)
+        out[0] = 2.0 * np.exp(2.0 * theta[0]) * np.sum(w)  # k(x, x) = σ_z²
+        return out
+
 
 class Constant(Kernel):
     """``k = c²`` everywhere; ``theta = [log c]``."""
@@ -132,6 +144,9 @@ class Constant(Kernel):
 
     def weighted_gradient(self, X1, X2, theta, W, K=None):
         return np.array([2.0 * np.exp(2.0 * theta[0]) * np.sum(W)])
+
+    def weighted_diag_gradient(self, X, theta, w):
+        return np.array([2.0 * np.exp(2.0 * theta[0]) * np.sum(w)])
 
 
 class Subspace(Kernel):
@@ -157,6 +172,9 @@ class Subspace(Kernel):
 
     def weighted_gradient(self, X1, X2, theta, W, K=None):
         return self.kernel.weighted_gradient(*self._select(X1, X2), theta, W, K)
+
+    def weighted_diag_gradient(self, X, theta, w):
+        return self.kernel.weighted_diag_gradient(np.asarray(X)[:, self.dims], theta, w)
 
 
 class Sum(Kernel):
@@ -186,6 +204,10 @@ class Sum(Kernel):
         t1, t2 = self._split(theta)
         return np.concatenate([self.k1.weighted_gradient(X1, X2, t1, W), self.k2.weighted_gradient(X1, X2, t2, W)])
 
+    def weighted_diag_gradient(self, X, theta, w):
+        t1, t2 = self._split(theta)
+        return np.concatenate([self.k1.weighted_diag_gradient(X, t1, w), self.k2.weighted_diag_gradient(X, t2, w)])
+
 
 class Product(Sum):
     """``k1 * k2`` (elementwise); ``theta = [theta1, theta2]``."""
@@ -214,6 +236,16 @@ class Product(Sum):
             [
                 self.k1.weighted_gradient(X1, X2, t1, W * K2, K1),
                 self.k2.weighted_gradient(X1, X2, t2, W * K1, K2),
+            ]
+        )
+
+    def weighted_diag_gradient(self, X, theta, w):
+        t1, t2 = self._split(theta)
+        d1, d2 = self.k1.diag(X, t1), self.k2.diag(X, t2)
+        return np.concatenate(
+            [
+                self.k1.weighted_diag_gradient(X, t1, w * d2),
+                self.k2.weighted_diag_gradient(X, t2, w * d1),
             ]
         )
 

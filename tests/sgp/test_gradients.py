@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from diegocal.sgp.gp import Hyperparameters, negative_log_likelihood
-from diegocal.sgp.kernels import Constant, SquaredExponential, Subspace
+from diegocal.sgp.kernels import Constant, Kernel, SquaredExponential, Subspace
 
 
 def _problem(n_out=2, N=25, p=3, m=4, seed=0):
@@ -15,20 +15,20 @@ def _problem(n_out=2, N=25, p=3, m=4, seed=0):
     return U, Y, F, rng
 
 
-def _check(kernels, U, Y, F, rng):
+def _check(kernels, U, Y, F, rng, inducing=None):
     sizes = [0 if k is None else k.n_params for k in kernels]
     theta = tuple(rng.normal(0, 0.4, s) for s in sizes)
     hp = Hyperparameters(0.3, np.log([0.2, 0.3][: Y.shape[1]]), theta)
     x = hp.pack()
-    f, g = negative_log_likelihood(x, kernels, U, Y, F, sizes)
+    f, g = negative_log_likelihood(x, kernels, U, Y, F, sizes, inducing=inducing)
     eps = 1e-5
     fd = np.zeros_like(x)
     for i in range(x.size):
         e = np.zeros_like(x)
         e[i] = eps
         fd[i] = (
-            negative_log_likelihood(x + e, kernels, U, Y, F, sizes, grad=False)
-            - negative_log_likelihood(x - e, kernels, U, Y, F, sizes, grad=False)
+            negative_log_likelihood(x + e, kernels, U, Y, F, sizes, grad=False, inducing=inducing)
+            - negative_log_likelihood(x - e, kernels, U, Y, F, sizes, grad=False, inducing=inducing)
         ) / (2 * eps)
     np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6 * max(1.0, abs(f)))
     return g
@@ -49,6 +49,15 @@ def test_gp_gradient_matches_finite_differences():
 def test_pr_gradient_matches_finite_differences():
     U, Y, F, rng = _problem()
     _check([None, None], U, Y, F, rng)
+
+
+@pytest.mark.parametrize("features", [True, False])
+def test_sparse_vfe_gradient_matches_finite_differences(features):
+    """The VFE bound (inducing inputs fixed) has an analytic gradient too; one output has no GP."""
+    U, Y, F, rng = _problem()
+    kernels = [Subspace([0, 2], SquaredExponential(2)), None] if features else [SquaredExponential(3)] * 2
+    Z = U[rng.choice(len(U), 6, replace=False)] + 0.1 * rng.standard_normal((6, 3))
+    _check(kernels, U, Y, F if features else F[:, :, :0], rng, inducing=Z)
 
 
 @pytest.mark.parametrize("compose", ["sum", "product"])
@@ -73,7 +82,8 @@ def _kernel_zoo():
 @pytest.mark.parametrize("name", ["se", "subspace", "sum", "product"])
 def test_weighted_gradient_equals_dense_contraction(name):
     """Σ_ab W_ab ∂K_ab/∂θ_p: the closed form equals contracting the dense derivatives (X1 = X2)
-    and central finite differences of Σ W ∘ k(X1, X2) (cross-covariances, sparse inference)."""
+    and central finite differences of Σ W ∘ k(X1, X2) (cross-covariances, sparse inference);
+    likewise its diagonal form."""
     k = _kernel_zoo()[name]
     rng = np.random.default_rng(3)
     X, Z = rng.standard_normal((30, 3)), rng.standard_normal((7, 3))
@@ -89,3 +99,7 @@ def test_weighted_gradient_equals_dense_contraction(name):
         e[p] = eps
         fd[p] = np.sum(Wc * (k(X, Z, theta + e) - k(X, Z, theta - e))) / (2 * eps)
     np.testing.assert_allclose(k.weighted_gradient(X, Z, theta, Wc), fd, rtol=1e-6, atol=1e-8)
+    w = rng.standard_normal(30)  # Σ_a w_a ∂k(x_a, x_a): closed form vs the dense 1×1 derivatives
+    np.testing.assert_allclose(
+        k.weighted_diag_gradient(X, theta, w), Kernel.weighted_diag_gradient(k, X, theta, w), atol=1e-12
+    )

@@ -14,9 +14,7 @@ def _tiny(seed=0, N=15, n=2, m=3, p=2):
     F = rng.standard_normal((N, n, m))
     Y = F @ rng.standard_normal(m) + np.cos(U[:, :1]) + 0.1 * rng.standard_normal((N, n))
     kernels = [SquaredExponential(p), Subspace([1], SquaredExponential(1))]
-    hp = Hyperparameters(
-        np.log(2.0), np.log([0.1, 0.2]), (np.array([0.1, -0.2, 0.3]), np.array([-0.1, 0.2]))
-    )
+    hp = Hyperparameters(np.log(2.0), np.log([0.1, 0.2]), (np.array([0.1, -0.2, 0.3]), np.array([-0.1, 0.2])))
     Uq, Fq = rng.standard_normal((7, p)), rng.standard_normal((7, n, m))
     return U, Y, F, kernels, hp, Uq, Fq
 
@@ -36,10 +34,7 @@ def _dense(U, Y, F, kernels, hp, Uq, Fq):
         for a in range(len(Uq)):
             sqd = sw2 * Fq[a, j] @ Fs.T
             sqd[j * N : (j + 1) * N] += kernels[j](Uq[a : a + 1], U, hp.theta[j])[0]
-            sqq = (
-                sw2 * Fq[a, j] @ Fq[a, j]
-                + kernels[j](Uq[a : a + 1], Uq[a : a + 1], hp.theta[j])[0, 0]
-            )
+            sqq = sw2 * Fq[a, j] @ Fq[a, j] + kernels[j](Uq[a : a + 1], Uq[a : a + 1], hp.theta[j])[0, 0]
             k = np.linalg.solve(Kdd, sqd)
             mean[a, j] = k @ y
             var[a, j] = sqq - k @ sqd
@@ -89,6 +84,20 @@ def test_sparse_with_few_inducing_points_is_an_approximation():
     sparse = fit_posterior(kernels, U, Y, F, hp, inducing=U[:5]).predict(Uq, Fq)
     assert not np.allclose(exact[0], sparse[0], atol=1e-6)  # the test above is not vacuous
     assert np.all(sparse[1] >= 0)
+
+
+def test_sparse_log_likelihood_is_the_vfe_lower_bound():
+    """Titsias's bound: below the exact log likelihood with few inducing inputs, and the value
+    the sparse negative_log_likelihood (the learning objective) returns."""
+    from diegocal.sgp.gp import negative_log_likelihood
+
+    U, Y, F, kernels, hp, Uq, Fq = _tiny(seed=4, N=40)
+    exact = fit_posterior(kernels, U, Y, F, hp).log_likelihood
+    sparse = fit_posterior(kernels, U, Y, F, hp, inducing=U[:6]).log_likelihood
+    assert sparse < exact
+    sizes = [k.n_params for k in kernels]
+    nll = negative_log_likelihood(hp.pack(), kernels, U, Y, F, sizes, grad=False, inducing=U[:6])
+    np.testing.assert_allclose(-nll, sparse, rtol=1e-12)
 
 
 def test_failed_cholesky_raises_numerical_error_with_a_hint():
