@@ -163,6 +163,7 @@ class BatchKinematics:
         B, n = q.shape[0], self.n
         R = np.empty((n, 3, 3, B))  # component-major while chaining: rows of B are contiguous
         p = np.empty((n, 3, B))
+        ax = np.empty((n, 3, B))  # joint axes: R_j a = R_parent P a (Rot(a, q) a = a)
         sin, cos = np.sin(q.T), 1.0 - np.cos(q.T)
         for j in range(n):
             par = self.parent[j]
@@ -172,6 +173,7 @@ class BatchKinematics:
             else:
                 X = self._chain_t[j] @ R[par]  # (3, 11, B): R_parent @ [P, PK, PK², p, Pa]
                 pp = X[:, 9] + p[par]
+            ax[j] = X[:, 10]
             if self.prismatic[j]:
                 R[j] = X[:, 0:3]
                 p[j] = pp + X[:, 10] * q[:, j]
@@ -180,6 +182,7 @@ class BatchKinematics:
                 p[j] = pp
         R = R.transpose(3, 0, 1, 2)
         p = p.transpose(2, 0, 1)
+        axis = np.ascontiguousarray(ax.transpose(2, 0, 1))
         if self.base_joint == 0:  # the chain started in the base frame (see __init__)
             Rout, pout = np.ascontiguousarray(R), np.ascontiguousarray(p)
             RbT = np.broadcast_to(self.base_R.T, (B, 3, 3))
@@ -191,7 +194,7 @@ class BatchKinematics:
             Rout = RbT[:, None] @ R
             pout = np.einsum("bij,bnj->bni", RbT, p - pb[:, None])
             root_p = -(RbT @ pb[..., None])[..., 0]
-        axis = np.einsum("bnij,nj->bni", Rout, self.local_axis)
+            axis = np.einsum("bij,bnj->bni", RbT, axis)
         return Poses(Rout, pout, axis, np.ascontiguousarray(RbT), np.ascontiguousarray(root_p))
 
     def twists(self, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
@@ -295,12 +298,16 @@ class BatchKinematics:
         sw = (np.ascontiguousarray(tw.transpose(0, 2, 1)).reshape(B * 6, self.n) @ st.sign.T).reshape(B, 6, N)
         return sw[:, 3:].transpose(0, 2, 1) + np.cross(sw[:, :3].transpose(0, 2, 1), x)
 
-    def points_project(self, poses: Poses, x: np.ndarray, links, f: np.ndarray) -> np.ndarray:
-        """f_mᵀ J_m (B, N, n): each point's Jacobian projected on a direction f (B, N, 3)."""
+    def points_project(self, poses: Poses, x: np.ndarray, links, f: np.ndarray, cols=None) -> np.ndarray:
+        """f_mᵀ J_m (B, N, n): each point's Jacobian projected on a direction f (B, N, 3); only
+        the joints ``cols`` (c,) when given: (B, N, c)."""
         st = self._points_structure(links)
-        omega, v = self.twists(poses)
+        xi = self._twists(poses)
+        sign = st.sign
+        if cols is not None:
+            xi, sign = xi[:, :, cols], sign[:, cols]
         wrench = np.concatenate([np.cross(x, f), f], axis=2)  # ξ · (x × f, f) = f · (v + ω × x)
-        return (wrench @ np.concatenate([omega, v], axis=2).transpose(0, 2, 1)) * st.sign
+        return (wrench @ xi.transpose(1, 0, 2)) * sign
 
     def _points_structure(self, links) -> _Structure:
         key = tuple(links)

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from diegocal.stac.model import Observation, Params
-from diegocal.stac.qphase import Noise, normal_equations
+from diegocal.stac.qphase import Noise, block_solve, damped, map_batches, normal_equations
 
 
 def free_mask(obs: Observation) -> np.ndarray:
@@ -68,13 +68,59 @@ def _theta_transpose_times(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
     out = [np.einsum("bp,bp->p", vp, s), vp.sum(0)]
     if M:
         vx = v[:, P:].reshape(-1, M, 3) / noise.sig_x
-        y = (np.einsum("bmij,mj->bmi", Rl, params.xyz) + pl) @ params.R.T  # R x_b
-        out.append(np.einsum("bmki,lk,bml->mi", Rl, params.R, vx).ravel())  # (R h_r)ᵀ v
+        y = ((Rl @ params.xyz[:, :, None])[..., 0] + pl) @ params.R.T  # R x_b
+        out.append(np.einsum("bmki,bmk->mi", Rl, vx @ params.R).ravel())  # (R h_r)ᵀ v
         out.append(np.cross(y, vx).sum((0, 1)))  # (−[y]×)ᵀ v = y × v
         out.append(vx.sum((0, 1)))
     else:
         out += [np.zeros(0), np.zeros(3), np.zeros(3)]
     return np.concatenate(out)
+
+
+def _times_q(obs: Observation, params: Params, noise: Noise, ex: dict, u: np.ndarray) -> np.ndarray:
+    """w (J_q u − r) (B, P + 3M) in residual space (pots, then marker coordinates), from the
+    linearisation ``ex`` of :func:`~diegocal.stac.qphase.normal_equations`; u (B, n)."""
+    B, P, M = u.shape[0], obs.n_pots, obs.n_markers
+    out = np.zeros((B, P + 3 * M))
+    if noise.use_pots and P:
+        du = u @ obs.A.T
+        if len(obs.linear):
+            du[:, obs.linear] = np.einsum("blc,bc->bl", ex["lin"].ds_lin, u[:, obs.sparsity.lin_cols])
+        out[:, :P] = ex["wp"] * (du * (params.gain / noise.sig_p) - ex["zp"])
+    if noise.use_markers and M:
+        vel = obs.kin.points_velocity(ex["lin"].poses, ex["x"], obs.marker_links, u)  # eq. 2.23
+        out[:, P:] = (ex["wx"][..., None] * (vel @ params.R.T / noise.sig_x - ex["rx"])).reshape(B, -1)
+    return out
+
+
+def _dense_q_jacobian(obs: Observation, params: Params, noise: Noise, q: np.ndarray, wp, wx) -> np.ndarray:
+    """J_q (b, P + 3M, n) and the weights w (b, P + 3M) of a few frames q (b, n), for their
+    robust weights wp (b, P) and wx (b, M)."""
+    b, P, M = q.shape[0], obs.n_pots, obs.n_markers
+    _, ds, _, _, Jx = obs.evaluate(q, params.xyz)
+    Jq = np.zeros((b, P + 3 * M, q.shape[1]))
+    w = np.zeros((b, P + 3 * M))
+    if noise.use_pots and P:
+        Jq[:, :P] = ds * (params.gain / noise.sig_p)[None, :, None]  # eq. 2.22
+        w[:, :P] = wp
+    if noise.use_markers and M:
+        Jq[:, P:] = (np.einsum("ij,bmjn->bmin", params.R, Jx) / noise.sig_x).reshape(b, -1, q.shape[1])  # eq. 2.23
+        w[:, P:] = np.repeat(wx, 3, axis=1)
+    return Jq, w
+
+
+def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: slice, stride: int, want_red: bool):
+    """One batch's share of the reduced system: Bᵀ H⁻¹ g − g_θ (Nθ,), the redundancy, and what
+    the reduced matrix needs of its frames t ≡ 0 (mod stride)."""
+    H, g, _, (s, Rl, pl), red, ex = normal_equations(obs, params, noise, q, sl, want_red)
+    Hd = damped(H, lam[sl], inplace=True)
+    u = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ g
+    v = _times_q(obs, params, noise, ex, u)
+    rhs = _theta_transpose_times(obs, params, noise, s, Rl, pl, v)
+    k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)
+    wx = ex["wx"][k] if ex["wx"] is not None else None
+    picked = (q[sl][k], Hd[k], ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k])
+    return rhs, red, picked
 
 
 def theta_step(
@@ -83,46 +129,33 @@ def theta_step(
     noise: Noise,
     q: np.ndarray,
     lam: np.ndarray,
-    batch: int = 500,
-    max_frames: int = 250,
+    batch: int = 250,
+    max_frames: int = 100,
+    want_red: bool = False,
+    jobs: int = 1,
 ) -> tuple[Params, dict, dict]:
-    """θ + Δθ from the reduced (Schur) system, the q-phase redundancy per sensor type and the
-    standard errors of θ with q marginalised: ``{"gain", "bias" (P,), "xyz" (M, 3)}`` from the
-    diagonal of the inverse reduced matrix (the residuals are standardised, so it is the
-    covariance itself); NaN for the entries held fixed."""
+    """θ + Δθ from the reduced (Schur) system, the q-phase redundancy per sensor type (when
+    ``want_red``; else empty) and the standard errors of θ with q marginalised:
+    ``{"gain", "bias" (P,), "xyz" (M, 3)}`` from the diagonal of the inverse reduced matrix (the
+    residuals are standardised, so it is the covariance itself); NaN for the entries held fixed.
+    Batches of frames run in ``jobs`` threads."""
     T, n = q.shape
     P, M = obs.n_pots, obs.n_markers
     N = 2 * P + 3 * M + 6
     stride = max(1, T // max_frames)
-    S = np.zeros((N, N))
-    rhs = np.zeros(N)
-    used: dict = {}
-    for i in range(0, T, batch):
-        sl = slice(i, min(i + batch, T))
-        H, g, _, (s, Rl, pl), red, ex = normal_equations(obs, params, noise, q, sl)
-        used = {k: used.get(k, 0.0) + v for k, v in red.items()}
-        B = H.shape[0]
-        Jq = np.zeros((B, P + 3 * M, n))
-        w = np.zeros((B, P + 3 * M))
-        r = np.zeros((B, P + 3 * M))
-        if noise.use_pots and P:
-            Jq[:, :P] = ex["ds"] * (params.gain / noise.sig_p)[None, :, None]
-            w[:, :P], r[:, :P] = ex["wp"], ex["zp"]
-        if noise.use_markers and M:
-            Jq[:, P:], w[:, P:], r[:, P:] = ex["Jx"], ex["wx"], ex["rx"].reshape(B, -1)
-        diag = np.einsum("bii->bi", H)
-        Hd = H + (lam[sl, None] * diag + 1e-9 * (1.0 + diag.max(1, keepdims=True)))[..., None] * np.eye(n)
-        u = np.linalg.solve(Hd, g[..., None])[..., 0]  # H⁻¹ g
-        v = w * (np.einsum("bkn,bn->bk", Jq, u) - r)
-        rhs += _theta_transpose_times(obs, params, noise, s, Rl, pl, v)  # Bᵀ H⁻¹ g − g_θ
-        pick = np.arange(sl.start, sl.stop) % stride == 0
-        if pick.any():
-            Jt = _theta_jacobian(obs, params, noise, s[pick], Rl[pick], pl[pick], ex["valid"][pick])
-            WJt = Jt * w[pick][..., None]
-            Bt = np.swapaxes(Jq[pick], 1, 2) @ WJt  # (b, n, Nθ)
-            X = np.linalg.solve(Hd[pick], Bt)
-            Wp, Jp = WJt.reshape(-1, N), Jt.reshape(-1, N)
-            S += stride * (Wp.T @ Jp - Bt.reshape(-1, N).T @ X.reshape(-1, N))
+    parts = map_batches(lambda sl: _schur_batch(obs, params, noise, q, lam, sl, stride, want_red), T, batch, jobs)
+    rhs = sum(p[0] for p in parts)
+    used = {k: sum(p[1][k] for p in parts) for k in parts[0][1]}
+    qp, Hd, wp, wx, s, Rl, pl, valid = (
+        None if parts[0][2][i] is None else np.concatenate([p[2][i] for p in parts]) for i in range(8)
+    )
+    Jq, w = _dense_q_jacobian(obs, params, noise, qp, wp, wx)
+    Jt = _theta_jacobian(obs, params, noise, s, Rl, pl, valid)
+    WJt = Jt * w[..., None]
+    Bt = np.swapaxes(Jq, 1, 2) @ WJt  # (b, n, Nθ)
+    X = block_solve(Hd, Bt, obs.sparsity.blocks)
+    # the reduced matrix from every stride-th frame, scaled (a quasi-Newton approximation)
+    S = stride * (WJt.reshape(-1, N).T @ Jt.reshape(-1, N) - Bt.reshape(-1, N).T @ X.reshape(-1, N))
     free = free_mask(obs)
     A = S[np.ix_(free, free)]
     A = A + 1e-9 * max(np.trace(A), 1.0) / max(free.sum(), 1) * np.eye(free.sum())

@@ -4,13 +4,21 @@
 robot's sensors, checks names and observability once, and evaluates for a batch of frames
 the quantities both phases need: the pot transmission s(q) (eq. 2.18-2.20, with ∂s/∂q for
 eq. 2.22) and the pose of every marker's link (eq. 2.11, with the point Jacobian of eq. 2.23).
+
+The q-phase does not need the dense Jacobians: :meth:`Observation.linearise` returns the joint
+poses (the markers' Gauss-Newton sums are formed from them, see
+:meth:`diegocal.robot.batch.BatchKinematics.points_normal`) and ∂s/∂q of the linear pots only;
+rotary, encoder and tendon pots have the constant ∂s/∂q = A. :class:`Sparsity` records which
+joints each reading depends on, once per log.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.sparse.csgraph import connected_components
 
 from diegocal.errors import FitError, UnknownNameError
 from diegocal.io import Log
@@ -35,6 +43,36 @@ class Params:
     xyz: np.ndarray
     R: np.ndarray
     T: np.ndarray
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """The observation model at a batch q (B, n) for Gauss-Newton: s (B, P), Rl (B, M, 3, 3),
+    pl (B, M, 3) as in :class:`State`, the joint ``poses`` (:class:`diegocal.robot.batch.Poses`)
+    and ∂s/∂q of the linear pots ``ds_lin`` (B, L, c) on the joints ``Sparsity.lin_cols`` (c,)
+    (eq. 2.19-2.20; zero on the other joints)."""
+
+    s: np.ndarray
+    Rl: np.ndarray
+    pl: np.ndarray
+    poses: object
+    ds_lin: np.ndarray
+
+
+@dataclass(frozen=True)
+class Sparsity:
+    """Which entries of the per-frame q-phase normal matrix JᵀWJ (n, n) can be non-zero.
+
+    pot_flat : per pot kind with a constant ∂s/∂q (rotary, encoder, tendon): (pot indices (k,),
+        flat indices U into the n x n matrix, vec(A_p A_pᵀ)[U] (k, |U|))
+    lin_cols : (c,) joints that move the linear pots' anchors relative to each other
+    blocks : index arrays of the joints in each independent block (connected components of the
+        pattern): the normal matrix is block diagonal, each block is solved on its own
+    """
+
+    pot_flat: dict
+    lin_cols: np.ndarray
+    blocks: tuple
 
 
 @dataclass(frozen=True)
@@ -101,6 +139,31 @@ class Observation:
         margin = np.where(bad, 0.0, 0.25 * (hi - lo) + np.where(self.kin.prismatic, 0.0, 0.3))
         self.lower, self.upper = lo - margin, hi + margin
         self.fixed_bias = np.zeros(len(self.pot_index), dtype=bool)
+        self.sparsity = self._sparsity()
+
+    def _sparsity(self) -> Sparsity:
+        n = self.robot.n_joints
+        pattern = np.eye(n, dtype=bool)
+        pot_flat = {}
+        for kind in dict.fromkeys(self.kinds[self.kinds != "linear"]):
+            idx = np.flatnonzero(self.kinds == kind)
+            outer = np.einsum("pj,pk->pjk", self.A[idx], self.A[idx]).reshape(len(idx), n * n)
+            U = np.flatnonzero(np.any(outer != 0, axis=0))
+            pot_flat[kind] = (idx, U, outer[:, U])
+            pattern.ravel()[U] = True
+        lin_cols = np.zeros(0, dtype=int)
+        if len(self.linear):
+            joint, _, _ = self.kin.link_info(self.anchors.links)
+            moves = self.kin._anc[joint[0::2]] != self.kin._anc[joint[1::2]]  # (L, n)
+            lin_cols = np.flatnonzero(moves.any(axis=0))
+            for row in moves:
+                pattern |= np.outer(row, row)
+        if self.n_markers:
+            st = self.kin._points_structure(self.marker_links)
+            pattern |= (st.coeff_nested != 0) | (st.coeff_other != 0)
+        _, label = connected_components(pattern, directed=False)
+        blocks = tuple(np.flatnonzero(label == c) for c in np.unique(label))
+        return Sparsity(pot_flat, lin_cols, blocks)
 
     @property
     def n_pots(self) -> int:
@@ -109,6 +172,13 @@ class Observation:
     @property
     def n_markers(self) -> int:
         return len(self.marker_index)
+
+    def subset(self, frames: slice) -> Observation:
+        """The same sensors and robot on a subset of the frames (shares everything but the data)."""
+        sub = copy.copy(self)
+        sub.pots, sub.markers, sub.valid = self.pots[frames], self.markers[frames], self.valid[frames]
+        sub.n_frames = sub.pots.shape[0]
+        return sub
 
     # ------------------------------------------------------------------ checks
     def check_observable(self) -> None:
@@ -189,6 +259,25 @@ class Observation:
         if xyz is not None and self.n_markers:
             _, Jx = self.kin.points_jacobian(poses, PointSet(self.marker_links, xyz))
         return s, ds, Rl, pl, Jx
+
+    def linearise(self, q: np.ndarray) -> Linearisation:
+        """s, marker link poses and joint poses at q (B, n), with ∂s/∂q of the linear pots
+        (eq. 2.19-2.20: the unit vector between the anchors times their relative Jacobian)."""
+        poses = self.kin.joint_poses(q)
+        s = q @ self.A.T
+        cols = self.sparsity.lin_cols
+        ds_lin = np.zeros((q.shape[0], len(self.linear), len(cols)))
+        if len(self.linear):
+            x = self.kin.points(poses, self.anchors)
+            d = x[:, 1::2] - x[:, 0::2]
+            length = np.linalg.norm(d, axis=-1)
+            s[:, self.linear] = length  # eq. 2.19-2.20
+            u = d / length[..., None]
+            f = np.stack([-u, u], axis=2).reshape(x.shape)  # ∂|d|/∂q = uᵀ (J_1 − J_0)
+            proj = self.kin.points_project(poses, x, self.anchors.links, f, cols)
+            ds_lin = proj[:, 0::2] + proj[:, 1::2]
+        Rl, pl = self.kin.link_poses(poses, self.marker_links)
+        return Linearisation(s, Rl, pl, poses, ds_lin)
 
     def state(self, q: np.ndarray, batch: int = 2000) -> State:
         """s(q) and link poses for every frame, in batches."""

@@ -42,35 +42,52 @@ def kabsch(xb: np.ndarray, x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np
     cb = (w[:, None] * xb).sum(0) / sw  # eq. 2.13
     cx = (w[:, None] * x).sum(0) / sw
     S = ((xb - cb) * w[:, None]).T @ (x - cx)  # eq. 2.14: U Σ Vᵀ
-    U, _, Vt = np.linalg.svd(S)
-    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
-    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T  # replaces eq. 2.15 (see module docstring)
+    R = _proper_rotation(S)
     return R, cx - R @ cb  # eq. 2.16
 
 
-def marker_means(obs: Observation, st: State, R, T, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 2.17: d_m = weighted mean of h_r⁻¹ (R⁻¹ (x − T0) − h_p) over frames.
-
-    Returns d (M, 3) and its standard error (M, 3), m.
-    """
-    xb = np.nan_to_num(obs.markers - T) @ R  # R⁻¹ (x − T0), row form
-    local = np.einsum("tmji,tmj->tmi", st.Rl, xb - st.pl)  # h_rᵀ (… − h_p)
-    sw = w.sum(0)  # (M,)
-    d = (w[..., None] * local).sum(0) / sw[:, None]
-    n = (w > 0).sum(0)
-    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(sw[:, None] * (n[:, None] - 1) / n[:, None], 1e-300)
-    se = np.sqrt(var * (w**2).sum(0)[:, None]) / sw[:, None]
-    return d, se
+def _proper_rotation(S: np.ndarray) -> np.ndarray:
+    """argmax_R tr(R S) over rotations for the 3 x 3 cross-covariance S = Σ w xb xᵀ (eq. 2.14)."""
+    U, _, Vt = np.linalg.svd(S)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T  # replaces eq. 2.15 (see module docstring)
 
 
 def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inner: int = 4):
-    """Alternate Procrustes (R, T0) and marker means d a few times; returns (R, T, d, d_se)."""
-    R, T, d = params.R, params.T, params.xyz
-    flat_w = w.reshape(-1)
+    """Alternate Procrustes (R, T0) and marker means d (eq. 2.13-2.17) a few times; returns
+    (R, T, d, d_se).
+
+    Both steps are linear in the data given (R, d), so one pass over the frames collects their
+    weighted moments per marker (with x_c = x − c_x, c_x the weighted centroid of the markers):
+    ``Σ w``, ``G = Σ w h_r``, ``Σ w h_p``, ``C = Σ w h_r ⊗ x_c``, ``D = Σ w h_p x_cᵀ``,
+    ``K = Σ w h_rᵀ h_p``; the alternation then costs nothing per frame:
+    c_b = Σ_m (G_m d_m + Σ w h_p) / Σ w, S = Σ_m (C_m · d_m + D_m) (eq. 2.13-2.14; Σ w x_c = 0),
+    and d_m = (Σ_ik R_ki C_m,i·k + G_mᵀ c_b − K_m) / Σ w (eq. 2.17, with T0 = c_x − R c_b).
+    """
+    Rl, pl = st.Rl, st.pl
+    sw = w.sum(0)  # (M,)
+    if sw.sum() <= 0:
+        raise NumericalError("Procrustes: no valid marker sample (all occluded?)")
+    x = np.where(w[..., None] > 0, np.nan_to_num(obs.markers), 0.0)
+    cx = np.einsum("tm,tmk->k", w, x) / sw.sum()
+    xc = (x - cx) * w[..., None]  # weighted, centred
+    M = w.shape[1]
+    G = np.einsum("tm,tmij->mij", w, Rl)
+    Pm = np.einsum("tm,tmi->mi", w, pl)
+    C = np.matmul(Rl.reshape(-1, M, 9).transpose(1, 2, 0), xc.transpose(1, 0, 2)).reshape(M, 3, 3, 3)
+    D = np.matmul(pl.transpose(1, 2, 0), xc.transpose(1, 0, 2))
+    K = np.einsum("tm,tmj->mj", w, np.einsum("tmij,tmi->tmj", Rl, pl))
+    R, d = params.R, params.xyz
     for _ in range(inner):
-        xb = np.einsum("tmij,mj->tmi", st.Rl, d) + st.pl
-        R, T = kabsch(xb.reshape(-1, 3), np.nan_to_num(obs.markers).reshape(-1, 3), flat_w)
-        d, se = marker_means(obs, st, R, T, w)
+        cb = (np.einsum("mij,mj->i", G, d) + Pm.sum(0)) / sw.sum()  # eq. 2.13
+        R = _proper_rotation(np.einsum("mijk,mj->ik", C, d) + D.sum(0))  # eq. 2.14-2.15
+        d = (np.einsum("mijk,ki->mj", C, R) + np.einsum("mij,i->mj", G, cb) - K) / sw[:, None]  # eq. 2.17
+    T = cx - R @ cb  # eq. 2.16
+    # standard error of each mean from the spread of the marker in its link frame
+    local = np.einsum("tmji,tmj->tmi", Rl, (x - cx) @ R + cb - pl)  # h_rᵀ (R⁻¹ (x − T0) − h_p)
+    n = (w > 0).sum(0)
+    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(sw[:, None] * (n[:, None] - 1) / n[:, None], 1e-300)
+    se = np.sqrt(var * (w**2).sum(0)[:, None]) / sw[:, None]
     return R, T, d, se
 
 

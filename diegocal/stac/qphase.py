@@ -53,7 +53,7 @@ def irls_weight(z: np.ndarray, loss: str, k: float) -> np.ndarray:
 def residuals(obs: Observation, params: Params, noise: Noise, s, Rl, pl, pots, markers, valid):
     """Standardised residuals of a batch: pots (B, P), marker norms (B, M) and vectors (B, M, 3)."""
     zp = (params.gain * s + params.bias - pots) / noise.sig_p
-    xb = np.einsum("bmij,mj->bmi", Rl, params.xyz) + pl
+    xb = (Rl @ params.xyz[:, :, None])[..., 0] + pl
     rx = np.where(valid[..., None], (xb @ params.R.T + params.T - np.nan_to_num(markers)) / noise.sig_x, 0.0)
     return zp, np.linalg.norm(rx, axis=-1), rx
 
@@ -70,52 +70,112 @@ def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarra
 
 
 def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarray, sl: slice, want_red: bool = True):
-    """JᵀWJ (B, n, n), gradient JᵀW r (B, n), per-frame cost (B,), the evaluation at q[sl] and the
-    redundancy of each sensor type (dict, summed over the batch; see :func:`redundancy`)."""
+    """JᵀWJ (B, n, n), gradient JᵀW r (B, n), per-frame cost (B,), the evaluation at q[sl], the
+    redundancy of each sensor type (dict, summed over the batch; see :func:`redundancy`) and the
+    linearisation with the robust weights (dict, for the joint step).
+
+    J is eq. 2.22 (pots) and eq. 2.23 (markers), never formed densely: rotary/encoder/tendon pots
+    have the constant ∂s/∂q = A, the linear pots' rows are few, and the markers' sums come from
+    the joint twists (:meth:`diegocal.robot.batch.BatchKinematics.points_normal`).
+    """
     q = q[sl]
     pots, markers, valid = obs.pots[sl], obs.markers[sl], obs.valid[sl]
-    s, ds, Rl, pl, Jx = obs.evaluate(q, params.xyz)
+    lin = obs.linearise(q)
+    s, Rl, pl = lin.s, lin.Rl, lin.pl
     zp, zx, rx = residuals(obs, params, noise, s, Rl, pl, pots, markers, valid)
     B, n = q.shape
     H = np.zeros((B, n, n))
     g = np.zeros((B, n))
     c0 = np.zeros(B)
-    parts = {}
+    parts = {}  # per sensor type: its entries of H, as flat indices (k,) and values (B, k)
     wp = np.zeros_like(zp)
-    J = w3 = None
+    wx = x = None
     if noise.use_pots and obs.n_pots:
-        Jp = ds * (params.gain / noise.sig_p)[None, :, None]  # eq. 2.22
+        kp = params.gain / noise.sig_p  # eq. 2.22: ∂z_p/∂q = (gain / σ_p) ∂s/∂q
         wp = irls_weight(zp, noise.loss, noise.huber)
-        for kind in dict.fromkeys(obs.kinds):
-            k = obs.kinds == kind
-            parts[kind] = np.swapaxes(Jp[:, k], 1, 2) @ (Jp[:, k] * wp[:, k, None])
-            H += parts[kind]
-        g += np.einsum("bpn,bp->bn", Jp, wp * zp)
+        wz = wp * zp * kp
+        g += wz @ obs.A
+        sp = obs.sparsity
+        flat = H.reshape(B, n * n)
+        for kind, (idx, U, outer) in sp.pot_flat.items():
+            parts[kind] = (U, (wp[:, idx] * kp[idx] ** 2) @ outer)
+            flat[:, U] += parts[kind][1]
+        if len(obs.linear):
+            Jl = lin.ds_lin * kp[obs.linear, None]
+            g[:, sp.lin_cols] += np.einsum("blc,bl->bc", lin.ds_lin, wz[:, obs.linear])
+            U = (sp.lin_cols[:, None] * n + sp.lin_cols).ravel()
+            parts["linear"] = (U, (np.swapaxes(Jl, 1, 2) @ (Jl * wp[:, obs.linear, None])).reshape(B, -1))
+            flat[:, U] += parts["linear"][1]
         c0 += rho(zp, noise.loss, noise.huber).sum(1)
     if noise.use_markers and obs.n_markers:
         wx = irls_weight(zx, noise.loss, noise.huber) * valid
-        J = (np.einsum("ij,bmjn->bmin", params.R, Jx) / noise.sig_x).reshape(B, -1, n)  # eq. 2.23
-        w3 = np.repeat(wx, 3, axis=1)
-        parts[MARKERS] = np.swapaxes(J, 1, 2) @ (J * w3[..., None])
-        H += parts[MARKERS]
-        g += np.einsum("brn,br->bn", J, w3 * rx.reshape(B, -1))
+        x = (Rl @ params.xyz[:, :, None])[..., 0] + pl  # markers in the base frame (eq. 2.11)
+        f = (wx / noise.sig_x)[..., None] * (rx @ params.R)  # w Rᵀ z / σ_x (eq. 2.23 with R)
+        Hm, gm = obs.kin.points_normal(lin.poses, x, obs.marker_links, wx / noise.sig_x**2, f)
+        parts[MARKERS] = None  # the rest of H
+        H += Hm
+        g += gm
         c0 += rho(zx, noise.loss, noise.huber).sum(1)
-    extra = {"ds": ds, "wp": wp, "zp": zp, "Jx": J, "wx": w3, "rx": rx, "valid": valid}
-    return H, g, c0, (s, Rl, pl), redundancy(H, parts) if want_red else {}, extra
+    extra = {"lin": lin, "wp": wp, "zp": zp, "wx": wx, "rx": rx, "valid": valid, "x": x}
+    return H, g, c0, (s, Rl, pl), redundancy(H, parts, obs.sparsity.blocks) if want_red else {}, extra
 
 
-def redundancy(H: np.ndarray, parts: dict) -> dict:
+def damped(H: np.ndarray, lam: np.ndarray, inplace: bool = False) -> np.ndarray:
+    """H + λ diag(H) + ε I per frame (Levenberg-Marquardt, with a tiny ridge for joints no
+    sensor sees): H (B, n, n), λ (B,); ``inplace`` overwrites H."""
+    out = H if inplace else H.copy()
+    diag = np.einsum("bii->bi", out)
+    diag += lam[:, None] * diag + 1e-9 * (1.0 + diag.max(1, keepdims=True))
+    return out
+
+
+def map_batches(fn, T: int, batch: int, jobs: int = 1) -> list:
+    """[fn(slice) for each batch of ``batch`` frames out of T], in ``jobs`` threads (numpy
+    releases the GIL in the heavy products)."""
+    slices = [slice(i, min(i + batch, T)) for i in range(0, T, batch)]
+    if jobs > 1 and len(slices) > 1:
+        with ThreadPoolExecutor(jobs) as pool:
+            return list(pool.map(fn, slices))
+    return [fn(sl) for sl in slices]
+
+
+def block_solve(A: np.ndarray, b: np.ndarray, blocks) -> np.ndarray:
+    """A⁻¹ b per frame for block-diagonal A (B, n, n) (blocks: joint index arrays); b (B, n) or
+    (B, n, k)."""
+    vec = b.ndim == 2
+    b = b[..., None] if vec else b
+    out = np.zeros(b.shape)
+    for ix in blocks:
+        out[:, ix] = np.linalg.solve(A[:, ix[:, None], ix], b[:, ix])
+    return out[..., 0] if vec else out
+
+
+def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     """Variance-component redundancy per sensor type: tr(H⁻¹ H_g) summed over frames.
 
     Fitting q_t absorbs n degrees of freedom per frame; the share of type g is the trace of
     its block of the hat matrix, tr((JᵀWJ)⁻¹ J_gᵀ W J_g). §2.3.5's re-estimate σ_g² = RSS_g / N_g
     ignores this and collapses to 0 when a type can be fitted exactly (one rotary pot per joint);
     σ_g² = RSS_g / (N_g − tr_g) (Helmert/Förstner variance-component estimation) does not.
+
+    H (B, n, n) = Σ_g H_g; ``parts`` gives each H_g as flat indices into n x n and values (B, k),
+    or None for (at most) one type, whose share is the rest: Σ_g tr(H⁻¹ H_g) = n − ε tr(H⁻¹) with
+    H⁻¹ = (H + ε I)⁻¹. ``blocks``: H is block diagonal on these joint index arrays.
     Returns {group: Σ_t tr_g}.
     """
-    n = H.shape[-1]
-    Hi = np.linalg.inv(H + 1e-9 * (1.0 + np.einsum("bii->b", H))[:, None, None] * np.eye(n))
-    return {g: float(np.einsum("bij,bji->", Hi, Hg)) for g, Hg in parts.items()}
+    B, n = H.shape[:2]
+    blocks = blocks if blocks is not None else (np.arange(n),)
+    eps = 1e-9 * (1.0 + np.einsum("bii->b", H))
+    Hi = np.zeros((B, n, n))
+    for ix in blocks:
+        Hb = H[:, ix[:, None], ix]
+        np.einsum("bii->bi", Hb)[...] += eps[:, None]
+        Hi[:, ix[:, None], ix] = np.linalg.inv(Hb)
+    flat = Hi.reshape(B, n * n)
+    out = {g: float(np.vdot(flat[:, p[0]], p[1])) for g, p in parts.items() if p is not None}  # H_g, Hi symmetric
+    for g in (g for g, p in parts.items() if p is None):
+        out[g] = B * n - float(eps @ np.einsum("bii->b", Hi)) - sum(out.values())
+    return out
 
 
 def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_red=True):
@@ -123,10 +183,7 @@ def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want
     H, g, c0, (s, Rl, pl), red, _ = normal_equations(obs, params, noise, q, sl, want_red)
     q, lam = q[sl], lam[sl]
     pots, markers, valid = obs.pots[sl], obs.markers[sl], obs.valid[sl]
-    n = q.shape[1]
-    diag = np.einsum("bii->bi", H)
-    A = H + (lam[:, None] * diag + 1e-9 * (1.0 + diag.max(1, keepdims=True)))[..., None] * np.eye(n)
-    delta = np.linalg.solve(A, -g[..., None])[..., 0]
+    delta = -block_solve(damped(H, lam, inplace=True), g, obs.sparsity.blocks)
     cand = np.clip(q + delta, lo, hi)  # projection onto the joint limits
     s1, _, Rl1, pl1, _ = obs.evaluate(cand)
     c1 = frame_cost(obs, params, noise, s1, Rl1, pl1, pots, markers, valid)
@@ -147,7 +204,7 @@ def q_step(
     noise: Noise,
     q: np.ndarray,
     lam: np.ndarray,
-    batch: int = 1000,
+    batch: int = 250,
     jobs: int = 1,
     want_red: bool = True,
 ):
@@ -156,12 +213,7 @@ def q_step(
     Returns (q (T, n), λ (T,), State at the new q, cost (T,), redundancy {group: Σ tr_g} at
     the old q; empty unless ``want_red``: it costs one n x n inverse per frame).
     """
-    slices = [slice(i, min(i + batch, q.shape[0])) for i in range(0, q.shape[0], batch)]
-    if jobs > 1 and len(slices) > 1:
-        with ThreadPoolExecutor(jobs) as pool:
-            parts = list(pool.map(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red), slices))
-    else:
-        parts = [_step_batch(obs, params, noise, q, lam, sl, want_red) for sl in slices]
+    parts = map_batches(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red), q.shape[0], batch, jobs)
     q_new = np.concatenate([p[0] for p in parts])
     lam_new = np.concatenate([p[1] for p in parts])
     st = State(*(np.concatenate([p[2][k] for p in parts]) for k in range(3)))
@@ -180,7 +232,7 @@ def group_sigma(obs: Observation, params: Params, st: State, used: dict | None =
     rp = params.gain * st.s + params.bias - obs.pots
     for kind in obs.groups:
         if kind == MARKERS:
-            xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
+            xb = (st.Rl @ params.xyz[:, :, None])[..., 0] + st.pl
             r = (xb @ params.R.T + params.T - obs.markers)[obs.valid]
         else:
             r = rp[:, obs.kinds == kind]

@@ -12,13 +12,15 @@ from diegocal.stac.calibration import Calibration
 
 @dataclass(frozen=True)
 class IterationRecord:
-    """One outer iteration: cost (negative log-likelihood up to a constant), noise levels, time."""
+    """One outer iteration: cost (negative log-likelihood up to a constant), noise levels, time
+    since the start, and the number of frames it used (the coarse stage uses a subset)."""
 
     iteration: int
     cost: float
     sigma_pots: float
     sigma_markers: float
     seconds: float
+    frames: int = 0
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,8 @@ class StacOptions:
     schedule : STAC q-phase schedule, 'lm-iter' (default), 'lm-batch' or 'bfgs' (thesis §2.6.1)
     q_steps : LM steps per alternation in 'lm-iter'
     batch_size : frames per batched normal-equation solve
+    coarse_frames : STAC first converges on an evenly spaced subset of about this many frames
+        when the log has more, then finishes on all frames (0: all frames throughout)
     marker_seed : 'origin' (markers start at their link origins, §2.7.1) or 'nominal' (sensors.yaml)
     joint : try a joint Gauss-Newton step on (q, pot gains/biases) each iteration (joint_step.py)
     anderson : depth of the Anderson acceleration of the alternation (0 = plain alternation)
@@ -64,7 +68,8 @@ class StacOptions:
     quiet: bool = True
     schedule: str = "lm-iter"
     q_steps: int = 1
-    batch_size: int = 1000
+    batch_size: int = 250
+    coarse_frames: int = 2500
     marker_seed: str = "origin"
     anderson: int = 0
     joint: bool = True

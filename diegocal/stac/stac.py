@@ -9,6 +9,11 @@ is minimised by alternating a p-phase (θ in closed form at fixed q, :mod:`.ppha
 (per-frame damped Gauss-Newton on eq. 2.21 at fixed θ, :mod:`.qphase`) and the dynamic
 variance adjustment σ_g = RMS residual of sensor type g. Each block is a descent step, so the
 cost recorded per iteration is non-increasing (up to the robust weights of Huber's loss).
+σ is re-estimated (with the q-phase's degrees of freedom, see :func:`.qphase.group_sigma`)
+in every iteration after (q, θ) have settled for it (SIGMA_SETTLE); that fixed-point iteration
+converges linearly, so every third estimate is extrapolated by Aitken's Δ² (:func:`_aitken`).
+The alternation has converged when the (q, θ) step moves the cost by less than 10 x
+``tolerance`` per reading and σ by less than SIGMA_TOL.
 
 Schedule (thesis §2.6.1, Fig. 2.6). ``lm-iter`` (one LM step per alternation), ``lm-batch``
 (LM to convergence, then θ) and ``bfgs`` (L-BFGS-B on all q at fixed θ, σ) are available as in
@@ -24,6 +29,15 @@ LM-batch the dearest (its extra q-steps buy nothing, as the thesis observed). Th
 BFGS best per iteration on its hand; here it was not (3 L-BFGS iterations per alternation).
 Hence the default: ``lm-iter`` with the joint step.
 
+Thesis scale (coarse to fine). With more frames than ``coarse_frames`` the alternation first
+runs on every k-th frame (about ``coarse_frames`` of them), from the initialisation below; its
+q is interpolated to all frames and its LM damping carried over, and the alternation then
+continues on all frames to the same convergence test. The coarse stage does the many early
+iterations cheaply; the full-data iterations that follow only have to remove the subsample's
+sampling error (about one standard error), which the joint step does in one or two iterations,
+and settle σ. The answer is the full-data optimum: on diego at 5,000 frames, run to
+tolerance 1e-9, both routes end at the same θ to 1e-7 relative (bench/bench_stac.py).
+
 Initialisation: q from the nominal pots (rotary/encoder pots inverted, clipped to the limits;
 gimbal and tendon joints by a few LM steps on the pots alone), markers at their link origins
 (§2.7.1), R = I; the first p-phase then places the mocap frame by Procrustes. σ starts at each
@@ -32,8 +46,8 @@ sensor type's dynamic range (§2.3.5).
 
 from __future__ import annotations
 
-import os
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -54,6 +68,10 @@ LOSSES = ("linear", "huber")
 #: residuals to zero (the likelihood is unbounded there: one pot per joint can be fitted exactly),
 #: a collapse seen on the test robots; waiting for (q, θ) to settle avoids it.
 SIGMA_SETTLE = 1e-3
+#: ... and the alternation has converged once a re-estimate moves every σ by less than this
+#: (relative): σ's own standard error at thesis size is about 0.2 %, and the parameters move by
+#: about 0.01 of their standard errors per 1 % of σ (bench/bench_stac.py, diego).
+SIGMA_TOL = 1e-3
 
 
 def check_options(options: StacOptions) -> None:
@@ -140,6 +158,28 @@ def _update_sigma(obs, params, st, used) -> dict:
     return {g: max(v, 1e-9) for g, v in new.items()}
 
 
+def _aitken(history: list) -> dict:
+    """Aitken's Δ² extrapolation of the σ fixed-point iteration from its last three iterates.
+
+    σ ← RSS(σ) / (N − used(σ)) converges linearly, at a rate near 0.7 for the linear pots of
+    diego (their σ decides how much the gimbal angles follow them rather than the markers), so
+    each type's log σ is extrapolated along its geometric tail: with steps d1, d2 and rate
+    r = d2 / d1, log σ + d2 r / (1 − r). The types' iterations are coupled, so the estimated
+    rate is capped at 0.75 (at most three more steps of the same size); types whose steps do
+    not shrink monotonically keep their last iterate. Returns the σ to continue from and clears
+    ``history``.
+    """
+    a, b, c = history
+    out = {}
+    for g, sc in c.items():
+        d1, d2 = np.log(b[g] / a[g]), np.log(sc / b[g])
+        r = min(d2 / d1, 0.75) if d1 != 0.0 else 0.0
+        out[g] = float(sc * np.exp(d2 * r / (1.0 - r))) if 0.0 < r < 1.0 and abs(d2) < abs(d1) else sc
+    history.clear()
+    history.append(out)
+    return out
+
+
 def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> StacResult:
     """STAC (thesis §2.2-2.3): calibrate pots, markers and the mocap frame; track q.
 
@@ -160,31 +200,77 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
     obs = Observation(log, robot)
     obs.check_observable()
     params = obs.nominal(options.marker_seed)
-    q = initial_q(obs, params, options)
+    history: list[IterationRecord] = []
+    stride = -(-obs.n_frames // options.coarse_frames) if options.coarse_frames else 1
+    if stride > 1:  # coarse stage: θ and σ on every stride-th frame (module docstring)
+        sub = obs.subset(slice(None, None, stride))
+        coarse = _alternate(sub, params, initial_q(sub, params, options), None, options, t0, history)
+        params, sigma = coarse.params, coarse.sigma
+        lam = np.repeat(coarse.lam, stride)[: obs.n_frames]  # warm LM state (see _alternate)
+        frames = np.arange(0, obs.n_frames, stride)
+        t = np.arange(obs.n_frames)
+        q = np.stack([np.interp(t, frames, coarse.q[:, j]) for j in range(robot.n_joints)], axis=1)
+    else:
+        q, sigma, lam = initial_q(obs, params, options), None, None
+    fine = _alternate(obs, params, q, sigma, options, t0, history, lam)
+    params, sigma, q = fine.params, fine.sigma, fine.q
+    # standard errors with q marginalised (Schur complement at the solution), not the p-phase's
+    # conditional-on-q ones, which ignore the joint-angle uncertainty
+    se = fine.se
+    if obs.n_pots:
+        _, _, se = theta_step(
+            obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames), options.batch_size, jobs=options.jobs
+        )
+    fit = FitInfo(history[-1].cost, len(history), fine.converged, time.perf_counter() - t0)
+    cal = obs.to_calibration(params, se, sigma, "stac", fit)
+    cal = _with_history(cal, history)
+    return StacResult(cal, q, tuple(history))
+
+
+@dataclass(frozen=True)
+class _Stage:
+    """Where one run of the alternation ended: θ, its p-phase SEs, σ per type, q (T, n)."""
+
+    params: Params
+    se: dict
+    sigma: dict
+    q: np.ndarray
+    lam: np.ndarray
+    converged: bool
+
+
+def _alternate(
+    obs: Observation,
+    params: Params,
+    q: np.ndarray,
+    sigma: dict | None,
+    options: StacOptions,
+    t0: float,
+    history: list,
+    lam: np.ndarray | None = None,
+) -> _Stage:
+    """The alternation of eq. 2.6 from q (T, n) and θ (σ: the dynamic range when None, with a
+    first p-phase); appends one IterationRecord per iteration to ``history``."""
     st = obs.state(q, options.batch_size)
-    sigma = dynamic_range(obs)
+    sigma = dynamic_range(obs) if sigma is None else sigma
     noise = _noise(obs, sigma, options)
     ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
     params = ph.params
-    history: list[IterationRecord] = []
-    converged, prev, prev_fixed = False, np.inf, np.inf
+    converged, prev_fixed, sigma_change = False, np.inf, np.inf
+    sigmas: list[dict] = []
     n_obs = obs.pots.size + 3 * int(obs.valid.sum())
-    lam = np.full(obs.n_frames, 1e-2)
+    lam = np.full(obs.n_frames, 1e-2) if lam is None else lam
     bfgs = _BfgsSchedule(obs, options) if options.schedule == "bfgs" else None
     accel = Anderson(options.anderson) if options.anderson and bfgs is None else None
     cost = total_cost(obs, params, st, noise, sigma)
-    for it in range(1, options.max_iterations + 1):
+    for _ in range(options.max_iterations):
         noise = _noise(obs, sigma, options)
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
-            params_j, used, _ = theta_step(obs, params, noise, q, lam)
-            q_j, lam_j, st_j, _, _ = q_step(
-                obs, params_j, noise, q, lam, options.batch_size, options.jobs, want_red=False
-            )
+            params_j, _, _ = theta_step(obs, params, noise, q, lam, options.batch_size, jobs=options.jobs)
+            q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs)
             ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
             cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
-            if os.environ.get("STAC_DEBUG"):
-                print("joint", it, cost_j - cost)
             if cost_j < cost:
                 q, lam, st, ph, cost, stepped = q_j, lam_j, st_j, ph_j, cost_j, True
         if not stepped:
@@ -211,14 +297,19 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
                     else:
                         accel.reset()
         params = ph.params
-        settled = abs(prev_fixed - cost) < SIGMA_SETTLE * max(abs(cost), 1.0)
-        prev_fixed = cost
-        if settled:  # §2.3.5, once (q, θ) have settled for the current σ (see SIGMA_SETTLE)
-            sigma = _update_sigma(obs, params, st, used)
+        change = abs(prev_fixed - cost)  # what the (q, θ) step did at fixed σ
+        if change < SIGMA_SETTLE * max(abs(cost), 1.0):  # §2.3.5, once (q, θ) have settled (SIGMA_SETTLE)
+            new = _update_sigma(obs, params, st, used)
+            sigmas.append(new)
+            if len(sigmas) == 3:
+                new = _aitken(sigmas)
+            sigma_change = max(abs(new[g] / sigma[g] - 1.0) for g in new)
+            sigma = new
             cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
-            prev_fixed = np.inf
+        prev_fixed = cost
         if accel is not None:
             accel.reset()
+        it = len(history) + 1
         history.append(
             IterationRecord(
                 it,
@@ -226,24 +317,17 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
                 _rms_pots(obs, sigma),
                 sigma.get(MARKERS, np.nan),
                 time.perf_counter() - t0,
+                obs.n_frames,
             )
         )
         if options.on_iteration is not None:
             options.on_iteration(it, obs.to_calibration(params, ph.se, sigma, "stac"))
-        # converged when the cost (nats) moves by less than 10 x tolerance per reading
-        if abs(prev - cost) < 10 * options.tolerance * n_obs:
+        # converged when the (q, θ) step moves the cost (nats) by less than 10 x tolerance per
+        # reading and the last re-estimate moved σ by less than SIGMA_TOL
+        if change < 10 * options.tolerance * n_obs and sigma_change < SIGMA_TOL:
             converged = True
             break
-        prev = cost
-    # standard errors with q marginalised (Schur complement at the solution), not the p-phase's
-    # conditional-on-q ones, which ignore the joint-angle uncertainty
-    se = ph.se
-    if obs.n_pots:
-        _, _, se = theta_step(obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames))
-    fit = FitInfo(history[-1].cost, len(history), converged, time.perf_counter() - t0)
-    cal = obs.to_calibration(params, se, sigma, "stac", fit)
-    cal = _with_history(cal, history)
-    return StacResult(cal, q, tuple(history))
+    return _Stage(params, ph.se, sigma, q, lam, converged)
 
 
 def _rms_pots(obs, sigma) -> float:
@@ -263,6 +347,7 @@ def _with_history(cal, history):
                 "sigma_pots": float(h.sigma_pots),
                 "sigma_markers": float(h.sigma_markers),
                 "seconds": float(h.seconds),
+                "frames": int(h.frames),
             }
             for h in history
         ),

@@ -1,13 +1,15 @@
-"""Two routes agree: the structured J_θᵀ v of the Schur step equals the explicit Jacobian's, and
-the explicit J_θ equals finite differences of the standardised residuals."""
+"""Two routes agree: the structured J_θᵀ v of the Schur step equals the explicit Jacobian's, the
+explicit J_θ equals finite differences of the standardised residuals, and the q-phase's normal
+equations and redundancies, formed without the Jacobian, equal the dense Jacobian's products."""
 
 import numpy as np
+import pytest
 import synth
 from scipy.spatial.transform import Rotation
 
 from diegocal.stac.joint_step import _theta_jacobian, _theta_transpose_times
 from diegocal.stac.model import Observation, Params
-from diegocal.stac.qphase import Noise, residuals
+from diegocal.stac.qphase import Noise, normal_equations, residuals
 
 
 def _setup(robot):
@@ -63,3 +65,25 @@ def test_structured_transpose_product(tree_robot):
         rtol=1e-10,
         atol=1e-8,
     )
+
+
+def test_sparse_normal_equations_equal_the_dense_jacobian(tree_robot):
+    """JᵀWJ, JᵀW r and tr(H⁻¹ H_g) per sensor type from the sparse route equal those of the dense
+    eq. 2.22-2.23 Jacobian (Observation.evaluate), with occlusion and linear pots."""
+    obs, params, noise, _ = _setup(tree_robot)
+    q = np.random.default_rng(2).normal(0.0, 0.3, (obs.n_frames, tree_robot.n_joints))
+    H, g, _, _, red, ex = normal_equations(obs, params, noise, q, slice(None), want_red=True)
+    _, ds, _, _, Jx = obs.evaluate(q, params.xyz)
+    Jp = ds * (params.gain / noise.sig_p)[None, :, None]
+    Jm = np.einsum("ij,bmjn->bmin", params.R, Jx) / noise.sig_x
+    parts = {k: np.einsum("bpi,bpj->bij", Jp[:, obs.kinds == k], Jp[:, obs.kinds == k]) for k in ("rotary", "linear")}
+    parts["markers"] = np.einsum("bmci,bm,bmcj->bij", Jm, ex["wx"], Jm)
+    H_dense = sum(parts.values())
+    np.testing.assert_allclose(H, H_dense, atol=1e-9 * np.abs(H_dense).max())
+    g_dense = np.einsum("bpi,bp->bi", Jp, ex["zp"]) + np.einsum("bmci,bm,bmc->bi", Jm, ex["wx"], ex["rx"])
+    np.testing.assert_allclose(g, g_dense, atol=1e-9 * np.abs(g_dense).max())
+    n = H.shape[-1]
+    eps = 1e-9 * (1.0 + np.einsum("bii->b", H_dense))
+    Hi = np.linalg.inv(H_dense + eps[:, None, None] * np.eye(n))
+    for k, Hk in parts.items():
+        assert red[k] == pytest.approx(np.einsum("bij,bji->", Hi, Hk), rel=1e-9)

@@ -11,7 +11,7 @@ from diegocal.stac.model import Observation
 from diegocal.stac.pphase import kabsch
 from diegocal.stac.predict import predict
 from diegocal.stac.result import StacOptions
-from diegocal.stac.stac import calibrate
+from diegocal.stac.stac import _aitken, calibrate
 
 Z = 4.5  # standard errors allowed per parameter (a few hundred parameters in all)
 
@@ -116,6 +116,32 @@ def test_occluded_markers_converge_to_the_same_answer(tree_robot, tree_fit):
     assert np.all(np.abs(a.gain - b.gain) < Z * b.gain_se)
     assert np.all(np.abs(a.marker_xyz - b.marker_xyz) < Z * b.marker_xyz_se + 1e-9)
     _check_recovery(tree_robot, occluded, res2)
+
+
+def test_coarse_to_fine_reaches_the_full_data_optimum(tree_robot, tree_fit):
+    """Converging on every third frame first, then on all frames, ends where the alternation on all
+    frames ends (a small fraction of a standard error apart), in fewer full-data iterations."""
+    log, result = tree_fit
+    res = calibrate(log.without_truth(), tree_robot, StacOptions(max_iterations=40, coarse_frames=200))
+    frames = [h.frames for h in res.history]
+    assert frames[0] == 200 and frames[-1] == log.n_samples
+    assert frames.count(log.n_samples) < len(result.history)
+    a, b = result.calibration, res.calibration
+    assert np.max(np.abs(b.gain - a.gain) / a.gain_se) < 0.2
+    assert np.nanmax(np.abs(b.bias - a.bias) / a.bias_se) < 0.2
+    assert np.nanmax(np.abs(b.marker_xyz - a.marker_xyz) / a.marker_xyz_se) < 0.2
+    assert np.abs(res.q - result.q).max() < 1e-3
+    for g, sigma in a.sigma_by_group.items():
+        assert b.sigma_by_group[g] == pytest.approx(sigma, rel=2e-3)
+
+
+def test_aitken_extrapolates_a_geometric_tail():
+    """σ iterates that shrink geometrically are extrapolated to their limit; others are kept."""
+    limit, r = 0.005, 0.6
+    seq = [{"a": limit * np.exp(0.2 * r**k), "b": 1.0 + 0.1 * (-1) ** k} for k in range(3)]
+    out = _aitken(list(seq))
+    assert out["a"] == pytest.approx(limit, rel=1e-12)
+    assert out["b"] == seq[-1]["b"]  # oscillating: not extrapolated
 
 
 def test_heldout_cross_sensor_prediction(tree_robot, tree_fit):
