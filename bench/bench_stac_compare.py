@@ -8,7 +8,7 @@
     70/30 in time into training and held-out parts. Each calibration is trained on the first
     part; on the held-out part the joint angles are solved from the pots alone (the same q-phase
     for every row: rotary pots inverted, gimbals by Gauss-Newton on their two linear pots,
-    :func:`diegocal.stac.classical.joint_angles_from_pots`) and the markers predicted from them.
+    :func:`diegocal.stac.pot_inverse.joint_angles_from_pots`) and the markers predicted from them.
     Rows: manual (= sensors.yaml nominal values, as given and with the mocap frame placed by
     Procrustes), classical σp = 0 and STAC, plus the EKF. The σp = 0 row is what the thesis did
     for Diego (§2.7.2: "stac-σp = 0", the classical approach of §2.4.2 *including* the gimbal
@@ -51,8 +51,9 @@ from diegocal.io import load_yaml, save_yaml
 from diegocal.robot import BUNDLED_ROBOTS, load_robot, predict_markers
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 from diegocal.stac import Calibration, StacOptions
-from diegocal.stac.classical import calibrate_classical, joint_angles_from_pots
+from diegocal.stac.classical import calibrate_classical
 from diegocal.stac.ekf import EkfOptions, calibrate_ekf, nominal_seed
+from diegocal.stac.pot_inverse import joint_angles_from_pots
 
 GAIN_TOL, BIAS_TOL, XYZ_TOL, ROT_TOL, TRANS_TOL, Q_TOL = 0.10, 0.10, 0.01, 0.05, 0.01, 0.10
 LEVER = 0.02  # m: a tendon's bias error expressed as joint angle (same lever as ekf.prior_sd)
@@ -148,9 +149,7 @@ def print_table(header, rows, fmts) -> None:
 # ------------------------------------------------------------------------------- Fig. 2.7
 def seeded(truth: Calibration, robot, level: float, rng) -> Calibration:
     """Seed of error level s: gains ×(1+N(0,s)), biases +N(0,s) rad·|g|·lever, xyz +N(0,s·5cm)."""
-    lever = np.array(
-        [1.0 if p.kind in ("rotary", "encoder") else LEVER for p in robot.sensors.pots]
-    )
+    lever = np.array([1.0 if p.kind in ("rotary", "encoder") else LEVER for p in robot.sensors.pots])
     enc = np.array([p.kind == "encoder" for p in robot.sensors.pots])
     gain = truth.gain * (1 + rng.normal(0, level, truth.gain.shape))
     gain[enc] = 1.0
@@ -200,10 +199,7 @@ def fig27(args) -> dict:
     methods = ("seed", "STAC", "EKF") if stac is not None else ("seed", "EKF")
     counts = {m: np.zeros((2, len(seeds), len(noises)), int) for m in methods}
     n_par = n_q = 0
-    print(
-        "\n(b) Fig. 2.7 on robots/finger, 500 frames per cell; "
-        f"STAC {'present' if stac else 'ABSENT'}"
-    )
+    print(f"\n(b) Fig. 2.7 on robots/finger, 500 frames per cell; STAC {'present' if stac else 'ABSENT'}")
     work = Path(tempfile.mkdtemp(prefix="fig27_"))
     for i, s in enumerate(seeds):
         for j, k in enumerate(noises):
@@ -301,14 +297,10 @@ def plot_fig27(counts, seeds, noises, totals, path: Path):
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="3x3 grid and a 40 s diego session")
-    ap.add_argument(
-        "--duration", type=float, default=None, help="diego session length, s (default 100)"
-    )
+    ap.add_argument("--duration", type=float, default=None, help="diego session length, s (default 100)")
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument(
-        "--pot-noise", type=float, default=0.005, help="Table 2.2 pot noise, V (default 0.005)"
-    )
+    ap.add_argument("--pot-noise", type=float, default=0.005, help="Table 2.2 pot noise, V (default 0.005)")
     ap.add_argument("--only", choices=("table", "grid"), default=None)
     args = ap.parse_args(argv)
     if args.duration is None:

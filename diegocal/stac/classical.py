@@ -8,9 +8,13 @@ alone (eq. 2.29 = eq. 2.4),
 
 .. math:: \\min_\\theta \\sum_{t,m} \\| \\hat x_{mt}(\\theta, q_t(p_t, \\theta)) - x_{mt} \\|^2 ,
 
-solved by :func:`scipy.optimize.least_squares` with an analytic Jacobian (chain rule through
-eq. 2.23's ∂x̂/∂q). Linear (gimbal, eq. 2.19-2.20) and tendon pots are the case the thesis says
-classical methods cannot handle: by default :func:`calibrate_classical` refuses them by name.
+solved by Levenberg-Marquardt on the normal equations (:mod:`.regression`): JᵀWJ and JᵀW r are
+summed over batches of frames and, within a batch, per marker over the joints that move it
+(chain rule through eq. 2.23's ∂x̂/∂q and the pot inverse of :mod:`.pot_inverse`), so neither
+the dense Jacobian (T·M·3 x |θ|) nor ∂q/∂θ of all frames is ever held in memory.
+
+Linear (gimbal, eq. 2.19-2.20) and tendon pots are the case the thesis says classical methods
+cannot handle: by default :func:`calibrate_classical` refuses them by name.
 Two explicit alternatives (``nonlinear_pots=``):
 
 ``"constrain"``
@@ -30,21 +34,20 @@ angles, as a classical method would; every other parameter starts at its nominal
 from __future__ import annotations
 
 import time
-import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
-from scipy import sparse
-from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
-from diegocal.errors import DiegocalError, FitError, NumericalError
+from diegocal.errors import FitError, NumericalError
 from diegocal.io import Log
-from diegocal.robot import PointSet, Robot, anchor_points, marker_points
+from diegocal.robot import PointSet, Robot, marker_points
 from diegocal.stac.calibration import Calibration, FitInfo
+from diegocal.stac.pot_inverse import batch_kinematics, joint_angles_from_pots, nonlinear_pots
+from diegocal.stac.regression import MarkerRegression, base_points, levenberg_marquardt
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 
-NONLINEAR_KINDS = ("linear", "tendon")
 _MODES = ("refuse", "constrain", "nominal")
 
 
@@ -125,34 +128,13 @@ class ThetaLayout:
         ng = len(self.gain_pots)
         gse[self.gain_pots] = se[:ng]
         bse[self.bias_pots] = se[ng : self.n_pot_params]
-        return replace(
-            template, gain_se=gse, bias_se=bse, marker_xyz_se=se[self.xyz].reshape(-1, 3)
-        )
+        return replace(template, gain_se=gse, bias_se=bse, marker_xyz_se=se[self.xyz].reshape(-1, 3))
 
 
 # ---------------------------------------------------------------------------------- kinematics
-_BATCH: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _batch(robot: Robot):
-    """STAC's frame-vectorised kinematics for ``robot`` (cached), or None where unavailable.
-
-    It is tested to equal Robot.points/points_jacobian; Robot's per-frame Pinocchio loop is
-    the fallback (same numbers, ~10-50× slower at thesis size).
-    """
-    if robot not in _BATCH:
-        try:
-            from diegocal.robot.batch import BatchKinematics
-
-            _BATCH[robot] = BatchKinematics(robot)
-        except (ImportError, DiegocalError):
-            _BATCH[robot] = None
-    return _BATCH[robot]
-
-
 def points_jacobian(robot: Robot, q: np.ndarray, points: PointSet):
     """Points (T, N, 3) m and ∂/∂q (T, N, 3, n) in the base frame (thesis eq. 2.23)."""
-    bk = _batch(robot)
+    bk = batch_kinematics(robot)
     if bk is None:
         return robot.points_jacobian(q, points)
     return bk.points_jacobian(bk.joint_poses(q), points)
@@ -160,32 +142,10 @@ def points_jacobian(robot: Robot, q: np.ndarray, points: PointSet):
 
 def link_rotations(robot: Robot, q: np.ndarray, links) -> np.ndarray:
     """Rotation of each link in the base frame: (T, L, 3, 3)."""
-    bk = _batch(robot)
+    bk = batch_kinematics(robot)
     if bk is None:
         return robot.link_poses(q, links)[0]
     return bk.link_poses(bk.joint_poses(q), links)[0]
-
-
-def transmission_jacobian(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """s(q) (T, P) and ∂s/∂q (T, P, n) of every pot (eq. 2.18-2.20, 2.22); as
-    :func:`diegocal.robot.pot_transmission_jacobian`, with the batched anchor kinematics."""
-    q = robot.check_q(q)
-    P, n = len(robot.sensors.pots), robot.n_joints
-    A = np.zeros((P, n))
-    for i, p in enumerate(robot.sensors.pots):
-        if p.kind in ("rotary", "encoder"):
-            A[i, robot.joint_index(p.joint)] = 1.0
-        for joint, arm in p.moment_arms.items():
-            A[i, robot.joint_index(joint)] = arm
-    s, ds = q @ A.T, np.broadcast_to(A, (q.shape[0], P, n)).copy()
-    linear = [i for i, p in enumerate(robot.sensors.pots) if p.kind == "linear"]
-    if linear:
-        x, J = points_jacobian(robot, q, anchor_points(robot))
-        d = x[:, 1::2] - x[:, 0::2]
-        length = np.linalg.norm(d, axis=-1)  # eq. 2.19-2.20: L(q)
-        s[:, linear] = length
-        ds[:, linear] = np.einsum("tkc,tkcn->tkn", d / length[..., None], J[:, 1::2] - J[:, 0::2])
-    return s, ds
 
 
 # ---------------------------------------------------------------------------------- markers
@@ -238,138 +198,6 @@ def kabsch(base: np.ndarray, mocap: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return R, cb - R @ ca  # eq. 2.16
 
 
-# ---------------------------------------------------------------------------------- pots -> q
-@dataclass(frozen=True)
-class PotInverse:
-    """Joint angles solved from pots with σp = 0 (eq. 2.28) and their derivatives.
-
-    q : (T, n) rad
-    dtheta : (T, n, G + B) ∂q/∂(free gains, free biases) of a :class:`ThetaLayout`
-    """
-
-    q: np.ndarray
-    dtheta: np.ndarray
-
-
-def nonlinear_pots(robot: Robot) -> tuple[str, ...]:
-    """Names of the pots that are not one-pot-one-joint (linear on gimbals, tendons)."""
-    return tuple(p.name for p in robot.sensors.pots if p.kind in NONLINEAR_KINDS)
-
-
-def joint_angles_from_pots(
-    robot: Robot,
-    cal: Calibration,
-    pots: np.ndarray,
-    q0=None,
-    layout: ThetaLayout | None = None,
-    max_steps: int = 30,
-) -> PotInverse:
-    """Solve ``gain · s(q) + bias = p`` for q in every frame (thesis eq. 2.2, 2.28).
-
-    Rotary and encoder pots are inverted analytically; the remaining joints are solved by
-    Gauss-Newton from the linear/tendon pots (eq. 2.19-2.20), starting at ``q0`` (T, n) or the
-    robot's neutral pose. Used both for fitting and for predicting markers from pots.
-
-    Parameters
-    ----------
-    pots : (T, P) readings, V, in sensors.yaml order
-    layout : the free parameters to differentiate with respect to (None: no derivatives)
-    """
-    pot_specs = robot.sensors.pots
-    T, n = pots.shape[0], robot.n_joints
-    gain, bias = np.asarray(cal.gain, float), np.asarray(cal.bias, float)
-    q = np.tile(robot.neutral(), (T, 1)) if q0 is None else np.array(q0, dtype=float)
-    direct = {}
-    for i, p in enumerate(pot_specs):
-        if p.kind in ("rotary", "encoder"):
-            direct.setdefault(robot.joint_index(p.joint), i)  # first pot of a joint wins
-    known = np.array(sorted(direct), dtype=int)
-    unknown = np.array([j for j in range(n) if j not in direct], dtype=int)
-    for j, i in direct.items():
-        q[:, j] = (pots[:, i] - bias[i]) / gain[i]  # eq. 2.2
-    nl = np.array([i for i, p in enumerate(pot_specs) if p.kind in NONLINEAR_KINDS], dtype=int)
-    if len(unknown):
-        _check_coverage(robot, unknown, nl)
-        q = _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps)
-    if layout is None:
-        return PotInverse(q, np.zeros((T, n, 0)))
-    dtheta = np.zeros((T, n, layout.n_pot_params))
-    col_gain = {int(i): c for c, i in enumerate(layout.gain_pots)}
-    col_bias = {int(i): len(layout.gain_pots) + c for c, i in enumerate(layout.bias_pots)}
-    for j, i in direct.items():
-        if i in col_gain:
-            dtheta[:, j, col_gain[i]] = -q[:, j] / gain[i]
-        if i in col_bias:
-            dtheta[:, j, col_bias[i]] = -1.0 / gain[i]
-    if len(unknown):
-        # implicit function theorem on r(q, θ) = gain·s(q) + bias − p = 0 for the nl pots
-        s, ds = transmission_jacobian(robot, q)
-        G = ds[:, nl] * gain[nl][None, :, None]  # (T, Pnl, n)
-        rhs = np.einsum("tpk,tkc->tpc", G[:, :, known], dtheta[:, known])
-        for r, i in enumerate(nl):
-            if i in col_gain:
-                rhs[:, r, col_gain[i]] += s[:, i]
-            if i in col_bias:
-                rhs[:, r, col_bias[i]] += 1.0
-        dtheta[:, unknown] = -np.linalg.pinv(G[:, :, unknown]) @ rhs
-    return PotInverse(q, dtheta)
-
-
-def _check_coverage(robot: Robot, unknown: np.ndarray, nl: np.ndarray) -> None:
-    """Every joint without a rotary/encoder pot must move some linear/tendon pot."""
-    rng = np.random.default_rng(0)
-    lo = np.where(np.isfinite(robot.lower), robot.lower, -1.0)
-    hi = np.where(np.isfinite(robot.upper), robot.upper, 1.0)
-    probe = lo + (hi - lo) * rng.uniform(0.3, 0.7, size=(2, robot.n_joints))
-    _, ds = transmission_jacobian(robot, probe)
-    seen = np.abs(ds[:, nl][:, :, unknown]).max(axis=(0, 1)) if len(nl) else np.zeros(len(unknown))
-    blind = [robot.joint_names[j] for j, v in zip(unknown, seen, strict=True) if v < 1e-12]
-    if blind:
-        raise FitError(
-            "classical calibration needs every joint read by a pot; "
-            f"no pot reads: {', '.join(blind)}"
-        )
-    if len(nl) < len(unknown):
-        raise FitError(
-            f"classical calibration: {len(unknown)} joints depend on only "
-            f"{len(nl)} linear/tendon pots"
-        )
-
-
-def _gauss_newton(robot, q, unknown, nl, gain, bias, pots, max_steps) -> np.ndarray:
-    """Per-frame Gauss-Newton on the nl-pot constraints for the joints in ``unknown``.
-
-    Frames leave the iteration once their step is below 1e-9 rad; a frame whose solution lies
-    past a joint limit (noise near a singular gimbal pose) stops at the limit after max_steps.
-    """
-    q = q.copy()
-    lo, hi = robot.lower[unknown], robot.upper[unknown]
-    active = np.arange(q.shape[0])
-    for _ in range(max_steps):
-        s, ds = transmission_jacobian(robot, q[active])
-        r = gain[nl] * s[:, nl] + bias[nl] - pots[active][:, nl]
-        G = ds[:, nl][:, :, unknown] * gain[nl][None, :, None]
-        if G.shape[1] == G.shape[2]:  # as many pots as joints (gimbals): Newton
-            try:
-                step = np.linalg.solve(G, r[..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                step = np.einsum("tkp,tp->tk", np.linalg.pinv(G), r)
-        else:  # more pots than joints: Gauss-Newton
-            step = np.einsum("tkp,tp->tk", np.linalg.pinv(G), r)
-        dq = np.clip(-step, -0.3, 0.3)  # damped: the gimbal lengths are far from linear
-        new = np.clip(q[np.ix_(active, unknown)] + dq, lo, hi)
-        if not np.isfinite(new).all():
-            raise NumericalError(
-                "solving linear/tendon pots for joint angles failed (non-finite); check the gains"
-            )
-        moved = np.abs(new - q[np.ix_(active, unknown)]).max(axis=1)
-        q[np.ix_(active, unknown)] = new
-        active = active[moved > 1e-9]
-        if not len(active):
-            break
-    return q
-
-
 # ---------------------------------------------------------------------------------- the fit
 def calibrate_classical(
     log: Log,
@@ -414,35 +242,38 @@ def calibrate_classical(
     layout = ThetaLayout.for_robot(robot, frozen=hard if nonlinear == "nominal" else ())
     if q0 is not None:
         q0 = np.broadcast_to(np.asarray(q0, float), (pots.shape[0], robot.n_joints))
-    inv = joint_angles_from_pots(robot, nominal, pots, q0=q0)
-    xb = points_jacobian(robot, inv.q, marker_points(robot, nominal.marker_xyz))[0]
-    R0, T0 = kabsch(xb.reshape(-1, 3), markers.reshape(-1, 3))  # eq. 2.13-2.16 seed
-    seed = replace(nominal, mocap_R=R0, mocap_T=T0)
-    problem = _Problem(robot, layout, seed, pots, markers, inv.q)
-    res = problem.solve(layout.pack(seed), options, "linear", 1.0)
-    if options.loss == "huber":
-        # the Huber corner at huber_scale robust sigmas (MAD of the least-squares residuals)
-        scale = options.huber_scale * max(1.4826 * np.median(np.abs(res.fun)), 1e-9)
-        res = problem.solve(res.x, options, "huber", scale)
-    if not np.isfinite(res.x).all():
-        raise NumericalError(
-            "classical calibration diverged (non-finite parameters); check the nominal seed"
-        )
-    fitted = layout.unpack(res.x, seed)
-    inv = problem.inverse(res.x)
-    dof = max(res.fun.size - np.linalg.matrix_rank(problem.normal_matrix(res.x)), 1)
-    sigma = float(np.sqrt(np.sum(res.fun**2) / dof))
-    se = packed_standard_errors(problem.normal_matrix(res.x), sigma)
+    # one BLAS thread: the products are many and small (per batch and marker), where threads only
+    # add synchronisation (ten times the CPU time measured on a loaded two-core machine)
+    with threadpool_limits(limits=1, user_api="blas"):
+        inv = joint_angles_from_pots(robot, nominal, pots, q0=q0)
+        xb = base_points(robot, inv.q, nominal.marker_links, nominal.marker_xyz)
+        R0, T0 = kabsch(xb.reshape(-1, 3), markers.reshape(-1, 3))  # eq. 2.13-2.16 seed
+        seed = replace(nominal, mocap_R=R0, mocap_T=T0)
+        problem = MarkerRegression(robot, layout, seed, pots, markers, inv.q)
+        max_nfev = max(4 * options.max_iterations, 20)
+        res = levenberg_marquardt(problem, layout.pack(seed), max_nfev)
+        if options.loss == "huber":
+            # the Huber corner at huber_scale robust sigmas (MAD of the least-squares residuals)
+            scale = options.huber_scale * max(1.4826 * np.median(np.abs(res.fun)), 1e-9)
+            res = levenberg_marquardt(problem, res.x, max_nfev, huber=scale)
+        if not np.isfinite(res.x).all():
+            raise NumericalError("classical calibration diverged (non-finite parameters); check the nominal seed")
+        fitted = layout.unpack(res.x, seed)
+        q = problem.inverse(res.x)
+        JtJ = problem.normal_equations(res.x)[0]
+        dof = max(res.fun.size - np.linalg.matrix_rank(JtJ), 1)
+        sigma = float(np.sqrt(np.sum(res.fun**2) / dof))
+        se = packed_standard_errors(JtJ, sigma)
     seconds = time.perf_counter() - started
     fitted = layout.standard_errors(se, fitted)
     fitted = replace(
         fitted,
         sigma_pots=0.0,
         sigma_markers=sigma,
-        fit=FitInfo(float(res.cost), int(res.nfev), bool(res.status > 0), seconds),
+        fit=FitInfo(float(res.cost), int(res.nfev), res.converged, seconds),
     )
     record = IterationRecord(int(res.nfev), float(res.cost), 0.0, sigma, seconds)
-    return StacResult(fitted, inv.q, (record,))
+    return StacResult(fitted, q, (record,))
 
 
 def read_streams(log: Log, robot: Robot, who: str) -> tuple[np.ndarray, np.ndarray]:
@@ -472,105 +303,3 @@ def packed_standard_errors(JtJ: np.ndarray, sigma: float, tol: float = 1e-10) ->
     in_null = (V[:, ~keep] ** 2).sum(axis=1) > 1e-6
     se[in_null | dead] = np.nan
     return se
-
-
-class _Problem:
-    """Residuals (visible marker coordinates, m) and their Jacobian for least_squares, cached."""
-
-    def __init__(self, robot, layout, template, pots, markers, q_start):
-        self.robot, self.layout, self.template = robot, layout, template
-        self.pots, self.markers = pots, markers
-        self.visible = np.isfinite(markers).reshape(-1)
-        self.q_warm = q_start
-        self._key = None
-        T, M = markers.shape[:2]
-        self.dense = self.visible.sum() * layout.size <= 4_000_000
-        # sparsity of the marker-position block: row (t, m, c) -> column xyz.start + 3m + k
-        rows = np.arange(T * M * 3).reshape(T, M, 3, 1).repeat(3, axis=3)
-        cols = (
-            layout.xyz.start
-            + 3 * np.arange(M)[None, :, None, None]
-            + np.arange(3)[None, None, None, :]
-        )
-        self._xyz_rows, self._xyz_cols = rows.ravel(), np.broadcast_to(cols, rows.shape).ravel()
-
-    def inverse(self, x) -> PotInverse:
-        self._evaluate(x)
-        return self._inv
-
-    def _evaluate(self, x):
-        key = x.tobytes()
-        if key == self._key:
-            return
-        cal = self.layout.unpack(x, self.template)
-        inv = joint_angles_from_pots(self.robot, cal, self.pots, q0=self.q_warm, layout=self.layout)
-        self.q_warm = inv.q
-        self._inv, self._cal = inv, cal
-        self._model = marker_model(self.robot, inv.q, cal)
-        self._key = key
-
-    def residual(self, x) -> np.ndarray:
-        self._evaluate(x)
-        return (self._model.x - self.markers).reshape(-1)[self.visible]
-
-    def jacobian(self, x):
-        self._evaluate(x)
-        mm, lay = self._model, self.layout
-        T, M = self.markers.shape[:2]
-        head = np.concatenate(
-            [
-                np.einsum("tmcn,tnk->tmck", mm.dq, self._inv.dtheta),  # pot params through q(p, θ)
-                mm.drot,
-                np.broadcast_to(np.eye(3), (T, M, 3, 3)),
-            ],
-            axis=3,
-        ).reshape(T * M * 3, -1)
-        vals = mm.dxyz.reshape(-1)
-        if self.dense:
-            J = np.zeros((T * M * 3, lay.size))
-            J[:, : lay.xyz.start] = head
-            J[self._xyz_rows, self._xyz_cols] = vals
-            return J[self.visible]
-        r, c = np.nonzero(head)
-        rows = np.concatenate([r, self._xyz_rows])
-        cols = np.concatenate([c, self._xyz_cols])
-        J = sparse.csr_matrix(
-            (np.concatenate([head[r, c], vals]), (rows, cols)), shape=(T * M * 3, lay.size)
-        )
-        return J[self.visible]
-
-    def normal_matrix(self, x) -> np.ndarray:
-        J = self.jacobian(x)
-        JtJ = J.T @ J
-        return JtJ.toarray() if sparse.issparse(JtJ) else JtJ
-
-    def solve(self, x0, options: StacOptions, loss: str, f_scale: float):
-        try:
-            # MINPACK's LM (its own QR, no threaded LAPACK SVD) when the Jacobian is dense and the
-            # loss plain; the trust-region reflective method for the sparse or robust cases
-            lm = self.dense and loss == "linear"
-            kw = (
-                {}
-                if lm
-                else {
-                    "loss": loss,
-                    "f_scale": f_scale,
-                    "tr_solver": "exact" if self.dense else "lsmr",
-                }
-            )
-            return least_squares(
-                self.residual,
-                x0,
-                jac=self.jacobian,
-                method="lm" if lm else "trf",
-                x_scale="jac",
-                ftol=1e-8,
-                xtol=1e-8,
-                gtol=1e-8,
-                max_nfev=max(4 * options.max_iterations, 20),
-                **kw,
-            )
-        except (np.linalg.LinAlgError, ValueError) as exc:
-            raise NumericalError(
-                f"classical calibration failed ({exc}); check the nominal seed and the data"
-            ) from None

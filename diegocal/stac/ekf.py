@@ -31,13 +31,8 @@ from diegocal.errors import FitError
 from diegocal.io import Log
 from diegocal.robot import Robot, pots_jacobian
 from diegocal.stac.calibration import Calibration, FitInfo
-from diegocal.stac.classical import (
-    ThetaLayout,
-    joint_angles_from_pots,
-    kabsch,
-    marker_model,
-    read_streams,
-)
+from diegocal.stac.classical import ThetaLayout, kabsch, marker_model, read_streams
+from diegocal.stac.pot_inverse import joint_angles_from_pots
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 
 #: a typical lever arm (m) turning an angle error into a linear/tendon pot's length error
@@ -132,9 +127,7 @@ def calibrate_ekf(
     """
     ekf = ekf or EkfOptions()
     if ekf.sigma_pots <= 0 or ekf.sigma_markers <= 0 or ekf.q_step < 0 or ekf.passes < 1:
-        raise FitError(
-            "EKF noise levels must be positive (sigma_pots, sigma_markers) and passes >= 1"
-        )
+        raise FitError("EKF noise levels must be positive (sigma_pots, sigma_markers) and passes >= 1")
     pots, markers = read_streams(log, robot, "EKF calibration")
     started = time.perf_counter()
     if seed is None:
@@ -160,19 +153,13 @@ def calibrate_ekf(
             P[layout.size :, layout.size :] = np.eye(robot.n_joints) * ekf.q0_sd**2
         z, P, q, stats = filt.run(z, P, pots, markers)
         history.append(
-            IterationRecord(
-                k + 1, stats.cost, stats.rms_pots, stats.rms_markers, time.perf_counter() - started
-            )
+            IterationRecord(k + 1, stats.cost, stats.rms_pots, stats.rms_markers, time.perf_counter() - started)
         )
         if stats.diverged_at is not None:
             break
     diverged = stats.diverged_at is not None
     cal = layout.unpack(z[: layout.size], seed) if np.isfinite(z[: layout.size]).all() else seed
-    se = (
-        np.sqrt(np.clip(np.diag(P)[: layout.size], 0.0, None))
-        if not diverged
-        else np.full(layout.size, np.nan)
-    )
+    se = np.sqrt(np.clip(np.diag(P)[: layout.size], 0.0, None)) if not diverged else np.full(layout.size, np.nan)
     cal = layout.standard_errors(se, cal)
     cal = replace(
         cal,
@@ -218,9 +205,7 @@ class _Filter:
         H[P:, lay.rot] = mm.drot[0].reshape(3 * M, 3)
         H[P:, lay.trans] = np.tile(np.eye(3), (M, 1))
         for m in range(M):
-            H[P + 3 * m : P + 3 * m + 3, lay.xyz.start + 3 * m : lay.xyz.start + 3 * m + 3] = (
-                mm.dxyz[0, m]
-            )
+            H[P + 3 * m : P + 3 * m + 3, lay.xyz.start + 3 * m : lay.xyz.start + 3 * m + 3] = mm.dxyz[0, m]
         H[P:, lay.size :] = mm.dq[0].reshape(3 * M, n)
         h = np.concatenate([s[0] * cal.gain + cal.bias, mm.x[0].reshape(-1)])
         keep = np.concatenate([np.ones(P, bool), visible])
@@ -259,10 +244,7 @@ class _Filter:
             except (np.linalg.LinAlgError, ValueError, FloatingPointError):
                 diverged_at = t
                 break
-            if (
-                not (np.isfinite(z).all() and np.isfinite(P).all())
-                or np.abs(z[lay.size :]).max() > 1e3
-            ):
+            if not (np.isfinite(z).all() and np.isfinite(P).all()) or np.abs(z[lay.size :]).max() > 1e3:
                 diverged_at = t
                 break
             q_out[t] = z[lay.size :]

@@ -17,14 +17,9 @@ from diegocal.errors import FitError, MissingStreamError
 from diegocal.robot import BUNDLED_ROBOTS, load_robot, predict_markers
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 from diegocal.stac import Calibration, StacOptions
-from diegocal.stac.classical import (
-    ThetaLayout,
-    _Problem,
-    calibrate_classical,
-    joint_angles_from_pots,
-    kabsch,
-    packed_standard_errors,
-)
+from diegocal.stac.classical import ThetaLayout, calibrate_classical, kabsch, packed_standard_errors
+from diegocal.stac.pot_inverse import joint_angles_from_pots
+from diegocal.stac.regression import MarkerRegression
 
 ROTARY_CHAINS = (("arm", "rrrr"), ("leg", "rrr"))
 
@@ -40,9 +35,7 @@ def rotary_logs(rotary_robot):
     opts = KinematicsOptions(duration=6.0, pot_noise=1e-4, marker_noise=0.001, occlusion=0.1)
     train = simulate_kinematics(rotary_robot, opts, np.random.default_rng(11))
     truth = Calibration.from_dict(train.truth.params)
-    held = synth.simulate(
-        rotary_robot, n_frames=300, seed=12, sigma_pots=1e-4, sigma_markers=0.001, truth=truth
-    )
+    held = synth.simulate(rotary_robot, n_frames=300, seed=12, sigma_pots=1e-4, sigma_markers=0.001, truth=truth)
     return train, held, truth
 
 
@@ -53,9 +46,7 @@ def _gauge_entries(robot):
     the bias and the markers' in-plane coordinates form one unidentifiable direction.
     """
     parent = [robot.model.parents[k + 1] - 1 for k in range(robot.n_joints)]
-    marker_joint = [
-        robot.model.frames[robot.frame_id(m.link)].parentJoint - 1 for m in robot.sensors.markers
-    ]
+    marker_joint = [robot.model.frames[robot.frame_id(m.link)].parentJoint - 1 for m in robot.sensors.markers]
 
     def below(j, k):  # is joint k joint j or one of its descendants
         while k >= 0:
@@ -92,9 +83,7 @@ def test_recovers_rotary_robot_within_standard_errors(rotary_robot, rotary_logs)
     ok = np.isfinite(cal.marker_xyz_se)
     z_xyz = (cal.marker_xyz - truth.marker_xyz)[ok] / cal.marker_xyz_se[ok]
     assert ok.sum() == ok.size - 2 * len(gauge) and np.all(np.abs(z_xyz) < 4.5), z_xyz
-    rot_err = np.degrees(
-        np.arccos(np.clip((np.trace(cal.mocap_R.T @ truth.mocap_R) - 1) / 2, -1, 1))
-    )
+    rot_err = np.degrees(np.arccos(np.clip((np.trace(cal.mocap_R.T @ truth.mocap_R) - 1) / 2, -1, 1)))
     assert rot_err < 0.5
     assert abs(cal.sigma_markers - 0.001) < 0.0003
     # held-out data: markers predicted from pots reach the marker noise, far below nominal
@@ -107,9 +96,7 @@ def test_recovers_rotary_robot_within_standard_errors(rotary_robot, rotary_logs)
 def _mae(robot, cal, pots, markers):
     """Mean marker distance (m) when markers are predicted from pots alone (thesis Table 2.2)."""
     q = joint_angles_from_pots(robot, cal, pots).q
-    err = np.linalg.norm(
-        predict_markers(robot, q, cal.marker_xyz, cal.mocap_R, cal.mocap_T) - markers, axis=-1
-    )
+    err = np.linalg.norm(predict_markers(robot, q, cal.marker_xyz, cal.mocap_R, cal.mocap_T) - markers, axis=-1)
     return float(np.nanmean(err))
 
 
@@ -117,9 +104,7 @@ def test_does_not_read_truth(rotary_robot, rotary_logs):
     train = rotary_logs[0]
     short = train.slice(0, 200)
     a = calibrate_classical(short, rotary_robot, StacOptions(max_iterations=5)).calibration
-    b = calibrate_classical(
-        short.without_truth(), rotary_robot, StacOptions(max_iterations=5)
-    ).calibration
+    b = calibrate_classical(short.without_truth(), rotary_robot, StacOptions(max_iterations=5)).calibration
     np.testing.assert_array_equal(a.gain, b.gain)
     np.testing.assert_array_equal(a.marker_xyz, b.marker_xyz)
 
@@ -149,23 +134,27 @@ def test_bad_options_and_missing_streams(rotary_robot, rotary_logs):
         calibrate_classical(log.slice(0, 1), rotary_robot)
 
 
-def test_jacobian_matches_finite_differences_through_gimbal_constraints(tree_robot):
-    """Analytic ∂residual/∂θ (implicit-function step for gimbal pots) = central differences."""
+def test_normal_equations_match_finite_differences_through_gimbal_constraints(tree_robot):
+    """JᵀWJ and JᵀW r summed per marker block (implicit-function step for gimbal pots) equal
+    those of the central-difference Jacobian of the residuals, in batches smaller than the log."""
     log = synth.simulate(tree_robot, n_frames=6, seed=4, sigma_pots=0.0, occlusion=0.2)
     pots, mk = log.streams["pots"].data, log.streams["markers"].data
     truth = Calibration.from_dict(log.truth.params)
     layout = ThetaLayout.for_robot(tree_robot)
-    problem = _Problem(tree_robot, layout, truth, pots, mk, log.truth.signals["q"].data)
+    problem = MarkerRegression(tree_robot, layout, truth, pots, mk, log.truth.signals["q"].data, batch=4)
     x0 = layout.pack(truth) + np.random.default_rng(0).normal(0, 1e-3, layout.size)
-    J = problem.jacobian(x0)
-    fd = np.empty_like(J)
+    fd = np.empty((problem.residual(x0).size, layout.size))
     for k in range(layout.size):
         h = 1e-6 * max(1.0, abs(x0[k]))
         up, dn = x0.copy(), x0.copy()
         up[k] += h
         dn[k] -= h
         fd[:, k] = (problem.residual(up) - problem.residual(dn)) / (2 * h)
-    np.testing.assert_allclose(J, fd, atol=1e-6 * np.abs(fd).max())
+    r = problem.residual(x0)
+    w = np.random.default_rng(1).uniform(0.2, 1.0, r.size)
+    A, g = problem.normal_equations(x0, w)
+    np.testing.assert_allclose(A, fd.T @ (fd * w[:, None]), atol=1e-6 * np.abs(A).max())
+    np.testing.assert_allclose(g, fd.T @ (w * r), atol=1e-6 * np.abs(g).max())
 
 
 def test_constrained_gimbals_recover_parameters(tree_robot):
@@ -222,16 +211,14 @@ def test_kabsch_recovers_a_rotation_and_guards_reflections():
 def test_standard_errors_flag_the_null_space():
     J = np.array([[1.0, 1.0, 0.0], [2.0, 2.0, 0.0], [0.0, 0.0, 3.0], [1.0, 1.0, 1.0]])
     se = packed_standard_errors(J.T @ J, 1.0)
-    assert np.isnan(se[:2]).all() and np.isclose(
-        se[2], np.sqrt(np.linalg.inv(J[:, 1:].T @ J[:, 1:])[1, 1])
-    )
+    assert np.isnan(se[:2]).all() and np.isclose(se[2], np.sqrt(np.linalg.inv(J[:, 1:].T @ J[:, 1:])[1, 1]))
 
 
 @pytest.mark.parametrize("name", ["finger", "diego"])
 def test_batched_transmission_equals_the_robot_route(name):
     """transmission_jacobian (batched anchors) = diegocal.robot.pot_transmission_jacobian."""
     from diegocal.robot import pot_transmission_jacobian
-    from diegocal.stac.classical import transmission_jacobian
+    from diegocal.stac.pot_inverse import transmission_jacobian
 
     robot = load_robot(BUNDLED_ROBOTS / name)
     rng = np.random.default_rng(0)
