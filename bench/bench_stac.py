@@ -7,10 +7,16 @@ Schur step (the default). Per iteration: cost, wall time and mean relative param
 against the simulator truth (gains and marker positions, gauge-free entries).
 
 Part 2 runs STAC on diego at thesis size (100 Hz x 250 s = 25,000 frames, 38 joints,
-24 markers) and the classical σp = 0 method on the same data, printing wall time, peak
-resident memory (resource.getrusage) and where STAC's time goes.
+24 markers), with one and two worker threads, and the classical σp = 0 method on the same data,
+printing wall and CPU time, peak resident memory (resource.getrusage: the process's peak so
+far, so each row includes the rows above it), the load average, accuracy against the simulator
+truth, and where STAC's time goes (per stage, and a CPU-time profile of a second run).
+
+Part 3 checks that the coarse-to-fine schedule ends at the full-data optimum: the same log
+(5,000 frames) calibrated with coarse_frames=0, differences in units of standard errors.
 
     .venv/bin/python bench/bench_stac.py [--frames 25000] [--skip-full] [--skip-schedules]
+        [--skip-verify] [--skip-classical] [--verify-frames 5000]
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import io
+import os
 import pstats
 import resource
 import time
@@ -87,57 +94,126 @@ def schedules(seed: int = 0) -> None:
         print(f"{name:<28}{n:>6}{t:>9.2f}{c:>14.1f}{e:>10.4f}")
 
 
-def full(frames: int, seed: int = 0) -> None:
+def _diego(frames: int, seed: int):
     robot = load_robot(resolve_robot_dir("diego", None))
     opts = KinematicsOptions(duration=frames / 100.0, rate_hz=100.0)
     log = simulate_kinematics(robot, opts, np.random.default_rng(seed))
+    return robot, log, opts
+
+
+def _free_joints(robot, data) -> list[int]:
+    """Joints whose zero is not a gauge freedom (their q RMSE is comparable to the truth)."""
+    obs = Observation(data, robot)
+    obs.check_observable()
+    gauge = {obs.pot_specs[j].joint for j in np.flatnonzero(obs.fixed_bias)}
+    return [i for i, n in enumerate(robot.joint_names) if n not in gauge]
+
+
+def _load() -> str:
+    return "load average " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def full(frames: int, seed: int = 0, jobs: tuple = (1, 2), classical: bool = True) -> None:
+    robot, log, opts = _diego(frames, seed)
     truth = Calibration.from_dict(log.truth.params)
     data = log.without_truth()
     print(
         f"\n== thesis size: diego, {log.n_samples} frames, {robot.n_joints} joints, "
-        f"{len(robot.sensors.markers)} markers, occlusion {opts.occlusion:.0%}"
+        f"{len(robot.sensors.markers)} markers, occlusion {opts.occlusion:.0%}; {_load()}"
     )
-    print(f"{'method':<12}{'wall s':>9}{'peak RSS MiB':>14}{'iters':>7}{'gain rel err':>14}{'q RMSE rad':>12}")
+    print(
+        f"{'method':<16}{'wall s':>8}{'CPU s':>8}{'peak RSS MiB':>14}{'iters':>9}"
+        f"{'gain rel err':>14}{'max |z| gain':>14}{'q RMSE rad':>12}"
+    )
     q_true = log.truth.signals["q"].data
-    obs = Observation(data, robot)
-    obs.check_observable()
-    gauge = {obs.pot_specs[j].joint for j in np.flatnonzero(obs.fixed_bias)}
-    free_q = [i for i, n in enumerate(robot.joint_names) if n not in gauge]
-    prof = cProfile.Profile()
-    for name in ("stac", "classical"):
-        t0 = time.perf_counter()
-        if name == "stac":
-            prof.enable()
-            res = calibrate(data, robot, StacOptions(max_iterations=30))
-            prof.disable()
+    free_q = _free_joints(robot, data)
+    runs = [(f"stac --jobs {j}", StacOptions(max_iterations=30, jobs=j)) for j in jobs]
+    if classical:
+        runs.append(("classical", StacOptions()))
+    for name, options in runs:
+        t0, c0 = time.perf_counter(), time.process_time()
+        if name.startswith("stac"):
+            res = calibrate(data, robot, options)
         else:
             from diegocal.stac.classical import calibrate_classical
 
-            res = calibrate_classical(data, robot, StacOptions(), nonlinear="constrain")
-        wall = time.perf_counter() - t0
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            res = calibrate_classical(data, robot, options, nonlinear="constrain")
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # the process's peak so far
         cal = res.calibration
         gerr = float(np.median(np.abs(cal.gain / truth.gain - 1)))
+        zmax = float(np.nanmax(np.abs((cal.gain - truth.gain) / cal.gain_se)))
         rmse = float(np.sqrt(np.mean((res.q - q_true)[:, free_q] ** 2)))  # gauge joints excluded
-        print(f"{name:<12}{wall:>9.1f}{rss:>14.0f}{cal.fit.iterations:>7}{gerr:>14.4f}{rmse:>12.4f}")
-    buf = io.StringIO()
-    pstats.Stats(prof, stream=buf).sort_stats("cumulative").print_stats(
-        "(stac/(stac|qphase|pphase|joint_step|model)|robot/batch).py", 18
+        frames_used = [h.frames for h in res.history]
+        iters = f"{len(frames_used) - frames_used.count(log.n_samples)}+{frames_used.count(log.n_samples)}"
+        print(f"{name:<16}{wall:>8.1f}{cpu:>8.1f}{rss:>14.0f}{iters:>9}{gerr:>14.5f}{zmax:>14.2f}{rmse:>12.4f}")
+        if name == "stac --jobs 1":
+            stac_res = res
+    print(f"({_load()}; iters: on the subset + on all frames; max |z|: |gain − truth| / SE)")
+    _where_the_time_goes(data, robot, stac_res, log.n_samples)
+
+
+def _where_the_time_goes(data, robot, res, frames: int) -> None:
+    """Per-stage wall time from the run above, then a CPU-time profile of a second run."""
+    h = res.history
+    coarse = [x for x in h if x.frames < frames]
+    t_coarse = coarse[-1].seconds if coarse else 0.0
+    first = coarse[0].seconds if coarse else h[0].seconds
+    print(
+        f"\nstages (wall): setup and initial q {first:.1f} s; coarse, {len(coarse)} iterations on "
+        f"{coarse[0].frames if coarse else 0} frames: {t_coarse - first:.1f} s; all {frames} frames, "
+        f"{len(h) - len(coarse)} iterations: {h[-1].seconds - t_coarse:.1f} s"
     )
-    print("\nwhere STAC's time goes (cumulative seconds):")
-    print("\n".join(line for line in buf.getvalue().splitlines() if "stac/" in line or "cumtime" in line))
+    prof = cProfile.Profile(time.process_time)
+    prof.enable()
+    calibrate(data, robot, StacOptions(max_iterations=30))
+    prof.disable()
+    buf = io.StringIO()
+    stats = pstats.Stats(prof, stream=buf).sort_stats("cumulative")
+    stats.print_stats(r"(stac/(stac|qphase|pphase|joint_step|model)|robot/batch)\.py", 22)
+    print("where STAC's CPU time goes (cProfile, cumulative CPU seconds, second run):")
+    print("\n".join(line for line in buf.getvalue().splitlines() if "diegocal/" in line or "cumtime" in line))
+
+
+def verify(frames: int, seed: int = 0) -> None:
+    """Coarse to fine ends at the full-data optimum: the same log with coarse_frames=0."""
+    robot, log, _ = _diego(frames, seed)
+    data = log.without_truth()
+    print(f"\n== coarse to fine vs all frames throughout: diego, {frames} frames; {_load()}")
+    out = {}
+    for name, cf in (("coarse to fine", StacOptions().coarse_frames), ("all frames", 0)):
+        t0 = time.perf_counter()
+        out[name] = calibrate(data, robot, StacOptions(max_iterations=60, coarse_frames=cf))
+        print(f"{name:<16}{time.perf_counter() - t0:>8.1f} s, {len(out[name].history)} iterations")
+    a, b = out["all frames"].calibration, out["coarse to fine"].calibration
+    for what, x, y, se in (
+        ("gain", a.gain, b.gain, a.gain_se),
+        ("bias", a.bias, b.bias, a.bias_se),
+        ("marker xyz", a.marker_xyz, b.marker_xyz, a.marker_xyz_se),
+    ):
+        print(f"max |difference| / SE, {what:<11}{np.nanmax(np.abs(x - y) / se):8.3f}")
+    dq = np.abs(out["all frames"].q - out["coarse to fine"].q).max()
+    print(
+        f"max |difference| in q: {dq:.2e} rad; σ: "
+        + ", ".join(f"{g} {b.sigma_by_group[g] / v - 1:+.1e}" for g, v in a.sigma_by_group.items())
+    )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=25000)
+    ap.add_argument("--verify-frames", type=int, default=5000)
     ap.add_argument("--skip-full", action="store_true")
     ap.add_argument("--skip-schedules", action="store_true")
+    ap.add_argument("--skip-verify", action="store_true")
+    ap.add_argument("--skip-classical", action="store_true")
     args = ap.parse_args()
     if not args.skip_schedules:
         schedules()
     if not args.skip_full:
-        full(args.frames)
+        full(args.frames, classical=not args.skip_classical)
+    if not args.skip_verify:
+        verify(args.verify_frames)
 
 
 if __name__ == "__main__":

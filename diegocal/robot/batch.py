@@ -63,15 +63,17 @@ class Poses:
 @dataclass(frozen=True)
 class _Structure:
     """Which joints move which points: sign (N, n) ∈ {−1, 0, 1}, D = |sign| (N, n), the sign of
-    each joint's column (n,), and the sign s_j s_k of H[j, k] (n, n) where joint k moves a subset
-    of j's points (``coeff_nested``) and where j moves a strict subset of k's (``coeff_other``);
-    zero where they move no point in common."""
+    each joint's column (n,), and the pairs of joints that move points in common, as
+    (o, d) index arrays with d the deeper joint (it moves a subset of o's points; o == d on
+    the diagonal) and s_o s_d (pairs,); ``pattern`` (n, n) bool is where H can be non-zero."""
 
     sign: np.ndarray
     D: np.ndarray
     sign_joint: np.ndarray
-    coeff_nested: np.ndarray
-    coeff_other: np.ndarray
+    pair_o: np.ndarray
+    pair_d: np.ndarray
+    pair_sign: np.ndarray
+    pattern: np.ndarray
 
 
 class BatchKinematics:
@@ -283,9 +285,12 @@ class BatchKinematics:
         Y[3] = mu * v[0] + om[1] * c[2] - om[2] * c[1]
         Y[4] = mu * v[1] + om[2] * c[0] - om[0] * c[2]
         Y[5] = mu * v[2] + om[0] * c[1] - om[1] * c[0]
-        Hc = xi.transpose(1, 2, 0) @ Y.transpose(1, 0, 2)  # Hc[j, k] = ξ_j · Ĝ_k ξ_k
-        H = Hc * st.coeff_nested  # right where k moves a subset of j's points; else H[j, k] = Hc[k, j]
-        H += np.swapaxes(Hc * st.coeff_other.T, 1, 2)
+        o, d, n = st.pair_o, st.pair_d, self.n
+        vals = np.einsum("fbp,fbp->bp", xi[:, :, o], Y[:, :, d]) * st.pair_sign  # s_o s_d ξ_o · Ĝ_d ξ_d
+        H = np.zeros((B, n, n))
+        flat = H.reshape(B, n * n)
+        flat[:, o * n + d] = vals
+        flat[:, d * n + o] = vals
         g = (om * acc[13:16]).sum(0) + (v * acc[10:13]).sum(0)  # ξ_k · Σ (x × f, f)
         return H, g * st.sign_joint
 
@@ -320,8 +325,8 @@ class BatchKinematics:
             if np.any(share & ~nested & ~nested.T):
                 raise RobotConfigError("kinematic tree expected: two joints move overlapping point sets")
             sj = np.where(self._anc[self.base_joint], -1.0, 1.0)
-            coeff = np.outer(sj, sj) * share
-            self._structure[key] = _Structure(sign, D.astype(float), sj, coeff * nested, coeff * ~nested)
+            o, d = np.nonzero(share & nested & (~nested.T | np.tri(self.n, dtype=bool).T))  # one per pair
+            self._structure[key] = _Structure(sign, D.astype(float), sj, o, d, sj[o] * sj[d], share)
         return self._structure[key]
 
     def _joint_or_root(self, poses: Poses, joint: np.ndarray, B: int):

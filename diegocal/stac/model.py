@@ -160,7 +160,7 @@ class Observation:
                 pattern |= np.outer(row, row)
         if self.n_markers:
             st = self.kin._points_structure(self.marker_links)
-            pattern |= (st.coeff_nested != 0) | (st.coeff_other != 0)
+            pattern |= st.pattern
         _, label = connected_components(pattern, directed=False)
         blocks = tuple(np.flatnonzero(label == c) for c in np.unique(label))
         return Sparsity(pot_flat, lin_cols, blocks)

@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from diegocal.stac.model import MARKERS, Observation, Params, State
 
@@ -54,8 +55,9 @@ def residuals(obs: Observation, params: Params, noise: Noise, s, Rl, pl, pots, m
     """Standardised residuals of a batch: pots (B, P), marker norms (B, M) and vectors (B, M, 3)."""
     zp = (params.gain * s + params.bias - pots) / noise.sig_p
     xb = (Rl @ params.xyz[:, :, None])[..., 0] + pl
-    rx = np.where(valid[..., None], (xb @ params.R.T + params.T - np.nan_to_num(markers)) / noise.sig_x, 0.0)
-    return zp, np.linalg.norm(rx, axis=-1), rx
+    rx = (xb @ params.R.T + params.T - markers) / noise.sig_x
+    rx[~valid] = 0.0  # occluded (NaN) markers
+    return zp, np.sqrt(np.einsum("bmi,bmi->bm", rx, rx)), rx
 
 
 def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarray:
@@ -131,11 +133,11 @@ def damped(H: np.ndarray, lam: np.ndarray, inplace: bool = False) -> np.ndarray:
 
 def map_batches(fn, T: int, batch: int, jobs: int = 1) -> list:
     """[fn(slice) for each batch of ``batch`` frames out of T], in ``jobs`` threads (numpy
-    releases the GIL in the heavy products)."""
+    releases the GIL in the heavy products; the results do not depend on ``jobs``)."""
     slices = [slice(i, min(i + batch, T)) for i in range(0, T, batch)]
     if jobs > 1 and len(slices) > 1:
-        with ThreadPoolExecutor(jobs) as pool:
-            return list(pool.map(fn, slices))
+        with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(jobs) as pool:
+            return list(pool.map(fn, slices))  # one BLAS thread per worker
     return [fn(sl) for sl in slices]
 
 

@@ -72,6 +72,9 @@ SIGMA_SETTLE = 1e-3
 #: (relative): σ's own standard error at thesis size is about 0.2 %, and the parameters move by
 #: about 0.01 of their standard errors per 1 % of σ (bench/bench_stac.py, diego).
 SIGMA_TOL = 1e-3
+#: The coarse stage stops at a looser σ tolerance: the full-data iterations re-estimate σ anyway,
+#: and the subset's σ differs from the full data's by its own sampling error (about 0.5 %).
+COARSE_SIGMA_TOL = 1e-2
 
 
 def check_options(options: StacOptions) -> None:
@@ -86,7 +89,9 @@ def check_options(options: StacOptions) -> None:
 
 
 def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.ndarray | None = None) -> np.ndarray:
-    """q (T, n) from the pots: invert rotary/encoder pots; LM on the pots for the rest.
+    """q (T, n) from the pots: invert rotary/encoder pots; LM on the pots for the rest, up to ten
+    steps, until a step lowers their summed cost by less than 1 % (a starting point: the
+    alternation refines q with the markers).
 
     ``use`` (P,) bool restricts the pots used (default: all).
     """
@@ -101,8 +106,12 @@ def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.nd
         scale = np.where(use, np.maximum(np.std(obs.pots, axis=0), 1e-6), np.inf)
         noise = Noise(scale, 1.0, use_markers=False)
         lam = np.full(obs.n_frames, 1e-2)
+        prev = np.inf
         for _ in range(10):
-            q, lam, _, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
+            q, lam, _, cost, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
+            if cost.sum() > 0.99 * prev:
+                break
+            prev = cost.sum()
     return q
 
 
@@ -204,7 +213,8 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
     stride = -(-obs.n_frames // options.coarse_frames) if options.coarse_frames else 1
     if stride > 1:  # coarse stage: θ and σ on every stride-th frame (module docstring)
         sub = obs.subset(slice(None, None, stride))
-        coarse = _alternate(sub, params, initial_q(sub, params, options), None, options, t0, history)
+        q = initial_q(sub, params, options)
+        coarse = _alternate(sub, params, q, None, options, t0, history, sigma_tol=COARSE_SIGMA_TOL)
         params, sigma = coarse.params, coarse.sigma
         lam = np.repeat(coarse.lam, stride)[: obs.n_frames]  # warm LM state (see _alternate)
         frames = np.arange(0, obs.n_frames, stride)
@@ -214,10 +224,11 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
         q, sigma, lam = initial_q(obs, params, options), None, None
     fine = _alternate(obs, params, q, sigma, options, t0, history, lam)
     params, sigma, q = fine.params, fine.sigma, fine.q
-    # standard errors with q marginalised (Schur complement at the solution), not the p-phase's
-    # conditional-on-q ones, which ignore the joint-angle uncertainty
-    se = fine.se
-    if obs.n_pots:
+    # standard errors with q marginalised (the Schur complement of the last joint step, one
+    # converged iteration from the solution), not the p-phase's conditional-on-q ones, which
+    # ignore the joint-angle uncertainty
+    se = fine.se_joint or fine.se
+    if obs.n_pots and fine.se_joint is None:
         _, _, se = theta_step(
             obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames), options.batch_size, jobs=options.jobs
         )
@@ -229,10 +240,12 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
 
 @dataclass(frozen=True)
 class _Stage:
-    """Where one run of the alternation ended: θ, its p-phase SEs, σ per type, q (T, n)."""
+    """Where one run of the alternation ended: θ, its p-phase SEs (conditional on q), the joint
+    step's SEs (q marginalised; None without joint steps), σ per type, q (T, n), LM damping (T,)."""
 
     params: Params
     se: dict
+    se_joint: dict | None
     sigma: dict
     q: np.ndarray
     lam: np.ndarray
@@ -248,14 +261,20 @@ def _alternate(
     t0: float,
     history: list,
     lam: np.ndarray | None = None,
+    sigma_tol: float = SIGMA_TOL,
 ) -> _Stage:
-    """The alternation of eq. 2.6 from q (T, n) and θ (σ: the dynamic range when None, with a
-    first p-phase); appends one IterationRecord per iteration to ``history``."""
+    """The alternation of eq. 2.6 from q (T, n) and θ; appends one IterationRecord per
+    iteration to ``history``. A fresh start (``sigma`` None) takes σ from the readings' spread
+    and places θ by a first p-phase; a warm start (σ given, θ converged on a subset of the
+    frames) may re-estimate σ from its first iteration on."""
     st = obs.state(q, options.batch_size)
-    sigma = dynamic_range(obs) if sigma is None else sigma
+    warm = sigma is not None
+    if not warm:
+        sigma = dynamic_range(obs)
+        noise = _noise(obs, sigma, options)
+        params = p_phase(obs, st, params, *weights(obs, params, st, noise)).params
     noise = _noise(obs, sigma, options)
-    ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
-    params = ph.params
+    se_joint = None
     converged, prev_fixed, sigma_change = False, np.inf, np.inf
     sigmas: list[dict] = []
     n_obs = obs.pots.size + 3 * int(obs.valid.sum())
@@ -265,10 +284,11 @@ def _alternate(
     cost = total_cost(obs, params, st, noise, sigma)
     for _ in range(options.max_iterations):
         noise = _noise(obs, sigma, options)
+        red = warm or np.isfinite(prev_fixed)  # the q-phase's degrees of freedom, for σ below
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
-            params_j, _, _ = theta_step(obs, params, noise, q, lam, options.batch_size, jobs=options.jobs)
-            q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs)
+            params_j, _, se_joint = theta_step(obs, params, noise, q, lam, options.batch_size, jobs=options.jobs)
+            q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red)
             ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
             cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
             if cost_j < cost:
@@ -280,7 +300,7 @@ def _alternate(
             else:
                 steps = options.q_steps if options.schedule == "lm-iter" else 30
                 for _ in range(steps):
-                    q, lam, st, _, used = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs)
+                    q, lam, st, _, used = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, red)
                     if options.schedule == "lm-batch" and np.all(lam >= 1e3):
                         break
             ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
@@ -298,7 +318,8 @@ def _alternate(
                         accel.reset()
         params = ph.params
         change = abs(prev_fixed - cost)  # what the (q, θ) step did at fixed σ
-        if change < SIGMA_SETTLE * max(abs(cost), 1.0):  # §2.3.5, once (q, θ) have settled (SIGMA_SETTLE)
+        # §2.3.5, once (q, θ) have settled (SIGMA_SETTLE); at once on a warm start
+        if change < SIGMA_SETTLE * max(abs(cost), 1.0) or (warm and not np.isfinite(prev_fixed)):
             new = _update_sigma(obs, params, st, used)
             sigmas.append(new)
             if len(sigmas) == 3:
@@ -323,11 +344,11 @@ def _alternate(
         if options.on_iteration is not None:
             options.on_iteration(it, obs.to_calibration(params, ph.se, sigma, "stac"))
         # converged when the (q, θ) step moves the cost (nats) by less than 10 x tolerance per
-        # reading and the last re-estimate moved σ by less than SIGMA_TOL
-        if change < 10 * options.tolerance * n_obs and sigma_change < SIGMA_TOL:
+        # reading and the last re-estimate moved σ by less than sigma_tol
+        if change < 10 * options.tolerance * n_obs and sigma_change < sigma_tol:
             converged = True
             break
-    return _Stage(params, ph.se, sigma, q, lam, converged)
+    return _Stage(params, ph.se, se_joint, sigma, q, lam, converged)
 
 
 def _rms_pots(obs, sigma) -> float:
