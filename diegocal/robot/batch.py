@@ -126,19 +126,17 @@ class BatchKinematics:
                 P, pp = self.base_R.T @ P, self.base_R.T @ (pp - self.base_p)
             self._chain[j] = np.concatenate([P, P @ K, P @ K @ K, pp[:, None], (P @ self.local_axis[j])[:, None]], 1)
         self._chain_t = np.ascontiguousarray(np.swapaxes(self._chain, 1, 2))
-        self._links: dict = {}
-        self._at_joint: dict = {}
+        self._links: dict = {}  # links -> (parent joints, placements R, p, all placements identity)
         self._structure: dict = {}
 
     # ------------------------------------------------------------------ links
     def link_info(self, links) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Parent joint index (L,) (Pinocchio numbering, 0 = root), placement R (L,3,3), p (L,3)."""
         key = tuple(links)
-        if key not in self._links:
-            self._links[key] = self._link_info(key)
-            _, R, p = self._links[key]
-            self._at_joint[key] = bool(np.all(R == np.eye(3)) and np.all(p == 0.0))
-        return self._links[key]
+        if key not in self._links:  # (one assignment: safe when batches run in threads)
+            joint, R, p = self._link_info(key)
+            self._links[key] = joint, R, p, bool(np.all(R == np.eye(3)) and np.all(p == 0.0))
+        return self._links[key][:3]
 
     def _link_info(self, links):
         model = self.robot.model
@@ -224,12 +222,13 @@ class BatchKinematics:
     def link_poses(self, poses: Poses, links) -> tuple[np.ndarray, np.ndarray]:
         """Rotation (B, L, 3, 3) and origin (B, L, 3) of each link in the base frame."""
         joint, Rl, pl = self.link_info(links)
+        at_joint = self._links[tuple(links)][3]  # link frames at their joints' frames (as URDF links are)
         B = poses.R.shape[0]
         if np.all(joint > 0):
             Rj, pj = poses.R[:, joint - 1], poses.p[:, joint - 1]
         else:
             Rj, pj = self._joint_or_root(poses, joint, B)
-        if self._at_joint[tuple(links)]:  # link frames at their joints' frames (as URDF links are)
+        if at_joint:
             return Rj, pj
         return Rj @ Rl, (Rj @ pl[None, :, :, None])[..., 0] + pj
 

@@ -21,8 +21,8 @@ the thesis, plus, by default, a joint Gauss-Newton step on (q, θ) by the Schur 
 (:mod:`.joint_step`) tried before each LM-iter step. Evidence (bench/bench_stac.py, bundled
 finger, 200 well-spread frames, seeds from sensors.yaml, markers at link origins; mean relative
 error of gains and gauge-free marker positions): after 60 iterations plain LM-batch, LM-iter
-and BFGS stood at 0.029, 0.029 and 0.040 (cost -24125, -24121, -23963), still creeping, while
-LM-iter + Schur converged in 23 iterations to 0.006 (cost -24237). Plain alternation stalls
+and BFGS stood at 0.028, 0.029 and 0.042 (cost -24123, -24119, -23952), still creeping, while
+LM-iter + Schur converged in 20 iterations to 0.006 (cost -24246). Plain alternation stalls
 along directions where θ and q co-move (a pot more precise than the markers about its joint),
 which the joint step removes; per iteration LM-iter is the cheapest of the plain schedules,
 LM-batch the dearest (its extra q-steps buy nothing, as the thesis observed). The thesis found
@@ -35,8 +35,9 @@ q is interpolated to all frames and its LM damping carried over, and the alterna
 continues on all frames to the same convergence test. The coarse stage does the many early
 iterations cheaply; the full-data iterations that follow only have to remove the subsample's
 sampling error (about one standard error), which the joint step does in one or two iterations,
-and settle σ. The answer is the full-data optimum: on diego at 5,000 frames, run to
-tolerance 1e-9, both routes end at the same θ to 1e-7 relative (bench/bench_stac.py).
+and settle σ. The answer is the full-data optimum: on diego at 5,000 frames the two routes end
+0.007 standard errors apart in the gains, 0.004 in the biases, 0.035 in the marker positions,
+σ within 0.3 % (bench/bench_stac.py, part 3; run to tolerance 1e-9, θ agrees to 1e-7).
 
 Initialisation: q from the nominal pots (rotary/encoder pots inverted, clipped to the limits;
 gimbal and tendon joints by a few LM steps on the pots alone), markers at their link origins

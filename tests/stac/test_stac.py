@@ -135,6 +135,18 @@ def test_coarse_to_fine_reaches_the_full_data_optimum(tree_robot, tree_fit):
         assert b.sigma_by_group[g] == pytest.approx(sigma, rel=2e-3)
 
 
+def test_threads_give_the_same_answer(tree_robot, tree_fit):
+    """--jobs runs batches of frames in threads; the result does not depend on it."""
+    log, _ = tree_fit
+    one, two = (
+        calibrate(log.without_truth(), tree_robot, StacOptions(max_iterations=5, batch_size=100, jobs=j))
+        for j in (1, 2)
+    )
+    np.testing.assert_array_equal(one.q, two.q)
+    np.testing.assert_array_equal(one.calibration.gain, two.calibration.gain)
+    np.testing.assert_array_equal(one.calibration.gain_se, two.calibration.gain_se)
+
+
 def test_aitken_extrapolates_a_geometric_tail():
     """σ iterates that shrink geometrically are extrapolated to their limit; others are kept."""
     limit, r = 0.005, 0.6
