@@ -87,6 +87,8 @@ def check_options(options: StacOptions) -> None:
         raise FitError(f"unknown marker seed {options.marker_seed!r} (expected origin or nominal)")
     if options.max_iterations < 1:
         raise FitError("max_iterations must be at least 1")
+    if options.coarse_frames < 0 or options.batch_size < 1:
+        raise FitError("coarse_frames must be >= 0 (0: no coarse stage) and batch_size >= 1")
 
 
 def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.ndarray | None = None) -> np.ndarray:

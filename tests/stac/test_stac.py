@@ -6,6 +6,7 @@ import pytest
 import synth
 from scipy.spatial.transform import Rotation
 
+from diegocal.errors import FitError
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.model import Observation
 from diegocal.stac.pphase import kabsch
@@ -145,6 +146,13 @@ def test_threads_give_the_same_answer(tree_robot, tree_fit):
     np.testing.assert_array_equal(one.q, two.q)
     np.testing.assert_array_equal(one.calibration.gain, two.calibration.gain)
     np.testing.assert_array_equal(one.calibration.gain_se, two.calibration.gain_se)
+
+
+def test_bad_schedule_options_raise(tree_robot, tree_fit):
+    log, _ = tree_fit
+    for bad in (StacOptions(coarse_frames=-1), StacOptions(batch_size=0)):
+        with pytest.raises(FitError, match="coarse_frames"):
+            calibrate(log.without_truth(), tree_robot, bad)
 
 
 def test_aitken_extrapolates_a_geometric_tail():
