@@ -22,6 +22,12 @@ so the cost is n Cholesky factorisations of N×N plus O(n N² m), not O((nN)³).
 variance at a query (eq. 3.8-3.20, marginalising W): with ``r = f_j(q) - F_j^T A_j^{-1} k_j(q)``,
 ``E = f_j(q) ŵ + k_j(q)^T α_j`` and ``V = k_j(q,q) - k_j(q)^T A_j^{-1} k_j(q) + r^T M^{-1} r``.
 
+Sparse inference keeps the parametric part exact (W shared, M as above) and replaces each
+``A_j`` by the inducing-point ``Q_j + σ_v,j² I`` (:class:`SparseBlock`, O(N M²)); its likelihood
+is Titsias's (2009) collapsed variational bound, which :func:`negative_log_likelihood` also
+differentiates analytically (inducing inputs fixed), so hyperparameters can be learnt on all N
+samples without an N×N matrix.
+
 The thesis's printed likelihood (§3.3.4) is garbled (it uses σ_qd σ_dd⁻¹ σ_qdᵀ + σ_v as the
 covariance of the data). We use the Gaussian marginal likelihood of y under the full covariance
 K above, which is what eq. (3.13)-(3.15) define.
