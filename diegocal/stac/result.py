@@ -43,11 +43,12 @@ class StacResult:
 class StacOptions:
     """Options shared by the calibration methods (each method reads the ones it uses).
 
-    max_iterations : outer alternations (STAC) or passes (EKF)
-    tolerance : relative cost change that ends the alternation
+    max_iterations : outer alternations (STAC: per stage, coarse and full-data) or passes (EKF)
+    tolerance : cost change per reading (x 10, nats) that ends the alternation (STAC: once σ
+        has settled too)
     loss : 'linear' (Gaussian, eq. 2.21) or 'huber' (robust to mocap outliers/swapped labels)
     huber_scale : residual (in sigmas) where the Huber loss turns linear
-    jobs : worker processes for the per-frame q-phase
+    jobs : workers (STAC: threads over batches of frames in the q-phase and the joint step)
     schedule : STAC q-phase schedule, 'lm-iter' (default), 'lm-batch' or 'bfgs' (thesis §2.6.1)
     q_steps : LM steps per alternation in 'lm-iter'
     batch_size : frames per batched normal-equation solve
