@@ -91,8 +91,7 @@ class KinematicsOptions:
         if not np.isfinite(self.rate_hz) or self.rate_hz <= 0:
             raise SimOptionError(f"rate must be positive, got {self.rate_hz} Hz")
         if self.n_samples < 2:
-            raise SimOptionError(
-                f"duration {self.duration} s at {self.rate_hz} Hz gives fewer than 2 samples")
+            raise SimOptionError(f"duration {self.duration} s at {self.rate_hz} Hz gives fewer than 2 samples")
         if not 0.0 <= self.occlusion < 0.95:
             raise SimOptionError(f"occlusion fraction must be in [0, 0.95), got {self.occlusion}")
         if not self.occlusion_run > 0:
@@ -102,8 +101,7 @@ class KinematicsOptions:
             if not np.isfinite(value) or value < 0:
                 raise SimOptionError(f"{name.replace('_', '-')} must be >= 0, got {value}")
         if self.gain_error >= 1:
-            raise SimOptionError(f"gain-error must be < 1 (a gain may not flip sign), "
-                                 f"got {self.gain_error}")
+            raise SimOptionError(f"gain-error must be < 1 (a gain may not flip sign), got {self.gain_error}")
         if not 0 < self.hold[0] <= self.hold[1]:
             raise SimOptionError(f"hold must be 0 < low <= high, got {self.hold}")
         check_effects(self.effects, "kinematics")
@@ -121,8 +119,9 @@ def joint_ranges(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def pid_trajectory(lower, upper, n_samples: int, rate_hz: float, rng: np.random.Generator,
-                   hold=(0.5, 3.0)) -> tuple[np.ndarray, np.ndarray]:
+def pid_trajectory(
+    lower, upper, n_samples: int, rate_hz: float, rng: np.random.Generator, hold=(0.5, 3.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """Joints driven by PID controllers toward random targets (thesis §2.5.1).
 
     Each joint is a unit-inertia second-order plant under PID control,
@@ -163,8 +162,7 @@ def pid_trajectory(lower, upper, n_samples: int, rate_hz: float, rng: np.random.
     Ad, Bd = disc[:, :3, :3], disc[:, :3, 3]
 
     span = upper - lower
-    targets = _random_targets(lower + 0.05 * span, upper - 0.05 * span, n_samples, rate_hz,
-                              rng, hold)
+    targets = _random_targets(lower + 0.05 * span, upper - 0.05 * span, n_samples, rate_hz, rng, hold)
     x = np.zeros((n, 3))
     x[:, 0] = targets[0]
     q = np.empty((n_samples, n))
@@ -192,8 +190,9 @@ def _random_targets(lo, hi, n_samples, rate_hz, rng, hold) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- occlusion
-def occlusion_mask(n_samples: int, n_markers: int, fraction: float, mean_run: float,
-                   rng: np.random.Generator) -> np.ndarray:
+def occlusion_mask(
+    n_samples: int, n_markers: int, fraction: float, mean_run: float, rng: np.random.Generator
+) -> np.ndarray:
     """Occlusion runs from a two-state Markov chain per marker, vectorised over runs.
 
     Occluded runs last Geometric(1/L) samples (mean L = ``mean_run`` samples); visible runs
@@ -236,8 +235,9 @@ def _bias_scale(robot: Robot, s: np.ndarray, q: np.ndarray) -> np.ndarray:
     return scale
 
 
-def draw_truth(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray,
-               rng: np.random.Generator) -> Calibration:
+def draw_truth(
+    robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray, rng: np.random.Generator
+) -> Calibration:
     """True sensor parameters around the nominal ones (see the module docstring).
 
     ``s`` (T, P) is the transmission quantity and ``q`` (T, n) the joint angles of the run,
@@ -256,10 +256,19 @@ def draw_truth(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.nd
     xyz = nominal.marker_xyz + direction * distance
     R = Rotation.random(random_state=rng).as_matrix()
     T = rng.uniform([-1.0, -1.0, 0.5], [1.0, 1.0, 1.5])
-    return Calibration(pot_names=nominal.pot_names, gain=gain, bias=bias,
-                       marker_names=nominal.marker_names, marker_links=nominal.marker_links,
-                       marker_xyz=xyz, mocap_R=R, mocap_T=T, sigma_pots=options.pot_noise,
-                       sigma_markers=options.marker_noise, method="truth")
+    return Calibration(
+        pot_names=nominal.pot_names,
+        gain=gain,
+        bias=bias,
+        marker_names=nominal.marker_names,
+        marker_links=nominal.marker_links,
+        marker_xyz=xyz,
+        mocap_R=R,
+        mocap_T=T,
+        sigma_pots=options.pot_noise,
+        sigma_markers=options.marker_noise,
+        method="truth",
+    )
 
 
 # ----------------------------------------------------------------------------- effects
@@ -305,13 +314,13 @@ def _default_channel(request: EffectRequest, robot: Robot, rng) -> str:
         "time_offset": ["markers"],
     }[request.name]
     if not choices:
-        raise EffectError(f"effect '{request.name}': robot {robot.name!r} has nothing it can "
-                          "act on")
+        raise EffectError(f"effect '{request.name}': robot {robot.name!r} has nothing it can act on")
     return str(choices[int(rng.integers(len(choices)))])
 
 
-def plan_effects(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray,
-                 gain: np.ndarray, seed: int) -> EffectPlan:
+def plan_effects(
+    robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray, gain: np.ndarray, seed: int
+) -> EffectPlan:
     """Draw every requested effect's true values (seeded per effect) and its /truth record.
 
     ``s`` (T, P) transmission quantities and ``q`` (T, n) joint angles of the effect-free run
@@ -348,14 +357,12 @@ def plan_effects(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.
             s0, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-9)
             peak = rng.uniform(0.05, 0.10) * abs(gain[i]) * half * rng.choice([-1.0, 1.0])
             plan.nonlinear[i] = (s0, peak / half**2)
-            values = {"form": "reading += c2 * (s - s0)**2", "s0": s0, "c2": peak / half**2,
-                      "peak": peak}
+            values = {"form": "reading += c2 * (s - s0)**2", "s0": s0, "c2": peak / half**2, "peak": peak}
         elif req.name == "time_offset":
             check_channel(req, ["markers"], "clock (use time_offset:markers)")
             k = int(rng.integers(3, 9)) * int(rng.choice([-1, 1]))
             plan.shift = k
-            values = {"samples": k, "seconds": k / options.rate_hz,
-                      "convention": "markers[t] observe q(t + seconds)"}
+            values = {"samples": k, "seconds": k / options.rate_hz, "convention": "markers[t] observe q(t + seconds)"}
         else:  # marker_slip
             m = markers.index(check_channel(req, markers, "marker"))
             t_slip = int(rng.uniform(0.3, 0.7) * T)
@@ -364,8 +371,11 @@ def plan_effects(robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.
             plan.slips[m] = (t_slip, d)
             t0 = t_slip / options.rate_hz
             values = {"sample": t_slip, "time": t0, "dxyz": d}
-            plan.records.append(effect_record(req.name, channel, values, region={
-                "variable": "time", "low": t0, "high": (T - 1) / options.rate_hz}))
+            plan.records.append(
+                effect_record(
+                    req.name, channel, values, region={"variable": "time", "low": t0, "high": (T - 1) / options.rate_hz}
+                )
+            )
             continue
         plan.records.append(effect_record(req.name, channel, values))
     return plan
@@ -423,16 +433,14 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
     options.check()
     sensors = robot.sensors
     if not sensors.pots and not sensors.markers:
-        raise RobotConfigError(f"robot {robot.name!r} has no pots and no markers: "
-                               "nothing to simulate")
+        raise RobotConfigError(f"robot {robot.name!r} has no pots and no markers: nothing to simulate")
     T, rate = options.n_samples, options.rate_hz
     seeds = rng.integers(0, 2**62, size=6)
-    traj_rng, truth_rng, pot_rng, marker_rng, occ_rng = (np.random.default_rng(s)
-                                                         for s in seeds[:5])
+    traj_rng, truth_rng, pot_rng, marker_rng, occ_rng = (np.random.default_rng(s) for s in seeds[:5])
 
     lower, upper = joint_ranges(robot)
     q_ext, qd_ext = pid_trajectory(lower, upper, T + 2 * PAD, rate, traj_rng, options.hold)
-    q, qd = q_ext[PAD:PAD + T], qd_ext[PAD:PAD + T]
+    q, qd = q_ext[PAD : PAD + T], qd_ext[PAD : PAD + T]
     fast = offset_robot(robot, {})
     s_nominal = pot_transmission(fast, q) if sensors.pots else np.zeros((T, 0))
     truth = draw_truth(robot, options, s_nominal, q, truth_rng)
@@ -450,22 +458,25 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
         p += pot_rng.normal(0.0, options.pot_noise, p.shape)
         streams["pots"] = make_stream(sensors.pot_names, p)
     if sensors.markers:
-        q_mocap = q_ext[PAD + plan.shift: PAD + plan.shift + T]
+        q_mocap = q_ext[PAD + plan.shift : PAD + plan.shift + T]
         x = marker_positions(gen, q_mocap, truth, plan.slips)
         x += marker_rng.normal(0.0, options.marker_noise, x.shape)
-        mask = occlusion_mask(T, len(sensors.markers), options.occlusion,
-                              options.occlusion_run * rate, occ_rng)
+        mask = occlusion_mask(T, len(sensors.markers), options.occlusion, options.occlusion_run * rate, occ_rng)
         x[mask] = np.nan
         streams["markers"] = make_stream(sensors.marker_names, x)
 
     signals = {"q": make_stream(robot.joint_names, q), "qd": make_stream(robot.joint_names, qd)}
     name = robot.directory.name if robot.directory is not None else robot.name
-    return Log(time=np.arange(T) / rate, streams=streams, robot=name, rate_hz=rate,
-               truth=Truth(params=truth.to_dict(), effects=plan.records, signals=signals))
+    return Log(
+        time=np.arange(T) / rate,
+        streams=streams,
+        robot=name,
+        rate_hz=rate,
+        truth=Truth(params=truth.to_dict(), effects=plan.records, signals=signals),
+    )
 
 
-def marker_positions(robot: Robot, q: np.ndarray, truth: Calibration,
-                     slips: dict | None = None) -> np.ndarray:
+def marker_positions(robot: Robot, q: np.ndarray, truth: Calibration, slips: dict | None = None) -> np.ndarray:
     """Noise-free markers in the mocap frame (T, M, 3), m, thesis eq. 2.11-2.12.
 
     ``slips`` maps a marker index to (sample, (3,) m): from that sample on, the marker sits

@@ -138,13 +138,11 @@ def test_link_offset_moves_only_the_markers_below_that_joint(robot, clean):
     shift = log.streams["markers"].data - clean.streams["markers"].data
     names = robot.sensors.marker_names
     for m in ("m_upper", "m_lower", "m_slider"):  # on the shoulder's subtree: shifted by |d|
-        np.testing.assert_allclose(np.linalg.norm(shift[:, names.index(m)], axis=1),
-                                   np.linalg.norm(d), rtol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(shift[:, names.index(m)], axis=1), np.linalg.norm(d), rtol=1e-9)
     for m in ("m_head", "m_finger"):
         np.testing.assert_array_equal(shift[:, names.index(m)], 0.0)
     R = Calibration.from_dict(log.truth.params).mocap_R  # waist is the base: shift = R d
-    np.testing.assert_allclose(shift[:, names.index("m_upper")], np.tile(R @ d, (log.n_samples, 1)),
-                               atol=1e-12)
+    np.testing.assert_allclose(shift[:, names.index("m_upper")], np.tile(R @ d, (log.n_samples, 1)), atol=1e-12)
 
 
 def test_link_offset_reaches_linear_pots_through_their_anchors(robot, clean):
@@ -182,8 +180,7 @@ def test_backlash_lags_the_reading_in_the_direction_of_motion(robot, clean):
     assert np.mean(np.isclose(lag[down], half, atol=1e-9)) > 0.7
     step = np.diff(lag)
     assert (step[up[1:]] <= 1e-12).all() and (step[down[1:]] >= -1e-12).all()
-    np.testing.assert_array_equal(np.delete(log.streams["pots"].data - clean.streams["pots"].data,
-                                            i, axis=1), 0.0)
+    np.testing.assert_array_equal(np.delete(log.streams["pots"].data - clean.streams["pots"].data, i, axis=1), 0.0)
 
 
 def test_backlash_operator_is_a_dead_band():
@@ -198,7 +195,7 @@ def test_time_offset_shifts_the_mocap_clock_only(robot, clean):
     np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
     a, b = log.streams["markers"].data, clean.streams["markers"].data
     lo, hi = max(0, -k), log.n_samples - max(0, k)
-    np.testing.assert_allclose(a[lo:hi], b[lo + k: hi + k], atol=1e-12)
+    np.testing.assert_allclose(a[lo:hi], b[lo + k : hi + k], atol=1e-12)
     assert np.abs(a - b).max() > 1e-3
 
 
@@ -257,9 +254,27 @@ runner = CliRunner()
 
 def test_cli_writes_a_log_with_truth(tmp_path):
     out = tmp_path / "k.h5"
-    res = runner.invoke(app, ["simulate", "kinematics", "--robot", str(TINY), "-o", str(out),
-                              "--duration", "5", "--seed", "3", "--effect", "backlash:elbow",
-                              "--occlusion", "0.2", "--marker-noise", "0.001"])
+    res = runner.invoke(
+        app,
+        [
+            "simulate",
+            "kinematics",
+            "--robot",
+            str(TINY),
+            "-o",
+            str(out),
+            "--duration",
+            "5",
+            "--seed",
+            "3",
+            "--effect",
+            "backlash:elbow",
+            "--occlusion",
+            "0.2",
+            "--marker-noise",
+            "0.001",
+        ],
+    )
     assert res.exit_code == 0, res.output
     log = load_log(out)
     assert log.n_samples == 500 and log.robot == "kin_tiny"
@@ -267,18 +282,20 @@ def test_cli_writes_a_log_with_truth(tmp_path):
     assert log.truth.params["sigma"]["markers"] == 0.001
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--effect", "wobble"], "not a kinematics effect"),
-    (["--effect", "backlash:nope"], "'nope' is not a pot"),
-    (["--effect", "marker_slip:m99"], "'m99' is not a marker"),
-    (["--effect", "time_offset:pots"], "time_offset:markers"),
-    (["--duration", "-2"], "duration must be positive"),
-    (["--occlusion", "1.5"], "occlusion fraction"),
-    (["--robot", "/no/such/robot"], "not found"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--effect", "wobble"], "not a kinematics effect"),
+        (["--effect", "backlash:nope"], "'nope' is not a pot"),
+        (["--effect", "marker_slip:m99"], "'m99' is not a marker"),
+        (["--effect", "time_offset:pots"], "time_offset:markers"),
+        (["--duration", "-2"], "duration must be positive"),
+        (["--occlusion", "1.5"], "occlusion fraction"),
+        (["--robot", "/no/such/robot"], "not found"),
+    ],
+)
 def test_cli_bad_input_is_one_clear_line(tmp_path, args, message):
-    base_args = ["simulate", "kinematics", "--robot", str(TINY), "-o", str(tmp_path / "x.h5"),
-                 "--duration", "1"]
+    base_args = ["simulate", "kinematics", "--robot", str(TINY), "-o", str(tmp_path / "x.h5"), "--duration", "1"]
     res = runner.invoke(app, base_args + args)
     assert res.exit_code != 0
     assert message in res.output
@@ -303,8 +320,9 @@ def test_robot_with_markers_only_or_no_sensors(tmp_path):
     with pytest.raises(EffectError, match="nothing it can act on"):
         simulate(load_robot(_variant(tmp_path, False, True)), duration=2.0, effects=["backlash"])
     bare = _variant(tmp_path, False, False)
-    res = runner.invoke(app, ["simulate", "kinematics", "--robot", str(bare),
-                              "-o", str(tmp_path / "x.h5"), "--duration", "1"])
+    res = runner.invoke(
+        app, ["simulate", "kinematics", "--robot", str(bare), "-o", str(tmp_path / "x.h5"), "--duration", "1"]
+    )
     assert res.exit_code != 0 and "nothing to simulate" in res.output
 
 
@@ -322,5 +340,4 @@ def test_batched_points_equal_the_library_loop(tmp_path, base_link):
     robot = load_robot(tmp_path)
     q = np.random.default_rng(1).uniform(robot.lower, robot.upper, (50, robot.n_joints))
     pts = marker_points(robot, np.random.default_rng(2).normal(0, 0.05, (5, 3)))
-    np.testing.assert_allclose(base_points(robot, q, pts.links, pts.xyz), robot.points(q, pts),
-                               atol=1e-13)
+    np.testing.assert_allclose(base_points(robot, q, pts.links, pts.xyz), robot.points(q, pts), atol=1e-13)
