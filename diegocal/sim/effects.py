@@ -20,6 +20,8 @@ VOCABULARY: dict[str, str] = {
     "backlash": "kinematics",
     "time_offset": "kinematics",
     "marker_slip": "kinematics",
+    "marker_outliers": "kinematics",
+    "swapped_labels": "kinematics",
     "coulomb_friction": "dynamics",
     "viscous_friction": "dynamics",
     "position_friction": "dynamics",

@@ -18,7 +18,11 @@ Readings follow the observation models of :mod:`diegocal.robot.observe` (eq. 2.1
 
 Markers are NaN over contiguous occlusion runs (a two-state Markov chain per marker).
 Kinematic effects from DESIGN.md's vocabulary are injected by name (:func:`plan_effects`) and
-recorded in ``/truth`` with their true values.
+recorded in ``/truth`` with their true values. Two of them corrupt the mocap stream itself, as
+labelling errors of a real motion-capture session do: ``marker_outliers`` (ghost markers and
+reflections: a reading a few cm to dm off for a few samples) and ``swapped_labels`` (two nearby
+markers exchange labels for runs of a fraction of a second); ``/truth`` then also holds the
+signal ``markers_corrupted`` (T, M), 1 where a reading is not its own marker's.
 """
 
 from __future__ import annotations
@@ -282,6 +286,8 @@ class EffectPlan:
     nonlinear: dict = field(default_factory=dict)  # pot index -> (s0, c2)
     shift: int = 0  # markers[t] observe q[t + shift]
     slips: dict = field(default_factory=dict)  # marker index -> (sample, (3,) m)
+    outliers: list = field(default_factory=list)  # (marker index, start, length, (3,) m)
+    swaps: list = field(default_factory=list)  # (marker index, partner index, start, length)
 
 
 def _effect_rng(seed: int, request: EffectRequest) -> np.random.Generator:
@@ -312,25 +318,62 @@ def _default_channel(request: EffectRequest, robot: Robot, rng) -> str:
         "backlash": analog,
         "marker_slip": list(robot.sensors.marker_names),
         "time_offset": ["markers"],
+        "marker_outliers": ["markers"] if robot.sensors.markers else [],
+        "swapped_labels": list(robot.sensors.marker_names) if len(robot.sensors.markers) > 1 else [],
     }[request.name]
     if not choices:
         raise EffectError(f"effect '{request.name}': robot {robot.name!r} has nothing it can act on")
     return str(choices[int(rng.integers(len(choices)))])
 
 
+def _runs(rng, n_samples: int, fraction: float, low: int, high: int) -> list[tuple[int, int]]:
+    """Non-overlapping runs (start, length) of U{low..high} samples covering about ``fraction``
+    of ``n_samples``, at uniformly random places."""
+    runs, covered = [], np.zeros(n_samples, dtype=bool)
+    target = int(round(fraction * n_samples))
+    for _ in range(100 * max(target, 1)):  # bounded: stops when the target is covered
+        if covered.sum() >= target:
+            break
+        length = int(rng.integers(low, high + 1))
+        start = int(rng.integers(0, max(n_samples - length, 0) + 1))
+        if not covered[start : start + length].any():
+            covered[start : start + length] = True
+            runs.append((start, length))
+    return sorted(runs)
+
+
+def _nearest_marker(x: np.ndarray, m: int) -> int:
+    """The marker whose true path (T, M, 3) stays closest to marker m's on average."""
+    d = np.linalg.norm(x - x[:, m : m + 1], axis=-1).mean(axis=0)
+    d[m] = np.inf
+    return int(np.argmin(d))
+
+
 def plan_effects(
-    robot: Robot, options: KinematicsOptions, s: np.ndarray, q: np.ndarray, gain: np.ndarray, seed: int
+    robot: Robot,
+    options: KinematicsOptions,
+    s: np.ndarray,
+    q: np.ndarray,
+    gain: np.ndarray,
+    seed: int,
+    x: np.ndarray | None = None,
 ) -> EffectPlan:
     """Draw every requested effect's true values (seeded per effect) and its /truth record.
 
     ``s`` (T, P) transmission quantities and ``q`` (T, n) joint angles of the effect-free run
-    set the scale of pot effects; ``gain`` (P,) the true pot gains.
+    set the scale of pot effects; ``gain`` (P,) the true pot gains; ``x`` (T, M, 3) the clean
+    marker paths choose a swapped label's partner.
 
     - ``link_offset:JOINT``: the joint's origin moves by 5-10 mm (random direction).
     - ``backlash:POT``: play operator of width 0.02-0.05 rad (equivalent) on s.
     - ``sensor_nonlinearity:POT``: ``c2 (s - s0)²`` added, peak 5-10 % of the half-range.
     - ``time_offset:markers``: markers[t] observe q(t + k/rate), |k| = 3..8 samples.
     - ``marker_slip:MARKER``: the marker moves 1-3 cm on its link at 30-70 % of the run.
+    - ``marker_outliers[:MARKER]``: in 1-3 % of the samples of each marker (``markers``, the
+      default) or of the one named, the reading is off by 3-15 cm in a random direction, for
+      runs of 1-5 samples (ghosts, reflections, a neighbour's label for an instant).
+    - ``swapped_labels:MARKER``: the marker and its nearest neighbour (on average over the run)
+      exchange labels in 3-8 % of the samples, in runs of 0.2-1 s.
     """
     plan = EffectPlan()
     pots, markers = robot.sensors.pot_names, robot.sensors.marker_names
@@ -363,6 +406,31 @@ def plan_effects(
             k = int(rng.integers(3, 9)) * int(rng.choice([-1, 1]))
             plan.shift = k
             values = {"samples": k, "seconds": k / options.rate_hz, "convention": "markers[t] observe q(t + seconds)"}
+        elif req.name == "marker_outliers":
+            check_channel(req, ["markers", *markers], "marker (or 'markers' for all)")
+            which = range(len(markers)) if channel == "markers" else [markers.index(channel)]
+            fraction = rng.uniform(0.01, 0.03)
+            for m in which:
+                for start, length in _runs(rng, T, fraction, 1, 5):
+                    d = rng.normal(size=3)
+                    plan.outliers.append((m, start, length, d * rng.uniform(0.03, 0.15) / np.linalg.norm(d)))
+            samples = sum(o[2] for o in plan.outliers)
+            values = {"fraction": fraction, "samples": samples, "distance": [0.03, 0.15], "run_samples": [1, 5]}
+        elif req.name == "swapped_labels":
+            m = markers.index(check_channel(req, markers, "marker"))
+            if len(markers) < 2 or x is None:
+                raise EffectError(f"effect '{req}': needs a second marker to swap labels with")
+            k = _nearest_marker(x, m)
+            fraction = rng.uniform(0.03, 0.08)
+            lo, hi = max(1, round(0.2 * options.rate_hz)), max(1, round(1.0 * options.rate_hz))
+            runs = _runs(rng, T, fraction, lo, hi)
+            plan.swaps += [(m, k, start, length) for start, length in runs]
+            values = {
+                "partner": markers[k],
+                "fraction": fraction,
+                "runs": len(runs),
+                "samples": sum(r[1] for r in runs),
+            }
         else:  # marker_slip
             m = markers.index(check_channel(req, markers, "marker"))
             t_slip = int(rng.uniform(0.3, 0.7) * T)
@@ -444,7 +512,9 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
     fast = offset_robot(robot, {})
     s_nominal = pot_transmission(fast, q) if sensors.pots else np.zeros((T, 0))
     truth = draw_truth(robot, options, s_nominal, q, truth_rng)
-    plan = plan_effects(robot, options, s_nominal, q, truth.gain, int(seeds[5]))
+    swaps = any(e.name == "swapped_labels" for e in options.effects)
+    x_nominal = marker_positions(fast, q, truth) if swaps and sensors.markers else None
+    plan = plan_effects(robot, options, s_nominal, q, truth.gain, int(seeds[5]), x_nominal)
     gen = offset_robot(robot, plan.joint_offsets)
 
     streams = {}
@@ -461,11 +531,15 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
         q_mocap = q_ext[PAD + plan.shift : PAD + plan.shift + T]
         x = marker_positions(gen, q_mocap, truth, plan.slips)
         x += marker_rng.normal(0.0, options.marker_noise, x.shape)
+        x, corrupted = corrupt_labels(x, plan)
         mask = occlusion_mask(T, len(sensors.markers), options.occlusion, options.occlusion_run * rate, occ_rng)
         x[mask] = np.nan
+        corrupted &= ~mask
         streams["markers"] = make_stream(sensors.marker_names, x)
 
     signals = {"q": make_stream(robot.joint_names, q), "qd": make_stream(robot.joint_names, qd)}
+    if plan.outliers or plan.swaps:
+        signals["markers_corrupted"] = make_stream(sensors.marker_names, corrupted.astype(float))
     name = robot.directory.name if robot.directory is not None else robot.name
     return Log(
         time=np.arange(T) / rate,
@@ -474,6 +548,21 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
         rate_hz=rate,
         truth=Truth(params=truth.to_dict(), effects=plan.records, signals=signals),
     )
+
+
+def corrupt_labels(x: np.ndarray, plan: EffectPlan) -> tuple[np.ndarray, np.ndarray]:
+    """Markers (T, M, 3) with the plan's label swaps and outliers applied, and the mask (T, M)
+    of readings that are not their own marker's (swaps first, then outliers on top)."""
+    x = x.copy()
+    bad = np.zeros(x.shape[:2], dtype=bool)
+    for m, k, start, length in plan.swaps:
+        sl = slice(start, start + length)
+        x[sl, m], x[sl, k] = x[sl, k].copy(), x[sl, m].copy()
+        bad[sl, m] = bad[sl, k] = True
+    for m, start, length, d in plan.outliers:
+        x[start : start + length, m] += d
+        bad[start : start + length, m] = True
+    return x, bad
 
 
 def marker_positions(robot: Robot, q: np.ndarray, truth: Calibration, slips: dict | None = None) -> np.ndarray:

@@ -212,14 +212,53 @@ def test_marker_slip_moves_one_marker_from_the_recorded_time(robot, clean):
     np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
 
 
+def test_marker_outliers_displace_short_runs_of_readings(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["marker_outliers"]))
+    rec = _effect(log)
+    assert rec["channel"] == "markers" and 0.01 <= rec["values"]["fraction"] <= 0.03
+    bad = log.truth.signals["markers_corrupted"].data.astype(bool)
+    diff = log.streams["markers"].data - clean.streams["markers"].data
+    moved = np.linalg.norm(diff, axis=-1)
+    np.testing.assert_array_equal(moved > 0, bad)  # only the recorded readings, and all of them
+    assert np.all((moved[bad] >= 0.03 - 1e-12) & (moved[bad] <= 0.15 + 1e-12))
+    # every marker gets its share, in runs of 1-5 samples
+    np.testing.assert_allclose(bad.mean(axis=0), rec["values"]["fraction"], atol=0.005)
+    starts = (bad[1:] & ~bad[:-1]).sum(axis=0) + bad[0]
+    assert np.all(bad.sum(axis=0) / starts <= 5) and bad.sum() == rec["values"]["samples"]
+    np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
+
+
+def test_swapped_labels_exchange_two_nearby_markers_in_runs(robot, clean):
+    log = simulate(robot, **_noise_free(effects=["swapped_labels:m_lower"]))
+    rec = _effect(log)
+    names = robot.sensors.marker_names
+    m, k = names.index("m_lower"), names.index(rec["values"]["partner"])
+    x, x0 = log.streams["markers"].data, clean.streams["markers"].data
+    dist = np.linalg.norm(x0 - x0[:, m : m + 1], axis=-1).mean(axis=0)
+    assert k == np.argsort(dist)[1]  # the nearest other marker
+    bad = log.truth.signals["markers_corrupted"].data.astype(bool)
+    swapped = bad[:, m]
+    np.testing.assert_array_equal(bad[:, k], swapped)
+    assert swapped.sum() == rec["values"]["samples"] and 0.03 <= rec["values"]["fraction"] <= 0.08
+    np.testing.assert_array_equal(x[swapped, m], x0[swapped, k])
+    np.testing.assert_array_equal(x[swapped, k], x0[swapped, m])
+    np.testing.assert_array_equal(x[~bad], x0[~bad])
+    starts = (swapped[1:] & ~swapped[:-1]).sum() + swapped[0]
+    assert starts == rec["values"]["runs"] and 20 <= swapped.sum() / starts <= 100  # 0.2-1 s at 100 Hz
+    assert "markers_corrupted" not in clean.truth.signals
+
+
 def test_effects_without_channel_pick_a_valid_one_reproducibly(robot):
-    a = simulate(robot, effects=["backlash", "link_offset", "marker_slip"], duration=5.0)
-    b = simulate(robot, effects=["backlash", "link_offset", "marker_slip"], duration=5.0)
+    effects = ["backlash", "link_offset", "marker_slip", "swapped_labels", "marker_outliers"]
+    a = simulate(robot, effects=effects, duration=5.0)
+    b = simulate(robot, effects=effects, duration=5.0)
     assert a.truth.effects == b.truth.effects
+    np.testing.assert_array_equal(a.streams["markers"].data, b.streams["markers"].data)
     by = {e["cause"]: e["channel"] for e in a.truth.effects}
     assert by["backlash"] in robot.sensors.pot_names
     assert by["link_offset"] in robot.joint_names
     assert by["marker_slip"] in robot.sensors.marker_names
+    assert by["swapped_labels"] in robot.sensors.marker_names and by["marker_outliers"] == "markers"
 
 
 def test_bad_effects_and_options_raise(robot):
@@ -280,6 +319,28 @@ def test_cli_writes_a_log_with_truth(tmp_path):
     assert log.n_samples == 500 and log.robot == "kin_tiny"
     assert log.truth.effects[0]["cause"] == "backlash"
     assert log.truth.params["sigma"]["markers"] == 0.001
+    out2 = tmp_path / "k2.h5"
+    res = runner.invoke(
+        app,
+        [
+            "simulate",
+            "kinematics",
+            "--robot",
+            str(TINY),
+            "-o",
+            str(out2),
+            "--duration",
+            "5",
+            "--effect",
+            "swapped_labels",
+            "--effect",
+            "marker_outliers:m_head",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    back = load_log(out2)
+    assert [e["cause"] for e in back.truth.effects] == ["swapped_labels", "marker_outliers"]
+    assert back.truth.signals["markers_corrupted"].data.any()
 
 
 @pytest.mark.parametrize(
@@ -288,6 +349,8 @@ def test_cli_writes_a_log_with_truth(tmp_path):
         (["--effect", "wobble"], "not a kinematics effect"),
         (["--effect", "backlash:nope"], "'nope' is not a pot"),
         (["--effect", "marker_slip:m99"], "'m99' is not a marker"),
+        (["--effect", "swapped_labels:m99"], "'m99' is not a marker"),
+        (["--effect", "marker_outliers:elbow"], "'elbow' is not a marker"),
         (["--effect", "time_offset:pots"], "time_offset:markers"),
         (["--duration", "-2"], "duration must be positive"),
         (["--occlusion", "1.5"], "occlusion fraction"),
