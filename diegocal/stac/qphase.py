@@ -180,7 +180,9 @@ def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     return out
 
 
-def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_red=True):
+def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_red, out) -> dict:
+    """One LM step on the frames ``sl``, written into ``out`` (q, λ, s, Rl, pl, cost over all
+    frames); returns the batch's redundancy."""
     lo, hi = obs.lower, obs.upper
     H, g, c0, (s, Rl, pl), red, _ = normal_equations(obs, params, noise, q, sl, want_red)
     q, lam = q[sl], lam[sl]
@@ -189,15 +191,15 @@ def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want
     cand = np.clip(q + delta, lo, hi)  # projection onto the joint limits
     s1, _, Rl1, pl1, _ = obs.evaluate(cand)
     c1 = frame_cost(obs, params, noise, s1, Rl1, pl1, pots, markers, valid)
-    ok = c1 <= c0
-    q_new = np.where(ok[:, None], cand, q)
-    lam_new = np.where(ok, np.maximum(lam / 3.0, 1e-7), np.minimum(lam * 4.0, 1e7))
-    st = (
-        np.where(ok[:, None], s1, s),
-        np.where(ok[:, None, None, None], Rl1, Rl),
-        np.where(ok[:, None, None], pl1, pl),
-    )
-    return q_new, lam_new, st, np.where(ok, c1, c0), red
+    ok = c1 <= c0  # accept: λ/3; reject: λ x 4, keep q
+    q_out, lam_out, s_out, Rl_out, pl_out, c_out = (x[sl] for x in out)
+    q_out[...] = np.where(ok[:, None], cand, q)
+    lam_out[...] = np.where(ok, np.maximum(lam / 3.0, 1e-7), np.minimum(lam * 4.0, 1e7))
+    s_out[...] = np.where(ok[:, None], s1, s)
+    Rl_out[...] = np.where(ok[:, None, None, None], Rl1, Rl)
+    pl_out[...] = np.where(ok[:, None, None], pl1, pl)
+    c_out[...] = np.where(ok, c1, c0)
+    return red
 
 
 def q_step(
@@ -215,12 +217,18 @@ def q_step(
     Returns (q (T, n), λ (T,), State at the new q, cost (T,), redundancy {group: Σ tr_g} at
     the old q; empty unless ``want_red``: it costs one n x n inverse per frame).
     """
-    parts = map_batches(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red), q.shape[0], batch, jobs)
-    q_new = np.concatenate([p[0] for p in parts])
-    lam_new = np.concatenate([p[1] for p in parts])
-    st = State(*(np.concatenate([p[2][k] for p in parts]) for k in range(3)))
-    red = {g: sum(p[4][g] for p in parts) for g in parts[0][4]}
-    return q_new, lam_new, st, np.concatenate([p[3] for p in parts]), red
+    T, M = q.shape[0], obs.n_markers
+    out = (
+        np.empty_like(q),
+        np.empty_like(lam),
+        np.empty((T, obs.n_pots)),
+        np.empty((T, M, 3, 3)),
+        np.empty((T, M, 3)),
+        np.empty(T),
+    )
+    reds = map_batches(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red, out), T, batch, jobs)
+    red = {g: sum(r[g] for r in reds) for g in reds[0]}
+    return out[0], out[1], State(*out[2:5]), out[5], red
 
 
 def group_sigma(obs: Observation, params: Params, st: State, used: dict | None = None) -> dict:
