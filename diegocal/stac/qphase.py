@@ -6,11 +6,13 @@ Each frame t solves, independently (eq. 2.6),
           + \\sum_j \\rho((\\hat p_{jt} - p_{jt}) / \\sigma_{p,kind(j)})
 
 with ρ(z) = z²/2 (Gaussian, eq. 2.21) or Huber's loss. One Levenberg-Marquardt step per call:
-the batched normal equations ``(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀW r`` are solved with
-``np.linalg.solve`` on (B, n, n), the step is projected onto the joint limits, and each frame
-keeps its own damping λ_t (accept: λ/3, reject: λ·4). Jacobians are eq. 2.22 (pots) and eq. 2.23
-(markers) from :mod:`diegocal.robot.batch`. Batches run in threads (``jobs``): numpy
-releases the GIL in the heavy products, and no robot model is pickled.
+the batched normal equations ``(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀW r`` are solved per frame, the
+step is projected onto the joint limits, and each frame keeps its own damping λ_t (accept: λ/3,
+reject: λ·4). J (eq. 2.22 pots, eq. 2.23 markers) is never formed: JᵀWJ and JᵀW r are summed
+from its structure (:func:`normal_equations`), and JᵀWJ is block diagonal over the joints that
+share no sensor (diego: torso, head and arms; each leg), so each block is solved on its own.
+Batches of frames (``batch_size``, 250: their arrays stay in cache) run in threads (``jobs``):
+numpy releases the GIL in the heavy products, and no robot model is pickled.
 """
 
 from __future__ import annotations
