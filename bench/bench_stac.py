@@ -145,11 +145,12 @@ def full(frames: int, seed: int = 0, jobs: tuple = (1, 2), classical: bool = Tru
         zmax = float(np.nanmax(np.abs((cal.gain - truth.gain) / cal.gain_se)))
         rmse = float(np.sqrt(np.mean((res.q - q_true)[:, free_q] ** 2)))  # gauge joints excluded
         frames_used = [h.frames for h in res.history]
-        iters = f"{len(frames_used) - frames_used.count(log.n_samples)}+{frames_used.count(log.n_samples)}"
+        full_iters = frames_used.count(log.n_samples)
+        iters = f"{len(frames_used) - full_iters}+{full_iters}" if name.startswith("stac") else str(cal.fit.iterations)
         print(f"{name:<16}{wall:>8.1f}{cpu:>8.1f}{rss:>14.0f}{iters:>9}{gerr:>14.5f}{zmax:>14.2f}{rmse:>12.4f}")
         if name == "stac --jobs 1":
             stac_res = res
-    print(f"({_load()}; iters: on the subset + on all frames; max |z|: |gain − truth| / SE)")
+    print(f"({_load()}; STAC iters: on the subset + on all frames; max |z|: |gain − truth| / SE)")
     _where_the_time_goes(data, robot, stac_res, log.n_samples)
 
 
