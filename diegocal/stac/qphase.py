@@ -5,7 +5,8 @@ Each frame t solves, independently (eq. 2.6),
 .. math:: q_t^* = \\arg\\min_{q_t} \\sum_m \\rho(\\|\\hat x_{mt} - x_{mt}\\| / \\sigma_x)
           + \\sum_j \\rho((\\hat p_{jt} - p_{jt}) / \\sigma_{p,kind(j)})
 
-with ρ(z) = z²/2 (Gaussian, eq. 2.21) or Huber's loss. One Levenberg-Marquardt step per call:
+with ρ(z) = z²/2 (Gaussian, eq. 2.21) or, for the markers only, a robust loss (Huber's or
+Tukey's, :mod:`.robust`); the pots stay Gaussian. One Levenberg-Marquardt step per call:
 the batched normal equations ``(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀW r`` are solved per frame, the
 step is projected onto the joint limits, and each frame keeps its own damping λ_t (accept: λ/3,
 reject: λ·4). J (eq. 2.22 pots, eq. 2.23 markers) is never formed: JᵀWJ and JᵀW r are summed
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from diegocal.stac import robust
 from diegocal.stac.model import MARKERS, Observation, Params, State
 
 
@@ -39,18 +41,13 @@ class Noise:
 
 
 def rho(z: np.ndarray, loss: str, k: float) -> np.ndarray:
-    """Loss of standardised residuals z (any shape): z²/2 or Huber."""
-    if loss == "huber":
-        a = np.abs(z)
-        return np.where(a <= k, 0.5 * z * z, k * a - 0.5 * k * k)
-    return 0.5 * z * z
+    """Loss of standardised residuals z (any shape): z²/2, Huber or Tukey (:func:`.robust.rho`)."""
+    return robust.rho(z, loss, k)
 
 
 def irls_weight(z: np.ndarray, loss: str, k: float) -> np.ndarray:
-    """IRLS weight ρ'(z)/z: 1 (Gaussian) or min(1, k/|z|) (Huber)."""
-    if loss == "huber":
-        return np.minimum(1.0, k / np.maximum(np.abs(z), 1e-300))
-    return np.ones_like(z)
+    """IRLS weight ρ'(z)/z (:func:`.robust.weight`)."""
+    return robust.weight(z, loss, k)
 
 
 def residuals(obs: Observation, params: Params, noise: Noise, s, Rl, pl, pots, markers, valid):
@@ -67,7 +64,7 @@ def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarra
     zp, zx, _ = residuals(obs, params, noise, s, Rl, pl, pots, markers, valid)
     c = np.zeros(s.shape[0])
     if noise.use_pots:
-        c += rho(zp, noise.loss, noise.huber).sum(1)
+        c += 0.5 * (zp * zp).sum(1)  # pots: Gaussian under every loss (robust.py)
     if noise.use_markers:
         c += rho(zx, noise.loss, noise.huber).sum(1)
     return c
@@ -96,7 +93,7 @@ def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarr
     wx = x = None
     if noise.use_pots and obs.n_pots:
         kp = params.gain / noise.sig_p  # eq. 2.22: ∂z_p/∂q = (gain / σ_p) ∂s/∂q
-        wp = irls_weight(zp, noise.loss, noise.huber)
+        wp = np.ones_like(zp)  # pots: Gaussian under every loss (robust.py)
         wz = wp * zp * kp
         g += wz @ obs.A
         sp = obs.sparsity
@@ -110,7 +107,7 @@ def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarr
             U = (sp.lin_cols[:, None] * n + sp.lin_cols).ravel()
             parts["linear"] = (U, (np.swapaxes(Jl, 1, 2) @ (Jl * wp[:, obs.linear, None])).reshape(B, -1))
             flat[:, U] += parts["linear"][1]
-        c0 += rho(zp, noise.loss, noise.huber).sum(1)
+        c0 += 0.5 * (zp * zp).sum(1)
     if noise.use_markers and obs.n_markers:
         wx = irls_weight(zx, noise.loss, noise.huber) * valid
         x = (Rl @ params.xyz[:, :, None])[..., 0] + pl  # markers in the base frame (eq. 2.11)

@@ -46,7 +46,8 @@ class StacOptions:
     max_iterations : outer alternations (STAC: per stage, coarse and full-data) or passes (EKF)
     tolerance : cost change per reading (x 10, nats) that ends the alternation (STAC: once σ
         has settled too)
-    loss : 'linear' (Gaussian, eq. 2.21) or 'huber' (robust to mocap outliers/swapped labels)
+    loss : 'linear' (Gaussian, eq. 2.21), or for the markers 'huber' or 'tukey' (Tukey's biweight
+        after a Huber stage), robust to mocap outliers and swapped labels (:mod:`.robust`)
     huber_scale : residual (in sigmas) where the Huber loss turns linear
     jobs : workers (STAC: threads over batches of frames in the q-phase and the joint step)
     schedule : STAC q-phase schedule, 'lm-iter' (default), 'lm-batch' or 'bfgs' (thesis §2.6.1)

@@ -5,8 +5,9 @@ sensor type, §2.3.5)
 
 .. math:: LL(q_{1:T}, θ, σ) = \\sum_g \\Big[\\sum_{i \\in g} ρ(r_i / σ_g) + N_g \\log σ_g\\Big]
 
-is minimised by alternating a p-phase (θ in closed form at fixed q, :mod:`.pphase`), a q-phase
-(per-frame damped Gauss-Newton on eq. 2.21 at fixed θ, :mod:`.qphase`) and the dynamic
+(ρ: z²/2, or for the markers a robust loss, :mod:`.robust`) is minimised by alternating a p-phase
+(θ in closed form at fixed q, :mod:`.pphase`), a q-phase (per-frame damped Gauss-Newton on
+eq. 2.21 at fixed θ, :mod:`.qphase`) and the dynamic
 variance adjustment σ_g = RMS residual of sensor type g. Each block is a descent step, so the
 cost recorded per iteration is non-increasing (up to the robust weights of Huber's loss).
 σ is re-estimated (with the q-phase's degrees of freedom, see :func:`.qphase.group_sigma`)
@@ -53,7 +54,7 @@ sensor type's dynamic range (§2.3.5).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -61,15 +62,16 @@ from threadpoolctl import threadpool_limits
 from diegocal.errors import FitError
 from diegocal.io import Log
 from diegocal.robot import Robot
+from diegocal.stac import robust
 from diegocal.stac.calibration import FitInfo
 from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.pphase import p_phase
 from diegocal.stac.qphase import Noise, normal_equations, pot_sigmas, q_step, rho
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
+from diegocal.stac.robust import LOSSES, REDESCENDING
 
 SCHEDULES = ("lm-iter", "lm-batch", "bfgs")
-LOSSES = ("linear", "huber")
 #: σ is re-estimated only once the cost at fixed σ moves by less than this (relative). Updating
 #: it every iteration while θ is still far off lets the per-type σ of the pots chase the pot
 #: residuals to zero (the likelihood is unbounded there: one pot per joint can be fitted exactly),
@@ -137,15 +139,15 @@ def dynamic_range(obs: Observation) -> dict:
 
 
 def weights(obs: Observation, params: Params, st: State, noise: Noise):
-    """Robust weights for the p-phase: pots (T, P), markers (T, M); zero where occluded."""
+    """Robust weights for the p-phase: pots (T, P) (all 1: Gaussian), markers (T, M); zero where
+    occluded."""
     wp = np.ones_like(obs.pots)
     wx = obs.valid.astype(float)
-    if noise.loss == "huber":
+    if noise.loss != "linear":
         from diegocal.stac.qphase import irls_weight, residuals
 
-        zp, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
-        wp = irls_weight(zp, "huber", noise.huber)
-        wx = irls_weight(zx, "huber", noise.huber) * obs.valid
+        _, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
+        wx = irls_weight(zx, noise.loss, noise.huber) * obs.valid
     return wp, wx
 
 
@@ -160,7 +162,7 @@ def total_cost(obs: Observation, params: Params, st: State, noise: Noise, sigma:
             c += rho(zx[obs.valid], noise.loss, noise.huber).sum() + 3 * obs.valid.sum() * np.log(sg)
         else:
             z = zp[:, obs.kinds == g]
-            c += rho(z, noise.loss, noise.huber).sum() + z.size * np.log(sg)
+            c += 0.5 * (z * z).sum() + z.size * np.log(sg)
     return float(c)
 
 
@@ -168,11 +170,12 @@ def _noise(obs, sigma, options) -> Noise:
     return Noise(pot_sigmas(obs, sigma), sigma.get(MARKERS, 1.0), options.loss, options.huber_scale)
 
 
-def _update_sigma(obs, params, st, used) -> dict:
-    """§2.3.5: re-estimate σ per type from the residuals, with the q-phase's degrees of freedom."""
+def _update_sigma(obs, params, st, used, loss: str = "linear", sigma: dict | None = None) -> dict:
+    """§2.3.5: re-estimate σ per type from the residuals, with the q-phase's degrees of freedom;
+    under a robust loss from residuals clipped at a few current σ (:func:`.robust.group_sigma`)."""
     from diegocal.stac.qphase import group_sigma
 
-    new = group_sigma(obs, params, st, used)
+    new = group_sigma(obs, params, st, used) if loss == "linear" else robust.group_sigma(obs, params, st, used, sigma)
     return {g: max(v, 1e-9) for g, v in new.items()}
 
 
@@ -228,10 +231,12 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
     params = obs.nominal(options.marker_seed)
     history: list[IterationRecord] = []
     stride = -(-obs.n_frames // options.coarse_frames) if options.coarse_frames else 1
+    # a redescending loss is not convex: its first stage (the coarse one, or a full one) uses Huber's
+    first = replace(options, loss="huber") if options.loss in REDESCENDING else options
     if stride > 1:  # coarse stage: θ and σ on every stride-th frame (module docstring)
         sub = obs.subset(slice(None, None, stride))
         q = initial_q(sub, params, options)
-        coarse = _alternate(sub, params, q, None, options, t0, history, sigma_tol=COARSE_SIGMA_TOL)
+        coarse = _alternate(sub, params, q, None, first, t0, history, sigma_tol=COARSE_SIGMA_TOL)
         params, sigma = coarse.params, coarse.sigma
         lam = np.repeat(coarse.lam, stride)[: obs.n_frames]  # warm LM state (see _alternate)
         frames = np.arange(0, obs.n_frames, stride)
@@ -239,6 +244,9 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
         q = np.stack([np.interp(t, frames, coarse.q[:, j]) for j in range(robot.n_joints)], axis=1)
     else:
         q, sigma, lam = initial_q(obs, params, options), None, None
+        if first is not options:
+            warm = _alternate(obs, params, q, sigma, first, t0, history, lam)
+            params, sigma, q, lam = warm.params, warm.sigma, warm.q, warm.lam
     fine = _alternate(obs, params, q, sigma, options, t0, history, lam)
     params, sigma, q = fine.params, fine.sigma, fine.q
     # standard errors with q marginalised (the Schur complement of the last joint step, one
@@ -336,8 +344,9 @@ def _alternate(
         params = ph.params
         change = abs(prev_fixed - cost)  # what the (q, θ) step did at fixed σ
         # §2.3.5, once (q, θ) have settled (SIGMA_SETTLE); at once on a warm start
-        if change < SIGMA_SETTLE * max(abs(cost), 1.0) or (warm and not np.isfinite(prev_fixed)):
-            new = _update_sigma(obs, params, st, used)
+        frozen = options.loss in REDESCENDING  # σ from the Huber stage (robust.py)
+        if not frozen and (change < SIGMA_SETTLE * max(abs(cost), 1.0) or (warm and not np.isfinite(prev_fixed))):
+            new = _update_sigma(obs, params, st, used, options.loss, sigma)
             sigmas.append(new)
             if len(sigmas) == 3:
                 new = _aitken(sigmas)
@@ -362,7 +371,7 @@ def _alternate(
             options.on_iteration(it, obs.to_calibration(params, ph.se, sigma, "stac"))
         # converged when the (q, θ) step moves the cost (nats) by less than 10 x tolerance per
         # reading and the last re-estimate moved σ by less than sigma_tol
-        if change < 10 * options.tolerance * n_obs and sigma_change < sigma_tol:
+        if change < 10 * options.tolerance * n_obs and (sigma_change < sigma_tol or frozen):
             converged = True
             break
     return _Stage(params, ph.se, se_joint, sigma, q, lam, converged)
@@ -374,8 +383,6 @@ def _rms_pots(obs, sigma) -> float:
 
 
 def _with_history(cal, history):
-    from dataclasses import replace
-
     return replace(
         cal,
         history=tuple(
