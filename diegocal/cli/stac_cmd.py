@@ -69,7 +69,12 @@ def stac(
         Path | None, typer.Option("-o", "--output", help="calib.yaml [default: <log>.calib.yaml].")
     ] = None,
     method: Annotated[str, typer.Option(help="stac | classical | ekf | nominal.")] = "stac",
-    loss: Annotated[str, typer.Option(help="linear (Gaussian, eq. 2.21) | huber (robust).")] = "linear",
+    loss: Annotated[
+        str,
+        typer.Option(
+            help="linear (Gaussian, eq. 2.21) | huber | tukey (robust to mocap outliers, swapped labels)."
+        ),
+    ] = "linear",
     max_iterations: Annotated[int, typer.Option("--max-iterations", min=1)] = 50,
     schedule: Annotated[str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")] = "lm-iter",
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the q-phase.")] = 1,
