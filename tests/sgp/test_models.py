@@ -61,9 +61,14 @@ def test_baselines_predict_held_out_data(case, fitted, kind):
     err = nmse(pred.tau, clean)
     if kind == "gp":  # no physics: fine where the data are, clearly worse than the SGP
         assert np.all(err < 0.3)
-    else:  # two stages: at least as good as PR alone
-        pr = fitted("pr").predict(test)
-        assert np.all(err <= 1.02 * nmse(pr.tau, clean) + 1e-4)
+    else:
+        # two stages (thesis §3.4.1): the GP on PR's residuals cannot undo PR's bias on a new
+        # trajectory, and its ML-II optimum is start-dependent (a 1e-9 change of the start moves
+        # it), so it is only asked to stay near PR, while the joint fit (SGP) must beat it where
+        # the unmodelled bump acts (the elbow)
+        e_pr = nmse(fitted("pr").predict(test).tau, clean)
+        assert np.all(err <= 1.2 * e_pr + 1e-4), (err, e_pr)
+        assert nmse(fitted("sgp").predict(test).tau, clean)[1] < 0.8 * err[1]
 
 
 def test_uncertainty_grows_away_from_the_training_data(case, fitted):
