@@ -206,6 +206,7 @@ def calibrate_classical(
     *,
     nonlinear: str = "refuse",
     q0=None,
+    hold: tuple[str, ...] = (),
 ) -> StacResult:
     """Classical σp = 0 calibration: minimise eq. 2.29 over θ with q = q(p, θ) (thesis §2.4.2).
 
@@ -218,6 +219,8 @@ def calibrate_classical(
     nonlinear : 'refuse' (default) | 'constrain' | 'nominal': what to do with linear/tendon pots
         (see the module docstring)
     q0 : optional (n,) or (T, n) starting joint angles for the joints solved numerically
+    hold : names of pots kept at their nominal gain and bias (not calibrated, standard errors
+        NaN), e.g. the fixed point of an alternation with σp = 0 (see bench/bench_stac_compare.py)
 
     Returns
     -------
@@ -239,7 +242,10 @@ def calibrate_classical(
     pots, markers = read_streams(log, robot, "classical calibration")
     started = time.perf_counter()
     nominal = replace(Calibration.nominal(robot), method="classical")
-    layout = ThetaLayout.for_robot(robot, frozen=hard if nonlinear == "nominal" else ())
+    unknown = [name for name in hold if name not in robot.sensors.pot_names]
+    if unknown:
+        raise FitError(f"hold: {unknown[0]!r} is not a pot of {robot.name}")
+    layout = ThetaLayout.for_robot(robot, frozen=(hard if nonlinear == "nominal" else ()) + tuple(hold))
     if q0 is not None:
         q0 = np.broadcast_to(np.asarray(q0, float), (pots.shape[0], robot.n_joints))
     # one BLAS thread: the products are many and small (per batch and marker), where threads only

@@ -134,6 +134,19 @@ def test_bad_options_and_missing_streams(rotary_robot, rotary_logs):
         calibrate_classical(log.slice(0, 1), rotary_robot)
 
 
+def test_held_pots_keep_their_nominal_values(rotary_robot, rotary_logs):
+    """hold=(names): those pots are not calibrated (nominal values, no standard error), the rest are."""
+    train, _, truth = rotary_logs
+    held = rotary_robot.sensors.pot_names[:2]
+    cal = calibrate_classical(train.without_truth(), rotary_robot, hold=held).calibration
+    nominal = Calibration.nominal(rotary_robot)
+    np.testing.assert_array_equal(cal.gain[:2], nominal.gain[:2])
+    np.testing.assert_array_equal(cal.bias[:2], nominal.bias[:2])
+    assert np.isnan(cal.gain_se[:2]).all() and np.isfinite(cal.gain_se[2:]).all()
+    with pytest.raises(FitError, match="'nope' is not a pot"):
+        calibrate_classical(train.without_truth(), rotary_robot, hold=("nope",))
+
+
 def test_normal_equations_match_finite_differences_through_gimbal_constraints(tree_robot):
     """JᵀWJ and JᵀW r summed per marker block (implicit-function step for gimbal pots) equal
     those of the central-difference Jacobian of the residuals, in batches smaller than the log."""
