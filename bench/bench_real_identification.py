@@ -25,8 +25,9 @@ reference figures from the README.
 Splits: TX40 (one 7.8 s excitation at 200 Hz) half/half in time and the reverse; TIAGo rows
 921-4800 for training and 4800-6791 held out (9.2-48.0 s / 48.0-67.9 s, as FIGAROH). TIAGo's
 arm_5..7 efforts are unusable (exactly zero in ~90 % of samples): they are left out of the
-torques — only torso and arm_1..4 rows are fitted and scored — but arm_5..7 still move and
-their links enter the arm_1..4 regressor rows. The torso row is a force in N and is scored by
+torques (the loader leaves them out of the ``tau`` stream) — ``fit_dynamics`` then fits and
+scores the torso and arm_1..4 rows only, while arm_5..7 still move and their links enter the
+arm_1..4 regressor rows. The torso row is a force in N and is scored by
 nMSE only; TIAGo's pooled RMSE is over arm_1..4 (N·m).
 
 Training data are subsampled by a stride (``--tx40-stride``, ``--tiago-stride``) so that the
@@ -51,7 +52,7 @@ import pinocchio as pin
 from diegocal.io import Log, make_stream
 from diegocal.io.real import RealOptions, load_tiago, load_tx40
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
-from diegocal.sgp import DynamicsModel, SGPOptions, nmse
+from diegocal.sgp import SGPOptions, fit_dynamics, nmse
 from diegocal.sgp.model import log_arrays
 
 REPO = Path(__file__).resolve().parents[1]
@@ -112,23 +113,6 @@ def tiago_split(data: Path, stride: int) -> Split:
 
 
 # ----------------------------------------------------------------------------- models
-class PartialTorqueModel(DynamicsModel):
-    """A :class:`DynamicsModel` fitted on the torque rows of a subset of the joints.
-
-    ``fit_dynamics`` needs a torque for every joint of the robot; TIAGo has none usable for
-    arm_5..7. The features keep every joint's state (the wrist's motion enters the arm_1..4 rows
-    of the regressor, thesis eq. 3.30) but only the rows of ``tau_joints``: (T, n_tau, r).
-    """
-
-    def __init__(self, robot, options: SGPOptions, tau_joints):
-        super().__init__(robot, options)
-        self.rows = [robot.joint_index(j) for j in tau_joints]
-        self.joint_names = tuple(tau_joints)
-
-    def features(self, q, qd, qdd) -> np.ndarray:
-        return super().features(q, qd, qdd)[:, self.rows, :]
-
-
 def arrays(split: Split, log: Log):
     """(q, qd, qdd) of all joints and tau of the scored joints, (T, n) and (T, n_tau)."""
     q, qd, qdd = log_arrays(log, split.robot, need_tau=False)
@@ -159,12 +143,12 @@ def fit_predict(split: Split, method: str, seed: int) -> Result:
         options = SGPOptions(kind="sgp", seed=seed, min_noise=NOISE_FLOOR)
     else:
         options = SGPOptions(kind=method, seed=seed)
-    model = PartialTorqueModel(split.robot, options, split.tau_joints)
-    q, qd, qdd, tau = arrays(split, split.train)
     start = time.perf_counter()
-    model.fit_arrays(q, qd, qdd, tau)
-    pred = model.predict_arrays(*arrays(split, split.test)[:3])
-    return Result(method, pred.tau, time.perf_counter() - start, len(q),
+    # TIAGo's tau stream has no wrist channel: fit_dynamics fits the joints that have a torque
+    model = fit_dynamics(split.train, split.robot, options)
+    assert model.joint_names == split.tau_joints
+    pred = model.predict(split.test)
+    return Result(method, pred.tau, time.perf_counter() - start, split.train.n_samples,
                   float(np.mean(model.nmse_in_sample_)))
 
 

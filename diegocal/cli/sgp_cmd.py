@@ -50,9 +50,7 @@ def _choice(name: str, value: str, allowed) -> str:
 @cli_errors
 def sgp_fit(
     log: Annotated[Path, typer.Argument(help="Log with q, qd, qdd and tau streams (.h5 or .csv).")],
-    robot: Annotated[
-        str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")
-    ] = None,
+    robot: Annotated[str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
     model: Annotated[str, typer.Option("--model", "-m", help="sgp | pr | gp | prgp.")] = "sgp",
     friction: Annotated[
         str, typer.Option("--friction", help="Friction columns: viscous,coulomb | none.")
@@ -61,12 +59,8 @@ def sgp_fit(
         str, typer.Option("--inference", help="auto | exact | sparse (auto: exact up to 3000).")
     ] = "auto",
     n_inducing: Annotated[int, typer.Option("--n-inducing", min=1)] = 300,
-    guard: Annotated[
-        bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")
-    ] = True,
-    gp_inputs: Annotated[
-        str | None, typer.Option("--gp-inputs", help="Streams the GP sees, e.g. q,qd.")
-    ] = None,
+    guard: Annotated[bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")] = True,
+    gp_inputs: Annotated[str | None, typer.Option("--gp-inputs", help="Streams the GP sees, e.g. q,qd.")] = None,
     restarts: Annotated[int, typer.Option("--restarts", min=0)] = 0,
     seed: Annotated[int, typer.Option("--seed")] = 0,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,
@@ -105,10 +99,7 @@ def sgp_fit(
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     fitted.save(out, meta)
-    rows = [
-        (f"nMSE in-sample {j}", float(v))
-        for j, v in zip(fitted.joint_names, fitted.nmse_in_sample_, strict=True)
-    ]
+    rows = [(f"nMSE in-sample {j}", float(v)) for j, v in zip(fitted.joint_names, fitted.nmse_in_sample_, strict=True)]
     par = fitted.parametric_
     rows = [
         ("model", kind),
@@ -116,6 +107,8 @@ def sgp_fit(
         ("inference", fitted.gp_.inference),
         ("base parameters", 0 if par is None else len(par.names)),
     ] + rows
+    if fitted.joints_without_tau:
+        rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
     summary(f"sgp-fit → {out}", rows, quiet=quiet)
 
 
@@ -125,12 +118,13 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
     robot = load_robot(resolve_robot_dir(opts.robot, data.robot)) if opts.robot else None
     model = load_model(model_path, robot=robot)
     pred = model.predict(data)
-    names = model.joint_names
+    names = model.joint_names  # the joints with a fitted torque
     q, qd, qdd = log_arrays(data, model.robot, need_tau=False)
+    every = model.robot.joint_names
     streams = {
-        "q": make_stream(names, q),
-        "qd": make_stream(names, qd),
-        "qdd": make_stream(names, qdd),
+        "q": make_stream(every, q),
+        "qd": make_stream(every, qd),
+        "qdd": make_stream(every, qdd),
         "tau": make_stream(names, pred.tau),
         "tau_std": make_stream(names, pred.tau_std),
     }

@@ -35,30 +35,38 @@ FTOL = 1e-6
 class Guard:
     """Guards against the GP part soaking up physics the parametric part explains (all optional).
 
+    Why it is needed: wherever a parametric term is a smooth function of the GP's inputs (gravity
+    in q, friction in qd) the GP can carry part of it at nearly the same marginal likelihood, and
+    along a trajectory every smooth function of time is a function of the state, so a flexible GP
+    can even mimic terms in inputs it does not see (the motor command of the reaction wheel, in
+    which eq. 3.28 is linear). In-sample this costs nothing; far from the data, where the GP
+    reverts to its prior, the W it distorted predicts alone. :data:`diegocal.sgp.DEFAULT_GUARD`
+    documents the default setting and the evidence for it.
+
     Attributes
     ----------
     max_lengthscale : float or None
-        Upper bound on every length-scale, in units of the input's training std. A GP with
-        length-scales far beyond the data's spread is a global smooth function that competes
-        with the parametric model at equal likelihood; bounding it keeps Z local.
+        Upper bound on every length-scale, in units of the input's training std. Bounded, the GP
+        reverts to its prior a few stds outside the data instead of extrapolating a trend or
+        half-reverting, and cannot become a global smooth function competing with W.
     lengthscale_prior : (mean, std) or None
         Gaussian prior on log ℓ (ℓ in units of the input's std): MAP instead of ML-II.
     amplitude_prior : float or None
         Std of a Gaussian prior on log(σ_z / s), s the std of the residual of the parametric-only
-        fit: keeps σ_z at the size of what the parametric model leaves unexplained.
+        fit (it keeps σ_z at that size even where the GP is not needed; off by default).
     validation_fraction : float
-        Fraction of the training samples (the last ones, in time order) held out to judge the
-        starts and a parametric-only fallback, per output; the posterior then uses all data.
+        Fraction of the training samples (the last ones, in time order) held out to judge, per
+        output, the learnt hyperparameters against a parametric-only fallback (σ_z at its floor):
+        an output whose held-out nMSE the GP does not lower falls back. The hyperparameters are
+        learnt on all samples; the held-out posterior uses the first part only.
     restarts : int
-        Extra starts (on top of the estimator's ``restarts``) judged on the validation split.
+        Extra starts on top of the estimator's ``restarts``.
     fix_sigma_w : bool
-        Keep σ_w at §3.3.4's "large number" (a flat prior on W: no shrinkage of the physical
-        parameters towards 0, which would hand their share of the torque to the GP).
+        Keep σ_w at a large value (a flat prior on W) instead of learning it by ML-II.
     max_amplitude : float or None
         Upper bound on σ_z in units of the parametric-only fit's residual std: Z models the
         *deviations* from the parametric model (thesis §3.3), so it may not grow to the size of
-        the physics. Without it the marginal likelihood may prefer a long-length-scale GP that
-        carries a whole parametric term (its Occam penalty is lower than W's under a flat prior).
+        the physics.
     """
 
     max_lengthscale: float | None = None
@@ -305,18 +313,19 @@ class SemiParametricGP:
         return (float(res.fun), res.x) if ok else None
 
     def _learn(self, Us, Y, Fs, rng) -> Hyperparameters:
-        """ML-II (or MAP with the guard's priors) from several starts.
+        """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.
 
-        Without validation the best objective wins. With ``guard.validation_fraction`` and
-        several starts, each start is optimised on the first part of the (sub)sample and scored
-        by its nMSE on the held-out last part, per output, next to a parametric-only fallback
-        (σ_z at its floor); each output keeps the hyperparameters that score best.
+        With ``guard.validation_fraction`` the GP then has to earn its place, output by output:
+        with the learnt hyperparameters, the posterior of the first part of the (sub)sample (in
+        time order) predicts the held-out last part, and so does a parametric-only fallback (σ_z
+        at its floor, σ_v at the parametric residual); an output whose held-out nMSE the GP does
+        not lower keeps the fallback (SGP → PR for that output).
         """
         N = len(Us)
         idx = np.arange(N)
         if N > self.hyper_max:
             idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
-        hp0, resid = self._initial(Us[idx], Y, Fs)
+        hp0, resid = self._initial(Us[idx], Y[idx], Fs[idx])
         sizes = [0 if k is None else k.n_params for k in self.kernels]
         bounds = self._bounds(hp0, resid)
         lo, hi = [b[0] for b in bounds], [b[1] for b in bounds]
@@ -325,13 +334,10 @@ class SemiParametricGP:
         x0 = np.clip(hp0.pack(), lo, hi)
         starts = self._starts(x0, bounds, sizes, resid, rng, n_extra if has_gp else 0)
         self.n_starts_ = len(starts)
-        n_val = int(round(self.guard.validation_fraction * len(idx)))
-        validate = len(starts) > 1 and n_val >= 2
-        fit_idx, val_idx = (idx[:-n_val], idx[-n_val:]) if validate else (idx, idx[:0])
-        U1, Y1, F1 = Us[fit_idx], Y[fit_idx], Fs[fit_idx]
+        data = Us[idx], Y[idx], Fs[idx]
 
         def run(s):
-            return self._optimise(s, bounds, sizes, resid, U1, Y1, F1, self.maxiter)
+            return self._optimise(s, bounds, sizes, resid, *data, self.maxiter)
 
         if self.jobs > 1 and len(starts) > 1:  # independent starts in threads (LAPACK drops the GIL)
             with ThreadPoolExecutor(max_workers=self.jobs) as pool:
@@ -344,11 +350,15 @@ class SemiParametricGP:
                 "hyperparameter optimisation failed from every start; "
                 "raise min_noise or check the data for repeated samples"
             )
-        if not validate:
-            best = min(candidates, key=lambda c: c[0])
-            self.objective_ = best[0]
-            return Hyperparameters.unpack(best[1], sizes)
-        # the parametric-only fallback: σ_z at its floor, σ_v at the parametric residual
+        self.objective_, x = min(candidates, key=lambda c: c[0])
+        n_val = int(round(self.guard.validation_fraction * len(idx)))
+        if has_gp and n_val >= 2 and len(idx) - n_val >= 3:
+            x = self._validate(x, x0, idx[:-n_val], idx[-n_val:], Us, Y, Fs, sizes, resid, lo, hi)
+        return Hyperparameters.unpack(x, sizes)
+
+    def _validate(self, x, x0, fit_idx, val_idx, Us, Y, Fs, sizes, resid, lo, hi) -> np.ndarray:
+        """Per output, the learnt hyperparameters ``x`` or the parametric-only fallback, whichever
+        predicts the held-out samples ``val_idx`` better from the posterior of ``fit_idx``."""
         fallback = x0.copy()
         k = 1 + len(self.kernels)
         for j, (kern, size) in enumerate(zip(self.kernels, sizes, strict=True)):
@@ -357,28 +367,26 @@ class SemiParametricGP:
                 if is_amplitude(name):
                     fallback[k + i] = lo[k + i]
             k += size
-        xs = [x for _, x in candidates] + [np.clip(fallback, lo, hi)]
-        scores = np.full((len(xs), Y.shape[1]), np.inf)
-        for c, x in enumerate(xs):
+        fallback = np.clip(fallback, lo, hi)
+        scores = np.full((2, Y.shape[1]), np.inf)
+        for c, vec in enumerate((x, fallback)):
             try:
-                post = fit_posterior(self.kernels, U1, Y1, F1, Hyperparameters.unpack(x, sizes))
+                hp = Hyperparameters.unpack(vec, sizes)
+                post = fit_posterior(self.kernels, Us[fit_idx], Y[fit_idx], Fs[fit_idx], hp)
             except NumericalError:
                 continue
             mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
             scores[c] = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
-        self.validation_scores_ = scores  # (starts + fallback, n): held-out nMSE per output
-        # per output, the hyperparameters (its σ_v and kernel) of the start that predicts the
-        # held-out samples best; the fallback wins where the GP does not help (SGP → PR there)
-        best = np.argmin(scores, axis=0)
-        self.fallback_ = tuple(bool(b == len(xs) - 1) for b in best)
-        x = xs[int(np.argmin(scores.mean(1)))].copy()
+        self.validation_scores_ = scores  # (learnt, fallback) × outputs: held-out nMSE
+        self.fallback_ = tuple(bool(f < g) for g, f in scores.T)
+        out = x.copy()
         k = 1 + len(self.kernels)
         for j, size in enumerate(sizes):
-            x[1 + j] = xs[best[j]][1 + j]
-            x[k : k + size] = xs[best[j]][k : k + size]
+            if self.fallback_[j]:
+                out[1 + j] = fallback[1 + j]
+                out[k : k + size] = fallback[k : k + size]
             k += size
-        self.objective_ = float("nan")
-        return Hyperparameters.unpack(x, sizes)
+        return out
 
     # ------------------------------------------------------------------ predict
     def predict(self, U, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

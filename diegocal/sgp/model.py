@@ -13,6 +13,7 @@ robot's joint-torque regressor (+ friction) reduced to base parameters
 
 from __future__ import annotations
 
+import logging
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -22,22 +23,32 @@ from diegocal.sgp.estimator import Guard, SemiParametricGP
 from diegocal.sgp.kernels import SquaredExponential, Subspace
 from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor
 
+LOG = logging.getLogger(__name__)
 KINDS = ("sgp", "pr", "gp", "prgp")
 INFERENCE = ("auto", "exact", "sparse")
 INPUT_STREAMS = ("q", "qd", "qdd")
 
-#: The guard's defaults (SGPOptions(guard=True)): the GP sees (q, qd) only (the rigid-body model
-#: is exactly linear in qdd), W has a flat prior (σ_w fixed large: no shrinkage handing physics
-#: to the GP), σ_z has a prior at the size of the parametric fit's residual and may not exceed
-#: twice it, log ℓ a weak prior, and the starts are judged on a held-out 20 % of the samples.
+#: The guard's defaults (SGPOptions(guard=True)), one setting for every robot and experiment
+#: (evidence: bench/bench_sgp_experiments.py, bench/bench_real_identification.py):
+#:
+#: - the GP sees the state (q, qd) only: the rigid-body model is exactly linear in qdd, so a GP
+#:   that also saw qdd could take the inertial terms away from W (GUARD_GP_INPUTS);
+#: - length-scales at most MAX_LENGTHSCALE training stds: far from the data the GP reverts to 0
+#:   and W alone predicts, instead of extrapolating a trend or half-reverting (the failure of the
+#:   reaction wheel's pole-up and the 3-link arm's vertical figure-eight);
+#: - σ_z at most twice the parametric fit's residual std: Z models deviations, not the physics
+#:   (without it ML-II let σ_z grow to 120 N·m on a TX40 joint);
+#: - the GP must lower the held-out nMSE of the last 20 % of the samples (time order), output by
+#:   output, else that output falls back to the parametric model: on real, low-pass filtered
+#:   torques ML-II otherwise shrinks σ_v until the GP interpolates the run and extrapolates badly.
+#: W keeps §3.3.4's ML-II σ_w (a zero-mean prior learnt from the data, as for PR): a flat prior
+#: left the weakly excited parameters of a single figure-eight free to drift.
+MAX_LENGTHSCALE = 3.0
 DEFAULT_GUARD = Guard(
-    max_lengthscale=None,
-    lengthscale_prior=(0.0, 1.5),
-    amplitude_prior=0.5,
+    max_lengthscale=MAX_LENGTHSCALE,
+    max_amplitude=2.0,
     validation_fraction=0.2,
     restarts=1,
-    fix_sigma_w=True,
-    max_amplitude=2.0,
 )
 GUARD_GP_INPUTS = ("q", "qd")
 
@@ -83,20 +94,14 @@ class SGPOptions:
 
     def __post_init__(self):
         if self.kind not in KINDS:
-            raise ValueError(
-                f"unknown model kind {self.kind!r}; expected one of {', '.join(KINDS)}"
-            )
+            raise ValueError(f"unknown model kind {self.kind!r}; expected one of {', '.join(KINDS)}")
         if self.inference not in INFERENCE:
-            raise ValueError(
-                f"unknown inference {self.inference!r}; expected one of {', '.join(INFERENCE)}"
-            )
+            raise ValueError(f"unknown inference {self.inference!r}; expected one of {', '.join(INFERENCE)}")
         object.__setattr__(self, "friction", check_friction(self.friction))
         if self.gp_inputs is not None:
             bad = [s for s in self.gp_inputs if s not in INPUT_STREAMS]
             if bad or not self.gp_inputs:
-                raise ValueError(
-                    f"gp_inputs must be a non-empty subset of {INPUT_STREAMS}, got {self.gp_inputs}"
-                )
+                raise ValueError(f"gp_inputs must be a non-empty subset of {INPUT_STREAMS}, got {self.gp_inputs}")
 
     @property
     def guard_active(self) -> bool:
@@ -177,8 +182,7 @@ class ParametricEstimate:
 
     def as_dict(self) -> dict:
         return {
-            n: {"value": float(v), "std": float(s)}
-            for n, v, s in zip(self.names, self.values, self.std, strict=True)
+            n: {"value": float(v), "std": float(s)} for n, v, s in zip(self.names, self.values, self.std, strict=True)
         }
 
 
@@ -188,11 +192,34 @@ def nmse(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.mean((pred - truth) ** 2, axis=0) / np.where(var > 0, var, 1.0)
 
 
-def log_arrays(log, robot, need_tau: bool = True):
-    """q, qd, qdd (and tau) of a log in the robot's joint order, (T, n) each; one-line errors."""
+def torque_array(log, robot) -> tuple[np.ndarray, tuple]:
+    """The ``tau`` stream's columns of the robot's joints, in the robot's joint order.
+
+    Returns (tau (T, k), joint names (k,)): every joint that has a torque channel. A joint without
+    one (e.g. TIAGo's wrists, whose efforts are unusable) is simply absent, so that a model can be
+    fitted on the rows of the joints that have a torque; channels that are no joint of the robot
+    and a stream with no joint at all raise one-line errors.
+    """
+    s = log.stream("tau", needed_by="sgp-fit")
+    extra = [c for c in s.names if c not in robot.joint_names]
+    if extra:
+        raise UnknownNameError(
+            f"stream 'tau' has channel(s) {extra} that are not joints of robot "
+            f"{robot.name!r} (joints: {', '.join(robot.joint_names)})"
+        )
+    joints = tuple(j for j in robot.joint_names if j in s.names)
+    if not joints:
+        raise MissingStreamError(f"stream 'tau' has no channel: nothing to fit for robot {robot.name!r}")
+    return s.select(joints).data, joints
+
+
+def log_arrays(log, robot, need_tau: bool = True, needed_by: str | None = None):
+    """q, qd, qdd (and tau) of a log in the robot's joint order, (T, n) each; one-line errors
+    naming ``needed_by`` (default: "sgp-fit" with tau, "sgp predict" without)."""
+    needed_by = needed_by or ("sgp-fit" if need_tau else "sgp predict")
     out = []
     for name in INPUT_STREAMS + (("tau",) if need_tau else ()):
-        s = log.stream(name, needed_by="sgp-fit" if need_tau else "sgp predict")
+        s = log.stream(name, needed_by=needed_by)
         extra = [c for c in s.names if c not in robot.joint_names]
         if extra:
             raise UnknownNameError(
@@ -201,9 +228,7 @@ def log_arrays(log, robot, need_tau: bool = True):
             )
         missing = [j for j in robot.joint_names if j not in s.names]
         if missing:
-            raise MissingStreamError(
-                f"stream '{name}' lacks joint(s) {missing} of robot {robot.name!r}"
-            )
+            raise MissingStreamError(f"stream '{name}' lacks joint(s) {missing} of robot {robot.name!r}")
         out.append(s.select(robot.joint_names).data)
     return tuple(out)
 
@@ -215,26 +240,32 @@ class DynamicsModel:
     ``hyperparameters_`` (dict per joint, plus ``sigma_w``), ``nmse_in_sample_`` (n,).
     """
 
-    def __init__(self, robot, options: SGPOptions):
+    def __init__(self, robot, options: SGPOptions, tau_joints=None):
         self.robot = robot
         self.options = options
-        self.joint_names = tuple(robot.joint_names)
+        self.joint_names = tuple(robot.joint_names if tau_joints is None else tau_joints)
+        unknown = [j for j in self.joint_names if j not in robot.joint_names]
+        if unknown or not self.joint_names:
+            raise UnknownNameError(
+                f"torque joints {unknown or '()'} are not joints of robot {robot.name!r} "
+                f"(joints: {', '.join(robot.joint_names)})"
+            )
+        #: the robot joints whose torque rows are fitted (all joints' states enter the regressor)
+        self.rows = [robot.joint_index(j) for j in self.joint_names]
+        self.joints_without_tau = tuple(j for j in robot.joint_names if j not in self.joint_names)
         n = robot.n_joints
-        self.input_names = tuple(f"{s}.{j}" for s in INPUT_STREAMS for j in self.joint_names)
+        self.input_names = tuple(f"{s}.{j}" for s in INPUT_STREAMS for j in robot.joint_names)
         gp_streams = options.resolved_gp_inputs()
-        self.gp_dims = np.array(
-            [INPUT_STREAMS.index(s) * n + i for s in gp_streams for i in range(n)]
-        )
+        self.gp_dims = np.array([INPUT_STREAMS.index(s) * n + i for s in gp_streams for i in range(n)])
 
     # ------------------------------------------------------------------ building blocks
     def features(self, q, qd, qdd) -> np.ndarray:
-        """Base regressor f(u): (T, n, r)."""
-        return self.base_.project(full_regressor(self.robot, q, qd, qdd, self.options.friction))
+        """Base regressor f(u): (T, k, r), the rows of the k fitted joints."""
+        F = full_regressor(self.robot, q, qd, qdd, self.options.friction)
+        return self.base_.project(F[:, self.rows] if self.joints_without_tau else F)
 
     def _kernels(self):
-        return [
-            Subspace(self.gp_dims, SquaredExponential(len(self.gp_dims))) for _ in self.joint_names
-        ]
+        return [Subspace(self.gp_dims, SquaredExponential(len(self.gp_dims))) for _ in self.joint_names]
 
     def _inference(self, N: int) -> str:
         o = self.options
@@ -263,14 +294,18 @@ class DynamicsModel:
 
     # ------------------------------------------------------------------ fit
     def fit_arrays(self, q, qd, qdd, tau, state: dict | None = None) -> DynamicsModel:
-        """Fit on arrays (T, n); ``state`` (:meth:`state`) restores a saved fit, no optimising."""
+        """Fit on q, qd, qdd (T, n) of every joint and tau (T, k) of ``joint_names``; ``state``
+        (:meth:`state`) restores a saved fit, no optimising."""
         q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
         o = self.options
         T = len(q)
+        if tau.shape != (T, len(self.joint_names)):
+            raise ValueError(f"expected tau of shape ({T}, {len(self.joint_names)}), got {tau.shape}")
         if state is not None:
             self.base_ = BaseParameters.from_dict(state["base"])
         else:
-            self.base_ = base_parameters(self.robot, o.friction, seed=o.seed)
+            rows = self.rows if self.joints_without_tau else None
+            self.base_ = base_parameters(self.robot, o.friction, seed=o.seed, rows=rows)
         r = self.base_.n_base
         need = max(10, int(np.ceil((r + 1) / len(self.joint_names)))) if o.kind != "gp" else 10
         if T < need:
@@ -283,17 +318,11 @@ class DynamicsModel:
         self.U_, self.tau_ = U, tau
         st = state or {}
         if o.kind == "prgp":
-            self.pr_ = self._estimator("pr", T, False).fit(
-                U, tau, F, st.get("hyper_pr"), st.get("inducing_pr")
-            )
+            self.pr_ = self._estimator("pr", T, False).fit(U, tau, F, st.get("hyper_pr"), st.get("inducing_pr"))
             resid = tau - self.pr_.predict(U, F)[0]
-            self.gp_ = self._estimator("gp", T, False).fit(
-                U, resid, F, st.get("hyper"), st.get("inducing")
-            )
+            self.gp_ = self._estimator("gp", T, False).fit(U, resid, F, st.get("hyper"), st.get("inducing"))
         else:
-            self.gp_ = self._estimator(o.kind, T, o.guard_active).fit(
-                U, tau, F, st.get("hyper"), st.get("inducing")
-            )
+            self.gp_ = self._estimator(o.kind, T, o.guard_active).fit(U, tau, F, st.get("hyper"), st.get("inducing"))
         self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd).tau, tau)
         return self
 
@@ -328,7 +357,7 @@ class DynamicsModel:
                 th = hp.theta[j]
                 entry["sigma_z"] = float(np.exp(th[0]))
                 # length-scales back in the input's unit (inputs were standardised)
-                ell = np.exp(th[1:]) * est.u_std_[self.gp_dims]
+                ell = np.exp(th[1 : 1 + len(self.gp_dims)]) * est.u_std_[self.gp_dims]
                 entry["lengthscales"] = {nm: float(v) for nm, v in zip(names, ell, strict=True)}
             out[joint] = entry
         return out
@@ -372,10 +401,22 @@ class DynamicsModel:
 def fit_dynamics(log, robot, options: SGPOptions = SGPOptions()) -> DynamicsModel:
     """Fit an inverse-dynamics model (``options.kind``) to a log with q, qd, qdd and tau streams.
 
-    Fitting never reads ``log.truth``.
+    q, qd and qdd must cover every joint of the robot; ``tau`` may cover a subset: the model is
+    then fitted on (and predicts) the torques of the joints that have one, while every joint's
+    motion still enters their regressor rows (thesis eq. 3.30); the others are logged and listed
+    in ``model.joints_without_tau``. Fitting never reads ``log.truth``.
     """
-    q, qd, qdd, tau = log_arrays(log.without_truth(), robot)
-    return DynamicsModel(robot, options).fit_arrays(q, qd, qdd, tau)
+    log = log.without_truth()
+    q, qd, qdd = log_arrays(log, robot, need_tau=False, needed_by="sgp-fit")
+    tau, joints = torque_array(log, robot)
+    model = DynamicsModel(robot, options, tau_joints=joints)
+    if model.joints_without_tau:
+        LOG.warning(
+            "no torque for joint(s) %s: fitting the torques of %s only (their motion still enters the regressor)",
+            ", ".join(model.joints_without_tau),
+            ", ".join(joints),
+        )
+    return model.fit_arrays(q, qd, qdd, tau)
 
 
 def with_kind(options: SGPOptions, kind: str) -> SGPOptions:

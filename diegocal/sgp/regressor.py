@@ -30,9 +30,7 @@ def check_friction(friction) -> tuple[str, ...]:
     friction = tuple(friction)
     bad = [f for f in friction if f not in FRICTION_KINDS]
     if bad:
-        raise ValueError(
-            f"unknown friction kind(s) {bad}; expected a subset of {list(FRICTION_KINDS)}"
-        )
+        raise ValueError(f"unknown friction kind(s) {bad}; expected a subset of {list(FRICTION_KINDS)}")
     return tuple(f for f in FRICTION_KINDS if f in friction)
 
 
@@ -75,9 +73,7 @@ def full_regressor(robot, q, qd, qdd, friction=FRICTION_KINDS) -> np.ndarray:
     return out
 
 
-def true_parameters(
-    robot, friction_values: dict | None = None, friction=FRICTION_KINDS
-) -> np.ndarray:
+def true_parameters(robot, friction_values: dict | None = None, friction=FRICTION_KINDS) -> np.ndarray:
     """The full parameter vector of the robot's URDF inertias (+ given friction coefficients).
 
     ``friction_values`` maps ``"viscous"``/``"coulomb"`` to arrays of shape (n,) (N·m·s/rad, N·m);
@@ -85,8 +81,7 @@ def true_parameters(
     """
     w = [robot.model.inertias[i].toDynamicParameters() for i in range(1, robot.model.njoints)]
     extra = [
-        np.asarray((friction_values or {}).get(k, np.zeros(robot.n_joints)), float)
-        for k in check_friction(friction)
+        np.asarray((friction_values or {}).get(k, np.zeros(robot.n_joints)), float) for k in check_friction(friction)
     ]
     return np.concatenate(w + extra)
 
@@ -142,12 +137,19 @@ class BaseParameters:
 
 
 def base_parameters(
-    robot, friction=FRICTION_KINDS, n_samples: int = 200, seed: int = 0, tol: float = 1e-8
+    robot,
+    friction=FRICTION_KINDS,
+    n_samples: int = 200,
+    seed: int = 0,
+    tol: float = 1e-8,
+    rows=None,
 ) -> BaseParameters:
     """Base parameters from QR with column pivoting of a regressor stacked over random states.
 
     States: q uniform within the joint limits (clipped to [-π, π]), qd and qdd standard normal
     (rad/s, rad/s²). Columns whose diagonal ``|R_kk|`` falls below ``tol · |R_00|`` are dependent.
+    ``rows`` (joint indices) keeps only those joints' torque rows: the parameters identifiable
+    from the torques of a subset of the joints (e.g. a robot whose wrist torques are not measured).
     """
     rng = np.random.default_rng(seed)
     n = robot.n_joints
@@ -156,7 +158,10 @@ def base_parameters(
     q = rng.uniform(lo, hi, size=(n_samples, n))
     qd = rng.standard_normal((n_samples, n))
     qdd = rng.standard_normal((n_samples, n))
-    F = full_regressor(robot, q, qd, qdd, friction).reshape(n_samples * n, -1)
+    F = full_regressor(robot, q, qd, qdd, friction)
+    if rows is not None:
+        F = F[:, list(rows), :]
+    F = F.reshape(-1, F.shape[2])
     _, R, piv = qr(F, mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
     if diag.size == 0 or diag[0] == 0:

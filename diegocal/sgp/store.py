@@ -55,16 +55,13 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "kind": model.options.kind,
         "robot": model.robot.name,
         "joints": list(model.joint_names),
+        "joints_without_tau": list(model.joints_without_tau),
         "n_samples": int(len(model.U_)),
         "inference": est.inference,
         "n_inducing": None if est.inducing_ is None else int(len(est.inducing_)),
-        "gp_inputs": [model.input_names[d] for d in model.gp_dims]
-        if model.options.kind != "pr"
-        else [],
+        "gp_inputs": [model.input_names[d] for d in model.gp_dims] if model.options.kind != "pr" else [],
         "log_likelihood": float(est.log_likelihood_),
-        "nmse_in_sample": {
-            j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)
-        },
+        "nmse_in_sample": {j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)},
         "hyperparameters": model.hyperparameters_,
         "parameters": None if par is None else par.as_dict(),
         "options": model.options.to_dict(),
@@ -104,9 +101,7 @@ def load_summary(directory) -> dict:
         raise InputFileError(f"{directory}: not an sgp model directory (no sgp.yaml)")
     data = load_yaml(directory / "sgp.yaml")
     if data.get("format") != FORMAT:
-        raise InputFileError(
-            f"{directory}/sgp.yaml: format is {data.get('format')!r}, expected {FORMAT!r}"
-        )
+        raise InputFileError(f"{directory}/sgp.yaml: format is {data.get('format')!r}, expected {FORMAT!r}")
     return data
 
 
@@ -130,7 +125,7 @@ def load_model(directory, robot=None):
     if robot is None:
         robot = load_robot(directory / "robot")
     options = SGPOptions.from_dict(summary["options"])
-    model = DynamicsModel(robot, options)
+    model = DynamicsModel(robot, options, tau_joints=summary.get("joints"))
     n = robot.n_joints
     u = arrays["u"]
     q, qd, qdd = u[:, :n], u[:, n : 2 * n], u[:, 2 * n :]

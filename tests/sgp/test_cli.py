@@ -115,3 +115,21 @@ def test_predict_with_a_directory_that_is_not_a_model(logs, tmp_path):
     empty = tmp_path / "empty.sgp"
     empty.mkdir()
     assert "sgp.yaml" in one_line_error(runner.invoke(app, ["predict", str(empty), str(test)]))
+
+
+def test_fit_and_predict_when_a_joint_has_no_torque(arm2, simulate, arm2_dir, tmp_path):
+    log, _ = simulate(arm2, T=120, seed=0)
+    streams = dict(log.streams, tau=make_stream(["elbow"], log.stream("tau").select(["elbow"]).data))
+    path = tmp_path / "wrist.h5"
+    save_log(Log(log.time, streams, robot=log.robot), path)
+    out = tmp_path / "w.sgp"
+    r = runner.invoke(app, ["sgp-fit", str(path), "--robot", str(arm2_dir), "-m", "pr", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "not fitted (no tau)" in r.output and "shoulder" in r.output
+    summary = load_yaml(out / "sgp.yaml")
+    assert summary["joints"] == ["elbow"] and summary["joints_without_tau"] == ["shoulder"]
+    pred_path = tmp_path / "pred.h5"
+    r = runner.invoke(app, ["predict", str(out), str(path), "-o", str(pred_path)])
+    assert r.exit_code == 0, r.output
+    pred = load_log(pred_path)
+    assert pred.stream("tau").names == ("elbow",) and pred.stream("q").names == ("shoulder", "elbow")
