@@ -6,13 +6,18 @@ per method, the SGP guard across seeds, and 95 %-interval coverage on data-poor 
 
 Methods: PR (parametric, eq. 3.25), GP (eq. 3.21), PRGP (two-stage, §3.4.1), SGP (joint, with the
 guard of diegocal.sgp), SGP-noguard (plain ML-II SGP). nMSE is against the noise-free simulated
-torque, normalised by its variance over the test log; coverage is of the measured torque. The
-fit time column is the reference for the methods' cost, measured in the same run.
+target (torque; for the reaction wheel's forward model, the predictable acceleration), normalised
+by its variance over the test log; coverage is of the measured target. Each nMSE cell is the seed
+mean ± its standard error; the last column is SGP's verdict against the best of PR, GP and PRGP
+(diegocal.sgp_experiments.common.Verdict: "tied" = behind by at most one paired standard error
+over the seeds). The fit times are the reference for the methods' cost, measured in the same run.
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -27,6 +32,7 @@ from diegocal.sgp_experiments import (
     run_reaction_wheel,
     table,
 )
+from diegocal.sgp_experiments.common import spread_table, verdicts
 
 #: Experiment -> (runner, full config, quick config, data-poor (test, region) cells).
 EXPERIMENTS = {
@@ -39,7 +45,7 @@ EXPERIMENTS = {
     "wheel": (
         run_reaction_wheel,
         WheelConfig(),
-        WheelConfig(train_s=2.0, test_s=2.0),
+        WheelConfig(train_s=8.0, test_s=5.0),
         [("pole-up", "all")],
     ),
     "arm3": (run_arm3, ArmConfig(), ArmConfig(train_s=6.0, test_s=3.0), [("vertical", "all")]),
@@ -76,18 +82,29 @@ def main() -> None:
     ap.add_argument("--only", default="pendulum,wheel,arm3")
     ap.add_argument("--quick", action="store_true", help="reduced sizes (the tests' scale)")
     args = ap.parse_args()
+    try:  # two cores shared: one BLAS thread per process
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:  # pragma: no cover
+        pass
+    sys.stdout.reconfigure(line_buffering=True)
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    print(
+        f"diegocal commit {head or 'unknown'}; command: python bench/bench_sgp_experiments.py {' '.join(sys.argv[1:])}"
+    )
     seeds = tuple(range(args.seeds))
     for name in args.only.split(","):
         run, full, quick, poor = EXPERIMENTS[name]
         start = time.perf_counter()
         scores = run(seeds=seeds, cfg=quick if args.quick else full)
         wall = time.perf_counter() - start
+        print(f"\n=== {name}: {len(seeds)} seeds, {wall:.0f} s; mean fit time per method: {fit_times(scores)}")
+        print(spread_table(scores, title=f"{name}: held-out nMSE, seed mean ± standard error (* lowest)"))
+        labels = [v.label for v in verdicts(scores)]
         print(
-            f"\n=== {name}: {len(seeds)} seeds, {wall:.0f} s; "
-            f"mean fit time per method: {fit_times(scores)}"
-        )
-        print(
-            table(scores, "nmse", np.mean, title=f"{name}: held-out nMSE, mean over seeds (* best)")
+            f"SGP: {labels.count('best')} best, {labels.count('tied')} tied, {labels.count('worse')} worse "
+            f"of {len(labels)} cells"
         )
         print()
         print(table(scores, "nmse", np.max, title=f"{name}: held-out nMSE, worst seed"))
@@ -101,8 +118,7 @@ def main() -> None:
                 poor_scores,
                 "coverage",
                 np.mean,
-                title=f"{name}: coverage of the 95 % interval on the data-poor test set "
-                "(* closest to 0.95)",
+                title=f"{name}: coverage of the 95 % interval on the data-poor test set (* closest to 0.95)",
             )
         )
 

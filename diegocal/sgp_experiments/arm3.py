@@ -29,7 +29,7 @@ class ArmConfig:
     rate_hz: float = 20.0
     noise: float = 0.01
     cable: float = 2.0
-    sgp: SGPOptions = SGPOptions(friction=("viscous", "coulomb"), maxiter=60)
+    sgp: SGPOptions = SGPOptions(friction=("viscous", "coulomb"))
 
 
 def arm_data(robot, seed: int, cfg: ArmConfig):

@@ -53,45 +53,39 @@ def select(log: Log, mask: np.ndarray) -> Log:
     if truth is not None:
         sig = {k: make_stream(s.names, s.data[mask]) for k, s in truth.signals.items()}
         truth = replace(truth, signals=sig)
-    return Log(
-        time=log.time[mask], streams=streams, robot=log.robot, rate_hz=log.rate_hz, truth=truth
-    )
+    return Log(time=log.time[mask], streams=streams, robot=log.robot, rate_hz=log.rate_hz, truth=truth)
 
 
-def score(
-    pred, log: Log, regions: dict, experiment: str, seed: int, method: str, test: str
+def score_arrays(
+    mean, std, clean, measured, names, regions: dict, experiment: str, seed: int, method: str, test: str
 ) -> list:
-    """Scores of a :class:`~diegocal.sgp.TorquePrediction` on ``log`` for each region mask (T,)."""
-    clean = log.truth.signals["tau"].data
-    measured = log.streams["tau"].data
+    """Scores of predictions ``mean``/``std`` (T, n) against the noise-free target ``clean`` and
+    the measurement ``measured`` (T, n), for each region mask (T,) and output ``names`` (n,)."""
     var = np.var(clean, axis=0)
-    inside = np.abs(measured - pred.tau) <= 1.96 * pred.tau_std
+    inside = np.abs(measured - mean) <= 1.96 * std
     out = []
     for region, mask in regions.items():
         if not mask.any():
             continue
-        err = ((pred.tau[mask] - clean[mask]) ** 2).mean(axis=0) / var
+        err = ((mean[mask] - clean[mask]) ** 2).mean(axis=0) / var
         cov = inside[mask].mean(axis=0)
-        for j, joint in enumerate(log.streams["tau"].names):
+        for j, name in enumerate(names):
             out.append(
-                Score(
-                    experiment,
-                    seed,
-                    method,
-                    test,
-                    region,
-                    joint,
-                    float(err[j]),
-                    float(cov[j]),
-                    int(mask.sum()),
-                )
+                Score(experiment, seed, method, test, region, name, float(err[j]), float(cov[j]), int(mask.sum()))
             )
     return out
 
 
-def run_methods(
-    train: Log, tests: dict, robot, base: SGPOptions, experiment: str, seed: int, methods=None
-) -> list:
+def score(pred, log: Log, regions: dict, experiment: str, seed: int, method: str, test: str) -> list:
+    """Scores of a :class:`~diegocal.sgp.TorquePrediction` on ``log`` for each region mask (T,):
+    against the noise-free torque of ``/truth`` and the measured torque."""
+    clean = log.truth.signals["tau"].data
+    measured = log.streams["tau"].data
+    names = log.streams["tau"].names
+    return score_arrays(pred.tau, pred.tau_std, clean, measured, names, regions, experiment, seed, method, test)
+
+
+def run_methods(train: Log, tests: dict, robot, base: SGPOptions, experiment: str, seed: int, methods=None) -> list:
     """Fit each method on ``train`` and score it on ``tests`` (name -> (log, {region: mask}))."""
     out = []
     for label in methods or METHODS:
@@ -118,9 +112,7 @@ def table(scores, field: str = "nmse", reduce=np.mean, title: str = "", methods=
     (lowest nMSE, or coverage closest to 0.95) of each row is starred."""
     agg = aggregate(scores, field, reduce)
     methods = [m for m in (methods or METHODS) if any(k[0] == m for k in agg)]
-    rows = sorted(
-        {k[1:] for k in agg}, key=lambda r: [(s.test, s.region, s.joint) for s in scores].index(r)
-    )
+    rows = sorted({k[1:] for k in agg}, key=lambda r: [(s.test, s.region, s.joint) for s in scores].index(r))
     head = f"{'test':<12}{'region':<16}{'joint':<8}" + "".join(f"{m:>13}" for m in methods)
     lines = [title, head, "-" * len(head)] if title else [head, "-" * len(head)]
     for r in rows:
@@ -129,4 +121,72 @@ def table(scores, field: str = "nmse", reduce=np.mean, title: str = "", methods=
         best = int(np.nanargmin(key))
         cells = "".join(f"{v:>12.4g}{'*' if i == best else ' '}" for i, v in enumerate(vals))
         lines.append(f"{r[0]:<12}{r[1]:<16}{r[2]:<8}" + cells)
+    return "\n".join(lines)
+
+
+#: The methods SGP is judged against (thesis Fig. 3.2, 3.4, 3.9); SGP-noguard is a diagnostic.
+BASELINES = ("PR", "GP", "PRGP")
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """SGP against the best baseline of one cell (test, region, joint), paired over seeds.
+
+    ``diff`` is the seed mean of nMSE_SGP − nMSE_best and ``se`` its standard error (std/√k over
+    the k seeds). ``label``: "best" when SGP's seed-mean nMSE is the lowest; "tied" when it is not
+    but ``diff ≤ se`` (the seeds do not show the best baseline ahead by more than one standard
+    error: the definition of "tied" fixed before measuring); "worse" otherwise.
+    """
+
+    cell: tuple
+    best: str
+    diff: float
+    se: float
+    label: str
+
+
+def verdicts(scores, method: str = "SGP", baselines=BASELINES) -> list[Verdict]:
+    """One :class:`Verdict` per cell where ``method`` and at least one baseline were scored."""
+    by = defaultdict(dict)
+    for s in scores:
+        by[(s.test, s.region, s.joint)].setdefault(s.method, {})[s.seed] = s.nmse
+    out = []
+    for cell, per in by.items():
+        if method not in per:
+            continue
+        rivals = [b for b in baselines if b in per]
+        if not rivals:
+            continue
+        best = min(rivals, key=lambda b: np.mean(list(per[b].values())))
+        seeds = sorted(set(per[method]) & set(per[best]))
+        d = np.array([per[method][k] - per[best][k] for k in seeds])
+        se = float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("nan")
+        mean = float(d.mean())
+        label = "best" if mean < 0 else ("tied" if mean <= se else "worse")
+        out.append(Verdict(cell, best, mean, se, label))
+    return out
+
+
+def spread_table(scores, title: str = "", methods=None) -> str:
+    """nMSE per cell: seed mean ± standard error per method (* lowest mean), then SGP's
+    :class:`Verdict` against the best baseline (difference ± its paired standard error)."""
+    methods = [m for m in (methods or METHODS) if any(s.method == m for s in scores)]
+    groups = defaultdict(list)
+    for s in scores:
+        groups[(s.method, s.test, s.region, s.joint)].append(s.nmse)
+    rows = list(dict.fromkeys((s.test, s.region, s.joint) for s in scores))
+    verdict = {v.cell: v for v in verdicts(scores)}
+    head = f"{'test':<11}{'region':<15}{'joint':<7}" + "".join(f"{m:>19}" for m in methods) + "  SGP vs best"
+    lines = ([title] if title else []) + [head, "-" * len(head)]
+    for r in rows:
+        vals = [np.array(groups.get((m,) + r, [np.nan])) for m in methods]
+        means = [v.mean() for v in vals]
+        best = int(np.nanargmin(means))
+        cells = ""
+        for i, v in enumerate(vals):
+            se = v.std(ddof=1) / np.sqrt(v.size) if v.size > 1 else 0.0
+            cells += f"{f'{v.mean():.3g}±{se:.2g}':>18}{'*' if i == best else ' '}"
+        vd = verdict.get(r)
+        tail = "" if vd is None else f"  {vd.label} ({vd.best} {vd.diff:+.2g}±{vd.se:.2g})"
+        lines.append(f"{r[0]:<11}{r[1]:<15}{r[2]:<7}" + cells + tail)
     return "\n".join(lines)

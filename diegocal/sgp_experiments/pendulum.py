@@ -36,7 +36,7 @@ class PendulumConfig:
     sparse_keep: float = 0.05
     bump: float = 3.0
     noise: float = 0.02
-    sgp: SGPOptions = SGPOptions(friction=(), maxiter=60)
+    sgp: SGPOptions = SGPOptions(friction=())
 
 
 def pendulum_data(robot, seed: int, cfg: PendulumConfig):
@@ -64,15 +64,11 @@ def pendulum_data(robot, seed: int, cfg: PendulumConfig):
     return train, test, regions
 
 
-def run_pendulum(
-    seeds=(0, 1, 2, 3, 4), cfg: PendulumConfig = PendulumConfig(), methods=None
-) -> list:
+def run_pendulum(seeds=(0, 1, 2, 3, 4), cfg: PendulumConfig = PendulumConfig(), methods=None) -> list:
     """Scores of every method and seed (list of :class:`~diegocal.sgp_experiments.common.Score`)."""
     robot = load_robot(BUNDLED_ROBOTS / "pendulum")
     out = []
     for seed in seeds:
         train, test, regions = pendulum_data(robot, seed, cfg)
-        out += run_methods(
-            train, {"whirl": (test, regions)}, robot, cfg.sgp, "pendulum", seed, methods
-        )
+        out += run_methods(train, {"whirl": (test, regions)}, robot, cfg.sgp, "pendulum", seed, methods)
     return out

@@ -1,49 +1,63 @@
-"""The guard against the GP soaking up physics (slow: `make bench` runs it).
+"""The guard against the GP soaking up physics, across seeds (slow: `make bench` runs it).
 
-Thesis §3.4.2 forward model of the reaction wheel, eq. (3.28): accelerations from
-[sin θ_p, θ_w, m] per axis, 6 parameters, while the simulator also has viscous friction.
-Trained on pole-down data, tested on pole-up (LQR-balanced) data. Without the guard a plain
-ML-II SGP may let the GP take over the motor term of the wheel axis (w₆ → 0) and fail pole-up;
-with the guard (GP on the state only, not on m; flat prior on W; σ_z prior and bound at the
-parametric residual; validation-judged starts) it must not.
+Thesis §3.4.2, forward model of the reaction wheel, eq. (3.28): accelerations from
+[sin θ_p, θ_w, m] per axis, 6 parameters, while the simulator also has viscous friction. Trained
+pole-down, tested pole-up (LQR-balanced, far from every training state), where the GP reverts to
+its prior and W predicts alone. Across five seeds the guarded SGP must keep the wheel axis's
+motor gain (the M⁻¹ entry that dominates the wheel's acceleration) closer to the truth than PR,
+whose gain absorbs the omitted friction, and must never blow up pole-up: its worst seed stays
+within a small margin of PR's worst on each axis.
 """
 
 import numpy as np
 import pytest
 
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
-from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Subspace, nmse
+from diegocal.sgp_experiments.reaction_wheel import (
+    ForwardModel,
+    WheelConfig,
+    forward_arrays,
+    predictable_acceleration,
+    true_parameters,
+    wheel_data,
+)
 
 pytestmark = pytest.mark.slow
+SEEDS = (0, 1, 2, 3, 4)
 
 
-def _forward(log):
-    q, qd, qdd, tau = (log.stream(s).data for s in ("q", "qd", "qdd", "tau"))
-    m = tau[:, 1]  # the wheel motor's torque plays the thesis's control signal m
-    row = np.column_stack([np.sin(q[:, 0]), q[:, 1], m])
-    F = np.zeros((len(q), 2, 6))
-    F[:, 0, :3], F[:, 1, 3:] = row, row
-    return np.column_stack([q, qd, m]), qdd, F
-
-
-def _sim(trajectory, seed, duration):
-    from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
-
+@pytest.fixture(scope="module")
+def runs():
     robot = load_robot(BUNDLED_ROBOTS / "reaction_wheel")
-    opts = DynamicsOptions(duration=duration, trajectory=trajectory)
-    return simulate_dynamics(robot, opts, np.random.default_rng(seed)).without_truth()
+    cfg = WheelConfig(train_s=8.0, test_s=5.0)
+    out = []
+    for seed in SEEDS:
+        train, tests = wheel_data(robot, seed, cfg)
+        U, Y, F = forward_arrays(train.without_truth())
+        Uu, _, Fu = forward_arrays(tests["pole-up"])
+        clean = predictable_acceleration(tests["pole-up"], robot)
+        row = {}
+        for method in ("PR", "SGP"):
+            model = ForwardModel(method, seed=seed).fit(U, Y, F)
+            mean, _ = model.predict(Uu, Fu)
+            row[method] = (model.w_, np.mean((mean - clean) ** 2, axis=0) / np.var(clean, axis=0))
+        out.append(row)
+    return true_parameters(robot), out
 
 
-@pytest.mark.parametrize("seed", [2, 5])
-def test_guard_keeps_the_motor_term_in_the_parametric_part(seed):
-    U, Y, F = _forward(_sim("pole-down", seed, 10.0))
-    U, Y, F = U[::2], Y[::2], F[::2]
-    Uu, Yu, Fu = _forward(_sim("pole-up", seed + 200, 5.0))
-    pr = SemiParametricGP([None, None], seed=seed).fit(U, Y, F)
-    kernels = [Subspace([0, 1, 2, 3], SquaredExponential(4)) for _ in range(2)]  # not on m
-    guarded = SemiParametricGP(kernels, seed=seed, restarts=1, guard=DEFAULT_GUARD).fit(U, Y, F)
-    e_pr = nmse(pr.predict(Uu, Fu)[0], Yu)
-    e_guard = nmse(guarded.predict(Uu, Fu)[0], Yu)
-    # the wheel axis pole-up: no worse than the parametric model, and the motor gain is kept
-    assert e_guard[1] < 1.5 * e_pr[1] + 0.01, (e_pr, e_guard)
-    assert abs(guarded.w_[5] - pr.w_[5]) < 0.2 * abs(pr.w_[5])
+def test_guard_keeps_the_wheel_motor_gain_in_the_parametric_part(runs):
+    w_true, rows = runs
+    for row in rows:
+        err_pr = abs(row["PR"][0][5] - w_true[5])
+        err_sgp = abs(row["SGP"][0][5] - w_true[5])
+        assert err_sgp < err_pr, (err_sgp, err_pr)
+        assert err_sgp < 0.01 * abs(w_true[5])
+
+
+def test_guard_never_blows_up_pole_up(runs):
+    _, rows = runs
+    pr = np.array([r["PR"][1] for r in rows])
+    sgp = np.array([r["SGP"][1] for r in rows])
+    print("pole-up nMSE PR", pr.round(4).tolist(), "SGP", sgp.round(4).tolist())
+    assert (sgp.max(axis=0) <= 1.2 * pr.max(axis=0) + 0.005).all()
+    assert (sgp.mean(axis=0) <= pr.mean(axis=0) + 0.005).all()

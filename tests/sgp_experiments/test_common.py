@@ -9,7 +9,7 @@ import pytest
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import TorquePrediction
-from diegocal.sgp_experiments.common import Score, score, select, table
+from diegocal.sgp_experiments.common import Score, score, select, spread_table, table
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
 
@@ -71,3 +71,22 @@ def test_table_stars_the_best_method_per_row():
     text = table(rows, "nmse")
     assert "0.1*" in text and "0.5*" not in text
     assert "0.9*" in table(rows, "coverage")
+
+
+def _cells(values):
+    """Scores of one cell: method -> nMSE per seed."""
+    return [Score("e", k, m, "t", "r", "j", v, 0.9, 10) for m, vs in values.items() for k, v in enumerate(vs)]
+
+
+def test_verdict_best_tied_and_worse_follow_the_paired_standard_error():
+    from diegocal.sgp_experiments.common import verdicts
+
+    best = verdicts(_cells({"PR": [0.2, 0.3, 0.25], "SGP": [0.1, 0.2, 0.15]}))[0]
+    assert best.label == "best" and best.best == "PR" and best.diff == pytest.approx(-0.1)
+    # SGP behind by 0.01 on average, but the seeds disagree (one SE = 0.0265): tied
+    tied = verdicts(_cells({"PR": [0.10, 0.20, 0.30], "SGP": [0.15, 0.16, 0.32]}))[0]
+    assert tied.label == "tied" and tied.diff == pytest.approx(0.01) and tied.se > 0.01
+    # behind on every seed by about the same amount: worse
+    worse = verdicts(_cells({"PR": [0.10, 0.20, 0.30], "GP": [1, 1, 1], "SGP": [0.12, 0.21, 0.33]}))[0]
+    assert worse.label == "worse" and worse.best == "PR"
+    assert "worse (PR" in spread_table(_cells({"PR": [0.10, 0.20, 0.30], "SGP": [0.12, 0.21, 0.33]}))
