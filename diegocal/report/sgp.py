@@ -159,7 +159,8 @@ def summary_lines(summary: dict) -> list[str]:
         f"inference: {summary['inference']}"
         + (f" ({summary['n_inducing']} inducing inputs)" if summary.get("n_inducing") else ""),
         f"GP inputs: {', '.join(summary.get('gp_inputs') or []) or '-'}",
-        f"log marginal likelihood: {summary['log_likelihood']:.6g}",
+        ("VFE lower bound on the log marginal likelihood" if summary.get("n_inducing") else "log marginal likelihood")
+        + f": {summary['log_likelihood']:.6g}",
         "",
         "nMSE in-sample per joint:",
     ]
@@ -174,6 +175,8 @@ def summary_lines(summary: dict) -> list[str]:
         parts = [f"sigma_v {entry['sigma_v']:.3g}"]
         if "sigma_z" in entry:
             parts.append(f"sigma_z {entry['sigma_z']:.3g}")
+        if "guard_choice" in entry:
+            parts.append(f"guard: {entry['guard_choice']}")
         lines.append(f"  {j}: " + ", ".join(parts))
         for name, ell in (entry.get("lengthscales") or {}).items():
             lines.append(f"      l {name:24s} {ell:.3g}")

@@ -13,6 +13,7 @@ for inverse dynamics.
 
 from __future__ import annotations
 
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -29,6 +30,8 @@ LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
 # scipy's default (2.2e-9) spends about half of the evaluations on the last 0.1 nat of a
 # likelihood of several thousand nats (bench/bench_sgp_scale.py; held-out accuracy unchanged).
 FTOL = 1e-6
+# Upper bound of a length-scale without the guard's cap, in input stds (constant along it).
+UNCAPPED_LENGTHSCALE = 1e3
 
 
 @dataclass(frozen=True)
@@ -55,10 +58,11 @@ class Guard:
         Std of a Gaussian prior on log(σ_z / s), s the std of the residual of the parametric-only
         fit (it keeps σ_z at that size even where the GP is not needed; off by default).
     validation_fraction : float
-        Fraction of the training samples (the last ones, in time order) held out to judge, per
-        output, the learnt hyperparameters against a parametric-only fallback (σ_z at its floor):
-        an output whose held-out nMSE the GP does not lower falls back. The hyperparameters are
-        learnt on all samples; the held-out posterior uses the first part only.
+        Size of the contiguous blocks (fraction of the samples, in time order) of a blocked
+        cross-validation that judges, per output, the learnt hyperparameters against a
+        parametric-only fallback (σ_z at its floor): an output whose cross-validated nMSE the GP
+        does not lower falls back to the parametric model. The hyperparameters are learnt on
+        all samples; each block is predicted by the posterior of the others.
     restarts : int
         Extra starts on top of the estimator's ``restarts``.
     fix_sigma_w : bool
@@ -67,6 +71,14 @@ class Guard:
         Upper bound on σ_z in units of the parametric-only fit's residual std: Z models the
         *deviations* from the parametric model (thesis §3.3), so it may not grow to the size of
         the physics.
+    uncapped_candidate : bool
+        With ``max_lengthscale`` and ``validation_fraction``: also learn the hyperparameters
+        without the length-scale cap (warm-started at the capped optimum) and let the blocked
+        cross-validation choose, output by output, between capped, uncapped and parametric-only.
+        A deviation linear in a velocity (viscous friction the parametric model omits) is
+        extrapolated by long length-scales and cut off by capped ones; an irrelevant input (the
+        reaction wheel's drifting angle) should be ignored, not make the GP revert to 0 where it
+        leaves the training range.
     """
 
     max_lengthscale: float | None = None
@@ -76,6 +88,7 @@ class Guard:
     restarts: int = 0
     fix_sigma_w: bool = False
     max_amplitude: float | None = None
+    uncapped_candidate: bool = False
 
 
 class SemiParametricGP:
@@ -185,7 +198,9 @@ class SemiParametricGP:
         if M >= len(Us):
             return Us.copy()
         start = Us[rng.choice(len(Us), M, replace=False)]
-        centres, _ = kmeans2(Us, start, iter=10, minit="matrix", seed=rng)
+        with warnings.catch_warnings():  # an empty cluster keeps its start, a training input: fine
+            warnings.filterwarnings("ignore", "One of the clusters is empty", UserWarning)
+            centres, _ = kmeans2(Us, start, iter=10, minit="matrix", seed=rng)
         return centres
 
     def _initial(self, Us, Y, Fs) -> tuple[Hyperparameters, np.ndarray]:
@@ -315,11 +330,11 @@ class SemiParametricGP:
     def _learn(self, Us, Y, Fs, rng) -> Hyperparameters:
         """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.
 
-        With ``guard.validation_fraction`` the GP then has to earn its place, output by output:
-        with the learnt hyperparameters, the posterior of the first part of the (sub)sample (in
-        time order) predicts the held-out last part, and so does a parametric-only fallback (σ_z
-        at its floor, σ_v at the parametric residual); an output whose held-out nMSE the GP does
-        not lower keeps the fallback (SGP → PR for that output).
+        With ``guard.validation_fraction`` the GP then has to earn its place, output by output,
+        in a blocked cross-validation (:meth:`_validate`) against a parametric-only fallback
+        (σ_z at its floor, σ_v at the parametric residual; SGP → PR for that output) and, with
+        ``guard.uncapped_candidate``, against the hyperparameters learnt without the length-scale
+        cap.
         """
         N = len(Us)
         idx = np.arange(N)
@@ -351,40 +366,77 @@ class SemiParametricGP:
                 "raise min_noise or check the data for repeated samples"
             )
         self.objective_, x = min(candidates, key=lambda c: c[0])
-        n_val = int(round(self.guard.validation_fraction * len(idx)))
-        if has_gp and n_val >= 2 and len(idx) - n_val >= 3:
-            x = self._validate(x, x0, idx[:-n_val], idx[-n_val:], Us, Y, Fs, sizes, resid, lo, hi)
+        f = self.guard.validation_fraction
+        folds = int(round(1.0 / f)) if f > 0 else 0
+        if has_gp and folds >= 2 and len(idx) >= 3 * folds:
+            options = {"learnt": x}
+            if self.guard.max_lengthscale and self.guard.uncapped_candidate:
+                uncapped = self._uncapped(
+                    x, bounds, lambda s, b: self._optimise(s, b, sizes, resid, *data, self.maxiter)
+                )
+                if uncapped is not None:
+                    options["uncapped"] = uncapped
+            options["parametric"] = self._parametric_only(x, x0, sizes, resid, lo, hi)
+            blocks = np.array_split(idx, folds)  # contiguous in time order
+            x = self._validate(options, blocks, Us, Y, Fs, sizes)
         return Hyperparameters.unpack(x, sizes)
 
-    def _validate(self, x, x0, fit_idx, val_idx, Us, Y, Fs, sizes, resid, lo, hi) -> np.ndarray:
-        """Per output, the learnt hyperparameters ``x`` or the parametric-only fallback, whichever
-        predicts the held-out samples ``val_idx`` better from the posterior of ``fit_idx``."""
-        fallback = x0.copy()
+    def _uncapped(self, x, bounds, optimise) -> np.ndarray | None:
+        """Guard.uncapped_candidate: the hyperparameters re-optimised by ``optimise(start,
+        bounds)`` from ``x`` with the length-scales bounded by UNCAPPED_LENGTHSCALE instead of the
+        guard's cap; None when no length-scale sits at the cap (nothing would change) or it fails."""
+        cap, top = np.log(self.guard.max_lengthscale), np.log(UNCAPPED_LENGTHSCALE)
+        new_bounds, at_cap = list(bounds), False
+        k = 1 + len(self.kernels)
+        for kern in self.kernels:
+            for i, name in enumerate(kern.names if kern is not None else ()):
+                if is_lengthscale(name):
+                    new_bounds[k + i] = (bounds[k + i][0], top)
+                    at_cap |= bool(x[k + i] >= cap - 1e-3)
+            k += 0 if kern is None else kern.n_params
+        result = optimise(x, new_bounds) if at_cap else None
+        return None if result is None else result[1]
+
+    def _parametric_only(self, x, x0, sizes, resid, lo, hi) -> np.ndarray:
+        """The parametric-only fallback: σ_z at its floor, σ_v at the parametric residual."""
+        out = x0.copy()
         k = 1 + len(self.kernels)
         for j, (kern, size) in enumerate(zip(self.kernels, sizes, strict=True)):
-            fallback[1 + j] = np.log(resid[j])
+            out[1 + j] = np.log(resid[j])
             for i, name in enumerate(kern.names if kern is not None else ()):
                 if is_amplitude(name):
-                    fallback[k + i] = lo[k + i]
+                    out[k + i] = lo[k + i]
             k += size
-        fallback = np.clip(fallback, lo, hi)
-        scores = np.full((2, Y.shape[1]), np.inf)
-        for c, vec in enumerate((x, fallback)):
-            try:
-                hp = Hyperparameters.unpack(vec, sizes)
-                post = fit_posterior(self.kernels, Us[fit_idx], Y[fit_idx], Fs[fit_idx], hp)
-            except NumericalError:
-                continue
-            mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
-            scores[c] = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
-        self.validation_scores_ = scores  # (learnt, fallback) × outputs: held-out nMSE
-        self.fallback_ = tuple(bool(f < g) for g, f in scores.T)
-        out = x.copy()
+        return np.clip(out, lo, hi)
+
+    def _validate(self, options: dict, blocks, Us, Y, Fs, sizes) -> np.ndarray:
+        """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [uncapped,]
+        parametric) that predict held-out samples best: blocked cross-validation, each
+        contiguous block of ``blocks`` predicted by the posterior of the others, nMSE averaged
+        over the blocks (one held-out block could be unrepresentative, e.g. a robot at rest at
+        the end of a run). Ties go to the earlier option; σ_w is the earliest chosen option's.
+        Sets ``selection_`` (label per output) and ``validation_scores_`` (label -> (n,))."""
+        labels, options = list(options), list(options.values())
+        scores = np.zeros((len(options), Y.shape[1]))
+        for c, vec in enumerate(options):
+            hp = Hyperparameters.unpack(vec, sizes)
+            for b, val_idx in enumerate(blocks):
+                fit_idx = np.concatenate(blocks[:b] + blocks[b + 1 :])
+                try:
+                    post = fit_posterior(self.kernels, Us[fit_idx], Y[fit_idx], Fs[fit_idx], hp)
+                except NumericalError:
+                    scores[c] = np.inf
+                    break
+                mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
+                scores[c] += np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2 / len(blocks)
+        self.validation_scores_ = dict(zip(labels, scores, strict=True))
+        choice = np.argmin(scores, axis=0)  # first minimum: ties keep the earlier option
+        self.selection_ = tuple(labels[c] for c in choice)
+        out = options[int(choice.min())].copy()
         k = 1 + len(self.kernels)
         for j, size in enumerate(sizes):
-            if self.fallback_[j]:
-                out[1 + j] = fallback[1 + j]
-                out[k : k + size] = fallback[k : k + size]
+            out[1 + j] = options[choice[j]][1 + j]
+            out[k : k + size] = options[choice[j]][k : k + size]
             k += size
         return out
 

@@ -38,9 +38,10 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #:   reaction wheel's pole-up and the 3-link arm's vertical figure-eight);
 #: - σ_z at most twice the parametric fit's residual std: Z models deviations, not the physics
 #:   (without it ML-II let σ_z grow to 120 N·m on a TX40 joint);
-#: - the GP must lower the held-out nMSE of the last 20 % of the samples (time order), output by
-#:   output, else that output falls back to the parametric model: on real, low-pass filtered
-#:   torques ML-II otherwise shrinks σ_v until the GP interpolates the run and extrapolates badly.
+#: - the GP must lower the nMSE of a blocked cross-validation (five contiguous blocks in time
+#:   order), output by output, else that output falls back to the parametric model: on real,
+#:   low-pass filtered torques ML-II otherwise shrinks σ_v until the GP interpolates the run and
+#:   extrapolates badly.
 #: W keeps §3.3.4's ML-II σ_w (a zero-mean prior learnt from the data, as for PR): a flat prior
 #: left the weakly excited parameters of a single figure-eight free to drift.
 MAX_LENGTHSCALE = 3.0
@@ -49,6 +50,7 @@ DEFAULT_GUARD = Guard(
     max_amplitude=2.0,
     validation_fraction=0.2,
     restarts=1,
+    uncapped_candidate=True,
 )
 GUARD_GP_INPUTS = ("q", "qd")
 
@@ -359,6 +361,8 @@ class DynamicsModel:
                 # length-scales back in the input's unit (inputs were standardised)
                 ell = np.exp(th[1 : 1 + len(self.gp_dims)]) * est.u_std_[self.gp_dims]
                 entry["lengthscales"] = {nm: float(v) for nm, v in zip(names, ell, strict=True)}
+                if hasattr(est, "selection_"):  # the guard's cross-validated choice (fits only)
+                    entry["guard_choice"] = est.selection_[j]
             out[joint] = entry
         return out
 

@@ -139,4 +139,9 @@ def load_model(directory, robot=None):
         "hyper_pr": hyper_pr,
         "inducing_pr": inducing_pr,
     }
-    return model.fit_arrays(q, qd, qdd, arrays["tau"], state=state)
+    model.fit_arrays(q, qd, qdd, arrays["tau"], state=state)
+    hp = summary.get("hyperparameters") or {}
+    choices = [(hp.get(j) or {}).get("guard_choice") for j in model.joint_names]
+    if all(choices):  # the guard's cross-validated choice, as fitted (reporting only)
+        model.gp_.selection_ = tuple(choices)
+    return model

@@ -125,10 +125,16 @@ def test_guard_switches_gp_inputs_and_bounds(case, fitted):
     # parametric-only fallback on held-out samples
     names = [f"{s}.{j}" for s in ("q", "qd") for j in ("shoulder", "elbow")]
     std = dict(zip(names, np.hstack([train.stream("q").data, train.stream("qd").data]).std(0), strict=True))
+    # (unless the blocked cross-validation chose the hyperparameters learnt without that cap)
+    choices = set()
     for joint in ("shoulder", "elbow"):
+        choices.add(on.hyperparameters_[joint]["guard_choice"])
+        if on.hyperparameters_[joint]["guard_choice"] == "uncapped":
+            continue
         for name, ell in on.hyperparameters_[joint]["lengthscales"].items():
             assert ell <= MAX_LENGTHSCALE * std[name] * (1 + 1e-9)
-    assert on.gp_.n_starts_ == 3 and on.gp_.validation_scores_.shape == (2, 2)
+    assert choices <= {"learnt", "uncapped", "parametric"}
+    assert on.gp_.n_starts_ == 3 and set(on.gp_.validation_scores_) >= {"learnt", "parametric"}
     assert off.gp_.n_starts_ == 2 and not hasattr(off.gp_, "validation_scores_")
     explicit = replace(SGPOptions(kind="sgp", guard=False), gp_inputs=("q",))
     assert explicit.resolved_gp_inputs() == ("q",)

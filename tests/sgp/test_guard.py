@@ -1,0 +1,67 @@
+"""The guard's blocked cross-validation chooses, output by output, between the capped
+hyperparameters, the ones learnt without the length-scale cap, and the parametric model alone.
+
+Ground truth from a known function: y = w·f(u) + d(u), where the deviation d is viscous-friction
+like (linear in a velocity, which the cap cuts off when extrapolated) on one output and absent on
+the other.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential
+
+W_TRUE = np.array([1.5, -0.7])
+FRICTION = -2.0  # the deviation on output 0: FRICTION × velocity
+
+
+def _data(rng, N, velocity_range, drift_range):
+    angle = rng.uniform(-1.0, 1.0, N)
+    velocity = rng.uniform(*velocity_range, N)
+    drift = np.sort(rng.uniform(*drift_range, N))  # an irrelevant input that drifts (a wheel angle)
+    U = np.column_stack([angle, velocity, drift])
+    F = np.zeros((N, 2, 2))
+    F[:, :, 0] = np.sin(angle)[:, None]
+    F[:, :, 1] = rng.uniform(-1.0, 1.0, N)[:, None]  # a command both outputs are linear in
+    clean = F @ W_TRUE
+    clean[:, 0] += FRICTION * velocity
+    return U, clean + 0.02 * rng.standard_normal(clean.shape), F, clean
+
+
+@pytest.fixture(scope="module")
+def fits():
+    rng = np.random.default_rng(3)
+    U, Y, F, _ = _data(rng, 240, (-1.0, 1.0), (0.0, 1.0))
+    # test: velocities up to twice the training range, the drifting input far beyond it
+    test = _data(rng, 200, (-2.0, 2.0), (3.0, 6.0))
+    guard = replace(DEFAULT_GUARD, uncapped_candidate=True)
+    out = {}
+    for label, g in (("with", guard), ("without", replace(guard, uncapped_candidate=False))):
+        kernels = [SquaredExponential(3) for _ in range(2)]
+        out[label] = SemiParametricGP(kernels, guard=g, restarts=1, seed=0).fit(U, Y, F)
+    return out, test
+
+
+def _nmse(est, test):
+    U, _, F, clean = test
+    mean, _, _ = est.predict(U, F)
+    return np.mean((mean - clean) ** 2, axis=0) / np.var(clean, axis=0)
+
+
+def test_the_uncapped_candidate_is_chosen_where_it_extrapolates_the_deviation(fits):
+    est, capped = fits[0]["with"], fits[0]["without"]
+    assert est.selection_[0] == "uncapped", est.validation_scores_
+    assert capped.selection_[0] == "learnt"
+    e_est, e_capped = _nmse(est, fits[1]), _nmse(capped, fits[1])
+    assert e_est[0] < 0.5 * e_capped[0], (e_est, e_capped)
+
+
+def test_an_output_without_deviation_predicts_like_the_true_parametric_model(fits):
+    """Whichever the validation keeps there (the GP or not: equal within the noise), the output
+    with nothing to model extrapolates like the true model, and W is the truth."""
+    est = fits[0]["with"]
+    assert est.selection_[1] in ("learnt", "uncapped", "parametric")
+    np.testing.assert_allclose(est.w_, W_TRUE, atol=0.05)
+    assert _nmse(est, fits[1])[1] < 2e-3
