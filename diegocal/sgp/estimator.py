@@ -30,8 +30,8 @@ LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
 # scipy's default (2.2e-9) spends about half of the evaluations on the last 0.1 nat of a
 # likelihood of several thousand nats (bench/bench_sgp_scale.py; held-out accuracy unchanged).
 FTOL = 1e-6
-# Upper bound of a length-scale without the guard's cap, in input stds (constant along it).
-UNCAPPED_LENGTHSCALE = 1e3
+# A released length-scale (Guard.release_capped), in input stds: the kernel is constant along it.
+RELEASED_LENGTHSCALE = 1e3
 
 
 @dataclass(frozen=True)
@@ -71,14 +71,17 @@ class Guard:
         Upper bound on σ_z in units of the parametric-only fit's residual std: Z models the
         *deviations* from the parametric model (thesis §3.3), so it may not grow to the size of
         the physics.
-    uncapped_candidate : bool
-        With ``max_lengthscale`` and ``validation_fraction``: also learn the hyperparameters
-        without the length-scale cap (warm-started at the capped optimum) and let the blocked
-        cross-validation choose, output by output, between capped, uncapped and parametric-only.
-        A deviation linear in a velocity (viscous friction the parametric model omits) is
-        extrapolated by long length-scales and cut off by capped ones; an irrelevant input (the
-        reaction wheel's drifting angle) should be ignored, not make the GP revert to 0 where it
-        leaves the training range.
+    release_capped : bool
+        With ``max_lengthscale`` and ``validation_fraction``: a third candidate for the blocked
+        cross-validation, in which every input whose length-scale ends at the cap is *released*
+        (ℓ fixed at RELEASED_LENGTHSCALE stds: the GP constant along it, as if it were not an
+        input) and the other hyperparameters re-optimised under the cap. ARD's verdict "no
+        structure at any scale the cap allows" then holds outside the data too: a capped
+        irrelevant input (the reaction wheel's angle, which drifts far from its training range)
+        makes the GP revert to 0 wherever it leaves the training range, dropping the deviation
+        it models (the wheel's friction) although the deviation does not depend on that input.
+        Released, not uncapped: a length-scale of some ten stds half-reverts at a pole-up
+        angle 30 stds away and blew up a short reaction-wheel run (nMSE 0.059 against PR's 0.005).
     """
 
     max_lengthscale: float | None = None
@@ -88,7 +91,7 @@ class Guard:
     restarts: int = 0
     fix_sigma_w: bool = False
     max_amplitude: float | None = None
-    uncapped_candidate: bool = False
+    release_capped: bool = False
 
 
 class SemiParametricGP:
@@ -333,8 +336,7 @@ class SemiParametricGP:
         With ``guard.validation_fraction`` the GP then has to earn its place, output by output,
         in a blocked cross-validation (:meth:`_validate`) against a parametric-only fallback
         (σ_z at its floor, σ_v at the parametric residual; SGP → PR for that output) and, with
-        ``guard.uncapped_candidate``, against the hyperparameters learnt without the length-scale
-        cap.
+        ``guard.release_capped``, against the hyperparameters with the capped inputs released.
         """
         N = len(Us)
         idx = np.arange(N)
@@ -370,31 +372,32 @@ class SemiParametricGP:
         folds = int(round(1.0 / f)) if f > 0 else 0
         if has_gp and folds >= 2 and len(idx) >= 3 * folds:
             options = {"learnt": x}
-            if self.guard.max_lengthscale and self.guard.uncapped_candidate:
-                uncapped = self._uncapped(
+            if self.guard.max_lengthscale and self.guard.release_capped:
+                released = self._release(
                     x, bounds, lambda s, b: self._optimise(s, b, sizes, resid, *data, self.maxiter)
                 )
-                if uncapped is not None:
-                    options["uncapped"] = uncapped
+                if released is not None:
+                    options["released"] = released
             options["parametric"] = self._parametric_only(x, x0, sizes, resid, lo, hi)
             blocks = np.array_split(idx, folds)  # contiguous in time order
             x = self._validate(options, blocks, Us, Y, Fs, sizes)
         return Hyperparameters.unpack(x, sizes)
 
-    def _uncapped(self, x, bounds, optimise) -> np.ndarray | None:
-        """Guard.uncapped_candidate: the hyperparameters re-optimised by ``optimise(start,
-        bounds)`` from ``x`` with the length-scales bounded by UNCAPPED_LENGTHSCALE instead of the
-        guard's cap; None when no length-scale sits at the cap (nothing would change) or it fails."""
-        cap, top = np.log(self.guard.max_lengthscale), np.log(UNCAPPED_LENGTHSCALE)
-        new_bounds, at_cap = list(bounds), False
+    def _release(self, x, bounds, optimise) -> np.ndarray | None:
+        """Guard.release_capped: the length-scales at the cap fixed at RELEASED_LENGTHSCALE and
+        the other hyperparameters re-optimised from ``x`` by ``optimise(start, bounds)``; None
+        when no length-scale sits at the cap or the optimisation fails."""
+        cap, big = np.log(self.guard.max_lengthscale), np.log(RELEASED_LENGTHSCALE)
+        start, new_bounds, any_capped = x.copy(), list(bounds), False
         k = 1 + len(self.kernels)
         for kern in self.kernels:
             for i, name in enumerate(kern.names if kern is not None else ()):
-                if is_lengthscale(name):
-                    new_bounds[k + i] = (bounds[k + i][0], top)
-                    at_cap |= bool(x[k + i] >= cap - 1e-3)
+                if is_lengthscale(name) and x[k + i] >= cap - 1e-3:
+                    start[k + i] = big
+                    new_bounds[k + i] = (big, big)
+                    any_capped = True
             k += 0 if kern is None else kern.n_params
-        result = optimise(x, new_bounds) if at_cap else None
+        result = optimise(start, new_bounds) if any_capped else None
         return None if result is None else result[1]
 
     def _parametric_only(self, x, x0, sizes, resid, lo, hi) -> np.ndarray:
@@ -410,7 +413,7 @@ class SemiParametricGP:
         return np.clip(out, lo, hi)
 
     def _validate(self, options: dict, blocks, Us, Y, Fs, sizes) -> np.ndarray:
-        """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [uncapped,]
+        """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [released,]
         parametric) that predict held-out samples best: blocked cross-validation, each
         contiguous block of ``blocks`` predicted by the posterior of the others, nMSE averaged
         over the blocks (one held-out block could be unrepresentative, e.g. a robot at rest at

@@ -50,7 +50,7 @@ DEFAULT_GUARD = Guard(
     max_amplitude=2.0,
     validation_fraction=0.2,
     restarts=1,
-    uncapped_candidate=True,
+    release_capped=True,
 )
 GUARD_GP_INPUTS = ("q", "qd")
 
