@@ -13,7 +13,8 @@ machine is shared) with the load average before and after.
 Table 1, fits (n = 3 joints fitted jointly by ours, one at a time by scikit-learn):
 
 - ``sgp exact``: SGPOptions(kind="sgp", inference="exact"), the defaults: the guard (GP on
-  q, qd; starts judged on a held-out 20 %), hyperparameters by ML-II on at most ``hyper_max`` =
+  q, qd; per joint a blocked 5-fold cross-validation between the learnt, released and
+  parametric-only hyperparameters), hyperparameters by ML-II on at most ``hyper_max`` =
   1000 samples, exact posterior on all N (shared W, n Cholesky factors of N×N);
 - ``sgp exact all``: the same with hyper_max = N: ML-II on all N samples (N ≤ 2000);
 - ``sgp sparse``: inference="sparse": hyperparameters as the estimator learns them for sparse
