@@ -61,7 +61,18 @@ def sgp_fit(
     n_inducing: Annotated[int, typer.Option("--n-inducing", min=1)] = 300,
     guard: Annotated[bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")] = True,
     gp_inputs: Annotated[str | None, typer.Option("--gp-inputs", help="Streams the GP sees, e.g. q,qd.")] = None,
-    restarts: Annotated[int, typer.Option("--restarts", min=0)] = 0,
+    restarts: Annotated[
+        int, typer.Option("--restarts", min=0, help="Extra hyperparameter starts.")
+    ] = SGPOptions.restarts,
+    min_noise: Annotated[
+        float,
+        typer.Option(
+            "--min-noise",
+            min=0.0,
+            help="Floor of the noise std σ_v relative to std(tau) per joint; raise it (e.g. 0.2) for "
+            "low-pass filtered torques, whose correlated noise ML-II otherwise fits.",
+        ),
+    ] = SGPOptions.min_noise,
     seed: Annotated[int, typer.Option("--seed")] = 0,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,
     output: Annotated[
@@ -87,6 +98,7 @@ def sgp_fit(
         jobs=jobs,
         guard=guard,
         gp_inputs=streams,
+        min_noise=min_noise,
     )
     data = load_log(log)
     rob = load_robot(resolve_robot_dir(robot, data.robot))
@@ -107,6 +119,8 @@ def sgp_fit(
         ("inference", fitted.gp_.inference),
         ("base parameters", 0 if par is None else len(par.names)),
     ] + rows
+    hyper = fitted.hyperparameters_
+    rows += [(f"guard {j}", hyper[j]["guard_choice"]) for j in fitted.joint_names if "guard_choice" in hyper[j]]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
     summary(f"sgp-fit → {out}", rows, quiet=quiet)

@@ -89,3 +89,24 @@ def test_invalid_yaml_model(tmp_path, log_file):
     model = tmp_path / "m.yaml"
     model.write_text("a: [1, 2\n")
     assert "not valid YAML" in one_line_error(runner.invoke(app, ["predict", str(model), str(log_file)]))
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["stac"], "Missing argument"),
+        (["simulate", "dynamics", "--duration", "abc", "-o", "x.h5"], "--duration"),
+        (["pneumatic-fit", "x.h5", "--starts", "0"], "--starts"),
+        (["nosuch"], "No such command"),
+    ],
+)
+def test_usage_errors_are_one_line_with_exit_2(args, needle):
+    """A bad option value or a missing argument: one line naming it, exit 2 (usage), not a box."""
+    result = runner.invoke(app, args)
+    line = one_line_error(result)
+    assert needle in line and line.startswith("error: diegocal") and result.exit_code == 2
+
+
+def test_no_arguments_prints_the_help():
+    result = runner.invoke(app, [])
+    assert result.exit_code == 0 and "Usage" in result.output and "sgp-fit" in result.output

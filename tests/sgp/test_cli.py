@@ -50,11 +50,18 @@ def test_sgp_fit_writes_hyperparameters(logs, arm2_dir, tmp_path):
     train, _ = logs
     out = tmp_path / "m.sgp"
     args = ["sgp-fit", str(train), "--robot", str(arm2_dir), "--friction", "none", "-o", str(out)]
-    r = runner.invoke(app, args + ["-q"])
+    r = runner.invoke(app, args + ["--min-noise", "0.05"])
     assert r.exit_code == 0, r.output
     s = load_yaml(out / "sgp.yaml")
-    assert s["kind"] == "sgp" and s["options"]["friction"] == []
+    assert s["kind"] == "sgp" and s["options"]["friction"] == [] and s["options"]["min_noise"] == 0.05
     assert "lengthscales" in s["hyperparameters"]["elbow"]
+    # the guard's cross-validated choice per joint, in the summary and the file
+    for joint in ("shoulder", "elbow"):
+        choice = s["hyperparameters"][joint]["guard_choice"]
+        assert choice in ("learnt", "released", "parametric") and f"guard {joint}" in r.output
+        assert s["hyperparameters"][joint]["sigma_v"] >= 0.05 * 0.999 * np.std(
+            load_log(train).stream("tau").data[:, ["shoulder", "elbow"].index(joint)]
+        )
     assert not any(n.endswith((".fv", ".fc")) for n in s["parameters"])
 
 
@@ -95,6 +102,7 @@ def test_too_few_samples(arm2, simulate, arm2_dir, tmp_path):
         ("--friction", "stiction", "--friction"),
         ("--inference", "magic", "--inference"),
         ("--gp-inputs", "tau", "--gp-inputs"),
+        ("--min-noise", "-0.1", "--min-noise"),
     ],
 )
 def test_bad_option_values(logs, arm2_dir, option, value, needle):
