@@ -12,7 +12,7 @@ from diegocal.cli.app import simulate_app
 from diegocal.cli.common import cli_errors, summary
 from diegocal.io import save_log
 from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sim.effects import check_effects, parse_effects
+from diegocal.sim.effects import VOCABULARY, check_effects, parse_effects
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 
 
@@ -26,8 +26,8 @@ def simulate_kinematics_cmd(
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
     effect: Annotated[list[str] | None, typer.Option(
         "--effect", metavar="NAME[:CHANNEL]",
-        help="Kinematic effect to inject (repeatable): link_offset, sensor_nonlinearity, "
-        "backlash, time_offset, marker_slip.")] = None,
+        help="Kinematic effect to inject (repeatable): "
+        + ", ".join(k for k, v in VOCABULARY.items() if v == "kinematics") + ".")] = None,
     occlusion: Annotated[float, typer.Option(help="Fraction of occluded marker samples.")] = 0.1,
     occlusion_run: Annotated[float, typer.Option(help="Mean occlusion length, s.")] = 0.5,
     gain_error: Annotated[float, typer.Option(help="True gain = nominal·(1 + U(±this)).")] = 0.2,
