@@ -59,10 +59,11 @@ class Guard:
         fit (it keeps σ_z at that size even where the GP is not needed; off by default).
     validation_fraction : float
         Size of the contiguous blocks (fraction of the samples, in time order) of a blocked
-        cross-validation that judges, per output, the learnt hyperparameters against a
-        parametric-only fallback (σ_z at its floor): an output whose cross-validated nMSE the GP
-        does not lower falls back to the parametric model. The hyperparameters are learnt on
-        all samples; each block is predicted by the posterior of the others.
+        cross-validation that chooses, per output, between the learnt hyperparameters, the
+        released ones (``release_capped``) and a parametric-only fallback (σ_z at its floor): an
+        output whose cross-validated nMSE no GP lowers falls back to the parametric model. The
+        hyperparameters are learnt on all samples; each block is predicted by the posterior of
+        the others.
     restarts : int
         Extra starts on top of the estimator's ``restarts``.
     fix_sigma_w : bool
@@ -378,7 +379,7 @@ class SemiParametricGP:
                 )
                 if released is not None:
                     options["released"] = released
-            options["parametric"] = self._parametric_only(x, x0, sizes, resid, lo, hi)
+            options["parametric"] = self._parametric_only(x0, sizes, resid, lo, hi)
             blocks = np.array_split(idx, folds)  # contiguous in time order
             x = self._validate(options, blocks, Us, Y, Fs, sizes)
         return Hyperparameters.unpack(x, sizes)
@@ -400,7 +401,7 @@ class SemiParametricGP:
         result = optimise(start, new_bounds) if any_capped else None
         return None if result is None else result[1]
 
-    def _parametric_only(self, x, x0, sizes, resid, lo, hi) -> np.ndarray:
+    def _parametric_only(self, x0, sizes, resid, lo, hi) -> np.ndarray:
         """The parametric-only fallback: σ_z at its floor, σ_v at the parametric residual."""
         out = x0.copy()
         k = 1 + len(self.kernels)
