@@ -2,7 +2,7 @@
 per method, the SGP guard across seeds, and 95 %-interval coverage on data-poor test sets.
 
     .venv/bin/python bench/bench_sgp_experiments.py [--seeds 5] [--only pendulum,wheel,arm3]
-                                                    [--quick]
+                                                    [--quick] [--arm-rate HZ]
 
 Methods: PR (parametric, eq. 3.25), GP (eq. 3.21), PRGP (two-stage, §3.4.1), SGP (joint, with the
 guard of diegocal.sgp), SGP-noguard (plain ML-II SGP). nMSE is against the noise-free simulated
@@ -19,6 +19,7 @@ import argparse
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -81,6 +82,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--only", default="pendulum,wheel,arm3")
     ap.add_argument("--quick", action="store_true", help="reduced sizes (the tests' scale)")
+    ap.add_argument("--arm-rate", type=float, default=None, help="arm3 sample rate, Hz (default 20: 200 samples)")
     args = ap.parse_args()
     try:  # two cores shared: one BLAS thread per process
         from threadpoolctl import threadpool_limits
@@ -96,6 +98,8 @@ def main() -> None:
     seeds = tuple(range(args.seeds))
     for name in args.only.split(","):
         run, full, quick, poor = EXPERIMENTS[name]
+        if name == "arm3" and args.arm_rate:
+            full, quick = (replace(c, rate_hz=args.arm_rate) for c in (full, quick))
         start = time.perf_counter()
         scores = run(seeds=seeds, cfg=quick if args.quick else full)
         wall = time.perf_counter() - start
