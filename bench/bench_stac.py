@@ -115,13 +115,7 @@ def _bias_z(robot, data, cal, truth) -> float:
     and every other pot reading that joint by −gain · r · δ (tests/stac/test_stac.py)."""
     obs = Observation(data, robot)
     obs.check_observable()
-    b_equiv = truth.bias.copy()
-    for j in np.flatnonzero(obs.fixed_bias):
-        k = int(np.argmax(np.abs(obs.A[j])))
-        delta = (truth.bias[j] - cal.bias[j]) / (truth.gain[j] * obs.A[j, k])
-        for i in np.flatnonzero(obs.A[:, k]):
-            if i != j:
-                b_equiv[i] -= truth.gain[i] * obs.A[i, k] * delta
+    b_equiv = obs.gauge_equivalent_bias(truth.gain, truth.bias, cal.bias)
     return float(np.nanmax(np.abs((cal.bias - b_equiv) / cal.bias_se)[~obs.fixed_bias]))
 
 

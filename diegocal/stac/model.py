@@ -233,6 +233,22 @@ class Observation:
                 fixed[readers[0]] = True
         return fixed
 
+    def gauge_equivalent_bias(self, true_gain, true_bias, fitted_bias) -> np.ndarray:
+        """True biases (P,) moved into the gauge a fit fixed (for scoring against ground truth).
+
+        A pot j whose bias is fixed at nominal (``fixed_bias``) shifts its joint k's zero by
+        δ = (b_true,j − b_fit,j) / (gain_j r_jk), and every other pot i reading q_k by
+        −gain_i r_ik δ; the other biases are unchanged.
+        """
+        out = np.array(true_bias, float)
+        for j in np.flatnonzero(self.fixed_bias):
+            k = int(np.argmax(np.abs(self.A[j])))
+            delta = (true_bias[j] - fitted_bias[j]) / (true_gain[j] * self.A[j, k])
+            for i in np.flatnonzero(self.A[:, k]):
+                if i != j:
+                    out[i] -= true_gain[i] * self.A[i, k] * delta
+        return out
+
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, q: np.ndarray, xyz: np.ndarray | None = None):
         """Transmission and marker link poses for a batch q (B, n).

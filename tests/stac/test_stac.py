@@ -41,13 +41,7 @@ def _check_recovery(robot, log, result):
     # δ = (b_true − b_nominal) / gain and every other pot reading q_k (tendons) by −gain r δ
     obs = Observation(log, robot)
     obs.check_observable()
-    b_equiv = truth.bias.copy()
-    for j in np.flatnonzero(obs.fixed_bias):
-        k = int(np.argmax(np.abs(obs.A[j])))
-        delta = (truth.bias[j] - cal.bias[j]) / (truth.gain[j] * obs.A[j, k])
-        for i in np.flatnonzero(obs.A[:, k]):
-            if i != j:
-                b_equiv[i] -= truth.gain[i] * obs.A[i, k] * delta
+    b_equiv = obs.gauge_equivalent_bias(truth.gain, truth.bias, cal.bias)
     zb = ((cal.bias - b_equiv) / cal.bias_se)[bias_free]
     assert np.all(np.abs(zb) < Z), f"bias z-scores {np.round(zb, 1)}"
     zx = ((cal.marker_xyz - truth.marker_xyz) / cal.marker_xyz_se)[marker_free]
