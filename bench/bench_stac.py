@@ -51,12 +51,7 @@ def rel_error(cal: Calibration, truth: Calibration, gauge_free_markers: np.ndarr
 def gauge_free_markers(robot, log) -> np.ndarray:
     obs = Observation(log, robot)
     obs.check_observable()
-    fixed = {obs.pot_specs[j].joint for j in np.flatnonzero(obs.fixed_bias)}
-    out = []
-    for m in robot.sensors.markers:
-        j = robot.model.frames[robot.frame_id(m.link)].parentJoint
-        out.append(not (j > 0 and robot.joint_names[j - 1] in fixed))
-    return np.array(out)
+    return obs.gauge_free_markers()
 
 
 def schedules(seed: int = 0) -> None:

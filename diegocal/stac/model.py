@@ -233,6 +233,20 @@ class Observation:
                 fixed[readers[0]] = True
         return fixed
 
+    def gauge_joints(self) -> set[str]:
+        """Joints whose zero is a gauge, fixed by keeping a reading pot's bias at nominal."""
+        return {self.pot_specs[j].joint for j in np.flatnonzero(self.fixed_bias)}
+
+    def gauge_free_markers(self) -> np.ndarray:
+        """(M,) bool, in ``robot.sensors.markers`` order: markers whose position takes up no gauge
+        (not on the child link of a gauge joint, about whose axis they would rotate with its zero)."""
+        fixed, robot = self.gauge_joints(), self.robot
+        out = []
+        for m in robot.sensors.markers:
+            joint = robot.model.frames[robot.frame_id(m.link)].parentJoint
+            out.append(not (joint > 0 and robot.joint_names[joint - 1] in fixed))
+        return np.array(out, dtype=bool)
+
     def gauge_equivalent_bias(self, true_gain, true_bias, fitted_bias) -> np.ndarray:
         """True biases (P,) moved into the gauge a fit fixed (for scoring against ground truth).
 

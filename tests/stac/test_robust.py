@@ -115,12 +115,7 @@ def _free(robot, log):
     """Estimated biases (not gauge-fixed) and markers not on a gauge joint's link (test_stac.py)."""
     obs = Observation(log, robot)
     obs.check_observable()
-    fixed = {obs.pot_specs[j].joint for j in np.flatnonzero(obs.fixed_bias)}
-    markers = []
-    for m in robot.sensors.markers:
-        joint = robot.model.frames[robot.frame_id(m.link)].parentJoint
-        markers.append(not (joint > 0 and robot.joint_names[joint - 1] in fixed))
-    return obs, ~obs.fixed_bias, np.array(markers)
+    return obs, ~obs.fixed_bias, obs.gauge_free_markers()
 
 
 def _distance(cal, ref, bias_free, marker_free) -> float:

@@ -17,30 +17,17 @@ from diegocal.stac.stac import _aitken, calibrate
 Z = 4.5  # standard errors allowed per parameter (a few hundred parameters in all)
 
 
-def _gauge_free(robot, log):
-    """Pots whose bias is estimated and markers whose position does not take up a gauge."""
-    obs = Observation(log, robot)
-    obs.check_observable()
-    fixed_joints = {obs.pot_specs[j].joint for j in np.flatnonzero(obs.fixed_bias)}
-    leaf_links = set()
-    for m in robot.sensors.markers:
-        joint = robot.model.frames[robot.frame_id(m.link)].parentJoint
-        if joint > 0 and robot.joint_names[joint - 1] in fixed_joints:
-            leaf_links.add(m.link)
-    markers = np.array([m.link not in leaf_links for m in robot.sensors.markers])
-    return ~obs.fixed_bias, markers, fixed_joints
-
-
 def _check_recovery(robot, log, result):
     truth = Calibration.from_dict(log.truth.params)
     cal = result.calibration
-    bias_free, marker_free, fixed_joints = _gauge_free(robot, log)
+    # pots whose bias is estimated, markers whose position takes up no gauge
+    obs = Observation(log, robot)
+    obs.check_observable()
+    bias_free, marker_free, fixed_joints = ~obs.fixed_bias, obs.gauge_free_markers(), obs.gauge_joints()
     zg = (cal.gain - truth.gain) / cal.gain_se
     assert np.all(np.abs(zg) < Z), f"gain z-scores {np.round(zg, 1)}"
     # gauge-equivalent true biases: fixing pot j's bias at nominal shifts q_k by
     # δ = (b_true − b_nominal) / gain and every other pot reading q_k (tendons) by −gain r δ
-    obs = Observation(log, robot)
-    obs.check_observable()
     b_equiv = obs.gauge_equivalent_bias(truth.gain, truth.bias, cal.bias)
     zb = ((cal.bias - b_equiv) / cal.bias_se)[bias_free]
     assert np.all(np.abs(zb) < Z), f"bias z-scores {np.round(zb, 1)}"
