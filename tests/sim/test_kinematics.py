@@ -291,28 +291,16 @@ def test_bundled_robots_simulate(name):
 runner = CliRunner()
 
 
+def _simulate_cli(out, *extra):
+    """`diegocal simulate kinematics` of the tiny robot into ``out``, 5 s, with ``extra`` options."""
+    args = ["simulate", "kinematics", "--robot", str(TINY), "-o", str(out), "--duration", "5", *extra]
+    return runner.invoke(app, args)
+
+
 def test_cli_writes_a_log_with_truth(tmp_path):
     out = tmp_path / "k.h5"
-    res = runner.invoke(
-        app,
-        [
-            "simulate",
-            "kinematics",
-            "--robot",
-            str(TINY),
-            "-o",
-            str(out),
-            "--duration",
-            "5",
-            "--seed",
-            "3",
-            "--effect",
-            "backlash:elbow",
-            "--occlusion",
-            "0.2",
-            "--marker-noise",
-            "0.001",
-        ],
+    res = _simulate_cli(
+        out, "--seed", "3", "--effect", "backlash:elbow", "--occlusion", "0.2", "--marker-noise", "0.001"
     )
     assert res.exit_code == 0, res.output
     log = load_log(out)
@@ -320,23 +308,7 @@ def test_cli_writes_a_log_with_truth(tmp_path):
     assert log.truth.effects[0]["cause"] == "backlash"
     assert log.truth.params["sigma"]["markers"] == 0.001
     out2 = tmp_path / "k2.h5"
-    res = runner.invoke(
-        app,
-        [
-            "simulate",
-            "kinematics",
-            "--robot",
-            str(TINY),
-            "-o",
-            str(out2),
-            "--duration",
-            "5",
-            "--effect",
-            "swapped_labels",
-            "--effect",
-            "marker_outliers:m_head",
-        ],
-    )
+    res = _simulate_cli(out2, "--effect", "swapped_labels", "--effect", "marker_outliers:m_head")
     assert res.exit_code == 0, res.output
     back = load_log(out2)
     assert [e["cause"] for e in back.truth.effects] == ["swapped_labels", "marker_outliers"]
