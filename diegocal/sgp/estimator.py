@@ -32,6 +32,8 @@ LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
 FTOL = 1e-6
 # A released length-scale (Guard.release_capped), in input stds: the kernel is constant along it.
 RELEASED_LENGTHSCALE = 1e3
+# The stretches along the σ_z-ℓ ridge tried by Guard.extend_capped.
+STRETCHES = 2.0 ** np.arange(1, 11)
 
 
 @dataclass(frozen=True)
@@ -83,6 +85,17 @@ class Guard:
         it models (the wheel's friction) although the deviation does not depend on that input.
         Released, not uncapped: a length-scale of some ten stds half-reverts at a pole-up
         angle 30 stds away and blew up a short reaction-wheel run (nMSE 0.059 against PR's 0.005).
+    extend_capped : bool
+        With ``max_lengthscale`` and ``validation_fraction``: a further candidate where the
+        likelihood, not the cap, decides the limit of each capped length-scale (:meth:`~Semi
+        ParametricGP._extend`): a capped input is released if that costs no likelihood, and the
+        rest are stretched along the σ_z-ℓ ridge towards an SE kernel's *linear* limit while the
+        likelihood rises. Why: an SE kernel carries a linear trend (viscous friction in a
+        velocity) only on that ridge, where the likelihood is nearly flat and σ_z ≫ the residual,
+        so the σ_z cap stops it at ℓ ≈ 3 stds and the GP reverts to 0 a few stds outside the data.
+        Offer it only when the parametric model has no term linear in those inputs (no viscous
+        friction column): otherwise the linear limit competes with W (3-link arm, whose regressor
+        has viscous friction: 5 of 6 cells slightly worse with it).
     """
 
     max_lengthscale: float | None = None
@@ -93,6 +106,7 @@ class Guard:
     fix_sigma_w: bool = False
     max_amplitude: float | None = None
     release_capped: bool = False
+    extend_capped: bool = False
 
 
 class SemiParametricGP:
@@ -379,6 +393,10 @@ class SemiParametricGP:
                 )
                 if released is not None:
                     options["released"] = released
+            if self.guard.max_lengthscale and self.guard.extend_capped:
+                extended = self._extend(x, sizes, data)
+                if extended is not None:
+                    options["extended"] = extended
             options["parametric"] = self._parametric_only(x0, sizes, resid, lo, hi)
             blocks = np.array_split(idx, folds)  # contiguous in time order
             x = self._validate(options, blocks, Us, Y, Fs, sizes)
@@ -400,6 +418,55 @@ class SemiParametricGP:
             k += 0 if kern is None else kern.n_params
         result = optimise(start, new_bounds) if any_capped else None
         return None if result is None else result[1]
+
+    def _extend(self, x, sizes, data) -> np.ndarray | None:
+        """Guard.extend_capped: where ML-II presses a length-scale against the cap, take the limit
+        the likelihood points to, output by output, without re-optimising.
+
+        1. Release each capped input (ℓ → RELEASED_LENGTHSCALE: the GP constant along it) whose
+           release does not lower the marginal likelihood.
+        2. Stretch along the ridge: σ_z and every length-scale not released, times K in
+           STRETCHES (2 to 1024); keep the K of highest likelihood, if any beats the unstretched.
+           An SE kernel whose length-scales all exceed the data's spread is, to second order, a
+           constant plus a *linear* kernel of slope variance σ_z²/ℓ² (unchanged by the stretch):
+           it then extrapolates a linear trend (viscous friction in a velocity) instead of
+           reverting to 0 a few stds outside the data.
+        None when nothing changed."""
+        U, Y, F = data
+
+        def nll(vec):
+            try:
+                return negative_log_likelihood(vec, self.kernels, U, Y, F, sizes, grad=False)
+            except NumericalError:
+                return np.inf
+
+        cap, big = np.log(self.guard.max_lengthscale), np.log(RELEASED_LENGTHSCALE)
+        x, best = x.copy(), nll(x)
+        start = x.copy()
+        k = 1 + len(self.kernels)
+        for kern in self.kernels:
+            if kern is None:
+                continue
+            scales = [k + i for i, name in enumerate(kern.names) if is_lengthscale(name)]
+            amps = [k + i for i, name in enumerate(kern.names) if is_amplitude(name)]
+            for i in scales:  # 1. release
+                if x[i] >= cap - 1e-3:
+                    trial = x.copy()
+                    trial[i] = big
+                    f = nll(trial)
+                    if f <= best:
+                        x, best = trial, f
+            free = [i for i in scales if x[i] < big - 1e-6]
+            base = x.copy()
+            for K in STRETCHES if free and amps else ():  # 2. stretch
+                trial = base.copy()
+                trial[amps] += np.log(K)
+                trial[free] = np.minimum(trial[free] + np.log(K), big)
+                f = nll(trial)
+                if f < best:
+                    x, best = trial, f
+            k += kern.n_params
+        return None if np.array_equal(x, start) else x
 
     def _parametric_only(self, x0, sizes, resid, lo, hi) -> np.ndarray:
         """The parametric-only fallback: σ_z at its floor, σ_v at the parametric residual."""

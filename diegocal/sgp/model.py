@@ -57,6 +57,13 @@ DEFAULT_GUARD = Guard(
 GUARD_GP_INPUTS = ("q", "qd")
 
 
+def default_guard(friction: tuple) -> Guard:
+    """DEFAULT_GUARD, with ``extend_capped`` when the regressor has no viscous friction column:
+    then nothing in W is linear in qd, and only the SE kernel's linear limit carries a viscous
+    friction beyond the training velocities (:class:`~diegocal.sgp.estimator.Guard`)."""
+    return DEFAULT_GUARD if "viscous" in friction else replace(DEFAULT_GUARD, extend_capped=True)
+
+
 @dataclass(frozen=True)
 class SGPOptions:
     """Options of :func:`fit_dynamics`, parsed once (STYLE.md: no option dicts).
@@ -279,7 +286,7 @@ class DynamicsModel:
 
     def _estimator(self, kind: str, N: int, guard: bool) -> SemiParametricGP:
         o = self.options
-        g = (o.guard_options or DEFAULT_GUARD) if guard else Guard()
+        g = (o.guard_options or default_guard(o.friction)) if guard else Guard()
         kernels = [None] * len(self.joint_names) if kind == "pr" else self._kernels()
         return SemiParametricGP(
             kernels,

@@ -58,7 +58,7 @@ def test_sgp_fit_writes_hyperparameters(logs, arm2_dir, tmp_path):
     # the guard's cross-validated choice per joint, in the summary and the file
     for joint in ("shoulder", "elbow"):
         choice = s["hyperparameters"][joint]["guard_choice"]
-        assert choice in ("learnt", "released", "parametric") and f"guard {joint}" in r.output
+        assert choice in ("learnt", "released", "extended", "parametric") and f"guard {joint}" in r.output
         assert s["hyperparameters"][joint]["sigma_v"] >= 0.05 * 0.999 * np.std(
             load_log(train).stream("tau").data[:, ["shoulder", "elbow"].index(joint)]
         )

@@ -38,7 +38,7 @@ def fits():
     test = _data(rng, 200, (-1.0, 1.0), (3.0, 6.0))
     guard = replace(DEFAULT_GUARD, release_capped=True)
     out = {}
-    for label, g in (("with", guard), ("without", replace(guard, release_capped=False))):
+    for label, g in (("with", guard), ("without", replace(guard, release_capped=False, extend_capped=False))):
         kernels = [SquaredExponential(3) for _ in range(2)]
         out[label] = SemiParametricGP(kernels, guard=g, restarts=1, seed=0).fit(U, Y, F)
     return out, test
