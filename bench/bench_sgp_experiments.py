@@ -84,6 +84,9 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="reduced sizes (the tests' scale)")
     ap.add_argument("--arm-rate", type=float, default=None, help="arm3 sample rate, Hz (default 20: 200 samples)")
     args = ap.parse_args()
+    unknown = sorted(set(args.only.split(",")) - set(EXPERIMENTS))
+    if unknown:
+        ap.error(f"unknown experiment(s) {', '.join(unknown)}; known: {', '.join(EXPERIMENTS)}")
     try:  # two cores shared: one BLAS thread per process
         from threadpoolctl import threadpool_limits
 

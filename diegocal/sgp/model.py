@@ -29,7 +29,8 @@ INFERENCE = ("auto", "exact", "sparse")
 INPUT_STREAMS = ("q", "qd", "qdd")
 
 #: The guard's defaults (SGPOptions(guard=True)), one setting for every robot and experiment
-#: (evidence: bench/bench_sgp_experiments.py, bench/bench_real_identification.py):
+#: (evidence: bench/bench_sgp_experiments.py, bench/bench_real_identification.py), except that a
+#: regressor without viscous friction also gets the "extended" candidate (:func:`default_guard`):
 #:
 #: - the GP sees the state (q, qd) only: the rigid-body model is exactly linear in qdd, so a GP
 #:   that also saw qdd could take the inertial terms away from W (GUARD_GP_INPUTS);
