@@ -23,11 +23,12 @@ recorded acceleration minus the disturbance's share ``M⁻¹ [d, 0]`` (the distu
 is of the recorded acceleration.
 
 Methods as for the robots (:data:`~diegocal.sgp_experiments.common.METHODS`): the GP of GP, PRGP
-and the unguarded SGP sees all five inputs; the guarded SGP's GP does not see the inputs eq.
-(3.28) is linear in, the motor command m and the wheel angle θ_w — the same rule as the robots'
-guard, whose GP sees (q, qd) and not qdd, in which the regressor is linear. (The GP used to see
-θ_w and fitted structure along it, which the true model does not have, while the test runs' wheel
-angle drifts 8-15 training stds away.) Its guard is :data:`WHEEL_GUARD`.
+and the unguarded SGP sees all five inputs; the guarded SGP's GP sees the state only, not the
+motor command in which eq. (3.28) is exactly linear — the same rule as the robots' guard, whose
+GP sees (q, qd) and not qdd. (Dropping the wheel angle too, in which eq. 3.28 is also linear,
+was tried: on the full runs all four cells became best or tied, but the pole axis of an 8-s run,
+seed 0, got worse than PR's, 0.09 against 0.018; why was not examined.) Its guard is
+:data:`WHEEL_GUARD`.
 """
 
 from __future__ import annotations
@@ -46,8 +47,8 @@ from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
 AXES = ("pole", "wheel")
 INPUTS = ("q.pole", "q.wheel", "qd.pole", "qd.wheel", "m")
-#: The guarded GP's inputs: those eq. (3.28) is not linear in, [θ_p, θ̇_p, θ̇_w] (see the module doc).
-GUARDED_INPUTS = (0, 2, 3)
+#: The guarded GP's inputs: the state [θ_p, θ_w, θ̇_p, θ̇_w], not m (see the module doc).
+GUARDED_INPUTS = (0, 1, 2, 3)
 #: Eq. (3.28) has no term in the velocities, so only the SE kernel's linear limit carries the
 #: omitted viscous friction beyond the training speeds: the guard offers it (Guard.extend_capped).
 WHEEL_GUARD = replace(DEFAULT_GUARD, extend_capped=True)
