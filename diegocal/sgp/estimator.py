@@ -279,15 +279,24 @@ class SemiParametricGP:
                     hi.append(top)
         return list(zip(lo, hi, strict=True))
 
-    def _prior(self, vec, sizes, resid):
+    def _slots(self):
+        """Per output: (j, offset of its kernel's log-parameters in the packed vector, their
+        names); the names are empty for an output without GP."""
+        k = 1 + len(self.kernels)
+        for j, kern in enumerate(self.kernels):
+            names = kern.names if kern is not None else ()
+            yield j, k, names
+            k += len(names)
+
+    def _capped(self, log_lengthscale) -> bool:
+        return log_lengthscale >= np.log(self.guard.max_lengthscale) - 1e-3
+
+    def _prior(self, vec, resid):
         """Negative log prior of the guard's priors, and its gradient (0 when no prior is set)."""
         g = self.guard
         val, grad = 0.0, np.zeros_like(vec)
-        k = 1 + len(self.kernels)
-        for j, kern in enumerate(self.kernels):
-            if kern is None:
-                continue
-            for i, name in enumerate(kern.names):
+        for j, k, names in self._slots():
+            for i, name in enumerate(names):
                 x = vec[k + i]
                 if is_lengthscale(name) and g.lengthscale_prior is not None:
                     mu, sd = g.lengthscale_prior
@@ -297,10 +306,9 @@ class SemiParametricGP:
                     mu, sd = np.log(resid[j]), g.amplitude_prior
                     val += 0.5 * ((x - mu) / sd) ** 2
                     grad[k + i] += (x - mu) / sd**2
-            k += sizes[j]
         return val, grad
 
-    def _starts(self, x0, bounds, sizes, resid, rng, n_extra):
+    def _starts(self, x0, bounds, resid, rng, n_extra):
         """Starts: §3.3.4's; a short-length-scale one (ℓ = 0.3 input std); a parametric-first
         one (σ_z and σ_v at the parametric fit's residual: the basin where W carries the
         physics); then random perturbations of §3.3.4's."""
@@ -308,17 +316,14 @@ class SemiParametricGP:
 
         def variant(ell=None, amp=None):
             x = x0.copy()
-            k = 1 + len(self.kernels)
-            for j, (kern, size) in enumerate(zip(self.kernels, sizes, strict=True)):
-                if kern is not None:
-                    if amp is not None:
-                        x[1 + j] = np.log(amp[j] / 3.0)
-                    for i, name in enumerate(kern.names):
-                        if is_lengthscale(name) and ell is not None:
-                            x[k + i] = np.log(ell)
-                        elif is_amplitude(name) and amp is not None:
-                            x[k + i] = np.log(amp[j])
-                k += size
+            for j, k, names in self._slots():
+                if names and amp is not None:
+                    x[1 + j] = np.log(amp[j] / 3.0)
+                for i, name in enumerate(names):
+                    if is_lengthscale(name) and ell is not None:
+                        x[k + i] = np.log(ell)
+                    elif is_amplitude(name) and amp is not None:
+                        x[k + i] = np.log(amp[j])
             return x
 
         starts = [x0, variant(ell=0.3), variant(amp=resid)][: 1 + n_extra]
@@ -331,7 +336,7 @@ class SemiParametricGP:
                 f, gr = negative_log_likelihood(vec, self.kernels, U, Y, F, sizes)
             except NumericalError:
                 return 1e25, np.zeros_like(vec)
-            pv, pg = self._prior(vec, sizes, resid)
+            pv, pg = self._prior(vec, resid)
             return f + pv, gr + pg
 
         res = minimize(
@@ -364,7 +369,7 @@ class SemiParametricGP:
         has_gp = any(k is not None for k in self.kernels)
         n_extra = self.restarts + (self.guard.restarts if has_gp else 0)
         x0 = np.clip(hp0.pack(), lo, hi)
-        starts = self._starts(x0, bounds, sizes, resid, rng, n_extra if has_gp else 0)
+        starts = self._starts(x0, bounds, resid, rng, n_extra if has_gp else 0)
         self.n_starts_ = len(starts)
         data = Us[idx], Y[idx], Fs[idx]
 
@@ -397,7 +402,7 @@ class SemiParametricGP:
                 extended = self._extend(x, sizes, data)
                 if extended is not None:
                     options["extended"] = extended
-            options["parametric"] = self._parametric_only(x0, sizes, resid, lo, hi)
+            options["parametric"] = self._parametric_only(x0, resid, lo, hi)
             blocks = np.array_split(idx, folds)  # contiguous in time order
             x = self._validate(options, blocks, Us, Y, Fs, sizes)
         return Hyperparameters.unpack(x, sizes)
@@ -406,16 +411,14 @@ class SemiParametricGP:
         """Guard.release_capped: the length-scales at the cap fixed at RELEASED_LENGTHSCALE and
         the other hyperparameters re-optimised from ``x`` by ``optimise(start, bounds)``; None
         when no length-scale sits at the cap or the optimisation fails."""
-        cap, big = np.log(self.guard.max_lengthscale), np.log(RELEASED_LENGTHSCALE)
+        big = np.log(RELEASED_LENGTHSCALE)
         start, new_bounds, any_capped = x.copy(), list(bounds), False
-        k = 1 + len(self.kernels)
-        for kern in self.kernels:
-            for i, name in enumerate(kern.names if kern is not None else ()):
-                if is_lengthscale(name) and x[k + i] >= cap - 1e-3:
+        for _, k, names in self._slots():
+            for i, name in enumerate(names):
+                if is_lengthscale(name) and self._capped(x[k + i]):
                     start[k + i] = big
                     new_bounds[k + i] = (big, big)
                     any_capped = True
-            k += 0 if kern is None else kern.n_params
         result = optimise(start, new_bounds) if any_capped else None
         return None if result is None else result[1]
 
@@ -440,17 +443,14 @@ class SemiParametricGP:
             except NumericalError:
                 return np.inf
 
-        cap, big = np.log(self.guard.max_lengthscale), np.log(RELEASED_LENGTHSCALE)
+        big = np.log(RELEASED_LENGTHSCALE)
         x, best = x.copy(), nll(x)
         start = x.copy()
-        k = 1 + len(self.kernels)
-        for kern in self.kernels:
-            if kern is None:
-                continue
-            scales = [k + i for i, name in enumerate(kern.names) if is_lengthscale(name)]
-            amps = [k + i for i, name in enumerate(kern.names) if is_amplitude(name)]
+        for _, k, names in self._slots():
+            scales = [k + i for i, name in enumerate(names) if is_lengthscale(name)]
+            amps = [k + i for i, name in enumerate(names) if is_amplitude(name)]
             for i in scales:  # 1. release
-                if x[i] >= cap - 1e-3:
+                if self._capped(x[i]):
                     trial = x.copy()
                     trial[i] = big
                     f = nll(trial)
@@ -465,19 +465,16 @@ class SemiParametricGP:
                 f = nll(trial)
                 if f < best:
                     x, best = trial, f
-            k += kern.n_params
         return None if np.array_equal(x, start) else x
 
-    def _parametric_only(self, x0, sizes, resid, lo, hi) -> np.ndarray:
+    def _parametric_only(self, x0, resid, lo, hi) -> np.ndarray:
         """The parametric-only fallback: σ_z at its floor, σ_v at the parametric residual."""
         out = x0.copy()
-        k = 1 + len(self.kernels)
-        for j, (kern, size) in enumerate(zip(self.kernels, sizes, strict=True)):
+        for j, k, names in self._slots():
             out[1 + j] = np.log(resid[j])
-            for i, name in enumerate(kern.names if kern is not None else ()):
+            for i, name in enumerate(names):
                 if is_amplitude(name):
                     out[k + i] = lo[k + i]
-            k += size
         return np.clip(out, lo, hi)
 
     def _validate(self, options: dict, blocks, Us, Y, Fs, sizes) -> np.ndarray:
@@ -504,11 +501,9 @@ class SemiParametricGP:
         choice = np.argmin(scores, axis=0)  # first minimum: ties keep the earlier option
         self.selection_ = tuple(labels[c] for c in choice)
         out = options[int(choice.min())].copy()
-        k = 1 + len(self.kernels)
-        for j, size in enumerate(sizes):
+        for j, k, names in self._slots():
             out[1 + j] = options[choice[j]][1 + j]
-            out[k : k + size] = options[choice[j]][k : k + size]
-            k += size
+            out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
         return out
 
     # ------------------------------------------------------------------ predict
