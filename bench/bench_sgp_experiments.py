@@ -86,7 +86,7 @@ def main() -> None:
     args = ap.parse_args()
     unknown = sorted(set(args.only.split(",")) - set(EXPERIMENTS))
     if unknown:
-        ap.error(f"unknown experiment(s) {', '.join(unknown)}; known: {', '.join(EXPERIMENTS)}")
+        sys.exit(f"bench_sgp_experiments: unknown experiment(s) {', '.join(unknown)}; known: {', '.join(EXPERIMENTS)}")
     try:  # two cores shared: one BLAS thread per process
         from threadpoolctl import threadpool_limits
 

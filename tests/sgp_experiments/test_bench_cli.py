@@ -1,0 +1,15 @@
+"""The experiments' bench script refuses an unknown experiment with one line, before any work."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_sgp_experiments.py"
+
+
+def test_an_unknown_experiment_is_one_error_line():
+    r = subprocess.run([sys.executable, str(BENCH), "--only", "wheel,reaction_wheel"], capture_output=True, text=True)
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "reaction_wheel" in lines[0] and "known: pendulum, wheel, arm3" in lines[0], r.stderr
+    assert "===" not in r.stdout  # no experiment ran
