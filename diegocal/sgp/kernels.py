@@ -26,6 +26,11 @@ class Kernel:
     def n_params(self) -> int:
         return len(self.names)
 
+    @property
+    def lengthscale_inputs(self) -> tuple[int | None, ...]:
+        """Per log-parameter, the input column whose length-scale it is (None for the others)."""
+        return (None,) * self.n_params
+
     def __call__(self, X1: np.ndarray, X2: np.ndarray, theta: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
@@ -80,6 +85,10 @@ class SquaredExponential(Kernel):
     def __init__(self, n_dims: int):
         self.n_dims = int(n_dims)
         self.names = ("log_sigma_z",) + tuple(f"log_ell_{d}" for d in range(self.n_dims))
+
+    @property
+    def lengthscale_inputs(self):
+        return (None, *range(self.n_dims))
 
     def _scaled(self, X, theta):
         return np.asarray(X, float) / np.exp(theta[1:])
@@ -157,6 +166,10 @@ class Subspace(Kernel):
         self.kernel = kernel
         self.names = kernel.names
 
+    @property
+    def lengthscale_inputs(self):
+        return tuple(None if d is None else int(self.dims[d]) for d in self.kernel.lengthscale_inputs)
+
     def _select(self, X1, X2):
         S1 = np.asarray(X1)[:, self.dims]
         return S1, (S1 if X2 is X1 else np.asarray(X2)[:, self.dims])  # keep k(X, X) symmetric
@@ -183,6 +196,10 @@ class Sum(Kernel):
     def __init__(self, k1: Kernel, k2: Kernel):
         self.k1, self.k2 = k1, k2
         self.names = tuple(f"k1.{n}" for n in k1.names) + tuple(f"k2.{n}" for n in k2.names)
+
+    @property
+    def lengthscale_inputs(self):
+        return self.k1.lengthscale_inputs + self.k2.lengthscale_inputs
 
     def _split(self, theta):
         return theta[: self.k1.n_params], theta[self.k1.n_params :]

@@ -74,3 +74,25 @@ def test_a_local_deviation_keeps_its_short_length_scale():
     velocity_scale = np.exp(est.hyper_.theta[0][2])  # [log σ_z, log ℓ_angle, log ℓ_velocity]
     assert est.selection_[0] != "parametric"
     assert velocity_scale < 1.0, est.hyper_.theta[0]
+
+
+def test_inputs_the_features_are_linear_in_are_found_exactly():
+    """The stretch releases inputs in which the parametric part is exactly linear (W's own
+    column): found per output through the kernels' input columns, a near-linear one (sin of a
+    small angle) is not."""
+    from diegocal.sgp import Subspace
+    from diegocal.sgp.kernels import Constant
+
+    rng = np.random.default_rng(7)
+    angle, drift, velocity = rng.uniform(-0.3, 0.3, 50), rng.uniform(-5, 5, 50), rng.uniform(-1, 1, 50)
+    U = np.column_stack([angle, drift, velocity])
+    F = np.zeros((50, 2, 3))
+    F[:, 0] = np.column_stack([np.sin(angle), drift, np.zeros(50)])  # output 0: linear in the drift
+    F[:, 1] = np.column_stack([np.sin(angle), np.zeros(50), 2.0 * velocity - 1.0])  # output 1: velocity
+    kernels = [Subspace((0, 1, 2), SquaredExponential(3)), Subspace((2, 1), SquaredExponential(2)) + Constant()]
+    assert kernels[1].lengthscale_inputs == (None, 2, 1, None)
+    est = SemiParametricGP(kernels)
+    est.u_mean_, est.u_std_, est.f_scale_ = U.mean(0), U.std(0), np.ones(3)
+    Us, Fs = est._scale(U, F)
+    # packed: [σ_w, σ_v0, σ_v1, (σ_z, ℓ0, ℓ1, ℓ2) of output 0, (σ_z, ℓ2, ℓ1, c) of output 1]
+    assert est._linear_slots(Us, Fs) == {3 + 2, 7 + 1}
