@@ -65,3 +65,23 @@ def test_an_output_without_deviation_predicts_like_the_true_parametric_model(fit
     assert est.selection_[1] in ("learnt", "released", "parametric")
     np.testing.assert_allclose(est.w_, W_TRUE, atol=0.05)
     assert _nmse(est, fits[1])[1] < 2e-3
+
+
+def test_the_parametric_fallback_is_pr():
+    """The fallback the cross-validation offers is PR itself: σ_w and σ_v learnt by ML-II without
+    GP (σ_w's shrinkage holds W's weakly excited directions), so an output falling back predicts
+    like PR, not like an unregularised least-squares fit."""
+    from diegocal.sgp.gp import Hyperparameters
+
+    rng = np.random.default_rng(4)
+    U, Y, F, _ = _data(rng, 120, (-1.0, 1.0), (0.0, 1.0))
+    est = SemiParametricGP([SquaredExponential(3) for _ in range(2)], guard=DEFAULT_GUARD, seed=0).fit(U, Y, F)
+    pr = SemiParametricGP([None, None]).fit(U, Y, F)
+    Us, Fs = est._scale(U, F)
+    hp0, resid = est._initial(Us, Y, Fs)
+    vec = est._parametric_only(hp0.pack(), resid, est._bounds(hp0, resid), (Us, Y, Fs))
+    assert vec[0] == pytest.approx(pr.hyper_.log_sigma_w, abs=1e-3)
+    np.testing.assert_allclose(vec[1:3], pr.hyper_.log_sigma_v, atol=1e-3)
+    fallback = est.fit(U, Y, F, hyperparameters=Hyperparameters.unpack(vec, [4, 4]))
+    np.testing.assert_allclose(fallback.w_, pr.w_, rtol=1e-4)
+    np.testing.assert_allclose(fallback.predict(U, F)[0], pr.predict(U, F)[0], rtol=1e-4, atol=1e-6)
