@@ -39,6 +39,21 @@ STRETCHES = 2.0 ** np.arange(1, 11)
 LINEAR_TOLERANCE = 1e-6
 
 
+def choose_by_validation(per_block: np.ndarray, fallback: int) -> np.ndarray:
+    """Per output, the option of lowest mean held-out error, unless it beats the ``fallback``
+    option by at most one standard error of their paired per-block difference: then the
+    fallback (the one-standard-error rule, Hastie et al., *Elements of Statistical Learning*
+    §7.10, with the simplest model as the fallback). ``per_block`` (options, blocks, outputs);
+    returns option indices (outputs,). Ties of the mean go to the earlier option."""
+    choice = np.argmin(per_block.mean(axis=1), axis=0)
+    for j, c in enumerate(choice):
+        gain = per_block[fallback, :, j] - per_block[c, :, j]
+        if c != fallback and np.all(np.isfinite(gain)):
+            if gain.mean() <= gain.std(ddof=1) / np.sqrt(len(gain)):
+                choice[j] = fallback
+    return choice
+
+
 @dataclass(frozen=True)
 class Guard:
     """Guards against the GP part soaking up physics the parametric part explains (all optional).
@@ -534,12 +549,12 @@ class SemiParametricGP:
         the end of a run). Ties go to the earlier option; σ_w is the earliest chosen option's.
 
         A GP must earn its place: an output keeps one only if it beats the parametric fallback
-        by more than one standard error of their paired per-block difference (the one-standard-
-        error rule, Hastie et al., *Elements of Statistical Learning* §7.10). Why: W is shared,
-        and a GP on an output that PR already fits to the noise lets W drift in directions the
-        training run barely excites, at no cost in-sample or in the cross-validation (3-link arm
-        at 1000 samples, seed 0: joint 1's GP beat PR by 0.4 % of its CV error, and the vertical
-        figure-eight's joint 1 was predicted at nMSE 6.8 against PR's 0.15).
+        by more than one standard error of their paired per-block difference
+        (:func:`choose_by_validation`). Why: W is shared, and a GP on an output that PR already
+        fits to the noise lets W drift in directions the training run barely excites, at no
+        cost in-sample or in the cross-validation (3-link arm at 1000 samples, seed 0: joint 1's
+        GP beat PR by 0.4 % of its CV error, and the vertical figure-eight's joint 1 was
+        predicted at nMSE 6.8 against PR's 0.15).
         Sets ``selection_`` (label per output) and ``validation_scores_`` (label -> (n,))."""
         labels, options = list(options), list(options.values())
         per_block = np.zeros((len(options), len(blocks), Y.shape[1]))
@@ -554,15 +569,8 @@ class SemiParametricGP:
                     break
                 mean, _, _ = post.predict(Us[val_idx], Fs[val_idx])
                 per_block[c, b] = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
-        scores = per_block.mean(axis=1)
-        self.validation_scores_ = dict(zip(labels, scores, strict=True))
-        choice = np.argmin(scores, axis=0)  # first minimum: ties keep the earlier option
-        fallback = labels.index("parametric")
-        for j, c in enumerate(choice):
-            gain = per_block[fallback, :, j] - per_block[c, :, j]
-            if c != fallback and np.all(np.isfinite(gain)):
-                if gain.mean() <= gain.std(ddof=1) / np.sqrt(len(gain)):
-                    choice[j] = fallback
+        self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
+        choice = choose_by_validation(per_block, labels.index("parametric"))
         self.selection_ = tuple(labels[c] for c in choice)
         out = options[int(choice.min())].copy()
         for j, k, names in self._slots():

@@ -85,3 +85,22 @@ def test_the_parametric_fallback_is_pr():
     fallback = est.fit(U, Y, F, hyperparameters=Hyperparameters.unpack(vec, [4, 4]))
     np.testing.assert_allclose(fallback.w_, pr.w_, rtol=1e-4)
     np.testing.assert_allclose(fallback.predict(U, F)[0], pr.predict(U, F)[0], rtol=1e-4, atol=1e-6)
+
+
+def test_a_gp_must_beat_the_fallback_by_one_standard_error():
+    """choose_by_validation: options (learnt, released, parametric) × 5 blocks × 3 outputs."""
+    from diegocal.sgp.estimator import choose_by_validation
+
+    pr = np.array([1.0, 1.2, 0.9, 1.1, 1.0])
+    per_block = np.stack(
+        [
+            np.column_stack([pr - 0.30, pr - 0.01 * np.array([1, -1, 1, -1, 1]), pr + 0.1]),  # learnt
+            np.column_stack([pr - 0.20, pr + 0.05, pr + 0.2]),  # released
+            np.column_stack([pr, pr, pr]),  # parametric
+        ]
+    )
+    # output 0: learnt wins clearly; output 1: learnt lower on average by less than one SE of
+    # the paired difference -> PR; output 2: PR is best anyway
+    assert choose_by_validation(per_block, fallback=2).tolist() == [0, 2, 2]
+    per_block[0, :, 1] = pr - 0.05  # a consistent gain, far beyond its (zero) spread
+    assert choose_by_validation(per_block, fallback=2).tolist() == [0, 0, 2]
