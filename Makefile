@@ -22,7 +22,7 @@ test: $(STAMP)
 	if [ $$rc -eq 5 ]; then echo "no tests were collected"; exit 1; fi; exit $$rc
 
 lint: $(STAMP)
-	$(BIN)/ruff check diegocal tests scripts bench
+	$(BIN)/ruff check diegocal tests scripts bench experiments
 
 robots: $(STAMP)
 	$(BIN)/python scripts/make_robots.py robots

@@ -9,7 +9,7 @@ guard of diegocal.sgp), SGP-noguard (plain ML-II SGP). nMSE is against the noise
 target (torque; for the reaction wheel's forward model, the predictable acceleration), normalised
 by its variance over the test log; coverage is of the measured target. Each nMSE cell is the seed
 mean ± its standard error; the last column is SGP's verdict against the best of PR, GP and PRGP
-(diegocal.sgp_experiments.common.Verdict: "tied" = behind by at most one paired standard error
+(experiments.sgp.common.Verdict: "tied" = behind by at most one paired standard error
 over the seeds). The fit times are the reference for the methods' cost, measured in the same run.
 """
 
@@ -20,10 +20,12 @@ import subprocess
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-from diegocal.sgp_experiments import (
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/ is not installed
+from experiments.sgp import (  # noqa: E402
     ArmConfig,
     PendulumConfig,
     WheelConfig,
@@ -33,7 +35,7 @@ from diegocal.sgp_experiments import (
     run_reaction_wheel,
     table,
 )
-from diegocal.sgp_experiments.common import spread_table, verdicts
+from experiments.sgp.common import spread_table, verdicts  # noqa: E402
 
 #: Experiment -> (runner, full config, quick config, data-poor (test, region) cells).
 EXPERIMENTS = {

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
-from diegocal.sgp_experiments.reaction_wheel import (
+from experiments.sgp.reaction_wheel import (
     ForwardModel,
     WheelConfig,
     forward_arrays,

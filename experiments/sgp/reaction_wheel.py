@@ -22,7 +22,7 @@ recorded acceleration minus the disturbance's share ``M⁻¹ [d, 0]`` (the distu
 ``/truth`` for scoring only; no fit sees it), normalised by its variance on the test run; coverage
 is of the recorded acceleration.
 
-Methods as for the robots (:data:`~diegocal.sgp_experiments.common.METHODS`): the GP of GP, PRGP
+Methods as for the robots (:data:`~experiments.sgp.common.METHODS`): the GP of GP, PRGP
 and the unguarded SGP sees all five inputs; the guarded SGP's GP sees the state only, not the
 motor command in which eq. (3.28) is exactly linear — the same rule as the robots' guard, whose
 GP sees (q, qd) and not qdd. (Dropping the wheel angle too, in which eq. 3.28 is also linear,
@@ -44,8 +44,8 @@ from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import Guard, SemiParametricGP, SquaredExponential, Subspace
 from diegocal.sgp.model import default_guard
-from diegocal.sgp_experiments.common import METHODS, score_arrays, select
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from experiments.sgp.common import METHODS, score_arrays, select
 
 AXES = ("pole", "wheel")
 INPUTS = ("q.pole", "q.wheel", "qd.pole", "qd.wheel", "m")
@@ -162,7 +162,7 @@ def wheel_data(robot, seed: int, cfg: WheelConfig):
 
 
 def run_reaction_wheel(seeds=(0, 1, 2, 3, 4), cfg: WheelConfig = WheelConfig(), methods=None, guard=None) -> list:
-    """Scores of every method and seed (list of :class:`~diegocal.sgp_experiments.common.Score`)."""
+    """Scores of every method and seed (list of :class:`~experiments.sgp.common.Score`)."""
     robot = load_robot(BUNDLED_ROBOTS / "reaction_wheel")
     out = []
     for seed in seeds:

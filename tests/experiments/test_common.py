@@ -9,8 +9,8 @@ import pytest
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import TorquePrediction
-from diegocal.sgp_experiments.common import Score, score, select, spread_table, table
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from experiments.sgp.common import Score, score, select, spread_table, table
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +79,7 @@ def _cells(values):
 
 
 def test_verdict_best_tied_and_worse_follow_the_paired_standard_error():
-    from diegocal.sgp_experiments.common import verdicts
+    from experiments.sgp.common import verdicts
 
     best = verdicts(_cells({"PR": [0.2, 0.3, 0.25], "SGP": [0.1, 0.2, 0.15]}))[0]
     assert best.label == "best" and best.best == "PR" and best.diff == pytest.approx(-0.1)

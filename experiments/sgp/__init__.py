@@ -2,10 +2,10 @@
 wheel (§3.4.2) and 3-link arm (§3.4.4). Each ``run_*`` returns per-cell scores; :func:`table`
 prints them. ``bench/bench_sgp_experiments.py`` runs the full versions."""
 
-from diegocal.sgp_experiments.arm3 import ArmConfig, run_arm3
-from diegocal.sgp_experiments.common import METHODS, Score, aggregate, run_methods, table
-from diegocal.sgp_experiments.pendulum import PendulumConfig, run_pendulum
-from diegocal.sgp_experiments.reaction_wheel import WheelConfig, run_reaction_wheel
+from experiments.sgp.arm3 import ArmConfig, run_arm3
+from experiments.sgp.common import METHODS, Score, aggregate, run_methods, table
+from experiments.sgp.pendulum import PendulumConfig, run_pendulum
+from experiments.sgp.reaction_wheel import WheelConfig, run_reaction_wheel
 
 __all__ = [
     "METHODS",

@@ -18,8 +18,8 @@ import numpy as np
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions
-from diegocal.sgp_experiments.common import run_methods, select
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from experiments.sgp.common import run_methods, select
 
 SPARSE = (-2.0, 0.0)
 BUMP = (2.0, 2.5)
@@ -65,7 +65,7 @@ def pendulum_data(robot, seed: int, cfg: PendulumConfig):
 
 
 def run_pendulum(seeds=(0, 1, 2, 3, 4), cfg: PendulumConfig = PendulumConfig(), methods=None) -> list:
-    """Scores of every method and seed (list of :class:`~diegocal.sgp_experiments.common.Score`)."""
+    """Scores of every method and seed (list of :class:`~experiments.sgp.common.Score`)."""
     robot = load_robot(BUNDLED_ROBOTS / "pendulum")
     out = []
     for seed in seeds:

@@ -13,16 +13,16 @@ import numpy as np
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions, fit_dynamics, true_parameters
-from diegocal.sgp_experiments.common import score
-from diegocal.sgp_experiments.pendulum import PendulumConfig, pendulum_data
-from diegocal.sgp_experiments.reaction_wheel import (
+from experiments.sgp.common import score
+from experiments.sgp.pendulum import PendulumConfig, pendulum_data
+from experiments.sgp.reaction_wheel import (
     ForwardModel,
     WheelConfig,
     forward_arrays,
     predictable_acceleration,
     wheel_data,
 )
-from diegocal.sgp_experiments.reaction_wheel import true_parameters as wheel_parameters
+from experiments.sgp.reaction_wheel import true_parameters as wheel_parameters
 
 QUICK = dict(maxiter=40, hyper_max=200)
 

@@ -16,8 +16,8 @@ import numpy as np
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions
-from diegocal.sgp_experiments.common import run_methods
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from experiments.sgp.common import run_methods
 
 CABLE = (1.35, 2.3)
 
