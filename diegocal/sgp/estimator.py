@@ -22,6 +22,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.optimize import minimize
 
 from diegocal.errors import FitError, NumericalError
+from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood
 from diegocal.sgp.kernels import is_amplitude, is_lengthscale
 
@@ -37,21 +38,6 @@ STRETCHES = 2.0 ** np.arange(1, 11)
 # An input is "linear in the parametric part" when its column is in the span of the output's
 # feature columns and a constant to this relative residual (rounding only: an exact column).
 LINEAR_TOLERANCE = 1e-6
-
-
-def choose_by_validation(per_block: np.ndarray, fallback: int) -> np.ndarray:
-    """Per output, the option of lowest mean held-out error, unless it beats the ``fallback``
-    option by at most one standard error of their paired per-block difference: then the
-    fallback (the one-standard-error rule, Hastie et al., *Elements of Statistical Learning*
-    §7.10, with the simplest model as the fallback). ``per_block`` (options, blocks, outputs);
-    returns option indices (outputs,). Ties of the mean go to the earlier option."""
-    choice = np.argmin(per_block.mean(axis=1), axis=0)
-    for j, c in enumerate(choice):
-        gain = per_block[fallback, :, j] - per_block[c, :, j]
-        if c != fallback and np.all(np.isfinite(gain)):
-            if gain.mean() <= gain.std(ddof=1) / np.sqrt(len(gain)):
-                choice[j] = fallback
-    return choice
 
 
 @dataclass(frozen=True)
