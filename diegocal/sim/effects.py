@@ -1,4 +1,4 @@
-"""Effect requests shared by the simulators: ``--effect NAME[:channel]`` parsing and validation.
+"""Effect requests shared by the simulators: ``--effect NAME[:channel][=SIZE]`` parsing and validation.
 
 An effect is a named departure of the simulated robot from its nominal model (DESIGN.md,
 "Diagnosis output", vocabulary). Each simulator injects the effects of its own domain and
@@ -54,30 +54,43 @@ class EffectRequest:
     name : str, the cause id (``position_friction``)
     channel : str or None, the joint / sensor / marker / chamber it acts on (``r_knee``);
         None lets the simulator choose one (seeded).
+    size : float or None, the effect's magnitude in the unit its simulator documents (a torque in
+        N·m, a reading in V, a distance in m, a delay in s, a pressure in kPa); None: the
+        simulator's default.
     """
 
     name: str
     channel: str | None = None
+    size: float | None = None
 
     def __str__(self) -> str:
-        return self.name if self.channel is None else f"{self.name}:{self.channel}"
+        text = self.name if self.channel is None else f"{self.name}:{self.channel}"
+        return text if self.size is None else f"{text}={self.size:g}"
 
 
 def parse_effect(text: str) -> EffectRequest:
-    """Parse ``"NAME"`` or ``"NAME:channel"`` into an :class:`EffectRequest`.
+    """Parse ``"NAME"``, ``"NAME:channel"``, ``"NAME=SIZE"`` or ``"NAME:channel=SIZE"``.
 
     Only the syntax is checked here; :func:`check_effects` checks names against a domain.
     """
     if not isinstance(text, str):
         raise EffectError(f"effect must be a string like 'name:channel', got {text!r}")
-    raw = text.strip()
+    raw, eq, size_text = text.strip().partition("=")
     name, sep, channel = raw.partition(":")
     name, channel = name.strip(), channel.strip()
     if not name:
-        raise EffectError(f"effect {text!r}: expected NAME or NAME:CHANNEL")
+        raise EffectError(f"effect {text!r}: expected NAME, NAME:CHANNEL or NAME:CHANNEL=SIZE")
     if sep and not channel:
         raise EffectError(f"effect {text!r}: empty channel after ':'")
-    return EffectRequest(name=name, channel=channel or None)
+    size = None
+    if eq:
+        try:
+            size = float(size_text)
+        except ValueError:
+            raise EffectError(f"effect {text!r}: size {size_text.strip()!r} is not a number") from None
+        if not size > 0 or size == float("inf"):
+            raise EffectError(f"effect {text!r}: size must be a positive number, got {size_text.strip()}")
+    return EffectRequest(name=name, channel=channel or None, size=size)
 
 
 def parse_effects(texts) -> tuple[EffectRequest, ...]:

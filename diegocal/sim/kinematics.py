@@ -381,7 +381,7 @@ def plan_effects(
     T = options.n_samples
     for req in options.effects:
         rng = _effect_rng(seed, req)
-        req = EffectRequest(req.name, req.channel or _default_channel(req, robot, rng))
+        req = EffectRequest(req.name, req.channel or _default_channel(req, robot, rng), req.size)
         channel = req.channel
         if req.name == "link_offset":
             check_channel(req, robot.joint_names, "joint")
