@@ -13,7 +13,9 @@ from dataclasses import dataclass
 from diegocal.errors import DiegocalError, UnknownNameError
 from diegocal.io.files import to_plain
 
-#: Cause id -> domain, from DESIGN.md's diagnosis vocabulary.
+#: Cause id -> domain, from DESIGN.md's diagnosis vocabulary, extended with the causes real
+#: torque data asks for (issue #13): ``armature`` (rotor inertia, torque ∝ qdd), ``coupled_friction``
+#: (a motor driving two joints, e.g. the TX40's wrist), ``torque_lag`` (the torque sensor lags).
 VOCABULARY: dict[str, str] = {
     "link_offset": "kinematics",
     "sensor_nonlinearity": "kinematics",
@@ -28,6 +30,9 @@ VOCABULARY: dict[str, str] = {
     "payload": "dynamics",
     "spring": "dynamics",
     "torque_offset": "dynamics",
+    "armature": "dynamics",
+    "coupled_friction": "dynamics",
+    "torque_lag": "dynamics",
     "valve_delay": "pneumatics",
     "chamber_leak": "pneumatics",
     "supply_droop": "pneumatics",
