@@ -1,1 +1,176 @@
-"""diagnose"""
+"""Diagnosis: show what a model gets wrong, name the cause, extend the model, measure the gain.
+
+Public API::
+
+    from diegocal.diagnose import diagnose, DiagnoseOptions
+    result = diagnose(log, robot, DiagnoseOptions(domain="dynamics"))   # a Diagnosis
+    result.findings          # most important first; () when nothing is significant
+    result.to_dict()         # diagnosis.yaml (DESIGN.md, "Diagnosis output")
+    result.save_extended(path)   # the extended model, a bundle `predict` accepts
+
+The engine (:mod:`.engine`, statistics in :mod:`.stats`, the Show step in :mod:`.show`) is
+domain-free; each domain gives it an adapter: :mod:`.dynamics`, :mod:`.kinematics`,
+:mod:`.pneumatics` (their function ``adapters(log, robot, options) -> list[Adapter]``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from diegocal.diagnose.engine import (
+    Adapter,
+    Candidate,
+    EngineOptions,
+    Fault,
+    Finding,
+    Residuals,
+    UnitDiagnosis,
+    run_unit,
+)
+from diegocal.errors import DiegocalError, MissingStreamError
+from diegocal.evaluate import Blocks, split_blocks
+
+DOMAINS = ("kinematics", "dynamics", "pneumatics")
+#: The streams that make a domain diagnosable (DESIGN.md: ``diagnose --domain`` defaults).
+DOMAIN_STREAMS = {
+    "kinematics": ("pots", "markers"),
+    "dynamics": ("q", "tau"),
+    "pneumatics": ("pressure", "valve"),
+}
+#: The file name of each domain's extended model beside diagnosis.yaml.
+EXTENDED_SUFFIX = {
+    "kinematics": ".extended.calib.yaml",
+    "dynamics": ".extended.sgp",
+    "pneumatics": ".extended.pneumatic.yaml",
+}
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions:
+    """Options of :func:`diagnose`, parsed once.
+
+    domain : "kinematics" | "dynamics" | "pneumatics"
+    alpha, min_gain, max_rounds : see :class:`~diegocal.diagnose.engine.EngineOptions`
+    n_blocks : contiguous blocks the log is cut into (roles train / validation / held out, interleaved)
+    friction : dynamics: the baseline's friction terms (subset of viscous, coulomb)
+    chambers : pneumatics: the chambers to diagnose (() = all)
+    jobs : independent units (chambers) diagnosed in parallel processes
+    seed : seeds anything random (none of the defaults is)
+    progress : optional callable(str)
+    """
+
+    domain: str = "dynamics"
+    alpha: float = 0.01
+    min_gain: float = 0.05
+    max_rounds: int = 6
+    n_blocks: int = 10
+    friction: tuple = ("viscous", "coulomb")
+    chambers: tuple = ()
+    jobs: int = 1
+    seed: int = 0
+    progress: object = field(default=None, repr=False, compare=False)
+
+    def engine(self, n_units: int = 1) -> EngineOptions:
+        return EngineOptions(
+            alpha=self.alpha,
+            min_gain=self.min_gain,
+            max_rounds=self.max_rounds,
+            n_units=n_units,
+            progress=self.progress,
+        )
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """The diagnosis of one log in one domain: every unit's result, and how the log was cut."""
+
+    domain: str
+    units: tuple[UnitDiagnosis, ...]
+    blocks: Blocks
+    time: np.ndarray
+    options: DiagnoseOptions
+    adapters: tuple = field(repr=False, default=())
+
+    @property
+    def findings(self) -> tuple[Finding, ...]:
+        """Every unit's findings, most important first: data faults, then terms by validation
+        gain, then what stays unexplained."""
+        order = {"fault": 0, "term": 1, "unexplained": 2}
+        items = [f for u in self.units for f in u.findings]
+        return tuple(sorted(items, key=lambda f: (order[f.kind], -f.evidence.get("validation_gain", 0.0))))
+
+    def save_extended(self, path, header: dict) -> Path:
+        """Write the extended model (a bundle of the domain's kind) to ``path``."""
+        if len(self.units) == 1:
+            return self.adapters[0].save(self.units[0].fitted, path, header)
+        module = importlib.import_module(f"diegocal.diagnose.{self.domain}")
+        return module.save_units(self.adapters, [u.fitted for u in self.units], path, header)
+
+    def to_dict(self, extended_model: str | None = None) -> dict:
+        from diegocal.diagnose.output import diagnosis_dict
+
+        return diagnosis_dict(self, extended_model)
+
+
+def domains_of(log) -> tuple[str, ...]:
+    """The domains a log's streams allow (DESIGN.md: markers + pots, q + tau, pressure + valve)."""
+    return tuple(d for d in DOMAINS if all(log.has(s) for s in DOMAIN_STREAMS[d]))
+
+
+def check_domain(log, domain: str) -> None:
+    if domain not in DOMAINS:
+        raise DiegocalError(f"unknown domain {domain!r}; expected one of {', '.join(DOMAINS)}")
+    missing = [s for s in DOMAIN_STREAMS[domain] if not log.has(s)]
+    if missing:
+        have = ", ".join(sorted(log.streams)) or "none"
+        raise MissingStreamError(
+            f"diagnose --domain {domain} needs the stream(s) {', '.join(missing)}; the log has: {have}"
+        )
+
+
+def diagnose(log, robot, options: DiagnoseOptions | None = None) -> Diagnosis:
+    """Diagnose ``log`` in ``options.domain`` (never reads ``log.truth``)."""
+    options = options or DiagnoseOptions()
+    check_domain(log, options.domain)
+    log = log.without_truth()
+    blocks = split_blocks(log.n_samples, options.n_blocks)
+    module = importlib.import_module(f"diegocal.diagnose.{options.domain}")
+    adapters = tuple(module.adapters(log, robot, options))
+    if not adapters:
+        raise DiegocalError(f"nothing to diagnose in the {options.domain} domain of this log")
+    engine = options.engine(n_units=len(adapters))
+    if options.jobs > 1 and len(adapters) > 1:
+        quiet = replace(engine, progress=None)
+        with ProcessPoolExecutor(max_workers=options.jobs) as pool:
+            futures = [pool.submit(run_unit, a, blocks, quiet) for a in adapters]
+            units = []
+            for a, fut in zip(adapters, futures, strict=True):
+                units.append(fut.result())
+                if options.progress is not None:
+                    options.progress(f"diagnosed {a.unit_name}")
+    else:
+        units = [run_unit(a, blocks, engine) for a in adapters]
+    return Diagnosis(options.domain, tuple(units), blocks, log.time, options, adapters)
+
+
+__all__ = [
+    "DOMAINS",
+    "Adapter",
+    "Candidate",
+    "DiagnoseOptions",
+    "Diagnosis",
+    "EngineOptions",
+    "Fault",
+    "Finding",
+    "Residuals",
+    "UnitDiagnosis",
+    "check_domain",
+    "diagnose",
+    "domains_of",
+    "run_unit",
+]

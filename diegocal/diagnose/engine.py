@@ -8,12 +8,20 @@ scores a model on held-out samples. The engine owns the statistics and the order
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
+from diegocal.diagnose.stats import (
+    OutOfSample,
+    autocorrelation_time,
+    critical_t,
+    out_of_sample_test,
+    paired_difference,
+)
 from diegocal.evaluate import Score
 from diegocal.terms import Term
 
@@ -98,3 +106,435 @@ class Adapter(Protocol):
     def describe(self, fitted) -> str: ...
 
     def save(self, fitted, path, header: dict) -> Path: ...
+
+
+# ----------------------------------------------------------------------------- options and results
+@dataclass(frozen=True)
+class EngineOptions:
+    """How strict the diagnosis is.
+
+    alpha : family-wise false-alarm rate over every test of a log (Bonferroni across candidates,
+        channels, rounds' candidates and units): clean data gives a finding with probability at
+        most ``alpha`` from chance alone
+    min_gain : practical significance: a finding must remove at least this fraction of its
+        channels' validation error (a real but negligible model error is not worth a term)
+    max_rounds : at most this many terms are added (the loop stops earlier when nothing is left)
+    n_units : independent units diagnosed for the same log (chambers): alpha is shared among them
+    n_bins : bins of a state variable in the Show step and the ``unexplained`` test
+    progress : optional callable(str) told what the engine is doing
+    """
+
+    alpha: float = 0.01
+    min_gain: float = 0.05
+    max_rounds: int = 6
+    n_units: int = 1
+    n_bins: int = 10
+    progress: Callable[[str], None] | None = None
+
+
+@dataclass(frozen=True)
+class Tested:
+    """One candidate after fitting on the training rows and testing on the validation rows.
+
+    term : the candidate's term with its training estimate (values, standard errors)
+    channels : residual channels it acts on
+    test : :class:`~diegocal.diagnose.stats.OutOfSample` on the validation rows
+    threshold : the Bonferroni critical t it had to pass
+    significant : t above the threshold and validation gain at least ``min_gain``
+    """
+
+    term: Term
+    channels: tuple[str, ...]
+    test: OutOfSample
+    threshold: float
+    significant: bool
+    n_params: int
+    candidate: Candidate = field(repr=False)
+
+    @property
+    def gain(self) -> float:
+        return self.test.gain
+
+    def to_dict(self) -> dict:
+        return {
+            "cause": self.term.cause,
+            "channel": self.term.channel,
+            "region": None if self.term.region is None else self.term.region.to_dict(),
+            "validation_gain": round(float(self.gain), 4),
+            "t": round(float(self.test.t), 2),
+            "threshold_t": round(float(self.threshold), 2),
+            "significant": bool(self.significant),
+            "parameters": len(self.term.parameters),
+        }
+
+
+@dataclass(frozen=True)
+class Finding:
+    """What the diagnosis found: a term (``kind`` "term"), a data fault ("fault") or structure no
+    candidate explains ("unexplained"), with its held-out gain and evidence."""
+
+    term: Term
+    kind: str
+    heldout_before: Score | None
+    heldout_after: Score | None
+    evidence: dict = field(default_factory=dict)
+    runners_up: tuple = ()
+
+    @property
+    def cause(self) -> str:
+        return self.term.cause
+
+    @property
+    def channel(self) -> str:
+        return self.term.channel
+
+    def gain(self) -> dict:
+        """Held-out RMSE of the finding's channels before and after it (pooled over them)."""
+        if self.heldout_before is None or self.heldout_after is None:
+            return {}
+        chans = [c for c in self.evidence.get("channels", ()) if c in self.heldout_before.channels]
+        before = _pooled(self.heldout_before, chans)
+        after = _pooled(self.heldout_after, chans)
+        red = 1.0 - after / before if before > 0 and np.isfinite(before) and np.isfinite(after) else float("nan")
+        return {"rmse_before": before, "rmse_after": after, "reduction": red}
+
+
+@dataclass(frozen=True)
+class UnitDiagnosis:
+    """The diagnosis of one unit (a robot, a chamber)."""
+
+    unit: str
+    domain: str
+    baseline_model: str
+    baseline_score: Score
+    extended_model: str
+    extended_score: Score
+    findings: tuple[Finding, ...]
+    show: dict
+    fitted: Any = field(repr=False, default=None)
+    exclude: dict = field(repr=False, default_factory=dict)
+
+
+def _pooled(score: Score, channels) -> float:
+    idx = [score.channels.index(c) for c in channels if c in score.channels]
+    if not idx:
+        return float("nan")
+    n = score.n_samples[idx].astype(float)
+    r = score.rmse[idx]
+    ok = (n > 0) & np.isfinite(r)
+    if not ok.any():
+        return float("nan")
+    return float(np.sqrt(np.sum(r[ok] ** 2 * n[ok]) / n[ok].sum()))
+
+
+# ----------------------------------------------------------------------------- rows
+class _Stack:
+    """Residual channels as weighted rows on a set of samples.
+
+    A channel's rows are its samples (T,) or its samples × axes (T·d,) in sample-major order; each
+    is multiplied by the channel's weight (1 / its baseline training RMS) so that channels in
+    different units (V and m) can share a least-squares problem and a test.
+    """
+
+    def __init__(self, res: Residuals, weights: dict, samples: np.ndarray, exclude: dict):
+        self.res, self.weights, self.samples, self.exclude = res, weights, samples, exclude
+        self.dims = {c: 1 if np.ndim(r) == 1 else int(np.shape(r)[1]) for c, r in res.channels.items()}
+
+    def residual(self, channels) -> tuple[np.ndarray, np.ndarray]:
+        """(rows,) weighted residual (NaN where missing or excluded) and (rows,) sample index."""
+        parts, samp = [], []
+        for c in channels:
+            r = np.array(self.res.channels[c], float)
+            if c in self.exclude:
+                r[np.asarray(self.exclude[c], bool)] = np.nan
+            r = r[self.samples] * self.weights[c]
+            parts.append(r.reshape(-1))
+            samp.append(np.repeat(self.samples, self.dims[c]))
+        if not parts:
+            return np.zeros(0), np.zeros(0, int)
+        return np.concatenate(parts), np.concatenate(samp)
+
+    def design(self, cols: dict | None, channels, k: int) -> np.ndarray:
+        """(rows, k): the columns (channel -> (T, k) or (T, d, k)) in :meth:`residual`'s row order;
+        zero rows for a channel the columns do not act on."""
+        out = []
+        for c in channels:
+            x = None if not cols else cols.get(c)
+            n = self.samples.size * self.dims[c]
+            if x is None:
+                out.append(np.zeros((n, k)))
+            else:
+                out.append((np.asarray(x, float)[self.samples] * self.weights[c]).reshape(n, k))
+        return np.vstack(out) if out else np.zeros((0, k))
+
+
+def _channel_weights(res: Residuals, train: np.ndarray) -> dict:
+    out = {}
+    for c, r in res.channels.items():
+        x = np.asarray(r, float)[train]
+        rms = float(np.sqrt(np.nanmean(x * x))) if np.isfinite(x).any() else 0.0
+        out[c] = 1.0 / rms if rms > 0 and np.isfinite(rms) else 1.0
+    return out
+
+
+# ----------------------------------------------------------------------------- candidates
+@dataclass(frozen=True)
+class _Fit:
+    coef: np.ndarray  # (k + k0,)
+    se: np.ndarray  # (k,) standard errors of the term's parameters
+    train_gain: float  # Σ r² − Σ (r − A coef)² on the training rows (weighted)
+
+
+def _columns(cand: Candidate, stack: _Stack, channels) -> np.ndarray:
+    k = cand.n_params
+    A = stack.design(cand.columns, channels, k)
+    if cand.refit:
+        k0 = next(iter(np.shape(v)[-1] for v in cand.refit.values()))
+        A = np.hstack([A, stack.design(cand.refit, channels, k0)])
+    return A
+
+
+def _fit(cand: Candidate, stack: _Stack, channels) -> _Fit | None:
+    r, samp = stack.residual(channels)
+    A = _columns(cand, stack, channels)
+    ok = np.isfinite(r) & np.isfinite(A).all(axis=1)
+    if ok.sum() <= A.shape[1] + 2:
+        return None
+    A, r, samp = A[ok], r[ok], samp[ok]
+    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    e = r - A @ coef
+    gain = float(r @ r - e @ e)
+    dof = max(r.size - A.shape[1], 1)
+    # correlated residuals: the variance of a sum is inflated by the correlation time
+    tau = autocorrelation_time(np.bincount(samp, weights=e)[np.unique(samp)])
+    s2 = float(e @ e) / dof * max(tau, 1.0)
+    cov = np.linalg.pinv(A.T @ A) * s2
+    k = cand.n_params
+    return _Fit(coef, np.sqrt(np.maximum(np.diag(cov)[:k], 0.0)), gain)
+
+
+def _test(cand: Candidate, fit: _Fit, stack: _Stack, channels, validation: np.ndarray):
+    r, samp = stack.residual(channels)
+    A = _columns(cand, stack, channels)
+    ok = np.isfinite(r) & np.isfinite(A).all(axis=1)
+    return out_of_sample_test(r[ok], A[ok] @ fit.coef, samp[ok], validation)
+
+
+def _candidate_channels(cand: Candidate) -> tuple[str, ...]:
+    names = list(cand.columns)
+    for c in cand.refit or {}:
+        if c not in names:
+            names.append(c)
+    return tuple(names)
+
+
+def evaluate_candidates(
+    candidates: list[Candidate],
+    res: Residuals,
+    weights: dict,
+    train: np.ndarray,
+    validation: np.ndarray,
+    options: EngineOptions,
+    exclude: dict | None = None,
+) -> list[Tested]:
+    """Fit every candidate on the ``train`` samples (one variant per family: the best training
+    fit), test it on the ``validation`` samples, Bonferroni over the families (and units)."""
+    exclude = exclude or {}
+    tr = _Stack(res, weights, np.flatnonzero(train), exclude)
+    va = _Stack(res, weights, np.flatnonzero(validation), exclude)
+    best: dict[str, tuple[Candidate, _Fit]] = {}
+    for i, cand in enumerate(candidates):
+        key = cand.family or f"#{i}"
+        fit = _fit(cand, tr, _candidate_channels(cand))
+        if fit is None:
+            continue
+        if key not in best or fit.train_gain > best[key][1].train_gain:
+            best[key] = (cand, fit)
+    n_tests = max(len(best), 1) * max(options.n_units, 1)
+    out = []
+    for cand, fit in best.values():
+        chans = _candidate_channels(cand)
+        test = _test(cand, fit, va, chans, validation)
+        thr = critical_t(options.alpha, n_tests, test.df)
+        k = cand.n_params
+        term = cand.term.with_values(fit.coef[:k], fit.se)
+        sig = bool(test.t > thr and test.gain >= options.min_gain)
+        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand))
+    out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
+    return out
+
+
+def choose(tested: list[Tested], validation: np.ndarray) -> Tested | None:
+    """The significant candidate that removes the most validation error, unless a simpler one
+    (fewer parameters) on the same channels is within one standard error of it (paired over the
+    validation sub-blocks of the best one's test): then the simplest such (the one-SE rule)."""
+    sig = [t for t in tested if t.significant]
+    if not sig:
+        return None
+    best = max(sig, key=lambda t: t.test.sse_before - t.test.sse_after)
+    simpler = []
+    for t in sig:
+        if t is best or t.n_params >= best.n_params or set(t.channels) != set(best.channels):
+            continue
+        mean, se, n = paired_difference(t.test.after, best.test.after, validation, best.test.length)
+        if n >= 3 and mean <= se:  # the simpler one is worse by at most one standard error
+            simpler.append(t)
+    if simpler:
+        return min(simpler, key=lambda t: (t.n_params, t.test.sse_after))
+    return best
+
+
+# ----------------------------------------------------------------------------- the loop
+def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> UnitDiagnosis:
+    """Diagnose one unit (DESIGN.md "Diagnosis output"; the module docstring; issue #13's steps):
+
+    1. Show: fit the baseline on the training blocks; residuals on every sample; the Show step.
+    2. Name the cause: data faults first (a fault corrupts every fit), then rounds of candidates,
+       each fitted on the training blocks and tested on the validation blocks; the winner's term
+       is added and the model refitted, until no candidate is significant (or ``max_rounds``).
+       What stays significant in the binned test is ``unexplained``.
+    3. Extend: the last fit is the extended model (``adapter.save`` writes it).
+    4. Measure the gain: held-out blocks only, never used to select.
+    """
+    from diegocal.diagnose.show import binned_candidate, region_of, show
+    from diegocal.diagnose.stats import cluster_length
+
+    options = options or EngineOptions()
+    say = options.progress or (lambda text: None)
+    train, val, held = blocks.mask("train"), blocks.mask("validation"), blocks.mask("heldout")
+    unit = f" {adapter.unit_name}" if getattr(adapter, "unit_name", "") else ""
+    say(f"fitting the baseline{unit} on {int(train.sum())} training samples")
+    fitted = adapter.fit((), train)
+    baseline = fitted
+    res = adapter.residuals(fitted)
+    weights = _channel_weights(res, train)
+    length = cluster_length([np.asarray(r, float)[train] for r in res.channels.values()])
+    shown = val | held
+    time = res.variables.get("time")
+    say(f"Show step{unit}: {len(res.channels)} channels")
+    shown_tests = show(res, weights, train, val, shown, length, options, time)
+    exclude: dict = {}
+    findings: list[Finding] = []
+    terms: tuple[Term, ...] = ()
+
+    faults = getattr(adapter, "faults", None)
+    for fault in faults(fitted, res) if faults else []:
+        if fault.exclude:
+            for c, m in fault.readings.items():
+                exclude[c] = np.asarray(exclude.get(c, np.zeros_like(m, bool)), bool) | np.asarray(m, bool)
+        new = adapter.fit(terms + (fault.term,), train)
+        before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
+        evidence = dict(fault.evidence, channels=list(fault.readings))
+        findings.append(Finding(fault.term, "fault", before, after, evidence))
+        fitted, terms = new, adapter.terms(new)
+        say(f"found {fault.term.cause} on {fault.term.channel}{unit}")
+
+    for _ in range(options.max_rounds):
+        res = adapter.residuals(fitted)
+        candidates = adapter.candidates(fitted, res, train)
+        say(f"testing {len(candidates)} candidate terms{unit}")
+        tested = evaluate_candidates(candidates, res, weights, train, val, options, exclude)
+        best = choose(tested, val)
+        if best is None:
+            break
+        new = adapter.fit(terms + (best.term,), train)
+        before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
+        res_new = adapter.residuals(new)
+        variable = _evidence_variable(best.term, res)
+        evidence = {
+            "channels": list(best.channels),
+            "validation_gain": float(best.gain),
+            "t": float(best.test.t),
+            "threshold_t": float(best.threshold),
+            "variable": variable,
+        }
+        if variable is not None:
+            evidence["curves"] = _curves(
+                res, res_new, best.channels[0], variable, shown, length, train, options.n_bins, exclude
+            )
+        runners = tuple(t.to_dict() for t in tested if t is not best)[:8]
+        new_terms = adapter.terms(new)
+        fitted_term = next((t for t in new_terms if _same(t, best.term)), best.term)
+        findings.append(Finding(fitted_term, "term", before, after, evidence, runners))
+        fitted, terms = new, new_terms
+        say(f"found {best.term.cause} on {best.term.channel}{unit} (validation gain {best.gain:.0%})")
+
+    # what remains: significant binned structure that no candidate explained
+    res = adapter.residuals(fitted)
+    generic = [
+        binned_candidate(res, c, v, train, options.n_bins)
+        for c in res.channels
+        for v in res.channel_variables.get(c, ())
+    ]
+    if generic:
+        tested = evaluate_candidates(generic, res, weights, train, val, options, exclude)
+        for t in [t for t in tested if t.significant]:
+            if any(f.kind == "unexplained" and f.channel == t.term.channel for f in findings):
+                continue  # one per channel: its most significant variable
+            region = region_of(t)
+            term = Term("unexplained", t.term.channel, (), region)
+            evidence = {
+                "channels": list(t.channels),
+                "validation_gain": float(t.gain),
+                "t": float(t.test.t),
+                "threshold_t": float(t.threshold),
+                "variable": region.variable,
+            }
+            evidence["curves"] = _curves(
+                res, None, t.term.channel, region.variable, shown, length, train, options.n_bins, exclude
+            )
+            findings.append(Finding(term, "unexplained", None, None, evidence))
+            say(f"unexplained structure on {t.term.channel}{unit} against {region.variable}")
+
+    baseline_score = adapter.score(baseline, held, exclude)
+    extended_score = adapter.score(fitted, held, exclude)
+    return UnitDiagnosis(
+        getattr(adapter, "unit_name", ""),
+        adapter.domain,
+        adapter.describe(baseline),
+        baseline_score,
+        adapter.describe(fitted),
+        extended_score,
+        tuple(findings),
+        shown_tests,
+        fitted,
+        exclude,
+    )
+
+
+def _same(a: Term, b: Term) -> bool:
+    return a.cause == b.cause and a.channel == b.channel and a.region == b.region
+
+
+def _evidence_variable(term: Term, res: Residuals) -> str | None:
+    """The variable that localises a term: its region's, else its channel's first variable."""
+    if term.region is not None and term.region.variable in res.variables:
+        return term.region.variable
+    for c in [term.channel, *res.channels]:
+        names = res.channel_variables.get(c)
+        if names:
+            return names[0]
+    return None
+
+
+def _curves(res, res_new, channel, variable, shown, length, train, n_bins, exclude) -> dict:
+    """Residual mean per bin of ``variable`` on the shown (validation + held-out) samples, before
+    and (when ``res_new`` is given) after, with block standard errors: the evidence plot's data."""
+    from diegocal.diagnose.stats import binned_means, quantile_edges
+    from diegocal.evaluate import sub_blocks
+
+    x = np.asarray(res.variables[variable], float)
+    edges = quantile_edges(x[train], n_bins)
+    cl = sub_blocks(shown, length)
+    out = {}
+    for name, r in (("before", res), ("after", res_new)):
+        if r is None or channel not in r.channels:
+            continue
+        v = np.array(r.channels[channel], float)
+        if exclude and channel in exclude:
+            v[np.asarray(exclude[channel], bool)] = np.nan
+        scalar = v if v.ndim == 1 else np.linalg.norm(v, axis=1)
+        out[name] = binned_means(np.where(shown, scalar, np.nan), x, cl, edges, variable).to_dict()
+    out["unit"] = res.units.get(channel, "")
+    out["channel"] = channel
+    return out

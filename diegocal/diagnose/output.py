@@ -1,0 +1,118 @@
+"""diagnosis.yaml: the contract of DESIGN.md ("Diagnosis output"), extended.
+
+::
+
+    kind: diagnosis            # + the bundle header (robot, log, command, version, created)
+    domain: dynamics
+    baseline: {model: rigid_body+viscous+coulomb, heldout_rmse: {joint1: 0.41, ...}, unit: N·m}
+    findings:                  # most important first; [] when nothing is significant
+      - cause: position_friction
+        channel: joint3
+        region: {variable: q.joint3, low: 1.9, high: 2.3}
+        parameters: {coulomb: {value: 0.31, std: 0.01, unit: N·m}, ...}
+        gain: {rmse_before: 0.41, rmse_after: 0.12, reduction: 0.71}     # held-out blocks
+        kind: term             # term | fault | unexplained
+        unit: N·m
+        evidence: {validation_gain, t, threshold_t, variable, curves: {before, after}}
+        runners_up: [{cause, channel, region, validation_gain, t, threshold_t, significant}, ...]
+    extended_model: run.extended.sgp
+    extended: {model: ..., heldout_rmse: {...}}
+    blocks: {train: [[t0, t1], ...], validation: [...], heldout: [...]}   # seconds
+    options: {alpha: 0.01, min_gain: 0.05, max_rounds: 6, n_blocks: 10}
+    residual_tests: {channel: {correlation_time_s, change_point: {p, time}, variables: {...}}}
+
+Pneumatics has one unit per chamber: ``baseline`` and ``extended`` hold every chamber's held-out
+RMSE, and each finding names its chamber as its channel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diegocal.terms import Term
+
+
+def _clean(v):
+    if isinstance(v, dict):
+        return {str(k): _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _clean(v.tolist())
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return None if not np.isfinite(f) else f
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    return v
+
+
+def _rmse_map(scores) -> dict:
+    out = {}
+    for s in scores:
+        for c, r in zip(s.channels, s.rmse, strict=True):
+            out[c] = None if not np.isfinite(r) else float(r)
+    return out
+
+
+def _units(scores) -> str:
+    units = sorted({s.unit for s in scores if s.unit})
+    return ", ".join(units)
+
+
+def finding_dict(f, units: dict) -> dict:
+    term: Term = f.term
+    d = term.to_dict()
+    out = {
+        "cause": d["cause"],
+        "channel": d["channel"],
+        "region": d["region"],
+        "parameters": d["parameters"],
+        "gain": _clean(f.gain()) or None,
+        "kind": f.kind,
+        "unit": units.get(f.evidence.get("channels", [term.channel])[0], "") if f.evidence.get("channels") else "",
+        "evidence": _clean(
+            {k: v for k, v in f.evidence.items() if k != "channels"} | {"channels": f.evidence.get("channels", [])}
+        ),
+    }
+    if d.get("extra"):
+        out["extra"] = d["extra"]
+    if f.runners_up:
+        out["runners_up"] = _clean(list(f.runners_up))
+    return out
+
+
+def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
+    """The diagnosis.yaml mapping of a :class:`~diegocal.diagnose.Diagnosis` (without the header)."""
+    units = diag.units
+    channel_units = {}
+    for u in units:
+        channel_units.update({c: u.baseline_score.unit for c in u.baseline_score.channels})
+    base = [u.baseline_score for u in units]
+    ext = [u.extended_score for u in units]
+    o = diag.options
+    return {
+        "domain": diag.domain,
+        "baseline": {
+            "model": units[0].baseline_model if len(units) == 1 else _common_model(u.baseline_model for u in units),
+            "heldout_rmse": _rmse_map(base),
+            "unit": _units(base),
+        },
+        "findings": [finding_dict(f, channel_units) for f in diag.findings],
+        "extended_model": extended_model,
+        "extended": {
+            "model": units[0].extended_model if len(units) == 1 else "per chamber (see findings)",
+            "heldout_rmse": _rmse_map(ext),
+            "unit": _units(ext),
+        },
+        "blocks": diag.blocks.to_dict(diag.time),
+        "options": {"alpha": o.alpha, "min_gain": o.min_gain, "max_rounds": o.max_rounds, "n_blocks": o.n_blocks},
+        "residual_tests": _clean({(f"{u.unit}/{c}" if u.unit else c): v for u in units for c, v in u.show.items()}),
+    }
+
+
+def _common_model(models) -> str:
+    models = list(dict.fromkeys(models))
+    return models[0] if len(models) == 1 else "; ".join(models)

@@ -1,0 +1,122 @@
+"""The Show step: what a model gets wrong, channel by channel, before any cause is named.
+
+For each channel and each state variable the domain names (its own joint's angle and velocity,
+the sign of the velocity, a lagged valve command, time), the residual's mean per quantile bin of
+the variable, fitted on the training samples, is tested on the validation samples like any
+candidate (:func:`~diegocal.diagnose.engine.evaluate_candidates`): a binned mean is the most flexible
+term that depends on that variable alone. Beside it, the residual's correlation time (whiteness)
+and a CUSUM change-point test in time (:func:`~diegocal.diagnose.stats.change_point`).
+
+The same binned terms, run on what remains after the named causes, are the ``unexplained``
+findings: structure that is significant and large, but that no term of the vocabulary explains.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diegocal.diagnose.stats import autocorrelation_time, bin_index, binned_means, change_point, quantile_edges
+from diegocal.terms import Region, Term
+
+
+def binned_candidate(res, channel: str, variable: str, train: np.ndarray, n_bins: int):
+    """A Candidate whose columns are the indicators of the quantile bins (from the training
+    samples) of ``variable``, one per bin and residual axis; its term is ``unexplained`` on the
+    channel (``extra.edges`` holds the bin edges)."""
+    from diegocal.diagnose.engine import Candidate
+
+    x = np.asarray(res.variables[variable], float)
+    edges = quantile_edges(x[train], n_bins)
+    b = bin_index(x, edges)
+    B = edges.size - 1
+    onehot = np.zeros((x.size, B))
+    ok = b >= 0
+    onehot[np.flatnonzero(ok), b[ok]] = 1.0
+    onehot[~ok] = np.nan
+    r = np.asarray(res.channels[channel])
+    if r.ndim == 1:
+        cols = onehot
+        names = [f"bin{k}" for k in range(B)]
+    else:
+        d = r.shape[1]
+        cols = np.zeros((x.size, d, B * d))
+        for a in range(d):
+            cols[:, a, a * B : (a + 1) * B] = onehot
+        names = [f"bin{k}.{a}" for a in range(d) for k in range(B)]
+    from diegocal.terms import Parameter
+
+    term = Term(
+        "unexplained",
+        channel,
+        tuple(Parameter(n) for n in names),
+        Region(variable, float(edges[0]), float(edges[-1])),
+        {"edges": [float(e) for e in edges]},
+    )
+    return Candidate(term, {channel: cols}, family="")
+
+
+def region_of(tested, n_bins_axes: int | None = None) -> Region:
+    """Where a significant binned term departs most: the contiguous run of bins around the bin
+    of largest |mean|, extended while the neighbours exceed half of it (edges of the variable)."""
+    term = tested.term
+    edges = np.asarray(term.extra["edges"], float)
+    B = edges.size - 1
+    vals = term.values.reshape(-1, B) if term.values.size % B == 0 else term.values[None, :B]
+    mag = np.sqrt((vals**2).sum(axis=0))
+    k = int(np.argmax(mag))
+    lo = hi = k
+    while lo > 0 and mag[lo - 1] > 0.5 * mag[k]:
+        lo -= 1
+    while hi < B - 1 and mag[hi + 1] > 0.5 * mag[k]:
+        hi += 1
+    return Region(term.region.variable, float(edges[lo]), float(edges[hi + 1]))
+
+
+def show(res, weights: dict, train, validation, shown, length: int, options, time=None, exclude=None) -> dict:
+    """The Show step on residuals ``res``: per channel, per variable the binned test (fitted on
+    ``train``, tested on ``validation``) and the curve (residual mean per bin on the ``shown``
+    samples, with block bands over sub-blocks of ``length`` samples), the correlation time and the
+    change-point test. Returns a plain mapping (diagnosis.yaml's ``residual_tests``)."""
+    from dataclasses import replace
+
+    from diegocal.diagnose.engine import evaluate_candidates
+    from diegocal.evaluate import sub_blocks
+
+    out = {}
+    n_tests = sum(len(res.channel_variables.get(c, ())) for c in res.channels) or 1
+    opts = replace(options, n_units=max(options.n_units, 1) * n_tests)
+    shown_cl = sub_blocks(shown, length)
+    seen_cl = sub_blocks(shown | train, length)
+    for c, r in res.channels.items():
+        r = np.array(r, float)
+        if exclude and c in exclude:
+            r[np.asarray(exclude[c], bool)] = np.nan
+        scalar = r if r.ndim == 1 else np.linalg.norm(r, axis=1)
+        entry = {"correlation_time_s": None, "variables": {}}
+        if time is not None and time.size > 1:
+            entry["correlation_time_s"] = float(autocorrelation_time(r[train]) * np.median(np.diff(time)))
+        for v in res.channel_variables.get(c, ()):
+            cand = binned_candidate(res, c, v, train, options.n_bins)
+            tested = evaluate_candidates([cand], res, weights, train, validation, opts, exclude)
+            x = np.asarray(res.variables[v], float)
+            edges = np.asarray(cand.term.extra["edges"])
+            curve = binned_means(np.where(shown, scalar, np.nan), x, shown_cl, edges, v)
+            item = {"curve": curve.to_dict()}
+            if tested:
+                t = tested[0]
+                item.update(
+                    t=round(float(t.test.t), 2),
+                    threshold_t=round(float(t.threshold), 2),
+                    validation_gain=round(float(t.gain), 4),
+                    significant=bool(t.significant),
+                )
+            entry["variables"][v] = item
+        centred = scalar - np.nanmean(scalar[train]) if np.isfinite(scalar[train]).any() else scalar
+        cp = change_point(np.where(shown | train, centred, np.nan), seen_cl)
+        entry["change_point"] = {
+            "p": float(cp.p),
+            "statistic": round(cp.statistic, 3),
+            "time": None if time is None else float(time[cp.at]),
+        }
+        out[c] = entry
+    return out
