@@ -1,0 +1,184 @@
+"""`diegocal diagnose LOG`: what the model gets wrong, the named cause, the extended model, the gain.
+
+parse → load the log and robot → :func:`diegocal.diagnose.diagnose` per domain → write the
+extended model (a bundle `predict` accepts) and diagnosis.yaml → summary table.
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from diegocal.cli.app import app
+from diegocal.cli.common import cli_errors, default_output, errors, summary
+from diegocal.errors import DiegocalError, MissingStreamError
+
+#: The bundle kind of each domain's extended model.
+EXTENDED_KIND = {"kinematics": "calibration", "dynamics": "dynamics", "pneumatics": "pneumatic"}
+
+
+def _command() -> str:
+    args = sys.argv[1:]
+    return "diegocal " + " ".join(shlex.quote(a) for a in args) if args else "diegocal diagnose"
+
+
+def _friction(text: str) -> str:
+    """Parse-time check of --friction (a bad value is a usage error, exit 2)."""
+    parts = tuple(t.strip() for t in text.split(",") if t.strip())
+    bad = [p for p in parts if p not in ("viscous", "coulomb", "none")]
+    if bad:
+        raise typer.BadParameter(f"unknown friction kind(s) {', '.join(bad)}; use viscous,coulomb or none")
+    return text
+
+
+def _domain(text: str | None) -> str | None:
+    """Parse-time check of --domain."""
+    domains = ("kinematics", "dynamics", "pneumatics")
+    if text is not None and text not in domains:
+        raise typer.BadParameter(f"{text!r} is not one of {', '.join(domains)}")
+    return text
+
+
+def output_paths(log: Path, output: Path | None, domain: str, several: bool) -> tuple[Path, Path]:
+    """diagnosis.yaml and the extended model's path for one domain (DESIGN.md: beside the log by
+    default, ``<log>.diagnosis.yaml``; with several domains the domain is in the name)."""
+    from diegocal.diagnose import EXTENDED_SUFFIX
+
+    if output is None:
+        out = default_output(log, f".{domain}.diagnosis.yaml" if several else ".diagnosis.yaml")
+    elif several:
+        out = output.with_name(f"{output.name.removesuffix('.yaml')}.{domain}.yaml")
+    else:
+        out = output
+    stem = out.name.removesuffix(".yaml").removesuffix(".diagnosis")
+    return out, out.with_name(stem + EXTENDED_SUFFIX[domain])
+
+
+@app.command("diagnose")
+@cli_errors
+def diagnose_cmd(
+    log: Annotated[Path, typer.Argument(help="Log to diagnose (.h5 or .csv).")],
+    robot: Annotated[str | None, typer.Option("--robot", help="Robot directory; by default the log's robot.")] = None,
+    domain: Annotated[
+        str | None,
+        typer.Option(
+            "--domain",
+            callback=_domain,
+            help="kinematics, dynamics or pneumatics; by default every domain the log's streams allow.",
+        ),
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option("-o", "--output", help="diagnosis.yaml to write; by default LOG.diagnosis.yaml beside the log."),
+    ] = None,
+    friction: Annotated[
+        str,
+        typer.Option(
+            "--friction", callback=_friction, help="Dynamics: the baseline's friction, viscous,coulomb or none."
+        ),
+    ] = "viscous,coulomb",
+    chamber: Annotated[
+        list[str] | None, typer.Option("--chamber", "-c", help="Pneumatics: chamber to diagnose (repeatable).")
+    ] = None,
+    alpha: Annotated[
+        float,
+        typer.Option("--alpha", min=1e-6, max=0.5, help="Family-wise false-alarm rate of the whole diagnosis."),
+    ] = 0.01,
+    min_gain: Annotated[
+        float,
+        typer.Option(
+            "--min-gain",
+            min=0.0,
+            max=0.99,
+            help="Smallest fraction of a channel's validation error a finding must remove.",
+        ),
+    ] = 0.05,
+    blocks: Annotated[
+        int,
+        typer.Option("--blocks", min=5, help="Contiguous blocks the log is cut into (train / validation / held out)."),
+    ] = 10,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Parallel processes (pneumatics: per chamber).")] = 1,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
+) -> None:
+    """Show what the model gets wrong, name the cause, extend the model and measure the gain on
+    held-out blocks of the log."""
+    from diegocal.diagnose import DiagnoseOptions, diagnose, domains_of
+    from diegocal.io import load_log, save_yaml
+    from diegocal.io.bundle import header
+    from diegocal.robot import load_robot, resolve_robot_dir
+
+    fric = tuple(t.strip() for t in friction.split(",") if t.strip() and t.strip() != "none")
+    data = load_log(log)
+    todo = (domain,) if domain else domains_of(data)
+    if not todo:
+        have = ", ".join(sorted(data.streams)) or "none"
+        raise MissingStreamError(
+            "nothing to diagnose: the log needs markers + pots (kinematics), q + tau (dynamics) or "
+            f"pressure + valve (pneumatics); it has: {have}"
+        )
+    rob = load_robot(resolve_robot_dir(robot, data.robot))
+
+    def progress(text: str) -> None:
+        errors.print(f"[dim]diagnose:[/] {text}", highlight=False)
+
+    rows = []
+    for d in todo:
+        options = DiagnoseOptions(
+            domain=d,
+            alpha=alpha,
+            min_gain=min_gain,
+            n_blocks=blocks,
+            friction=fric,
+            chambers=tuple(dict.fromkeys(chamber or ())),
+            jobs=jobs,
+            progress=None if quiet else progress,
+        )
+        result = diagnose(data, rob, options)
+        out, extended = output_paths(log, output, d, len(todo) > 1)
+        command = _command()
+        try:
+            result.save_extended(extended, header(EXTENDED_KIND[d], rob, log, command))
+        except OSError as exc:
+            raise DiegocalError(f"{extended}: cannot write the extended model ({exc.strerror or exc})") from None
+        mapping = {**header("diagnosis", rob, log, command), **result.to_dict(extended_model=extended.name)}
+        save_yaml(mapping, out)
+        rows += _summary_rows(d, mapping, out, extended)
+    summary(f"diagnose {Path(log).name}", rows, quiet=quiet)
+
+
+def _summary_rows(domain: str, mapping: dict, out: Path, extended: Path) -> list:
+    import numpy as np
+
+    def pooled(d: dict) -> float:
+        v = np.array([x for x in (d or {}).values() if x is not None], float)
+        return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+
+    base, ext = mapping["baseline"], mapping["extended"]
+    unit = base.get("unit", "")
+    rows = [
+        (f"{domain}: baseline", base["model"]),
+        (
+            "held-out RMSE baseline → extended",
+            f"{pooled(base['heldout_rmse']):.4g} → {pooled(ext['heldout_rmse']):.4g} {unit}",
+        ),
+        ("findings", str(len(mapping["findings"])) if mapping["findings"] else "none (nothing significant)"),
+    ]
+    for f in mapping["findings"]:
+        where = f"{f['channel']}"
+        if f.get("region"):
+            r = f["region"]
+            where += f" [{r['variable']} {r['low']:.3g}..{r['high']:.3g}]"
+        g = f.get("gain") or {}
+        if g.get("rmse_before") is not None and g.get("rmse_after") is not None:
+            red = g.get("reduction")
+            gain = f"{g['rmse_before']:.3g} → {g['rmse_after']:.3g} {f.get('unit', '')}"
+            gain += f" ({red:.0%} less)" if red is not None else ""
+        else:
+            gain = f"validation gain {f['evidence'].get('validation_gain', 0):.0%} (not explained by any term)"
+        rows.append((f"  {f['cause']} on {where}", gain))
+    rows += [("diagnosis", str(out)), ("extended model", str(extended))]
+    return rows
