@@ -1,6 +1,6 @@
 """PDF reports assembled from result files; each section module registers itself on import."""
 
-from diegocal.report import logs, pneumatic, sgp, stac  # noqa: F401 - imported to register their sections
+from diegocal.report import diagnose, logs, pneumatic, sgp, stac  # noqa: F401 - imported to register their sections
 from diegocal.report.pdf import write_report
 from diegocal.report.registry import SECTIONS, ReportContext, Section, register_section
 
