@@ -63,6 +63,14 @@ class ChamberData:
         """Indices where a gap-free stretch of the recording begins."""
         return np.concatenate([[0], np.flatnonzero(~self.steps) + 1])
 
+    def u_lags(self, n: int) -> np.ndarray:
+        """(T, n + 1) the commands u_t, u_{t-1}, ..., u_{t-n} (V); before the start of a gap-free
+        stretch the stretch's first command is repeated (no command crosses a session gap)."""
+        T = self.n_samples
+        first = np.repeat(self.segment_starts(), np.diff(np.append(self.segment_starts(), T)))
+        idx = np.maximum(np.arange(T)[:, None] - np.arange(n + 1)[None, :], first[:, None])
+        return self.u[idx]
+
 
 def chamber_spec(sensors: SensorConfig, name: str) -> ChamberSpec:
     for c in sensors.chambers:

@@ -1,12 +1,20 @@
 """pneumatic.yaml: fitted chamber models plus what the report needs to rebuild its pages.
 
-Schema (DESIGN.md: the top-level ``chambers`` key is how ``predict`` recognises the file)::
+Schema (DESIGN.md; the bundle header of ``diegocal.io.bundle`` at the top, ``kind: pneumatic``;
+files without it are recognised by their ``chambers`` key)::
 
+    kind: pneumatic
+    robot: {name, dir, hash}
+    log: ...; command: ...; version: ...; created: ...
     chambers:
       r_elbow.flex: {c1..c9, c_b, c_s, c_gamma, v_ref, v_scale, stderr: {c1..c9},
+                     terms: [{cause, channel, region, parameters: {name: {value, std, unit}}}],
                      cost, rmse, n_samples, drift_2s, drift_curve, volume_sensor, supply, room}
     meta: {command, log, robot, created, jacobian, starts, seed, skipped: {NAME: reason},
            drift: {starts, horizon_s, curve_step_s}, steady_state_log (optional)}
+
+``terms`` (a chamber's extra terms, :mod:`diegocal.pneumatic.terms`) is there only when the
+model has any (``diagnose`` writes them; ``predict`` and the report honour them).
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ from pathlib import Path
 
 from diegocal.errors import InputFileError
 from diegocal.io import load_yaml
+from diegocal.io.bundle import HEADER_KEYS
 from diegocal.pneumatic.fit import BatchFit, FitOptions
 from diegocal.pneumatic.params import ChamberParams
 from diegocal.robot.sensors import SensorConfig
@@ -40,8 +49,11 @@ class PneumaticModel:
     meta: dict
 
 
-def model_dict(batch: BatchFit, sensors: SensorConfig, options: FitOptions, meta: dict) -> dict:
-    """The pneumatic.yaml mapping for a batch of fits; ``meta`` adds log, robot, etc."""
+def model_dict(
+    batch: BatchFit, sensors: SensorConfig, options: FitOptions, meta: dict, header: dict | None = None
+) -> dict:
+    """The pneumatic.yaml mapping for a batch of fits; ``meta`` adds log, robot, etc.;
+    ``header`` (``diegocal.io.bundle.header("pneumatic", ...)``) goes first, at the top level."""
     specs = {c.name: c for c in sensors.chambers}
     chambers = {}
     for name, fit in batch.fits.items():
@@ -63,7 +75,7 @@ def model_dict(batch: BatchFit, sensors: SensorConfig, options: FitOptions, meta
         },
         "skipped": dict(batch.skipped),
     }
-    return {"chambers": chambers, "meta": {**head, **meta}}
+    return {**(header or {}), "chambers": chambers, "meta": {**head, **meta}}
 
 
 def parse_model(data: dict, source: str = "pneumatic.yaml") -> PneumaticModel:
@@ -109,4 +121,6 @@ def merge_models(datas, sources) -> dict:
         meta = meta or dict(model.meta)
     meta["skipped"] = {k: v for k, v in skipped.items() if k not in chambers}
     meta["merged_from"] = [str(Path(s)) for s in sources]
-    return {"chambers": chambers, "meta": meta}
+    first = datas[0] if datas else {}
+    header = {k: first[k] for k in HEADER_KEYS if k in first}  # the first file's bundle header
+    return {**header, "chambers": chambers, "meta": meta}

@@ -1,10 +1,11 @@
-"""Next-step least squares for the 9-parameter model (thesis §4.5.3, the equation after 4.11).
+"""Next-step least squares for the valve-chamber model (thesis §4.5.3, the equation after 4.11).
 
 .. math:: c^* = \\arg\\min_c \\sum_t (p_{t+h} - \\hat p_{t+h}(p_t, u_t, v_t, \\dot v_t; c))^2
 
-with p̂ the exact step (4.7), bounds of Table 4.1 (plus ``|c6| < 1`` on the normalised volume
-coordinate), and an analytic Jacobian (:func:`diegocal.pneumatic.model.step_vector`) for
-scipy's ``trf``.
+with p̂ the exact step (4.7) of the model's terms (c1..c9 of eq. 4.10 and any extra terms,
+:class:`~diegocal.pneumatic.model.ChamberModel`), bounds of Table 4.1 (plus ``|c6| < 1`` on the
+normalised volume coordinate) and of the extra terms, and an analytic Jacobian for scipy's
+``trf``. Parameters are packed by name at the optimiser's door only.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ except ImportError:  # pragma: no cover - optional
     threadpool_limits = None
 from diegocal.pneumatic import params as P
 from diegocal.pneumatic.data import ChamberData
-from diegocal.pneumatic.model import step_vector
+from diegocal.pneumatic.model import ChamberModel
 from diegocal.pneumatic.params import ChamberParams
 from diegocal.pneumatic.predict import drift
 
@@ -96,15 +97,34 @@ def volume_normalisation(v: np.ndarray) -> tuple[float, float]:
     return 0.5 * (hi + lo), half if half > 1e-9 * max(1.0, abs(lo), abs(hi)) else 1.0
 
 
+def step_rows(data: ChamberData, rows: np.ndarray | None = None) -> np.ndarray:
+    """Indices t of the steps t -> t+1 used by a fit: not across a gap in the recording and, when
+    ``rows`` (T,) bool is given, with both t and t+1 in ``rows`` (never across a block edge)."""
+    ok = data.steps.copy()
+    if rows is not None:
+        rows = np.asarray(rows, bool)
+        ok &= rows[:-1] & rows[1:]
+    return np.flatnonzero(ok)
+
+
 class _Problem:
     """Residuals and Jacobian of the next-step fit, sharing one evaluation per x."""
 
-    def __init__(self, data: ChamberData, nominal: ChamberParams):
-        sl = np.flatnonzero(data.steps)  # pairs (t, t+1) that do not straddle a gap
+    def __init__(
+        self,
+        data: ChamberData,
+        nominal: ChamberParams,
+        model: ChamberModel | None = None,
+        rows: np.ndarray | None = None,
+    ):
+        self.model = model or ChamberModel()
+        sl = step_rows(data, rows)  # pairs (t, t+1) that do not straddle a gap
         v, vd = nominal.volume_coordinate(data.v[sl], data.vd[sl])
         self.args = (data.p[sl], data.u[sl], v, vd, np.diff(data.time)[sl])
         self.target = data.p[sl + 1]
         self.consts = (nominal.c_b, nominal.c_s, nominal.c_gamma)
+        h = float(np.median(np.diff(data.time)))
+        self.lags = data.u_lags(self.model.n_lags(h))[sl] if self.model.has_delay else None
         self._x = None
         self._cache = None
 
@@ -116,7 +136,7 @@ class _Problem:
         ):
             return self._cache
         p, u, v, vd, h = self.args
-        out = step_vector(x, p, u, v, vd, h, *self.consts, jacobian=jacobian)
+        out = self.model.step(x, p, u, v, vd, h, *self.consts, self.lags, jacobian=jacobian)
         self._x, self._cache = np.array(x), out
         return out
 
@@ -124,50 +144,81 @@ class _Problem:
         return self._eval(x, jacobian=True)[0] - self.target
 
     def residuals_only(self, x):
-        return step_vector(x, *self.args, *self.consts, jacobian=False)[0] - self.target
+        return self.model.step(x, *self.args, *self.consts, self.lags, jacobian=False)[0] - self.target
 
     def jacobian(self, x):
         return self._eval(x, jacobian=True)[1]
 
 
+#: Random start points of the baseline (§4.5.3's multi-start check), drawn in this order.
+_RANDOM_STARTS = (
+    ("c1", lambda rng: rng.uniform(4.0, 6.0)),  # V
+    ("c2", lambda rng: np.exp(rng.uniform(np.log(0.3), np.log(5.0)))),
+    ("c3", lambda rng: rng.uniform(-0.5, 1.0)),
+    ("c4", lambda rng: rng.normal(0.0, 5.0)),
+    ("c5", lambda rng: rng.normal(0.0, 1.0)),
+    ("c7", lambda rng: np.exp(rng.uniform(np.log(2.0), np.log(100.0)))),
+    ("c8", lambda rng: rng.uniform(-0.5, 0.5)),
+    ("c9", lambda rng: np.exp(rng.uniform(np.log(0.01), np.log(0.5)))),
+)
+
+
 def start_points(
-    n: int, bounds: tuple[np.ndarray, np.ndarray], rng: np.random.Generator
+    n: int,
+    bounds: tuple[np.ndarray, np.ndarray],
+    rng: np.random.Generator,
+    model: ChamberModel | None = None,
 ) -> np.ndarray:
-    """Start vectors (n, 9): Table 4.1's start values, then seeded random ones inside the bounds."""
+    """Start vectors (n, P), by name: the model's start values (Table 4.1's for c1..c9, the extra
+    terms' own), then seeded random ones for c1..c9 inside the bounds (extras keep their start)."""
+    model = model or ChamberModel()
     lo, hi = bounds
-    x0 = [np.clip(P.start_vector(), lo + 1e-6, hi - 1e-6)]
+    first = model.start()
+    x0 = [np.clip(first, lo + 1e-6, hi - 1e-6)]
+    i = model.index
     for _ in range(n - 1):
-        x = np.array(
-            [
-                rng.uniform(4.0, 6.0),  # c1, V
-                np.exp(rng.uniform(np.log(0.3), np.log(5.0))),  # c2
-                rng.uniform(-0.5, 1.0),  # c3
-                rng.normal(0.0, 5.0),  # c4
-                rng.normal(0.0, 1.0),  # c5
-                0.0,  # c6 (drawn below)
-                np.exp(rng.uniform(np.log(2.0), np.log(100.0))),  # c7
-                rng.uniform(-0.5, 0.5),  # c8
-                np.exp(rng.uniform(np.log(0.01), np.log(0.5))),  # c9
-            ]
-        )
-        x[5] = rng.uniform(0.5 * lo[5], 0.5 * hi[5])
+        x = first.copy()
+        for name, draw in _RANDOM_STARTS:
+            x[i[name]] = draw(rng)
+        x[i["c6"]] = rng.uniform(0.5 * lo[i["c6"]], 0.5 * hi[i["c6"]])
         x0.append(np.clip(x, lo + 1e-6, hi - 1e-6))
     return np.array(x0)
 
 
-def fit_chamber(data: ChamberData, options: FitOptions = FitOptions()) -> ChamberFit:
-    """Fit c1..c9 of one chamber by next-step least squares (thesis §4.5.3)."""
+def fit_chamber(
+    data: ChamberData,
+    options: FitOptions = FitOptions(),
+    terms=(),
+    rows: np.ndarray | None = None,
+    start: ChamberParams | None = None,
+) -> ChamberFit:
+    """Fit c1..c9 of one chamber, and any extra ``terms``, by next-step least squares (§4.5.3).
+
+    Parameters
+    ----------
+    terms : extra terms (:mod:`diegocal.pneumatic.terms`); their values are the start points
+    rows : (T,) bool, the samples whose steps t -> t+1 may be used (both ends inside; the
+        training blocks of a diagnosis); default every step
+    start : a previous fit whose c1..c9 (and volume normalisation) start this one (default
+        Table 4.1's start values and the data's own normalisation)
+    """
     if threadpool_limits is None:
-        return _fit_chamber(data, options)
+        return _fit_chamber(data, options, terms, rows, start)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit_chamber(data, options)
+        return _fit_chamber(data, options, terms, rows, start)
 
 
-def _fit_chamber(data: ChamberData, options: FitOptions) -> ChamberFit:
-    v_ref, v_scale = volume_normalisation(data.v)
-    nominal = replace(ChamberParams.nominal(data.supply, data.room), v_ref=v_ref, v_scale=v_scale)
-    problem = _Problem(data, nominal)
-    lo, hi = P.lower_bounds(), P.upper_bounds()
+def _fit_chamber(data: ChamberData, options: FitOptions, terms=(), rows=None, start=None) -> ChamberFit:
+    model = ChamberModel(terms)
+    if start is not None:
+        nominal = replace(start, terms=model.extra, stderr={})
+    else:
+        v_ref, v_scale = volume_normalisation(data.v if rows is None else data.v[np.asarray(rows, bool)])
+        nominal = replace(
+            ChamberParams.nominal(data.supply, data.room), v_ref=v_ref, v_scale=v_scale, terms=model.extra
+        )
+    problem = _Problem(data, nominal, model, rows)
+    lo, hi = model.lower(), model.upper()
     rng = np.random.default_rng(options.seed)
     if options.jacobian == "analytic":
         fun, jac = problem.residuals, problem.jacobian
@@ -176,7 +227,10 @@ def _fit_chamber(data: ChamberData, options: FitOptions) -> ChamberFit:
     else:
         raise FitError(f"unknown jacobian {options.jacobian!r} (expected 'analytic' or '2-point')")
     runs = []
-    for x0 in start_points(max(1, options.starts), (lo, hi), rng):
+    starts = start_points(max(1, options.starts), (lo, hi), rng, model)
+    if start is not None:
+        starts[0, : len(P.NAMES)] = np.clip(start.vector(), lo[: len(P.NAMES)] + 1e-6, hi[: len(P.NAMES)] - 1e-6)
+    for x0 in starts:
         try:
             res = least_squares(
                 fun,
@@ -200,7 +254,11 @@ def _fit_chamber(data: ChamberData, options: FitOptions) -> ChamberFit:
     J = problem.jacobian(best.x)
     stderr = _stderr(J, best.cost, n)
     fitted = nominal.from_vector(best.x, stderr)
-    dr = drift(fitted, data, options.drift_starts, options.horizon_s)
+    if options.drift_starts > 0:
+        dr = drift(fitted, data, options.drift_starts, options.horizon_s)
+        drift_2s, curve = dr.final, dr.curve()
+    else:
+        drift_2s, curve = float("nan"), []
     return ChamberFit(
         name=data.name,
         params=fitted,
@@ -208,8 +266,8 @@ def _fit_chamber(data: ChamberData, options: FitOptions) -> ChamberFit:
         rmse=float(np.sqrt(2 * best.cost / n)),
         n_samples=int(n),
         nfev=int(best.nfev),
-        drift_2s=dr.final,
-        drift_curve=dr.curve(),
+        drift_2s=drift_2s,
+        drift_curve=curve,
         start_costs=tuple(float(r.cost) for r in runs),
         start_params=np.array([r.x for r in runs]),
     )

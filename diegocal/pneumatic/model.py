@@ -1,10 +1,13 @@
-"""The 9-parameter valve-chamber model, thesis eq. (4.6)-(4.11), and its exact step (4.7).
+"""The valve-chamber model, thesis eq. (4.6)-(4.11), built from terms, and its exact step (4.7).
 
-Inputs are sample arrays of one shape (T,) (or any common broadcast shape):
-``u`` valve voltage (V), ``v`` the normalised volume coordinate v' (see
-:class:`~diegocal.pneumatic.params.ChamberParams`), ``vd`` its rate (1/s),
-``p`` pressure (pressure unit, "pu"), ``h`` time step (s). ``x`` is the packed vector c1..c9
-(:data:`diegocal.pneumatic.params.NAMES`); ``c_b, c_s, c_gamma`` are the fixed constants.
+A :class:`ChamberModel` is the baseline terms of eq. (4.10) (:mod:`diegocal.pneumatic.terms`)
+plus any extra terms. Inputs are sample arrays of one shape (T,) (or any common broadcast
+shape): ``u`` valve voltage (V), ``v`` the normalised volume coordinate v' (see
+:class:`~diegocal.pneumatic.params.ChamberParams`), ``vd`` its rate (1/s), ``p`` pressure
+(pressure unit, "pu"), ``h`` time step (s), ``u_lags`` (T, L+1) the commands u_t, u_{t-1}, ...
+(only a model with a ``valve_delay`` reads them). ``x`` is the packed vector of the model's
+parameters in the order of :attr:`ChamberModel.names` (c1..c9 first);
+``c_b, c_s, c_gamma`` are the fixed constants.
 
 Note on the thesis: the compact form (4.11) writes the v-dot term of the rate as
 ``+ c5 vdot p / (1 + c6 v)``, while the sequential form (4.10e-f) gives
@@ -18,21 +21,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diegocal.pneumatic.params import ChamberParams
+from diegocal.pneumatic import terms as T
+from diegocal.pneumatic.params import NAMES, ChamberParams
 
 
 @dataclass(frozen=True)
 class ModelTerms:
     """s(), r() and their parameter derivatives at each sample (thesis eq. 4.10).
 
-    s, r : arrays (T,), steady-state pressure (pu) and rate (1/s)
-    ds : (T, 9) d s / d c (non-zero in c1..c4); dr : (T, 9) d r / d c (c1, c5..c9)
+    s, r : arrays (T,), steady-state pressure (pu) and rate (1/s), extra terms' flows folded in
+    ds, dr : (T, P) d s / d x and d r / d x (None unless asked for); r is not clamped here
+    s_p : d s / d p (T,) or 0.0 (only a supply droop makes s depend on the pressure)
     """
 
     s: np.ndarray
     r: np.ndarray
     ds: np.ndarray | None
     dr: np.ndarray | None
+    s_p: np.ndarray | float = 0.0
 
 
 def sigmoid(x):
@@ -45,78 +51,191 @@ def rate_shape(x, a, b, c):
     return np.sqrt(x * x + a * a) - a + b + c * x
 
 
+class ChamberModel:
+    """The baseline terms of eq. (4.10) plus ``extra`` terms (at most one per cause).
+
+    Attributes
+    ----------
+    terms : every term, in evaluation order (inputs, steady state, rate, volume, flows, reading)
+    extra : the extra terms as given
+    names : parameter names, c1..c9 then the extra terms' (the packed vector's order)
+    specs : (P,) their :class:`~diegocal.pneumatic.terms.ParamSpec`
+    has_delay : whether the model reads lagged commands (:meth:`n_lags`)
+    """
+
+    def __init__(self, extra=()):
+        extra = tuple(T.as_chamber_term(t) for t in extra)
+        causes = [t.cause for t in extra]
+        dup = {c for c in causes if causes.count(c) > 1}
+        if dup:
+            raise ValueError(f"a chamber model takes one term per cause; {sorted(dup)} given twice")
+        base = T.baseline_terms()
+        self.extra = extra
+        self.terms = tuple(sorted(base + extra, key=lambda t: t.stage))
+        self.specs = T.BASELINE_SPECS + tuple(s for t in extra for s in t.specs)
+        self.names = tuple(s.name for s in self.specs)
+        self.index = {n: i for i, n in enumerate(self.names)}
+        self.has_flow = any(t.stage == 5 for t in extra)
+        self.offset_at = self.index.get("offset")
+        self.has_delay = "valve_delay" in causes
+
+    def n_lags(self, h: float) -> int:
+        """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay."""
+        return int(np.ceil(T.MAX_DELAY_S / h - 1e-9)) + 1 if self.has_delay else 0
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+    def lower(self) -> np.ndarray:
+        return np.array([s.lower for s in self.specs])
+
+    def upper(self) -> np.ndarray:
+        return np.array([s.upper for s in self.specs])
+
+    def start(self) -> np.ndarray:
+        """Start values by name: Table 4.1's for c1..c9, the extra terms' own values."""
+        x = np.array([s.start for s in self.specs])
+        for t in self.extra:
+            for p in t.parameters:
+                x[self.index[p.name]] = p.value
+        return x
+
+    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True) -> ModelTerms:
+        """s and r of eq. (4.10) with every term added and the flows folded in (module doc of
+        :mod:`~diegocal.pneumatic.terms`); ``p`` the model's pressure (the reading minus any
+        offset). Also returns the evaluation for :meth:`step`."""
+        return self._evaluate(x, p, u, v, vd, h, (c_b, c_s, c_gamma), u_lags, jacobian)[0]
+
+    def _evaluate(self, x, p, u, v, vd, h, consts, u_lags, jacobian):
+        x = np.asarray(x, float)
+        shape = np.broadcast(u, v, vd).shape
+        ev = T.Evaluation(
+            x, self.index, p, u, v, vd, h, *consts, jacobian, u_lags=u_lags, shape=shape
+        )
+        for term in self.terms:
+            term.add(ev)
+        shape = np.broadcast(ev.u, v, vd).shape
+        r = ev.num / ev.den  # (4.10e)
+        dr = None
+        if jacobian:
+            den = ev.den[..., None] if np.ndim(ev.den) else ev.den
+            dr = ev.dnum / den - (r[..., None] if np.ndim(r) else r) * ev.dden / den
+        s, ds, s_p = ev.s, ev.ds, 0.0 if ev.s_p is None else ev.s_p
+        if self.has_flow:  # (s - p) r + α - β p = (s' - p) r', r' = r + β, s' = (s r + α) / r'
+            rc = np.maximum(r, 0.0)
+            r2 = rc + ev.beta
+            safe = np.where(r2 > 0, r2, 1.0)
+            s2 = np.where(r2 > 0, (s * rc + ev.alpha) / safe, s)
+            if jacobian:
+                drc = np.where((r > 0)[..., None], dr, 0.0)
+                dr2 = drc + ev.dbeta
+                ds = (ds * rc[..., None] + s[..., None] * drc + ev.dalpha - s2[..., None] * dr2) / safe[..., None]
+                dr = dr2
+            s_p = s_p * rc / safe
+            s, r = s2, r2
+        return ModelTerms(s, r, ds, dr, s_p), ev
+
+    def step(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True):
+        """Exact step over h with s, r held fixed, thesis eq. (4.7): p(t+h) = s + (p - s) exp(-r h).
+
+        ``p`` is the pressure reading at the step's start. Returns (p_next, J) with p_next of the
+        samples' shape and J = d p_next / d x, shape (T, P) (None unless ``jacobian``).
+
+        The rate is used as max(r, 0): §4.3 defines r() > 0 (a rate of convergence to s), but
+        (4.10e) can turn negative where c5 vdot < -c7 k; a negative rate would make the step an
+        exponential divergence from s, which no chamber does. Where r < 0 the pressure is held.
+        """
+        x = np.asarray(x, float)
+        offset = 0.0 if self.offset_at is None else float(x[self.offset_at])
+        pm = p if self.offset_at is None else p - offset  # the sensor reads p + offset
+        t, ev = self._evaluate(x, pm, u, v, vd, h, (c_b, c_s, c_gamma), u_lags, jacobian)
+        r = np.maximum(t.r, 0.0)
+        e = np.exp(-r * h)
+        p_next = t.s + (pm - t.s) * e
+        if self.offset_at is not None:
+            p_next = p_next + offset
+        if not jacobian:
+            return p_next, None
+        d_s = 1.0 - e  # d p_next / d s
+        d_r = np.where(t.r > 0.0, -h * (pm - t.s) * e, 0.0)  # d p_next / d r (0 where clamped)
+        jac = d_s[..., None] * t.ds + d_r[..., None] * t.dr
+        if ev.delay_at is not None:  # u enters only through û = u - c1 (4.10a)
+            jac[..., ev.delay_at] = -jac[..., self.index["c1"]] * ev.du
+        if self.offset_at is not None:  # d/d offset = 1 - d p_next / d p
+            jac[..., self.offset_at] = 1.0 - (e + d_s * t.s_p)
+        return p_next, jac
+
+
+BASELINE = ChamberModel()
+
+
+def model_of(params: ChamberParams) -> ChamberModel:
+    """The chamber model of fitted parameters: the baseline plus their extra terms."""
+    return ChamberModel(params.terms) if params.terms else BASELINE
+
+
 def terms(x, u, v, vd, c_b, c_s, c_gamma, jacobian: bool = True) -> ModelTerms:
-    """Evaluate s() and r() of thesis eq. (4.10a-e), with d/dc when ``jacobian``."""
-    c1, c2, c3, c4, c5, c6, c7, c8, c9 = (float(c) for c in x)
-    uh = u - c1  # (4.10a)
-    a = c2 * uh + c3 * uh**3
-    root = np.sqrt(a * a + 1.0)
-    g = a / root  # (4.10b)
-    s = c_b + c_s * g + c4 * vd  # (4.10c)
-    ru = np.sqrt(uh * uh + c_gamma * c_gamma)
-    k = ru - c_gamma + c9 + c8 * uh  # (4.10d), k(uh; c_gamma, c9, c8)
-    den = 1.0 + c6 * v
-    num = c7 * k + c5 * vd
-    r = num / den  # (4.10e)
-    if not jacobian:
-        return ModelTerms(s, r, None, None)
-    shape = np.broadcast(u, v, vd).shape
-    ds = np.zeros((*shape, 9))
-    dr = np.zeros((*shape, 9))
-    dg = c_s / root**3  # c_s dg/da
-    ds[..., 0] = -dg * (c2 + 3.0 * c3 * uh**2)
-    ds[..., 1] = dg * uh
-    ds[..., 2] = dg * uh**3
-    ds[..., 3] = vd
-    dr[..., 0] = -c7 * (uh / ru + c8) / den
-    dr[..., 4] = vd / den
-    dr[..., 5] = -r * v / den
-    dr[..., 6] = k / den
-    dr[..., 7] = c7 * uh / den
-    dr[..., 8] = c7 / den
-    return ModelTerms(s, r, ds, dr)
+    """s() and r() of the baseline, thesis eq. (4.10a-e), with d/dc when ``jacobian``."""
+    return BASELINE.evaluate(x, 0.0, u, v, vd, 1.0, c_b, c_s, c_gamma, jacobian=jacobian)
+
+
+def step_vector(x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian: bool = True):
+    """The baseline's exact step (4.7), see :meth:`ChamberModel.step`; J is (T, 9)."""
+    return BASELINE.step(x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian=jacobian)
+
+
+def _inputs(params: ChamberParams, u, v, vd, u_lags=None):
+    model = model_of(params)
+    v, vd = params.volume_coordinate(v, vd)
+    if model.has_delay and u_lags is None:  # a steady command: every lag is the command itself
+        u_lags = np.repeat(np.asarray(u, float)[..., None], model.n_lags(0.01) + 1, axis=-1)
+    return model, v, vd, u_lags
 
 
 def pressure_rate(params: ChamberParams, p, u, v, vd):
     """pdot = (s - p) r, thesis eq. (4.6)/(4.10f), pu/s; v, vd raw sensor readings."""
-    v, vd = params.volume_coordinate(v, vd)
-    t = terms(params.vector(), u, v, vd, params.c_b, params.c_s, params.c_gamma, jacobian=False)
-    return (t.s - p) * t.r
+    model, v, vd, lags = _inputs(params, u, v, vd)
+    x = params.full_vector()
+    off = 0.0 if model.offset_at is None else x[model.offset_at]
+    t = model.evaluate(x, p - off, u, v, vd, 0.01, params.c_b, params.c_s, params.c_gamma, lags, False)
+    return (t.s - (p - off)) * t.r
 
 
 def steady_state(params: ChamberParams, u, v=0.0, vd=0.0):
-    """s(u, v, vdot), the steady-state pressure of thesis eq. (4.10c), pu; v, vd raw readings."""
-    v, vd = params.volume_coordinate(v, vd)
-    return terms(
-        params.vector(), u, v, vd, params.c_b, params.c_s, params.c_gamma, jacobian=False
-    ).s
+    """s(u, v, vdot), the steady-state pressure of thesis eq. (4.10c) as the sensor reads it, pu;
+    v, vd raw readings. With a supply droop (s depends on p) the fixed point s = s(p = s)."""
+    model, v, vd, lags = _inputs(params, u, v, vd)
+    x = params.full_vector()
+    off = 0.0 if model.offset_at is None else x[model.offset_at]
+    consts = (params.c_b, params.c_s, params.c_gamma)
+    s = model.evaluate(x, params.c_b, u, v, vd, 0.01, *consts, lags, False).s
+    if "supply_droop" in (t.cause for t in model.extra):
+        for _ in range(20):
+            s = model.evaluate(x, s, u, v, vd, 0.01, *consts, lags, False).s
+    return s + off
 
 
-def step_vector(x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian: bool = True):
-    """Exact step over h with s, r held fixed, thesis eq. (4.7): p(t+h) = s + (p - s) exp(-r h).
-
-    Returns (p_next, J) with p_next of the samples' shape and J = d p_next / d c, shape (T, 9)
-    (None unless ``jacobian``).
-
-    The rate is used as max(r, 0): §4.3 defines r() > 0 (a rate of convergence to s), but
-    (4.10e) can turn negative where c5 vdot < -c7 k; a negative rate would make the step an
-    exponential divergence from s, which no chamber does. Where r < 0 the pressure is held.
-    """
-    t = terms(x, u, v, vd, c_b, c_s, c_gamma, jacobian)
-    r = np.maximum(t.r, 0.0)
-    e = np.exp(-r * h)
-    p_next = t.s + (p - t.s) * e
-    if not jacobian:
-        return p_next, None
-    d_s = 1.0 - e  # d p_next / d s
-    d_r = np.where(t.r > 0.0, -h * (p - t.s) * e, 0.0)  # d p_next / d r (0 where clamped)
-    jac = d_s[..., None] * t.ds + d_r[..., None] * t.dr
-    return p_next, jac
-
-
-def step(params: ChamberParams, p, u, v, vd, h):
-    """p(t+h) by thesis eq. (4.7) for a :class:`ChamberParams`; v, vd raw readings."""
-    v, vd = params.volume_coordinate(v, vd)
-    return step_vector(
-        params.vector(), p, u, v, vd, h, params.c_b, params.c_s, params.c_gamma, False
+def step(params: ChamberParams, p, u, v, vd, h, u_lags=None):
+    """p(t+h) by thesis eq. (4.7) for a :class:`ChamberParams`; v, vd raw readings; ``u_lags``
+    (T, L+1) the commands u_t, u_{t-1}, ... when the model has a valve delay
+    (:meth:`~diegocal.pneumatic.data.ChamberData.u_lags`)."""
+    model, v, vd, lags = _inputs(params, u, v, vd, u_lags)
+    return model.step(
+        params.full_vector(), p, u, v, vd, h, params.c_b, params.c_s, params.c_gamma, lags, False
     )[0]
+
+
+__all__ = [
+    "NAMES",
+    "ChamberModel",
+    "ModelTerms",
+    "model_of",
+    "pressure_rate",
+    "rate_shape",
+    "sigmoid",
+    "steady_state",
+    "step",
+    "step_vector",
+    "terms",
+]

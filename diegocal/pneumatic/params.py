@@ -14,46 +14,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from diegocal.errors import InputFileError
+from diegocal.pneumatic.terms import BASELINE_SPECS, ParamSpec, as_chamber_term, term_from_dict
 
 #: c_gamma, the voltage range of the leaky regime, fixed globally by the thesis (§4.4), V.
 C_GAMMA = 0.1
 
 
-@dataclass(frozen=True)
-class ParamSpec:
-    """One free parameter: name, unit, bounds (Table 4.1 or ours, see ``note``), start value."""
-
-    name: str
-    unit: str
-    lower: float
-    upper: float
-    start: float
-    meaning: str
-    note: str = ""
-
-
-#: The free parameters c1..c9 in order. Bounds from Table 4.1; c2 > 0 and c7 > 0 are ours:
-#: they fix the sign conventions (s increases with u, the rate r is positive) that the thesis
-#: states in words ("r() > 0", §4.3) but does not list in the table.
-SPECS: tuple[ParamSpec, ...] = (
-    ParamSpec("c1", "V", 2.0, 8.0, 5.0, "valve-voltage origin (U_c + U_r)/2", "Table 4.1"),
-    ParamSpec("c2", "1/V", 1e-3, np.inf, 1.0, "valve-voltage scale B", "ours: > 0"),
-    ParamSpec("c3", "1/V^3", -1.0, np.inf, 0.0, "kink factor", "Table 4.1"),
-    ParamSpec("c4", "pu s", -np.inf, np.inf, 0.0, "ds/dvdot", ""),
-    ParamSpec("c5", "1", -np.inf, np.inf, 0.0, "dr/dvdot", ""),
-    ParamSpec(
-        "c6",
-        "1",
-        -0.98,
-        0.98,
-        0.0,
-        "volume-sensor scale",
-        "|c6| < 1 keeps 1 + c6 v' > 0 on the normalised travel v' in [-1, 1]",
-    ),
-    ParamSpec("c7", "1/(s V)", 1e-6, np.inf, 10.0, "B of eq. (4.3): rate per volt", "ours: > 0"),
-    ParamSpec("c8", "1", -1.0, 1.0, 0.0, "rate asymmetry", "Table 4.1"),
-    ParamSpec("c9", "V", 1e-6, np.inf, 0.05, "leakage (L_c + L_r)/2", "Table 4.1: > 0"),
-)
+#: The free parameters c1..c9 in order (Table 4.1; bounds, units and the notes on our own
+#: bounds are in :mod:`diegocal.pneumatic.terms`, where each baseline term names its own).
+SPECS: tuple[ParamSpec, ...] = BASELINE_SPECS
 NAMES: tuple[str, ...] = tuple(s.name for s in SPECS)
 N_PARAMS = len(SPECS)
 
@@ -81,6 +50,8 @@ class ChamberParams:
     c_gamma : leaky-regime voltage range, V (0.1 in the thesis)
     stderr : dict name -> float, standard errors (NaN where unknown)
     v_ref, v_scale : the model's volume coordinate is (v - v_ref) / v_scale (see below)
+    terms : extra terms of the model (:mod:`diegocal.pneumatic.terms`: valve_delay, chamber_leak,
+        supply_droop, pressure_offset) with their fitted values and standard errors
 
     Volume coordinate. Eq. (4.10e) divides by ``1 + c6 v``: the "1" is the volume at v = 0 in
     units of the sensor's bias (§4.4). With a raw pot reading, v = 0 may lie far outside the
@@ -98,6 +69,7 @@ class ChamberParams:
     stderr: dict = field(default_factory=dict)
     v_ref: float = 0.0
     v_scale: float = 1.0
+    terms: tuple = ()
 
     def volume_coordinate(self, v, vd):
         """(v', v̇') = ((v - v_ref) / v_scale, v̇ / v_scale): the model's volume inputs."""
@@ -122,10 +94,32 @@ class ChamberParams:
         """The nine free parameters packed in the order of :data:`NAMES` (the optimiser's door)."""
         return np.array([float(self.values[n]) for n in NAMES])
 
+    def full_vector(self) -> np.ndarray:
+        """c1..c9 then the extra terms' parameters, in the order of the model's ``names``."""
+        return np.concatenate([self.vector(), *[t.values for t in self.terms]])
+
     def from_vector(self, x, stderr=None) -> ChamberParams:
-        vals = {n: float(v) for n, v in zip(NAMES, np.asarray(x, float), strict=True)}
-        se = {} if stderr is None else {n: float(v) for n, v in zip(NAMES, stderr, strict=True)}
-        return replace(self, values=vals, stderr=se)
+        """New values (and standard errors) for c1..c9, or for c1..c9 and every extra term."""
+        x = np.asarray(x, float)
+        se_all = None if stderr is None else np.asarray(stderr, float)
+        n = len(NAMES)
+        if x.size not in (n, self.full_vector().size):
+            raise ValueError(f"expected {n} or {self.full_vector().size} values, got {x.size}")
+        vals = {k: float(v) for k, v in zip(NAMES, x[:n], strict=True)}
+        se = {} if se_all is None else {k: float(v) for k, v in zip(NAMES, se_all[:n], strict=True)}
+        terms = self.terms
+        if x.size > n:
+            terms, k = [], n
+            for t in self.terms:
+                m = len(t.parameters)
+                terms.append(t.with_values(x[k : k + m], None if se_all is None else se_all[k : k + m]))
+                k += m
+            terms = tuple(terms)
+        return replace(self, values=vals, stderr=se, terms=terms)
+
+    def with_terms(self, terms) -> ChamberParams:
+        """The same chamber with these extra terms (generic Terms become chamber terms)."""
+        return replace(self, terms=tuple(as_chamber_term(t) for t in terms))
 
     def to_dict(self) -> dict:
         out = {n: float(self.values[n]) for n in NAMES}
@@ -138,6 +132,8 @@ class ChamberParams:
         )
         if self.stderr:
             out["stderr"] = {n: float(self.stderr.get(n, np.nan)) for n in NAMES}
+        if self.terms:
+            out["terms"] = [t.to_dict() for t in self.terms]
         return out
 
     @classmethod
@@ -150,6 +146,10 @@ class ChamberParams:
         try:
             vals = {n: float(raw[n]) for n in NAMES}
             se = {n: float(v) for n, v in (raw.get("stderr") or {}).items()}
+            extra = raw.get("terms") or []
+            if not isinstance(extra, list):
+                raise InputFileError(f"{where}: 'terms' must be a list of terms")
+            terms = tuple(term_from_dict(t, f"{where}: term {i + 1}") for i, t in enumerate(extra))
             return cls(
                 vals,
                 float(raw["c_b"]),
@@ -158,6 +158,7 @@ class ChamberParams:
                 se,
                 float(raw.get("v_ref", 0.0)),
                 float(raw.get("v_scale", 1.0)),
+                terms,
             )
         except (TypeError, ValueError):
             raise InputFileError(f"{where}: parameters must be numbers") from None

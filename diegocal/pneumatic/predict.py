@@ -12,7 +12,7 @@ import numpy as np
 
 from diegocal.errors import FitError
 from diegocal.pneumatic.data import ChamberData
-from diegocal.pneumatic.model import step_vector
+from diegocal.pneumatic.model import model_of
 from diegocal.pneumatic.params import ChamberParams
 
 #: Fig. 4.13: 48 start points per chamber, 2 s horizon.
@@ -60,14 +60,16 @@ def integrate_from(params: ChamberParams, data: ChamberData, starts, n_steps: in
     (S, n_steps + 1) predicted pressure; column 0 is the measured p at the starts.
     """
     starts = np.asarray(starts, dtype=int)
-    x = params.vector()
+    model = model_of(params)
+    x = params.full_vector()
     h = np.diff(data.time)
     v, vd = params.volume_coordinate(data.v, data.vd)
+    lags = data.u_lags(model.n_lags(float(np.median(h)))) if model.has_delay else None
     out = np.empty((starts.size, n_steps + 1))
     out[:, 0] = data.p[starts]
     for j in range(n_steps):
         i = starts + j
-        out[:, j + 1] = step_vector(
+        out[:, j + 1] = model.step(
             x,
             out[:, j],
             data.u[i],
@@ -77,9 +79,22 @@ def integrate_from(params: ChamberParams, data: ChamberData, starts, n_steps: in
             params.c_b,
             params.c_s,
             params.c_gamma,
+            None if lags is None else lags[i],
             jacobian=False,
         )[0]
     return out
+
+
+def next_step(params: ChamberParams, data: ChamberData) -> np.ndarray:
+    """(T - 1,) the model's p̂_{t+1} from the measured p_t, u_t, v_t, vdot_t (the fit's target;
+    thesis Fig. 4.11); steps across a gap in the recording are predicted all the same."""
+    model = model_of(params)
+    h = np.diff(data.time)
+    v, vd = params.volume_coordinate(data.v[:-1], data.vd[:-1])
+    lags = data.u_lags(model.n_lags(float(np.median(h))))[:-1] if model.has_delay else None
+    x = params.full_vector()
+    consts = (params.c_b, params.c_s, params.c_gamma)
+    return model.step(x, data.p[:-1], data.u[:-1], v, vd, h, *consts, lags, jacobian=False)[0]
 
 
 def horizon_steps(data: ChamberData, horizon_s: float) -> int:

@@ -16,9 +16,9 @@ from diegocal.errors import DiegocalError
 from diegocal.io import load_log, load_yaml
 from diegocal.pneumatic.data import ChamberData, extract
 from diegocal.pneumatic.files import PneumaticModel, load_model
-from diegocal.pneumatic.model import steady_state, step
+from diegocal.pneumatic.model import steady_state
 from diegocal.pneumatic.params import NAMES
-from diegocal.pneumatic.predict import predict_with_resets
+from diegocal.pneumatic.predict import next_step, predict_with_resets
 from diegocal.report.registry import Section, register_section
 from diegocal.report.style import COLORS, axes_or_new, page, save_page, text_page
 
@@ -91,9 +91,8 @@ def plot_steady_state(model: PneumaticModel, sweep=None, names=None, ax=None):
 def plot_delta_p(data: ChamberData, params, ax=None, window=(0.0, 10.0)):
     """Fig. 4.11: measured p_{t+h} - p_t (light) and the model's one-step change (dark)."""
     ax = axes_or_new(ax)
-    h = np.diff(data.time)
     sel = np.flatnonzero((data.time[:-1] >= window[0]) & (data.time[:-1] < window[1]) & data.steps)
-    pred = step(params, data.p[sel], data.u[sel], data.v[sel], data.vd[sel], h[sel])
+    pred = next_step(params, data)[sel]
     ax.plot(data.time[sel], data.p[sel + 1] - data.p[sel], color="0.7", lw=1.5, label="measured")
     ax.plot(data.time[sel], pred - data.p[sel], color=COLORS["model"], lw=0.7, label="model")
     ax.set_xlabel("time [s]")
@@ -135,6 +134,9 @@ def _table_lines(model: PneumaticModel) -> list[str]:
             + "".join(f"{x:8.3g}" for x in v)
             + f"{c.raw.get('rmse', np.nan):7.2f}{100 * c.raw.get('drift_2s', np.nan):6.1f}%"
         )
+        for t in c.params.terms:  # extra terms (diagnose's extended model)
+            vals = ", ".join(f"{p.name} {p.value:.4g} ± {p.stderr:.2g} {p.unit}" for p in t.parameters)
+            lines.append(f"{'':<4}+ {t.cause}: {vals}")
     skipped = model.meta.get("skipped") or {}
     if skipped:
         lines += ["", "not fitted:"] + [f"  {k}: {v}"[:110] for k, v in skipped.items()]

@@ -28,6 +28,18 @@ loop makes trajectories sensitive to the step size (halving it moves samples by 
 3 s, through the timing of joint-limit hits), and the 9-parameter model's 2-s drift rose to a
 median of 5.5 % (max 12 %) of Pc - Pr; see the final report of this work.
 
+Effects (``--effect NAME[:CHAMBER][=SIZE]``; SIZE in the unit given, default in brackets), each
+with its own physical shape, independent of the model's terms that ``diagnose`` fits:
+
+- ``valve_delay`` [0.03 s]: the spool follows the command SIZE seconds late (the held 10 ms command
+  shifted in continuous time, to the sub-step);
+- ``chamber_leak`` [0.08e-6 m²]: an orifice of SIZE m² from the chamber to the room, with the
+  thin-plate flow of eq. (4.1) (choked above the critical ratio);
+- ``supply_droop`` [10 kPa per g/s; 1 on the shared line]: the supply pressure a chamber sees
+  drops by SIZE kPa per g/s of the mass flow drawn from the supply (its own flow, or, without a
+  chamber, the whole robot's flow through one shared line), from the previous sub-step's flow;
+- ``pressure_offset`` [15 kPa]: the pressure sensor reads SIZE kPa high.
+
 Chamber geometry keys (sensors.yaml ``chambers:``, all optional; defaults in brackets):
 ``side`` [+1 for *.flex, -1 otherwise], ``bore_area`` [2e-4 m²], ``stroke`` [0.04 m],
 ``moment_arm`` [0.9 stroke / joint range], ``dead_volume`` [2e-6 m³].
@@ -42,9 +54,9 @@ import numpy as np
 
 from diegocal.errors import RobotConfigError
 from diegocal.io import Log, Truth, make_stream
-from diegocal.pneumatic.physics import GasConstants, ValveGeometry, z_flow
 from diegocal.robot import Robot, predict_pots
 from diegocal.sim.effects import SimOptionError, check_channel, check_effects, effect_record
+from diegocal.sim.thin_plate import GasConstants, ValveGeometry, z_flow
 
 EXPERIMENTS = ("dynamic", "steady-state")
 KPA = 1e3
@@ -57,6 +69,9 @@ EFFECT_DEFAULTS = {
     "supply_droop": {"kpa_per_g_s": 10.0},
     "pressure_offset": {"offset": 15.0},
 }
+#: The value ``--effect NAME=SIZE`` sets, per effect (its unit: the module docstring).
+EFFECT_SIZE = {"valve_delay": "delay_s", "chamber_leak": "area_m2", "supply_droop": "kpa_per_g_s",
+               "pressure_offset": "offset"}
 
 
 @dataclass(frozen=True)
@@ -200,7 +215,8 @@ def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
     q_fns = [_joint_motion(robot, cyl, options, rng) for _ in range(S)]
     # (n_ticks, S, C): the command held over each tick, per session
     u = np.stack([_valve_commands(options, cyl, n_ticks, rng) for _ in range(S)], axis=1)
-    effects, u_spool, leak, droop, droop_shared, offset = _effects(options, names, u, dt_tick, rng)
+    effects, delay, leak, droop, droop_shared, offset = _effects(options, names, rng)
+    lag_sub = np.round(delay * options.rate_hz * options.substeps).astype(int)  # (C,) sub-steps
     # Sessions and chambers are independent: integrate them together as S*C flat columns.
     flat = lambda x: np.broadcast_to(x, (S, C)).ravel()  # noqa: E731
     supply_f, room_f, droop_f = flat(supply), flat(room), flat(droop)
@@ -217,10 +233,14 @@ def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
         q, qd = (np.stack(x, axis=1) for x in zip(*(fn(ts) for fn in q_fns), strict=True))
         vol, vol_rate = (x.reshape(t1 - t0, n_sub, S * C) for x in cyl.volume(q, qd))
         for i in range(t1 - t0):
-            a_c, a_r = valve.areas(u_spool[t0 + i])
+            a_c, a_r = valve.areas(u[t0 + i])
             a_c, a_r = a_c.ravel(), (a_r + leak).ravel()
             acc = np.zeros(S * C)
             for k in range(n_sub):
+                if lag_sub.any():  # the spool sees the command of lag_sub sub-steps ago
+                    tick = np.maximum(((t0 + i) * n_sub + k - lag_sub) // n_sub, 0)
+                    a_c, a_r = valve.areas(u[tick, :, np.arange(C)].T)
+                    a_c, a_r = a_c.ravel(), (a_r + leak).ravel()
                 # supply droop: kPa per g/s = 1e6 Pa per kg/s, on the session's total or own flow
                 flow = np.repeat(m_supply.reshape(S, C).sum(1), C) if droop_shared else m_supply
                 p, mean, m_supply = _substep(
@@ -367,11 +387,12 @@ def _valve_commands(options, cyl, n_ticks, rng):
     return np.clip(5.0 + 2.0 * np.tanh(0.7 * w), U_LOW, U_HIGH)
 
 
-def _effects(options, names, u, dt_tick, rng):
-    """Apply the requested effects; returns (records, spool command, leak area (m²), droop gain
-    (kPa per g/s), whether the droop follows the total supply flow, pressure offset (kPa))."""
+def _effects(options, names, rng):
+    """The requested effects (module docstring); returns (records, valve delay (s), leak area (m²),
+    droop gain (kPa per g/s), whether the droop follows the total supply flow, pressure offset
+    (kPa)), arrays (C,)."""
     C = len(names)
-    u_spool, leak, droop, offset = u.copy(), np.zeros(C), np.zeros(C), np.zeros(C)
+    delay, leak, droop, offset = np.zeros(C), np.zeros(C), np.zeros(C), np.zeros(C)
     records, shared = [], False
     for req in check_effects(options.effects, "pneumatics"):
         values = dict(EFFECT_DEFAULTS[req.name])
@@ -383,10 +404,10 @@ def _effects(options, names, u, dt_tick, rng):
                 check_channel(req, names, "chamber") if req.channel else names[int(rng.integers(C))]
             )
             sel = np.array([n == channel for n in names])
+        if req.size is not None:
+            values[EFFECT_SIZE[req.name]] = float(req.size)
         if req.name == "valve_delay":
-            lag = max(1, int(round(values["delay_s"] / dt_tick)))
-            delayed = np.vstack([np.repeat(u[:1], lag, axis=0), u[:-lag]])
-            u_spool[..., sel] = delayed[..., sel]
+            delay[sel] = values["delay_s"]
         elif req.name == "chamber_leak":
             leak[sel] += values["area_m2"]
         elif req.name == "supply_droop":
@@ -394,7 +415,7 @@ def _effects(options, names, u, dt_tick, rng):
         elif req.name == "pressure_offset":
             offset[sel] += values["offset"]
         records.append(effect_record(req.name, channel, values))
-    return records, u_spool, leak, droop, shared, offset
+    return records, delay, leak, droop, shared, offset
 
 
 def _pots(robot, q, options, rng):
@@ -445,37 +466,3 @@ def _check_options(o: PneumaticSimOptions) -> None:
         raise SimOptionError(f"substeps must be >= 1, got {o.substeps}")
     if o.pressure_noise < 0 or o.pot_noise < 0:
         raise SimOptionError("noise levels must be non-negative")
-
-
-def simulate_parametric(log: Log, sensors, params: dict, noise: float, seed: int) -> Log:
-    """Replace the log's pressure by the 9-parameter model's own output (identifiability tests).
-
-    p_{t+1} = step(p_t, u_t, v_t, vdot_t; c) + N(0, noise²) (thesis eq. 4.7) from room pressure,
-    with u, v (the volume sensors) and vdot (their forward difference) taken from ``log``.
-    ``params`` maps chamber names to :class:`~diegocal.pneumatic.params.ChamberParams`; other
-    chambers are dropped. /truth records them in the pneumatic.yaml schema.
-    """
-    from diegocal.pneumatic.data import chamber_data
-    from diegocal.pneumatic.model import step
-
-    rng = np.random.default_rng(seed)
-    names = list(params)
-    out = np.empty((log.n_samples, len(names)))
-    for k, name in enumerate(names):
-        d = chamber_data(log, sensors, name, check_span=False)
-        c = params[name]
-        p = out[:, k]
-        p[0] = d.room
-        h = np.diff(d.time)
-        eps = rng.normal(0.0, noise, d.n_samples)
-        for t in range(d.n_samples - 1):
-            p[t + 1] = step(c, p[t], d.u[t], d.v[t], d.vd[t], h[t]) + eps[t]
-    truth = Truth(
-        params={"model": "parametric", "chambers": {n: params[n].to_dict() for n in names}},
-        effects=[],
-        signals=dict(log.truth.signals) if log.truth else {},
-    )
-    streams = dict(log.streams)
-    streams["pressure"] = make_stream(names, out)
-    streams["valve"] = log.streams["valve"].select(names)
-    return Log(log.time, streams, robot=log.robot, rate_hz=log.rate_hz, truth=truth)

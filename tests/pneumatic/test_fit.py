@@ -11,7 +11,7 @@ from diegocal.pneumatic import FitOptions, chamber_data, drift, fit_chamber, fit
 from diegocal.pneumatic.fit import volume_normalisation
 from diegocal.pneumatic.params import NAMES, ChamberParams
 from diegocal.pneumatic.predict import predict_with_resets
-from diegocal.sim.pneumatics import simulate_parametric
+from diegocal.pneumatic.synthetic import simulate_model
 
 TRUE_X = np.array([4.9, 1.5, 0.3, -20.0, 0.5, 0.3, 30.0, 0.1, 0.1])
 
@@ -24,7 +24,7 @@ def test_parametric_data_recovers_the_parameters_within_their_standard_errors(ro
     truth = replace(ChamberParams.nominal(620.0, 100.0), v_ref=v_ref, v_scale=v_scale).from_vector(
         TRUE_X
     )
-    log = simulate_parametric(train_log, robot.sensors, {name: truth}, noise=1.0, seed=3)
+    log = simulate_model(train_log, robot.sensors, {name: truth}, noise=1.0, seed=3)
     assert log.truth.params["chambers"][name]["c7"] == 30.0
     fit = fit_chamber(chamber_data(log.without_truth(), robot.sensors, name))
     est, se = fit.params.vector(), np.array([fit.params.stderr[n] for n in NAMES])

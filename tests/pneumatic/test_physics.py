@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from diegocal.pneumatic.physics import (
+from diegocal.sim.pneumatics import _rate, _substep
+from diegocal.sim.thin_plate import (
     GasConstants,
     ValveGeometry,
     flow_function,
@@ -12,7 +13,6 @@ from diegocal.pneumatic.physics import (
     mass_flow,
     steady_state_pressure,
 )
-from diegocal.sim.pneumatics import _rate, _substep
 
 GAS = GasConstants()
 VALVE = ValveGeometry(U_c=5.1, U_r=4.9, L_c=0.05e-6, L_r=0.05e-6, B=2e-6, smooth=1e-6)

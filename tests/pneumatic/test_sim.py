@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from diegocal.errors import UnknownNameError
-from diegocal.pneumatic.physics import steady_state_pressure
 from diegocal.sim.effects import EffectError
 from diegocal.sim.pneumatics import (
     PneumaticSimOptions,
@@ -12,6 +11,7 @@ from diegocal.sim.pneumatics import (
     robot_valves,
     simulate_pneumatics,
 )
+from diegocal.sim.thin_plate import steady_state_pressure
 
 
 def test_log_has_the_contract_streams_and_truth(physics_log, robot):
@@ -98,3 +98,30 @@ def test_bad_options_and_effects_fail_clearly(robot):
         )
     with pytest.raises(SimOptionError, match="experiment"):
         simulate_pneumatics(robot, PneumaticSimOptions(duration=1.0, experiment="wild"))
+
+
+def test_effect_sizes_are_honoured_in_their_documented_units(robot):
+    opts = dict(duration=3.0, substeps=5, seed=6)
+    names = robot.sensors.chamber_names
+    base = simulate_pneumatics(robot, PneumaticSimOptions(**opts)).truth.signals["pressure"].data
+
+    def run(effect):
+        log = simulate_pneumatics(robot, PneumaticSimOptions(effects=(effect,), **opts))
+        return log, log.truth.signals["pressure"].data
+
+    log, _ = run("pressure_offset:elbow.ext=1.5")
+    i = names.index("elbow.ext")
+    assert log.truth.effects[0]["values"]["offset"] == 1.5
+    assert (log.streams["pressure"].data[:, i] - log.truth.signals["pressure"].data[:, i]).mean() == pytest.approx(
+        1.5, abs=0.05
+    )
+    # a delay between two ticks lies between the two whole-tick delays (continuous time shift)
+    j = names.index("shoulder.flex")
+    moved = {d: np.abs(run(f"valve_delay:shoulder.flex={d}")[1][:, j] - base[:, j]).mean() for d in (0.01, 0.015, 0.02)}
+    assert moved[0.01] < moved[0.015] < moved[0.02]
+    # a bigger orifice leaks more; a bigger droop lowers the pressure more (chamber's own flow)
+    k = names.index("elbow.flex")
+    leak = [np.mean(base[:, k] - run(f"chamber_leak:elbow.flex={a}")[1][:, k]) for a in (0.05e-6, 0.2e-6)]
+    assert 0 < leak[0] < leak[1]
+    droop = [np.mean(base[:, k] - run(f"supply_droop:elbow.flex={g}")[1][:, k]) for g in (5.0, 20.0)]
+    assert 0 < droop[0] < droop[1]

@@ -5,7 +5,7 @@ mass flow in kg/s, time in s. The simulator (``diegocal.sim.pneumatics``) conver
 log's kPa at its boundary. The fitting code never uses this module: the parametric model of
 §4.4 (``diegocal.pneumatic.model``) is fitted to data only.
 
-Two departures from the printed thesis, both needed for the model to be what the text says:
+Departures from the printed thesis, each needed for the model to be what the text says:
 
 * eq. (4.13): the printed ``beta = C sqrt(kappa M / (Z R T)) (2/(kappa+1))^((kappa+1)/(kappa-1))``
   puts the exponent outside the square root, which makes ``z`` jump at ``p_u/p_d = theta``

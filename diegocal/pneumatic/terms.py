@@ -1,0 +1,416 @@
+"""The terms of the valve-chamber model: thesis eq. (4.10) as baseline terms, plus extra terms.
+
+The chamber model is ``pdot = (s - p) r`` (thesis eq. 4.6) with
+
+.. math::
+
+    s = c_b + \\sum_i s_i, \\qquad r = \\frac{\\sum_i n_i}{1 + \\sum_i d_i}
+
+and each term adds its parts ``s_i`` (steady-state pressure), ``n_i`` (the rate's numerator) or
+``d_i`` (its volume denominator), with their derivatives in every parameter, into an
+:class:`Evaluation`. The nine parameters c1..c9 of Table 4.1 are five baseline terms, grouped by
+what they model in eq. (4.10):
+
+==========================  ===========  ==============================================
+term (``cause``)            parameters   part of eq. (4.10)
+==========================  ===========  ==============================================
+``valve_steady_state``      c1 c2 c3     s += c_s g(c2 û + c3 û³), û = u - c1 (4.10a-c)
+``volume_rate_steady``      c4           s += c4 v̇ (4.10c)
+``valve_rate``              c7 c8 c9     n += c7 k(û; c_γ, c9, c8) (4.10d-e; reads c1)
+``volume_rate_rate``        c5           n += c5 v̇ (4.10e)
+``chamber_volume``          c6           d += c6 v (4.10e)
+==========================  ===========  ==============================================
+
+Extra terms (``diagnose``'s vocabulary, DESIGN.md; channel = the chamber) keep the form (4.6), so
+that the exact step (4.7) still applies:
+
+- ``valve_delay`` (delay_s, s): the valve answers the command ``delay_s`` late, û = u(t - delay)
+  - c1, interpolated linearly between samples;
+- ``chamber_leak`` (leak, 1/s): air escapes to the room, an added outflow
+  ``-leak (p - P_r) / (1 + c6 v)`` (a flow into a chamber of volume ∝ 1 + c6 v);
+- ``supply_droop`` (droop, s): the supply pressure sags with the flow drawn from it,
+  P_c' = P_c - droop · f n (P_c - p) with f = (1 + g)/2 the supply's share of the port flow (the
+  part of s between P_r and P_c) and n the rate's numerator (a flow in volume units): s loses
+  ``droop f² n (P_c - p)``, evaluated at the step's starting pressure like every other input;
+- ``pressure_offset`` (offset, pressure unit): the sensor reads p + offset; the model runs on the
+  reading minus the offset.
+
+Folding the flows into (s, r): ``(s - p) r + α - β p = (s' - p) r'`` with r' = r + β and
+s' = (s r + α) / r'.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from diegocal.errors import InputFileError
+from diegocal.terms import Parameter, Term
+
+#: The longest valve delay the model (and diagnose's grid) considers, s.
+MAX_DELAY_S = 0.1
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One free parameter: name, unit, bounds (Table 4.1 or ours, see ``note``), start value."""
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    start: float
+    meaning: str
+    note: str = ""
+
+    def parameter(self, value: float | None = None, stderr: float = np.nan) -> Parameter:
+        v = self.start if value is None else float(value)
+        return Parameter(self.name, v, self.unit, self.lower, self.upper, stderr)
+
+
+@dataclass
+class Evaluation:
+    """Work space of one evaluation of the model on N samples; the terms add into it.
+
+    Inputs: ``x`` (P,) parameter values in the model's layout (``index``: name -> position);
+    ``p`` (N,) pressure at the step's start (pu); ``u`` (N,) valve command (V); ``v``, ``vd`` (N,)
+    the normalised volume coordinate and its rate; ``u_lags`` (N, L+1) u_t, u_{t-1}, ...
+    (None when no term needs it); ``h`` (N,) step, s; ``c_b, c_s, c_gamma`` the fixed constants.
+
+    Parts (N,) and their derivatives (N, P) (None unless ``jacobian``): ``s``/``ds`` the steady
+    state, ``num``/``dnum`` and ``den``/``dden`` the rate's numerator and denominator, ``g``/``dg``
+    the valve sigmoid, ``alpha``/``beta`` the flows added to ``pdot`` as ``alpha - beta p`` (None
+    until a term adds one), ``s_p`` d s / d p (None: 0). ``du`` (N,) d u / d(delay) and
+    ``delay_at`` its parameter's position (None without a valve delay).
+    """
+
+    x: np.ndarray
+    index: dict
+    p: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    vd: np.ndarray
+    h: np.ndarray
+    c_b: float
+    c_s: float
+    c_gamma: float
+    jacobian: bool
+    u_lags: np.ndarray | None = None
+    uh: np.ndarray | None = None
+    s: np.ndarray | None = None
+    ds: np.ndarray | None = None
+    g: np.ndarray | None = None
+    dg: np.ndarray | None = None
+    num: np.ndarray | None = None
+    dnum: np.ndarray | None = None
+    den: np.ndarray | None = None
+    dden: np.ndarray | None = None
+    alpha: np.ndarray | None = None
+    dalpha: np.ndarray | None = None
+    beta: np.ndarray | None = None
+    dbeta: np.ndarray | None = None
+    s_p: np.ndarray | None = None
+    du: np.ndarray | None = None
+    delay_at: int | None = None
+    shape: tuple = field(default=())
+
+    def value(self, name: str) -> float:
+        return float(self.x[self.index[name]])
+
+    def zeros(self) -> np.ndarray:
+        return np.zeros((*self.shape, self.x.size))
+
+    @property
+    def supply(self) -> float:
+        return self.c_b + self.c_s
+
+    @property
+    def room(self) -> float:
+        return self.c_b - self.c_s
+
+    def add_flow(self, alpha, beta, dalpha=None, dbeta=None) -> None:
+        """Add ``alpha - beta p`` to pdot (pu/s); derivatives (N, P) when ``jacobian``."""
+        self.alpha = alpha if self.alpha is None else self.alpha + alpha
+        self.beta = beta if self.beta is None else self.beta + beta
+        if self.jacobian:
+            self.dalpha = dalpha if self.dalpha is None else self.dalpha + dalpha
+            self.dbeta = dbeta if self.dbeta is None else self.dbeta + dbeta
+
+
+class ChamberTerm(Term):
+    """A term of the chamber model: its parameters (``specs``) and what it adds (:meth:`add`).
+
+    ``stage`` orders the terms in an evaluation: inputs (0), steady state (1), rate numerator (2),
+    volume (3), terms that read the baseline's parts (4), flows (5), the sensor reading (6).
+    """
+
+    CAUSE: ClassVar[str] = ""
+    specs: ClassVar[tuple[ParamSpec, ...]] = ()
+    stage: ClassVar[int] = 1
+    baseline: ClassVar[bool] = False
+
+    def add(self, ev: Evaluation) -> None:  # pragma: no cover - every term overrides it
+        raise NotImplementedError
+
+
+# ----------------------------------------------------------------------------- baseline (Table 4.1)
+#: Bounds from Table 4.1; c2 > 0 and c7 > 0 are ours: they fix the sign conventions (s increases
+#: with u, the rate r is positive) that the thesis states in words ("r() > 0", §4.3) but does not
+#: list in the table.
+C1 = ParamSpec("c1", "V", 2.0, 8.0, 5.0, "valve-voltage origin (U_c + U_r)/2", "Table 4.1")
+C2 = ParamSpec("c2", "1/V", 1e-3, np.inf, 1.0, "valve-voltage scale B", "ours: > 0")
+C3 = ParamSpec("c3", "1/V^3", -1.0, np.inf, 0.0, "kink factor", "Table 4.1")
+C4 = ParamSpec("c4", "pu s", -np.inf, np.inf, 0.0, "ds/dvdot", "")
+C5 = ParamSpec("c5", "1", -np.inf, np.inf, 0.0, "dr/dvdot", "")
+C6 = ParamSpec(
+    "c6",
+    "1",
+    -0.98,
+    0.98,
+    0.0,
+    "volume-sensor scale",
+    "|c6| < 1 keeps 1 + c6 v' > 0 on the normalised travel v' in [-1, 1]",
+)
+C7 = ParamSpec("c7", "1/(s V)", 1e-6, np.inf, 10.0, "B of eq. (4.3): rate per volt", "ours: > 0")
+C8 = ParamSpec("c8", "1", -1.0, 1.0, 0.0, "rate asymmetry", "Table 4.1")
+C9 = ParamSpec("c9", "V", 1e-6, np.inf, 0.05, "leakage (L_c + L_r)/2", "Table 4.1: > 0")
+
+
+class ValveSteadyState(ChamberTerm):
+    """s += c_s g(c2 û + c3 û³), û = u - c1: the valve's steady state, thesis eq. (4.10a-c)."""
+
+    CAUSE = "valve_steady_state"
+    specs = (C1, C2, C3)
+    stage = 1
+    baseline = True
+
+    def add(self, ev: Evaluation) -> None:
+        c1, c2, c3 = (ev.value(n) for n in ("c1", "c2", "c3"))
+        uh = ev.u - c1  # (4.10a)
+        a = c2 * uh + c3 * uh**3
+        root = np.sqrt(a * a + 1.0)
+        ev.uh, ev.g = uh, a / root  # (4.10b)
+        ev.s = ev.c_b + ev.c_s * ev.g  # (4.10c)
+        if ev.jacobian:
+            i1, i2, i3 = (ev.index[n] for n in ("c1", "c2", "c3"))
+            dg = 1.0 / root**3  # dg/da
+            ev.dg = ev.zeros()
+            ev.dg[..., i1] = -dg * (c2 + 3.0 * c3 * uh**2)
+            ev.dg[..., i2] = dg * uh
+            ev.dg[..., i3] = dg * uh**3
+            dgs = ev.c_s / root**3  # c_s dg/da: ds, written as (4.10) is differentiated
+            ev.ds = ev.zeros()
+            ev.ds[..., i1] = -dgs * (c2 + 3.0 * c3 * uh**2)
+            ev.ds[..., i2] = dgs * uh
+            ev.ds[..., i3] = dgs * uh**3
+
+
+class VolumeRateSteady(ChamberTerm):
+    """s += c4 v̇: the volume rate drives the steady state, thesis eq. (4.10c)."""
+
+    CAUSE = "volume_rate_steady"
+    specs = (C4,)
+    stage = 1
+    baseline = True
+
+    def add(self, ev: Evaluation) -> None:
+        ev.s = ev.s + ev.value("c4") * ev.vd
+        if ev.jacobian:
+            ev.ds[..., ev.index["c4"]] = ev.vd
+
+
+class ValveRate(ChamberTerm):
+    """n += c7 k(û; c_γ, c9, c8): the rate's dependence on the valve, thesis eq. (4.9), (4.10d-e).
+
+    Reads c1 (through û) from :class:`ValveSteadyState`.
+    """
+
+    CAUSE = "valve_rate"
+    specs = (C7, C8, C9)
+    stage = 2
+    baseline = True
+
+    def add(self, ev: Evaluation) -> None:
+        c1, c7, c8, c9 = (ev.value(n) for n in ("c1", "c7", "c8", "c9"))
+        uh, cg = ev.uh, ev.c_gamma
+        ru = np.sqrt(uh * uh + cg * cg)
+        k = ru - cg + c9 + c8 * uh  # (4.10d), k(û; c_γ, c9, c8)
+        ev.num = c7 * k
+        if ev.jacobian:
+            ev.dnum = ev.zeros()
+            ev.dnum[..., ev.index["c1"]] = -c7 * (uh / ru + c8)
+            ev.dnum[..., ev.index["c7"]] = k
+            ev.dnum[..., ev.index["c8"]] = c7 * uh
+            ev.dnum[..., ev.index["c9"]] = c7
+
+
+class VolumeRateRate(ChamberTerm):
+    """n += c5 v̇: the volume rate in the rate, thesis eq. (4.10e)."""
+
+    CAUSE = "volume_rate_rate"
+    specs = (C5,)
+    stage = 2
+    baseline = True
+
+    def add(self, ev: Evaluation) -> None:
+        ev.num = ev.num + ev.value("c5") * ev.vd
+        if ev.jacobian:
+            ev.dnum[..., ev.index["c5"]] = ev.vd
+
+
+class ChamberVolume(ChamberTerm):
+    """d += c6 v: the chamber's volume 1 + c6 v in the rate's denominator, thesis eq. (4.10e)."""
+
+    CAUSE = "chamber_volume"
+    specs = (C6,)
+    stage = 3
+    baseline = True
+
+    def add(self, ev: Evaluation) -> None:
+        ev.den = 1.0 + ev.value("c6") * ev.v
+        if ev.jacobian:
+            ev.dden = ev.zeros()
+            ev.dden[..., ev.index["c6"]] = ev.v
+
+
+#: The baseline terms in the order of eq. (4.10), and their parameters in Table 4.1's order.
+BASELINE: tuple[type[ChamberTerm], ...] = (
+    ValveSteadyState,
+    VolumeRateSteady,
+    ValveRate,
+    VolumeRateRate,
+    ChamberVolume,
+)
+BASELINE_SPECS: tuple[ParamSpec, ...] = (C1, C2, C3, C4, C5, C6, C7, C8, C9)
+
+
+def baseline_terms(channel: str = "", values: dict | None = None) -> tuple[ChamberTerm, ...]:
+    """The five baseline terms of eq. (4.10) with ``values`` by name (default: Table 4.1's starts)."""
+    values = values or {}
+    return tuple(
+        cls(cls.CAUSE, channel, tuple(s.parameter(values.get(s.name)) for s in cls.specs))
+        for cls in BASELINE
+    )
+
+
+# ----------------------------------------------------------------------------- extra terms
+class ValveDelay(ChamberTerm):
+    """The valve answers the command ``delay_s`` late: û = u(t - delay_s) - c1.
+
+    u(t - D h) = (1 - f) u_{t-n} + f u_{t-n-1}, n = floor(D), f = D - n (linear interpolation of
+    the commands; the valve itself holds each command for a tick). u enters the model only through
+    û = u - c1 (4.10a), so d p̂/d delay = -d p̂/d c1 · d u/d delay (the model applies it).
+    """
+
+    CAUSE = "valve_delay"
+    specs = (ParamSpec("delay_s", "s", 0.0, MAX_DELAY_S, 0.0, "valve delay"),)
+    stage = 0
+
+    def add(self, ev: Evaluation) -> None:
+        if ev.u_lags is None:
+            raise ValueError("valve_delay needs the lagged commands (Evaluation.u_lags)")
+        L = ev.u_lags.shape[-1] - 1
+        D = np.clip(ev.value("delay_s") / ev.h, 0.0, L - 1e-9)
+        n = np.floor(D).astype(int)
+        f = D - n
+        lag0 = np.take_along_axis(ev.u_lags, n[..., None], axis=-1)[..., 0]
+        lag1 = np.take_along_axis(ev.u_lags, n[..., None] + 1, axis=-1)[..., 0]
+        ev.u = (1.0 - f) * lag0 + f * lag1
+        if ev.jacobian:
+            ev.du = (lag1 - lag0) / ev.h
+            ev.delay_at = ev.index["delay_s"]
+
+
+class ChamberLeak(ChamberTerm):
+    """Air escapes to the room: pdot += -leak (p - P_r) / (1 + c6 v)."""
+
+    CAUSE = "chamber_leak"
+    specs = (ParamSpec("leak", "1/s", 0.0, np.inf, 0.0, "leak rate to the room"),)
+    stage = 5
+
+    def add(self, ev: Evaluation) -> None:
+        c = ev.value("leak")
+        beta = c / ev.den
+        dbeta = dalpha = None
+        if ev.jacobian:
+            dbeta = -beta[..., None] * ev.dden / ev.den[..., None]
+            dbeta[..., ev.index["leak"]] += 1.0 / ev.den
+            dalpha = ev.room * dbeta
+        ev.add_flow(ev.room * beta, beta, dalpha, dbeta)
+
+
+class SupplyDroop(ChamberTerm):
+    """The supply pressure sags with the flow drawn from it: s -= droop f² n (P_c - p), f = (1+g)/2.
+
+    Reads g (c1..c3) and the rate's numerator n (c1, c5, c7..c9) of the baseline.
+    """
+
+    CAUSE = "supply_droop"
+    specs = (ParamSpec("droop", "s", 0.0, np.inf, 0.0, "supply sag per unit of supply flow"),)
+    stage = 4
+
+    def add(self, ev: Evaluation) -> None:
+        c = ev.value("droop")
+        f = 0.5 * (1.0 + ev.g)
+        gap = ev.supply - ev.p
+        shape = f * f * ev.num
+        ev.s = ev.s - c * shape * gap
+        ev.s_p = (0.0 if ev.s_p is None else ev.s_p) + c * shape
+        if ev.jacobian:
+            d = (f * ev.num)[..., None] * ev.dg + (f * f)[..., None] * ev.dnum
+            ev.ds = ev.ds - (c * gap)[..., None] * d
+            ev.ds[..., ev.index["droop"]] -= shape * gap
+
+
+class PressureOffset(ChamberTerm):
+    """The pressure sensor reads p + offset (its zero drifted). Applied by the model to the reading."""
+
+    CAUSE = "pressure_offset"
+    specs = (ParamSpec("offset", "pu", -np.inf, np.inf, 0.0, "pressure-sensor offset"),)
+    stage = 6
+
+    def add(self, ev: Evaluation) -> None:  # the model shifts the reading (see ChamberModel.step)
+        return None
+
+
+#: Extra terms by cause (diagnose's vocabulary, DESIGN.md).
+EXTRA: dict[str, type[ChamberTerm]] = {
+    "valve_delay": ValveDelay,
+    "chamber_leak": ChamberLeak,
+    "supply_droop": SupplyDroop,
+    "pressure_offset": PressureOffset,
+}
+CAUSES: tuple[str, ...] = tuple(EXTRA)
+
+
+def make_term(cause: str, chamber: str, values: dict | None = None, stderr: dict | None = None,
+              extra: dict | None = None) -> ChamberTerm:
+    """An extra term of ``cause`` on ``chamber`` with parameter ``values`` by name (default: start)."""
+    if cause not in EXTRA:
+        raise InputFileError(f"unknown pneumatic term {cause!r}; known: {', '.join(CAUSES)}")
+    cls = EXTRA[cause]
+    values, stderr = values or {}, stderr or {}
+    params = tuple(
+        s.parameter(values.get(s.name), float(stderr.get(s.name, np.nan))) for s in cls.specs
+    )
+    return cls(cls.CAUSE, chamber, params, None, dict(extra or {}))
+
+
+def as_chamber_term(term: Term) -> ChamberTerm:
+    """A generic :class:`~diegocal.terms.Term` (from YAML or diagnose) as the chamber term of its
+    cause, keeping its values and standard errors by name (bounds and units from the specs)."""
+    if isinstance(term, ChamberTerm):
+        return term
+    vals = {p.name: p.value for p in term.parameters}
+    se = {p.name: p.stderr for p in term.parameters}
+    return make_term(term.cause, term.channel, vals, se, term.extra)
+
+
+def term_from_dict(d: dict, where: str = "term") -> ChamberTerm:
+    """An extra term from its YAML mapping (``Term.to_dict``)."""
+    fields = Term.fields_from_dict(d, where)
+    if fields["cause"] not in EXTRA:
+        raise InputFileError(f"{where}: unknown pneumatic term {fields['cause']!r}; known: {', '.join(CAUSES)}")
+    return as_chamber_term(Term(**fields))

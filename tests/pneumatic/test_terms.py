@@ -1,0 +1,143 @@
+"""The chamber model's terms: baseline c1..c9 by name, the extra terms, their Jacobians and fits."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from diegocal.errors import InputFileError
+from diegocal.pneumatic import FitOptions, chamber_data, fit_chamber, make_term
+from diegocal.pneumatic.fit import volume_normalisation
+from diegocal.pneumatic.model import BASELINE, ChamberModel, steady_state, step_vector
+from diegocal.pneumatic.params import NAMES, ChamberParams
+from diegocal.pneumatic.predict import next_step, predict_with_resets
+from diegocal.pneumatic.synthetic import simulate_model
+from diegocal.pneumatic.terms import CAUSES, baseline_terms
+from diegocal.terms import Term
+
+X = np.array([4.9, 1.5, 0.3, -20.0, 0.5, 0.3, 30.0, 0.1, 0.1])
+CONSTS = (360.0, 260.0, 0.1)
+EXTRA = {"valve_delay": {"delay_s": 0.023}, "chamber_leak": {"leak": 0.4}, "supply_droop": {"droop": 2e-3},
+         "pressure_offset": {"offset": 3.0}}
+
+
+def _extra(causes=CAUSES, chamber="c"):
+    return tuple(make_term(c, chamber, EXTRA[c]) for c in causes)
+
+
+def _samples(rng, n=60, lags=12):
+    u_lags = rng.uniform(3, 7, (n, lags + 1))
+    return (rng.uniform(100, 620, n), u_lags[:, 0], rng.uniform(-1, 1, n), rng.normal(0, 2, n),
+            np.full(n, 0.01), u_lags)
+
+
+def test_baseline_terms_name_c1_to_c9_in_table_order():
+    names = [p.name for t in baseline_terms() for p in t.parameters]
+    assert sorted(names) == list(NAMES) and BASELINE.names == NAMES
+    causes = [t.cause for t in baseline_terms()]
+    assert causes == ["valve_steady_state", "volume_rate_steady", "valve_rate", "volume_rate_rate", "chamber_volume"]
+
+
+@pytest.mark.parametrize("causes", [(), *[(c,) for c in CAUSES], CAUSES])
+def test_jacobian_of_every_term_matches_finite_differences(rng, causes):
+    model = ChamberModel(_extra(causes))
+    p, u, v, vd, h, lags = _samples(rng)
+    x = np.concatenate([X, [EXTRA[c][n] for c in causes for n in EXTRA[c]]])
+    _, J = model.step(x, p, u, v, vd, h, *CONSTS, lags)
+    assert J.shape == (p.size, model.n_params)
+    for i, name in enumerate(model.names):
+        e = 1e-6 * max(1.0, abs(x[i]))
+        xp, xm = x.copy(), x.copy()
+        xp[i] += e
+        xm[i] -= e
+        fd = (model.step(xp, p, u, v, vd, h, *CONSTS, lags, False)[0]
+              - model.step(xm, p, u, v, vd, h, *CONSTS, lags, False)[0]) / (2 * e)
+        np.testing.assert_allclose(J[:, i], fd, rtol=1e-5, atol=1e-6, err_msg=name)
+
+
+def test_extra_terms_at_zero_are_the_baseline(rng):
+    p, u, v, vd, h, lags = _samples(rng)
+    model = ChamberModel(tuple(make_term(c, "c") for c in CAUSES))
+    x = np.concatenate([X, np.zeros(4)])
+    a = model.step(x, p, u, v, vd, h, *CONSTS, lags, False)[0]
+    b = step_vector(X, p, u, v, vd, h, *CONSTS, jacobian=False)[0]
+    np.testing.assert_allclose(a, b, rtol=1e-12)
+
+
+def test_each_term_moves_the_prediction_the_way_its_physics_says(rng):
+    p, u, v, vd, h, lags = _samples(rng)
+    base = step_vector(X, p, u, v, vd, h, *CONSTS, jacobian=False)[0]
+
+    def with_(cause):
+        model = ChamberModel(_extra((cause,)))
+        return model.step(np.concatenate([X, list(EXTRA[cause].values())]), p, u, v, vd, h, *CONSTS, lags, False)[0]
+
+    # a leak pulls toward the room pressure, a droop lowers what the supply can reach
+    assert (with_("chamber_leak") <= base + 1e-9).all()
+    assert (with_("supply_droop") <= base + 1e-9).all()
+    # the valve delay answers an older command: the same as the baseline fed that command
+    d = 0.02 / 0.01
+    old = step_vector(X, p, lags[:, int(d)], v, vd, h, *CONSTS, jacobian=False)[0]
+    model = ChamberModel(_extra(("valve_delay",)))
+    np.testing.assert_allclose(model.step(np.append(X, 0.02), p, u, v, vd, h, *CONSTS, lags, False)[0], old)
+    # an offset of the reading: predicting readings p + δ gives the baseline's prediction + δ
+    model = ChamberModel(_extra(("pressure_offset",)))
+    np.testing.assert_allclose(model.step(np.append(X, 3.0), p + 3.0, u, v, vd, h, *CONSTS, lags, False)[0],
+                               base + 3.0)
+
+
+def test_params_with_terms_round_trip_through_yaml_mapping():
+    c = ChamberParams.nominal(620.0, 100.0).from_vector(X).with_terms(_extra(chamber="elbow.ext"))
+    assert c.full_vector().size == 13
+    raw = c.to_dict()
+    assert [t["cause"] for t in raw["terms"]] == list(CAUSES)
+    back = ChamberParams.from_dict(raw)
+    np.testing.assert_array_equal(back.full_vector(), c.full_vector())
+    assert back.terms[1].channel == "elbow.ext" and back.terms[1].parameters[0].unit == "1/s"
+    # a generic Term (as diagnose hands it over) becomes the chamber term of its cause
+    generic = Term(**Term.fields_from_dict(raw["terms"][2]))
+    assert ChamberModel((generic,)).names[-1] == "droop"
+    with pytest.raises(InputFileError, match="unknown pneumatic term"):
+        ChamberParams.from_dict({**raw, "terms": [{"cause": "valve_stiction", "channel": "x"}]})
+    with pytest.raises(ValueError, match="one term per cause"):
+        ChamberModel(_extra(("chamber_leak", "chamber_leak")))
+
+
+def test_steady_state_with_offset_and_leak():
+    c = ChamberParams.nominal(620.0, 100.0).from_vector(X)
+    u = np.linspace(3, 7, 21)
+    s = steady_state(c, u)
+    off = c.with_terms(_extra(("pressure_offset",)))
+    np.testing.assert_allclose(steady_state(off, u), s + 3.0)
+    leak = c.with_terms(_extra(("chamber_leak",)))
+    assert (steady_state(leak, u) < s).all() and (np.diff(steady_state(leak, u)) > 0).all()
+
+
+def test_fit_recovers_extra_terms_on_data_made_by_the_model(robot, train_log):
+    # Identifiability of the extra terms: the model with all four, noise 1 kPa -> within 4 SE.
+    name = "shoulder.flex"
+    v = train_log.streams["pots"].column("shoulder_pot")
+    v_ref, v_scale = volume_normalisation(v)
+    base = replace(ChamberParams.nominal(620.0, 100.0), v_ref=v_ref, v_scale=v_scale).from_vector(X)
+    truth = base.with_terms(_extra(chamber=name))
+    log = simulate_model(train_log, robot.sensors, {name: truth}, noise=1.0, seed=4)
+    data = chamber_data(log.without_truth(), robot.sensors, name)
+    start = tuple(make_term(c, name, {"delay_s": 0.02}) for c in CAUSES)  # delay starts a sample off
+    fit = fit_chamber(data, FitOptions(drift_starts=0), terms=start)
+    est = fit.params.full_vector()
+    se_extra = [p.stderr for t in fit.params.terms for p in t.parameters]
+    se = np.concatenate([[fit.params.stderr[n] for n in NAMES], se_extra])
+    z = (est - truth.full_vector()) / se
+    assert np.isfinite(se).all() and np.abs(z).max() < 4.0, np.round(z, 2)
+    assert fit.rmse == pytest.approx(1.0, rel=0.05)
+    # the fitted model predicts its own data: next step to the noise, open loop close to it
+    assert np.std(next_step(fit.params, data) - data.p[1:]) == pytest.approx(1.0, rel=0.05)
+    assert np.sqrt(np.mean((predict_with_resets(fit.params, data) - data.p) ** 2)) < 10.0
+
+
+def test_fit_on_some_rows_uses_only_steps_inside_them(robot, train_log):
+    data = chamber_data(train_log, robot.sensors, "elbow.flex")
+    rows = np.zeros(data.n_samples, bool)
+    rows[:1000] = rows[2000:3000] = True
+    fit = fit_chamber(data, FitOptions(drift_starts=0), rows=rows)
+    assert fit.n_samples == 999 + 999 and np.isnan(fit.drift_2s)
