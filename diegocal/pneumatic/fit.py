@@ -116,9 +116,11 @@ class _Problem:
         nominal: ChamberParams,
         model: ChamberModel | None = None,
         rows: np.ndarray | None = None,
+        weights: np.ndarray | None = None,
     ):
         self.model = model or ChamberModel()
         sl = step_rows(data, rows)  # pairs (t, t+1) that do not straddle a gap
+        self.w = None if weights is None else np.asarray(weights, float)[sl]
         v, vd = nominal.volume_coordinate(data.v[sl], data.vd[sl])
         self.args = (data.p[sl], data.u[sl], v, vd, np.diff(data.time)[sl])
         self.target = data.p[sl + 1]
@@ -141,13 +143,16 @@ class _Problem:
         return out
 
     def residuals(self, x):
-        return self._eval(x, jacobian=True)[0] - self.target
+        r = self._eval(x, jacobian=True)[0] - self.target
+        return r if self.w is None else self.w * r
 
     def residuals_only(self, x):
-        return self.model.step(x, *self.args, *self.consts, self.lags, jacobian=False)[0] - self.target
+        r = self.model.step(x, *self.args, *self.consts, self.lags, jacobian=False)[0] - self.target
+        return r if self.w is None else self.w * r
 
     def jacobian(self, x):
-        return self._eval(x, jacobian=True)[1]
+        J = self._eval(x, jacobian=True)[1]
+        return J if self.w is None else self.w[:, None] * J
 
 
 #: Random start points of the baseline (§4.5.3's multi-start check), drawn in this order.
@@ -191,6 +196,7 @@ def fit_chamber(
     terms=(),
     rows: np.ndarray | None = None,
     start: ChamberParams | None = None,
+    weights: np.ndarray | None = None,
 ) -> ChamberFit:
     """Fit c1..c9 of one chamber, and any extra ``terms``, by next-step least squares (§4.5.3).
 
@@ -201,14 +207,16 @@ def fit_chamber(
         training blocks of a diagnosis); default every step
     start : a previous fit whose c1..c9 (and volume normalisation) start this one (default
         Table 4.1's start values and the data's own normalisation)
+    weights : (T,) weight of the step from each sample (weighted least squares: the residual of
+        step t -> t+1 is multiplied by ``weights[t]``); ``cost`` and ``rmse`` are then weighted too
     """
     if threadpool_limits is None:
-        return _fit_chamber(data, options, terms, rows, start)
+        return _fit_chamber(data, options, terms, rows, start, weights)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit_chamber(data, options, terms, rows, start)
+        return _fit_chamber(data, options, terms, rows, start, weights)
 
 
-def _fit_chamber(data: ChamberData, options: FitOptions, terms=(), rows=None, start=None) -> ChamberFit:
+def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None) -> ChamberFit:
     model = ChamberModel(terms)
     if start is not None:
         nominal = replace(start, terms=model.extra, stderr={})
@@ -217,7 +225,7 @@ def _fit_chamber(data: ChamberData, options: FitOptions, terms=(), rows=None, st
         nominal = replace(
             ChamberParams.nominal(data.supply, data.room), v_ref=v_ref, v_scale=v_scale, terms=model.extra
         )
-    problem = _Problem(data, nominal, model, rows)
+    problem = _Problem(data, nominal, model, rows, weights)
     lo, hi = model.lower(), model.upper()
     rng = np.random.default_rng(options.seed)
     if options.jacobian == "analytic":
@@ -229,7 +237,8 @@ def _fit_chamber(data: ChamberData, options: FitOptions, terms=(), rows=None, st
     runs = []
     starts = start_points(max(1, options.starts), (lo, hi), rng, model)
     if start is not None:
-        starts[0, : len(P.NAMES)] = np.clip(start.vector(), lo[: len(P.NAMES)] + 1e-6, hi[: len(P.NAMES)] - 1e-6)
+        n = len(P.NAMES)
+        starts[0, :n] = np.clip(start.vector(), lo[:n] + 1e-6, hi[:n] - 1e-6)
     for x0 in starts:
         try:
             res = least_squares(

@@ -69,6 +69,8 @@ class ChamberModel:
         dup = {c for c in causes if causes.count(c) > 1}
         if dup:
             raise ValueError(f"a chamber model takes one term per cause; {sorted(dup)} given twice")
+        if sum(isinstance(t, T.ValveDelay) for t in extra) > 1:
+            raise ValueError("valve_delay and sensor_lag exclude each other (a delay includes the lag)")
         base = T.baseline_terms()
         self.extra = extra
         self.terms = tuple(sorted(base + extra, key=lambda t: t.stage))
@@ -77,7 +79,8 @@ class ChamberModel:
         self.index = {n: i for i, n in enumerate(self.names)}
         self.has_flow = any(t.stage == 5 for t in extra)
         self.offset_at = self.index.get("offset")
-        self.has_delay = "valve_delay" in causes
+        self.has_delay = any(isinstance(t, T.ValveDelay) for t in extra)
+        self.delay_at = next((self.index[t.specs[0].name] for t in extra if isinstance(t, T.ValveDelay)), None)
 
     def n_lags(self, h: float) -> int:
         """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay."""
@@ -101,21 +104,14 @@ class ChamberModel:
                 x[self.index[p.name]] = p.value
         return x
 
-    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True) -> ModelTerms:
+    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian=True) -> ModelTerms:
         """s and r of eq. (4.10) with every term added and the flows folded in (module doc of
-        :mod:`~diegocal.pneumatic.terms`); ``p`` the model's pressure (the reading minus any
-        offset). Also returns the evaluation for :meth:`step`."""
-        return self._evaluate(x, p, u, v, vd, h, (c_b, c_s, c_gamma), u_lags, jacobian)[0]
-
-    def _evaluate(self, x, p, u, v, vd, h, consts, u_lags, jacobian):
+        :mod:`~diegocal.pneumatic.terms`) for the command ``u`` the valve holds; ``p`` the model's
+        pressure (the reading minus any offset)."""
         x = np.asarray(x, float)
-        shape = np.broadcast(u, v, vd).shape
-        ev = T.Evaluation(
-            x, self.index, p, u, v, vd, h, *consts, jacobian, u_lags=u_lags, shape=shape
-        )
+        ev = T.Evaluation(x, self.index, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=np.broadcast(u, v, vd).shape)
         for term in self.terms:
             term.add(ev)
-        shape = np.broadcast(ev.u, v, vd).shape
         r = ev.num / ev.den  # (4.10e)
         dr = None
         if jacobian:
@@ -134,36 +130,63 @@ class ChamberModel:
                 dr = dr2
             s_p = s_p * rc / safe
             s, r = s2, r2
-        return ModelTerms(s, r, ds, dr, s_p), ev
+        return ModelTerms(s, r, ds, dr, s_p)
+
+    def _exact_step(self, x, p, u, v, vd, h, consts, jacobian):
+        """One exact step (4.7) with the command ``u`` held: p_next, d p_next / d x (or None),
+        d p_next / d p, and s and max(r, 0) (for the derivative in the step's length)."""
+        t = self.evaluate(x, p, u, v, vd, h, *consts, jacobian=jacobian)
+        r = np.maximum(t.r, 0.0)
+        e = np.exp(-r * h)
+        p_next = t.s + (p - t.s) * e
+        d_s = 1.0 - e  # d p_next / d s
+        jac = None
+        if jacobian:
+            d_r = np.where(t.r > 0.0, -h * (p - t.s) * e, 0.0)  # d p_next / d r (0 where clamped)
+            jac = d_s[..., None] * t.ds + d_r[..., None] * t.dr
+        return p_next, jac, e + d_s * t.s_p, t.s, r
 
     def step(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True):
         """Exact step over h with s, r held fixed, thesis eq. (4.7): p(t+h) = s + (p - s) exp(-r h).
 
-        ``p`` is the pressure reading at the step's start. Returns (p_next, J) with p_next of the
-        samples' shape and J = d p_next / d x, shape (T, P) (None unless ``jacobian``).
+        ``p`` is the pressure reading at the step's start; ``u_lags`` (T, L+1) the commands u_t,
+        u_{t-1}, ... (read only by a model with a valve delay, whose step is two exact steps, one
+        per command the valve holds; :class:`~diegocal.pneumatic.terms.ValveDelay`). Returns
+        (p_next, J) with p_next of the samples' shape and J = d p_next / d x, shape (T, P) (None
+        unless ``jacobian``).
 
         The rate is used as max(r, 0): §4.3 defines r() > 0 (a rate of convergence to s), but
         (4.10e) can turn negative where c5 vdot < -c7 k; a negative rate would make the step an
         exponential divergence from s, which no chamber does. Where r < 0 the pressure is held.
         """
         x = np.asarray(x, float)
+        consts = (c_b, c_s, c_gamma)
         offset = 0.0 if self.offset_at is None else float(x[self.offset_at])
         pm = p if self.offset_at is None else p - offset  # the sensor reads p + offset
-        t, ev = self._evaluate(x, pm, u, v, vd, h, (c_b, c_s, c_gamma), u_lags, jacobian)
-        r = np.maximum(t.r, 0.0)
-        e = np.exp(-r * h)
-        p_next = t.s + (pm - t.s) * e
+        if not self.has_delay:
+            p_next, jac, dp, _, _ = self._exact_step(x, pm, u, v, vd, h, consts, jacobian)
+        else:
+            if u_lags is None:
+                raise ValueError("a model with a valve delay needs the lagged commands (u_lags)")
+            at = self.delay_at
+            D = np.clip(x[at] / h, 0.0, u_lags.shape[-1] - 1 - 1e-9)
+            n = np.floor(D).astype(int)
+            f = D - n
+            old = np.take_along_axis(u_lags, n[..., None] + 1, axis=-1)[..., 0]  # held first, f h
+            new = np.take_along_axis(u_lags, n[..., None], axis=-1)[..., 0]  # then (1 - f) h
+            p_mid, j1, dp1, s1, r1 = self._exact_step(x, pm, old, v, vd, f * h, consts, jacobian)
+            p_next, j2, dp2, s2, r2 = self._exact_step(x, p_mid, new, v, vd, (1.0 - f) * h, consts, jacobian)
+            dp = dp2 * dp1
+            if jacobian:
+                jac = j2 + dp2[..., None] * j1
+                # d/d delay = (d/d f) / h; d p(τ)/d τ = r (s - p(τ)) at the end of an exact step
+                jac[..., at] = dp2 * r1 * (s1 - p_mid) - r2 * (s2 - p_next)
         if self.offset_at is not None:
             p_next = p_next + offset
         if not jacobian:
             return p_next, None
-        d_s = 1.0 - e  # d p_next / d s
-        d_r = np.where(t.r > 0.0, -h * (pm - t.s) * e, 0.0)  # d p_next / d r (0 where clamped)
-        jac = d_s[..., None] * t.ds + d_r[..., None] * t.dr
-        if ev.delay_at is not None:  # u enters only through û = u - c1 (4.10a)
-            jac[..., ev.delay_at] = -jac[..., self.index["c1"]] * ev.du
         if self.offset_at is not None:  # d/d offset = 1 - d p_next / d p
-            jac[..., self.offset_at] = 1.0 - (e + d_s * t.s_p)
+            jac[..., self.offset_at] = 1.0 - dp
         return p_next, jac
 
 
@@ -177,7 +200,7 @@ def model_of(params: ChamberParams) -> ChamberModel:
 
 def terms(x, u, v, vd, c_b, c_s, c_gamma, jacobian: bool = True) -> ModelTerms:
     """s() and r() of the baseline, thesis eq. (4.10a-e), with d/dc when ``jacobian``."""
-    return BASELINE.evaluate(x, 0.0, u, v, vd, 1.0, c_b, c_s, c_gamma, jacobian=jacobian)
+    return BASELINE.evaluate(x, 0.0, u, v, vd, 1.0, c_b, c_s, c_gamma, jacobian)
 
 
 def step_vector(x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian: bool = True):
@@ -198,7 +221,7 @@ def pressure_rate(params: ChamberParams, p, u, v, vd):
     model, v, vd, lags = _inputs(params, u, v, vd)
     x = params.full_vector()
     off = 0.0 if model.offset_at is None else x[model.offset_at]
-    t = model.evaluate(x, p - off, u, v, vd, 0.01, params.c_b, params.c_s, params.c_gamma, lags, False)
+    t = model.evaluate(x, p - off, u, v, vd, 0.01, params.c_b, params.c_s, params.c_gamma, False)
     return (t.s - (p - off)) * t.r
 
 
@@ -209,10 +232,10 @@ def steady_state(params: ChamberParams, u, v=0.0, vd=0.0):
     x = params.full_vector()
     off = 0.0 if model.offset_at is None else x[model.offset_at]
     consts = (params.c_b, params.c_s, params.c_gamma)
-    s = model.evaluate(x, params.c_b, u, v, vd, 0.01, *consts, lags, False).s
+    s = model.evaluate(x, params.c_b, u, v, vd, 0.01, *consts, jacobian=False).s
     if "supply_droop" in (t.cause for t in model.extra):
         for _ in range(20):
-            s = model.evaluate(x, s, u, v, vd, 0.01, *consts, lags, False).s
+            s = model.evaluate(x, s, u, v, vd, 0.01, *consts, jacobian=False).s
     return s + off
 
 

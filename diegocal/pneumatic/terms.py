@@ -24,8 +24,9 @@ term (``cause``)            parameters   part of eq. (4.10)
 Extra terms (``diagnose``'s vocabulary, DESIGN.md; channel = the chamber) keep the form (4.6), so
 that the exact step (4.7) still applies:
 
-- ``valve_delay`` (delay_s, s): the valve answers the command ``delay_s`` late, û = u(t - delay)
-  - c1, interpolated linearly between samples;
+- ``valve_delay`` (delay_s, s): the valve answers the command ``delay_s`` late: within a step the
+  valve holds first the older command, then the newer one, and the model takes one exact step
+  (4.7) per piece;
 - ``chamber_leak`` (leak, 1/s): air escapes to the room, an added outflow
   ``-leak (p - P_r) / (1 + c6 v)`` (a flow into a chamber of volume ∝ 1 + c6 v);
 - ``supply_droop`` (droop, s): the supply pressure sags with the flow drawn from it,
@@ -33,7 +34,9 @@ that the exact step (4.7) still applies:
   part of s between P_r and P_c) and n the rate's numerator (a flow in volume units): s loses
   ``droop f² n (P_c - p)``, evaluated at the step's starting pressure like every other input;
 - ``pressure_offset`` (offset, pressure unit): the sensor reads p + offset; the model runs on the
-  reading minus the offset.
+  reading minus the offset;
+- ``sensor_lag`` (lag_s, s; at most one tick): the tick-averaged pressure answers the command a
+  fraction of a tick late (thesis §4.5); the form of ``valve_delay``, which it excludes.
 
 Folding the flows into (s, r): ``(s - p) r + α - β p = (s' - p) r'`` with r' = r + β and
 s' = (s r + α) / r'.
@@ -51,6 +54,8 @@ from diegocal.terms import Parameter, Term
 
 #: The longest valve delay the model (and diagnose's grid) considers, s.
 MAX_DELAY_S = 0.1
+#: The longest lag of the tick-averaged sensors (one 10 ms tick, thesis §4.5), s.
+MAX_SENSOR_LAG_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -76,14 +81,13 @@ class Evaluation:
 
     Inputs: ``x`` (P,) parameter values in the model's layout (``index``: name -> position);
     ``p`` (N,) pressure at the step's start (pu); ``u`` (N,) valve command (V); ``v``, ``vd`` (N,)
-    the normalised volume coordinate and its rate; ``u_lags`` (N, L+1) u_t, u_{t-1}, ...
-    (None when no term needs it); ``h`` (N,) step, s; ``c_b, c_s, c_gamma`` the fixed constants.
+    the normalised volume coordinate and its rate; ``h`` (N,) step, s; ``c_b, c_s, c_gamma`` the
+    fixed constants.
 
     Parts (N,) and their derivatives (N, P) (None unless ``jacobian``): ``s``/``ds`` the steady
     state, ``num``/``dnum`` and ``den``/``dden`` the rate's numerator and denominator, ``g``/``dg``
     the valve sigmoid, ``alpha``/``beta`` the flows added to ``pdot`` as ``alpha - beta p`` (None
-    until a term adds one), ``s_p`` d s / d p (None: 0). ``du`` (N,) d u / d(delay) and
-    ``delay_at`` its parameter's position (None without a valve delay).
+    until a term adds one), ``s_p`` d s / d p (None: 0).
     """
 
     x: np.ndarray
@@ -97,7 +101,6 @@ class Evaluation:
     c_s: float
     c_gamma: float
     jacobian: bool
-    u_lags: np.ndarray | None = None
     uh: np.ndarray | None = None
     s: np.ndarray | None = None
     ds: np.ndarray | None = None
@@ -112,8 +115,6 @@ class Evaluation:
     beta: np.ndarray | None = None
     dbeta: np.ndarray | None = None
     s_p: np.ndarray | None = None
-    du: np.ndarray | None = None
-    delay_at: int | None = None
     shape: tuple = field(default=())
 
     def value(self, name: str) -> float:
@@ -297,30 +298,35 @@ def baseline_terms(channel: str = "", values: dict | None = None) -> tuple[Chamb
 
 # ----------------------------------------------------------------------------- extra terms
 class ValveDelay(ChamberTerm):
-    """The valve answers the command ``delay_s`` late: û = u(t - delay_s) - c1.
+    """The valve answers the command ``delay_s`` late.
 
-    u(t - D h) = (1 - f) u_{t-n} + f u_{t-n-1}, n = floor(D), f = D - n (linear interpolation of
-    the commands; the valve itself holds each command for a tick). u enters the model only through
-    û = u - c1 (4.10a), so d p̂/d delay = -d p̂/d c1 · d u/d delay (the model applies it).
+    With D = delay_s / h = n + f (n whole samples, 0 <= f < 1), the valve holds u_{t-n-1} for the
+    first f h of the step t -> t+1 and u_{t-n} for the rest: the model takes two exact steps (4.7),
+    over f h and (1 - f) h (the exact solution of (4.6) for that piecewise-constant command).
+    :meth:`~diegocal.pneumatic.model.ChamberModel.step` applies it; the term adds no part.
     """
 
     CAUSE = "valve_delay"
     specs = (ParamSpec("delay_s", "s", 0.0, MAX_DELAY_S, 0.0, "valve delay"),)
     stage = 0
 
-    def add(self, ev: Evaluation) -> None:
-        if ev.u_lags is None:
-            raise ValueError("valve_delay needs the lagged commands (Evaluation.u_lags)")
-        L = ev.u_lags.shape[-1] - 1
-        D = np.clip(ev.value("delay_s") / ev.h, 0.0, L - 1e-9)
-        n = np.floor(D).astype(int)
-        f = D - n
-        lag0 = np.take_along_axis(ev.u_lags, n[..., None], axis=-1)[..., 0]
-        lag1 = np.take_along_axis(ev.u_lags, n[..., None] + 1, axis=-1)[..., 0]
-        ev.u = (1.0 - f) * lag0 + f * lag1
-        if ev.jacobian:
-            ev.du = (lag1 - lag0) / ev.h
-            ev.delay_at = ev.index["delay_s"]
+    def add(self, ev: Evaluation) -> None:  # the model splits the step (see the docstring)
+        return None
+
+
+class SensorLag(ValveDelay):
+    """The measured pressure lags the command by a fraction of a sample, û = u(t - lag_s) - c1.
+
+    Not a fault: thesis §4.5 averages every sensor over each 10 ms tick (200 samples at 20 kHz),
+    so the pressure read at t is the mean over the last tick and answers a command change about
+    half a tick late. The 9-parameter model's next step cannot express that; ``diagnose`` fits it
+    with the baseline (at most :data:`MAX_SENSOR_LAG_S`), so that only a delay beyond the
+    sampling's own is a ``valve_delay``. Same form as :class:`ValveDelay` (the two exclude each
+    other: a valve delay's value includes the sensor's lag).
+    """
+
+    CAUSE = "sensor_lag"
+    specs = (ParamSpec("lag_s", "s", 0.0, MAX_SENSOR_LAG_S, 0.0, "lag of the tick-averaged sensors"),)
 
 
 class ChamberLeak(ChamberTerm):
@@ -375,14 +381,15 @@ class PressureOffset(ChamberTerm):
         return None
 
 
-#: Extra terms by cause (diagnose's vocabulary, DESIGN.md).
+#: Extra terms by cause: diagnose's vocabulary (DESIGN.md), :data:`CAUSES`, and ``sensor_lag``.
 EXTRA: dict[str, type[ChamberTerm]] = {
     "valve_delay": ValveDelay,
     "chamber_leak": ChamberLeak,
     "supply_droop": SupplyDroop,
     "pressure_offset": PressureOffset,
+    "sensor_lag": SensorLag,
 }
-CAUSES: tuple[str, ...] = tuple(EXTRA)
+CAUSES: tuple[str, ...] = ("valve_delay", "chamber_leak", "supply_droop", "pressure_offset")
 
 
 def make_term(cause: str, chamber: str, values: dict | None = None, stderr: dict | None = None,

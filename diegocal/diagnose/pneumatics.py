@@ -1,0 +1,289 @@
+"""The pneumatics adapter of the diagnosis engine: one valve-chamber system per unit (thesis ch. 4).
+
+Baseline: the 9-parameter model of eq. (4.10) fitted by next-step least squares (§4.5.3) on the
+steps t -> t+1 of the training blocks (both ends inside them; never across a block edge or a gap
+between sessions). Its residual is the next-step residual p_{t+1} - p̂_{t+1}, kept at sample t
+(the block of t), in the pressure unit. Candidates (:mod:`diegocal.pneumatic.terms`), each
+linearised at the current fit:
+
+- ``chamber_leak``, ``supply_droop``, ``pressure_offset``: the column ∂p̂_{t+1}/∂θ at θ = 0;
+- ``valve_delay``: a family over d = 1..D samples (D = MAX_DELAY_S), the exact difference
+  (p̂(u_{t-d}) - p̂(u_t)) / (d h), so that its coefficient is the delay in s;
+
+every one re-fitted jointly with the columns ∂p̂/∂c of the current model's parameters (c1..c9 and
+the terms found so far), so that the baseline can re-adjust. A term the engine selects is refitted
+with all parameters by nonlinear least squares (the delay from the best whole-sample delay).
+
+Held-out score: open-loop pressure with resets every 2 s (thesis Fig. 4.12), RMSE per chamber on
+the held-out samples. The extended model is a pneumatic.yaml (kind ``pneumatic``) whose chambers
+carry their extra terms, which ``predict`` and the report honour.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from diegocal.diagnose.engine import Candidate, Residuals
+from diegocal.errors import DiegocalError
+from diegocal.evaluate import Score, score
+from diegocal.pneumatic.data import ChamberData, chamber_data
+from diegocal.pneumatic.fit import ChamberFit, FitOptions, fit_chamber, step_rows
+from diegocal.pneumatic.model import ChamberModel, model_of
+from diegocal.pneumatic.predict import next_step, predict_with_resets
+from diegocal.pneumatic.terms import CAUSES, MAX_DELAY_S, MAX_SENSOR_LAG_S, as_chamber_term, make_term
+
+#: The unit the pressure stream is read in (DESIGN.md: kPa for the bundled robots).
+UNIT = "kPa"
+
+
+@dataclass
+class PneumaticFit:
+    """A fitted chamber model (baseline + extra terms) and the training samples it was fitted on."""
+
+    fit: ChamberFit
+    train: np.ndarray = field(repr=False)
+    _prediction: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def params(self):
+        return self.fit.params
+
+
+class PneumaticAdapter:
+    """The engine's adapter for one chamber (see the module docstring).
+
+    Parameters
+    ----------
+    data : the chamber's samples (``diegocal.pneumatic.data.chamber_data``)
+    volume_sensor : the pot read as its volume coordinate (written into the extended model)
+    options : the fit's options (no drift check: the engine scores held-out blocks itself)
+    """
+
+    domain = "pneumatics"
+
+    def __init__(self, data: ChamberData, volume_sensor: str, options: FitOptions | None = None):
+        self.data = data
+        self.unit_name = data.name
+        self.volume_sensor = volume_sensor
+        self.options = options or FitOptions(drift_starts=0)
+        self._baseline: PneumaticFit | None = None
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, terms, train) -> PneumaticFit:
+        train = np.asarray(train, bool)
+        terms = [replace(as_chamber_term(t), channel=self.unit_name) for t in terms]
+        terms = [t for t in terms if t.cause != "sensor_lag"]
+        base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
+        if not any(t.cause == "valve_delay" for t in terms):  # the sampling's own lag (module doc)
+            lag = _lag(base.params) if base is not None else 0.5 * MAX_SENSOR_LAG_S
+            terms.append(make_term("sensor_lag", self.unit_name, {"lag_s": lag}))
+        terms = tuple(terms)
+        start = None if base is None else base.params
+        if start is not None:
+            terms = self._start_delay(terms, start, train)
+        fit = fit_chamber(self.data, self.options, terms=terms, rows=train, start=start)
+        out = PneumaticFit(fit, train.copy())
+        if base is None and len(terms) == 1:
+            self._baseline = out
+        return out
+
+    def _start_delay(self, terms, start, train):
+        """A valve delay starts at the whole-sample delay with the least next-step error (the delay's
+        cost is not convex: each command step is a kink), the other parameters at ``start``."""
+        if not any(t.cause == "valve_delay" for t in terms):
+            return terms
+        model = ChamberModel(terms)
+        data = self.data
+        sl = step_rows(data, train)
+        h = np.diff(data.time)
+        x = np.concatenate([start.vector(), *[t.values for t in model.extra]])
+        at = model.index["delay_s"]
+        dt = float(np.median(h))
+        v, vd = start.volume_coordinate(data.v[sl], data.vd[sl])
+        lags = data.u_lags(model.n_lags(float(np.median(h))))[sl]
+        consts = (start.c_b, start.c_s, start.c_gamma)
+        best, best_cost = 0.0, np.inf
+        for d in np.arange(0.0, MAX_DELAY_S / dt, 0.5):  # every half sample
+            x[at] = min(d * dt, MAX_DELAY_S)
+            pred = model.step(x, data.p[sl], data.u[sl], v, vd, h[sl], *consts, lags, False)[0]
+            cost = float(np.sum((pred - data.p[sl + 1]) ** 2))
+            if cost < best_cost:
+                best, best_cost = x[at], cost
+        return tuple(t.with_values([best]) if t.cause == "valve_delay" else t for t in terms)
+
+    # ------------------------------------------------------------------ residuals and candidates
+    def _rows(self, fitted: PneumaticFit) -> np.ndarray:
+        """(T,) bool: samples t whose step t -> t+1 has a residual (no gap, no block edge)."""
+        ok = np.zeros(self.data.n_samples, bool)
+        tr = fitted.train
+        ok[:-1] = self.data.steps & (tr[:-1] == tr[1:])
+        return ok
+
+    def residuals(self, fitted: PneumaticFit) -> Residuals:
+        d, name = self.data, self.unit_name
+        r = np.full(d.n_samples, np.nan)
+        r[:-1] = d.p[1:] - next_step(fitted.params, d)
+        r[~self._rows(fitted)] = np.nan
+        du = np.concatenate([[0.0], np.diff(d.u)])
+        variables = {
+            "time": d.time,
+            f"p.{name}": d.p,
+            f"u.{name}": d.u,
+            f"du.{name}": du,
+            f"vd.{name}": d.vd,
+            f"v.{name}": d.v,
+        }
+        order = (f"p.{name}", f"u.{name}", f"du.{name}", f"vd.{name}", f"v.{name}")
+        return Residuals({name: r}, {name: UNIT}, variables, {name: order})
+
+    def _jacobian(self, params, extra=()):
+        """p̂_{t+1} (T,) and its Jacobian (T, P) of a model with ``params``' terms and ``extra`` terms at
+        0 appended, on every step t (NaN at the last sample)."""
+        d = self.data
+        model = ChamberModel(params.terms + tuple(extra))
+        x = np.concatenate([params.full_vector(), np.zeros(sum(len(t.parameters) for t in extra))])
+        h = np.diff(d.time)
+        v, vd = params.volume_coordinate(d.v[:-1], d.vd[:-1])
+        lags = d.u_lags(model.n_lags(float(np.median(h))))[:-1] if model.has_delay else None
+        consts = (params.c_b, params.c_s, params.c_gamma)
+        pred, J = model.step(x, d.p[:-1], d.u[:-1], v, vd, h, *consts, lags)
+        return _pad(pred), _pad(J), model
+
+    def candidates(self, fitted: PneumaticFit, residuals: Residuals, train) -> list[Candidate]:
+        """Every cause the model lacks, linearised at the current fit (module docstring); a
+        candidate whose estimate on the training rows breaks its parameter's bound (a negative
+        leak, droop or added delay: no physical cause) is not offered."""
+        name, params = self.unit_name, fitted.params
+        have = {t.cause for t in params.terms}
+        ok = self._rows(fitted)
+        n_now = params.full_vector().size
+        out = []
+        for cause in CAUSES:
+            if cause in have or cause == "valve_delay":
+                continue
+            _, J, _ = self._jacobian(params, (make_term(cause, name),))
+            J[~ok] = np.nan
+            out.append(Candidate(make_term(cause, name), {name: J[:, n_now:]}, refit={name: J[:, :n_now]}))
+        if "valve_delay" not in have:
+            out += self._delay_family(params, ok)
+        r = residuals.channels[name]
+        return [c for c in out if _physical(c, r, np.asarray(train, bool) & ok)]
+
+    def _delay_family(self, params, ok) -> list[Candidate]:
+        """Variants d = 1..D samples: the model with its command lag replaced by a delay of d
+        samples, minus the model now, per second of delay (a column whose coefficient is about the
+        delay added)."""
+        d, name = self.data, self.unit_name
+        base, J, _ = self._jacobian(params)
+        J[~ok] = np.nan
+        refit = {name: J}
+        h = np.diff(d.time)
+        dt = float(np.median(h))
+        others = tuple(t for t in params.terms if t.cause != "sensor_lag")
+        lag = _lag(params)
+        model = ChamberModel(others + (make_term("valve_delay", name),))
+        lags = d.u_lags(model.n_lags(dt))[:-1]
+        v, vd = params.volume_coordinate(d.v[:-1], d.vd[:-1])
+        consts = (params.c_b, params.c_s, params.c_gamma)
+        x = np.concatenate([params.vector(), *[t.values for t in others], [0.0]])
+        out = []
+        for k in range(1, int(round(MAX_DELAY_S / dt)) + 1):
+            x[-1] = k * dt
+            pred = _pad(model.step(x, d.p[:-1], d.u[:-1], v, vd, h, *consts, lags, False)[0])
+            col = (pred - base) / (k * dt - lag)
+            col[~ok] = np.nan
+            term = make_term("valve_delay", name, {"delay_s": k * dt})
+            out.append(Candidate(term, {name: col[:, None]}, family=f"valve_delay:{name}", refit=refit))
+        return out
+
+    # ------------------------------------------------------------------ scores and output
+    def score(self, fitted: PneumaticFit, mask, exclude: dict | None = None) -> Score:
+        if fitted._prediction is None:
+            fitted._prediction = predict_with_resets(fitted.params, self.data)
+        measured = self.data.p.astype(float).copy()
+        if exclude and self.unit_name in exclude:
+            measured[np.asarray(exclude[self.unit_name], bool)] = np.nan
+        return score(measured[:, None], fitted._prediction[:, None], (self.unit_name,), unit=UNIT, mask=mask)
+
+    def faults(self, fitted, residuals) -> list:
+        return []
+
+    def terms(self, fitted: PneumaticFit):
+        """The terms diagnose found (the baseline's ``sensor_lag`` is not one)."""
+        return tuple(t for t in fitted.params.terms if t.cause != "sensor_lag")
+
+    def describe(self, fitted: PneumaticFit) -> str:
+        return "+".join(["c1..c9 (eq. 4.10)", *[t.cause for t in fitted.params.terms]])
+
+    def chamber_entry(self, fitted: PneumaticFit) -> dict:
+        entry = fitted.fit.to_dict()
+        entry.update(volume_sensor=self.volume_sensor, supply=self.data.supply, room=self.data.room)
+        return entry
+
+    def save(self, fitted: PneumaticFit, path, header: dict) -> Path:
+        return save_units([self], [fitted], path, header)
+
+
+def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray) -> bool:
+    """Whether the least-squares estimate of ``cand`` on ``rows`` (its columns with its refit
+    columns, as the engine fits it) respects its parameters' lower bounds (a leak, a droop, an
+    added delay are positive)."""
+    name = cand.term.channel
+    col = np.asarray(cand.columns[name], float).reshape(r.size, -1)
+    A = np.hstack([col, np.asarray(cand.refit[name], float).reshape(r.size, -1)]) if cand.refit else col
+    sel = rows & np.isfinite(r) & np.isfinite(A).all(axis=1)
+    if sel.sum() <= A.shape[1]:
+        return False
+    coef = np.linalg.lstsq(A[sel], r[sel], rcond=None)[0][: col.shape[1]]
+    lower = np.array([p.lower for p in cand.term.parameters])
+    return bool((coef >= np.where(np.isfinite(lower), 0.0, -np.inf)).all())
+
+
+def _lag(params) -> float:
+    """The fitted sensor lag of a chamber model (0 without one), s."""
+    return next((t.values[0] for t in params.terms if t.cause == "sensor_lag"), 0.0)
+
+
+def _pad(a: np.ndarray) -> np.ndarray:
+    """A per-step array (T-1, ...) as a per-sample one (T, ...), NaN at the last sample."""
+    return np.concatenate([a, np.full((1, *a.shape[1:]), np.nan)])
+
+
+def adapters(log, robot, options) -> list[PneumaticAdapter]:
+    """One adapter per chamber (``options.chambers``, default every chamber of sensors.yaml that the
+    log lets us fit; a chamber named explicitly that cannot be fitted is an error)."""
+    sensors = robot.sensors
+    named = tuple(getattr(options, "chambers", ()) or ())
+    names = named or sensors.chamber_names
+    specs = {c.name: c for c in sensors.chambers}
+    out = []
+    for name in names:
+        try:
+            data = chamber_data(log, sensors, name)
+        except DiegocalError:
+            if named:
+                raise
+            continue
+        out.append(PneumaticAdapter(data, specs[name].volume_sensor))
+    return out
+
+
+def save_units(adapters, fitteds, path, header: dict) -> Path:
+    """One pneumatic.yaml (bundle kind ``pneumatic``) for every chamber's extended model."""
+    from diegocal.io import save_yaml
+
+    path = Path(path)
+    chambers = {a.unit_name: a.chamber_entry(f) for a, f in zip(adapters, fitteds, strict=True)}
+    meta = {
+        "command": header.get("command") or "diagnose",
+        "log": header.get("log"),
+        "robot": (header.get("robot") or {}).get("dir") if isinstance(header.get("robot"), dict) else None,
+        "model": "thesis eq. (4.10), exact step (4.7); v normalised by v_ref, v_scale; extra terms per chamber",
+        "fitted_on": "training blocks of the diagnosis",
+        "skipped": {},
+    }
+    save_yaml({**{**header, "kind": "pneumatic"}, "chambers": chambers, "meta": meta}, path)
+    return path
