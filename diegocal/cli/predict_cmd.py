@@ -1,8 +1,8 @@
 """`diegocal predict MODEL LOG`: use any fitted model on a new log.
 
-The model's kind is recognised from the file (DESIGN.md: MODEL is any fitted output):
-an ``sgp/`` directory, a calib.yaml (``pots``/``markers``/``mocap`` keys) or a pneumatic.yaml
-(``chambers`` key). Each domain registers its predictor here.
+The model's kind is read from its bundle header by the one loader, :func:`diegocal.io.bundle.load_bundle`
+(DESIGN.md: MODEL is any fitted output; STYLE.md: dispatch on the kind, never on file names). A
+diagnosis.yaml stands for the extended model it names. Each domain registers its predictor here.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ import typer
 from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors
 from diegocal.errors import InputFileError
-from diegocal.io import load_yaml
 
 
 @dataclass(frozen=True)
@@ -40,24 +39,36 @@ def register_predictor(kind: str, fn: Callable[[Path, Path, PredictOptions], Non
     PREDICTORS[kind] = fn
 
 
+#: Bundle kind -> the predictor registered for it.
+PREDICTOR_OF_KIND = {"calibration": "calib", "pneumatic": "pneumatic", "dynamics": "sgp"}
+
+
+def resolve_model(path: Path) -> tuple[str, Path]:
+    """(predictor name, model path) of a fitted output; a diagnosis.yaml resolves to the extended
+    model it names (beside it)."""
+    from diegocal.io.bundle import load_bundle
+
+    bundle = load_bundle(path)
+    if bundle.kind == "diagnosis":
+        name = bundle.data.get("extended_model")
+        if not name:
+            raise InputFileError(f"{path}: this diagnosis names no extended model")
+        return resolve_model(path.parent / str(name))
+    return PREDICTOR_OF_KIND[bundle.kind], path
+
+
 def model_kind(path: Path) -> str:
-    """'sgp', 'calib' or 'pneumatic', from the model file's shape."""
-    if not path.exists():
-        raise InputFileError(f"{path}: no such model file or directory")
-    if path.is_dir():
-        return "sgp"
-    data = load_yaml(path)
-    if "chambers" in data:
-        return "pneumatic"
-    if {"pots", "markers", "mocap"} & set(data):
-        return "calib"
-    raise InputFileError(f"{path}: not a fitted diegocal model (calib.yaml, pneumatic.yaml or sgp/)")
+    """'sgp', 'calib' or 'pneumatic': the predictor for the model at ``path`` (its bundle kind)."""
+    return resolve_model(path)[0]
 
 
 @app.command("predict")
 @cli_errors
 def predict(
-    model: Annotated[Path, typer.Argument(help="calib.yaml, pneumatic.yaml or an sgp/ model directory.")],
+    model: Annotated[
+        Path,
+        typer.Argument(help="Any fitted model: calib.yaml, pneumatic.yaml, an sgp/ directory, or a diagnosis.yaml."),
+    ],
     log: Annotated[Path, typer.Argument(help="Held-out log to predict.")],
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Where to write the prediction.")] = None,
     sensors_from: Annotated[
@@ -70,7 +81,7 @@ def predict(
     seed: Annotated[int, typer.Option("--seed")] = 0,
 ) -> None:
     """Predict a held-out log with a fitted model and report the error."""
-    kind = model_kind(model)
+    kind, model = resolve_model(model)
     if kind not in PREDICTORS:
         raise InputFileError(f"{model}: predicting with a {kind} model is not available in this build")
     opts = PredictOptions(output, _split(sensors_from), _split(sensors_to), robot, jobs, quiet, seed)
