@@ -5,6 +5,7 @@ from diegocal.io.files import (
     dump_yaml,
     load_log,
     load_yaml,
+    q_log_path,
     save_log,
     save_yaml,
     write_text,
@@ -13,6 +14,7 @@ from diegocal.io.log import JOINT_STREAMS, Log, Stream, Truth, check_log, make_s
 from diegocal.io.real import RealOptions, load_tiago, load_tx40
 
 __all__ = [
+    "q_log_path",
     "JOINT_STREAMS",
     "Log",
     "RealOptions",

@@ -125,6 +125,17 @@ def save_log(log: Log, path) -> None:
         raise LogFormatError(f"{path}: unknown log suffix {suffix!r} (use .h5 or .csv)")
 
 
+def q_log_path(calib_path) -> Path:
+    """The tracked joint angles a calibration writes beside itself: ``<stem>.q.h5``
+    (``x.calib.yaml`` -> ``x.q.h5``)."""
+    calib_path = Path(calib_path)
+    name = calib_path.name
+    for suffix in (".calib.yaml", ".yaml", ".yml"):
+        if name.endswith(suffix):
+            return calib_path.with_name(name[: -len(suffix)] + ".q.h5")
+    return calib_path.with_name(name + ".q.h5")
+
+
 def _existing(path) -> Path:
     path = Path(path)
     if not path.exists():

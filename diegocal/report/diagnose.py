@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diegocal.report.registry import Section, register_section
+from diegocal.report.registry import Section, is_bundle, register_section
 from diegocal.report.style import COLORS, PAGE_SIZE, axes_or_new, page, save_page
 
 #: What each cause means, in words (DESIGN.md's vocabulary and its extensions).
@@ -44,12 +44,7 @@ PHRASES = {
 
 
 def recognise(path: Path) -> bool:
-    from diegocal.io.bundle import load_bundle
-
-    path = Path(path)
-    if path.is_dir() or path.suffix not in (".yaml", ".yml"):
-        return False
-    return load_bundle(path).kind == "diagnosis"
+    return is_bundle(path, "diagnosis")
 
 
 def describe(path: Path) -> dict:

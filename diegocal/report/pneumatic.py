@@ -19,7 +19,7 @@ from diegocal.pneumatic.files import PneumaticModel, load_model
 from diegocal.pneumatic.model import steady_state
 from diegocal.pneumatic.params import NAMES
 from diegocal.pneumatic.predict import next_step, predict_with_resets
-from diegocal.report.registry import Section, register_section
+from diegocal.report.registry import Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new, page, save_page, text_page
 
 U_GRID = np.linspace(3.0, 7.0, 161)  # §4.5: commands 3-7 V
@@ -211,12 +211,7 @@ def _sweep(model: PneumaticModel):
 
 
 def _recognise(path: Path) -> bool:
-    if path.suffix.lower() not in (".yaml", ".yml") or not path.is_file():
-        return False
-    try:
-        return "chambers" in load_yaml(path)
-    except DiegocalError:
-        return False
+    return is_bundle(path, "pneumatic")
 
 
 def _describe(path: Path) -> dict:

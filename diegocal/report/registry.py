@@ -37,6 +37,21 @@ def register_section(section: Section) -> Section:
     return section
 
 
+def is_bundle(path, kind: str) -> bool:
+    """Whether ``path`` is a fitted-output YAML file of bundle ``kind`` (the one loader,
+    :func:`diegocal.io.bundle.load_bundle`, decides; a file it cannot read is no bundle)."""
+    from diegocal.errors import DiegocalError
+    from diegocal.io.bundle import load_bundle
+
+    path = Path(path)
+    if not path.is_file() or path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        return load_bundle(path).kind == kind
+    except DiegocalError:
+        return False
+
+
 def section_for(path: Path) -> Section | None:
     for s in SECTIONS:
         try:

@@ -14,19 +14,13 @@ import numpy as np
 
 from diegocal.errors import DiegocalError
 from diegocal.io import load_log, load_yaml
-from diegocal.report.registry import ReportContext, Section, register_section
+from diegocal.report.registry import ReportContext, Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new, page, save_page, text_page
 from diegocal.stac.calibration import Calibration
 
-CALIB_KEYS = {"pots", "markers", "mocap"}  # the same rule as diegocal.cli.predict_cmd.model_kind
-
 
 def recognise(path: Path) -> bool:
-    path = Path(path)
-    if path.is_dir() or path.suffix not in (".yaml", ".yml"):
-        return False
-    data = load_yaml(path)
-    return isinstance(data, dict) and "chambers" not in data and bool(CALIB_KEYS & set(data))
+    return is_bundle(path, "calibration")
 
 
 def describe(path: Path) -> dict:
@@ -216,7 +210,7 @@ def pages(path: Path, pdf, context: ReportContext) -> None:
 
 def _load_context(raw: dict, path: Path, context: ReportContext):
     """Robot, log and tracked q named in ``meta`` when they still exist (else None)."""
-    from diegocal.cli.stac_cmd import q_log_path
+    from diegocal.io import q_log_path
     from diegocal.robot import load_robot
 
     meta = raw.get("meta") or {}
