@@ -1,0 +1,82 @@
+"""`diegocal diagnose` from the command line: bad input is one line and a non-zero exit, never a
+traceback and never a half-written output."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
+from diegocal.io import Log, make_stream, save_log
+
+runner = CliRunner()
+
+
+def _log(tmp_path: Path, streams: dict, robot: str | None = "diego", T: int = 200) -> Path:
+    path = tmp_path / "run.h5"
+    log = Log(
+        np.arange(T) * 0.01,
+        {k: make_stream(names, np.random.default_rng(0).normal(size=(T, len(names)))) for k, names in streams.items()},
+        robot=robot,
+        rate_hz=100.0,
+    )
+    save_log(log, path)
+    return path
+
+
+def _no_outputs(tmp_path: Path) -> bool:
+    return not list(tmp_path.glob("*diagnosis*")) and not list(tmp_path.glob("*extended*"))
+
+
+def test_a_missing_log_is_one_line(tmp_path):
+    line = one_line_error(runner.invoke(app, ["diagnose", str(tmp_path / "nope.h5")]))
+    assert "nope.h5" in line
+
+
+def test_a_log_with_no_diagnosable_streams_names_what_it_needs(tmp_path):
+    path = _log(tmp_path, {"qd": ["joint1"]}, robot="arm3")
+    result = runner.invoke(app, ["diagnose", str(path)])
+    assert result.exit_code == 1
+    line = one_line_error(result)
+    assert "nothing to diagnose" in line and "q + tau" in line and "qd" in line
+    assert _no_outputs(tmp_path)
+
+
+def test_a_domain_whose_streams_are_missing_is_one_line(tmp_path):
+    path = _log(tmp_path, {"q": ["joint1"], "tau": ["joint1"]}, robot="arm3")
+    result = runner.invoke(app, ["diagnose", str(path), "--domain", "pneumatics"])
+    assert result.exit_code == 1
+    assert "pressure" in one_line_error(result)
+    assert _no_outputs(tmp_path)
+
+
+def test_an_unknown_domain_is_a_usage_error(tmp_path):
+    path = _log(tmp_path, {"q": ["joint1"], "tau": ["joint1"]}, robot="arm3")
+    result = runner.invoke(app, ["diagnose", str(path), "--domain", "thermal"])
+    assert result.exit_code == 2
+    assert "thermal" in one_line_error(result)
+
+
+@pytest.mark.parametrize("option", [["--friction", "sticky"], ["--alpha", "2"], ["--blocks", "1"]])
+def test_bad_option_values_are_usage_errors(tmp_path, option):
+    path = _log(tmp_path, {"q": ["joint1"], "tau": ["joint1"]}, robot="arm3")
+    result = runner.invoke(app, ["diagnose", str(path), *option])
+    assert result.exit_code == 2
+    one_line_error(result)
+
+
+def test_an_unknown_chamber_is_one_line(tmp_path):
+    path = _log(tmp_path, {"pressure": ["r_elbow.flex"], "valve": ["r_elbow.flex"], "pots": ["r_elbow"]})
+    result = runner.invoke(app, ["diagnose", str(path), "--chamber", "r_elbo.flex"])
+    assert result.exit_code == 1
+    assert "r_elbo.flex" in one_line_error(result)
+    assert _no_outputs(tmp_path)
+
+
+def test_a_log_naming_no_robot_asks_for_one(tmp_path):
+    path = _log(tmp_path, {"q": ["joint1"], "tau": ["joint1"]}, robot=None)
+    result = runner.invoke(app, ["diagnose", str(path)])
+    assert result.exit_code == 1
+    assert "--robot" in one_line_error(result)
