@@ -12,6 +12,10 @@ Extensions written by STAC (optional on read): ``sigma.by_group`` (noise level p
 §2.3.5), ``fit.history`` (per-iteration cost and noise levels), ``meta: {log, robot, command,
 created}`` and ``prediction`` (cross-sensor MAE table of ``diegocal predict``, Tables 2.1-2.2).
 
+``terms`` (optional): extra terms of the observation model found by ``diegocal diagnose``
+(:mod:`diegocal.stac.terms`), a list of ``{cause, channel, region, parameters, extra}``; ``predict``
+honours them.
+
 Simulated logs store the true values in ``/truth`` attribute ``params`` in this same schema.
 """
 
@@ -51,6 +55,7 @@ class Calibration:
     sigma_by_group : noise level per sensor type (rotary, linear, tendon, encoder, markers)
     history : per-iteration records as dicts {iteration, cost, sigma_pots, sigma_markers, seconds}
     meta : {log, robot, command, created}, where the calibration came from
+    terms : extra terms of the observation model (:mod:`diegocal.stac.terms`), () for STAC's own
     """
 
     pot_names: tuple[str, ...]
@@ -71,6 +76,7 @@ class Calibration:
     sigma_by_group: dict = field(default_factory=dict)
     history: tuple = ()
     meta: dict = field(default_factory=dict)
+    terms: tuple = ()
 
     @classmethod
     def nominal(cls, robot: Robot) -> Calibration:
@@ -131,6 +137,8 @@ class Calibration:
             ]
         if self.meta:
             out["meta"] = dict(self.meta)
+        if self.terms:
+            out["terms"] = [t.to_dict() for t in self.terms]
         return out
 
     @classmethod
@@ -170,9 +178,18 @@ class Calibration:
                 sigma_by_group={str(k): _nan(v) for k, v in (sigma.get("by_group") or {}).items()},
                 history=tuple(dict(h) for h in (fit.get("history") or ())),
                 meta=dict(data.get("meta") or {}),
+                terms=_terms(data.get("terms")),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None
+
+
+def _terms(items) -> tuple:
+    if not items:
+        return ()
+    from diegocal.stac.terms import term_from_dict
+
+    return tuple(term_from_dict(d) for d in items)
 
 
 def _f(v) -> float | None:

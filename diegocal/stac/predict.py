@@ -67,8 +67,24 @@ def predict(
     options: StacOptions | None = None,
     max_steps: int = 40,
 ) -> Prediction:
-    """Track q from ``sources`` with the calibration fixed; predict ``targets`` (thesis §2.7.2)."""
+    """Track q from ``sources`` with the calibration fixed; predict ``targets`` (thesis §2.7.2).
+
+    A calibration with extra terms (``calibration.terms``, found by ``diegocal diagnose``) is
+    honoured through :func:`diegocal.stac.terms.apply_terms`: the model runs on the log mapped into
+    its terms, and the predicted markers are mapped back to the log's markers and clock (the MAE
+    table is taken in the mapped terms: faulty readings removed, markers on the pots' clock).
+    """
     options = options or StacOptions()
+    if calibration.terms:
+        from dataclasses import replace
+
+        from diegocal.stac.terms import apply_terms, to_log_markers, with_slip_markers
+
+        applied = apply_terms(calibration.terms, log, robot)
+        cal = with_slip_markers(replace(calibration, terms=()), applied, calibration.terms)
+        pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
+        markers = to_log_markers(applied, pred.marker_names, pred.markers) if pred.marker_names else pred.markers
+        return replace(pred, markers=markers, marker_names=applied.marker_names)
     obs = Observation(log, robot, need=(), needed_by="predict")
     src = _groups(sources, obs, "from")
     tgt = _groups(targets, obs, "to")

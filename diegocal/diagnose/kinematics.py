@@ -1,0 +1,539 @@
+"""The kinematics adapter of the diagnosis engine: STAC's pots and markers (thesis ch. 2).
+
+Baseline: STAC (thesis §2.2-2.3) on the training blocks' frames, then the q-phase (eq. 2.21) on
+every frame with θ fixed, so that q is tracked everywhere. Channels: each pot (V) and each marker
+((T, 3), m); residual = reading − prediction at the tracked q. A model with extra terms is the
+baseline fitted to the log mapped into its terms (:func:`diegocal.stac.terms.apply_terms`).
+
+Candidates (:mod:`diegocal.stac.terms`), linearised at the current fit: the column
+∂(prediction)/∂θ_term over every pot and marker row of a frame. Because q is re-estimated per
+frame, every column is projected out of that frame's q directions (the Schur complement),
+
+.. math:: c_t \\leftarrow c_t - J_t (J_t^T W J_t)^{-1} J_t^T W c_t,
+
+J_t the observation Jacobian w.r.t. q_t (eq. 2.22-2.23), W = diag(1/σ²) the sensors' weights,
+so that no term is "explained" by moving q. Each candidate also re-fits (``refit``) the
+calibration parameters it could take over: a pot term its pot's gain and bias, a link offset the
+positions of the markers it moves and the mocap translation, a marker slip its marker's position.
+Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
+prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
+trend, by a threshold with a family-wise false-alarm rate).
+
+Held-out score: RMSE per channel of reading − prediction on the held-out frames, q tracked from
+every sensor with θ fixed. The extended model is a calib.yaml (kind ``calibration``) whose
+``terms`` ``predict`` honours.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+from diegocal.diagnose.engine import Candidate, Fault, Residuals
+from diegocal.evaluate import Score, score
+from diegocal.io import Log, make_stream
+from diegocal.stac.calibration import Calibration
+from diegocal.stac.model import MARKERS, Observation
+from diegocal.stac.predict import predict
+from diegocal.stac.result import StacOptions
+from diegocal.stac.stac import calibrate
+from diegocal.stac.terms import (
+    POT_CAUSES,
+    SLIP,
+    Applied,
+    apply_terms,
+    make_term,
+    pot_columns,
+    pot_extra,
+)
+from diegocal.terms import Region, Term
+
+#: Change times tried per marker for a slip (a family) inside each run of training frames.
+SLIP_STEPS = 8
+#: Half width (samples) of the running median a marker outlier is measured against.
+OUTLIER_WINDOW = 8
+#: A candidate acts on the channels that carry at least this share of its largest channel's
+#: weighted column energy (its projection spreads tiny parts over every sensor of the chain).
+CHANNEL_SHARE = 0.02
+#: GN refinements of the continuous terms after each STAC fit of an extended model.
+REFINE = 1
+
+
+@dataclass
+class KinFit:
+    """A fitted kinematic model: extra terms, the calibration (in the mapped terms of ``applied``),
+    tracked q (T, n), predictions pots (T, P) and markers (T, M', 3) in the mapped terms."""
+
+    terms: tuple
+    cal: Calibration
+    applied: Applied
+    q: np.ndarray
+    pots: np.ndarray
+    markers: np.ndarray
+    train: np.ndarray = field(repr=False)
+
+
+class KinematicsAdapter:
+    """The engine's adapter for a robot's pots and markers (module docstring)."""
+
+    domain = "kinematics"
+    unit_name = ""
+
+    def __init__(self, log: Log, robot, options: StacOptions | None = None):
+        self.log, self.robot = log.without_truth(), robot
+        self.options = options or StacOptions()
+        st = self.log.stream("pots")
+        self.pot_names = tuple(st.names)
+        self.raw_pots = np.asarray(st.data, float)
+        self.marker_names = tuple(self.log.stream("markers").names)
+        self.time = np.asarray(self.log.time, float)
+        self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, terms, train) -> KinFit:
+        train = np.asarray(train, bool)
+        terms = tuple(self._own(t, train) for t in terms)
+        fitted = self._fit_once(terms, train)
+        for _ in range(REFINE):
+            if not any(t.cause in (*POT_CAUSES, "link_offset", "time_offset") for t in terms):
+                break
+            terms = self._refine(fitted)
+            fitted = self._fit_once(terms, train)
+        return fitted
+
+    def _own(self, term: Term, train) -> Term:
+        """A term as this adapter builds it (engine copies keep ``extra``; YAML ones too)."""
+        if term.cause in POT_CAUSES and not term.extra:
+            j = self.pot_names.index(term.channel)
+            return replace(term, extra=pot_extra(term.cause, self.raw_pots[train, j], 0.005))
+        return term
+
+    def _fit_once(self, terms, train) -> KinFit:
+        applied = apply_terms(terms, self.log, self.robot)
+        idx = np.flatnonzero(train)
+        sub = Log(
+            applied.log.time[idx],
+            {k: make_stream(s.names, s.data[idx]) for k, s in applied.log.streams.items()},
+            robot=applied.log.robot,
+            rate_hz=applied.log.rate_hz,
+        )
+        cal = calibrate(sub, applied.robot, self.options).calibration
+        terms = tuple(self._slip_value(t, cal) for t in terms)
+        pred = predict(applied.log, applied.robot, cal, ("pots", "markers"), ("pots", "markers"), self.options)
+        return KinFit(terms, cal, applied, pred.q, pred.pots, pred.markers, train.copy())
+
+    @staticmethod
+    def _slip_value(term: Term, cal: Calibration) -> Term:
+        """A slip's value is the fitted position of its second marker minus the first's."""
+        if term.cause != "marker_slip":
+            return term
+        i, k = cal.marker_names.index(term.channel), cal.marker_names.index(term.channel + SLIP)
+        return term.with_values(cal.marker_xyz[k] - cal.marker_xyz[i])
+
+    def _refine(self, fitted: KinFit) -> tuple:
+        """One Gauss-Newton step on every continuous term at once (their projected columns with
+        their refit columns, weighted least squares on the training frames)."""
+        lin = self._linearise(fitted)
+        r = lin.residual_rows()
+        cols, ref, blocks, at = [], [], [], 0
+        for i, t in enumerate(fitted.terms):
+            made = self._term_columns(lin, fitted, t)
+            if made is None:
+                continue
+            c, rf = made
+            blocks.append((i, at, c.shape[-1]))
+            at += c.shape[-1]
+            cols.append(c)
+            if rf is not None:
+                ref.append(rf)
+        if not cols:
+            return fitted.terms
+        A = np.concatenate([*cols, *ref], axis=-1)  # (T, R, k)
+        rows = fitted.train[:, None] & np.isfinite(r) & np.isfinite(A).all(-1) & (lin.w > 0)
+        w = np.sqrt(lin.w)[rows]
+        coef = np.linalg.lstsq(A[rows] * w[:, None], r[rows] * w, rcond=None)[0]
+        out = list(fitted.terms)
+        for i, a0, k in blocks:
+            t = out[i]
+            out[i] = t.with_values(t.values + coef[a0 : a0 + k], [p.stderr for p in t.parameters])
+        return tuple(out)
+
+    # ------------------------------------------------------------------ residuals
+    def _merge(self, applied: Applied, x: np.ndarray) -> np.ndarray:
+        """Mapped markers (T, M', ...) -> the log's markers (T, M, ...), slips merged back."""
+        names = list(applied.log.stream("markers").names)
+        out = x[:, [names.index(n) for n in self.marker_names]].copy()
+        for name, (orig, k) in applied.slips.items():
+            out[k:, self.marker_names.index(orig)] = x[k:, names.index(name)]
+        return out
+
+    def _residual_arrays(self, fitted: KinFit):
+        a = fitted.applied
+        rp = np.asarray(a.log.stream("pots").data, float) - fitted.pots
+        xm = self._merge(a, np.asarray(a.log.stream("markers").data, float))
+        rm = xm - self._merge(a, fitted.markers)
+        return rp, rm, xm
+
+    def residuals(self, fitted: KinFit) -> Residuals:
+        rp, rm, _ = self._residual_arrays(fitted)
+        channels = {n: rp[:, i] for i, n in enumerate(self.pot_names)}
+        channels.update({n: rm[:, i] for i, n in enumerate(self.marker_names)})
+        units = {n: "V" for n in self.pot_names}
+        units.update({n: "m" for n in self.marker_names})
+        variables = {"time": self.time}
+        variables.update({f"p.{n}": self.raw_pots[:, i] for i, n in enumerate(self.pot_names)})
+        joints = self.robot.joint_names
+        variables.update({f"q.{j}": fitted.q[:, i] for i, j in enumerate(joints)})
+        chv = {}
+        for n in self.pot_names:
+            j = self.joint_of_pot.get(n)
+            chv[n] = (f"p.{n}",) + ((f"q.{j}",) if j else ())
+        for m in self.robot.sensors.markers:
+            if m.name in self.marker_names:
+                chv[m.name] = ("time",)
+        return Residuals(channels, units, variables, chv)
+
+    # ------------------------------------------------------------------ candidates
+    def _linearise(self, fitted: KinFit) -> _Lin:
+        return _Lin.at(fitted, self)
+
+    def _term_columns(self, lin: _Lin, fitted: KinFit, term: Term):
+        """(columns (T, R, k), refit (T, R, k0) or None) of a term on the mapped rows, projected."""
+        P = lin.P
+        if term.cause in POT_CAUSES:
+            j = self.pot_names.index(term.channel)
+            f = pot_columns(term, self.raw_pots[:, j])
+            g = lin.project_pot(j)  # (T, R)
+            s = lin.s[:, j]
+            return g[..., None] * f[:, None, :], np.stack([g * s[:, None], g], axis=-1)
+        if term.cause == "link_offset":
+            return lin.project(lin.link_offset_basis(term.channel)), lin.project(lin.refit_markers(term.channel))
+        if term.cause == "time_offset":
+            v = np.zeros((lin.T, lin.R, 1))
+            xd = np.gradient(fitted.markers, self.time, axis=0)  # (T, M', 3)
+            v[:, P:, 0] = xd.reshape(lin.T, -1)
+            return lin.project(np.nan_to_num(v)), None
+        return None
+
+    def candidates(self, fitted: KinFit, residuals: Residuals, train) -> list[Candidate]:
+        train = np.asarray(train, bool)
+        lin = self._linearise(fitted)
+        have = {(t.cause, t.channel) for t in fitted.terms}
+        sigma_p = lin.sigma_p
+        out = []
+        for j, name in enumerate(self.pot_names):
+            for cause in POT_CAUSES:
+                if (cause, name) in have:
+                    continue
+                extra = pot_extra(cause, self.raw_pots[train, j], float(sigma_p[j]))
+                term = make_term(cause, name, extra=extra)
+                cols, refit = self._term_columns(lin, fitted, term)
+                out.append(Candidate(term, lin.channels(cols), refit=lin.channels(refit)))
+        for joint in lin.observed_joints():
+            if ("link_offset", joint) in have:
+                continue
+            term = make_term("link_offset", joint)
+            cols, refit = self._term_columns(lin, fitted, term)
+            out.append(Candidate(term, lin.channels(cols), refit=lin.channels(refit)))
+        if ("time_offset", "markers") not in have:
+            term = make_term("time_offset", "markers")
+            cols, _ = self._term_columns(lin, fitted, term)
+            out.append(Candidate(term, lin.channels(cols)))
+        out += self._slip_family(lin, fitted, have, train)
+        return out
+
+    def _slip_family(self, lin: _Lin, fitted: KinFit, have, train) -> list[Candidate]:
+        """Per marker a family over change times: a grid inside the training runs and one time in
+        the middle of each gap between them (the training frames cannot place a slip inside a
+        gap more finely; its middle halves the worst error)."""
+        out = []
+        starts = _slip_samples(train, SLIP_STEPS)
+        for name in self.marker_names:
+            if ("marker_slip", name) in have:
+                continue
+            base = lin.project(lin.marker_basis(lin.mapped_index(name)))  # (T, R, 3)
+            refit = lin.channels(base)
+            for k in starts:
+                cols = base.copy()
+                cols[:k] = 0.0
+                region = Region("time", float(self.time[k]), float(self.time[-1]))
+                term = make_term("marker_slip", name, region=region)
+                out.append(Candidate(term, lin.channels(cols), family=f"marker_slip:{name}", refit=refit))
+        return out
+
+    # ------------------------------------------------------------------ faults
+    def faults(self, fitted: KinFit, residuals: Residuals) -> list[Fault]:
+        """Swapped labels, then marker outliers (module docstring), on the baseline's residuals."""
+        _, rm, xm = self._residual_arrays(fitted)
+        pred = xm - rm
+        T, M = rm.shape[:2]
+        n_tests = max(T * M, 1)
+        sig = float(fitted.cal.sigma_markers)
+        # a reading is off when its residual's squared norm passes chi²_3 at alpha / readings
+        thr2 = chi2.isf(0.01 / n_tests, 3) * sig**2
+        own = np.einsum("tmi,tmi->tm", rm, rm)
+        out = []
+        swapped = np.zeros((T, M), bool)
+        for m in range(M):
+            for k in range(m + 1, M):
+                bad = (own[:, m] > thr2) & (own[:, k] > thr2)
+                if bad.sum() < 3:
+                    continue
+                dm = np.sum((xm[:, m] - pred[:, k]) ** 2, -1)
+                dk = np.sum((xm[:, k] - pred[:, m]) ** 2, -1)
+                swap = bad & (dm < thr2) & (dk < thr2)
+                if swap.sum() >= 3:
+                    frames = np.flatnonzero(swap)
+                    a, b = self.marker_names[m], self.marker_names[k]
+                    term = make_term("swapped_labels", a, extra={"partner": b, "frames": frames.tolist()})
+                    mask = np.zeros(T, bool)
+                    mask[frames] = True
+                    ev = {"frames": int(swap.sum()), "partner": b, "threshold_m": float(np.sqrt(thr2))}
+                    out.append(Fault(term, {a: mask, b: mask}, exclude=False, evidence=ev))
+                    swapped[frames, m] = swapped[frames, k] = True
+        # outliers: the residual against its running median (a smooth model error is no outlier)
+        e = rm - _running_median(rm, OUTLIER_WINDOW)
+        e2 = np.einsum("tmi,tmi->tm", e, e)
+        ok = np.isfinite(e2)
+        scale = np.median(e2[ok]) / chi2.median(3) if ok.any() else 0.0
+        flag = ok & (e2 > chi2.isf(0.01 / n_tests, 3) * scale) & ~swapped
+        if flag.sum() >= 1:
+            frames = {self.marker_names[m]: np.flatnonzero(flag[:, m]).tolist() for m in range(M) if flag[:, m].any()}
+            ch = next(iter(frames)) if len(frames) == 1 else "markers"
+            term = make_term("marker_outliers", ch, extra={"frames": frames})
+            readings = {n: flag[:, self.marker_names.index(n)] for n in frames}
+            ev = {"readings": int(flag.sum()), "threshold_sigma": float(np.sqrt(chi2.isf(0.01 / n_tests, 3)))}
+            out.append(Fault(term, readings, exclude=True, evidence=ev))
+        return out
+
+    # ------------------------------------------------------------------ scores and output
+    def score(self, fitted: KinFit, mask, exclude: dict | None = None) -> Score:
+        rp, rm, xm = self._residual_arrays(fitted)
+        rp, rm = rp.copy(), rm.copy()
+        for c, ex in (exclude or {}).items():
+            ex = np.asarray(ex, bool)
+            if c in self.pot_names:
+                rp[ex, self.pot_names.index(c)] = np.nan
+            elif c in self.marker_names:
+                rm[ex, self.marker_names.index(c)] = np.nan
+        zero_p = np.zeros_like(rp)
+        sp = score(np.where(np.isfinite(rp), rp, np.nan), zero_p, self.pot_names, unit="V", mask=mask)
+        sm = score(rm, np.zeros_like(rm), self.marker_names, unit="m", mask=mask)
+        cov = None
+        return Score(
+            sp.channels + sm.channels,
+            np.concatenate([sp.rmse, sm.rmse]),
+            np.concatenate([sp.nmse, sm.nmse]),
+            np.concatenate([sp.mae, sm.mae]),
+            cov,
+            np.concatenate([sp.n_samples, sm.n_samples]),
+            "V (pots), m (markers)",
+        )
+
+    def terms(self, fitted: KinFit):
+        return tuple(fitted.terms)
+
+    def describe(self, fitted: KinFit) -> str:
+        return "+".join(["stac (eq. 2.11-2.20)", *[t.cause for t in fitted.terms]])
+
+    def calibration(self, fitted: KinFit) -> Calibration:
+        """The extended calibration in the log's own markers (slip markers folded into terms)."""
+        cal = fitted.cal
+        keep = [i for i, n in enumerate(cal.marker_names) if not n.endswith(SLIP)]
+        se = cal.marker_xyz_se[keep] if cal.marker_xyz_se is not None else None
+        return replace(
+            cal,
+            marker_names=tuple(cal.marker_names[i] for i in keep),
+            marker_links=tuple(cal.marker_links[i] for i in keep),
+            marker_xyz=cal.marker_xyz[keep],
+            marker_xyz_se=se,
+            terms=tuple(fitted.terms),
+        )
+
+    def save(self, fitted: KinFit, path, header: dict) -> Path:
+        from diegocal.io import save_yaml
+
+        path = Path(path)
+        data = self.calibration(fitted).to_dict()
+        save_yaml({**header, "kind": "calibration", **data}, path)
+        return path
+
+
+# ----------------------------------------------------------------------------- linearisation
+@dataclass
+class _Lin:
+    """The observation Jacobian and the Schur projector of every frame at a fit (mapped rows:
+    P pots, then 3 per mapped marker).
+
+    J : (T, R, n); K : (T, n, R) = (JᵀWJ)⁻¹ JᵀW; w : (T, R) weights 1/σ² (0 where occluded)
+    """
+
+    adapter: KinematicsAdapter
+    fitted: KinFit
+    obs: Observation
+    params: object
+    J: np.ndarray
+    K: np.ndarray
+    w: np.ndarray
+    s: np.ndarray
+    Rl: np.ndarray
+    sigma_p: np.ndarray
+
+    @property
+    def T(self) -> int:
+        return self.J.shape[0]
+
+    @property
+    def R(self) -> int:
+        return self.J.shape[1]
+
+    @property
+    def P(self) -> int:
+        return self.obs.n_pots
+
+    @classmethod
+    def at(cls, fitted: KinFit, adapter: KinematicsAdapter) -> _Lin:
+        a = fitted.applied
+        obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
+        params = obs.params_from(fitted.cal)
+        sig = dict(fitted.cal.sigma_by_group)
+        sigma_p = np.array([sig.get(k, fitted.cal.sigma_pots) for k in obs.kinds], float)
+        sig_x = float(sig.get(MARKERS, fitted.cal.sigma_markers))
+        T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, a.robot.n_joints
+        J = np.zeros((T, P + 3 * M, n))
+        s_all = np.zeros((T, P))
+        Rl_all = np.zeros((T, M, 3, 3))
+        for i in range(0, T, 500):
+            sl = slice(i, min(i + 500, T))
+            s, ds, Rl, _, Jx = obs.evaluate(fitted.q[sl], params.xyz)
+            J[sl, :P] = params.gain[None, :, None] * ds
+            J[sl, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(s.shape[0], 3 * M, n)
+            s_all[sl], Rl_all[sl] = s, Rl
+        w = np.zeros((T, P + 3 * M))
+        w[:, :P] = 1.0 / sigma_p**2
+        w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
+        JW = np.swapaxes(J, 1, 2) * w[:, None, :]
+        H = JW @ J
+        H += 1e-9 * (1.0 + np.einsum("bii->b", H))[:, None, None] * np.eye(n)
+        K = np.linalg.solve(H, JW)
+        return cls(adapter, fitted, obs, params, J, K, w, s_all, Rl_all, sigma_p)
+
+    def project(self, C: np.ndarray) -> np.ndarray:
+        """Columns (T, R, k) minus their part along the frame's q directions (module docstring)."""
+        return C - self.J @ (self.K @ C)
+
+    def project_pot(self, j: int) -> np.ndarray:
+        """The projected unit column of pot j: (T, R)."""
+        out = -self.J @ self.K[:, :, j : j + 1]
+        out[:, j, 0] += 1.0
+        return out[..., 0]
+
+    def residual_rows(self) -> np.ndarray:
+        """(T, R) residuals of the mapped rows (reading − prediction)."""
+        a, f = self.fitted.applied, self.fitted
+        rp = np.asarray(a.log.stream("pots").data, float) - f.pots
+        rm = np.asarray(a.log.stream("markers").data, float) - f.markers
+        return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
+
+    def mapped_index(self, name: str) -> int:
+        return self.obs.marker_names.index(name)
+
+    def marker_basis(self, m: int) -> np.ndarray:
+        """∂x_m/∂d_m = R Rl (T, R, 3) on marker m's rows."""
+        C = np.zeros((self.T, self.R, 3))
+        P = self.P
+        C[:, P + 3 * m : P + 3 * m + 3] = np.einsum("ij,tjk->tik", self.params.R, self.Rl[:, m])
+        return C
+
+    def _moves(self, joint: str) -> np.ndarray:
+        kin = self.obs.kin
+        k = self.adapter.robot.joint_index(joint)
+        jl, _, _ = kin.link_info(self.obs.marker_links)
+        return kin._anc[jl, k].astype(float) - kin._anc[kin.base_joint, k]
+
+    def observed_joints(self) -> list[str]:
+        return [j for j in self.adapter.robot.joint_names if np.any(self._moves(j) != 0)]
+
+    def link_offset_basis(self, joint: str) -> np.ndarray:
+        """∂x/∂δ (T, R, 3) of a translation δ of the joint's origin in its parent joint's frame:
+        every marker it moves shifts by R R_parent δ (linear pots: not modelled, rows 0)."""
+        kin = self.obs.kin
+        k = self.adapter.robot.joint_index(joint)
+        poses = kin.joint_poses(self.fitted.q)
+        par = kin.parent[k]
+        Rp = poses.R[:, par] if par >= 0 else poses.root_R
+        RRp = np.einsum("ij,tjk->tik", self.params.R, Rp)
+        C = np.zeros((self.T, self.R, 3))
+        P = self.P
+        for m, sgn in enumerate(self._moves(joint)):
+            if sgn:
+                C[:, P + 3 * m : P + 3 * m + 3] = sgn * RRp
+        return C
+
+    def refit_markers(self, joint: str) -> np.ndarray:
+        """Refit columns of a link offset: positions of the markers the joint moves (a joint whose
+        parent is fixed to the base moves everything alike: the mocap frame, not re-fitted here,
+        takes its offset up)."""
+        cols = [self.marker_basis(m) for m, sgn in enumerate(self._moves(joint)) if sgn]
+        return np.concatenate(cols, axis=-1)
+
+    def channels(self, C: np.ndarray | None) -> dict | None:
+        """Mapped rows (T, R, k) -> {channel: (T, k) pot or (T, 3, k) marker} on the log's
+        channels (slips merged back), channels the columns do not touch left out."""
+        if C is None:
+            return None
+        P, k = self.P, C.shape[-1]
+        Cw = np.nan_to_num(C * C) * self.w[..., None]
+        energy = np.concatenate([Cw[:, :P].sum(axis=(0, 2)), Cw[:, P:].reshape(self.T, -1, 3, k).sum(axis=(0, 2, 3))])
+        keep = energy >= CHANNEL_SHARE * (energy.max() if energy.size else 0.0)
+        out = {}
+        for i, n in enumerate(self.obs.pot_names):
+            if keep[i] and energy[i] > 0:
+                out[n] = C[:, i]
+        mk = C[:, P:].reshape(self.T, -1, 3, k)
+        a = self.fitted.applied
+        merged = self.adapter._merge(a, mk)
+        names = list(self.obs.marker_names)
+        for i, n in enumerate(self.adapter.marker_names):
+            j = P + names.index(n)
+            second = [P + names.index(v) for v, (o, _) in a.slips.items() if o == n]
+            if any(keep[x] and energy[x] > 0 for x in [j, *second]):
+                out[n] = merged[:, i]
+        return out
+
+
+def _slip_samples(train: np.ndarray, steps: int) -> list[int]:
+    """Candidate slip samples: ``steps`` per run of training frames, one mid-gap between runs
+    (none in the first and last 5 % of the log)."""
+    T = train.size
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], train.astype(int), [0]])))
+    runs = list(zip(edges[0::2], edges[1::2], strict=True))
+    out = []
+    for i, (a, b) in enumerate(runs):
+        out += [int(a + (b - a) * j / steps) for j in range(steps)]
+        if i + 1 < len(runs):
+            out.append(int((b + runs[i + 1][0]) // 2))
+    lo, hi = int(0.05 * T), int(0.95 * T)
+    return sorted({k for k in out if lo <= k <= hi})
+
+
+def _running_median(x: np.ndarray, half: int) -> np.ndarray:
+    """NaN-aware running median over ±half samples along axis 0 of (T, ...)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])
+    win = sliding_window_view(pad, 2 * half + 1, axis=0)
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanmedian(win, axis=-1)
+
+
+def adapters(log, robot, options) -> list[KinematicsAdapter]:
+    """One adapter: the robot's pots and markers together (they share q)."""
+    return [KinematicsAdapter(log, robot)]

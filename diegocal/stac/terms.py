@@ -1,0 +1,263 @@
+"""Extra terms of the kinematic observation model (thesis eq. 2.11-2.20 plus what ``diagnose`` adds).
+
+The baseline STAC model (thesis §2.3) predicts a pot reading ``p = gain · s(q) + bias`` and a
+marker ``x = R (base_T_link(q) d) + T0``. Each extra term changes one part of it; this module is
+the one place that says how, and both ``diagnose`` and ``predict`` use it:
+
+- ``sensor_nonlinearity:POT`` (c2, c3, V): ``p = gain s + bias + c2 u² + c3 u³`` with the reading
+  normalised ``u = (p − center) / half`` (center and half range of the training readings in
+  ``extra``): the pot's transfer curve is not linear.
+- ``backlash:POT`` (half_width, V): ``p = gain s + bias − half_width · dir_t``, dir_t = ±1 the
+  pot's direction of motion (:func:`direction`, held while it stands still): a dead band.
+- ``link_offset:JOINT`` (dx, dy, dz, m): the joint's origin is translated in its parent joint's
+  frame (the URDF's ``<origin xyz>`` is off).
+- ``time_offset:markers`` (seconds, s): the mocap clock is shifted: ``markers[t]`` observe
+  ``q(t + seconds)``.
+- ``marker_slip:MARKER`` (dx, dy, dz, m, region ``time`` from t0): from t0 on the marker sits at
+  ``d + (dx, dy, dz)`` on its link.
+- ``marker_outliers:MARKER`` (``extra.frames``: readings that are not the marker's) and
+  ``swapped_labels:MARKER`` (``extra.partner``, ``extra.frames``): labelling faults of the mocap.
+
+Rather than re-deriving STAC with each term, :func:`apply_terms` maps the log and the robot into
+the baseline model's terms: pot readings with the transfer-curve terms removed (``p − f(p)``),
+markers moved to the pots' clock, link offsets written into the Pinocchio model, a slipped marker
+split into two markers (before, ``NAME~slip`` after t0), faulty readings removed or swapped back.
+The baseline STAC machinery then fits and predicts unchanged; :func:`to_log_markers` maps its
+marker prediction back to the log's markers and clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pinocchio as pin
+
+from diegocal.errors import InputFileError
+from diegocal.io import Log, make_stream
+from diegocal.robot import MarkerSpec, Robot
+from diegocal.terms import Parameter, Region, Term
+
+#: The kinematic causes this module implements (DESIGN.md vocabulary).
+CAUSES = (
+    "sensor_nonlinearity",
+    "backlash",
+    "link_offset",
+    "time_offset",
+    "marker_slip",
+    "marker_outliers",
+    "swapped_labels",
+)
+POT_CAUSES = ("sensor_nonlinearity", "backlash")
+#: Suffix of the second marker a slipped marker is split into.
+SLIP = "~slip"
+#: Half width (samples) of the difference that tells a pot's direction of motion.
+DIRECTION_LAG = 3
+
+
+def make_term(cause: str, channel: str, values=None, region: Region | None = None, extra=None) -> Term:
+    """A kinematic term with its named parameters (module docstring), values default 0."""
+    names = {
+        "sensor_nonlinearity": (("c2", "V"), ("c3", "V")),
+        "backlash": (("half_width", "V"),),
+        "link_offset": (("dx", "m"), ("dy", "m"), ("dz", "m")),
+        "time_offset": (("seconds", "s"),),
+        "marker_slip": (("dx", "m"), ("dy", "m"), ("dz", "m")),
+        "marker_outliers": (),
+        "swapped_labels": (),
+    }
+    if cause not in names:
+        raise InputFileError(f"unknown kinematic term {cause!r} (expected one of {', '.join(CAUSES)})")
+    vals = np.zeros(len(names[cause])) if values is None else np.asarray(values, float).ravel()
+    params = tuple(Parameter(n, float(v), u) for (n, u), v in zip(names[cause], vals, strict=True))
+    return Term(cause, channel, params, region, dict(extra or {}))
+
+
+def term_from_dict(d: dict) -> Term:
+    """A kinematic term from its YAML mapping (:meth:`diegocal.terms.Term.to_dict`)."""
+    fields = Term.fields_from_dict(d, "calib.yaml terms")
+    if fields["cause"] not in CAUSES:
+        raise InputFileError(f"calib.yaml terms: unknown kinematic cause {fields['cause']!r}")
+    return Term(**fields)
+
+
+# ----------------------------------------------------------------------------- pot terms
+def direction(p: np.ndarray, threshold: float, lag: int = DIRECTION_LAG) -> np.ndarray:
+    """Direction of motion of a reading (T,) -> (T,) in {−1, 0, +1}: the sign of p[t+lag] − p[t−lag]
+    where it exceeds ``threshold``, else the last such sign (a dead band keeps its side while the
+    joint stands still); 0 before the first motion."""
+    p = np.asarray(p, float)
+    T = p.size
+    hi, lo = np.minimum(np.arange(T) + lag, T - 1), np.maximum(np.arange(T) - lag, 0)
+    v = p[hi] - p[lo]
+    moving = np.abs(v) > threshold
+    idx = np.where(moving, np.arange(T), -1)
+    idx = np.maximum.accumulate(idx)
+    out = np.where(idx >= 0, np.sign(v[np.maximum(idx, 0)]), 0.0)
+    return out
+
+
+def pot_columns(term: Term, p: np.ndarray) -> np.ndarray:
+    """∂p̂/∂θ (T, k) of a pot term at the readings p (T,) (module docstring)."""
+    e = term.extra
+    if term.cause == "sensor_nonlinearity":
+        u = (np.asarray(p, float) - e["center"]) / e["half"]
+        return np.stack([u * u, u * u * u], axis=1)
+    if term.cause == "backlash":
+        return -direction(p, e["threshold"])[:, None]
+    raise ValueError(f"{term.cause} is not a pot term")
+
+
+def pot_extra(cause: str, p: np.ndarray, sigma: float) -> dict:
+    """The fixed constants of a pot term from its training readings p (T,) and noise σ (V)."""
+    if cause == "sensor_nonlinearity":
+        lo, hi = float(np.min(p)), float(np.max(p))
+        return {"center": 0.5 * (lo + hi), "half": max(0.5 * (hi - lo), 1e-9)}
+    return {"threshold": float(4.0 * sigma)}
+
+
+# ----------------------------------------------------------------------------- geometry
+def offset_robot(robot: Robot, offsets: dict, extra_markers=()) -> Robot:
+    """A copy of ``robot`` with joint origins translated (joint -> (3,) m, in the parent joint's
+    frame) and ``extra_markers`` (MarkerSpec) appended to its sensors."""
+    model = pin.Model(robot.model)
+    for joint, d in offsets.items():
+        jid = model.getJointId(joint)
+        placement = model.jointPlacements[jid].copy()
+        placement.translation = placement.translation + np.asarray(d, float)
+        model.jointPlacements[jid] = placement
+    sensors = robot.sensors
+    if extra_markers:
+        sensors = replace(sensors, markers=tuple(sensors.markers) + tuple(extra_markers))
+    return Robot(model, sensors, robot.name, robot.directory)
+
+
+def shift_clock(x: np.ndarray, time: np.ndarray, seconds: float) -> np.ndarray:
+    """Readings (T, ...) resampled at ``time − seconds`` by linear interpolation (NaN where a
+    neighbour is NaN or outside the log): markers[t] observing q(t + s) become markers observing q(t)."""
+    if seconds == 0.0:
+        return x
+    t = np.asarray(time, float) - seconds
+    i = np.clip(np.searchsorted(time, t) - 1, 0, time.size - 2)
+    w = (t - time[i]) / (time[i + 1] - time[i])
+    shape = (-1,) + (1,) * (x.ndim - 1)
+    out = x[i] * (1.0 - w).reshape(shape) + x[i + 1] * w.reshape(shape)
+    out[(t < time[0]) | (t > time[-1])] = np.nan
+    return out
+
+
+# ----------------------------------------------------------------------------- the mapping
+@dataclass(frozen=True)
+class Applied:
+    """A log and robot mapped into the baseline STAC model's terms (module docstring).
+
+    log : pots with transfer-curve terms removed, markers on the pots' clock, faults removed,
+        slipped markers split (``NAME~slip`` from their slip sample on)
+    robot : joint origins moved by the link offsets; the slipped markers' second markers added
+    slips : second marker name -> (marker name, first sample)
+    shift : the mocap clock offset, s
+    time : (T,) the log's time, s
+    marker_names : the log's own marker names
+    """
+
+    log: Log
+    robot: Robot
+    slips: dict
+    shift: float
+    time: np.ndarray
+    marker_names: tuple
+
+
+def slip_sample(term: Term, time: np.ndarray) -> int:
+    return int(np.searchsorted(time, term.region.low - 1e-9))
+
+
+def apply_terms(terms, log: Log, robot: Robot) -> Applied:
+    """Map ``log`` and ``robot`` into the baseline model's terms (module docstring)."""
+    terms = tuple(terms)
+    time = np.asarray(log.time, float)
+    streams = {}
+    if log.has("pots"):
+        st = log.stream("pots")
+        p = np.array(st.data, float)
+        raw = st.data
+        for t in terms:
+            if t.cause in POT_CAUSES and t.channel in st.names:
+                j = st.names.index(t.channel)
+                p[:, j] -= pot_columns(t, raw[:, j]) @ t.values
+        streams["pots"] = make_stream(st.names, p)
+    names, slips, shift = (), {}, 0.0
+    offsets, extra = {}, []
+    for t in terms:
+        if t.cause == "link_offset":
+            offsets[t.channel] = offsets.get(t.channel, 0.0) + t.values
+        elif t.cause == "time_offset":
+            shift += float(t.values[0])
+    if log.has("markers"):
+        st = log.stream("markers")
+        names = tuple(st.names)
+        x = np.array(st.data, float)
+        specs = {m.name: m for m in robot.sensors.markers}
+        for t in terms:  # labelling faults first: they are facts about the raw stream
+            if t.cause == "swapped_labels" and t.channel in names:
+                a, b = names.index(t.channel), names.index(t.extra["partner"])
+                f = np.asarray(t.extra.get("frames", ()), int)
+                x[f, a], x[f, b] = x[f, b].copy(), x[f, a].copy()
+            elif t.cause == "marker_outliers":
+                for m, f in (t.extra.get("frames") or {}).items():
+                    if m in names:
+                        x[np.asarray(f, int), names.index(m)] = np.nan
+        x = shift_clock(x, time, shift)
+        cols, out_names = [x], list(names)
+        for t in terms:
+            if t.cause == "marker_slip" and t.channel in names:
+                m = names.index(t.channel)
+                k = slip_sample(t, time)
+                second = np.full((time.size, 1, 3), np.nan)
+                second[k:, 0] = x[k:, m]
+                x[k:, m] = np.nan
+                spec = specs[t.channel]
+                name = t.channel + SLIP
+                extra.append(MarkerSpec(name, spec.link, np.asarray(spec.xyz, float) + t.values))
+                slips[name] = (t.channel, k)
+                cols.append(second)
+                out_names.append(name)
+        streams["markers"] = make_stream(tuple(out_names), np.concatenate(cols, axis=1))
+    robot2 = offset_robot(robot, offsets, extra) if (offsets or extra) else robot
+    log2 = replace(log, streams={**log.streams, **streams}, truth=None)
+    return Applied(log2, robot2, slips, shift, time, names)
+
+
+def with_slip_markers(cal, applied: Applied, terms):
+    """A Calibration with the second marker of each slip added (at its marker's xyz + the slip)."""
+    if not applied.slips:
+        return cal
+    by = {t.channel: t for t in terms if t.cause == "marker_slip"}
+    names, links, xyz = list(cal.marker_names), list(cal.marker_links), [cal.marker_xyz]
+    se = [cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full_like(cal.marker_xyz, np.nan)]
+    for name, (orig, _) in applied.slips.items():
+        if name in names:
+            continue
+        i = names.index(orig)
+        names.append(name)
+        links.append(links[i])
+        xyz.append((cal.marker_xyz[i] + by[orig].values)[None])
+        se.append(np.full((1, 3), np.nan))
+    return replace(
+        cal,
+        marker_names=tuple(names),
+        marker_links=tuple(links),
+        marker_xyz=np.vstack(xyz),
+        marker_xyz_se=np.vstack(se),
+    )
+
+
+def to_log_markers(applied: Applied, names, x: np.ndarray) -> np.ndarray:
+    """Marker values (T, M', 3) over the mapped log's markers ``names`` -> (T, M, 3) over the log's
+    own markers, a slipped marker's second marker merged back from its slip sample on, on the
+    log's (mocap) clock."""
+    names = list(names)
+    out = np.stack([x[:, names.index(n)] for n in applied.marker_names], axis=1) if applied.marker_names else x
+    for name, (orig, k) in applied.slips.items():
+        out[k:, applied.marker_names.index(orig)] = x[k:, names.index(name)]
+    return shift_clock(out, applied.time, -applied.shift)
