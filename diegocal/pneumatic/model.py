@@ -31,7 +31,7 @@ class ModelTerms:
 
     s, r : arrays (T,), steady-state pressure (pu) and rate (1/s), extra terms' flows folded in
     ds, dr : (T, P) d s / d x and d r / d x (None unless asked for); r is not clamped here
-    s_p : d s / d p (T,) or 0.0 (only a supply droop makes s depend on the pressure)
+    s_p : d s / d p (T,) or 0.0 (0 unless a term makes s depend on the pressure)
     """
 
     s: np.ndarray
@@ -227,15 +227,14 @@ def pressure_rate(params: ChamberParams, p, u, v, vd):
 
 def steady_state(params: ChamberParams, u, v=0.0, vd=0.0):
     """s(u, v, vdot), the steady-state pressure of thesis eq. (4.10c) as the sensor reads it, pu;
-    v, vd raw readings. With a supply droop (s depends on p) the fixed point s = s(p = s)."""
+    v, vd raw readings. Should a term make s depend on p, the fixed point s = s(p = s)."""
     model, v, vd, lags = _inputs(params, u, v, vd)
     x = params.full_vector()
     off = 0.0 if model.offset_at is None else x[model.offset_at]
     consts = (params.c_b, params.c_s, params.c_gamma)
     s = model.evaluate(x, params.c_b, u, v, vd, 0.01, *consts, jacobian=False).s
-    if "supply_droop" in (t.cause for t in model.extra):
-        for _ in range(20):
-            s = model.evaluate(x, s, u, v, vd, 0.01, *consts, jacobian=False).s
+    for _ in range(20):  # a no-op unless a term reads p
+        s = model.evaluate(x, s, u, v, vd, 0.01, *consts, jacobian=False).s
     return s + off
 
 

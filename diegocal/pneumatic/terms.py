@@ -29,10 +29,9 @@ that the exact step (4.7) still applies:
   (4.7) per piece;
 - ``chamber_leak`` (leak, 1/s): air escapes to the room, an added outflow
   ``-leak (p - P_r) / (1 + c6 v)`` (a flow into a chamber of volume ∝ 1 + c6 v);
-- ``supply_droop`` (droop, s): the supply pressure sags with the flow drawn from it,
-  P_c' = P_c - droop · f n (P_c - p) with f = (1 + g)/2 the supply's share of the port flow (the
-  part of s between P_r and P_c) and n the rate's numerator (a flow in volume units): s loses
-  ``droop f² n (P_c - p)``, evaluated at the step's starting pressure like every other input;
+- ``supply_droop`` (droop, pressure unit): the supply sags while the valve draws from it: the
+  valve sees P_c - droop through its supply port, so s loses ``droop f`` with f = (1 + g)/2 the
+  supply's share of the port flow (the part of s between P_r and P_c);
 - ``pressure_offset`` (offset, pressure unit): the sensor reads p + offset; the model runs on the
   reading minus the offset;
 - ``sensor_lag`` (lag_s, s; at most one tick): the tick-averaged pressure answers the command a
@@ -348,26 +347,29 @@ class ChamberLeak(ChamberTerm):
 
 
 class SupplyDroop(ChamberTerm):
-    """The supply pressure sags with the flow drawn from it: s -= droop f² n (P_c - p), f = (1+g)/2.
+    """The supply sags while the valve draws from it: the valve sees P_c - droop, so
+    s = f (P_c - droop) + (1 - f) P_r loses ``droop f``, f = (1 + g)/2 the supply's share of the
+    port flow (the part of s between P_r and P_c). Reads g (c1..c3) of the baseline.
 
-    Reads g (c1..c3) and the rate's numerator n (c1, c5, c7..c9) of the baseline.
+    A sag is felt only through the supply port, in proportion to its share: where the valve is
+    open to the room (f ≈ 0) nothing changes; where it is open to the supply, the chamber settles
+    ``droop`` below the supply pressure of sensors.yaml. (A sag proportional to the rate of flow
+    drawn, P_c' = P_c - k f n (P_c' - p), was tried first: on the simulator's supply line, whose
+    choked flow sags the supply by tens of kPa while a chamber fills, it fitted worse than a
+    pressure offset, which this shape does not.)
     """
 
     CAUSE = "supply_droop"
-    specs = (ParamSpec("droop", "s", 0.0, np.inf, 0.0, "supply sag per unit of supply flow"),)
+    specs = (ParamSpec("droop", "pu", 0.0, np.inf, 0.0, "supply sag while the valve draws from it"),)
     stage = 4
 
     def add(self, ev: Evaluation) -> None:
         c = ev.value("droop")
         f = 0.5 * (1.0 + ev.g)
-        gap = ev.supply - ev.p
-        shape = f * f * ev.num
-        ev.s = ev.s - c * shape * gap
-        ev.s_p = (0.0 if ev.s_p is None else ev.s_p) + c * shape
+        ev.s = ev.s - c * f
         if ev.jacobian:
-            d = (f * ev.num)[..., None] * ev.dg + (f * f)[..., None] * ev.dnum
-            ev.ds = ev.ds - (c * gap)[..., None] * d
-            ev.ds[..., ev.index["droop"]] -= shape * gap
+            ev.ds = ev.ds - 0.5 * c * ev.dg
+            ev.ds[..., ev.index["droop"]] -= f
 
 
 class PressureOffset(ChamberTerm):
