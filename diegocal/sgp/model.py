@@ -22,6 +22,7 @@ from diegocal.errors import FitError, MissingStreamError, UnknownNameError
 from diegocal.sgp.estimator import Guard, SemiParametricGP
 from diegocal.sgp.kernels import SquaredExponential, Subspace
 from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor
+from diegocal.sgp.terms import apply_lags, as_dynamics_term, term_columns
 
 LOG = logging.getLogger(__name__)
 KINDS = ("sgp", "pr", "gp", "prgp")
@@ -253,11 +254,17 @@ class DynamicsModel:
 
     Learned attributes: ``parametric_`` (:class:`ParametricEstimate` or None for GP),
     ``hyperparameters_`` (dict per joint, plus ``sigma_w``), ``nmse_in_sample_`` (n,).
+
+    ``terms``: extra terms (:mod:`diegocal.sgp.terms`, e.g. found by ``diagnose``) whose columns
+    are appended to the base regressor and fitted with W (their values as given are not read),
+    except ``torque_lag``, which filters the columns of its joint with its lag as given (it needs
+    the samples' ``time``). Without terms the model is the one of thesis ch. 3 unchanged.
     """
 
-    def __init__(self, robot, options: SGPOptions, tau_joints=None):
+    def __init__(self, robot, options: SGPOptions, tau_joints=None, terms=()):
         self.robot = robot
         self.options = options
+        self.terms = tuple(as_dynamics_term(t) for t in terms)
         self.joint_names = tuple(robot.joint_names if tau_joints is None else tau_joints)
         unknown = [j for j in self.joint_names if j not in robot.joint_names]
         if unknown or not self.joint_names:
@@ -274,10 +281,38 @@ class DynamicsModel:
         self.gp_dims = np.array([INPUT_STREAMS.index(s) * n + i for s in gp_streams for i in range(n)])
 
     # ------------------------------------------------------------------ building blocks
-    def features(self, q, qd, qdd) -> np.ndarray:
-        """Base regressor f(u): (T, k, r), the rows of the k fitted joints."""
+    def features(self, q, qd, qdd, time=None) -> np.ndarray:
+        """Base regressor f(u): (T, k, r), the rows of the k fitted joints; with extra terms,
+        (T, k, r + K): their columns appended, ``torque_lag`` applied (needs ``time``, (T,) s)."""
         F = full_regressor(self.robot, q, qd, qdd, self.options.friction)
-        return self.base_.project(F[:, self.rows] if self.joints_without_tau else F)
+        F = self.base_.project(F[:, self.rows] if self.joints_without_tau else F)
+        if not self.terms:
+            return F
+        extra = term_columns(self.terms, self.robot, q, qd, qdd)[:, self.rows]
+        F = np.concatenate([F, extra], axis=2)
+        if any(t.is_filter for t in self.terms):
+            if time is None:
+                raise MissingStreamError("a model with a torque_lag term needs the samples' time")
+            F = apply_lags(self.terms, F, time, {j: r for r, j in enumerate(self.joint_names)})
+        return F
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The columns of :meth:`features`: base parameters, then the extra terms' parameters."""
+        return tuple(self.base_.names) + tuple(n for t in self.terms if not t.is_filter for n in t.parameter_labels)
+
+    def fitted_terms(self) -> tuple:
+        """The extra terms with their fitted values and standard errors (a lag as given)."""
+        par = self.parametric_
+        out, at = [], self.base_.n_base
+        for t in self.terms:
+            if t.is_filter or par is None:
+                out.append(t)
+                continue
+            k = len(t.parameters)
+            out.append(t.with_values(par.values[at : at + k], par.std[at : at + k]))
+            at += k
+        return tuple(out)
 
     def _kernels(self):
         return [Subspace(self.gp_dims, SquaredExponential(len(self.gp_dims))) for _ in self.joint_names]
@@ -308,10 +343,11 @@ class DynamicsModel:
         )
 
     # ------------------------------------------------------------------ fit
-    def fit_arrays(self, q, qd, qdd, tau, state: dict | None = None) -> DynamicsModel:
+    def fit_arrays(self, q, qd, qdd, tau, state: dict | None = None, time=None) -> DynamicsModel:
         """Fit on q, qd, qdd (T, n) of every joint and tau (T, k) of ``joint_names``; ``state``
-        (:meth:`state`) restores a saved fit, no optimising."""
+        (:meth:`state`) restores a saved fit, no optimising; ``time`` (T,) s for a torque_lag term."""
         q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
+        self.time_ = None if time is None else np.asarray(time, float)
         o = self.options
         T = len(q)
         if tau.shape != (T, len(self.joint_names)):
@@ -329,7 +365,7 @@ class DynamicsModel:
                 f"({r} base parameters, {len(self.joint_names)} joints)"
             )
         U = np.hstack([q, qd, qdd])
-        F = self.features(q, qd, qdd)
+        F = self.features(q, qd, qdd, self.time_)
         self.U_, self.tau_ = U, tau
         st = state or {}
         if o.kind == "prgp":
@@ -338,7 +374,7 @@ class DynamicsModel:
             self.gp_ = self._estimator("gp", T, False).fit(U, resid, F, st.get("hyper"), st.get("inducing"))
         else:
             self.gp_ = self._estimator(o.kind, T, o.guard_active).fit(U, tau, F, st.get("hyper"), st.get("inducing"))
-        self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd).tau, tau)
+        self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd, self.time_).tau, tau)
         return self
 
     @property
@@ -355,7 +391,7 @@ class DynamicsModel:
         if est is None:
             return None
         std = np.sqrt(np.maximum(np.diag(est.w_cov_), 0.0))
-        return ParametricEstimate(self.base_.names, est.w_.copy(), std, est.w_cov_.copy())
+        return ParametricEstimate(self.parameter_names, est.w_.copy(), std, est.w_cov_.copy())
 
     @property
     def hyperparameters_(self) -> dict:
@@ -380,11 +416,12 @@ class DynamicsModel:
         return out
 
     # ------------------------------------------------------------------ predict
-    def predict_arrays(self, q, qd, qdd) -> TorquePrediction:
-        """Predict torques for states (T, n) each (rad, rad/s, rad/s²)."""
+    def predict_arrays(self, q, qd, qdd, time=None) -> TorquePrediction:
+        """Predict torques for states (T, n) each (rad, rad/s, rad/s²); ``time`` (T,) s is
+        needed only by a model with a torque_lag term."""
         q, qd, qdd = (self.robot.check_q(x) for x in (q, qd, qdd))
         U = np.hstack([q, qd, qdd])
-        F = self.features(q, qd, qdd)
+        F = self.features(q, qd, qdd, time)
         mean, var, par = self.gp_.predict(U, F)
         noise = self.gp_.noise_var_
         if self.options.kind == "prgp":
@@ -395,7 +432,7 @@ class DynamicsModel:
 
     def predict(self, log) -> TorquePrediction:
         q, qd, qdd = log_arrays(log, self.robot, need_tau=False)
-        return self.predict_arrays(q, qd, qdd)
+        return self.predict_arrays(q, qd, qdd, log.time)
 
     # ------------------------------------------------------------------ persistence
     def state(self) -> dict:

@@ -4,7 +4,9 @@ For an open-chain robot the inverse dynamics are linear in the dynamic parameter
 eq. 3.29-3.30): ``tau = f(q, qd, qdd) w``. Here ``f`` is Pinocchio's
 ``computeJointTorqueRegressor`` (n × 10·L, ten inertial parameters per joint body in Pinocchio's
 order ``m, mc_x, mc_y, mc_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz``) followed by friction columns
-(thesis eq. 3.29: viscous ``qd_j η_v,j`` and Coulomb ``sign(qd_j) η_c,j``), one per joint and kind.
+(thesis eq. 3.29: viscous ``qd_j η_v,j`` and Coulomb ``sign(qd_j) η_c,j``), one per joint and kind:
+the ``viscous_friction`` and ``coulomb_friction`` terms of :mod:`diegocal.sgp.terms`, whose other
+terms a model may carry as extra columns (``DynamicsModel(terms=...)``).
 
 Many inertial parameters are not identifiable from torques; :func:`base_parameters` reduces the
 columns to a set of base parameters by QR with column pivoting of a regressor stacked over
@@ -20,6 +22,7 @@ import pinocchio as pin
 from scipy.linalg import qr
 
 from diegocal.errors import FitError
+from diegocal.sgp.terms import friction_column
 
 FRICTION_KINDS = ("viscous", "coulomb")
 INERTIAL_NAMES = ("m", "mc_x", "mc_y", "mc_z", "I_xx", "I_xy", "I_yy", "I_xz", "I_yz", "I_zz")
@@ -66,9 +69,8 @@ def full_regressor(robot, q, qd, qdd, friction=FRICTION_KINDS) -> np.ndarray:
         out[t, :, : 10 * n] = pin.computeJointTorqueRegressor(model, data, q[t], qd[t], qdd[t])
     col = 10 * n
     eye = np.arange(n)
-    for kind in friction:
-        values = qd if kind == "viscous" else np.sign(qd)
-        out[:, eye, col + eye] = values
+    for kind in friction:  # the friction terms of diegocal.sgp.terms, one per joint
+        out[:, eye, col + eye] = friction_column(kind, qd)
         col += n
     return out
 

@@ -4,8 +4,15 @@ Layout::
 
     sgp.yaml        summary: kind, joints, options, hyperparameters, base parameters with std
                     errors, in-sample nMSE per joint, meta {log, robot, command, created}
-    model.npz       training set (u, tau), base-parameter map, packed hyperparameters,
-                    inducing inputs: enough to rebuild the posterior exactly without optimising
+    model.npz       training set (u, tau; time with a torque_lag term), base-parameter map, packed
+                    hyperparameters, inducing inputs: enough to rebuild the posterior exactly
+                    without optimising
+
+A model with extra terms (``diagnose``'s extended model, :mod:`diegocal.sgp.terms`) lists them in
+sgp.yaml under ``terms`` (``{cause, channel, region, parameters, extra}``); a file without
+``terms`` is a model without extra terms (files written before terms existed load unchanged).
+``save_model(..., header=)`` writes a bundle header (:mod:`diegocal.io.bundle`) at the top level;
+the model's own kind (pr, sgp, ...) then stays under ``options.kind`` and ``model_kind``.
     robot/          copy of the robot's URDF and sensors.yaml, so the model is self-contained
 
 Files are written atomically (:func:`diegocal.io.atomic_path`, :func:`diegocal.io.save_yaml`).
@@ -49,7 +56,7 @@ def summary_dict(model, meta: dict | None = None) -> dict:
     """The content of sgp.yaml."""
     par = model.parametric_
     est = model.gp_
-    return {
+    out = {
         "format": FORMAT,
         "version": VERSION,
         "kind": model.options.kind,
@@ -67,14 +74,21 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "options": model.options.to_dict(),
         "meta": dict(meta or {}),
     }
+    terms = getattr(model, "terms", ())
+    if terms:
+        out["terms"] = [t.to_dict() for t in model.fitted_terms()]
+    return out
 
 
-def save_model(model, directory, meta: dict | None = None) -> Path:
-    """Write ``directory/`` (sgp.yaml, model.npz, robot/); returns the directory."""
+def save_model(model, directory, meta: dict | None = None, header: dict | None = None) -> Path:
+    """Write ``directory/`` (sgp.yaml, model.npz, robot/); returns the directory. ``header``
+    (a bundle header, kind ``dynamics``) is merged at the top level of sgp.yaml."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     st = model.state()
     arrays = {"u": model.U_, "tau": model.tau_}
+    if getattr(model, "time_", None) is not None:
+        arrays["time"] = model.time_
     arrays.update({f"base_{k}": np.asarray(v) for k, v in st["base"].items()})
     _pack_hyper("hyper", st["hyper"], st["inducing"], arrays)
     _pack_hyper("hyper_pr", st.get("hyper_pr"), st.get("inducing_pr"), arrays)
@@ -86,7 +100,12 @@ def save_model(model, directory, meta: dict | None = None) -> Path:
         urdf = robot.sensors.urdf
         write_text(directory / "robot" / urdf, (src / urdf).read_text())
         write_text(directory / "robot" / "sensors.yaml", (src / "sensors.yaml").read_text())
-    save_yaml(summary_dict(model, meta), directory / "sgp.yaml")
+    summary = summary_dict(model, meta)
+    if header:  # the header's keys (kind: dynamics, robot: {name, dir, hash}, ...) win
+        merged = {**dict(header), "model_kind": summary["kind"]}
+        merged.update({k: v for k, v in summary.items() if k not in header})
+        summary = merged
+    save_yaml(summary, directory / "sgp.yaml")
     return directory
 
 
@@ -124,8 +143,11 @@ def load_model(directory, robot=None):
         raise InputFileError(f"{npz}: cannot read ({exc})") from None
     if robot is None:
         robot = load_robot(directory / "robot")
+    from diegocal.sgp.terms import term_from_dict
+
     options = SGPOptions.from_dict(summary["options"])
-    model = DynamicsModel(robot, options, tau_joints=summary.get("joints"))
+    terms = [term_from_dict(t, f"{directory}/sgp.yaml terms") for t in summary.get("terms") or ()]
+    model = DynamicsModel(robot, options, tau_joints=summary.get("joints"), terms=terms)
     n = robot.n_joints
     u = arrays["u"]
     q, qd, qdd = u[:, :n], u[:, n : 2 * n], u[:, 2 * n :]
@@ -139,7 +161,7 @@ def load_model(directory, robot=None):
         "hyper_pr": hyper_pr,
         "inducing_pr": inducing_pr,
     }
-    model.fit_arrays(q, qd, qdd, arrays["tau"], state=state)
+    model.fit_arrays(q, qd, qdd, arrays["tau"], state=state, time=arrays.get("time"))
     hp = summary.get("hyperparameters") or {}
     choices = [(hp.get(j) or {}).get("guard_choice") for j in model.joint_names]
     if all(choices):  # the guard's cross-validated choice, as fitted (reporting only)
