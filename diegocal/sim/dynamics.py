@@ -14,9 +14,23 @@ torque: the motor torque on actuated joints and the random disturbance torque on
 (the thesis predicts accelerations, a forward model; diegocal's SGP predicts torques, so the pole's
 "torque" is the disturbance that the process noise of the thesis stands for).
 
-Effects (DESIGN.md vocabulary, domain ``dynamics``) are named with ``--effect NAME[:CHANNEL]``;
+Effects (DESIGN.md vocabulary, domain ``dynamics``) are named with ``--effect NAME[:CHANNEL][=SIZE]``;
 their true values go to ``/truth`` effects as ``{cause, channel, region, values}``; the true
-friction and inertial parameters to ``/truth`` params. Nothing here reads ``/truth`` back.
+friction and inertial parameters to ``/truth`` params. Nothing here reads ``/truth`` back. Each is
+a physical shape of its own (never a candidate term of ``diagnose``):
+
+- ``coulomb_friction``, ``viscous_friction``, ``position_friction`` (Coulomb + viscous while q_j
+  is in the region), ``spring`` (about the neutral angle), ``torque_offset`` (sensor bias);
+- ``armature``: a rotor inertia on the joint (Pinocchio's ``model.armature``, in rnea and aba);
+- ``coupled_friction``: a motor turning with v = qd_j + qd_{j-1} (the TX40's wrist, joint j and
+  the one before it; the one after for the first joint): a smooth Coulomb c·tanh(v / 0.05) plus
+  viscous η v on joint j, the same on its partner (ratio 1);
+- ``torque_lag``: joint j's torque sensor is a first-order low-pass filter (time constant lag);
+- ``payload``: a point mass on a link (default the last).
+
+SIZE is the effect's magnitude: a torque in N·m (Coulomb level, RMS viscous torque on the reference
+excitation, the spring's torque at half the range, the offset, RMS armature torque), the time
+constant in s for ``torque_lag``, the mass in kg for ``payload``. Without it: scaled to the robot.
 """
 
 from __future__ import annotations
@@ -55,7 +69,12 @@ JOINT_EFFECTS = (
     "position_friction",
     "spring",
     "torque_offset",
+    "armature",
+    "coupled_friction",
+    "torque_lag",
 )
+#: velocity (rad/s) over which the coupled motor's Coulomb friction changes sign (tanh)
+COUPLED_SMOOTHING = 0.05
 
 
 @dataclass(frozen=True)
@@ -108,7 +127,11 @@ class EffectTerm:
             r = self.record["region"]
             inside = (qj >= r["low"]) & (qj <= r["high"])
             return inside * (v["coulomb"] * np.sign(vj) + v["viscous"] * vj)
-        return np.zeros_like(qj)  # torque_offset: a sensor bias, no physical torque
+        if self.cause == "coupled_friction":
+            motor = vj + v["ratio"] * qd[:, int(v["partner_index"])]
+            return v["coulomb"] * np.tanh(motor / COUPLED_SMOOTHING) + v["viscous"] * motor
+        # torque_offset (a sensor bias), armature (in the model), torque_lag (the sensor's filter)
+        return np.zeros_like(qj)
 
 
 class TrueDynamics:
@@ -137,8 +160,26 @@ class TrueDynamics:
         for t in self.terms:
             if smooth and t.cause in ("coulomb_friction", "position_friction"):
                 continue
-            out[:, t.j] += t.torque(q, qd)
+            tau = t.torque(q, qd)
+            out[:, t.j] += tau
+            if t.cause == "coupled_friction":
+                v = t.record["values"]
+                out[:, int(v["partner_index"])] += v["ratio"] * tau
         return out
+
+    def sensor(self, tau: np.ndarray, time: np.ndarray) -> np.ndarray:
+        """What the torque sensors read of the applied torques (T, n): ``torque_lag`` joints
+        through a first-order low-pass filter (exact for a piecewise-constant input), + offset."""
+        out = np.array(tau, float, copy=True)
+        for t in self.terms:
+            if t.cause != "torque_lag":
+                continue
+            lag = t.record["values"]["lag"]
+            x, y = tau[:, t.j], out[:, t.j]
+            for k in range(1, x.size):
+                a = 1.0 - np.exp(-(time[k] - time[k - 1]) / lag)
+                y[k] = y[k - 1] + a * (x[k] - y[k - 1])
+        return out + self.offset
 
     def inverse(self, q, qd, qdd) -> np.ndarray:
         """Applied joint torques (T, n) N·m: ``rnea`` + friction + effects (no sensor offset)."""
@@ -207,6 +248,7 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
     rng, effect_rng = rng.spawn(2)
     n = robot.n_joints
     scale, vscale = robot_scales(robot)
+    ascale = None
     viscous = _per_joint(options.viscous, 0.1 * scale / vscale * rng.uniform(0.8, 1.2, n), n, "viscous")
     coulomb = _per_joint(options.coulomb, 0.05 * scale * rng.uniform(0.8, 1.2, n), n, "coulomb")
     model = robot.model.copy()
@@ -223,29 +265,59 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
         )
         j = robot.joint_index(joint)
         s, v = scale[j] * g, scale[j] / vscale[j] * g
+        size = req.size  # N·m (s for torque_lag), see the module docstring
         region = None
         if req.name == "coulomb_friction":
-            values = {"coulomb": 0.2 * s}
+            values = {"coulomb": 0.2 * s if size is None else size}
         elif req.name == "viscous_friction":
-            values = {"viscous": 0.3 * v}
+            values = {"viscous": 0.3 * v if size is None else size / vscale[j]}
         elif req.name == "position_friction":
             low, high = options.regions.get(joint, default_region(robot, j))
             if not low < high:
                 raise SimOptionError(f"position_friction region for {joint!r}: low must be < high, got {low}, {high}")
             region = {"variable": f"q.{joint}", "low": float(low), "high": float(high)}
-            values = {"coulomb": 0.3 * s, "viscous": 0.3 * v}
+            if size is None:
+                values = {"coulomb": 0.3 * s, "viscous": 0.3 * v}
+            else:
+                values = {"coulomb": size, "viscous": size / vscale[j]}
         elif req.name == "spring":
             rest = float(robot.neutral()[j])
             span = min(robot.upper[j] - robot.lower[j], 2 * np.pi)
-            values = {"stiffness": 0.4 * s / span, "rest": rest}
+            values = {"stiffness": (0.4 * s if size is None else 2.0 * size) / span, "rest": rest}
+        elif req.name == "armature":
+            if ascale is None:
+                ascale = _accel_scale(robot)
+            values = {"inertia": (0.2 * s if size is None else size) / ascale[j]}
+            model.armature[j] += values["inertia"]  # a revolute joint: one velocity per joint
+        elif req.name == "coupled_friction":
+            partner = j - 1 if j > 0 else j + 1
+            if not 0 <= partner < n:
+                raise SimOptionError(f"coupled_friction needs two joints; robot {robot.name!r} has {n}")
+            c = 0.2 * s if size is None else size
+            values = {
+                "coulomb": c,
+                "viscous": (0.1 * v if size is None else 0.5 * size / vscale[j]),
+                "ratio": 1.0,
+                "partner_index": float(partner),
+            }
+        elif req.name == "torque_lag":
+            values = {"lag": 0.02 if size is None else size}
         else:  # torque_offset
-            values = {"offset": 0.1 * s * float(effect_rng.choice([-1.0, 1.0]))}
+            values = {"offset": float(effect_rng.choice([-1.0, 1.0])) * (0.1 * s if size is None else size)}
             offset[j] += values["offset"]
         values = {k: float(x) for k, x in values.items()}
         rec = effect_record(req.name, joint, values, region)
+        if req.name == "coupled_friction":
+            rec["partner"] = robot.joint_names[int(values["partner_index"])]
         records.append(rec)
         terms.append(EffectTerm(req.name, j, rec))
     return TrueDynamics(model, viscous, coulomb, terms, offset, records)
+
+
+def _accel_scale(robot) -> np.ndarray:
+    """Per-joint RMS acceleration (rad/s²) on :func:`robot_scales`' reference excitation."""
+    ref = excitation(robot.lower, robot.upper, time_base(20.0, 50.0), np.random.default_rng(0))
+    return np.maximum(np.sqrt((ref.qdd**2).mean(0)), 1e-3)
 
 
 def _add_payload(model: pin.Model, robot, req, rng, gain: float) -> dict:
@@ -254,7 +326,7 @@ def _add_payload(model: pin.Model, robot, req, rng, gain: float) -> dict:
     link = check_channel(req, list(bodies), "link") if req.channel else list(bodies)[-1]
     frame = bodies[link]
     total = sum(model.inertias[i].mass for i in range(1, model.njoints))
-    mass = gain * 0.1 * max(total, 1.0)
+    mass = gain * 0.1 * max(total, 1.0) if req.size is None else req.size
     xyz = rng.uniform(-0.05, 0.05, 3)
     lever = frame.placement.act(xyz)  # in the parent joint's frame
     model.inertias[frame.parentJoint] += pin.Inertia(mass, lever, np.zeros((3, 3)))
@@ -359,7 +431,7 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     else:
         traj = _pole(robot, dyn, options, time, rng, up=kind == "pole-up")
     tau_phys = traj.tau if traj.tau is not None else dyn.inverse(traj.q, traj.qd, traj.qdd)
-    tau_clean = tau_phys + dyn.offset
+    tau_clean = dyn.sensor(tau_phys, time)
     tau = tau_clean + options.noise * noise_rng.standard_normal(tau_clean.shape)
     names = robot.joint_names
     streams = {k: make_stream(names, v) for k, v in (("q", traj.q), ("qd", traj.qd), ("qdd", traj.qdd), ("tau", tau))}
