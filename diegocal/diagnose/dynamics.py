@@ -1,0 +1,349 @@
+"""The dynamics adapter of the diagnosis engine: one robot's joint torques (thesis ch. 3).
+
+Baseline: the rigid body + viscous + Coulomb friction model of eq. (3.29)-(3.30), linear in its
+base parameters (:func:`diegocal.sgp.regressor.base_parameters`; friction kinds from
+``DiagnoseOptions.friction``), fitted by least squares on the training blocks, each joint's rows
+weighted by the inverse of its residual std (two passes; the weighting PR's per-joint noise gives).
+Channels: the joints with a torque; residual = measured − predicted torque, N·m. Variables:
+``q.<j>``, ``qd.<j>``, ``qdd.<j>``, ``time``.
+
+Candidates (:mod:`diegocal.sgp.terms`), all linear in their parameters so that their columns are
+exact, per joint: ``torque_offset``, ``spring``, ``armature``, ``viscous_friction`` /
+``coulomb_friction`` (when the model lacks them), ``position_friction`` (a family over windows of
+the joint's training range), ``torque_lag`` (column −d(predicted τ)/dt, its coefficient the lag in
+s), ``coupled_friction`` (a family over the joint before and motor ratios ±½, ±1, ±2). Each
+candidate's columns come with their least-squares fit by the current model's columns on every
+joint's training rows subtracted (Frisch-Waugh-Lovell: the same estimate and prediction change on
+its joints as re-fitting the whole model with the term, for one small regression): a candidate
+cannot merely take over a baseline part, and the base parameters an effect distorted are
+re-adjusted with it. (An engine ``refit`` on the candidate's joint alone would let any candidate on
+a joint whose shared parameters an effect elsewhere distorted outbid the true cause.) A candidate
+whose columns lie in the model's span (e.g. an armature on a first joint with a vertical axis) is
+not offered. A ``payload`` never is: a point mass on a link changes that link's inertial
+parameters, which the identified rigid body already fits, so an unmodelled payload is no model
+error here (only against nominal URDF inertias).
+
+A selected ``torque_lag`` is refitted as the sensor's first-order filter of the model's columns
+(:func:`diegocal.sgp.terms.lag_filter`), its time constant by a bounded 1-D search with the
+linear parameters re-solved at each trial. The extended model is a dynamics bundle: a PR model
+(``sgp/`` directory, :mod:`diegocal.sgp.store`) whose regressor carries the found terms, fitted on
+the training blocks, which ``diegocal predict`` uses like any other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from diegocal.diagnose.engine import Candidate, Residuals
+from diegocal.errors import FitError
+from diegocal.evaluate import Score, score
+from diegocal.sgp.model import INPUT_STREAMS, torque_array
+from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
+from diegocal.sgp.terms import (
+    FRICTION_CAUSE,
+    DynamicsTerm,
+    as_dynamics_term,
+    lag_filter,
+    make_term,
+    term_columns,
+)
+from diegocal.terms import Region
+
+UNIT = "N·m"
+#: position_friction: the joint's training range (0.5 %..99.5 % quantiles) is cut into this many
+#: equal bins; a region is 1..REGION_MAX_BINS consecutive bins with enough samples
+REGION_BINS = 16
+REGION_MAX_BINS = 6
+REGION_MIN_FRACTION = 0.03
+#: coupled_friction: motor velocity qd_j + ratio · qd_partner
+COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
+#: a candidate column whose residual after projection on its joint's model columns is below this
+#: fraction of its norm (training rows) lies in the model's span and is not offered
+SPAN_TOL = 1e-6
+#: the longest torque-sensor time constant a torque_lag may take, s
+MAX_LAG_S = 0.5
+
+
+@dataclass
+class DynamicsFit:
+    """A fitted torque model: coefficients of [base parameters, extra terms' columns], the terms
+    with their values, the per-joint residual std of the training rows and the prediction."""
+
+    w: np.ndarray
+    terms: tuple
+    sigma: np.ndarray
+    pred: np.ndarray = field(repr=False)
+    A: np.ndarray = field(repr=False)  # (T, k, P): the columns, lags applied
+    train: np.ndarray = field(repr=False)
+
+
+class DynamicsAdapter:
+    """The engine's adapter for one robot's torques (see the module docstring).
+
+    Parameters
+    ----------
+    robot : diegocal.robot.Robot
+    q, qd, qdd : (T, n) every joint, rad, rad/s, rad/s²; tau : (T, k) of ``joints``; time : (T,) s
+    friction : the baseline's friction kinds (subset of viscous, coulomb)
+    """
+
+    domain = "dynamics"
+
+    def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS):
+        self.robot = robot
+        self.unit_name = robot.name
+        self.time = np.asarray(time, float)
+        self.q, self.qd, self.qdd = (np.asarray(x, float) for x in (q, qd, qdd))
+        self.tau = np.asarray(tau, float)
+        self.joints = tuple(joints)
+        self.friction = check_friction(friction)
+        self.rows = [robot.joint_index(j) for j in self.joints]
+        self.row_of = {j: r for r, j in enumerate(self.joints)}
+        subset = len(self.joints) < robot.n_joints
+        self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
+        F = full_regressor(robot, self.q, self.qd, self.qdd, self.friction)
+        self.F = self.base.project(F[:, self.rows])  # (T, k, r)
+        self._weights = None  # the engine's row weights: 1 / the baseline's training RMS per joint
+
+    # ------------------------------------------------------------------ fit
+    def _gradient(self, X: np.ndarray) -> np.ndarray:
+        return np.gradient(X, self.time, axis=0)
+
+    def _solve(self, A, train, sigma):
+        """Weighted least squares of tau on A (T, k, P) over the training rows: (w, cov, rss/dof)."""
+        X = A[train] / sigma[None, :, None]
+        y = self.tau[train] / sigma[None, :]
+        X, y = X.reshape(-1, A.shape[2]), y.reshape(-1)
+        ok = np.isfinite(y) & np.isfinite(X).all(axis=1)
+        X, y = X[ok], y[ok]
+        if y.size <= X.shape[1]:
+            raise FitError(f"too few training torques ({y.size}) for {X.shape[1]} parameters")
+        w, *_ = np.linalg.lstsq(X, y, rcond=None)
+        e = y - X @ w
+        s2 = float(e @ e) / max(y.size - X.shape[1], 1)
+        cov = np.linalg.pinv(X.T @ X) * s2
+        return w, cov
+
+    def fit(self, terms, train) -> DynamicsFit:
+        train = np.asarray(train, bool)
+        terms = tuple(as_dynamics_term(t) for t in terms)
+        C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
+        A = np.concatenate([self.F, C], axis=2)
+        lags = {self.row_of[t.channel]: t.value("lag") for t in terms if t.is_filter and t.channel in self.row_of}
+        w, cov = self._solve(A, train, np.ones(len(self.joints)))
+        e = self.tau[train] - (A @ w)[train]
+        s = np.sqrt(np.nanmean(e * e, axis=0))  # second pass: each joint weighted by its residual std
+        sigma = np.where(np.isfinite(s) & (s > 0), s, 1.0)
+        if lags:
+            lags = self._fit_lags(A, lags, train, sigma)
+        Aeff = self._lagged(A, lags)
+        w, cov = self._solve(Aeff, train, sigma)
+        pred = Aeff @ w
+        if not terms:
+            e = self.tau[train] - pred[train]
+            rms = np.sqrt(np.nanmean(e * e, axis=0))
+            self._weights = np.where(np.isfinite(rms) & (rms > 0), 1.0 / rms, 1.0)
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        out, at = [], self.base.n_base
+        for t in terms:
+            if t.is_filter:
+                out.append(t.with_values([lags.get(self.row_of.get(t.channel), t.value("lag"))]))
+                continue
+            k = len(t.parameters)
+            out.append(t.with_values(w[at : at + k], se[at : at + k]))
+            at += k
+        return DynamicsFit(w, tuple(out), sigma, pred, Aeff, train)
+
+    def _lagged(self, A, lags: dict):
+        if not lags:
+            return A
+        out = A.copy()
+        for r, lag in lags.items():
+            out[:, r] = lag_filter(A[:, r], self.time, lag)
+        return out
+
+    def _fit_lags(self, A, lags: dict, train, sigma) -> dict:
+        """Each lagging sensor's time constant (s, in [0, MAX_LAG_S]) by bounded 1-D searches of
+        the weighted training error, the linear parameters re-solved at every trial (two sweeps)."""
+        from scipy.optimize import minimize_scalar
+
+        lags = dict(lags)
+
+        def cost(r, lag):
+            trial = dict(lags)
+            trial[r] = lag
+            Aeff = self._lagged(A, trial)
+            w, _ = self._solve(Aeff, train, sigma)
+            e = (self.tau[train] - (Aeff @ w)[train]) / sigma
+            return float(np.nansum(e * e))
+
+        for _ in range(2 if len(lags) > 1 else 1):
+            for r in list(lags):
+                res = minimize_scalar(
+                    lambda x, r=r: cost(r, x), bounds=(0.0, MAX_LAG_S), method="bounded", options={"xatol": 1e-4}
+                )
+                lags[r] = float(res.x)
+        return lags
+
+    # ------------------------------------------------------------------ residuals and candidates
+    def residuals(self, fitted: DynamicsFit) -> Residuals:
+        r = self.tau - fitted.pred
+        channels = {j: r[:, i] for i, j in enumerate(self.joints)}
+        variables = {"time": self.time}
+        for s, x in zip(INPUT_STREAMS, (self.q, self.qd, self.qdd), strict=True):
+            for i, j in enumerate(self.robot.joint_names):
+                variables[f"{s}.{j}"] = x[:, i]
+        order = {j: (f"q.{j}", f"qd.{j}", f"qdd.{j}") for j in self.joints}
+        return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order)
+
+    def _projector(self, fitted: DynamicsFit, train):
+        """A function cols -> (projected cols, fraction left): a candidate's columns (on its own
+        joints) minus their least-squares fit by the current model's columns on every joint's
+        training rows (rows weighted as the engine weighs them: 1 / the baseline's training RMS),
+        and the fraction of their norm that is left (0: the candidate lies in the model's span)."""
+        wt = self._weights if self._weights is not None else 1.0 / fitted.sigma
+        X = fitted.A * wt[None, :, None]  # (T, k, P)
+        Xt = X[train]
+        pinv = np.linalg.pinv(Xt.reshape(-1, X.shape[2]))  # (P, Ttr·k)
+        pinv = pinv.reshape(X.shape[2], Xt.shape[0], Xt.shape[1])
+
+        def project(cols: dict) -> tuple[dict, float]:
+            beta = 0.0
+            norm = 0.0
+            for j, c in cols.items():
+                r = self.row_of[j]
+                ct = np.asarray(c, float)[train] * wt[r]
+                beta = beta + pinv[:, :, r] @ ct
+                norm += float(np.sum(ct * ct))
+            left = Xt @ beta  # (Ttr, k, kc): the fit of the candidate on every joint's rows
+            for j, c in cols.items():
+                r = self.row_of[j]
+                left[:, r] -= np.asarray(c, float)[train] * wt[r]
+            frac = float(np.sqrt(np.sum(left * left) / norm)) if norm > 0 else 0.0
+            out = {j: np.asarray(c, float) - fitted.A[:, self.row_of[j]] @ beta for j, c in cols.items()}
+            return out, frac
+
+        return project
+
+    def _cols(self, term: DynamicsTerm) -> dict:
+        X = term.columns(self.robot, self.q, self.qd, self.qdd)
+        return {j: X[:, self.robot.joint_index(j)] for j in term.joints if j in self.row_of}
+
+    def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
+        """Every cause the model lacks on every joint (module docstring), its columns with their
+        fit by the current model subtracted (:meth:`_projector`); one whose columns lie in the
+        model's span is not offered."""
+        train = np.asarray(train, bool)
+        have = {(t.cause, t.channel) for t in fitted.terms}
+        coupled = {j for t in fitted.terms if t.cause == "coupled_friction" for j in t.joints}
+        out = []
+
+        def offer(term, cols, project, family=""):
+            cols, left = project(cols)
+            if left > SPAN_TOL:
+                out.append(Candidate(term, cols, family=family))
+
+        project = self._projector(fitted, train)
+        for j in self.joints:
+            plain = ["torque_offset", "spring", "armature"]
+            plain += [FRICTION_CAUSE[k] for k in FRICTION_KINDS if k not in self.friction]
+            for cause in plain:
+                if (cause, j) not in have:
+                    term = make_term(cause, j)
+                    offer(term, self._cols(term), project)
+            if ("torque_lag", j) not in have:
+                col = -self._gradient(fitted.pred[:, self.row_of[j]])
+                offer(make_term("torque_lag", j), {j: col[:, None]}, project)
+            if ("position_friction", j) not in have:
+                for t in self._regions(j, train):
+                    offer(t, self._cols(t), project, f"position_friction:{j}")
+            if j in coupled:
+                continue
+            i = self.robot.joint_index(j)
+            # the joint before only: (j, partner, ratio) and (partner, j, 1/ratio) are one motor
+            if i == 0 or self.robot.joint_names[i - 1] in coupled:
+                continue
+            partner = self.robot.joint_names[i - 1]
+            for ratio in COUPLING_RATIOS:
+                term = make_term("coupled_friction", j, extra={"partner": partner, "ratio": ratio})
+                offer(term, self._cols(term), project, f"coupled_friction:{j}+{partner}")
+        return out
+
+    def _regions(self, j: str, train) -> list[DynamicsTerm]:
+        """position_friction variants: windows of 1..REGION_MAX_BINS bins of q_j's training range."""
+        x = self.q[train, self.robot.joint_index(j)]
+        lo, hi = np.quantile(x, [0.005, 0.995])
+        if not hi > lo:
+            return []
+        edges = np.linspace(lo, hi, REGION_BINS + 1)
+        counts = np.histogram(np.clip(x, lo, hi), edges)[0]
+        out = []
+        for width in range(1, REGION_MAX_BINS + 1):
+            for a in range(REGION_BINS - width + 1):
+                if counts[a : a + width].sum() < REGION_MIN_FRACTION * x.size:
+                    continue
+                # the end windows reach the whole range's extremes (the quantiles cut no sample off)
+                low = float(self.q[:, self.robot.joint_index(j)].min()) if a == 0 else edges[a]
+                high = (
+                    float(self.q[:, self.robot.joint_index(j)].max()) if a + width == REGION_BINS else edges[a + width]
+                )
+                out.append(make_term("position_friction", j, Region(f"q.{j}", float(low), float(high))))
+        return out
+
+    # ------------------------------------------------------------------ scores and output
+    def score(self, fitted: DynamicsFit, mask, exclude: dict | None = None) -> Score:
+        measured = self.tau.copy()
+        for c, m in (exclude or {}).items():
+            if c in self.row_of:
+                measured[np.asarray(m, bool), self.row_of[c]] = np.nan
+        return score(measured, fitted.pred, self.joints, unit=UNIT, mask=mask)
+
+    def faults(self, fitted, residuals) -> list:
+        return []
+
+    def terms(self, fitted: DynamicsFit):
+        return tuple(fitted.terms)
+
+    def describe(self, fitted: DynamicsFit) -> str:
+        base = "rigid_body" + "".join(f"+{k}" for k in self.friction)
+        return "+".join([base, *[t.label for t in fitted.terms]])
+
+    def extended_model(self, fitted: DynamicsFit):
+        """The extended model as a PR :class:`~diegocal.sgp.model.DynamicsModel` with the found
+        terms, fitted on the training blocks."""
+        from diegocal.sgp.model import DynamicsModel, SGPOptions
+
+        model = DynamicsModel(self.robot, SGPOptions(kind="pr", friction=self.friction), self.joints, fitted.terms)
+        tr = fitted.train & np.isfinite(self.tau).all(axis=1)
+        return model.fit_arrays(self.q[tr], self.qd[tr], self.qdd[tr], self.tau[tr], time=self.time[tr])
+
+    def save(self, fitted: DynamicsFit, path, header: dict) -> Path:
+        from diegocal.sgp.store import save_model
+
+        model = self.extended_model(fitted)
+        meta = {
+            "log": header.get("log"),
+            "command": header.get("command") or "diagnose",
+            "created": header.get("created"),
+            "fitted_on": "training blocks of the diagnosis",
+            "model": self.describe(fitted),
+        }
+        return save_model(model, path, meta, header={**header, "kind": "dynamics"})
+
+
+def _derivative(x: np.ndarray, time: np.ndarray) -> np.ndarray:
+    return np.gradient(x, time, axis=0)
+
+
+def adapters(log, robot, options) -> list[DynamicsAdapter]:
+    """One adapter for the robot: q (qd, qdd from the log, else differentiated), tau of the joints
+    that have one (``diegocal.sgp.model.torque_array``)."""
+    q = log.stream("q", needed_by="diagnose").select(robot.joint_names).data
+    qd = log.stream("qd").select(robot.joint_names).data if log.has("qd") else _derivative(q, log.time)
+    qdd = log.stream("qdd").select(robot.joint_names).data if log.has("qdd") else _derivative(qd, log.time)
+    tau, joints = torque_array(log, robot)
+    friction = getattr(options, "friction", FRICTION_KINDS)
+    return [DynamicsAdapter(robot, log.time, q, qd, qdd, tau, joints, friction)]
