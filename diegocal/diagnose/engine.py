@@ -189,10 +189,15 @@ class Finding:
         return self.term.channel
 
     def gain(self) -> dict:
-        """Held-out RMSE of the finding's channels before and after it (pooled over them)."""
+        """Held-out RMSE before and after the finding: of its own channel where that is scored (a
+        joint, a pot, a chamber), else pooled over the channels it acts on (a link's payload, a
+        joint's offset seen by the markers)."""
         if self.heldout_before is None or self.heldout_after is None:
             return {}
-        chans = [c for c in self.evidence.get("channels", ()) if c in self.heldout_before.channels]
+        if self.channel in self.heldout_before.channels:
+            chans = [self.channel]
+        else:
+            chans = [c for c in self.evidence.get("channels", ()) if c in self.heldout_before.channels]
         before = _pooled(self.heldout_before, chans)
         after = _pooled(self.heldout_after, chans)
         red = 1.0 - after / before if before > 0 and np.isfinite(before) and np.isfinite(after) else float("nan")
