@@ -58,6 +58,8 @@ OUTLIER_WINDOW = 8
 #: A candidate acts on the channels that carry at least this share of its largest channel's
 #: weighted column energy (its projection spreads tiny parts over every sensor of the chain).
 CHANNEL_SHARE = 0.02
+#: Dead-band widths tried for a backlash (a family), in multiples of BAND_SIGMAS pot σ.
+BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
 #: GN refinements of the continuous terms after each STAC fit of an extended model.
 REFINE = 1
 
@@ -90,18 +92,22 @@ class KinematicsAdapter:
         self.raw_pots = np.asarray(st.data, float)
         self.marker_names = tuple(self.log.stream("markers").names)
         self.time = np.asarray(self.log.time, float)
+        self._baseline: KinFit | None = None
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
 
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train) -> KinFit:
         train = np.asarray(train, bool)
         terms = tuple(self._own(t, train) for t in terms)
-        fitted = self._fit_once(terms, train)
+        base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
+        fitted = self._fit_once(terms, train, None if base is None else base.pots)
+        if not terms:
+            self._baseline = fitted
         for _ in range(REFINE):
             if not any(t.cause in (*POT_CAUSES, "link_offset", "time_offset") for t in terms):
                 break
             terms = self._refine(fitted)
-            fitted = self._fit_once(terms, train)
+            fitted = self._fit_once(terms, train, fitted.pots)
         return fitted
 
     def _own(self, term: Term, train) -> Term:
@@ -111,8 +117,8 @@ class KinematicsAdapter:
             return replace(term, extra=pot_extra(term.cause, self.raw_pots[train, j], 0.005))
         return term
 
-    def _fit_once(self, terms, train) -> KinFit:
-        applied = apply_terms(terms, self.log, self.robot)
+    def _fit_once(self, terms, train, model_pots=None) -> KinFit:
+        applied = apply_terms(terms, self.log, self.robot, model_pots)
         idx = np.flatnonzero(train)
         sub = Log(
             applied.log.time[idx],
@@ -205,7 +211,7 @@ class KinematicsAdapter:
         P = lin.P
         if term.cause in POT_CAUSES:
             j = self.pot_names.index(term.channel)
-            f = pot_columns(term, self.raw_pots[:, j])
+            f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])
             g = lin.project_pot(j)  # (T, R)
             s = lin.s[:, j]
             return g[..., None] * f[:, None, :], np.stack([g * s[:, None], g], axis=-1)
@@ -229,9 +235,13 @@ class KinematicsAdapter:
                 if (cause, name) in have:
                     continue
                 extra = pot_extra(cause, self.raw_pots[train, j], float(sigma_p[j]))
-                term = make_term(cause, name, extra=extra)
-                cols, refit = self._term_columns(lin, fitted, term)
-                out.append(Candidate(term, lin.channels(cols), refit=lin.channels(refit)))
+                bands = BAND_SCALES if cause == "backlash" else (1.0,)
+                for b in bands:  # backlash: a family over dead-band widths
+                    ex = dict(extra, width=extra["width"] * b) if cause == "backlash" else extra
+                    term = make_term(cause, name, extra=ex)
+                    cols, refit = self._term_columns(lin, fitted, term)
+                    fam = f"backlash:{name}" if cause == "backlash" else ""
+                    out.append(Candidate(term, lin.channels(cols), family=fam, refit=lin.channels(refit)))
         for joint in lin.observed_joints():
             if ("link_offset", joint) in have:
                 continue

@@ -83,6 +83,9 @@ def predict(
         applied = apply_terms(calibration.terms, log, robot)
         cal = with_slip_markers(replace(calibration, terms=()), applied, calibration.terms)
         pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
+        if any(t.cause == "backlash" for t in calibration.terms):  # a dead band follows the model
+            applied = apply_terms(calibration.terms, log, robot, pred.pots)
+            pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
         markers = to_log_markers(applied, pred.marker_names, pred.markers) if pred.marker_names else pred.markers
         return replace(pred, markers=markers, marker_names=applied.marker_names)
     obs = Observation(log, robot, need=(), needed_by="predict")

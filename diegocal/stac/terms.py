@@ -7,8 +7,9 @@ the one place that says how, and both ``diagnose`` and ``predict`` use it:
 - ``sensor_nonlinearity:POT`` (c2, c3, V): ``p = gain s + bias + c2 u² + c3 u³`` with the reading
   normalised ``u = (p − center) / half`` (center and half range of the training readings in
   ``extra``): the pot's transfer curve is not linear.
-- ``backlash:POT`` (half_width, V): ``p = gain s + bias − half_width · dir_t``, dir_t = ±1 the
-  pot's direction of motion (:func:`direction`, held while it stands still): a dead band.
+- ``backlash:POT`` (half_width, V; ``extra.width`` W, V): ``p = ŷ − half_width · dir_t`` with
+  ŷ = gain s + bias and dir_t = (ŷ − play(ŷ, W)) / (W / 2) in [−1, 1] (:func:`direction`): the
+  reading lags the joint by a dead band (exactly the play operator when half_width = W / 2).
 - ``link_offset:JOINT`` (dx, dy, dz, m): the joint's origin is translated in its parent joint's
   frame (the URDF's ``<origin xyz>`` is off).
 - ``time_offset:markers`` (seconds, s): the mocap clock is shifted: ``markers[t]`` observe
@@ -51,8 +52,9 @@ CAUSES = (
 POT_CAUSES = ("sensor_nonlinearity", "backlash")
 #: Suffix of the second marker a slipped marker is split into.
 SLIP = "~slip"
-#: Half width (samples) of the difference that tells a pot's direction of motion.
-DIRECTION_LAG = 3
+#: Width of the dead band (in pot noise σ) that tells a pot's direction of motion: the noise
+#: rarely drags it, a real motion does.
+BAND_SIGMAS = 6.0
 
 
 def make_term(cause: str, channel: str, values=None, region: Region | None = None, extra=None) -> Term:
@@ -82,29 +84,31 @@ def term_from_dict(d: dict) -> Term:
 
 
 # ----------------------------------------------------------------------------- pot terms
-def direction(p: np.ndarray, threshold: float, lag: int = DIRECTION_LAG) -> np.ndarray:
-    """Direction of motion of a reading (T,) -> (T,) in {−1, 0, +1}: the sign of p[t+lag] − p[t−lag]
-    where it exceeds ``threshold``, else the last such sign (a dead band keeps its side while the
-    joint stands still); 0 before the first motion."""
+def direction(p: np.ndarray, width: float) -> np.ndarray:
+    """Where a reading (T,) sits in a dead band of ``width`` that it drags along (the play operator,
+    Krasnosel'skii-Pokrovskii): (p − play(p)) / (width / 2) in [−1, 1], +1 after moving up by
+    more than ``width``, −1 after moving down, held while the reading stands still; 0 at the
+    start. Reading noise moves it by about noise / (width / 2)."""
     p = np.asarray(p, float)
-    T = p.size
-    hi, lo = np.minimum(np.arange(T) + lag, T - 1), np.maximum(np.arange(T) - lag, 0)
-    v = p[hi] - p[lo]
-    moving = np.abs(v) > threshold
-    idx = np.where(moving, np.arange(T), -1)
-    idx = np.maximum.accumulate(idx)
-    out = np.where(idx >= 0, np.sign(v[np.maximum(idx, 0)]), 0.0)
-    return out
+    h = 0.5 * width
+    out = np.empty_like(p)
+    y = float(p[0])
+    for t, v in enumerate(p.tolist()):
+        y = min(max(y, v - h), v + h)
+        out[t] = v - y
+    return out / h
 
 
-def pot_columns(term: Term, p: np.ndarray) -> np.ndarray:
-    """∂p̂/∂θ (T, k) of a pot term at the readings p (T,) (module docstring)."""
+def pot_columns(term: Term, p: np.ndarray, model: np.ndarray | None = None) -> np.ndarray:
+    """∂p̂/∂θ (T, k) of a pot term at the readings p (T,) (module docstring); a backlash follows the
+    model's reading ``model`` (T,) = gain s(q) + bias when given (else the reading itself: a lagging
+    guess, :func:`apply_terms`)."""
     e = term.extra
     if term.cause == "sensor_nonlinearity":
         u = (np.asarray(p, float) - e["center"]) / e["half"]
         return np.stack([u * u, u * u * u], axis=1)
     if term.cause == "backlash":
-        return -direction(p, e["threshold"])[:, None]
+        return -direction(p if model is None else model, e["width"])[:, None]
     raise ValueError(f"{term.cause} is not a pot term")
 
 
@@ -113,7 +117,7 @@ def pot_extra(cause: str, p: np.ndarray, sigma: float) -> dict:
     if cause == "sensor_nonlinearity":
         lo, hi = float(np.min(p)), float(np.max(p))
         return {"center": 0.5 * (lo + hi), "half": max(0.5 * (hi - lo), 1e-9)}
-    return {"threshold": float(4.0 * sigma)}
+    return {"width": float(BAND_SIGMAS * sigma)}
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -172,8 +176,11 @@ def slip_sample(term: Term, time: np.ndarray) -> int:
     return int(np.searchsorted(time, term.region.low - 1e-9))
 
 
-def apply_terms(terms, log: Log, robot: Robot) -> Applied:
-    """Map ``log`` and ``robot`` into the baseline model's terms (module docstring)."""
+def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = None) -> Applied:
+    """Map ``log`` and ``robot`` into the baseline model's terms (module docstring).
+
+    ``model_pots`` (T, P) the baseline part gain s(q) + bias of each pot at a tracked q (a backlash
+    acts on it); None: the readings themselves (a first pass: the dead band then lags)."""
     terms = tuple(terms)
     time = np.asarray(log.time, float)
     streams = {}
@@ -184,7 +191,8 @@ def apply_terms(terms, log: Log, robot: Robot) -> Applied:
         for t in terms:
             if t.cause in POT_CAUSES and t.channel in st.names:
                 j = st.names.index(t.channel)
-                p[:, j] -= pot_columns(t, raw[:, j]) @ t.values
+                model = None if model_pots is None else model_pots[:, j]
+                p[:, j] -= pot_columns(t, raw[:, j], model) @ t.values
         streams["pots"] = make_stream(st.names, p)
     names, slips, shift = (), {}, 0.0
     offsets, extra = {}, []
