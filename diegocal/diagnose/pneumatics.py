@@ -3,16 +3,25 @@
 Baseline: the 9-parameter model of eq. (4.10) fitted by next-step least squares (§4.5.3) on the
 steps t -> t+1 of the training blocks (both ends inside them; never across a block edge or a gap
 between sessions). Its residual is the next-step residual p_{t+1} - p̂_{t+1}, kept at sample t
-(the block of t), in the pressure unit. Candidates (:mod:`diegocal.pneumatic.terms`), each
-linearised at the current fit:
+(the block of t), in the pressure unit. Candidates (:mod:`diegocal.pneumatic.terms`):
 
-- ``chamber_leak``, ``supply_droop``, ``pressure_offset``: the column ∂p̂_{t+1}/∂θ at θ = 0;
+- ``chamber_leak``, ``supply_droop``, ``pressure_offset``: the model refitted with the term (all
+  parameters, nonlinear least squares on the training steps, the term started at its resolution);
+  the column is the change of p̂_{t+1} it makes (coefficient ≈ 1). A linearisation at θ = 0 was
+  used first: for the sizes that matter (a leak of tens of 1/s, a sag of tens of kPa) it is far
+  from the refitted model and named the wrong cause (a large leak as a droop);
 - ``valve_delay``: a family over d = 1..D samples (D = MAX_DELAY_S), the exact difference
-  (p̂(u_{t-d}) - p̂(u_t)) / (d h), so that its coefficient is the delay in s;
+  (p̂(u_{t-d}) - p̂(u_t)) / (d h - lag), whose coefficient is the delay added to the sensors' lag,
+  re-fitted jointly with the columns ∂p̂/∂c of the current model's parameters.
 
-every one re-fitted jointly with the columns ∂p̂/∂c of the current model's parameters (c1..c9 and
-the terms found so far), so that the baseline can re-adjust. A term the engine selects is refitted
-with all parameters by nonlinear least squares (the delay from the best whole-sample delay).
+A candidate smaller than its resolution (:data:`FLOORS`: about twice what the 9-parameter model's
+own error puts into that term on clean simulated chambers) or outside its bounds is not offered:
+the model cannot tell it from its own error. A term the engine selects is the refitted model (the
+delay's from the best whole-sample delay). A leak orifice no larger than the valve's own
+room-port leakage (the simulator's default, 0.08e-6 m²) is, to eq. (4.10), just another valve: a
+constant area beside the room port shifts the valve's centre and leakage, which c1 and c9 absorb
+(refitted with the term on such a log, the leak comes out exactly 0); it is named from about
+1e-6 m² (half a volt of the valve's opening).
 
 Held-out score: open-loop pressure with resets every 2 s (thesis Fig. 4.12), RMSE per chamber on
 the held-out samples. The extended model is a pneumatic.yaml (kind ``pneumatic``) whose chambers
@@ -31,7 +40,7 @@ from diegocal.errors import DiegocalError
 from diegocal.evaluate import Score, score
 from diegocal.pneumatic.data import ChamberData, chamber_data
 from diegocal.pneumatic.fit import ChamberFit, FitOptions, fit_chamber, step_rows
-from diegocal.pneumatic.model import ChamberModel, model_of
+from diegocal.pneumatic.model import ChamberModel
 from diegocal.pneumatic.predict import next_step, predict_with_resets
 from diegocal.pneumatic.terms import CAUSES, MAX_DELAY_S, MAX_SENSOR_LAG_S, as_chamber_term, make_term
 
@@ -70,6 +79,7 @@ class PneumaticAdapter:
         self.volume_sensor = volume_sensor
         self.options = options or FitOptions(drift_starts=0)
         self._baseline: PneumaticFit | None = None
+        self._trials: dict = {}  # causes -> the full fit with them (on the baseline's training rows)
 
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train) -> PneumaticFit:
@@ -77,6 +87,9 @@ class PneumaticAdapter:
         terms = [replace(as_chamber_term(t), channel=self.unit_name) for t in terms]
         terms = [t for t in terms if t.cause != "sensor_lag"]
         base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
+        key = frozenset(t.cause for t in terms)
+        if base is not None and key in self._trials:  # a candidate's full fit (``candidates``)
+            return self._trials[key]
         if not any(t.cause == "valve_delay" for t in terms):  # the sampling's own lag (module doc)
             lag = _lag(base.params) if base is not None else 0.5 * MAX_SENSOR_LAG_S
             terms.append(make_term("sensor_lag", self.unit_name, {"lag_s": lag}))
@@ -159,18 +172,27 @@ class PneumaticAdapter:
         name, params = self.unit_name, fitted.params
         have = {t.cause for t in params.terms}
         ok = self._rows(fitted)
-        n_now = params.full_vector().size
+        span = self.data.supply - self.data.room
+        now = _pad(next_step(params, self.data))
         out = []
         for cause in CAUSES:
             if cause in have or cause == "valve_delay":
                 continue
-            _, J, _ = self._jacobian(params, (make_term(cause, name),))
-            J[~ok] = np.nan
-            out.append(Candidate(make_term(cause, name), {name: J[:, n_now:]}, refit={name: J[:, :n_now]}))
+            blank = make_term(cause, name)  # started at its resolution, the others where they are
+            start = dict(zip((p.name for p in blank.parameters), _floor(blank, span), strict=True))
+            trial = self.fit(self.terms(fitted) + (make_term(cause, name, start),), train)
+            term = next(t for t in trial.params.terms if t.cause == cause)
+            if not (np.abs(term.values) >= _floor(term, span)).all():
+                continue  # below the resolution (FLOORS): the model's own error at that size
+            self._trials[frozenset(t.cause for t in self.terms(trial))] = trial
+            col = _pad(next_step(trial.params, self.data)) - now
+            col[~ok] = np.nan
+            out.append(Candidate(term, {name: col[:, None]}))
         if "valve_delay" not in have:
-            out += self._delay_family(params, ok)
-        r = residuals.channels[name]
-        return [c for c in out if _physical(c, r, np.asarray(train, bool) & ok)]
+            r = residuals.channels[name]
+            rows = np.asarray(train, bool) & ok
+            out += [c for c in self._delay_family(params, ok) if _physical(c, r, rows, _floor(c.term, span))]
+        return out
 
     def _delay_family(self, params, ok) -> list[Candidate]:
         """Variants d = 1..D samples: the model with its command lag replaced by a delay of d
@@ -219,7 +241,14 @@ class PneumaticAdapter:
         return "+".join(["c1..c9 (eq. 4.10)", *[t.cause for t in fitted.params.terms]])
 
     def chamber_entry(self, fitted: PneumaticFit) -> dict:
+        from diegocal.pneumatic.predict import drift
+
         entry = fitted.fit.to_dict()
+        try:  # the 2-s open-loop drift on the whole log (§4.5.4), as pneumatic-fit stores it
+            dr = drift(fitted.params, self.data)
+            entry.update(drift_2s=dr.final, drift_curve=dr.curve())
+        except DiegocalError:
+            pass
         entry.update(volume_sensor=self.volume_sensor, supply=self.data.supply, room=self.data.room)
         return entry
 
@@ -227,10 +256,30 @@ class PneumaticAdapter:
         return save_units([self], [fitted], path, header)
 
 
-def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray) -> bool:
+#: The smallest size diagnose attributes to a cause (its resolution), per parameter, as a fraction
+#: of P_c - P_r (pressures), in 1/s (leak) or s (delay beyond the sensors' lag). About twice what the
+#: 9-parameter model's own error puts into each term on clean chambers of the simulator (20 diego
+#: chambers, 30-s logs, linearised estimates: offset -0.4..1.5 kPa, droop -2.5..1.3 kPa, leak
+#: -1.1..1.2 1/s, added delay below 2.4 ms): the model cannot tell a smaller effect from its own
+#: error at the ends of the pressure range, where these causes show.
+FLOORS = {"offset": 0.006, "droop": 0.006, "leak": 2.5, "delay_s": 0.005}
+
+
+def _floor(term, span: float) -> np.ndarray:
+    """(k,) the resolution of ``term``'s parameters (see :data:`FLOORS`) for a chamber with
+    P_c - P_r = ``span`` (a delay's column has the delay added to the sensors' lag as its
+    coefficient)."""
+    out = []
+    for p in term.parameters:
+        f = FLOORS.get(p.name, 0.0)
+        out.append(f * span if p.name in ("offset", "droop") else f)  # delay: the delay added
+    return np.array(out)
+
+
+def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray, floor=None) -> bool:
     """Whether the least-squares estimate of ``cand`` on ``rows`` (its columns with its refit
     columns, as the engine fits it) respects its parameters' lower bounds (a leak, a droop, an
-    added delay are positive)."""
+    added delay are positive) and is at least its resolution ``floor`` (k,) in size."""
     name = cand.term.channel
     col = np.asarray(cand.columns[name], float).reshape(r.size, -1)
     A = np.hstack([col, np.asarray(cand.refit[name], float).reshape(r.size, -1)]) if cand.refit else col
@@ -239,7 +288,8 @@ def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray) -> bool:
         return False
     coef = np.linalg.lstsq(A[sel], r[sel], rcond=None)[0][: col.shape[1]]
     lower = np.array([p.lower for p in cand.term.parameters])
-    return bool((coef >= np.where(np.isfinite(lower), 0.0, -np.inf)).all())
+    ok = (coef >= np.where(np.isfinite(lower), 0.0, -np.inf)).all()
+    return bool(ok and (floor is None or (np.abs(coef) >= floor).all()))
 
 
 def _lag(params) -> float:

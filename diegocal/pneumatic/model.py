@@ -109,7 +109,8 @@ class ChamberModel:
         :mod:`~diegocal.pneumatic.terms`) for the command ``u`` the valve holds; ``p`` the model's
         pressure (the reading minus any offset)."""
         x = np.asarray(x, float)
-        ev = T.Evaluation(x, self.index, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=np.broadcast(u, v, vd).shape)
+        shape = np.broadcast(u, v, vd).shape
+        ev = T.Evaluation(x, self.index, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=shape)
         for term in self.terms:
             term.add(ev)
         r = ev.num / ev.den  # (4.10e)
