@@ -10,18 +10,18 @@ Channels: the joints with a torque; residual = measured − predicted torque, N�
 Candidates (:mod:`diegocal.sgp.terms`), all linear in their parameters so that their columns are
 exact, per joint: ``torque_offset``, ``spring``, ``armature``, ``viscous_friction`` /
 ``coulomb_friction`` (when the model lacks them), ``position_friction`` (a family over windows of
-the joint's training range), ``torque_lag`` (column −d(predicted τ)/dt, its coefficient the lag in
-s), ``coupled_friction`` (a family over the joint before and motor ratios ±½, ±1, ±2). Each
-candidate's columns come with their least-squares fit by the current model's columns on every
-joint's training rows subtracted (Frisch-Waugh-Lovell: the same estimate and prediction change on
-its joints as re-fitting the whole model with the term, for one small regression): a candidate
-cannot merely take over a baseline part, and the base parameters an effect distorted are
-re-adjusted with it. (An engine ``refit`` on the candidate's joint alone would let any candidate on
-a joint whose shared parameters an effect elsewhere distorted outbid the true cause.) A candidate
-whose columns lie in the model's span (e.g. an armature on a first joint with a vertical axis) is
-not offered. A ``payload`` never is: a point mass on a link changes that link's inertial
-parameters, which the identified rigid body already fits, so an unmodelled payload is no model
-error here (only against nominal URDF inertias).
+the joint's training range), ``torque_lag`` (a family over lags L: column (filter_L(τ̂) − τ̂) / L,
+→ −dτ̂/dt as L → 0, its coefficient about the lag in s), ``coupled_friction`` (a family over the
+joint before and motor ratios ±½, ±1, ±2). Each candidate's columns come with their least-squares
+fit by the current model's columns on every joint's training rows subtracted (Frisch-Waugh-Lovell:
+the same estimate and prediction change on its joints as re-fitting the whole model with the term,
+for one small regression): a candidate cannot merely take over a baseline part, and the base
+parameters an effect distorted are re-adjusted with it. (An engine ``refit`` on the candidate's
+joint alone would let any candidate on a joint whose shared parameters an effect elsewhere
+distorted outbid the true cause.) A candidate whose columns lie in the model's span (e.g. an
+armature on a first joint with a vertical axis) is not offered. A ``payload`` never is: a point
+mass on a link changes that link's inertial parameters, which the identified rigid body already
+fits, so an unmodelled payload is no model error here (only against nominal URDF inertias).
 
 A selected ``torque_lag`` is refitted as the sensor's first-order filter of the model's columns
 (:func:`diegocal.sgp.terms.lag_filter`), its time constant by a bounded 1-D search with the
@@ -54,10 +54,13 @@ from diegocal.terms import Region
 
 UNIT = "N·m"
 #: position_friction: the joint's training range (0.5 %..99.5 % quantiles) is cut into this many
-#: equal bins; a region is 1..REGION_MAX_BINS consecutive bins with enough samples
-REGION_BINS = 16
-REGION_MAX_BINS = 6
+#: equal bins; a region is consecutive bins, at most REGION_MAX_FRACTION of the range, with at
+#: least REGION_MIN_FRACTION of the training samples; the REGION_KEEP best on the training
+#: residual are offered (the engine keeps the best of a family on the training rows anyway)
+REGION_BINS = 64
+REGION_MAX_FRACTION = 0.6
 REGION_MIN_FRACTION = 0.03
+REGION_KEEP = 5
 #: coupled_friction: motor velocity qd_j + ratio · qd_partner
 COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
 #: a candidate column whose residual after projection on its joint's model columns is below this
@@ -65,6 +68,9 @@ COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
 SPAN_TOL = 1e-6
 #: the longest torque-sensor time constant a torque_lag may take, s
 MAX_LAG_S = 0.5
+#: torque_lag variants: the column of lag L is (filter_L(τ̂) − τ̂) / L (its coefficient ≈ the lag;
+#: → −dτ̂/dt as L → 0); the engine keeps the best on the training rows
+LAG_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
 
 
 @dataclass
@@ -106,7 +112,6 @@ class DynamicsAdapter:
         self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
         F = full_regressor(robot, self.q, self.qd, self.qdd, self.friction)
         self.F = self.base.project(F[:, self.rows])  # (T, k, r)
-        self._weights = None  # the engine's row weights: 1 / the baseline's training RMS per joint
 
     # ------------------------------------------------------------------ fit
     def _gradient(self, X: np.ndarray) -> np.ndarray:
@@ -142,10 +147,6 @@ class DynamicsAdapter:
         Aeff = self._lagged(A, lags)
         w, cov = self._solve(Aeff, train, sigma)
         pred = Aeff @ w
-        if not terms:
-            e = self.tau[train] - pred[train]
-            rms = np.sqrt(np.nanmean(e * e, axis=0))
-            self._weights = np.where(np.isfinite(rms) & (rms > 0), 1.0 / rms, 1.0)
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         out, at = [], self.base.n_base
         for t in terms:
@@ -202,9 +203,10 @@ class DynamicsAdapter:
     def _projector(self, fitted: DynamicsFit, train):
         """A function cols -> (projected cols, fraction left): a candidate's columns (on its own
         joints) minus their least-squares fit by the current model's columns on every joint's
-        training rows (rows weighted as the engine weighs them: 1 / the baseline's training RMS),
-        and the fraction of their norm that is left (0: the candidate lies in the model's span)."""
-        wt = self._weights if self._weights is not None else 1.0 / fitted.sigma
+        training rows, rows weighted as the fit weighs them (1 / σ_joint, so that
+        Frisch-Waugh-Lovell is exact), and the fraction of their norm that is left (0: the
+        candidate lies in the model's span)."""
+        wt = 1.0 / fitted.sigma  # the fit's own row weights: exactly the refit's projection
         X = fitted.A * wt[None, :, None]  # (T, k, P)
         Xt = X[train]
         pinv = np.linalg.pinv(Xt.reshape(-1, X.shape[2]))  # (P, Ttr·k)
@@ -247,18 +249,31 @@ class DynamicsAdapter:
                 out.append(Candidate(term, cols, family=family))
 
         project = self._projector(fitted, train)
+        # springs about the joint's zero and about its mean training angle: the rest angle is not
+        # a linear parameter, and a spring at rest elsewhere is one of these + a torque_offset
+        reference = {j: float(np.mean(self.q[train, self.robot.joint_index(j)])) for j in self.joints}
         for j in self.joints:
             plain = ["torque_offset", "spring", "armature"]
             plain += [FRICTION_CAUSE[k] for k in FRICTION_KINDS if k not in self.friction]
             for cause in plain:
-                if (cause, j) not in have:
-                    term = make_term(cause, j)
-                    offer(term, self._cols(term), project)
+                if (cause, j) in have:
+                    continue
+                if cause == "spring":  # at rest at the joint's zero, or about its mean angle
+                    for ref in (0.0, reference[j]):
+                        term = make_term(cause, j, extra={"reference": ref})
+                        offer(term, self._cols(term), project, f"spring:{j}")
+                    continue
+                term = make_term(cause, j)
+                offer(term, self._cols(term), project)
             if ("torque_lag", j) not in have:
-                col = -self._gradient(fitted.pred[:, self.row_of[j]])
-                offer(make_term("torque_lag", j), {j: col[:, None]}, project)
+                pred = fitted.pred[:, self.row_of[j]]
+                for lag in LAG_GRID:  # the exact change a sensor lag makes, per second of lag
+                    col = (lag_filter(pred, self.time, lag) - pred) / lag
+                    offer(
+                        make_term("torque_lag", j, values={"lag": lag}), {j: col[:, None]}, project, f"torque_lag:{j}"
+                    )
             if ("position_friction", j) not in have:
-                for t in self._regions(j, train):
+                for t in self._regions(j, train, residuals.channels[j]):
                     offer(t, self._cols(t), project, f"position_friction:{j}")
             if j in coupled:
                 continue
@@ -272,25 +287,44 @@ class DynamicsAdapter:
                 offer(term, self._cols(term), project, f"coupled_friction:{j}+{partner}")
         return out
 
-    def _regions(self, j: str, train) -> list[DynamicsTerm]:
-        """position_friction variants: windows of 1..REGION_MAX_BINS bins of q_j's training range."""
-        x = self.q[train, self.robot.joint_index(j)]
+    def _regions(self, j: str, train, residual: np.ndarray) -> list[DynamicsTerm]:
+        """position_friction variants: the REGION_KEEP windows of q_j's training range (REGION_BINS
+        equal bins between its 0.5 % and 99.5 % quantiles, 1 bin up to REGION_MAX_FRACTION of the
+        range, at least REGION_MIN_FRACTION of the samples) whose two columns explain the most of
+        the joint's training residual (exact least squares per window, from cumulative sums)."""
+        col = self.robot.joint_index(j)
+        ok = train & np.isfinite(residual)
+        x, v, r = self.q[ok, col], self.qd[ok, col], residual[ok]
         lo, hi = np.quantile(x, [0.005, 0.995])
-        if not hi > lo:
+        if not hi > lo or x.size < 20:
             return []
         edges = np.linspace(lo, hi, REGION_BINS + 1)
-        counts = np.histogram(np.clip(x, lo, hi), edges)[0]
-        out = []
-        for width in range(1, REGION_MAX_BINS + 1):
-            for a in range(REGION_BINS - width + 1):
-                if counts[a : a + width].sum() < REGION_MIN_FRACTION * x.size:
+        b = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, REGION_BINS - 1)
+        s = np.sign(v)
+        # per bin: Σ s r, Σ v r, Σ s², Σ s v, Σ v², count
+        sums = np.stack([np.bincount(b, w, minlength=REGION_BINS) for w in (s * r, v * r, s * s, s * v, v * v)])
+        cum = np.concatenate([np.zeros((5, 1)), np.cumsum(sums, axis=1)], axis=1)
+        counts = np.concatenate([[0], np.cumsum(np.bincount(b, minlength=REGION_BINS))])
+        widest = max(1, int(REGION_MAX_FRACTION * REGION_BINS))
+        scored = []
+        for a in range(REGION_BINS):
+            for e in range(a + 1, min(a + widest, REGION_BINS) + 1):
+                if counts[e] - counts[a] < REGION_MIN_FRACTION * x.size:
                     continue
-                # the end windows reach the whole range's extremes (the quantiles cut no sample off)
-                low = float(self.q[:, self.robot.joint_index(j)].min()) if a == 0 else edges[a]
-                high = (
-                    float(self.q[:, self.robot.joint_index(j)].max()) if a + width == REGION_BINS else edges[a + width]
-                )
-                out.append(make_term("position_friction", j, Region(f"q.{j}", float(low), float(high))))
+                sr, vr, ss, sv, vv = cum[:, e] - cum[:, a]
+                det = ss * vv - sv * sv
+                if det <= 1e-12 * max(ss * vv, 1e-300):
+                    continue
+                gain = (vv * sr * sr - 2 * sv * sr * vr + ss * vr * vr) / det
+                scored.append((gain, a, e))
+        scored.sort(reverse=True)
+        lowest, highest = float(self.q[:, col].min()), float(self.q[:, col].max())
+        out = []
+        for _, a, e in scored[:REGION_KEEP]:
+            # the end windows reach the whole range's extremes (the quantiles cut no sample off)
+            low = lowest if a == 0 else float(edges[a])
+            high = highest if e == REGION_BINS else float(edges[e])
+            out.append(make_term("position_friction", j, Region(f"q.{j}", low, high)))
         return out
 
     # ------------------------------------------------------------------ scores and output

@@ -13,8 +13,10 @@ Causes (DESIGN.md vocabulary, domain ``dynamics``):
 - ``viscous_friction`` / ``coulomb_friction``: η_v qd_j, η_c sign(qd_j) on joint j;
 - ``position_friction``: the same, only while q_j is in the term's region (cables, a tube
   rubbing near a limit: thesis §3.4.4);
-- ``spring``: stiffness · q_j (an elastic element, a gravity compensator) about the joint's zero;
-  a spring at rest angle q0 is this plus a ``torque_offset`` of −stiffness · q0;
+- ``spring``: stiffness · (q_j − reference) (an elastic element, a gravity compensator; ``extra``
+  reference, rad, default 0; ``diagnose`` tries the joint's zero and its mean angle, the rest angle
+  being no linear parameter); a spring at rest angle q0 is this plus a ``torque_offset`` of
+  stiffness · (reference − q0);
 - ``torque_offset``: a constant bias of joint j's torque sensor;
 - ``armature``: the rotor's reflected inertia, inertia · qdd_j;
 - ``coupled_friction``: one motor that drives two joints (the TX40's wrist: motor 6 turns with
@@ -106,7 +108,7 @@ class DynamicsTerm(Term):
             out[:, j, 0] = inside * np.sign(vj)
             out[:, j, 1] = inside * vj
         elif c == "spring":
-            out[:, j, 0] = qj
+            out[:, j, 0] = qj - float(self.extra.get("reference", 0.0))
         elif c == "torque_offset":
             out[:, j, 0] = 1.0
         elif c == "armature":
@@ -195,9 +197,11 @@ def term_columns(terms, robot, q, qd, qdd) -> np.ndarray:
 
 
 def lag_filter(X: np.ndarray, time: np.ndarray, lag: float) -> np.ndarray:
-    """A first-order lag of time constant ``lag`` (s) along axis 0 of X (T, ...), causal, started at
-    rest on the first sample: y_k = y_{k-1} + α (x_k − y_{k-1}), α = 1 − exp(−dt/lag) (exact for an
-    input held between samples). A gap in ``time`` (a step over 1.5 × the median) restarts it."""
+    """A first-order lag L·y' + y = x of time constant ``lag`` (s) along axis 0 of X (T, ...),
+    causal, started at rest on the first sample, exact for an input linear between samples (a
+    first-order hold, so that a lag shorter than a sample delays by about ``lag``):
+    y_k = a·y_{k−1} + (1 − c)·x_k + (c − a)·x_{k−1}, a = exp(−h/L), c = (L/h)(1 − a), h the median
+    step. A gap in ``time`` (a step over 1.5 × the median) restarts it."""
     from scipy.signal import lfilter
 
     X = np.asarray(X, float)
@@ -205,14 +209,14 @@ def lag_filter(X: np.ndarray, time: np.ndarray, lag: float) -> np.ndarray:
         return X.copy()
     time = np.asarray(time, float)
     steps = np.diff(time)
-    dt = float(np.median(steps))
-    alpha = 1.0 - np.exp(-dt / lag)
-    cuts = np.concatenate([[0], np.flatnonzero(steps > 1.5 * dt) + 1, [X.shape[0]]])
+    h = float(np.median(steps))
+    a = np.exp(-h / lag)
+    c = lag / h * (1.0 - a)
+    cuts = np.concatenate([[0], np.flatnonzero(steps > 1.5 * h) + 1, [X.shape[0]]])
     out = np.empty_like(X)
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-        seg = X[a:b]
-        zi = (1.0 - alpha) * seg[:1]
-        out[a:b] = lfilter([alpha], [1.0, alpha - 1.0], seg, axis=0, zi=zi)[0]
+    for s, e in zip(cuts[:-1], cuts[1:], strict=True):
+        seg = X[s:e]
+        out[s:e] = lfilter([1.0 - c, c - a], [1.0, -a], seg, axis=0, zi=c * seg[:1])[0]
     return out
 
 

@@ -169,7 +169,8 @@ class TrueDynamics:
 
     def sensor(self, tau: np.ndarray, time: np.ndarray) -> np.ndarray:
         """What the torque sensors read of the applied torques (T, n): ``torque_lag`` joints
-        through a first-order low-pass filter (exact for a piecewise-constant input), + offset."""
+        through a first-order low-pass filter L·y' + y = τ (exact for a torque linear between
+        samples, so a lag shorter than a sample still delays), + offset."""
         out = np.array(tau, float, copy=True)
         for t in self.terms:
             if t.cause != "torque_lag":
@@ -177,8 +178,9 @@ class TrueDynamics:
             lag = t.record["values"]["lag"]
             x, y = tau[:, t.j], out[:, t.j]
             for k in range(1, x.size):
-                a = 1.0 - np.exp(-(time[k] - time[k - 1]) / lag)
-                y[k] = y[k - 1] + a * (x[k] - y[k - 1])
+                a = np.exp(-(time[k] - time[k - 1]) / lag)
+                m = (x[k] - x[k - 1]) / (time[k] - time[k - 1])  # the input's slope in the step
+                y[k] = a * (y[k - 1] - x[k - 1] + lag * m) + x[k] - lag * m
         return out + self.offset
 
     def inverse(self, q, qd, qdd) -> np.ndarray:
