@@ -137,9 +137,10 @@ def simulate_pneumatics_cmd(
         list[str] | None,
         typer.Option(
             "--effect",
-            metavar="NAME[:CHAMBER]",
-            help="Pneumatic effect (repeatable): valve_delay, chamber_leak, supply_droop, "
-            "pressure_offset.",
+            metavar="NAME[:CHAMBER][=SIZE]",
+            help="Pneumatic effect (repeatable), SIZE (unit, default): valve_delay (s, 0.03), "
+            "chamber_leak (orifice m², 0.08e-6), supply_droop (kPa per g/s of supply flow, 10), "
+            "pressure_offset (kPa, 15). A random chamber unless named.",
         ),
     ] = None,
     sessions: Annotated[
