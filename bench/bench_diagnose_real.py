@@ -1,0 +1,170 @@
+"""What does the rigid body + friction model get wrong on real robots? `diagnose` on TX40 and TIAGo.
+
+    .venv/bin/python bench/bench_diagnose_real.py [--data DIR] [--tx40-blocks 20] [--tiago-blocks 10]
+
+The recordings of ``shared/data/real`` (README there; converted by :mod:`diegocal.io.real` as in
+``bench_real_identification.py``) are diagnosed in the dynamics domain with the library's
+defaults except the number of blocks: the TX40 run is one 7.8 s excitation (1563 samples at
+200 Hz after the zero-phase 10 Hz filter), so its residuals stay correlated over ~0.5 s and ten
+blocks leave two validation blocks, too few sub-blocks for the out-of-sample test; 20 blocks of
+0.39 s are used (``--tx40-blocks``). Printed per robot:
+
+1. the diagnosis (interleaved train / validation / held-out blocks): the baseline's held-out RMSE
+   per joint, each finding with its fitted values (± standard error) and its held-out RMSE before
+   → after on the joints it acts on, the extended model's held-out RMSE;
+2. the found terms judged on the time splits of ``bench_real_identification.py`` (TX40: first /
+   second half and the reverse; TIAGo: 9.2-48 s / 48-67.9 s as FIGAROH): PR (base parameters +
+   viscous + Coulomb, ``SGPOptions(kind="pr")``) without and with the terms the diagnosis named
+   (the terms' structure only; their values are refitted on the training half), next to the
+   nominal model (URDF inertias, no friction) and, for the TX40, the nominal model + the
+   README's published priors (friction, rotor inertia, offsets, wrist-coupling motor terms).
+
+The diagnosis never reads anything but the log; the splits never see their held-out half. One
+BLAS thread (the machine is shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+try:  # two cores shared by many processes: one BLAS thread is much faster than contention
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+except ImportError:  # pragma: no cover
+    pass
+
+from bench_real import tx40_model  # noqa: E402
+from bench_real_identification import FIGAROH, TIAGO_WINDOW, arrays, nominal, tiago_split, tx40_splits  # noqa: E402
+
+from diegocal.diagnose import DiagnoseOptions, diagnose  # noqa: E402
+from diegocal.io.real import RealOptions, load_tiago, load_tx40  # noqa: E402
+from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
+from diegocal.sgp import SGPOptions  # noqa: E402
+from diegocal.sgp.model import DynamicsModel  # noqa: E402
+
+REPO = HERE.parent
+DEFAULT_DATA = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}" if np.isfinite(x) else "nan"
+
+
+def show_diagnosis(name: str, d, nm_joints) -> None:
+    u = d.units[0]
+    base, ext = u.baseline_score, u.extended_score
+    print(
+        f"\n== {name}: diagnose (blocks: {d.blocks.n_blocks}, held-out {int(d.blocks.mask('heldout').sum())} samples)"
+    )
+    print(f"baseline: {u.baseline_model}")
+    print("held-out RMSE per joint (N·m; torso N):")
+    print("  " + "  ".join(f"{c}={_fmt(r)}" for c, r in zip(base.channels, base.rmse, strict=True)))
+    if not d.findings:
+        print("findings: none")
+    for f in d.findings:
+        where = (
+            ""
+            if f.term.region is None
+            else f" [{f.term.region.variable} {f.term.region.low:.3g}..{f.term.region.high:.3g}]"
+        )
+        extra = "" if not f.term.extra else " " + ", ".join(f"{k}={v}" for k, v in f.term.extra.items())
+        values = ", ".join(
+            f"{p.name}={p.value:.4g}" + ("" if not np.isfinite(p.stderr) else f"±{p.stderr:.2g}") + f" {p.unit}"
+            for p in f.term.parameters
+        )
+        line = f"- {f.kind} {f.cause} on {f.channel}{where}{extra}: {values}"
+        if f.kind != "unexplained":
+            chans = [c for c in f.evidence.get("channels", []) if c in base.channels]
+            per = []
+            for c in chans:
+                i = f.heldout_before.channels.index(c)
+                per.append(f"{c} {f.heldout_before.rmse[i]:.3g} → {f.heldout_after.rmse[i]:.3g}")
+            line += " | held-out " + "; ".join(per)
+        line += (
+            f" | validation gain {f.evidence.get('validation_gain', float('nan')):.0%}, t {f.evidence.get('t', 0):.1f}"
+        )
+        print(line)
+    print(f"extended: {u.extended_model}")
+    print("  " + "  ".join(f"{c}={_fmt(r)}" for c, r in zip(ext.channels, ext.rmse, strict=True)))
+    idx = [base.channels.index(j) for j in nm_joints]
+    pooled = [float(np.sqrt(np.mean(s.rmse[idx] ** 2))) for s in (base, ext)]
+    print(f"pooled held-out RMSE over {len(idx)} N·m joints: {pooled[0]:.3f} → {pooled[1]:.3f} N·m")
+
+
+def pr(split, terms):
+    model = DynamicsModel(split.robot, SGPOptions(kind="pr"), split.tau_joints, terms)
+    q, qd, qdd, tau = arrays(split, split.train)
+    model.fit_arrays(q, qd, qdd, tau, time=split.train.time)
+    q, qd, qdd, _ = arrays(split, split.test)
+    return model.predict_arrays(q, qd, qdd, split.test.time).tau
+
+
+def judge_splits(splits, terms, tx40: bool) -> None:
+    print("\nsplit            model                        RMSE N·m   nMSE per joint")
+    for split in splits:
+        q, qd, qdd, tau = arrays(split, split.test)
+        cols = [split.tau_joints.index(j) for j in split.rmse_joints]
+        rows = [split.robot.joint_index(j) for j in split.tau_joints]
+        rb = nominal(split.robot, q, qd, qdd)
+        cases = [("nominal (URDF, no friction)", rb[:, rows])]
+        if tx40:
+            cases.append(("nominal + published priors", tx40_model(rb, qd, qdd)[:, rows]))
+        cases.append(("PR", pr(split, ())))
+        if terms:
+            cases.append(("PR + " + ", ".join(f"{t.cause}:{t.channel}" for t in terms), pr(split, terms)))
+        for label, pred in cases:
+            err = pred - tau
+            rmse = float(np.sqrt(np.mean(err[:, cols] ** 2)))
+            nmse = np.mean(err**2, axis=0) / np.var(tau, axis=0)
+            print(f"{split.name:16s} {label[:44]:44s} {rmse:6.2f}   " + " ".join(f"{v:.2f}" for v in nmse))
+        ref = FIGAROH.get(split.name)
+        if ref:
+            print(f"{split.name:16s} {'FIGAROH 1.0.2 (identified, nominal)':44s} {ref[0]:.2f}, {ref[1]:.2f}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    ap.add_argument("--tx40-blocks", type=int, default=20)
+    ap.add_argument("--tiago-blocks", type=int, default=10)
+    args = ap.parse_args(argv)
+    if not (args.data / "tx40").is_dir():
+        print(f"no real-robot data at {args.data}; skipped")
+        return 0
+    t0 = time.time()
+    # TX40
+    robot = load_robot(BUNDLED_ROBOTS / "tx40")
+    log = load_tx40(args.data / "tx40")
+    t = time.time()
+    d = diagnose(log, robot, DiagnoseOptions(domain="dynamics", n_blocks=args.tx40_blocks))
+    print(f"TX40: {log.n_samples} samples, {log.time[-1] - log.time[0]:.1f} s; diagnose {time.time() - t:.1f} s wall")
+    show_diagnosis("TX40", d, robot.joint_names)
+    terms = d.units[0].fitted.terms
+    judge_splits(tx40_splits(args.data, 1), terms, tx40=True)
+    # TIAGo
+    robot = load_robot(BUNDLED_ROBOTS / "tiago")
+    log = load_tiago(args.data / "tiago", RealOptions(cutoff_hz=5.0, window=TIAGO_WINDOW))
+    t = time.time()
+    d = diagnose(log, robot, DiagnoseOptions(domain="dynamics", n_blocks=args.tiago_blocks))
+    print(
+        f"\nTIAGo: {log.n_samples} samples, {log.time[-1] - log.time[0]:.1f} s; diagnose {time.time() - t:.1f} s wall"
+    )
+    split = tiago_split(args.data, 1)
+    show_diagnosis("TIAGo", d, split.rmse_joints)
+    judge_splits([split], d.units[0].fitted.terms, tx40=False)
+    print(f"\ntotal {time.time() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
