@@ -2,7 +2,8 @@
 
 sgp-fit: parse → load the log and robot → :func:`diegocal.sgp.fit_dynamics` → save ``sgp/`` →
 summary table (in-sample nMSE per joint). predict: load the model → predict the log's torques →
-write a log with ``tau`` (predicted) and ``tau_std`` → nMSE per joint when the log has ``tau``.
+write a log with ``tau`` (predicted) and ``tau_std`` → nMSE per joint when the log has ``tau``. A
+model with extra terms (``diagnose``'s extended model) predicts with them and lists them.
 """
 
 from __future__ import annotations
@@ -143,6 +144,9 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
         "tau_std": make_stream(names, pred.tau_std),
     }
     rows = [("model", model.options.kind), ("samples", data.n_samples)]
+    for term in model.fitted_terms():  # extra terms (diagnose's extended model), with their values
+        values = ", ".join(f"{p.name}={p.value:.4g} {p.unit}".rstrip() for p in term.parameters)
+        rows.append((f"term {term.label}", values))
     if data.has("tau"):
         measured = data.stream("tau").select(names).data
         streams["tau_measured"] = make_stream(names, measured)

@@ -282,3 +282,58 @@ def test_figure_eight_scales_to_a_small_robot():
     log = _sim(finger, trajectory="figure8-vertical", duration=2.0, rate_hz=50.0)
     q = log.streams["q"].data
     assert (q >= finger.lower).all() and (q <= finger.upper).all() and np.ptp(q, axis=0).max() > 0.05
+
+
+# ----------------------------------------------------------------------------- effects of issue #13
+def _diff(robot, effect, seed=4):
+    """Measured torque with ``effect`` minus without (same friction and trajectory), no noise."""
+    a = _sim(robot, seed=seed, effects=(effect,))
+    b = _sim(robot, seed=seed)
+    np.testing.assert_array_equal(a.streams["q"].data, b.streams["q"].data)
+    return a, a.streams["tau"].data - b.streams["tau"].data
+
+
+def test_armature_is_a_rotor_inertia_on_its_joint(arm3):
+    log, d = _diff(arm3, "armature:joint3=0.05")
+    inertia = log.truth.effects[0]["values"]["inertia"]
+    qdd = log.streams["qdd"].data
+    np.testing.assert_allclose(d[:, 2], inertia * qdd[:, 2], atol=1e-9)
+    assert np.abs(d[:, :2]).max() < 1e-9
+
+
+def test_coupled_friction_acts_on_the_joint_and_the_one_before(arm3):
+    log, d = _diff(arm3, "coupled_friction:joint3=0.05")
+    rec = log.truth.effects[0]
+    v = rec["values"]
+    assert rec["partner"] == "joint2" and v["ratio"] == 1.0 and v["coulomb"] == 0.05
+    qd = log.streams["qd"].data
+    motor = qd[:, 2] + qd[:, 1]
+    want = v["coulomb"] * np.tanh(motor / 0.05) + v["viscous"] * motor
+    np.testing.assert_allclose(d[:, 2], want, atol=1e-9)
+    np.testing.assert_allclose(d[:, 1], want, atol=1e-9)
+    assert np.abs(d[:, 0]).max() < 1e-9
+
+
+def test_torque_lag_is_a_first_order_sensor_on_its_joint(arm3):
+    from diegocal.sgp.terms import lag_filter
+
+    a = _sim(arm3, seed=4, effects=("torque_lag:joint1=0.02",))
+    b = _sim(arm3, seed=4)
+    assert a.truth.effects[0]["values"]["lag"] == 0.02
+    tau_a, tau_b = a.streams["tau"].data, b.streams["tau"].data
+    np.testing.assert_allclose(tau_a[:, 0], lag_filter(tau_b[:, 0], b.time, 0.02), atol=1e-9)
+    np.testing.assert_array_equal(tau_a[:, 1:], tau_b[:, 1:])
+    assert np.abs(tau_a[:, 0] - tau_b[:, 0]).max() > 1e-3
+
+
+@pytest.mark.parametrize(
+    "effect,key,want",
+    [
+        ("torque_offset:joint2=0.07", "offset", 0.07),
+        ("coulomb_friction:joint1=0.2", "coulomb", 0.2),
+        ("payload=0.3", "mass", 0.3),
+    ],
+)
+def test_effect_sizes_are_honoured(arm3, effect, key, want):
+    log = _sim(arm3, seed=2, effects=(effect,))
+    assert abs(log.truth.effects[0]["values"][key]) == pytest.approx(want)

@@ -1,0 +1,129 @@
+"""Dynamics terms (diegocal.sgp.terms): friction is two ordinary terms the regressor is built from,
+extra terms add exact regressor columns that a DynamicsModel fits with W, the lag filter is a
+first-order sensor, and a model with terms survives the sgp/ bundle (old bundles still load)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from diegocal.errors import InputFileError
+from diegocal.robot import load_robot
+from diegocal.robot.model import BUNDLED_ROBOTS
+from diegocal.sgp import SGPOptions, load_model
+from diegocal.sgp.model import DynamicsModel
+from diegocal.sgp.regressor import full_regressor
+from diegocal.sgp.terms import (
+    CAUSES,
+    friction_terms,
+    lag_filter,
+    make_term,
+    term_columns,
+    term_from_dict,
+)
+from diegocal.terms import Region
+
+
+@pytest.fixture(scope="module")
+def arm3():
+    return load_robot(BUNDLED_ROBOTS / "arm3")
+
+
+def states(robot, T=400, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(T) * 0.01
+    w = rng.uniform(0.5, 2.0, robot.n_joints)
+    q = 0.8 * np.sin(w * t[:, None]) + 0.3
+    qd = 0.8 * w * np.cos(w * t[:, None])
+    qdd = -0.8 * w**2 * np.sin(w * t[:, None])
+    return t, q, qd, qdd
+
+
+def test_friction_columns_of_the_regressor_are_the_friction_terms(arm3):
+    _, q, qd, qdd = states(arm3)
+    F = full_regressor(arm3, q, qd, qdd, ("viscous", "coulomb"))
+    n = arm3.n_joints
+    cols = term_columns(friction_terms(arm3.joint_names, ("viscous", "coulomb")), arm3, q, qd, qdd)
+    np.testing.assert_array_equal(F[:, :, 10 * n :], cols)
+
+
+def test_term_columns_are_the_torque_each_parameter_adds(arm3):
+    _, q, qd, qdd = states(arm3)
+    j = 1
+    region = Region("q.joint2", 0.2, 0.9)
+    pf = make_term("position_friction", "joint2", region).columns(arm3, q, qd, qdd)
+    inside = (q[:, j] >= 0.2) & (q[:, j] <= 0.9)
+    np.testing.assert_array_equal(pf[:, j, 0], inside * np.sign(qd[:, j]))
+    np.testing.assert_array_equal(pf[:, j, 1], inside * qd[:, j])
+    assert not pf[:, [0, 2]].any()  # only its joint
+    spring = make_term("spring", "joint2", extra={"reference": 0.3}).columns(arm3, q, qd, qdd)
+    np.testing.assert_allclose(spring[:, j, 0], q[:, j] - 0.3)
+    arm = make_term("armature", "joint3").columns(arm3, q, qd, qdd)
+    np.testing.assert_array_equal(arm[:, 2, 0], qdd[:, 2])
+    cf = make_term("coupled_friction", "joint3", extra={"partner": "joint2", "ratio": 2.0}).columns(arm3, q, qd, qdd)
+    v = qd[:, 2] + 2.0 * qd[:, 1]
+    np.testing.assert_allclose(cf[:, 2, 0], np.sign(v))
+    np.testing.assert_allclose(cf[:, 1, 1], 2.0 * v)  # the partner feels ratio × the motor's friction
+
+
+def test_terms_round_trip_through_yaml_and_refuse_bad_input():
+    t = make_term("position_friction", "joint2", Region("q.joint2", 0.2, 0.9), values={"coulomb": 0.3})
+    back = term_from_dict(t.to_dict())
+    assert back == t and back.value("coulomb") == 0.3
+    assert set(CAUSES) >= {"torque_offset", "spring", "armature", "coupled_friction", "torque_lag", "payload"}
+    with pytest.raises(InputFileError, match="unknown dynamics term cause"):
+        make_term("backlash", "joint1")
+    with pytest.raises(InputFileError, match="needs a region"):
+        make_term("position_friction", "joint1")
+    with pytest.raises(InputFileError, match="has parameters"):
+        term_from_dict({"cause": "torque_offset", "channel": "joint1", "parameters": {"bias": 1.0}})
+
+
+def test_lag_filter_is_a_first_order_sensor():
+    t = np.arange(0, 3, 0.01)
+    x = 0.5 * t  # a ramp: a first-order lag L follows it L seconds late once settled
+    y = lag_filter(x, t, 0.05)
+    np.testing.assert_allclose(y[100:], 0.5 * (t[100:] - 0.05), atol=1e-9)
+    assert lag_filter(x, t, 0.0) is not x and np.array_equal(lag_filter(x, t, 0.0), x)
+    # a gap restarts it at rest
+    t2 = np.concatenate([t, t + 10.0])
+    y2 = lag_filter(np.concatenate([x, x]), t2, 0.05)
+    np.testing.assert_allclose(y2[t.size :], y, atol=1e-12)
+
+
+def test_a_model_with_extra_terms_recovers_them_and_predicts_with_a_lag(arm3, tmp_path):
+    time, q, qd, qdd = states(arm3, T=1500, seed=1)
+    base = DynamicsModel(arm3, SGPOptions(kind="pr"))
+    base.fit_arrays(q, qd, qdd, np.zeros((len(q), 3)) + 1e-3 * np.random.default_rng(0).standard_normal((len(q), 3)))
+    w_true = np.random.default_rng(2).normal(size=base.base_.n_base)
+    F = base.features(q, qd, qdd)
+    offset = make_term("torque_offset", "joint3")
+    lag = make_term("torque_lag", "joint2", values={"lag": 0.03})
+    tau = F @ w_true
+    tau[:, 2] += 0.4  # the offset
+    tau[:, 1] = lag_filter(tau[:, 1], time, 0.03)
+    tau += 1e-3 * np.random.default_rng(3).standard_normal(tau.shape)
+    model = DynamicsModel(arm3, SGPOptions(kind="pr"), terms=(offset, lag))
+    model.fit_arrays(q, qd, qdd, tau, time=time)
+    fitted = {t.cause: t for t in model.fitted_terms()}
+    assert fitted["torque_offset"].value("offset") == pytest.approx(0.4, abs=0.01)
+    assert fitted["torque_lag"].value("lag") == 0.03  # fixed as given
+    assert model.parameter_names[-1].startswith("torque_offset:joint3")
+    pred = model.predict_arrays(q, qd, qdd, time).tau
+    assert np.sqrt(np.mean((pred - tau) ** 2)) < 3e-3
+    # saved and loaded: same prediction, terms listed with their values
+    model.save(tmp_path / "m.sgp", {"log": "x"})
+    back = load_model(tmp_path / "m.sgp")
+    assert [t.cause for t in back.terms] == ["torque_offset", "torque_lag"]
+    np.testing.assert_allclose(back.predict_arrays(q, qd, qdd, time).tau, pred, atol=1e-9)
+    # without terms the model is the one it always was: no 'terms' in its sgp.yaml
+    base.save(tmp_path / "b.sgp")
+    assert "terms" not in (tmp_path / "b.sgp" / "sgp.yaml").read_text()
+    assert load_model(tmp_path / "b.sgp").terms == ()
+
+
+def test_a_lag_term_needs_the_samples_time(arm3):
+    _, q, qd, qdd = states(arm3, T=200)
+    model = DynamicsModel(arm3, SGPOptions(kind="pr"), terms=(make_term("torque_lag", "joint1", values={"lag": 0.01}),))
+    with pytest.raises(Exception, match="time"):
+        model.fit_arrays(q, qd, qdd, np.zeros((200, 3)))
