@@ -283,7 +283,9 @@ class DynamicsModel:
     # ------------------------------------------------------------------ building blocks
     def features(self, q, qd, qdd, time=None) -> np.ndarray:
         """Base regressor f(u): (T, k, r), the rows of the k fitted joints; with extra terms,
-        (T, k, r + K): their columns appended, ``torque_lag`` applied (needs ``time``, (T,) s)."""
+        (T, k, r + K): their columns appended, ``torque_lag`` applied when ``time`` (T,) s is given
+        (or the states are the training samples); without it, states are no time series (a grid
+        of a report) and the columns are those of the torque before the sensor's lag."""
         F = full_regressor(self.robot, q, qd, qdd, self.options.friction)
         F = self.base_.project(F[:, self.rows] if self.joints_without_tau else F)
         if not self.terms:
@@ -291,9 +293,10 @@ class DynamicsModel:
         extra = term_columns(self.terms, self.robot, q, qd, qdd)[:, self.rows]
         F = np.concatenate([F, extra], axis=2)
         if any(t.is_filter for t in self.terms):
-            if time is None:
-                raise MissingStreamError("a model with a torque_lag term needs the samples' time")
-            F = apply_lags(self.terms, F, time, {j: r for r, j in enumerate(self.joint_names)})
+            if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
+                time = self.time_  # the training samples
+            if time is not None:
+                F = apply_lags(self.terms, F, time, {j: r for r, j in enumerate(self.joint_names)})
         return F
 
     @property
@@ -348,6 +351,8 @@ class DynamicsModel:
         (:meth:`state`) restores a saved fit, no optimising; ``time`` (T,) s for a torque_lag term."""
         q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
         self.time_ = None if time is None else np.asarray(time, float)
+        if self.time_ is None and any(t.is_filter for t in self.terms):
+            raise MissingStreamError("fitting a model with a torque_lag term needs the samples' time")
         o = self.options
         T = len(q)
         if tau.shape != (T, len(self.joint_names)):
@@ -417,8 +422,8 @@ class DynamicsModel:
 
     # ------------------------------------------------------------------ predict
     def predict_arrays(self, q, qd, qdd, time=None) -> TorquePrediction:
-        """Predict torques for states (T, n) each (rad, rad/s, rad/s²); ``time`` (T,) s is
-        needed only by a model with a torque_lag term."""
+        """Predict torques for states (T, n) each (rad, rad/s, rad/s²); ``time`` (T,) s matters
+        only to a model with a torque_lag term (without it: the torque before the sensor's lag)."""
         q, qd, qdd = (self.robot.check_q(x) for x in (q, qd, qdd))
         U = np.hstack([q, qd, qdd])
         F = self.features(q, qd, qdd, time)
