@@ -60,6 +60,10 @@ OUTLIER_WINDOW = 8
 CHANNEL_SHARE = 0.02
 #: Dead-band widths tried for a backlash (a family), in multiples of BAND_SIGMAS pot σ.
 BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
+#: A marker outlier is at least this many σ off its neighbours' trend: the chi² level of a
+#: family-wise 1 % assumes Gaussian residuals, and the tracked residuals' tails are heavier (frames
+#: with few visible markers); ghosts and reflections are centimetres off (tens of σ).
+OUTLIER_SIGMAS = 8.0
 #: GN refinements of the continuous terms after each STAC fit of an extended model.
 REFINE = 1
 
@@ -213,8 +217,11 @@ class KinematicsAdapter:
             j = self.pot_names.index(term.channel)
             f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])
             g = lin.project_pot(j)  # (T, R)
-            s = lin.s[:, j]
-            return g[..., None] * f[:, None, :], np.stack([g * s[:, None], g], axis=-1)
+            refit = []
+            for i in lin.sharing(j):  # gain and bias of every pot reading a joint this one reads
+                gi = g if i == j else lin.project_pot(i)
+                refit += [gi * lin.s[:, i, None], gi]
+            return g[..., None] * f[:, None, :], np.stack(refit, axis=-1)
         if term.cause == "link_offset":
             return lin.project(lin.link_offset_basis(term.channel)), lin.project(lin.refit_markers(term.channel))
         if term.cause == "time_offset":
@@ -284,12 +291,13 @@ class KinematicsAdapter:
         sig = float(fitted.cal.sigma_markers)
         # a reading is off when its residual's squared norm passes chi²_3 at alpha / readings
         thr2 = chi2.isf(0.01 / n_tests, 3) * sig**2
+        off2 = max(chi2.isf(0.01 / n_tests, 3), OUTLIER_SIGMAS**2) * sig**2
         own = np.einsum("tmi,tmi->tm", rm, rm)
         out = []
         swapped = np.zeros((T, M), bool)
         for m in range(M):
             for k in range(m + 1, M):
-                bad = (own[:, m] > thr2) & (own[:, k] > thr2)
+                bad = (own[:, m] > off2) & (own[:, k] > off2)
                 if bad.sum() < 3:
                     continue
                 dm = np.sum((xm[:, m] - pred[:, k]) ** 2, -1)
@@ -309,13 +317,14 @@ class KinematicsAdapter:
         e2 = np.einsum("tmi,tmi->tm", e, e)
         ok = np.isfinite(e2)
         scale = np.median(e2[ok]) / chi2.median(3) if ok.any() else 0.0
-        flag = ok & (e2 > chi2.isf(0.01 / n_tests, 3) * scale) & ~swapped
+        z2 = max(chi2.isf(0.01 / n_tests, 3), OUTLIER_SIGMAS**2)
+        flag = ok & (e2 > z2 * scale) & ~swapped
         if flag.sum() >= 1:
             frames = {self.marker_names[m]: np.flatnonzero(flag[:, m]).tolist() for m in range(M) if flag[:, m].any()}
             ch = next(iter(frames)) if len(frames) == 1 else "markers"
             term = make_term("marker_outliers", ch, extra={"frames": frames})
             readings = {n: flag[:, self.marker_names.index(n)] for n in frames}
-            ev = {"readings": int(flag.sum()), "threshold_sigma": float(np.sqrt(chi2.isf(0.01 / n_tests, 3)))}
+            ev = {"readings": int(flag.sum()), "threshold_sigma": float(np.sqrt(z2))}
             out.append(Fault(term, readings, exclude=True, evidence=ev))
         return out
 
@@ -412,6 +421,10 @@ class _Lin:
         sig = dict(fitted.cal.sigma_by_group)
         sigma_p = np.array([sig.get(k, fitted.cal.sigma_pots) for k in obs.kinds], float)
         sig_x = float(sig.get(MARKERS, fitted.cal.sigma_markers))
+        # a pot type fitted exactly (one pot per joint, its σ collapsed) pins its joints, but no
+        # weight may swamp the others' in floating point
+        floor = 1e-3 * float(np.max(np.concatenate([sigma_p, [sig_x / 0.1]])))
+        sigma_p = np.maximum(sigma_p, floor)
         T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, a.robot.n_joints
         J = np.zeros((T, P + 3 * M, n))
         s_all = np.zeros((T, P))
@@ -427,7 +440,8 @@ class _Lin:
         w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
         JW = np.swapaxes(J, 1, 2) * w[:, None, :]
         H = JW @ J
-        H += 1e-9 * (1.0 + np.einsum("bii->b", H))[:, None, None] * np.eye(n)
+        diag = np.einsum("bii->bi", H)
+        diag += 1e-9 * diag + 1e-12
         K = np.linalg.solve(H, JW)
         return cls(adapter, fitted, obs, params, J, K, w, s_all, Rl_all, sigma_p)
 
@@ -440,6 +454,14 @@ class _Lin:
         out = -self.J @ self.K[:, :, j : j + 1]
         out[:, j, 0] += 1.0
         return out[..., 0]
+
+    def sharing(self, j: int) -> list[int]:
+        """Pots (mapped order) that read a joint pot j reads (j first)."""
+        A = self.obs.A != 0
+        if self.obs.kinds[j] == "linear" or not A[j].any():
+            return [j]
+        others = [i for i in range(self.P) if i != j and self.obs.kinds[i] != "linear" and np.any(A[i] & A[j])]
+        return [j, *others]
 
     def residual_rows(self) -> np.ndarray:
         """(T, R) residuals of the mapped rows (reading − prediction)."""

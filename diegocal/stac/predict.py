@@ -83,7 +83,7 @@ def predict(
         applied = apply_terms(calibration.terms, log, robot)
         cal = with_slip_markers(replace(calibration, terms=()), applied, calibration.terms)
         pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
-        if any(t.cause == "backlash" for t in calibration.terms):  # a dead band follows the model
+        if any(t.cause in ("backlash", "sensor_nonlinearity") for t in calibration.terms):  # of the model's s
             applied = apply_terms(calibration.terms, log, robot, pred.pots)
             pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
         markers = to_log_markers(applied, pred.marker_names, pred.markers) if pred.marker_names else pred.markers

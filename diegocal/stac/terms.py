@@ -4,8 +4,8 @@ The baseline STAC model (thesis §2.3) predicts a pot reading ``p = gain · s(q)
 marker ``x = R (base_T_link(q) d) + T0``. Each extra term changes one part of it; this module is
 the one place that says how, and both ``diagnose`` and ``predict`` use it:
 
-- ``sensor_nonlinearity:POT`` (c2, c3, V): ``p = gain s + bias + c2 u² + c3 u³`` with the reading
-  normalised ``u = (p − center) / half`` (center and half range of the training readings in
+- ``sensor_nonlinearity:POT`` (c2, c3, V): ``p = ŷ + c2 u² + c3 u³`` with ŷ = gain s + bias
+  normalised ``u = (ŷ − center) / half`` (center and half range of the training readings in
   ``extra``): the pot's transfer curve is not linear.
 - ``backlash:POT`` (half_width, V; ``extra.width`` W, V): ``p = ŷ − half_width · dir_t`` with
   ŷ = gain s + bias and dir_t = (ŷ − play(ŷ, W)) / (W / 2) in [−1, 1] (:func:`direction`): the
@@ -100,15 +100,16 @@ def direction(p: np.ndarray, width: float) -> np.ndarray:
 
 
 def pot_columns(term: Term, p: np.ndarray, model: np.ndarray | None = None) -> np.ndarray:
-    """∂p̂/∂θ (T, k) of a pot term at the readings p (T,) (module docstring); a backlash follows the
-    model's reading ``model`` (T,) = gain s(q) + bias when given (else the reading itself: a lagging
-    guess, :func:`apply_terms`)."""
+    """∂p̂/∂θ (T, k) of a pot term (module docstring), a function of the model's reading ``model``
+    (T,) = gain s(q) + bias at a tracked q when given, else of the reading p (T,) itself (a first
+    guess: a dead band then lags, a curve is bent by itself; :func:`apply_terms`)."""
     e = term.extra
+    x = np.asarray(p if model is None else model, float)
     if term.cause == "sensor_nonlinearity":
-        u = (np.asarray(p, float) - e["center"]) / e["half"]
+        u = (x - e["center"]) / e["half"]
         return np.stack([u * u, u * u * u], axis=1)
     if term.cause == "backlash":
-        return -direction(p if model is None else model, e["width"])[:, None]
+        return -direction(x, e["width"])[:, None]
     raise ValueError(f"{term.cause} is not a pot term")
 
 
