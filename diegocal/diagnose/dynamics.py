@@ -114,11 +114,9 @@ class DynamicsAdapter:
         self.F = self.base.project(F[:, self.rows])  # (T, k, r)
 
     # ------------------------------------------------------------------ fit
-    def _gradient(self, X: np.ndarray) -> np.ndarray:
-        return np.gradient(X, self.time, axis=0)
-
     def _solve(self, A, train, sigma):
-        """Weighted least squares of tau on A (T, k, P) over the training rows: (w, cov, rss/dof)."""
+        """Weighted least squares of tau on A (T, k, P) over the training rows, joint rows divided
+        by ``sigma``: (w (P,), its covariance (P, P))."""
         X = A[train] / sigma[None, :, None]
         y = self.tau[train] / sigma[None, :]
         X, y = X.reshape(-1, A.shape[2]), y.reshape(-1)
@@ -133,6 +131,9 @@ class DynamicsAdapter:
         return w, cov
 
     def fit(self, terms, train) -> DynamicsFit:
+        """The baseline (eq. 3.30 with friction, base parameters) with ``terms`` on the training
+        samples: least squares, then again with each joint's rows weighted by 1 / its residual
+        std; a ``torque_lag``'s time constant by :meth:`_fit_lags` in between."""
         train = np.asarray(train, bool)
         terms = tuple(as_dynamics_term(t) for t in terms)
         C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
