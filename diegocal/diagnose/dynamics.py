@@ -152,12 +152,25 @@ class DynamicsAdapter:
         out, at = [], self.base.n_base
         for t in terms:
             if t.is_filter:
-                out.append(t.with_values([lags.get(self.row_of.get(t.channel), t.value("lag"))]))
+                r = self.row_of.get(t.channel)
+                lag = lags.get(r, t.value("lag"))
+                out.append(t.with_values([lag], [self._lag_se(A, w, r, lag, pred, train)] if r is not None else None))
                 continue
             k = len(t.parameters)
             out.append(t.with_values(w[at : at + k], se[at : at + k]))
             at += k
         return DynamicsFit(w, tuple(out), sigma, pred, Aeff, train)
+
+    def _lag_se(self, A, w, r: int, lag: float, pred, train) -> float:
+        """Standard error of a lag (s): the residual std of its joint over the root sum of squares
+        of the prediction's derivative with respect to the lag (central difference), training rows."""
+        h = max(1e-4, 0.01 * lag)
+        d = (lag_filter(A[:, r], self.time, lag + h) - lag_filter(A[:, r], self.time, max(lag - h, 0.0))) @ w
+        d /= lag + h - max(lag - h, 0.0)
+        ok = train & np.isfinite(self.tau[:, r])
+        e = self.tau[ok, r] - pred[ok, r]
+        den = float(d[ok] @ d[ok])
+        return float(np.sqrt(float(e @ e) / max(ok.sum() - 1, 1) / den)) if den > 0 else float("nan")
 
     def _lagged(self, A, lags: dict):
         if not lags:
