@@ -243,12 +243,14 @@ class KinematicsAdapter:
                     continue
                 extra = pot_extra(cause, self.raw_pots[train, j], float(sigma_p[j]))
                 bands = BAND_SCALES if cause == "backlash" else (1.0,)
+                shared = None
                 for b in bands:  # backlash: a family over dead-band widths
                     ex = dict(extra, width=extra["width"] * b) if cause == "backlash" else extra
                     term = make_term(cause, name, extra=ex)
                     cols, refit = self._term_columns(lin, fitted, term)
+                    shared = shared or lin.channels(refit)
                     fam = f"backlash:{name}" if cause == "backlash" else ""
-                    out.append(Candidate(term, lin.channels(cols), family=fam, refit=lin.channels(refit)))
+                    out.append(Candidate(term, lin.channels(cols), family=fam, refit=shared))
         for joint in lin.observed_joints():
             if ("link_offset", joint) in have:
                 continue
@@ -271,14 +273,12 @@ class KinematicsAdapter:
         for name in self.marker_names:
             if ("marker_slip", name) in have:
                 continue
-            base = lin.project(lin.marker_basis(lin.mapped_index(name)))  # (T, R, 3)
-            refit = lin.channels(base)
+            refit = lin.channels(lin.project(lin.marker_basis(lin.mapped_index(name))))  # (T, R, 3)
             for k in starts:
-                cols = base.copy()
-                cols[:k] = 0.0
+                cols = {c: _FromSample(v, k) for c, v in refit.items()}
                 region = Region("time", float(self.time[k]), float(self.time[-1]))
                 term = make_term("marker_slip", name, region=region)
-                out.append(Candidate(term, lin.channels(cols), family=f"marker_slip:{name}", refit=refit))
+                out.append(Candidate(term, cols, family=f"marker_slip:{name}", refit=refit))
         return out
 
     # ------------------------------------------------------------------ faults
@@ -291,13 +291,12 @@ class KinematicsAdapter:
         sig = float(fitted.cal.sigma_markers)
         # a reading is off when its residual's squared norm passes chi²_3 at alpha / readings
         thr2 = chi2.isf(0.01 / n_tests, 3) * sig**2
-        off2 = max(chi2.isf(0.01 / n_tests, 3), OUTLIER_SIGMAS**2) * sig**2
         own = np.einsum("tmi,tmi->tm", rm, rm)
         out = []
         swapped = np.zeros((T, M), bool)
         for m in range(M):
             for k in range(m + 1, M):
-                bad = (own[:, m] > off2) & (own[:, k] > off2)
+                bad = (own[:, m] > thr2) & (own[:, k] > thr2)
                 if bad.sum() < 3:
                     continue
                 dm = np.sum((xm[:, m] - pred[:, k]) ** 2, -1)
@@ -524,16 +523,33 @@ class _Lin:
         out = {}
         for i, n in enumerate(self.obs.pot_names):
             if keep[i] and energy[i] > 0:
-                out[n] = C[:, i]
+                out[n] = np.ascontiguousarray(C[:, i])  # a copy: C itself is not kept alive
         mk = C[:, P:].reshape(self.T, -1, 3, k)
         a = self.fitted.applied
-        merged = self.adapter._merge(a, mk)
         names = list(self.obs.marker_names)
-        for i, n in enumerate(self.adapter.marker_names):
+        for n in self.adapter.marker_names:
             j = P + names.index(n)
-            second = [P + names.index(v) for v, (o, _) in a.slips.items() if o == n]
-            if any(keep[x] and energy[x] > 0 for x in [j, *second]):
-                out[n] = merged[:, i]
+            second = [(names.index(v), first) for v, (o, first) in a.slips.items() if o == n]
+            if any(keep[x] and energy[x] > 0 for x in [j, *[P + v for v, _ in second]]):
+                col = mk[:, j - P].copy()
+                for v, first in second:
+                    col[first:] = mk[first:, v]
+                out[n] = col
+        return out
+
+
+class _FromSample:
+    """Columns (T, ...) that are zero before sample ``first``: a slip variant, made only when the
+    engine reads it (np.asarray), so that a family of change times shares one array."""
+
+    def __init__(self, base: np.ndarray, first: int):
+        self.base, self.first = base, first
+        self.shape = base.shape
+        self.ndim = base.ndim
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.array(self.base, dtype=dtype)
+        out[: self.first] = 0.0
         return out
 
 
