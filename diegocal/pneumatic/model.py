@@ -39,6 +39,7 @@ class ModelTerms:
     ds: np.ndarray | None
     dr: np.ndarray | None
     s_p: np.ndarray | float = 0.0
+    r_p: np.ndarray | float = 0.0
 
 
 def sigmoid(x):
@@ -118,9 +119,16 @@ class ChamberModel:
         if jacobian:
             den = ev.den[..., None] if np.ndim(ev.den) else ev.den
             dr = ev.dnum / den - (r[..., None] if np.ndim(r) else r) * ev.dden / den
+        r_p = 0.0
+        if ev.factor is not None:  # a shaping of the valve's rate (flow_saturation)
+            r_p = r * ev.factor_p
+            if jacobian:
+                dr = dr * ev.factor[..., None] + r[..., None] * ev.dfactor
+            r = r * ev.factor
         s, ds, s_p = ev.s, ev.ds, 0.0 if ev.s_p is None else ev.s_p
         if self.has_flow:  # (s - p) r + α - β p = (s' - p) r', r' = r + β, s' = (s r + α) / r'
             rc = np.maximum(r, 0.0)
+            rc_p = np.where(r > 0, r_p, 0.0)
             r2 = rc + ev.beta
             safe = np.where(r2 > 0, r2, 1.0)
             s2 = np.where(r2 > 0, (s * rc + ev.alpha) / safe, s)
@@ -129,9 +137,9 @@ class ChamberModel:
                 dr2 = drc + ev.dbeta
                 ds = (ds * rc[..., None] + s[..., None] * drc + ev.dalpha - s2[..., None] * dr2) / safe[..., None]
                 dr = dr2
-            s_p = s_p * rc / safe
-            s, r = s2, r2
-        return ModelTerms(s, r, ds, dr, s_p)
+            s_p = (s_p * rc + (s - s2) * rc_p) / safe
+            s, r, r_p = s2, r2, rc_p
+        return ModelTerms(s, r, ds, dr, s_p, r_p)
 
     def _exact_step(self, x, p, u, v, vd, h, consts, jacobian):
         """One exact step (4.7) with the command ``u`` held: p_next, d p_next / d x (or None),
@@ -145,7 +153,8 @@ class ChamberModel:
         if jacobian:
             d_r = np.where(t.r > 0.0, -h * (p - t.s) * e, 0.0)  # d p_next / d r (0 where clamped)
             jac = d_s[..., None] * t.ds + d_r[..., None] * t.dr
-        return p_next, jac, e + d_s * t.s_p, t.s, r
+        dp = e + d_s * t.s_p + np.where(t.r > 0.0, -h * (p - t.s) * e, 0.0) * t.r_p  # d p_next / d p
+        return p_next, jac, dp, t.s, r
 
     def step(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True):
         """Exact step over h with s, r held fixed, thesis eq. (4.7): p(t+h) = s + (p - s) exp(-r h).

@@ -35,7 +35,9 @@ that the exact step (4.7) still applies:
 - ``pressure_offset`` (offset, pressure unit): the sensor reads p + offset; the model runs on the
   reading minus the offset;
 - ``sensor_lag`` (lag_s, s; at most one tick): the tick-averaged pressure answers the command a
-  fraction of a tick late (thesis §4.5); the form of ``valve_delay``, which it excludes.
+  fraction of a tick late (thesis §4.5); the form of ``valve_delay``, which it excludes;
+- ``flow_saturation`` (sat, 1): the valve's rate r becomes r / (1 + sat |s - p| / c_s): the
+  thin-plate flow (4.1) is choked far from equilibrium, less than proportional to s - p.
 
 Folding the flows into (s, r): ``(s - p) r + α - β p = (s' - p) r'`` with r' = r + β and
 s' = (s r + α) / r'.
@@ -86,7 +88,8 @@ class Evaluation:
     Parts (N,) and their derivatives (N, P) (None unless ``jacobian``): ``s``/``ds`` the steady
     state, ``num``/``dnum`` and ``den``/``dden`` the rate's numerator and denominator, ``g``/``dg``
     the valve sigmoid, ``alpha``/``beta`` the flows added to ``pdot`` as ``alpha - beta p`` (None
-    until a term adds one), ``s_p`` d s / d p (None: 0).
+    until a term adds one), ``s_p`` d s / d p (None: 0), ``factor``/``factor_p``/``dfactor`` a
+    factor of the valve's rate num/den, its derivative in p and in x (None: 1).
     """
 
     x: np.ndarray
@@ -114,6 +117,9 @@ class Evaluation:
     beta: np.ndarray | None = None
     dbeta: np.ndarray | None = None
     s_p: np.ndarray | None = None
+    factor: np.ndarray | None = None
+    factor_p: np.ndarray | None = None
+    dfactor: np.ndarray | None = None
     shape: tuple = field(default=())
 
     def value(self, name: str) -> float:
@@ -148,7 +154,7 @@ class ChamberTerm(Term):
 
     CAUSE: ClassVar[str] = ""
     specs: ClassVar[tuple[ParamSpec, ...]] = ()
-    stage: ClassVar[int] = 1
+    stage: ClassVar[float] = 1
     baseline: ClassVar[bool] = False
 
     def add(self, ev: Evaluation) -> None:  # pragma: no cover - every term overrides it
@@ -383,13 +389,43 @@ class PressureOffset(ChamberTerm):
         return None
 
 
-#: Extra terms by cause: diagnose's vocabulary (DESIGN.md), :data:`CAUSES`, and ``sensor_lag``.
+class FlowSaturation(ChamberTerm):
+    """The ports' flow saturates with the pressure difference: r' = r / (1 + sat |s - p| / c_s).
+
+    Not a fault: the thin-plate flow of thesis eq. (4.1) is choked (independent of the downstream
+    pressure) far from equilibrium and grows like a square root near it, while eq. (4.6) makes it
+    proportional to s - p: far from s a chamber fills and empties at a rate less than proportional
+    to the gap. ``diagnose`` fits it with the baseline (like ``sensor_lag``), so that this known
+    limit of the 9-parameter model is not taken for structure that no term explains. It shapes the
+    valve's rate only (an added flow such as a leak keeps its own), after the whole s is known.
+    """
+
+    CAUSE = "flow_saturation"
+    specs = (ParamSpec("sat", "1", 0.0, 20.0, 0.0, "flow saturation per half-span c_s"),)
+    stage = 4.5
+
+    def add(self, ev: Evaluation) -> None:
+        k = ev.value("sat")
+        gap = ev.s - ev.p
+        a = np.abs(gap) / ev.c_s
+        f = 1.0 / (1.0 + k * a)
+        ev.factor = f
+        sgn = np.sign(gap) / ev.c_s
+        s_p = 0.0 if ev.s_p is None else ev.s_p
+        ev.factor_p = -(f * f) * k * sgn * (s_p - 1.0)  # d f / d p
+        if ev.jacobian:
+            ev.dfactor = -((f * f) * k * sgn)[..., None] * ev.ds
+            ev.dfactor[..., ev.index["sat"]] -= f * f * a
+
+
+#: Extra terms by cause: diagnose's vocabulary (DESIGN.md), :data:`CAUSES`; ``sensor_lag``, ``flow_saturation``.
 EXTRA: dict[str, type[ChamberTerm]] = {
     "valve_delay": ValveDelay,
     "chamber_leak": ChamberLeak,
     "supply_droop": SupplyDroop,
     "pressure_offset": PressureOffset,
     "sensor_lag": SensorLag,
+    "flow_saturation": FlowSaturation,
 }
 CAUSES: tuple[str, ...] = ("valve_delay", "chamber_leak", "supply_droop", "pressure_offset")
 

@@ -4,8 +4,8 @@ give nothing, two causes on one chamber are both found, and `predict` runs the e
 
 Sizes: valve_delay 0.03 s (the simulator's default), pressure_offset 5 kPa (17x the pressure
 noise), supply_droop 100 kPa per g/s (sags the supply by ~120 kPa while a chamber fills),
-chamber_leak 1e-6 m² (12x the default orifice; smaller leaks are, to eq. 4.10, another valve: see
-diegocal/diagnose/pneumatics.py). Seeds fixed; 20-s logs at 5 sub-steps per tick.
+chamber_leak 2e-6 m² (25x the default orifice; a leak below ~1e-6 m² is, to eq. 4.10, another
+valve: see diegocal/diagnose/pneumatics.py). Seeds fixed; 20-s logs at 5 sub-steps per tick.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def delay_and_offset(robot):
 
 @pytest.fixture(scope="module")
 def droop_and_leak(robot):
-    log = simulate(robot, 1, "supply_droop:elbow.ext=100", "chamber_leak:shoulder.flex=1e-6")
+    log = simulate(robot, 1, "supply_droop:elbow.ext=100", "chamber_leak:shoulder.flex=2e-6")
     return log, diagnose(log, robot, DiagnoseOptions(domain="pneumatics"))
 
 

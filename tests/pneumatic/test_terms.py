@@ -18,7 +18,8 @@ from diegocal.terms import Term
 X = np.array([4.9, 1.5, 0.3, -20.0, 0.5, 0.3, 30.0, 0.1, 0.1])
 CONSTS = (360.0, 260.0, 0.1)
 EXTRA = {"valve_delay": {"delay_s": 0.023}, "chamber_leak": {"leak": 0.4}, "supply_droop": {"droop": 2e-3},
-         "pressure_offset": {"offset": 3.0}}
+         "pressure_offset": {"offset": 3.0}, "flow_saturation": {"sat": 0.7}}
+SATURATED = ("flow_saturation", "chamber_leak", "supply_droop", "pressure_offset")
 
 
 def _extra(causes=CAUSES, chamber="c"):
@@ -38,7 +39,7 @@ def test_baseline_terms_name_c1_to_c9_in_table_order():
     assert causes == ["valve_steady_state", "volume_rate_steady", "valve_rate", "volume_rate_rate", "chamber_volume"]
 
 
-@pytest.mark.parametrize("causes", [(), *[(c,) for c in CAUSES], CAUSES])
+@pytest.mark.parametrize("causes", [(), *[(c,) for c in CAUSES], CAUSES, ("flow_saturation",), SATURATED])
 def test_jacobian_of_every_term_matches_finite_differences(rng, causes):
     model = ChamberModel(_extra(causes))
     p, u, v, vd, h, lags = _samples(rng)
@@ -141,3 +142,22 @@ def test_fit_on_some_rows_uses_only_steps_inside_them(robot, train_log):
     rows[:1000] = rows[2000:3000] = True
     fit = fit_chamber(data, FitOptions(drift_starts=0), rows=rows)
     assert fit.n_samples == 999 + 999 and np.isnan(fit.drift_2s)
+
+
+def test_flow_saturation_slows_the_rate_far_from_the_steady_state_and_its_pressure_derivative(rng):
+    p, u, v, vd, h, lags = _samples(rng)
+    sat = ChamberModel(_extra(("flow_saturation",)))
+    x = np.concatenate([X, [0.7]])
+    base = BASELINE.evaluate(X, p, u, v, vd, h, *CONSTS, jacobian=False)
+    shaped = sat.evaluate(x, p, u, v, vd, h, *CONSTS, jacobian=False)
+    np.testing.assert_allclose(shaped.s, base.s)
+    assert (shaped.r <= base.r + 1e-12).all() and (shaped.r < base.r).any()
+    # d p_next / d p (what the offset's column reads) against finite differences, with a leak
+    model = ChamberModel(_extra(SATURATED))
+    x = np.concatenate([X, [EXTRA[c][n] for c in SATURATED for n in EXTRA[c]]])
+    at = model.index["offset"]
+    _, J = model.step(x, p, u, v, vd, h, *CONSTS, lags)
+    e = 1e-5
+    fd = (model.step(x, p + e, u, v, vd, h, *CONSTS, lags, False)[0]
+          - model.step(x, p - e, u, v, vd, h, *CONSTS, lags, False)[0]) / (2 * e)
+    np.testing.assert_allclose(J[:, at], 1.0 - fd, rtol=1e-5, atol=1e-6)
