@@ -52,7 +52,7 @@ from diegocal.stac.terms import (
 from diegocal.terms import Region, Term
 
 #: Change times tried per marker for a slip (a family) inside each run of training frames.
-SLIP_STEPS = 8
+SLIP_STEPS = 4
 #: Half width (samples) of the running median a marker outlier is measured against.
 OUTLIER_WINDOW = 8
 #: A candidate acts on the channels that carry at least this share of its largest channel's
@@ -399,6 +399,7 @@ class _Lin:
     s: np.ndarray
     Rl: np.ndarray
     sigma_p: np.ndarray
+    _pots: dict = field(default_factory=dict)
 
     @property
     def T(self) -> int:
@@ -449,10 +450,12 @@ class _Lin:
         return C - self.J @ (self.K @ C)
 
     def project_pot(self, j: int) -> np.ndarray:
-        """The projected unit column of pot j: (T, R)."""
-        out = -self.J @ self.K[:, :, j : j + 1]
-        out[:, j, 0] += 1.0
-        return out[..., 0]
+        """The projected unit column of pot j: (T, R) (computed once per pot)."""
+        if j not in self._pots:
+            out = -self.J @ self.K[:, :, j : j + 1]
+            out[:, j, 0] += 1.0
+            self._pots[j] = out[..., 0]
+        return self._pots[j]
 
     def sharing(self, j: int) -> list[int]:
         """Pots (mapped order) that read a joint pot j reads (j first)."""
