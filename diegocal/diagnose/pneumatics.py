@@ -185,9 +185,10 @@ class PneumaticAdapter:
         return _pad(pred), _pad(J), model
 
     def candidates(self, fitted: PneumaticFit, residuals: Residuals, train) -> list[Candidate]:
-        """Every cause the model lacks, linearised at the current fit (module docstring); a
-        candidate whose estimate on the training rows breaks its parameter's bound (a negative
-        leak, droop or added delay: no physical cause) is not offered."""
+        """Every cause the model lacks (module docstring): leak, droop and offset as the model
+        refitted with them, the delay family linearised at the current fit; a candidate below its
+        resolution (:data:`FLOORS`) or whose estimate breaks its bound (a negative leak, droop or
+        added delay: no physical cause) is not offered."""
         name, params = self.unit_name, fitted.params
         have = {t.cause for t in params.terms}
         ok = self._rows(fitted)
