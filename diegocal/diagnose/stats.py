@@ -29,6 +29,8 @@ from scipy import stats
 #: Sub-blocks are at least this many samples, and this many correlation times, long.
 MIN_CLUSTER = 10
 CORRELATION_TIMES = 5.0
+#: Every contiguous run of validation samples gives at least this many sub-blocks.
+MIN_RUN_PIECES = 3
 
 
 def autocorrelation_time(r: np.ndarray, max_lag: int = 200) -> float:
@@ -133,7 +135,7 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     seen[samples] = True
     u_by_sample = np.bincount(samples, weights=u, minlength=T)[seen]
     tau = autocorrelation_time(u_by_sample)
-    length = int(max(MIN_CLUSTER, np.ceil(CORRELATION_TIMES * tau)))
+    length = int(max(MIN_CLUSTER, min(np.ceil(CORRELATION_TIMES * tau), _longest_sub_block(mask & seen))))
     _, cl = np.unique(sub_blocks(mask & seen, length)[samples], return_inverse=True)
     C = int(cl.max()) + 1
     if C < 3:
@@ -148,6 +150,21 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     return OutOfSample(
         slope, float(t), df, float(stats.t.sf(t, df)), float(before.sum()), float(after.sum()), length, before, after
     )
+
+
+def _longest_sub_block(mask: np.ndarray) -> int:
+    """The longest sub-block that still cuts every run of ``mask`` into MIN_RUN_PIECES pieces.
+
+    A residual that holds a second, not yet modelled effect has a long correlation time; without
+    this cap its sub-blocks would outgrow the validation blocks, leave one or two degrees of
+    freedom, and hide a strong effect behind a weaker one (two effects on one joint). Once the
+    stronger effect is in the model, the next round tests the other on a residual near noise.
+    """
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return MIN_CLUSTER
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(idx) > 1) + 1, [idx.size]])
+    return max(MIN_CLUSTER, int(np.diff(starts).min()) // MIN_RUN_PIECES)
 
 
 def paired_difference(x: np.ndarray, y: np.ndarray, mask: np.ndarray, length: int) -> tuple[float, float, int]:
