@@ -43,6 +43,12 @@ def _domain(text: str | None) -> str | None:
     return text
 
 
+def _choice(text: str, option: str, allowed: tuple[str, ...]) -> str:
+    if text not in allowed:
+        raise typer.BadParameter(f"{option} {text!r} is not one of {', '.join(allowed)}")
+    return text
+
+
 def output_paths(log: Path, output: Path | None, domain: str, several: bool) -> tuple[Path, Path]:
     """diagnosis.yaml and the extended model's path for one domain (DESIGN.md: beside the log by
     default, ``<log>.diagnosis.yaml``; with several domains the domain is in the name)."""
@@ -81,6 +87,14 @@ def diagnose_cmd(
             "--friction", callback=_friction, help="Dynamics: the baseline's friction, viscous,coulomb or none."
         ),
     ] = "viscous,coulomb",
+    inertia: Annotated[
+        str,
+        typer.Option(
+            "--inertia",
+            callback=lambda v: _choice(v, "--inertia", ("identified", "nominal")),
+            help="Dynamics: identified (fit the rigid body) or nominal (keep the URDF's inertias; names a payload).",
+        ),
+    ] = "identified",
     chamber: Annotated[
         list[str] | None, typer.Option("--chamber", "-c", help="Pneumatics: chamber to diagnose (repeatable).")
     ] = None,
@@ -133,6 +147,7 @@ def diagnose_cmd(
             min_gain=min_gain,
             n_blocks=blocks,
             friction=fric,
+            inertia=inertia,
             chambers=tuple(dict.fromkeys(chamber or ())),
             jobs=jobs,
             progress=None if quiet else progress,

@@ -58,6 +58,9 @@ class DiagnoseOptions:
     alpha, min_gain, max_rounds : see :class:`~diegocal.diagnose.engine.EngineOptions`
     n_blocks : contiguous blocks the log is cut into (roles train / validation / held out, interleaved)
     friction : dynamics: the baseline's friction terms (subset of viscous, coulomb)
+    inertia : dynamics: "identified" (the baseline fits the rigid body's base parameters) or
+        "nominal" (the URDF's inertias are the model; only friction is fitted, so an unmodelled
+        payload is a model error that can be named)
     chambers : pneumatics: the chambers to diagnose (() = all)
     jobs : independent units (chambers) diagnosed in parallel processes
     seed : seeds anything random (none of the defaults is)
@@ -70,6 +73,7 @@ class DiagnoseOptions:
     max_rounds: int = 6
     n_blocks: int = 10
     friction: tuple = ("viscous", "coulomb")
+    inertia: str = "identified"
     chambers: tuple = ()
     jobs: int = 1
     seed: int = 0

@@ -59,7 +59,9 @@ def test_an_unknown_domain_is_a_usage_error(tmp_path):
     assert "thermal" in one_line_error(result)
 
 
-@pytest.mark.parametrize("option", [["--friction", "sticky"], ["--alpha", "2"], ["--blocks", "1"]])
+@pytest.mark.parametrize(
+    "option", [["--friction", "sticky"], ["--alpha", "2"], ["--blocks", "1"], ["--inertia", "guessed"]]
+)
 def test_bad_option_values_are_usage_errors(tmp_path, option):
     path = _log(tmp_path, {"q": ["joint1"], "tau": ["joint1"]}, robot="arm3")
     result = runner.invoke(app, ["diagnose", str(path), *option])
