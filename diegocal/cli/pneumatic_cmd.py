@@ -139,8 +139,9 @@ def simulate_pneumatics_cmd(
             "--effect",
             metavar="NAME[:CHAMBER][=SIZE]",
             help="Pneumatic effect (repeatable), SIZE (unit, default): valve_delay (s, 0.03), "
-            "chamber_leak (orifice m², 0.08e-6), supply_droop (kPa per g/s of supply flow, 10), "
-            "pressure_offset (kPa, 15). A random chamber unless named.",
+            "chamber_leak (orifice m², 1e-6), supply_droop (kPa per g/s of supply flow, 100; "
+            "channel 'supply': one line shared by all, 1), pressure_offset (kPa, 15). "
+            "A random chamber unless named.",
         ),
     ] = None,
     sessions: Annotated[

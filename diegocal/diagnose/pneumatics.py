@@ -25,10 +25,10 @@ A candidate smaller than its resolution (:data:`FLOORS`: about twice what the 9-
 own error puts into that term on clean simulated chambers) or outside its bounds is not offered:
 the model cannot tell it from its own error. A term the engine selects is the refitted model (the
 delay's from the best whole-sample delay). A leak orifice no larger than the valve's own
-room-port leakage (the simulator's default, 0.08e-6 m²) is, to eq. (4.10), just another valve: a
-constant area beside the room port shifts the valve's centre and leakage, which c1 and c9 absorb
-(refitted with the term on such a log, the leak comes out exactly 0); it is named from about
-1e-6 m² (half a volt of the valve's opening).
+room-port leakage (the simulator's former default, 0.08e-6 m²) is, to eq. (4.10), just another
+valve: a constant area beside the room port shifts the valve's centre and leakage, which c1 and
+c9 absorb (refitted with the term on such a log, the leak comes out exactly 0); it is named from
+about 0.5-1e-6 m² (a fraction of a volt of the valve's opening).
 
 Measured on diego (thin-plate simulator, 30-s logs, 10 seeds, each cause on a random chamber,
 top finding = cause with a positive held-out gain): valve_delay 0.03 s 10/10, 0.015 s 10/10;

@@ -33,11 +33,15 @@ with its own physical shape, independent of the model's terms that ``diagnose`` 
 
 - ``valve_delay`` [0.03 s]: the spool follows the command SIZE seconds late (the held 10 ms command
   shifted in continuous time, to the sub-step);
-- ``chamber_leak`` [0.08e-6 m²]: an orifice of SIZE m² from the chamber to the room, with the
-  thin-plate flow of eq. (4.1) (choked above the critical ratio);
-- ``supply_droop`` [10 kPa per g/s; 1 on the shared line]: the supply pressure a chamber sees
-  drops by SIZE kPa per g/s of the mass flow drawn from the supply (its own flow, or, without a
-  chamber, the whole robot's flow through one shared line), from the previous sub-step's flow;
+- ``chamber_leak`` [1e-6 m², a hole of 1.1 mm]: an orifice of SIZE m² from the chamber to the
+  room, with the thin-plate flow of eq. (4.1) (choked above the critical ratio). An orifice no
+  larger than the valve's own room-port leakage (0.03-0.12e-6 m² here; the default was 0.08e-6)
+  is, to any valve model, a slightly different valve, so the default is one that matters;
+- ``supply_droop`` [100 kPa per g/s; 1 on the shared line]: the supply pressure a chamber sees
+  drops by SIZE kPa per g/s of the mass flow drawn from the supply (its own flow, or, with the
+  channel ``supply``, the whole robot's flow through one shared line), from the previous
+  sub-step's flow; a filling chamber draws a few g/s, so the default sags its supply by
+  ~100 kPa while it fills (the former 10 sagged it by ~2 kPa RMS, below the model's own error);
 - ``pressure_offset`` [15 kPa]: the pressure sensor reads SIZE kPa high.
 
 Chamber geometry keys (sensors.yaml ``chambers:``, all optional; defaults in brackets):
@@ -65,10 +69,12 @@ U_LOW, U_HIGH = 3.0, 7.0  # §4.5: "we used 3 < u < 7 Volts"
 DEFAULTS = {"bore_area": 2.0e-4, "stroke": 0.04, "dead_volume": 2.0e-6}
 EFFECT_DEFAULTS = {
     "valve_delay": {"delay_s": 0.03},
-    "chamber_leak": {"area_m2": 0.08e-6},
-    "supply_droop": {"kpa_per_g_s": 10.0},
+    "chamber_leak": {"area_m2": 1e-6},
+    "supply_droop": {"kpa_per_g_s": 100.0},
     "pressure_offset": {"offset": 15.0},
 }
+#: ``supply_droop:supply``: one supply line shared by every chamber (module docstring).
+SHARED_LINE = "supply"
 #: The value ``--effect NAME=SIZE`` sets, per effect (its unit: the module docstring).
 EFFECT_SIZE = {"valve_delay": "delay_s", "chamber_leak": "area_m2", "supply_droop": "kpa_per_g_s",
                "pressure_offset": "offset"}
@@ -396,8 +402,8 @@ def _effects(options, names, rng):
     records, shared = [], False
     for req in check_effects(options.effects, "pneumatics"):
         values = dict(EFFECT_DEFAULTS[req.name])
-        if req.name == "supply_droop" and req.channel is None:
-            sel, channel, shared = np.ones(C, bool), "supply", True
+        if req.name == "supply_droop" and req.channel == SHARED_LINE:
+            sel, channel, shared = np.ones(C, bool), SHARED_LINE, True
             values["kpa_per_g_s"] = 1.0  # the shared line carries every chamber's flow
         else:
             channel = (

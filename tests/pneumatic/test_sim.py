@@ -65,7 +65,7 @@ def test_effects_are_injected_and_recorded(robot):
                 "pressure_offset:elbow.ext",
                 "valve_delay:shoulder.flex",
                 "chamber_leak:elbow.flex",
-                "supply_droop",
+                "supply_droop:supply",
             ),
             **opts,
         ),
