@@ -104,14 +104,14 @@ class KinematicsAdapter:
         train = np.asarray(train, bool)
         terms = tuple(self._own(t, train) for t in terms)
         base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
-        fitted = self._fit_once(terms, train, None if base is None else base.pots)
+        fitted = self._fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
         for _ in range(REFINE):
             if not any(t.cause in (*POT_CAUSES, "link_offset", "time_offset") for t in terms):
                 break
             terms = self._refine(fitted)
-            fitted = self._fit_once(terms, train, fitted.pots)
+            fitted = self._fit_once(terms, train, fitted)
         return fitted
 
     def _own(self, term: Term, train) -> Term:
@@ -121,8 +121,10 @@ class KinematicsAdapter:
             return replace(term, extra=pot_extra(term.cause, self.raw_pots[train, j], 0.005))
         return term
 
-    def _fit_once(self, terms, train, model_pots=None) -> KinFit:
-        applied = apply_terms(terms, self.log, self.robot, model_pots)
+    def _fit_once(self, terms, train, previous: KinFit | None = None) -> KinFit:
+        """STAC on the training frames of the log mapped into ``terms``, then q tracked on every
+        frame (from ``previous``'s q: the pot terms act on its model readings)."""
+        applied = apply_terms(terms, self.log, self.robot, None if previous is None else previous.pots)
         idx = np.flatnonzero(train)
         sub = Log(
             applied.log.time[idx],
@@ -132,7 +134,9 @@ class KinematicsAdapter:
         )
         cal = calibrate(sub, applied.robot, self.options).calibration
         terms = tuple(self._slip_value(t, cal) for t in terms)
-        pred = predict(applied.log, applied.robot, cal, ("pots", "markers"), ("pots", "markers"), self.options)
+        q0 = None if previous is None else previous.q
+        both = ("pots", "markers")
+        pred = predict(applied.log, applied.robot, cal, both, both, self.options, q_init=q0)
         return KinFit(terms, cal, applied, pred.q, pred.pots, pred.markers, train.copy())
 
     @staticmethod

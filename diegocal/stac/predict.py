@@ -66,8 +66,12 @@ def predict(
     targets=("markers",),
     options: StacOptions | None = None,
     max_steps: int = 40,
+    q_init: np.ndarray | None = None,
 ) -> Prediction:
     """Track q from ``sources`` with the calibration fixed; predict ``targets`` (thesis §2.7.2).
+
+    ``q_init`` (T, n) rad: joint angles to start the tracking from (a previous fit's), instead of
+    the pots' inversion.
 
     A calibration with extra terms (``calibration.terms``, found by ``diegocal diagnose``) is
     honoured through :func:`diegocal.stac.terms.apply_terms`: the model runs on the log mapped into
@@ -82,10 +86,10 @@ def predict(
 
         applied = apply_terms(calibration.terms, log, robot)
         cal = with_slip_markers(replace(calibration, terms=()), applied, calibration.terms)
-        pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
+        pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, q_init)
         if any(t.cause in ("backlash", "sensor_nonlinearity") for t in calibration.terms):  # of the model's s
             applied = apply_terms(calibration.terms, log, robot, pred.pots)
-            pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps)
+            pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, pred.q)
         markers = to_log_markers(applied, pred.marker_names, pred.markers) if pred.marker_names else pred.markers
         return replace(pred, markers=markers, marker_names=applied.marker_names)
     obs = Observation(log, robot, need=(), needed_by="predict")
@@ -107,7 +111,9 @@ def predict(
         use_pots=bool(src - {MARKERS}),
         use_markers=MARKERS in src,
     )
-    if noise.use_pots:
+    if q_init is not None:
+        q = np.clip(np.asarray(q_init, float), obs.lower, obs.upper)
+    elif noise.use_pots:
         q = initial_q(obs, params, options, use=np.isin(obs.kinds, list(src)))
     else:
         q = np.tile(robot.neutral(), (obs.n_frames, 1))

@@ -214,3 +214,19 @@ def test_two_effects_both_found(finger):
     found = {(f.cause, f.channel) for f in d.findings}
     for e in log.truth.effects:
         assert (e["cause"], e["channel"]) in found, found
+
+
+@pytest.mark.slow
+def test_ur5_from_example_robot_data(tmp_path):
+    """A robot diegocal did not design (tests/erd.py: a pot on every joint, markers on every
+    other link): a pot's nonlinearity named on it too."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1]))
+    from erd import robot_dir
+
+    robot = load_robot(robot_dir(tmp_path, "ur5"))
+    log = _log(robot, 1, ("sensor_nonlinearity",))
+    d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
+    assert _named(d, log), [(f.cause, f.channel, f.gain()) for f in d.findings]
