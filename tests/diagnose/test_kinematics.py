@@ -48,7 +48,19 @@ def _named(diagnosis, log) -> bool:
     elif top.channel != truth["channel"]:
         return False
     red = top.gain()["reduction"]
+    if top.cause == "link_offset":  # a joint may share its name with its pot: the markers' gain
+        red = _pooled_reduction(top)
     return red > 0 or (top.kind == "fault" and red >= 0)
+
+
+def _pooled_reduction(finding) -> float:
+    """Held-out RMSE reduction pooled over the channels a finding acts on (its evidence)."""
+    out = []
+    for score in (finding.heldout_before, finding.heldout_after):
+        idx = [score.channels.index(c) for c in finding.evidence["channels"]]
+        n, r = score.n_samples[idx].astype(float), score.rmse[idx]
+        out.append(np.sqrt(np.sum(r**2 * n) / n.sum()))
+    return 1.0 - out[1] / out[0]
 
 
 # ----------------------------------------------------------------------------- terms (cheap)
