@@ -168,18 +168,23 @@ def diagnose_cmd(
 def _summary_rows(domain: str, mapping: dict, out: Path, extended: Path) -> list:
     import numpy as np
 
-    def pooled(d: dict) -> float:
-        v = np.array([x for x in (d or {}).values() if x is not None], float)
+    base, ext = mapping["baseline"], mapping["extended"]
+    units = base.get("units") or {}
+
+    def pooled(d: dict, unit: str) -> float:
+        v = np.array([x for c, x in (d or {}).items() if x is not None and units.get(c, unit) == unit], float)
         return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
 
-    base, ext = mapping["baseline"], mapping["extended"]
-    unit = base.get("unit", "")
+    held = [
+        (
+            f"held-out RMSE baseline → extended{' (' + u + ')' if len(set(units.values())) > 1 else ''}",
+            f"{pooled(base['heldout_rmse'], u):.4g} → {pooled(ext['heldout_rmse'], u):.4g} {u}",
+        )
+        for u in dict.fromkeys(units.values() or [base.get("unit", "")])
+    ]
     rows = [
         (f"{domain}: baseline", base["model"]),
-        (
-            "held-out RMSE baseline → extended",
-            f"{pooled(base['heldout_rmse']):.4g} → {pooled(ext['heldout_rmse']):.4g} {unit}",
-        ),
+        *held,
         ("findings", str(len(mapping["findings"])) if mapping["findings"] else "none (nothing significant)"),
     ]
     for f in mapping["findings"]:

@@ -9,7 +9,7 @@ scores a model on held-out samples. The engine owns the statistics and the order
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -118,6 +118,10 @@ class EngineOptions:
         most ``alpha`` from chance alone
     min_gain : practical significance: a finding must remove at least this fraction of its
         channels' validation error (a real but negligible model error is not worth a term)
+    unexplained_min_gain : the same for ``unexplained``: a binned correction spends ``n_bins``
+        parameters on one channel where a term spends one to three, so it must pay more (on clean
+        thin-plate chambers the 9-parameter model's known valve approximation leaves binned
+        structure worth 5-12 % of the validation error)
     max_rounds : at most this many terms are added (the loop stops earlier when nothing is left)
     n_units : independent units diagnosed for the same log (chambers): alpha is shared among them
     n_bins : bins of a state variable in the Show step and the ``unexplained`` test
@@ -126,6 +130,7 @@ class EngineOptions:
 
     alpha: float = 0.01
     min_gain: float = 0.05
+    unexplained_min_gain: float = 0.10
     max_rounds: int = 6
     n_units: int = 1
     n_bins: int = 10
@@ -194,7 +199,8 @@ class Finding:
         joint's offset seen by the markers)."""
         if self.heldout_before is None or self.heldout_after is None:
             return {}
-        if self.channel in self.heldout_before.channels:
+        acts_on = self.evidence.get("channels", (self.channel,))
+        if self.channel in self.heldout_before.channels and self.channel in acts_on:  # not a joint's namesake pot
             chans = [self.channel]
         else:
             chans = [c for c in self.evidence.get("channels", ()) if c in self.heldout_before.channels]
@@ -218,6 +224,7 @@ class UnitDiagnosis:
     show: dict
     fitted: Any = field(repr=False, default=None)
     exclude: dict = field(repr=False, default_factory=dict)
+    units: dict = field(default_factory=dict)  # channel -> unit ("V", "m", "N·m", "kPa")
 
 
 def _pooled(score: Score, channels) -> float:
@@ -472,7 +479,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         for v in res.channel_variables.get(c, ())
     ]
     if generic:
-        tested = evaluate_candidates(generic, res, weights, train, val, options, exclude)
+        strict = replace(options, min_gain=max(options.min_gain, options.unexplained_min_gain))
+        tested = evaluate_candidates(generic, res, weights, train, val, strict, exclude)
         for t in [t for t in tested if t.significant]:
             if any(f.kind == "unexplained" and f.channel == t.term.channel for f in findings):
                 continue  # one per channel: its most significant variable
@@ -504,6 +512,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         shown_tests,
         fitted,
         exclude,
+        dict(res.units),
     )
 
 

@@ -72,7 +72,7 @@ def finding_dict(f, units: dict) -> dict:
         "parameters": d["parameters"],
         "gain": _clean(f.gain()) or None,
         "kind": f.kind,
-        "unit": units.get(f.evidence.get("channels", [term.channel])[0], "") if f.evidence.get("channels") else "",
+        "unit": _finding_unit(f, units),
         "evidence": _clean(
             {k: v for k, v in f.evidence.items() if k != "channels"} | {"channels": f.evidence.get("channels", [])}
         ),
@@ -84,12 +84,21 @@ def finding_dict(f, units: dict) -> dict:
     return out
 
 
+def _finding_unit(f, units: dict) -> str:
+    """The unit of a finding's gain: its channel's where it is scored on it, else the unit of the
+    first channel it acts on (a joint's offset seen by markers: m)."""
+    acts_on = f.evidence.get("channels") or [f.term.channel]
+    if f.term.channel in units and f.term.channel in acts_on:
+        return units[f.term.channel]
+    return units.get(acts_on[0], "")
+
+
 def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
     """The diagnosis.yaml mapping of a :class:`~diegocal.diagnose.Diagnosis` (without the header)."""
     units = diag.units
     channel_units = {}
     for u in units:
-        channel_units.update({c: u.baseline_score.unit for c in u.baseline_score.channels})
+        channel_units.update({c: u.units.get(c, u.baseline_score.unit) for c in u.baseline_score.channels})
     base = [u.baseline_score for u in units]
     ext = [u.extended_score for u in units]
     o = diag.options
@@ -99,6 +108,7 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
             "model": units[0].baseline_model if len(units) == 1 else _common_model(u.baseline_model for u in units),
             "heldout_rmse": _rmse_map(base),
             "unit": _units(base),
+            "units": channel_units,
         },
         "findings": [finding_dict(f, channel_units) for f in diag.findings],
         "extended_model": extended_model,
