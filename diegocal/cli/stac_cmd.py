@@ -15,7 +15,7 @@ from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, default_output, summary
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
-from diegocal.io import load_log, load_yaml, make_stream, save_log, save_yaml
+from diegocal.io import load_log, load_yaml, make_stream, q_log_path, save_log, save_yaml
 from diegocal.io.log import Log
 from diegocal.robot import Robot, load_robot, resolve_robot_dir
 from diegocal.stac.calibration import Calibration
@@ -49,15 +49,6 @@ def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> Sta
     except ImportError:
         raise FitError(f"method {method!r} is not available in this build") from None
     raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
-
-
-def q_log_path(calib_path: Path) -> Path:
-    """``<stem>.q.h5`` beside calib.yaml (``x.calib.yaml`` -> ``x.q.h5``)."""
-    name = calib_path.name
-    for suffix in (".calib.yaml", ".yaml", ".yml"):
-        if name.endswith(suffix):
-            return calib_path.with_name(name[: -len(suffix)] + ".q.h5")
-    return calib_path.with_name(name + ".q.h5")
 
 
 @app.command("stac")
