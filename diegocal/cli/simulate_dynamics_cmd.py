@@ -44,8 +44,9 @@ def simulate_dynamics_cmd(
         list[str] | None,
         typer.Option(
             "--effect",
-            help="Dynamics effect NAME[:channel] to inject (repeatable): coulomb_friction, "
-            "viscous_friction, position_friction, payload (channel: link), spring, torque_offset.",
+            help="Dynamics effect NAME[:channel][=SIZE] to inject (repeatable): coulomb_friction, "
+            "viscous_friction, position_friction, payload (channel: link; SIZE kg), spring, torque_offset, "
+            "armature, coupled_friction, torque_lag (SIZE s); other SIZEs in N·m.",
         ),
     ] = None,
     region: Annotated[
