@@ -31,14 +31,19 @@ robots: $(STAMP)
 sample-data: $(STAMP)
 	$(BIN)/python scripts/make_sample_data.py sample_data
 
-# The main job on the bundled sample data: calibrate, fit, predict held-out, report.
+# The main job on the bundled sample data: calibrate, fit, predict held-out, diagnose one hidden
+# effect per domain (what the model gets wrong, the named cause, the held-out gain), report.
+DIAGNOSES := $(OUT)/kinematics.diagnosis.yaml $(OUT)/dynamics.diagnosis.yaml $(OUT)/pneumatics.diagnosis.yaml
 demo: $(STAMP)
 	@mkdir -p $(OUT)
 	$(DIEGOCAL) stac sample_data/diego_kinematics.h5 -o $(OUT)/calib.yaml --quiet
 	$(DIEGOCAL) predict $(OUT)/calib.yaml sample_data/diego_kinematics_heldout.h5 --from pots --to markers -o $(OUT)/kinematics_prediction.h5
 	$(DIEGOCAL) pneumatic-fit sample_data/diego_pneumatics.h5 --all --jobs 2 -o $(OUT)/pneumatic.yaml --quiet
 	$(DIEGOCAL) sgp-fit sample_data/arm3_dynamics.h5 --model sgp -o $(OUT)/arm3.sgp --quiet
-	$(DIEGOCAL) report sample_data/diego_kinematics.h5 $(OUT)/calib.yaml $(OUT)/pneumatic.yaml $(OUT)/arm3.sgp -o $(OUT)/report.pdf
+	$(DIEGOCAL) diagnose sample_data/finger_hidden_nonlinearity.h5 -o $(OUT)/kinematics.diagnosis.yaml --quiet
+	$(DIEGOCAL) diagnose sample_data/arm3_hidden_friction.h5 -o $(OUT)/dynamics.diagnosis.yaml --quiet
+	$(DIEGOCAL) diagnose sample_data/diego_hidden_valve_delay.h5 -o $(OUT)/pneumatics.diagnosis.yaml --quiet
+	$(DIEGOCAL) report sample_data/diego_kinematics.h5 $(OUT)/calib.yaml $(OUT)/pneumatic.yaml $(OUT)/arm3.sgp $(DIAGNOSES) -o $(OUT)/report.pdf
 	@echo "wrote $(OUT)/report.pdf"
 
 bench: $(STAMP)

@@ -92,7 +92,8 @@ def hidden_effects(out: Path) -> None:
     )  # fmt: skip
     diegocal(
         "simulate", "dynamics", "--robot", "arm3", "--duration", "30", "--seed", "2",
-        "--effect", "position_friction:joint3", "-o", str(out / "arm3_hidden_friction.h5"),
+        "--effect", "position_friction:joint3", "--region", "joint3:1.0:1.4",
+        "-o", str(out / "arm3_hidden_friction.h5"),
     )  # fmt: skip
     full = out / "_diego_pneumatics_full.h5"
     diegocal(
