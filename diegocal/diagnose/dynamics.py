@@ -40,7 +40,7 @@ import numpy as np
 from diegocal.diagnose.engine import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
-from diegocal.sgp.model import INPUT_STREAMS, torque_array
+from diegocal.sgp.model import INERTIA, INPUT_STREAMS, nominal_base, nominal_torque, torque_array
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
 from diegocal.sgp.terms import (
     FRICTION_CAUSE,
@@ -98,7 +98,7 @@ class DynamicsAdapter:
 
     domain = "dynamics"
 
-    def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS):
+    def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS, inertia="identified"):
         self.robot = robot
         self.unit_name = robot.name
         self.time = np.asarray(time, float)
@@ -109,16 +109,34 @@ class DynamicsAdapter:
         self.rows = [robot.joint_index(j) for j in self.joints]
         self.row_of = {j: r for r, j in enumerate(self.joints)}
         subset = len(self.joints) < robot.n_joints
-        self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
+        if inertia not in INERTIA:
+            raise ValueError(f"unknown inertia {inertia!r}; expected one of {', '.join(INERTIA)}")
+        self.inertia = inertia
+        if inertia == "nominal":  # the URDF's rigid body is fixed; only friction (+ terms) fitted
+            self.base = nominal_base(robot, self.friction)
+            self.tau0 = nominal_torque(robot, self.q, self.qd, self.qdd)[:, self.rows]
+        else:
+            self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
+            self.tau0 = np.zeros_like(self.tau)
         F = full_regressor(robot, self.q, self.qd, self.qdd, self.friction)
         self.F = self.base.project(F[:, self.rows])  # (T, k, r)
 
     # ------------------------------------------------------------------ fit
-    def _solve(self, A, train, sigma):
-        """Weighted least squares of tau on A (T, k, P) over the training rows, joint rows divided
-        by ``sigma``: (w (P,), its covariance (P, P))."""
+    def _offset(self, lags: dict) -> np.ndarray:
+        """(T, k): the fixed part of the prediction (the nominal rigid body's torque, zeros for an
+        identified one), through each lagging sensor's filter."""
+        if not lags or self.inertia != "nominal":
+            return self.tau0
+        out = self.tau0.copy()
+        for r, lag in lags.items():
+            out[:, r] = lag_filter(self.tau0[:, r], self.time, lag)
+        return out
+
+    def _solve(self, A, train, sigma, offset=None):
+        """Weighted least squares of tau − offset on A (T, k, P) over the training rows, joint rows
+        divided by ``sigma``: (w (P,), its covariance (P, P))."""
         X = A[train] / sigma[None, :, None]
-        y = self.tau[train] / sigma[None, :]
+        y = (self.tau[train] - (self.tau0 if offset is None else offset)[train]) / sigma[None, :]
         X, y = X.reshape(-1, A.shape[2]), y.reshape(-1)
         ok = np.isfinite(y) & np.isfinite(X).all(axis=1)
         X, y = X[ok], y[ok]
@@ -140,15 +158,17 @@ class DynamicsAdapter:
         A = np.concatenate([self.F, C], axis=2)
         lags = {self.row_of[t.channel]: t.value("lag") for t in terms if t.is_filter and t.channel in self.row_of}
         w, cov = self._solve(A, train, np.ones(len(self.joints)))
-        e = self.tau[train] - (A @ w)[train]
+        e = self.tau[train] - (A @ w + self.tau0)[train]
         s = np.sqrt(np.nanmean(e * e, axis=0))  # second pass: each joint weighted by its residual std
         sigma = np.where(np.isfinite(s) & (s > 0), s, 1.0)
         if lags:
             lags = self._fit_lags(A, lags, train, sigma)
         Aeff = self._lagged(A, lags)
-        w, cov = self._solve(Aeff, train, sigma)
-        pred = Aeff @ w
+        offset = self._offset(lags)
+        w, cov = self._solve(Aeff, train, sigma, offset)
+        pred = Aeff @ w + offset
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        se[self._unidentified(Aeff, train, terms)] = np.nan
         out, at = [], self.base.n_base
         for t in terms:
             if t.is_filter:
@@ -161,11 +181,39 @@ class DynamicsAdapter:
             at += k
         return DynamicsFit(w, tuple(out), sigma, pred, Aeff, train)
 
+    def _unidentified(self, A, train, terms) -> np.ndarray:
+        """Indices of A's columns that belong to a ``payload`` and lie in the span of the others on
+        the training rows (e.g. the mass of a link whose origin is on every earlier joint's axis:
+        only its moments show in the torques): their values are the minimum-norm solution's 0,
+        their standard errors NaN (not identified)."""
+        out, at = [], self.base.n_base
+        X = A[train].reshape(-1, A.shape[2])
+        X = X[np.isfinite(X).all(axis=1)]
+        for t in terms:
+            if t.is_filter:
+                continue
+            k = len(t.parameters)
+            if t.cause == "payload":
+                scale = float(np.linalg.norm(X[:, at : at + k], axis=0).max())
+                for p in range(at, at + k):
+                    c = X[:, p]
+                    norm = float(np.linalg.norm(c))
+                    others = np.delete(X, p, axis=1)
+                    beta, *_ = np.linalg.lstsq(others, c, rcond=None)
+                    if norm <= SPAN_TOL * scale or np.linalg.norm(c - others @ beta) <= SPAN_TOL * norm:
+                        out.append(p)
+            at += k
+        return np.asarray(out, int)
+
     def _lag_se(self, A, w, r: int, lag: float, pred, train) -> float:
         """Standard error of a lag (s): the residual std of its joint over the root sum of squares
         of the prediction's derivative with respect to the lag (central difference), training rows."""
         h = max(1e-4, 0.01 * lag)
         d = (lag_filter(A[:, r], self.time, lag + h) - lag_filter(A[:, r], self.time, max(lag - h, 0.0))) @ w
+        if self.inertia == "nominal":
+            d += lag_filter(self.tau0[:, r], self.time, lag + h) - lag_filter(
+                self.tau0[:, r], self.time, max(lag - h, 0.0)
+            )
         d /= lag + h - max(lag - h, 0.0)
         ok = train & np.isfinite(self.tau[:, r])
         e = self.tau[ok, r] - pred[ok, r]
@@ -191,8 +239,9 @@ class DynamicsAdapter:
             trial = dict(lags)
             trial[r] = lag
             Aeff = self._lagged(A, trial)
-            w, _ = self._solve(Aeff, train, sigma)
-            e = (self.tau[train] - (Aeff @ w)[train]) / sigma
+            offset = self._offset(trial)
+            w, _ = self._solve(Aeff, train, sigma, offset)
+            e = (self.tau[train] - (Aeff @ w + offset)[train]) / sigma
             return float(np.nansum(e * e))
 
         for _ in range(2 if len(lags) > 1 else 1):
@@ -246,7 +295,8 @@ class DynamicsAdapter:
 
     def _cols(self, term: DynamicsTerm) -> dict:
         X = term.columns(self.robot, self.q, self.qd, self.qdd)
-        return {j: X[:, self.robot.joint_index(j)] for j in term.joints if j in self.row_of}
+        joints = self.joints if term.cause == "payload" else term.joints  # a payload loads every joint
+        return {j: X[:, self.robot.joint_index(j)] for j in joints if j in self.row_of}
 
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
         """Every cause the model lacks on every joint (module docstring), its columns with their
@@ -299,6 +349,12 @@ class DynamicsAdapter:
             for ratio in COUPLING_RATIOS:
                 term = make_term("coupled_friction", j, extra={"partner": partner, "ratio": ratio})
                 offer(term, self._cols(term), project, f"coupled_friction:{j}+{partner}")
+        if self.inertia == "nominal":  # a point mass on each moving link (nominal inertias only)
+            for link in payload_links(self.robot):
+                if ("payload", link) in have:
+                    continue
+                term = make_term("payload", link)
+                offer(term, self._cols(term), project)
         return out
 
     def _regions(self, j: str, train, residual: np.ndarray) -> list[DynamicsTerm]:
@@ -356,7 +412,9 @@ class DynamicsAdapter:
         return tuple(fitted.terms)
 
     def describe(self, fitted: DynamicsFit) -> str:
-        base = "rigid_body" + "".join(f"+{k}" for k in self.friction)
+        base = ("nominal_rigid_body" if self.inertia == "nominal" else "rigid_body") + "".join(
+            f"+{k}" for k in self.friction
+        )
         return "+".join([base, *[t.label for t in fitted.terms]])
 
     def extended_model(self, fitted: DynamicsFit):
@@ -364,7 +422,9 @@ class DynamicsAdapter:
         terms, fitted on the training blocks."""
         from diegocal.sgp.model import DynamicsModel, SGPOptions
 
-        model = DynamicsModel(self.robot, SGPOptions(kind="pr", friction=self.friction), self.joints, fitted.terms)
+        model = DynamicsModel(
+            self.robot, SGPOptions(kind="pr", friction=self.friction, inertia=self.inertia), self.joints, fitted.terms
+        )
         tr = fitted.train & np.isfinite(self.tau).all(axis=1)
         return model.fit_arrays(self.q[tr], self.qd[tr], self.qdd[tr], self.tau[tr], time=self.time[tr])
 
@@ -394,4 +454,18 @@ def adapters(log, robot, options) -> list[DynamicsAdapter]:
     qdd = log.stream("qdd").select(robot.joint_names).data if log.has("qdd") else _derivative(qd, log.time)
     tau, joints = torque_array(log, robot)
     friction = getattr(options, "friction", FRICTION_KINDS)
-    return [DynamicsAdapter(robot, log.time, q, qd, qdd, tau, joints, friction)]
+    inertia = getattr(options, "inertia", "identified")
+    return [DynamicsAdapter(robot, log.time, q, qd, qdd, tau, joints, friction, inertia)]
+
+
+def payload_links(robot) -> tuple[str, ...]:
+    """The moving links a payload may sit on: per joint, the first body frame it carries (the
+    frames of one joint share its inertial columns, so one of them stands for all)."""
+    import pinocchio as pin
+
+    out, seen = [], set()
+    for f in robot.model.frames:
+        if f.type == pin.FrameType.BODY and f.parentJoint > 0 and f.parentJoint not in seen:
+            seen.add(f.parentJoint)
+            out.append(f.name)
+    return tuple(out)

@@ -21,11 +21,12 @@ import numpy as np
 from diegocal.errors import FitError, MissingStreamError, UnknownNameError
 from diegocal.sgp.estimator import Guard, SemiParametricGP
 from diegocal.sgp.kernels import SquaredExponential, Subspace
-from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor
+from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor, true_parameters
 from diegocal.sgp.terms import apply_lags, as_dynamics_term, term_columns
 
 LOG = logging.getLogger(__name__)
 KINDS = ("sgp", "pr", "gp", "prgp")
+INERTIA = ("identified", "nominal")
 INFERENCE = ("auto", "exact", "sparse")
 INPUT_STREAMS = ("q", "qd", "qdd")
 
@@ -90,6 +91,9 @@ class SGPOptions:
     fit_sigma_w : bool, learn σ_w (True) or keep §3.3.4's large prior
     maxiter : int, L-BFGS-B iterations per start
     min_noise : float, floor of σ_v relative to std(tau_j) (raise it for real, noisy torques)
+    inertia : "identified" (W holds the base parameters, eq. 3.30) | "nominal" (the rigid body
+        is fixed at the URDF's inertias, :func:`nominal_torque`; W holds friction and extra
+        terms only: a model that can show an unmodelled payload)
     """
 
     kind: str = "sgp"
@@ -107,8 +111,11 @@ class SGPOptions:
     fit_sigma_w: bool = True
     maxiter: int = 200
     min_noise: float = 1e-4
+    inertia: str = "identified"
 
     def __post_init__(self):
+        if self.inertia not in INERTIA:
+            raise ValueError(f"unknown inertia {self.inertia!r}; expected one of {', '.join(INERTIA)}")
         if self.kind not in KINDS:
             raise ValueError(f"unknown model kind {self.kind!r}; expected one of {', '.join(KINDS)}")
         if self.inference not in INFERENCE:
@@ -146,6 +153,8 @@ class SGPOptions:
             "fit_sigma_w": self.fit_sigma_w,
             "maxiter": self.maxiter,
             "min_noise": self.min_noise,
+            # only when not the default: the summaries of default fits stay as they were
+            **({"inertia": self.inertia} if self.inertia != "identified" else {}),
         }
 
     @classmethod
@@ -206,6 +215,25 @@ def nmse(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Normalised MSE per column (thesis §3.4.2: normalised by the target's variance)."""
     var = np.var(truth, axis=0)
     return np.mean((pred - truth) ** 2, axis=0) / np.where(var > 0, var, 1.0)
+
+
+def nominal_torque(robot, q, qd, qdd) -> np.ndarray:
+    """(T, n): the rigid body's torque with the URDF's inertias (eq. 3.30 with w = the URDF's
+    inertial parameters, no friction; Pinocchio's regressor times them, i.e. its RNEA)."""
+    n = robot.n_joints
+    w = true_parameters(robot, friction=())[: 10 * n]
+    return full_regressor(robot, q, qd, qdd, ())[:, :, : 10 * n] @ w
+
+
+def nominal_base(robot, friction) -> BaseParameters:
+    """The 'base parameters' of a nominal-inertia model: the friction columns of the full
+    regressor alone (:func:`~diegocal.sgp.regressor.full_regressor` order), nothing dependent."""
+    from diegocal.sgp.regressor import parameter_names
+
+    n = robot.n_joints
+    idx = np.arange(10 * n, 10 * n + n * len(check_friction(friction)))
+    names = parameter_names(robot, friction)
+    return BaseParameters(idx, np.zeros(0, int), np.zeros((idx.size, 0)), tuple(names[i] for i in idx))
 
 
 def torque_array(log, robot) -> tuple[np.ndarray, tuple]:
@@ -299,6 +327,19 @@ class DynamicsModel:
                 F = apply_lags(self.terms, F, time, {j: r for r, j in enumerate(self.joint_names)})
         return F
 
+    def offset(self, q, qd, qdd, time=None) -> np.ndarray:
+        """The fixed part of the prediction, (T, k): the nominal rigid body's torque of the fitted
+        joints (``inertia="nominal"``; a ``torque_lag`` applied as to the columns), else zeros."""
+        if self.options.inertia != "nominal":
+            return np.zeros((np.shape(q)[0], len(self.joint_names)))
+        tau0 = nominal_torque(self.robot, q, qd, qdd)[:, self.rows][:, :, None]
+        if any(t.is_filter for t in self.terms):
+            if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
+                time = self.time_
+            if time is not None:
+                tau0 = apply_lags(self.terms, tau0, time, {j: r for r, j in enumerate(self.joint_names)})
+        return tau0[:, :, 0]
+
     @property
     def parameter_names(self) -> tuple[str, ...]:
         """The columns of :meth:`features`: base parameters, then the extra terms' parameters."""
@@ -359,6 +400,8 @@ class DynamicsModel:
             raise ValueError(f"expected tau of shape ({T}, {len(self.joint_names)}), got {tau.shape}")
         if state is not None:
             self.base_ = BaseParameters.from_dict(state["base"])
+        elif o.inertia == "nominal":
+            self.base_ = nominal_base(self.robot, o.friction)
         else:
             rows = self.rows if self.joints_without_tau else None
             self.base_ = base_parameters(self.robot, o.friction, seed=o.seed, rows=rows)
@@ -372,6 +415,7 @@ class DynamicsModel:
         U = np.hstack([q, qd, qdd])
         F = self.features(q, qd, qdd, self.time_)
         self.U_, self.tau_ = U, tau
+        tau = tau - self.offset(q, qd, qdd, self.time_)  # nominal inertias: W fits the rest
         st = state or {}
         if o.kind == "prgp":
             self.pr_ = self._estimator("pr", T, False).fit(U, tau, F, st.get("hyper_pr"), st.get("inducing_pr"))
@@ -379,7 +423,7 @@ class DynamicsModel:
             self.gp_ = self._estimator("gp", T, False).fit(U, resid, F, st.get("hyper"), st.get("inducing"))
         else:
             self.gp_ = self._estimator(o.kind, T, o.guard_active).fit(U, tau, F, st.get("hyper"), st.get("inducing"))
-        self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd, self.time_).tau, tau)
+        self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd, self.time_).tau, self.tau_)
         return self
 
     @property
@@ -432,6 +476,9 @@ class DynamicsModel:
         if self.options.kind == "prgp":
             m_pr, v_pr, par = self.pr_.predict(U, F)
             mean, var = mean + m_pr, var + v_pr  # two independent stages: variances add
+        if self.options.inertia == "nominal":
+            tau0 = self.offset(q, qd, qdd, time)
+            mean, par = mean + tau0, par + tau0
         latent = np.sqrt(np.maximum(var, 0.0))
         return TorquePrediction(self.joint_names, mean, np.sqrt(var + noise), latent, par)
 

@@ -23,7 +23,9 @@ Causes (DESIGN.md vocabulary, domain ``dynamics``):
   q6 + q5): its friction, a function of the motor's velocity v = qd_j + ratio · qd_partner, acts
   on joint j and, times ``ratio``, on the partner (``extra``: partner, ratio);
 - ``payload``: an unmodelled point mass on a link (channel: the link): the regressor columns of
-  its parent joint's mass and first moments (m, m·c) in that joint's frame;
+  its parent joint's ten inertial parameters (m, m·c, and the second moments about the joint
+  frame's origin, Pinocchio's order): a point mass at a lever c has second moments m(|c|²I − ccᵀ),
+  not linear in (m, m·c), so they are parameters of their own;
 - ``torque_lag``: the torque sensor of joint j lags (a first-order filter, time constant lag; to
   first order τ_meas ≈ τ − lag · dτ/dt, the column ``diagnose`` proposes). Not a column: the
   model's columns of joint j are filtered (:func:`lag_filter`; linear in the parameters), so it
@@ -48,7 +50,18 @@ PARAMETERS: dict[str, tuple[tuple[str, str], ...]] = {
     "torque_offset": (("offset", "N·m"),),
     "armature": (("inertia", "kg·m²"),),
     "coupled_friction": (("coulomb", "N·m"), ("viscous", "N·m·s/rad")),
-    "payload": (("mass", "kg"), ("mc_x", "kg·m"), ("mc_y", "kg·m"), ("mc_z", "kg·m")),
+    "payload": (
+        ("mass", "kg"),
+        ("mc_x", "kg·m"),
+        ("mc_y", "kg·m"),
+        ("mc_z", "kg·m"),
+        ("I_xx", "kg·m²"),
+        ("I_xy", "kg·m²"),
+        ("I_yy", "kg·m²"),
+        ("I_xz", "kg·m²"),
+        ("I_yz", "kg·m²"),
+        ("I_zz", "kg·m²"),
+    ),
     "torque_lag": (("lag", "s"),),
 }
 CAUSES = tuple(PARAMETERS)
@@ -126,8 +139,8 @@ class DynamicsTerm(Term):
 
 
 def _payload_columns(robot, link: str, q, qd, qdd) -> np.ndarray:
-    """The joint-torque regressor's (m, mc_x, mc_y, mc_z) columns of the body that carries ``link``
-    (a point mass at the link's origin + offset: first moments in the parent joint's frame)."""
+    """The joint-torque regressor's ten columns (m, m·c, second moments; Pinocchio's order) of the
+    body that carries ``link`` (a point mass anywhere on it: moments in the parent joint's frame)."""
     import pinocchio as pin
 
     model = robot.model
@@ -136,10 +149,10 @@ def _payload_columns(robot, link: str, q, qd, qdd) -> np.ndarray:
         raise InputFileError(f"payload: {link!r} is not a moving link of robot {robot.name!r}")
     i = frame.parentJoint - 1  # the body's block of ten columns
     data = model.createData()
-    out = np.zeros((q.shape[0], robot.n_joints, 4))
+    out = np.zeros((q.shape[0], robot.n_joints, 10))
     for t in range(q.shape[0]):
         Y = pin.computeJointTorqueRegressor(model, data, q[t], qd[t], qdd[t])
-        out[t] = Y[:, 10 * i : 10 * i + 4]
+        out[t] = Y[:, 10 * i : 10 * i + 10]
     return out
 
 

@@ -127,3 +127,63 @@ def test_a_lag_term_needs_the_samples_time(arm3):
     model = DynamicsModel(arm3, SGPOptions(kind="pr"), terms=(make_term("torque_lag", "joint1", values={"lag": 0.01}),))
     with pytest.raises(Exception, match="time"):
         model.fit_arrays(q, qd, qdd, np.zeros((200, 3)))
+
+
+def test_payload_columns_are_the_link_bodys_ten_inertial_columns(arm3):
+    """A payload's columns are the regressor's block of its link's body: a point mass m at lever c
+    (second moments m(|c|²I − ccᵀ) about the joint frame) adds exactly columns @ its parameters."""
+    import pinocchio as pin
+
+    _, q, qd, qdd = states(arm3, T=50)
+    term = make_term("payload", "link3")
+    assert [p.name for p in term.parameters][:4] == ["mass", "mc_x", "mc_y", "mc_z"]
+    X = term.columns(arm3, q, qd, qdd)
+    assert X.shape == (50, 3, 10)
+    n = arm3.n_joints
+    np.testing.assert_array_equal(X, full_regressor(arm3, q, qd, qdd, ())[:, :, 10 * (n - 1) : 10 * n])
+    c = np.array([0.2, 0.03, -0.02])
+    theta = pin.Inertia(0.7, c, np.zeros((3, 3))).toDynamicParameters()
+    heavy = arm3.model.copy()
+    heavy.inertias[n] += pin.Inertia(0.7, c, np.zeros((3, 3)))
+    d0, d1 = arm3.model.createData(), heavy.createData()
+    diff = np.array([pin.rnea(heavy, d1, *x) - pin.rnea(arm3.model, d0, *x) for x in zip(q, qd, qdd, strict=True)])
+    np.testing.assert_allclose(X @ theta, diff, atol=1e-10)
+    with pytest.raises(InputFileError, match="moving link"):
+        make_term("payload", "no_such_link").columns(arm3, q, qd, qdd)
+
+
+def test_a_nominal_inertia_model_fits_friction_and_a_payload_and_survives_its_bundle(arm3, tmp_path):
+    """inertia="nominal": the URDF's rigid body is a fixed part of the prediction (rnea), W holds
+    the friction and the extra terms only; saved and loaded it predicts the same; the default
+    options' summary has no 'inertia' key (default fits unchanged), a bad value is refused."""
+    import pinocchio as pin
+
+    from diegocal.sgp.model import nominal_torque
+
+    time, q, qd, qdd = states(arm3, T=1500, seed=4)
+    data = arm3.model.createData()
+    rnea = np.array([pin.rnea(arm3.model, data, *x) for x in zip(q, qd, qdd, strict=True)])
+    np.testing.assert_allclose(nominal_torque(arm3, q, qd, qdd), rnea, atol=1e-9)
+    payload = make_term("payload", "link3")
+    theta = pin.Inertia(0.4, np.array([0.1, 0.0, 0.02]), np.zeros((3, 3))).toDynamicParameters()
+    tau = rnea + payload.columns(arm3, q, qd, qdd) @ theta + 0.3 * qd + 0.1 * np.sign(qd)
+    tau += 1e-3 * np.random.default_rng(5).standard_normal(tau.shape)
+    opts = SGPOptions(kind="pr", inertia="nominal")
+    model = DynamicsModel(arm3, opts, terms=(payload,)).fit_arrays(q, qd, qdd, tau, time=time)
+    assert model.base_.n_base == 2 * arm3.n_joints  # friction only
+    assert model.fitted_terms()[0].value("mass") == pytest.approx(0.4, abs=0.01)
+    pred = model.predict_arrays(q, qd, qdd, time)
+    assert np.sqrt(np.mean((pred.tau - tau) ** 2)) < 3e-3
+    model.save(tmp_path / "n.sgp", {"log": "x"})
+    assert "inertia: nominal" in (tmp_path / "n.sgp" / "sgp.yaml").read_text()
+    back = load_model(tmp_path / "n.sgp")
+    assert back.options.inertia == "nominal"
+    np.testing.assert_allclose(back.predict_arrays(q, qd, qdd, time).tau, pred.tau, atol=1e-9)
+    # without the payload term the nominal model cannot explain it; an identified one absorbs it
+    bare = DynamicsModel(arm3, opts).fit_arrays(q, qd, qdd, tau)
+    ident = DynamicsModel(arm3, SGPOptions(kind="pr")).fit_arrays(q, qd, qdd, tau)
+    err = [np.sqrt(np.mean((m.predict_arrays(q, qd, qdd).tau - tau) ** 2)) for m in (bare, ident)]
+    assert err[0] > 10 * err[1], err
+    assert "inertia" not in SGPOptions().to_dict()
+    with pytest.raises(ValueError, match="inertia"):
+        SGPOptions(inertia="guessed")
