@@ -323,9 +323,13 @@ def _accel_scale(robot) -> np.ndarray:
 
 
 def _add_payload(model: pin.Model, robot, req, rng, gain: float) -> dict:
-    """Add a point mass to a link of ``model`` (in place); default: the last link."""
+    """Add a point mass to a link of ``model`` (in place); default: the link the last moving joint
+    carries (its first body frame: the frames of one joint share its inertia, so a payload on the
+    tool flange is one on that link)."""
     bodies = {f.name: f for f in model.frames if f.type == pin.FrameType.BODY}
-    link = check_channel(req, list(bodies), "link") if req.channel else list(bodies)[-1]
+    last = max(f.parentJoint for f in bodies.values())
+    default = next(name for name, f in bodies.items() if f.parentJoint == last)
+    link = check_channel(req, list(bodies), "link") if req.channel else default
     frame = bodies[link]
     total = sum(model.inertias[i].mass for i in range(1, model.njoints))
     mass = gain * 0.1 * max(total, 1.0) if req.size is None else req.size
