@@ -83,6 +83,9 @@ BASELINE_FOR = {
 }
 
 
+#: ... and the robot has none of that friction on its other joints (else the baseline without it
+#: rightly names the joint with the most of the simulator's own friction first).
+ROBOT_FOR = {"coulomb_friction": {"coulomb": 0.0}, "viscous_friction": {"viscous": 0.0}}
 TORQUE_NOISE = 0.01  # N·m, the dynamics simulator's default
 
 
@@ -121,7 +124,7 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
     elif domain == "dynamics":
         from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
-        opts = DynamicsOptions(duration=case["duration"], noise=TORQUE_NOISE)
+        opts = DynamicsOptions(duration=case["duration"], noise=TORQUE_NOISE, **ROBOT_FOR.get(cause, {}))
         if cause and cause != "payload":
             request, regions = _sized_torque_effect(robot, cause, seed, opts)
             opts = replace(opts, effects=check_effects([request], domain), regions=regions)
