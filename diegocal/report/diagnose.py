@@ -82,8 +82,12 @@ def sentence(f: dict) -> str:
 
 def _parameters_text(f: dict) -> str:
     p = f.get("parameters") or {}
-    if not p or f["cause"] == "unexplained" or len(p) > 4:
+    if not p or f["cause"] == "unexplained":
         return ""
+    hidden = 0
+    if len(p) > 4:  # a payload's ten inertial parameters: the identified ones (with a standard error)
+        hidden = sum(v.get("std") is None for v in p.values())
+        p = dict(list({k: v for k, v in p.items() if v.get("std") is not None}.items())[:4])
     parts = []
     for name, v in p.items():
         if v.get("value") is None:
@@ -92,6 +96,8 @@ def _parameters_text(f: dict) -> str:
         if v.get("std") is not None:
             s += f" ± {v['std']:.2g}"
         parts.append(s + (f" {v['unit']}" if v.get("unit") else ""))
+    if hidden:
+        parts.append(f"{hidden} parameter(s) not identified by these data")
     return (" Fitted: " + ", ".join(parts) + ".") if parts else ""
 
 
