@@ -246,6 +246,18 @@ def _cross_columns(p: np.ndarray, a: np.ndarray) -> np.ndarray:
     )
 
 
+def shift_joint_origins(model: pin.Model, offsets: dict) -> pin.Model:
+    """A copy of ``model`` whose named joints' origins are translated by (3,) m vectors, each in
+    its parent joint's frame (a link whose geometry differs from the URDF: ``link_offset``)."""
+    model = pin.Model(model)
+    for joint, d in offsets.items():
+        jid = model.getJointId(joint)
+        placement = model.jointPlacements[jid].copy()
+        placement.translation = placement.translation + np.asarray(d, float)
+        model.jointPlacements[jid] = placement
+    return model
+
+
 def load_robot(directory) -> Robot:
     """Load ``robot.urdf`` + ``sensors.yaml`` from a robot directory (DESIGN.md)."""
     from diegocal.io import load_yaml

@@ -31,7 +31,6 @@ import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
-import pinocchio as pin
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
@@ -39,6 +38,7 @@ from diegocal.errors import RobotConfigError
 from diegocal.io import Log, Truth, make_stream
 from diegocal.robot import PointSet, Robot, pot_transmission
 from diegocal.robot.batch import BatchKinematics
+from diegocal.robot.model import shift_joint_origins
 from diegocal.sim.effects import (
     EffectError,
     EffectRequest,
@@ -473,12 +473,7 @@ class BatchedRobot(Robot):
 
 def offset_robot(robot: Robot, offsets: dict) -> BatchedRobot:
     """A batched copy of ``robot`` whose named joints' origins are shifted by (3,) m vectors."""
-    model = pin.Model(robot.model)
-    for joint, d in offsets.items():
-        jid = model.getJointId(joint)
-        placement = model.jointPlacements[jid].copy()
-        placement.translation = placement.translation + np.asarray(d, float)
-        model.jointPlacements[jid] = placement
+    model = shift_joint_origins(robot.model, offsets)
     return BatchedRobot(model, robot.sensors, robot.name, robot.directory)
 
 

@@ -32,11 +32,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pinocchio as pin
 
 from diegocal.errors import InputFileError
 from diegocal.io import Log, make_stream
 from diegocal.robot import MarkerSpec, Robot
+from diegocal.robot.model import shift_joint_origins
 from diegocal.terms import Parameter, Region, Term
 
 #: The kinematic causes this module implements (DESIGN.md vocabulary).
@@ -125,12 +125,7 @@ def pot_extra(cause: str, p: np.ndarray, sigma: float) -> dict:
 def offset_robot(robot: Robot, offsets: dict, extra_markers=()) -> Robot:
     """A copy of ``robot`` with joint origins translated (joint -> (3,) m, in the parent joint's
     frame) and ``extra_markers`` (MarkerSpec) appended to its sensors."""
-    model = pin.Model(robot.model)
-    for joint, d in offsets.items():
-        jid = model.getJointId(joint)
-        placement = model.jointPlacements[jid].copy()
-        placement.translation = placement.translation + np.asarray(d, float)
-        model.jointPlacements[jid] = placement
+    model = shift_joint_origins(robot.model, offsets)
     sensors = robot.sensors
     if extra_markers:
         sensors = replace(sensors, markers=tuple(sensors.markers) + tuple(extra_markers))
