@@ -100,12 +100,13 @@ class Outcome:
     gain: float  # held-out reduction of the top finding (NaN when none)
     seconds: float
     error: str = ""
+    also: tuple = ()  # other channels that name the same effect (a swapped pair's partner)
 
     @property
     def named(self) -> bool:
         if self.cause is None or not self.top:
             return False
-        return self.top == f"{self.cause}:{self.channel}" and self.gain > 0
+        return self.top in {f"{self.cause}:{c}" for c in (self.channel, *self.also)} and self.gain > 0
 
 
 def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None = None):
@@ -177,6 +178,7 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
     log, robot = simulate(domain, cause, seed, robot_name)
     hidden = log.truth.effects[0] if cause else {}
     channel = hidden.get("channel")
+    also = (hidden["values"]["partner"],) if cause == "swapped_labels" else ()  # a swap names either label
     options = replace(DiagnoseOptions(domain=domain), **BASELINE_FOR.get(cause, {}))
     if domain == "pneumatics":
         options = replace(options, chambers=_chambers(log, robot, channel, seed))
@@ -184,14 +186,14 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
     try:
         result = diagnose(log, robot, options)
     except DiegocalError as exc:
-        return Outcome(domain, cause, channel, seed, "", 0, float("nan"), time.perf_counter() - start, str(exc))
+        return Outcome(domain, cause, channel, seed, "", 0, float("nan"), time.perf_counter() - start, str(exc), also)
     seconds = time.perf_counter() - start
     findings = result.findings
     top, gain = "", float("nan")
     if findings:
         top = f"{findings[0].cause}:{findings[0].channel}"
         gain = float(findings[0].gain().get("reduction", float("nan")))
-    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds)
+    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds, also=also)
 
 
 def plan(domain: str, n_logs: int, seed: int) -> list[tuple[str, str | None, int]]:
