@@ -1,15 +1,16 @@
 """Does `diagnose` name what was hidden, and stay silent when nothing was? (issue #13, Evidence)
 
 For each domain, ``--logs`` simulated logs each hide one effect of the domain's vocabulary (causes
-taken in turn, the channel, magnitude and region drawn by the simulator from the seed) and
-``--logs`` clean logs hide none (dynamics: the simulator's sizes are replaced by a torque of 3-10×
-its noise on a random joint, as the issue asks; kinematics and pneumatics use the simulators'
-physical default ranges). Every log is diagnosed with the defaults a user gets, except
-that a cause the default baseline already contains is diagnosed against a baseline without it
-(:data:`BASELINE_FOR`). A hidden
-effect counts as *named* when the top finding has its cause and channel and a positive held-out
-gain; a clean log is a *false alarm* when it gives any finding. Printed per domain and per cause:
-the naming rate, the false-alarm rate and the wall time per log (load average beside it).
+taken in turn; channel, magnitude and region drawn from the seed) and ``--logs`` clean logs hide
+none. Dynamics: a torque of 3-10× the noise on a random joint, as the issue asks. Kinematics and
+pneumatics: the simulators' physical default ranges; a link offset is hidden on a joint another
+joint carries (the offset of a joint hanging from the base is the mocap frame's, which no
+calibration can tell apart). Every log is diagnosed with the defaults a user gets, except that a
+cause the default baseline already contains is diagnosed against a baseline without it
+(:data:`BASELINE_FOR`). A hidden effect counts as *named* when the top finding has its cause and
+channel and a positive held-out gain; a clean log is a *false alarm* when it gives any finding.
+Printed per domain and per cause: the naming rate, the false-alarm rate and the wall time per log
+(load average beside it).
 
 Seeds are fresh on every run (printed; ``--seed`` repeats a run). The bench reads each log's
 ``/truth`` to judge; the diagnosis never sees it (``diagnose`` drops it).
@@ -121,6 +122,10 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
     if domain == "kinematics":
         from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 
+        if cause == "link_offset":  # a joint carried by another: a base joint's offset is the mocap frame's
+            moving = [j for j in robot.joint_names if robot.model.parents[robot.model.getJointId(j)] > 0]
+            pick = moving[int(np.random.default_rng([seed, 1]).integers(len(moving)))]
+            effects = check_effects([f"link_offset:{pick}"], domain)
         log = simulate_kinematics(robot, KinematicsOptions(duration=case["duration"], effects=effects), rng)
     elif domain == "dynamics":
         from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
