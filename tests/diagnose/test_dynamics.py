@@ -29,22 +29,8 @@ from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 sys.path.insert(0, str(Path(__file__).parents[1]))
 from erd import robot_dir  # noqa: E402
 
-try:  # two cores shared by many processes: one BLAS thread is much faster than contention
-    from threadpoolctl import threadpool_limits
-except ImportError:  # pragma: no cover
-    threadpool_limits = None
-
 NOISE = 0.01  # N·m, the simulator's default torque noise
 runner = CliRunner()
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_blas_thread():
-    if threadpool_limits is None:
-        yield
-        return
-    with threadpool_limits(limits=1):
-        yield
 
 
 @pytest.fixture(scope="module")

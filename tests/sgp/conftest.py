@@ -14,21 +14,6 @@ import pytest
 from diegocal.io import Log, make_stream
 from diegocal.robot import load_robot
 
-try:  # two cores shared by many processes: one BLAS thread is ~20x faster than contention
-    from threadpoolctl import threadpool_limits
-except ImportError:  # pragma: no cover
-    threadpool_limits = None
-
-
-@pytest.fixture(autouse=True, scope="session")
-def _one_blas_thread():
-    if threadpool_limits is None:
-        yield
-        return
-    with threadpool_limits(limits=1):
-        yield
-
-
 ARM2_URDF = """<?xml version="1.0"?>
 <robot name="arm2">
   <link name="base"/>
