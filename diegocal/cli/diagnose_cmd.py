@@ -120,10 +120,10 @@ def diagnose_cmd(
 ) -> None:
     """Show what the model gets wrong, name the cause, extend the model and measure the gain on
     held-out blocks of the log."""
+    from diegocal.cli.common import robot_for_log
     from diegocal.diagnose import DiagnoseOptions, diagnose, domains_of
     from diegocal.io import load_log, save_yaml
     from diegocal.io.bundle import header
-    from diegocal.robot import load_robot, resolve_robot_dir
 
     fric = tuple(t.strip() for t in friction.split(",") if t.strip() and t.strip() != "none")
     data = load_log(log)
@@ -134,7 +134,7 @@ def diagnose_cmd(
             "nothing to diagnose: the log needs markers + pots (kinematics), q + tau (dynamics) or "
             f"pressure + valve (pneumatics); it has: {have}"
         )
-    rob = load_robot(resolve_robot_dir(robot, data.robot))
+    rob = robot_for_log(robot, data)
 
     def progress(text: str) -> None:
         errors.print(f"[dim]diagnose:[/] {text}", highlight=False)

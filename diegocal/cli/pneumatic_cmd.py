@@ -10,10 +10,11 @@ import numpy as np
 import typer
 
 from diegocal.cli.app import app, simulate_app
-from diegocal.cli.common import cli_errors, default_output, errors, summary
+from diegocal.cli.common import cli_errors, command_line, default_output, errors, robot_for_log, summary
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import DiegocalError, FitError, InputFileError
 from diegocal.io import Log, load_log, load_yaml, make_stream, save_log, save_yaml
+from diegocal.io.bundle import header
 from diegocal.pneumatic.data import chamber_data, extract
 from diegocal.pneumatic.files import load_model, merge_models, model_dict
 from diegocal.pneumatic.fit import FitOptions, fit_chambers
@@ -64,7 +65,7 @@ def pneumatic_fit(
     data = load_log(log)
     for stream in ("pressure", "valve", "pots"):  # log-level problems fail the whole command
         data.stream(stream, needed_by="pneumatic-fit")
-    rob = load_robot(resolve_robot_dir(robot, data.robot))
+    rob = robot_for_log(robot, data)
     names = list(rob.sensors.chamber_names) if all_chambers else list(dict.fromkeys(chamber))
     if not names:
         raise InputFileError(f"robot {rob.name!r} has no chambers in sensors.yaml")
@@ -90,7 +91,8 @@ def pneumatic_fit(
     if steady_state is not None:
         meta["steady_state_log"] = str(steady_state.resolve())
     out = output or default_output(log, ".pneumatic.yaml")
-    save_yaml(model_dict(batch, rob.sensors, options, meta), out)
+    head = header("pneumatic", rob, log, command_line("diegocal pneumatic-fit"))
+    save_yaml(model_dict(batch, rob.sensors, options, meta, head), out)
     drifts = np.array([f.drift_2s for f in batch.fits.values()])
     rows = [("chambers fitted", len(batch.fits)), ("skipped", len(batch.skipped))]
     if len(batch.fits) <= 8:

@@ -80,12 +80,37 @@ def predict(
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
     seed: Annotated[int, typer.Option("--seed")] = 0,
 ) -> None:
-    """Predict a held-out log with a fitted model and report the error."""
+    """Predict a held-out log with a fitted model and report the error (the model file is only read)."""
     kind, model = resolve_model(model)
+    if robot is None:
+        check_log_robot(model, log)
     if kind not in PREDICTORS:
         raise InputFileError(f"{model}: predicting with a {kind} model is not available in this build")
     opts = PredictOptions(output, _split(sensors_from), _split(sensors_to), robot, jobs, quiet, seed)
     PREDICTORS[kind](model, log, opts)
+
+
+def check_log_robot(model: Path, log: Path) -> None:
+    """Refuse (one line) a log that names a robot whose robot.urdf/sensors.yaml differ from those
+    the model was fitted on (the hash in the model's header; DESIGN.md "Command line")."""
+    from diegocal.errors import RobotConfigError
+    from diegocal.io.bundle import load_bundle, same_robot
+    from diegocal.io.files import log_robot
+    from diegocal.robot import resolve_robot_dir
+
+    record = load_bundle(model).robot
+    name = log_robot(log)
+    if not name or not record.get("hash"):
+        return
+    try:
+        source = resolve_robot_dir(None, name)
+    except RobotConfigError:
+        return  # a robot the log names but that is not here: the predictor decides
+    if not same_robot(record, source):
+        raise RobotConfigError(
+            f"{log} is a log of robot {name} ({source}), but {model} was fitted on {record.get('name')} "
+            f"({record.get('dir')}): their robot.urdf or sensors.yaml differ"
+        )
 
 
 def _split(text: str) -> tuple[str, ...]:

@@ -18,12 +18,14 @@ import numpy as np
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, fail, summary
+from diegocal.cli.common import cli_errors, default_output, fail, robot_for_log, summary
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.io import Log, load_log, make_stream, save_log
+from diegocal.io.bundle import header
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sgp import KINDS, SGPOptions, fit_dynamics, load_model, nmse
 from diegocal.sgp.model import INFERENCE, INPUT_STREAMS, log_arrays
+from diegocal.sgp.store import save_model
 
 
 def _command() -> str:
@@ -102,7 +104,7 @@ def sgp_fit(
         min_noise=min_noise,
     )
     data = load_log(log)
-    rob = load_robot(resolve_robot_dir(robot, data.robot))
+    rob = robot_for_log(robot, data)
     fitted = fit_dynamics(data, rob, opts)
     out = output or default_output(log, ".sgp")
     meta = {
@@ -111,7 +113,7 @@ def sgp_fit(
         "command": _command(),
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
-    fitted.save(out, meta)
+    save_model(fitted, out, meta, header=header("dynamics", rob, log, meta["command"]))
     rows = [(f"nMSE in-sample {j}", float(v)) for j, v in zip(fitted.joint_names, fitted.nmse_in_sample_, strict=True)]
     par = fitted.parametric_
     rows = [

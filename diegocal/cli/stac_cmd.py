@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import replace
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated
 
@@ -12,12 +10,13 @@ import numpy as np
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, summary
+from diegocal.cli.common import cli_errors, command_line, default_output, robot_for_log, robot_for_model, summary, warn
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
-from diegocal.io import load_log, load_yaml, make_stream, q_log_path, save_log, save_yaml
+from diegocal.io import load_log, make_stream, q_log_path, save_log, save_yaml
+from diegocal.io.bundle import header
 from diegocal.io.log import Log
-from diegocal.robot import Robot, load_robot, resolve_robot_dir
+from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.result import StacOptions, StacResult
 
@@ -76,7 +75,7 @@ def stac(
     if method not in METHODS:
         raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
     data = load_log(log)
-    model = load_robot(resolve_robot_dir(robot, data.robot))
+    model = robot_for_log(robot, data)
     options = StacOptions(
         max_iterations=max_iterations,
         loss=loss,
@@ -87,13 +86,7 @@ def stac(
     )
     result = run_method(method, data.without_truth(), model, options)
     out = output or default_output(log, ".calib.yaml")
-    meta = {
-        "log": str(Path(log).resolve()),
-        "robot": str(model.directory or model.name),
-        "command": " ".join(["diegocal", *sys.argv[1:]]) if sys.argv else "diegocal stac",
-        "created": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
-    cal = replace(result.calibration, meta=meta)
+    cal = replace(result.calibration, header=header("calibration", model, log, command_line("diegocal stac")))
     save_yaml(cal.to_dict(), out)
     qpath = q_log_path(Path(out))
     save_log(
@@ -105,6 +98,12 @@ def stac(
         ),
         qpath,
     )
+    if cal.unobservable:
+        names = ", ".join(u["pot"] for u in cal.unobservable)
+        warn(
+            f"{len(cal.unobservable)} pot(s) unobservable (no marker moves with their joints): {names}; "
+            f"their gain and bias keep their nominal values (listed under 'unobservable' in {out})"
+        )
     rows = [
         ("method", cal.method),
         ("frames", data.n_samples),
@@ -116,17 +115,39 @@ def stac(
         ("seconds", cal.fit.seconds),
     ]
     rows += [(f"σ {g}", v) for g, v in cal.sigma_by_group.items()]
+    rows += coverage_rows(cal, model)
     rows += [("calibration", str(out)), ("joint angles", str(qpath))]
     summary(f"stac {Path(log).name}", rows, quiet=quiet)
 
 
+def coverage_rows(cal: Calibration, robot: Robot) -> list:
+    """Summary rows: what the data could not determine, and the joints the model locked."""
+    rows = []
+    if cal.unobservable:
+        rows.append(("unobservable (nominal)", ", ".join(u["pot"] for u in cal.unobservable)))
+    if cal.gauges:
+        rows.append(("gauges (bias nominal)", ", ".join(f"{g['joint']} ({g['pot'] or '-'})" for g in cal.gauges)))
+    if robot.locked:
+        shown = ", ".join(list(robot.locked)[:4]) + (", ..." if len(robot.locked) > 4 else "")
+        rows.append((f"locked joints ({len(robot.locked)})", f"{shown} (at 0 or sensors.yaml's locked)"))
+    return rows
+
+
+#: predict warns when a held-out error is this many times the calibration's own noise level: the
+#: log is then most likely not of the session (robot, mocap frame, marker placement) it was fitted on
+IMPLAUSIBLE = 20.0
+
+
 def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
-    """`diegocal predict calib.yaml LOG --from pots --to markers` (thesis §2.7.2)."""
+    """`diegocal predict calib.yaml LOG --from pots --to markers` (thesis §2.7.2). Writes the
+    prediction, never into the model it reads."""
+    from diegocal.io.bundle import load_bundle
     from diegocal.stac.predict import predict
 
-    cal = Calibration.from_dict(load_yaml(model_path), source=str(model_path))
+    bundle = load_bundle(model_path)
+    cal = Calibration.from_dict(bundle.data, source=str(model_path))
     data = load_log(log_path)
-    model = load_robot(resolve_robot_dir(opts.robot, data.robot))
+    model = robot_for_model(bundle.robot, opts.robot, data, model_path)
     pred = predict(
         data.without_truth(),
         model,
@@ -142,7 +163,16 @@ def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> Non
     if pred.marker_names:
         streams["markers"] = make_stream(pred.marker_names, pred.markers)
     save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), out)
-    _record_prediction(model_path, log_path, pred)
+    for target, mae in pred.mae.items():
+        sigma = cal.sigma_by_group.get(target, cal.sigma_markers if target == "markers" else cal.sigma_pots)
+        if np.isfinite(sigma) and sigma > 0 and mae > IMPLAUSIBLE * sigma:
+            unit = " m" if target == "markers" else ""
+            warn(
+                f"{target} MAE {mae:.4g}{unit} is {mae / sigma:.0f} times the calibration's own noise "
+                f"({sigma:.3g}{unit}): this log does not look like the session {model_path.name} was fitted on "
+                "(another robot, mocap frame or marker placement?); hold out part of the same session: "
+                "diegocal split LOG --at 0.8 -o TRAIN HELDOUT"
+            )
     unit = {"markers": "m"}
     rows = [(f"{t} ({unit.get(t, 'sensor unit')})", pred.mae[t]) for t in pred.targets]
     summary(
@@ -151,25 +181,6 @@ def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> Non
         columns=("target", "MAE"),
         quiet=opts.quiet,
     )
-
-
-def _record_prediction(model_path: Path, log_path: Path, pred) -> None:
-    """Add the MAE row to calib.yaml's ``prediction`` list (the report's cross-sensor table)."""
-    data = load_yaml(model_path)
-    rows = [
-        r
-        for r in data.get("prediction") or []
-        if not (r.get("log") == str(Path(log_path).resolve()) and r.get("from") == list(pred.sources))
-    ]
-    rows.append(
-        {
-            "log": str(Path(log_path).resolve()),
-            "from": list(pred.sources),
-            "mae": {k: float(v) for k, v in pred.mae.items() if np.isfinite(v)},
-        }
-    )
-    data["prediction"] = rows
-    save_yaml(data, model_path)
 
 
 register_predictor("calib", predict_calib)

@@ -4,6 +4,7 @@ Every fitted output records the same header at its top level::
 
     kind: calibration | pneumatic | dynamics | diagnosis
     robot: {name: diego, dir: /abs/robots/diego, hash: sha256:…}   # hash of robot.urdf + sensors.yaml
+                                     # (+ locked: {joint: value} when its model was reduced)
     log: /abs/path/run.h5            # the log it was fitted on
     command: diegocal stac run.h5
     version: 0.1.0                   # diegocal's
@@ -35,23 +36,28 @@ DYNAMICS_SUMMARY = "sgp.yaml"
 HEADER_KEYS = ("kind", "robot", "log", "command", "version", "created")
 
 
-def robot_hash(directory) -> str | None:
-    """``sha256:<hex>`` of a robot directory's URDF and sensors.yaml (None if it has neither).
+def robot_hash(source) -> str | None:
+    """``sha256:<hex>`` of a robot's URDF and sensors.yaml (None if it has neither).
 
-    The URDF is the one sensors.yaml names (default ``robot.urdf``); the bytes are hashed as
-    they are on disk, so any edit, even of a comment, gives another robot.
+    ``source`` is a robot directory (the URDF is the one sensors.yaml names, default
+    ``robot.urdf``) or a URDF file (dynamics alone: the file only). The bytes are hashed as they
+    are on disk, so any edit, even of a comment, gives another robot.
     """
-    directory = Path(directory)
-    sensors = directory / "sensors.yaml"
-    urdf_name = "robot.urdf"
-    if sensors.is_file():
-        try:
-            urdf_name = str((load_yaml(sensors) or {}).get("urdf", urdf_name))
-        except InputFileError:
-            pass
+    source = Path(source)
+    if source.is_file():
+        paths = (source,)
+    else:
+        sensors = source / "sensors.yaml"
+        urdf_name = "robot.urdf"
+        if sensors.is_file():
+            try:
+                urdf_name = str((load_yaml(sensors) or {}).get("urdf", urdf_name))
+            except InputFileError:
+                pass
+        paths = (source / urdf_name, sensors)
     h = hashlib.sha256()
     found = False
-    for path in (directory / urdf_name, sensors):
+    for path in paths:
         if path.is_file():
             h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
             found = True
@@ -59,13 +65,45 @@ def robot_hash(directory) -> str | None:
 
 
 def robot_record(robot) -> dict:
-    """``{name, dir, hash}`` of a :class:`diegocal.robot.Robot` (dir and hash None without a directory)."""
-    directory = getattr(robot, "directory", None)
-    return {
+    """``{name, dir, hash}`` of a :class:`diegocal.robot.Robot` (dir and hash None when it was not
+    loaded from disk; ``dir`` is the URDF file for a robot given as a URDF), plus ``locked`` (the
+    joints held still in its reduced model) when there are any."""
+    source = getattr(robot, "source", None) or getattr(robot, "directory", None)
+    out = {
         "name": str(robot.name),
-        "dir": None if directory is None else str(Path(directory).resolve()),
-        "hash": None if directory is None else robot_hash(directory),
+        "dir": None if source is None else str(Path(source).resolve()),
+        "hash": None if source is None else robot_hash(source),
     }
+    if getattr(robot, "locked", None):
+        out["locked"] = dict(robot.locked)
+    return out
+
+
+def same_robot(record: dict, source) -> bool:
+    """Whether the robot at ``source`` (directory or URDF) has the files a bundle's robot record
+    hashed (True when the record has no hash: files written before hashes existed)."""
+    return not record.get("hash") or robot_hash(source) == record["hash"]
+
+
+def save_robot_copy(robot, directory) -> None:
+    """Write a self-contained copy of ``robot`` into ``directory``: ``robot.urdf`` and a
+    ``sensors.yaml`` (the original's, or a minimal one for a URDF-only robot) whose ``locked``
+    lists every joint the robot's reduced model holds still, so that loading the copy rebuilds
+    the same model whatever data it is used with."""
+    from diegocal.io.files import save_yaml, write_text
+
+    directory = Path(directory)
+    source = Path(getattr(robot, "source", None) or robot.directory)
+    if source.is_file():
+        urdf, sensors = source, {"urdf": "robot.urdf", "base_link": robot.sensors.base_link}
+    else:
+        urdf = source / robot.sensors.urdf
+        sensors = dict(load_yaml(source / "sensors.yaml"))
+    sensors["urdf"] = "robot.urdf"
+    if getattr(robot, "locked", None):
+        sensors["locked"] = dict(robot.locked)
+    write_text(directory / "robot.urdf", urdf.read_text())
+    save_yaml(sensors, directory / "sensors.yaml")
 
 
 def header(kind: str, robot=None, log=None, command: str | None = None) -> dict:

@@ -1,7 +1,7 @@
 """Robot models: URDF through Pinocchio, sensors.yaml, observation models and their Jacobians."""
 
 from diegocal.robot.gauges import gauge_joints
-from diegocal.robot.model import BUNDLED_ROBOTS, PointSet, Robot, load_robot, resolve_robot_dir
+from diegocal.robot.model import BUNDLED_ROBOTS, PointSet, Robot, data_joints, load_robot, resolve_robot_dir
 from diegocal.robot.observe import (
     anchor_points,
     marker_points,
@@ -33,6 +33,7 @@ __all__ = [
     "Robot",
     "SensorConfig",
     "anchor_points",
+    "data_joints",
     "gauge_joints",
     "load_robot",
     "marker_points",

@@ -17,6 +17,7 @@ import pinocchio as pin
 
 from diegocal.errors import RobotConfigError, UnknownNameError
 from diegocal.robot.sensors import SensorConfig, parse_sensors
+from diegocal.robot.urdf import load_urdf, reduce_model, root_link, sensor_joints
 
 #: The bundled robots shipped with the package's source tree.
 BUNDLED_ROBOTS = Path(__file__).resolve().parents[2] / "robots"
@@ -36,10 +37,13 @@ class Robot:
     Parameters
     ----------
     model : pinocchio.Model
-        Only one-DoF joints (revolute, prismatic) are accepted: q and qd have the same size.
+        Only one-DoF joints (revolute, prismatic) are accepted: q and qd have the same size
+        (:func:`load_robot` locks or converts the others, :mod:`diegocal.robot.urdf`).
     sensors : SensorConfig
     name : str
     directory : Path or None
+    locked : {joint: configuration} of the URDF's joints held still in ``model``
+    source : the directory or URDF file it was loaded from (default: ``directory``)
 
     ``points``, ``points_jacobian`` and ``link_poses`` work on a Pinocchio ``Data`` of their own
     per call, so one Robot may serve several threads (``--jobs``); ``self.data`` is a spare one
@@ -47,20 +51,29 @@ class Robot:
     """
 
     def __init__(
-        self, model: pin.Model, sensors: SensorConfig, name: str, directory: Path | None = None
+        self,
+        model: pin.Model,
+        sensors: SensorConfig,
+        name: str,
+        directory: Path | None = None,
+        locked: dict | None = None,
+        source: Path | None = None,
     ):
         for j in range(1, model.njoints):
             if model.joints[j].nq != 1 or model.joints[j].nv != 1:
                 raise RobotConfigError(
                     f"joint {model.names[j]!r} has {model.joints[j].nq} position coordinates; only "
-                    "one-DoF joints are supported (declare continuous joints as revolute with "
-                    "wide limits)"
+                    "one-DoF joints are supported (load_robot locks or converts the others)"
                 )
         self.model = model
         self.data = model.createData()
         self.sensors = sensors
         self.name = name
         self.directory = directory
+        #: joints of the URDF held still in this model, with their configuration (see .urdf)
+        self.locked: dict = dict(locked or {})
+        #: where the robot was loaded from: its directory, or the URDF file itself
+        self.source: Path | None = source if source is not None else directory
         self.joint_names: tuple[str, ...] = tuple(model.names[1:])
         self._joint_index = {n: i for i, n in enumerate(self.joint_names)}
         self.lower = np.array(model.lowerPositionLimit, dtype=float)
@@ -71,6 +84,17 @@ class Robot:
             )
         self.base_frame = self.frame_id(sensors.base_link)
         self._check_sensor_names()
+
+    @property
+    def reference(self) -> str:
+        """How a log names this robot (its ``robot`` attribute): the name of a bundled robot,
+        else the absolute path of its directory (or URDF file), which ``--robot`` defaults to."""
+        if self.source is None:
+            return self.name
+        source = Path(self.source).resolve()
+        if source.parent == BUNDLED_ROBOTS.resolve():
+            return source.name
+        return str(source)
 
     # ------------------------------------------------------------------ names
     @property
@@ -95,6 +119,8 @@ class Robot:
         for p in self.sensors.pots:
             try:
                 for j in p.joints:
+                    if j in self.locked:
+                        raise UnknownNameError(f"joint {j!r} is locked in sensors.yaml")
                     self.joint_index(j)
                 for a in p.anchors or ():
                     self.frame_id(a.link)
@@ -258,46 +284,67 @@ def shift_joint_origins(model: pin.Model, offsets: dict) -> pin.Model:
     return model
 
 
-def load_robot(directory) -> Robot:
-    """Load ``robot.urdf`` + ``sensors.yaml`` from a robot directory (DESIGN.md)."""
+def load_robot(source, joints=None) -> Robot:
+    """Load a robot: a directory (``robot.urdf`` + ``sensors.yaml``, DESIGN.md) or, for dynamics
+    alone, a URDF file (no sensors; the base link is the URDF's root).
+
+    Any URDF Pinocchio loads is accepted; the model is reduced to the joints the sensors use plus
+    ``joints`` (the joint names the data use, e.g. :func:`data_joints` of a log; None: not known),
+    the others locked (:mod:`diegocal.robot.urdf`; :attr:`Robot.locked` says at what).
+    """
     from diegocal.io import load_yaml
 
-    directory = Path(directory)
-    if not directory.is_dir():
-        raise RobotConfigError(f"{directory}: robot directory not found")
-    sensors_file = directory / "sensors.yaml"
-    if not sensors_file.exists():
-        raise RobotConfigError(f"{directory}: no sensors.yaml")
-    sensors = parse_sensors(load_yaml(sensors_file), source=str(sensors_file))
-    urdf = directory / sensors.urdf
-    if not urdf.exists():
-        raise RobotConfigError(f"{directory}: URDF {sensors.urdf!r} not found")
-    try:
-        model = pin.buildModelFromUrdf(str(urdf))
-    except (RuntimeError, ValueError) as exc:
-        raise RobotConfigError(
-            f"{urdf}: Pinocchio cannot load it ({str(exc).splitlines()[0]})"
-        ) from None
-    return Robot(model, sensors, name=model.name or directory.name, directory=directory)
+    source = Path(source)
+    if source.is_file() and source.suffix.lower() == ".urdf":
+        urdf, directory = source, None
+        loaded = load_urdf(urdf)
+        sensors = SensorConfig(urdf.name, root_link(loaded.model), (), (), ())
+    else:
+        if not source.is_dir():
+            raise RobotConfigError(f"{source}: robot directory not found")
+        directory = source
+        sensors_file = directory / "sensors.yaml"
+        if not sensors_file.exists():
+            raise RobotConfigError(f"{directory}: no sensors.yaml")
+        sensors = parse_sensors(load_yaml(sensors_file), source=str(sensors_file))
+        urdf = directory / sensors.urdf
+        if not urdf.exists():
+            raise RobotConfigError(f"{directory}: URDF {sensors.urdf!r} not found")
+        loaded = load_urdf(urdf)
+    model = loaded.model
+    used = sensor_joints(model, sensors) | set(joints or ())
+    known = set(model.names[1:])
+    keep = (used & known) or None  # nothing named: every one-DoF joint
+    reduction = reduce_model(model, keep, sensors.locked)
+    name = model.name or (directory.name if directory is not None else urdf.stem)
+    return Robot(reduction.model, sensors, name=name, directory=directory, locked=reduction.locked, source=source)
+
+
+def data_joints(log) -> set[str]:
+    """Channel names of a log's joint streams (q, qd, qdd, tau): the joints the data use."""
+    from diegocal.io.log import JOINT_STREAMS
+
+    return {n for s in JOINT_STREAMS if log.has(s) for n in log.streams[s].names}
 
 
 def resolve_robot_dir(robot: str | Path | None, log_robot: str | None) -> Path:
-    """The robot directory a command should use (DESIGN.md: --robot defaults to the log's robot).
+    """The robot directory (or URDF file) a command should use (DESIGN.md: --robot defaults to the
+    log's robot).
 
-    ``robot`` is a directory or the name of a bundled robot; ``None`` means the log's ``robot``
-    attribute, looked up in the bundled ``robots/`` folder.
+    ``robot`` is a directory, a URDF file or the name of a bundled robot; ``None`` means the log's
+    ``robot`` attribute (a directory, a URDF file or a bundled robot's name).
     """
     if robot is None:
         if not log_robot:
             raise RobotConfigError("the log names no robot: pass --robot DIR")
         robot = log_robot
     path = Path(robot)
-    if path.is_dir():
+    if path.is_dir() or (path.is_file() and path.suffix.lower() == ".urdf"):
         return path
     bundled = BUNDLED_ROBOTS / str(robot)
-    if bundled.is_dir():
+    if "/" not in str(robot) and bundled.is_dir():
         return bundled
     raise RobotConfigError(
-        f"robot {str(robot)!r} not found (neither a directory nor a bundled robot in "
+        f"robot {str(robot)!r} not found (neither a directory, a URDF file nor a bundled robot in "
         f"{BUNDLED_ROBOTS})"
     )

@@ -78,11 +78,15 @@ class ChamberSpec:
 
 @dataclass(frozen=True)
 class SensorConfig:
+    """The parsed sensors.yaml. ``locked`` maps joints to hold still to their configuration (a
+    number, or a list of position coordinates for a multi-DoF joint; see :mod:`.urdf`)."""
+
     urdf: str
     base_link: str
     pots: tuple[PotSpec, ...]
     markers: tuple[MarkerSpec, ...]
     chambers: tuple[ChamberSpec, ...]
+    locked: dict = field(default_factory=dict)
 
     @property
     def pot_names(self) -> tuple[str, ...]:
@@ -110,7 +114,26 @@ def parse_sensors(raw: dict, source: str = "sensors.yaml") -> SensorConfig:
     pots = tuple(_parse_list(raw, "pots", _parse_pot, source))
     markers = tuple(_parse_list(raw, "markers", _parse_marker, source))
     chambers = tuple(_parse_list(raw, "chambers", _parse_chamber, source))
-    return SensorConfig(str(urdf), base, pots, markers, chambers)
+    return SensorConfig(str(urdf), base, pots, markers, chambers, _parse_locked(raw.get("locked"), source))
+
+
+def _parse_locked(raw, source: str) -> dict:
+    """``locked: {joint: value | [values]}``: joints held still (see :mod:`diegocal.robot.urdf`)."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise RobotConfigError(f"{source}: 'locked' must be a mapping {{joint: value}}")
+    out = {}
+    for joint, value in raw.items():
+        values = value if isinstance(value, list) else [value]
+        try:
+            arr = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            arr = np.array([np.nan])
+        if arr.ndim != 1 or not arr.size or not np.isfinite(arr).all():
+            raise RobotConfigError(f"{source}: locked[{joint}] must be a number or a list of numbers, got {value!r}")
+        out[str(joint)] = float(arr[0]) if not isinstance(value, list) else [float(v) for v in arr]
+    return out
 
 
 def _parse_list(raw, key, parse, source):

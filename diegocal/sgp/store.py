@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.errors import InputFileError
-from diegocal.io import atomic_path, load_yaml, save_yaml, write_text
+from diegocal.io import atomic_path, load_yaml, save_yaml
 from diegocal.robot import load_robot
 from diegocal.sgp.gp import Hyperparameters
 
@@ -95,11 +95,10 @@ def save_model(model, directory, meta: dict | None = None, header: dict | None =
     with atomic_path(directory / "model.npz") as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
     robot = model.robot
-    if robot.directory is not None:
-        src = Path(robot.directory)
-        urdf = robot.sensors.urdf
-        write_text(directory / "robot" / urdf, (src / urdf).read_text())
-        write_text(directory / "robot" / "sensors.yaml", (src / "sensors.yaml").read_text())
+    if robot.source is not None:  # with its locked joints, so the copy rebuilds the same model
+        from diegocal.io.bundle import save_robot_copy
+
+        save_robot_copy(robot, directory / "robot")
     summary = summary_dict(model, meta)
     if header:  # the header's keys (kind: dynamics, robot: {name, dir, hash}, ...) win
         merged = {**dict(header), "model_kind": summary["kind"]}

@@ -454,4 +454,4 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
         "trajectory": kind,
     }
     truth = Truth(params=params, effects=dyn.records, signals={"tau": make_stream(names, tau_clean)})
-    return Log(time=time, streams=streams, robot=robot.name, rate_hz=float(options.rate_hz), truth=truth)
+    return Log(time=time, streams=streams, robot=robot.reference, rate_hz=float(options.rate_hz), truth=truth)

@@ -535,7 +535,7 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
     signals = {"q": make_stream(robot.joint_names, q), "qd": make_stream(robot.joint_names, qd)}
     if plan.outliers or plan.swaps:
         signals["markers_corrupted"] = make_stream(sensors.marker_names, corrupted.astype(float))
-    name = robot.directory.name if robot.directory is not None else robot.name
+    name = robot.reference  # a bundled robot's name, else its directory: --robot defaults to it
     return Log(
         time=np.arange(T) / rate,
         streams=streams,

@@ -292,7 +292,7 @@ def simulate_pneumatics(robot: Robot, options: PneumaticSimOptions) -> Log:
             "valve": make_stream(names, valve_log),
             "pots": pots,
         },
-        robot=robot.name,
+        robot=robot.reference,
         rate_hz=options.rate_hz,
         truth=truth,
     )

@@ -8,9 +8,19 @@ Its YAML form is the calib.yaml contract (issue #3; extend, never break)::
     sigma:   {pots, markers}
     fit:     {cost, iterations, converged, seconds}
 
-Extensions written by STAC (optional on read): ``sigma.by_group`` (noise level per sensor type,
-§2.3.5), ``fit.history`` (per-iteration cost and noise levels), ``meta: {log, robot, command,
-created}`` and ``prediction`` (cross-sensor MAE table of ``diegocal predict``, Tables 2.1-2.2).
+Extensions written by STAC (optional on read): the bundle header at the top (``kind: calibration``,
+``robot: {name, dir, hash}``, ``log``, ``command``, ``version``, ``created``; :mod:`diegocal.io.bundle`),
+``sigma.by_group`` (noise level per sensor type, §2.3.5), ``fit.history`` (per-iteration cost and
+noise levels), and what the data could not determine::
+
+    unobservable:   # pots whose gain and bias keep their nominal values
+      - {pot: neck_yaw, joints: [neck_yaw], reason: no marker moves with joint neck_yaw}
+    gauges:         # joint zeros the markers cannot fix
+      - {joint: r_wrist, pot: r_wrist, kind: leaf, reason: "every marker joint r_wrist moves is ..."}
+
+Files written before the header existed carry ``meta: {log, robot, command, created}`` instead, and
+older ones a ``prediction`` list (cross-sensor MAE rows that ``diegocal predict`` used to add; it no
+longer writes into the model it reads).
 
 ``terms`` (optional): extra terms of the observation model found by ``diegocal diagnose``
 (:mod:`diegocal.stac.terms`), a list of ``{cause, channel, region, parameters, extra}``; ``predict``
@@ -26,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from diegocal.errors import InputFileError
+from diegocal.io.bundle import HEADER_KEYS
 from diegocal.robot import Robot
 
 
@@ -54,8 +65,11 @@ class Calibration:
     method : 'stac' | 'classical' | 'ekf' | 'nominal'
     sigma_by_group : noise level per sensor type (rotary, linear, tendon, encoder, markers)
     history : per-iteration records as dicts {iteration, cost, sigma_pots, sigma_markers, seconds}
-    meta : {log, robot, command, created}, where the calibration came from
+    meta : {log, robot, command, created}, where a legacy calibration came from
     terms : extra terms of the observation model (:mod:`diegocal.stac.terms`), () for STAC's own
+    unobservable : ({pot, joints, reason}, ...) pots kept at their nominal gain and bias
+    gauges : ({joint, pot, kind, reason}, ...) joint zeros fixed by keeping a pot's bias nominal
+    header : the bundle header (:func:`diegocal.io.bundle.header`), written first
     """
 
     pot_names: tuple[str, ...]
@@ -77,6 +91,9 @@ class Calibration:
     history: tuple = ()
     meta: dict = field(default_factory=dict)
     terms: tuple = ()
+    unobservable: tuple = ()
+    gauges: tuple = ()
+    header: dict = field(default_factory=dict)
 
     @classmethod
     def nominal(cls, robot: Robot) -> Calibration:
@@ -99,6 +116,7 @@ class Calibration:
         bse = self.bias_se if self.bias_se is not None else np.full(P, np.nan)
         xse = self.marker_xyz_se if self.marker_xyz_se is not None else np.full((M, 3), np.nan)
         out = {
+            **{k: v for k, v in self.header.items()},
             "method": self.method,
             "pots": {
                 n: {
@@ -135,6 +153,10 @@ class Calibration:
             out["fit"]["history"] = [
                 {k: (_f(v) if isinstance(v, float) else v) for k, v in h.items()} for h in self.history
             ]
+        if self.unobservable:
+            out["unobservable"] = [dict(u) for u in self.unobservable]
+        if self.gauges:
+            out["gauges"] = [dict(g) for g in self.gauges]
         if self.meta:
             out["meta"] = dict(self.meta)
         if self.terms:
@@ -179,6 +201,9 @@ class Calibration:
                 history=tuple(dict(h) for h in (fit.get("history") or ())),
                 meta=dict(data.get("meta") or {}),
                 terms=_terms(data.get("terms")),
+                unobservable=tuple(dict(u) for u in (data.get("unobservable") or ())),
+                gauges=tuple(dict(g) for g in (data.get("gauges") or ())),
+                header={k: data[k] for k in HEADER_KEYS if k in data},
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None

@@ -35,8 +35,8 @@ from diegocal.stac.qphase import Noise, block_solve, damped, map_batches, normal
 def free_mask(obs: Observation) -> np.ndarray:
     """(Nθ,) which entries of θ = [gain (P), bias (P), d (3M), ω (3), T (3)] are estimated."""
     M = obs.n_markers
-    gain = obs.kinds != "encoder"
-    bias = ~obs.fixed_bias
+    gain = (obs.kinds != "encoder") & ~obs.fixed_gain
+    bias = ~obs.fixed_bias & ~obs.fixed_gain
     return np.concatenate([gain, bias, np.ones(3 * M + 6, dtype=bool)])
 
 

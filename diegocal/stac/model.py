@@ -15,6 +15,8 @@ joints each reading depends on, once per log.
 from __future__ import annotations
 
 import copy
+import difflib
+import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,6 +27,8 @@ from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
 from diegocal.robot.batch import BatchKinematics
 from diegocal.stac.calibration import Calibration
+
+LOG = logging.getLogger(__name__)
 
 #: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
 MARKERS = "markers"
@@ -101,20 +105,21 @@ class Observation:
         specs = {p.name: (i, p) for i, p in enumerate(robot.sensors.pots)}
         mspecs = {m.name: (i, m) for i, m in enumerate(robot.sensors.markers)}
         T = log.n_samples
+        self.ignored: dict = {}  # log channels sensors.yaml does not name, per stream (not used)
         if "pots" in need or log.has("pots"):
-            st = log.stream("pots", needed_by=needed_by)
-            _check_names(st.names, specs, "pot", robot)
+            st = _known(log.stream("pots", needed_by=needed_by), specs, "pots", self.ignored)
             self.pot_index = np.array([specs[n][0] for n in st.names], dtype=int)
             self.pots = st.data
         else:
             self.pot_index, self.pots = np.zeros(0, dtype=int), np.zeros((T, 0))
         if "markers" in need or log.has("markers"):
-            st = log.stream("markers", needed_by=needed_by)
-            _check_names(st.names, mspecs, "marker", robot)
+            st = _known(log.stream("markers", needed_by=needed_by), mspecs, "markers", self.ignored)
             self.marker_index = np.array([mspecs[n][0] for n in st.names], dtype=int)
             self.markers = st.data
         else:
             self.marker_index, self.markers = np.zeros(0, dtype=int), np.zeros((T, 0, 3))
+        if self.ignored:
+            LOG.warning(ignored_line(self.ignored, robot))
         self.valid = np.isfinite(self.markers).all(axis=-1)  # (T, M)
         self.pot_specs = [robot.sensors.pots[i] for i in self.pot_index]
         self.marker_specs = [robot.sensors.markers[i] for i in self.marker_index]
@@ -139,6 +144,9 @@ class Observation:
         margin = np.where(bad, 0.0, 0.25 * (hi - lo) + np.where(self.kin.prismatic, 0.0, 0.3))
         self.lower, self.upper = lo - margin, hi + margin
         self.fixed_bias = np.zeros(len(self.pot_index), dtype=bool)
+        self.fixed_gain = np.zeros(len(self.pot_index), dtype=bool)  # unobservable: gain and bias nominal
+        self.unobservable: tuple = ()  # ({pot, joints, reason}, ...) set by check_observable
+        self.gauges: tuple = ()  # ({joint, pot, kind, reason}, ...) set by check_observable
         self.sparsity = self._sparsity()
 
     def _sparsity(self) -> Sparsity:
@@ -182,7 +190,15 @@ class Observation:
 
     # ------------------------------------------------------------------ checks
     def check_observable(self) -> None:
-        """Every pot must move some marker, else its gain/bias cannot be told from q (§2.5.1)."""
+        """What the data determine (thesis §2.5.1), set once before a fit.
+
+        A pot whose joint(s) move none of the log's markers relative to the base link has an
+        unobservable gain and bias: both keep their nominal values (``fixed_gain``) and the pot is
+        listed in ``unobservable``; it still tracks its joint. Gauge joints (:meth:`_gauge_biases`)
+        keep one reading pot's bias at nominal and are listed in ``gauges``. Raises FitError only
+        when nothing can be calibrated: no markers, every marker on the base link, a marker never
+        seen, fewer than 10 frames.
+        """
         if self.n_markers == 0:
             raise FitError("STAC needs markers: the log's 'markers' stream has no channels")
         moving = [self.kin.moves(link) for link in self.marker_links]
@@ -195,16 +211,46 @@ class Observation:
         if not self.valid.any(axis=0).all():
             dead = [n for n, ok in zip(self.marker_names, self.valid.any(axis=0), strict=True) if not ok]
             raise FitError(f"markers never seen (all NaN) in the log: {', '.join(dead)}")
-        joints, _, _ = self.kin.link_info(self.marker_links)
-        seen = self.kin._anc[joints].any(axis=0) & ~self.kin._anc[self.kin.base_joint]
-        for p in self.pot_specs:
-            cols = np.flatnonzero(self.A[self.pot_specs.index(p)]) if p.kind != "linear" else None
-            if cols is not None and len(cols) and not seen[cols].any():
-                names = ", ".join(self.robot.joint_names[c] for c in cols)
-                raise FitError(f"pot {p.name!r}: no marker moves with joint(s) {names}; its gain/bias is unobservable")
-        self.fixed_bias = self._gauge_biases(joints)
         if self.n_frames < 10:
             raise FitError(f"too few samples for STAC: {self.n_frames} (need at least 10)")
+        joints, _, _ = self.kin.link_info(self.marker_links)
+        anc = self.kin._anc
+        seen = (anc[joints] != anc[self.kin.base_joint]).any(axis=0)  # (n,) moves some marker
+        names = self.robot.joint_names
+        self.fixed_gain = np.zeros(self.n_pots, dtype=bool)
+        unobservable = []
+        for j, p in enumerate(self.pot_specs):
+            cols = np.flatnonzero(self.A[j]) if p.kind != "linear" else np.zeros(0, dtype=int)
+            blind = [names[c] for c in cols if not seen[c]]
+            if blind:
+                self.fixed_gain[j] = True
+                what = "joint" if len(blind) == 1 else "joints"
+                reason = f"no marker moves with {what} {', '.join(blind)}"
+                unobservable.append({"pot": p.name, "joints": blind, "reason": reason})
+        self.unobservable = tuple(unobservable)
+        self.fixed_bias = self._gauge_biases(joints)
+        self.gauges = self._gauge_records(joints)
+
+    def _gauge_kinds(self, marker_joints: np.ndarray) -> dict:
+        """{joint index: 'leaf' | 'root'} of the joints whose zero the markers cannot fix."""
+        anc, kin = self.kin._anc, self.kin
+        out = {}
+        for k in range(self.robot.n_joints):
+            moved = anc[marker_joints, k]
+            if not moved.any():
+                continue
+            if (marker_joints[moved] == k + 1).all():
+                out[k] = "leaf"
+            elif kin.base_joint == 0 and kin.parent[k] < 0 and moved.all() and not kin.prismatic[k]:
+                out[k] = "root"
+        return out
+
+    def _gauge_reader(self, k: int) -> int | None:
+        """The pot whose bias fixes joint k's gauge: the first rotary/encoder pot (else tendon)
+        reading it, among those whose gain and bias are estimated."""
+        readers = [j for j in np.flatnonzero(self.A[:, k]) if self.kinds[j] != "linear" and not self.fixed_gain[j]]
+        readers.sort(key=lambda j: self.kinds[j] == "tendon")
+        return readers[0] if readers else None
 
     def _gauge_biases(self, marker_joints: np.ndarray) -> np.ndarray:
         """Pots whose bias is fixed at nominal to remove a gauge freedom: (P,) bool.
@@ -216,22 +262,38 @@ class Observation:
         mocap frame about its axis does the same (root gauge). The first rotary/encoder pot (else
         tendon) reading such a joint keeps its nominal bias.
         """
-        anc = self.kin._anc
-        kin = self.kin
         fixed = np.zeros(self.n_pots, dtype=bool)
-        for k in range(self.robot.n_joints):
-            moved = anc[marker_joints, k]
-            if not moved.any():
-                continue
-            leaf = (marker_joints[moved] == k + 1).all()
-            root = kin.base_joint == 0 and kin.parent[k] < 0 and moved.all() and not kin.prismatic[k]
-            if not (leaf or root):
-                continue
-            readers = [j for j in np.flatnonzero(self.A[:, k]) if self.kinds[j] != "linear"]
-            readers.sort(key=lambda j: self.kinds[j] == "tendon")
-            if readers:
-                fixed[readers[0]] = True
+        for k in self._gauge_kinds(marker_joints):
+            j = self._gauge_reader(k)
+            if j is not None:
+                fixed[j] = True
         return fixed
+
+    def _gauge_records(self, marker_joints: np.ndarray) -> tuple:
+        """({joint, pot, kind, reason}, ...) for calib.yaml's ``gauges`` (pot None when no pot
+        with an estimated bias reads the joint: its tracked angle's zero is then arbitrary)."""
+        out = []
+        for k, kind in self._gauge_kinds(marker_joints).items():
+            joint = self.robot.joint_names[k]
+            j = self._gauge_reader(k)
+            if kind == "leaf":
+                link = self.marker_links[int(np.flatnonzero(self.kin._anc[marker_joints, k])[0])]
+                why = (
+                    f"every marker joint {joint} moves is on link {link}: turning them about its axis "
+                    "absorbs any offset of its zero"
+                )
+            else:
+                why = (
+                    f"joint {joint} moves every marker about an axis fixed in the base: turning the mocap "
+                    "frame absorbs any offset of its zero"
+                )
+            if j is None:
+                why += "; no calibrated pot reads it, so its tracked angle's zero is arbitrary"
+            else:
+                why += f"; pot {self.pot_specs[j].name}'s bias keeps its nominal value"
+            pot = None if j is None else self.pot_specs[j].name
+            out.append({"joint": joint, "pot": pot, "kind": kind, "reason": why})
+        return tuple(out)
 
     def gauge_joints(self) -> set[str]:
         """Joints whose zero is a gauge, fixed by keeping a reading pot's bias at nominal."""
@@ -364,6 +426,8 @@ class Observation:
             sigma_pots=float(np.sqrt(np.mean(np.square(pots_sigma)))) if pots_sigma else float("nan"),
             sigma_markers=float(sigma.get(MARKERS, np.nan)),
             sigma_by_group={k: float(v) for k, v in sigma.items()},
+            unobservable=self.unobservable,
+            gauges=self.gauges,
         )
         return cal if fit is None else replace(cal, fit=fit)
 
@@ -384,13 +448,28 @@ class Observation:
         )
 
 
-def _check_names(names, specs, what, robot) -> None:
-    unknown = [n for n in names if n not in specs]
-    if unknown:
-        raise UnknownNameError(
-            f"log {what} {unknown[0]!r} is not in {robot.name}'s sensors.yaml"
-            + (f" ({len(unknown)} unknown {what}s)" if len(unknown) > 1 else "")
-        )
+def _known(stream, specs, what: str, ignored: dict):
+    """The stream's channels sensors.yaml names (in log order); the others go to ``ignored``."""
+    unknown = [n for n in stream.names if n not in specs]
+    if not unknown:
+        return stream
+    ignored[what] = unknown
+    return stream.select([n for n in stream.names if n in specs])
+
+
+def ignored_line(ignored: dict, robot) -> str:
+    """One line naming the log channels that sensors.yaml does not name (with close matches)."""
+    parts = []
+    for what, names in ignored.items():
+        specs = robot.sensors.pot_names if what == "pots" else robot.sensors.marker_names
+        shown = ", ".join(n + _close(n, specs) for n in names[:6]) + (", ..." if len(names) > 6 else "")
+        parts.append(f"{len(names)} log {what} ({shown})")
+    return f"ignored {' and '.join(parts)}: not in {robot.name}'s sensors.yaml"
+
+
+def _close(name: str, choices) -> str:
+    match = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.75)
+    return f" — did you mean {match[0]!r}?" if match else ""
 
 
 def _linear_map(robot: Robot, specs) -> np.ndarray:

@@ -91,11 +91,13 @@ def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inne
     return R, T, d, se
 
 
-def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray):
+def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray, gain0: np.ndarray | None = None):
     """Eq. 2.18-2.20 by weighted linear least squares per pot; w (T, P) robust weights.
 
     Returns gain, bias, gain_se, bias_se (P,). Encoders: gain 1, bias = mean(p − s). Pots in
-    ``obs.fixed_bias`` (gauge, see Observation._gauge_biases) keep ``bias0`` and fit the gain only.
+    ``obs.fixed_bias`` (gauge, see Observation._gauge_biases) keep ``bias0`` and fit the gain only;
+    pots in ``obs.fixed_gain`` (unobservable, see Observation.check_observable) keep ``gain0`` and
+    ``bias0`` (standard errors NaN).
     SE: σ̂² (Xᵀ W X)⁻¹ with σ̂² = Σ w r² / (N − k), the usual LS covariance with q held fixed.
     """
     P = obs.n_pots
@@ -103,6 +105,9 @@ def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray):
     for j in range(P):
         s, p, wj = st.s[:, j], obs.pots[:, j], w[:, j]
         sw = wj.sum()
+        if obs.fixed_gain[j]:
+            gain[j], bias[j] = (1.0 if gain0 is None else gain0[j]), bias0[j]
+            continue
         if obs.fixed_bias[j]:
             bias[j] = bias0[j]
             if obs.kinds[j] != "encoder":
@@ -135,5 +140,5 @@ def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray):
 def p_phase(obs: Observation, st: State, params: Params, w_pots: np.ndarray, w_markers: np.ndarray) -> PhaseResult:
     """All sensor parameters at fixed q (thesis eq. 2.6: independent sub-problems per sensor)."""
     R, T, d, dse = markers_fit(obs, st, params, w_markers)
-    gain, bias, gse, bse = pots_fit(obs, st, w_pots, params.bias)
+    gain, bias, gse, bse = pots_fit(obs, st, w_pots, params.bias, params.gain)
     return PhaseResult(Params(gain, bias, d, R, T), {"gain": gse, "bias": bse, "xyz": dse})

@@ -105,8 +105,10 @@ def test_fit_errors_are_one_line(files, robot_dir, tmp_path):
     assert "chamber 'knee.flex' is not in sensors.yaml" in msg
     msg = one_line_error(invoke("pneumatic-fit", log, "--robot", robot_dir))
     assert "--chamber NAME" in msg and "--all" in msg
-    msg = one_line_error(invoke("pneumatic-fit", log, "--chamber", "elbow.ext"))
-    assert "not found" in msg or "robot" in msg  # the log names a robot that is not bundled
+    # the log names its robot by directory (not bundled): no --robot needed (issue #15)
+    res = invoke("pneumatic-fit", log, "--chamber", "elbow.ext", "-o", tmp_path / "ok.yaml", "-q")
+    assert res.exit_code == 0, res.output
+    assert load_yaml(tmp_path / "ok.yaml")["robot"]["dir"] == str(robot_dir.resolve())
     data = load_log(log)
     u = data.streams["valve"].data.copy()
     u[5, 3] = -1.0

@@ -3,6 +3,7 @@ line, naming the entry (DESIGN.md: bad input gives one clear error line)."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from diegocal.errors import RobotConfigError
@@ -175,8 +176,23 @@ def test_unloadable_urdf(robot_dir, tiny_sensors):
         load_robot(robot_dir(tiny_sensors, urdf="<robot name='x'><link name='a'/><joint"))
 
 
-def test_multi_dof_joint_rejected(robot_dir, tiny_sensors, tiny_urdf):
+def test_continuous_joint_becomes_revolute(robot_dir, tiny_sensors, tiny_urdf):
+    """A continuous joint (Pinocchio: two position coordinates) loads as revolute within ±π."""
     urdf = tiny_urdf.replace('name="j3" type="revolute"', 'name="j3" type="continuous"')
     assert urdf != tiny_urdf
-    with pytest.raises(RobotConfigError, match="joint 'j3' has 2 position coordinates"):
-        load_robot(robot_dir(tiny_sensors, urdf=urdf))
+    robot = load_robot(robot_dir(tiny_sensors, urdf=urdf))
+    k = robot.joint_index("j3")
+    assert robot.model.nq == robot.model.nv == robot.n_joints
+    assert (robot.lower[k], robot.upper[k]) == pytest.approx((-np.pi, np.pi))
+
+
+def test_locked_entry_checked(robot_dir, tiny_sensors):
+    tiny_sensors["locked"] = {"j3": "up"}
+    with pytest.raises(RobotConfigError, match=r"locked\[j3\] must be a number"):
+        load_robot(robot_dir(tiny_sensors))
+    tiny_sensors["locked"] = {"nope": 0.1}
+    with pytest.raises(RobotConfigError, match="locked joint 'nope' is not a joint"):
+        load_robot(robot_dir(tiny_sensors))
+    tiny_sensors["locked"] = {"j3": 0.1}  # a pot (the tendon) reads j3
+    with pytest.raises(RobotConfigError, match="joint 'j3' is locked"):
+        load_robot(robot_dir(tiny_sensors))

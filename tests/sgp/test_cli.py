@@ -27,7 +27,8 @@ def test_fit_and_predict_end_to_end(logs, arm2_dir):
     assert r.exit_code == 0, r.output
     model_dir = train.with_name("train.sgp")  # DESIGN.md default: <log stem>.sgp/
     summary = load_yaml(model_dir / "sgp.yaml")
-    assert summary["kind"] == "pr" and set(summary["meta"]) == {
+    assert summary["kind"] == "dynamics" and summary["robot"]["name"] == "arm2"  # the bundle header
+    assert summary["model_kind"] == "pr" and set(summary["meta"]) == {
         "log",
         "robot",
         "command",
@@ -53,7 +54,7 @@ def test_sgp_fit_writes_hyperparameters(logs, arm2_dir, tmp_path):
     r = runner.invoke(app, args + ["--min-noise", "0.05"])
     assert r.exit_code == 0, r.output
     s = load_yaml(out / "sgp.yaml")
-    assert s["kind"] == "sgp" and s["options"]["friction"] == [] and s["options"]["min_noise"] == 0.05
+    assert s["model_kind"] == "sgp" and s["options"]["friction"] == [] and s["options"]["min_noise"] == 0.05
     assert "lengthscales" in s["hyperparameters"]["elbow"]
     # the guard's cross-validated choice per joint, in the summary and the file
     for joint in ("shoulder", "elbow"):

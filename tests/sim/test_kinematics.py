@@ -304,7 +304,7 @@ def test_cli_writes_a_log_with_truth(tmp_path):
     )
     assert res.exit_code == 0, res.output
     log = load_log(out)
-    assert log.n_samples == 500 and log.robot == "kin_tiny"
+    assert log.n_samples == 500 and log.robot == str(TINY.resolve())  # not bundled: its directory
     assert log.truth.effects[0]["cause"] == "backlash"
     assert log.truth.params["sigma"]["markers"] == 0.001
     out2 = tmp_path / "k2.h5"
