@@ -23,6 +23,7 @@ URDFS = {
     "ur5": "ur_description/urdf/ur5_joint_limited_robot.urdf",
     "panda": "panda_description/urdf/panda.urdf",
     "icub": "icub_description/robots/icub_reduced.urdf",
+    "icub_full": "icub_description/robots/icub.urdf",  # 32 joints: the neck too
     "talos_arm": "talos_data/robots/talos_left_arm.urdf",
 }
 

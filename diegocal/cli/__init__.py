@@ -13,6 +13,7 @@ from diegocal.cli import (  # noqa: F401
     sgp_cmd,
     simulate_cmd,
     simulate_dynamics_cmd,
+    split_cmd,
     stac_cmd,
 )
 from diegocal.cli.app import app

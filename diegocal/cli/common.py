@@ -53,6 +53,13 @@ def fail(message: str) -> typer.Exit:
     return typer.Exit(1)
 
 
+def usage_error(command: str, message: str) -> typer.Exit:
+    """A bad option value found after parsing (it needs the data): one line, exit 2, like the
+    parser's own usage errors."""
+    errors.print(f"error: diegocal {command}: {message} (see --help)", highlight=False, soft_wrap=True)
+    return typer.Exit(2)
+
+
 def cli_errors(fn):
     """Turn library errors into one line and exit 1 (STYLE.md: the CLI alone does this).
 

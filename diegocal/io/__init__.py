@@ -7,10 +7,11 @@ from diegocal.io.files import (
     load_yaml,
     q_log_path,
     save_log,
+    save_logs,
     save_yaml,
     write_text,
 )
-from diegocal.io.log import JOINT_STREAMS, Log, Stream, Truth, check_log, make_stream
+from diegocal.io.log import JOINT_STREAMS, Log, Stream, Truth, check_log, make_stream, split_log
 from diegocal.io.real import RealOptions, load_tiago, load_tx40
 
 __all__ = [
@@ -28,7 +29,9 @@ __all__ = [
     "load_tx40",
     "load_yaml",
     "make_stream",
+    "split_log",
     "save_log",
+    "save_logs",
     "save_yaml",
     "write_text",
 ]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import logging
 import os
 import tempfile
 from pathlib import Path
@@ -17,7 +18,9 @@ import numpy as np
 import yaml
 
 from diegocal.errors import InputFileError, LogFormatError
-from diegocal.io.log import FORMAT, VECTOR_STREAMS, VERSION, Log, Stream, Truth
+from diegocal.io.log import FORMAT, VECTOR_STREAMS, VERSION, Log, Stream, Truth, unknown_streams
+
+LOG = logging.getLogger(__name__)
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 CSV_HEADER_PREFIX = "# diegocal-log"
@@ -113,16 +116,26 @@ def log_robot(path) -> str | None:
 
 def save_log(log: Log, path) -> None:
     """Write a log; the format follows the suffix (``.h5``/``.hdf5`` or ``.csv``)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix in (".h5", ".hdf5"):
-        with atomic_path(path) as tmp:
-            _save_h5(log, tmp)
-    elif suffix == ".csv":
-        with atomic_path(path) as tmp:
-            _save_csv(log, tmp)
-    else:
-        raise LogFormatError(f"{path}: unknown log suffix {suffix!r} (use .h5 or .csv)")
+    save_logs([(log, path)])
+
+
+def save_logs(pairs) -> None:
+    """Write several logs ``[(log, path), ...]`` together: each goes to a temporary file, and they
+    are renamed over their targets only once every one is complete (a failure leaves none)."""
+    pairs = [(log, Path(path)) for log, path in pairs]
+    writers = []
+    for _, path in pairs:
+        suffix = path.suffix.lower()
+        if suffix in (".h5", ".hdf5"):
+            writers.append(_save_h5)
+        elif suffix == ".csv":
+            writers.append(_save_csv)
+        else:
+            raise LogFormatError(f"{path}: unknown log suffix {suffix!r} (use .h5 or .csv)")
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(atomic_path(path)) for _, path in pairs]
+        for (log, _), tmp, write in zip(pairs, tmps, writers, strict=True):
+            write(log, tmp)
 
 
 def q_log_path(calib_path) -> Path:
@@ -211,6 +224,7 @@ def _load_h5(path: Path) -> Log:
             if not isinstance(f[key], h5py.Group):
                 raise LogFormatError(f"{path}: /{key} should be a stream group (names, data)")
             streams[key] = _read_stream(f[key], f"{path}:/{key}")
+        _say_unknown(unknown_streams(streams, str(path)), path)
         robot = _attr_str(f.attrs.get("robot"))
         rate = f.attrs.get("rate_hz")
     try:
@@ -309,6 +323,7 @@ def _load_csv(path: Path) -> Log:
         if not order[stream] or order[stream][-1] != rest or stream not in VECTOR_STREAMS:
             order[stream].append(rest)
         index.setdefault(stream, []).append(i)
+    _say_unknown(unknown_streams(order, str(path)), path)
     streams = {}
     for stream, names in order.items():
         cols = table[:, index[stream]]
@@ -321,6 +336,14 @@ def _load_csv(path: Path) -> Log:
         return Log(time=np.ascontiguousarray(time), streams=streams, robot=robot, rate_hz=rate)
     except LogFormatError as exc:
         raise LogFormatError(f"{path}: {exc}") from None
+
+
+def _say_unknown(names: list, path: Path) -> None:
+    if names:
+        LOG.warning(
+            f"{path}: kept stream(s) {', '.join(repr(n) for n in names)} that no diegocal command reads "
+            "(not one of DESIGN.md's streams)"
+        )
 
 
 def _nth_line(path: Path, n: int) -> str:

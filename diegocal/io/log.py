@@ -8,6 +8,7 @@ simulator writes and only tests and reports read; fitting code never touches it.
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -25,6 +26,31 @@ VECTOR_STREAMS = frozenset({"markers"})
 
 #: Streams whose channels are the robot's joints (URDF names).
 JOINT_STREAMS = ("q", "qd", "qdd", "tau")
+
+#: The streams diegocal reads or writes (DESIGN.md's table, plus predict's outputs). A log may
+#: carry others (extend freely), but one whose name is a near miss of these is a typo.
+KNOWN_STREAMS = ("pots", "markers", *JOINT_STREAMS, "pressure", "valve", "tau_std", "tau_measured")
+
+
+def close_match(name: str, choices, cutoff: float = 0.6) -> str | None:
+    """The choice ``name`` most likely misspells (difflib), or None."""
+    match = difflib.get_close_matches(name, [c for c in choices if c != name], n=1, cutoff=cutoff)
+    return match[0] if match else None
+
+
+def unknown_streams(names, where: str) -> list[str]:
+    """Stream names that are not diegocal's: raises LogFormatError for a near miss of a known
+    stream (``tua`` for ``tau``: a typo must not silently become a stream of its own), returns
+    the others (the caller says it keeps them)."""
+    out = []
+    for name in names:
+        if name in KNOWN_STREAMS:
+            continue
+        match = close_match(name, KNOWN_STREAMS, cutoff=0.65)
+        if match is not None:
+            raise LogFormatError(f"{where}: stream {name!r} is not a diegocal stream — did you mean {match!r}?")
+        out.append(name)
+    return out
 
 
 @dataclass(frozen=True)
@@ -113,7 +139,9 @@ class Log:
         if name not in self.streams:
             who = f" (needed by {needed_by})" if needed_by else ""
             have = ", ".join(sorted(self.streams)) or "none"
-            raise MissingStreamError(f"log has no '{name}' stream{who}; it has: {have}")
+            match = close_match(name, self.streams)
+            hint = f" — did you mean {match!r}?" if match else ""
+            raise MissingStreamError(f"log has no '{name}' stream{who}; it has: {have}{hint}")
         return self.streams[name]
 
     def with_streams(self, **streams: Stream) -> Log:
@@ -131,6 +159,33 @@ class Log:
             sig = {k: Stream(s.names, s.data[start:stop]) for k, s in truth.signals.items()}
             truth = replace(truth, signals=sig)
         return replace(self, time=self.time[start:stop], streams=cut, truth=truth)
+
+
+def split_index(log: Log, at: float, unit: str) -> int:
+    """The first sample of the second part when ``log`` is cut at ``at``: a fraction of its samples
+    (``unit='fraction'``, 0 < at < 1) or seconds from its start (``unit='seconds'``). Raises
+    ValueError (the caller's usage error) when either part would have fewer than 2 samples."""
+    T = log.n_samples
+    if unit == "fraction":
+        if not 0.0 < at < 1.0:
+            raise ValueError(f"a fraction must lie strictly between 0 and 1, got {at:g}")
+        k = int(round(at * T))
+    elif unit == "seconds":
+        if not 0.0 < at < log.duration:
+            raise ValueError(f"{at:g} s is outside the log (0 to {log.duration:.6g} s)")
+        k = int(np.searchsorted(log.time, log.time[0] + at, side="left"))
+    else:
+        raise ValueError(f"unknown unit {unit!r}")
+    if k < 2 or T - k < 2:
+        raise ValueError(f"the cut leaves {k} and {T - k} samples; each part needs at least 2")
+    return k
+
+
+def split_log(log: Log, at: float, unit: str = "fraction") -> tuple[Log, Log]:
+    """Two contiguous parts of a log (train, held out), cut at :func:`split_index`; each keeps the
+    robot, rate and the simulator's truth signals of its samples."""
+    k = split_index(log, at, unit)
+    return log.slice(0, k), log.slice(k, log.n_samples)
 
 
 def check_stream(name: str, stream: Stream, n_samples: int) -> None:

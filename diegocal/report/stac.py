@@ -2,8 +2,9 @@
 
 Pages: parameter table; marker positions before/after on the robot skeleton (Figs. 2.8-2.9);
 convergence of the cost (``fit.history``); residual histograms per sensor type (reloads the
-log named in ``meta.log`` and the tracked joint angles ``<stem>.q.h5`` when they exist); and
-the cross-sensor MAE table (Tables 2.1-2.2) when ``diegocal predict`` recorded one.
+log named in the header and the tracked joint angles ``<stem>.q.h5`` when they exist); what the
+data could not determine (``unobservable`` pots, ``gauges``) in words on the first page; and the
+cross-sensor MAE table (Tables 2.1-2.2) of files where an older ``diegocal predict`` recorded one.
 """
 
 from __future__ import annotations
@@ -24,7 +25,16 @@ def recognise(path: Path) -> bool:
 
 
 def describe(path: Path) -> dict:
-    return dict(load_yaml(path).get("meta") or {})
+    """Title-page facts from the bundle header ({log, robot, command, created}; legacy ``meta``)."""
+    from diegocal.io.bundle import load_bundle
+
+    bundle = load_bundle(path)
+    data = bundle.data
+    meta = data.get("meta") or {}
+    out = {k: data.get(k, meta.get(k)) for k in ("log", "command", "created")}
+    rec = bundle.robot
+    out["robot"] = rec["dir"] or rec["name"]
+    return {k: v for k, v in out.items() if v}
 
 
 # ----------------------------------------------------------------------------- plots
@@ -138,17 +148,33 @@ def residuals_by_type(cal: Calibration, robot, log, q) -> dict:
     return out
 
 
+def coverage_lines(cal: Calibration) -> list[str]:
+    """What the data could not determine (calib.yaml's ``unobservable`` and ``gauges``), in words."""
+    lines = []
+    if cal.unobservable:
+        lines.append(f"Unobservable: {len(cal.unobservable)} pot(s) keep their nominal gain and bias")
+        lines += [f"  {u['pot']}: {u['reason']}" for u in cal.unobservable]
+    if cal.gauges:
+        lines.append(f"Gauges: {len(cal.gauges)} joint zero(s) the markers cannot fix")
+        lines += [f"  {g['joint']}: {g['reason']}" for g in cal.gauges]
+    return lines + [""] if lines else []
+
+
 def param_lines(cal: Calibration) -> list[str]:
     lines = [
         f"method: {cal.method}   iterations: {cal.fit.iterations}   converged: {cal.fit.converged}",
         "σ by type: " + ", ".join(f"{k} {v:.3g}" for k, v in cal.sigma_by_group.items()),
         "",
+        *coverage_lines(cal),
         f"{'pot':<20}{'gain':>10}{'± se':>10}{'bias':>10}{'± se':>10}",
     ]
     gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
     bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
+    nominal = {u["pot"] for u in cal.unobservable}
+    gauge = {g["pot"] for g in cal.gauges}
     for i, n in enumerate(cal.pot_names):
-        lines.append(f"{n:<20}{cal.gain[i]:>10.4f}{gse[i]:>10.2g}{cal.bias[i]:>10.4f}{bse[i]:>10.2g}")
+        note = "  nominal (unobservable)" if n in nominal else "  bias nominal (gauge)" if n in gauge else ""
+        lines.append(f"{n:<20}{cal.gain[i]:>10.4f}{gse[i]:>10.2g}{cal.bias[i]:>10.4f}{bse[i]:>10.2g}{note}")
     return lines
 
 
@@ -209,17 +235,19 @@ def pages(path: Path, pdf, context: ReportContext) -> None:
 
 
 def _load_context(raw: dict, path: Path, context: ReportContext):
-    """Robot, log and tracked q named in ``meta`` when they still exist (else None)."""
+    """Robot, log and tracked q named in the bundle header (legacy: ``meta``) when they still
+    exist (else None)."""
     from diegocal.io import q_log_path
+    from diegocal.io.bundle import load_bundle
     from diegocal.robot import load_robot
 
-    meta = raw.get("meta") or {}
     robot = log = q = None
     try:
-        rdir = context.robot or (Path(meta["robot"]) if meta.get("robot") else None)
-        robot = load_robot(rdir) if rdir is not None and Path(rdir).is_dir() else None
-        if meta.get("log") and Path(meta["log"]).exists():
-            log = load_log(meta["log"]).without_truth()
+        bundle = load_bundle(path)
+        rdir = context.robot or bundle.robot["dir"]
+        robot = load_robot(rdir) if rdir is not None and Path(rdir).exists() else None
+        if bundle.log and Path(bundle.log).exists():
+            log = load_log(bundle.log).without_truth()
         qp = q_log_path(Path(path))
         if qp.exists() and log is not None:
             qlog = load_log(qp)
