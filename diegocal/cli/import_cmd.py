@@ -10,8 +10,18 @@ import typer
 from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, summary
 
+HELP = (
+    "Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock.\n\n"
+    "The map (YAML) has the keys robot; sources (file pattern, time column or rate_hz, time_offset, "
+    "zero_time, stamp, max_gap_s); streams (source, table or topic, columns: file column -> channel, unit, "
+    "side: motor, scale, offset, torque_constant); transmission (ratio); clock (rate_hz or source); "
+    "interpolation (linear, nearest, previous); filter (cutoff_hz, order); derive (qd, qdd); window (auto, "
+    "or start and stop in s). diegocal/io/importers/mapping.py describes every key; "
+    "sample_data/real/*.map.yaml are worked examples."
+)
 
-@app.command("import")
+
+@app.command("import", help=HELP)
 @cli_errors
 def import_cmd(
     sources: Annotated[list[Path], typer.Argument(
@@ -23,9 +33,9 @@ def import_cmd(
         "--map", help="Import map (YAML): sources, columns -> channels, units, transmission, clock, "
         "filter, derive, window. Without it each file gives its natural streams.")] = None,
     rate: Annotated[float | None, typer.Option(
-        min=1e-6, help="Clock of the log, Hz (replaces the map's clock) [default: the map's, "
-        "else the C3D's, else the files' shared time stamps].")] = None,
-    robot: Annotated[str | None, typer.Option(help="Robot the log names [default: the map's robot].")] = None,
+        min=1e-6, help="Clock of the log, Hz; replaces the map's clock. Default: the map's clock, else the "
+        "C3D's time stamps, else those the files share.")] = None,
+    robot: Annotated[str | None, typer.Option(help="Robot the log names; default: the map's robot.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock."""

@@ -86,3 +86,22 @@ def test_a_broken_bag_is_one_line(tmp_path):
     (tmp_path / "empty.mcap").write_bytes(b"")
     with pytest.raises(LogFormatError, match="empty.mcap: not a readable ROS bag"):
         import_log([tmp_path / "empty.mcap"])
+
+
+def test_jittered_stamps_filtered_and_derived_on_the_bag_own_clock(tmp_path):
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.008, 0.012, 400))  # ~100 Hz with jitter, as drivers publish
+    q = np.column_stack([np.sin(t), np.cos(2 * t), t])
+    path = write_bag(tmp_path / "j.bag", "ros1", NAMES, t, q, None, 2 * q)
+    result = import_log([path], parse_map({"filter": {"cutoff_hz": 5}, "derive": ["qd"],
+                                           "sources": {"j": {"zero_time": True}}}))
+    log = result.log
+    assert "j.bag /joint_states's time stamps" in result.clock  # not a resampling grid
+    np.testing.assert_allclose(log.time, (t - t[0])[: log.n_samples], atol=1e-9)
+    # the filtering grid ends up to one step before the last stamp, the clock one stamp before that
+    assert log.time[-1] >= t[-1] - t[0] - 0.01 - 0.012
+    inner = slice(50, -50)
+    np.testing.assert_allclose(log.streams["qd"].data[inner], np.column_stack(
+        [np.cos(t), -2 * np.sin(2 * t), np.ones_like(t)])[: log.n_samples][inner], atol=5e-3)
+    # filtered on a uniform grid at the median rate (1 / 9.9 ms here: 101 Hz), then read at the stamps
+    assert any("uniform 101 Hz grid" in n for n in result.notes), result.notes

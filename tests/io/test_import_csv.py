@@ -190,3 +190,10 @@ def test_derived_velocities_and_window(tmp_path):
         import_log([path], parse_map({"window": "auto"}))
     with pytest.raises(LogFormatError, match="cut-off 150 Hz must be below half the sample rate"):
         import_log([path], parse_map({"filter": {"cutoff_hz": 150}}))
+
+
+def test_a_misspelt_stream_column_gets_a_close_match(tmp_path):
+    # the case: `tua.joint2` used to become a stream `tua` and the joint silently lost its torque
+    (tmp_path / "x.csv").write_text("time,q.joint1,q.joint2,tau.joint1,tua.joint2\n0,1,2,3,4\n1,2,3,4,5\n")
+    with pytest.raises(MapError, match=r"column 'tua.joint2' names no stream \('tua'\) — did you mean 'tau'\?"):
+        import_log([tmp_path / "x.csv"])

@@ -142,6 +142,7 @@ def _default_specs(sources: dict[str, Source], notes: list[str]) -> tuple[Stream
                 found += [StreamSpec(st, source=src.name, table=table.name)
                           for st in STREAMS if any(c.startswith(st + ".") for c in table.columns)]
             else:
+                _misspelt_stream(src, table)
                 raise MapError(f"{src.path.name}: nothing to import without a map (columns: "
                                f"{preview(list(table.columns))}); map them to streams with --map")
         for spec in found:
@@ -151,6 +152,16 @@ def _default_specs(sources: dict[str, Source], notes: list[str]) -> tuple[Stream
             origin[spec.stream] = src.path.name
             specs.append(spec)
     return tuple(specs)
+
+
+def _misspelt_stream(src: Source, table: Table) -> None:
+    """A diegocal-style column whose stream is misspelt (``tua.joint2``): say so, with the close match."""
+    for col in table.columns:
+        prefix = col.split(".", 1)[0]
+        hint = close_match(prefix, STREAMS) if "." in col and prefix not in STREAMS else ""
+        if hint:
+            raise MapError(f"{src.path.name}: column {col!r} names no stream ({prefix!r}){hint} "
+                           f"(streams: {', '.join(STREAMS)})")
 
 
 def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap) -> tuple[Series, str]:
@@ -164,7 +175,7 @@ def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap) -
             raise MapError(f"stream '{spec.stream}': no source {spec.source!r}" + close_match(spec.source, sources))
         src = sources[spec.source]
     table = src.table(spec.table)
-    origin = src.path.name + (f" {table.name}" if table.name and src.kind == "bag" else "")
+    origin = _label(src, table)
     where = f"stream '{spec.stream}' ({origin})"
     pairs = spec.columns if spec.columns is not None else _natural(spec.stream, table, where)
     names = tuple(ch for _, ch in pairs)
@@ -179,6 +190,11 @@ def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap) -
     max_gap = src.spec.max_gap_s if src.spec.max_gap_s is not None else default_max_gap(table.time)
     return Series(spec.stream, names, table.time, data, origin, src.name, table.name, max_gap,
                   table.rate_hz), conversion
+
+
+def _label(src: Source, table: Table) -> str:
+    """The file name, and the topic for a bag: where a stream came from, in messages."""
+    return src.path.name + (f" {table.name}" if src.kind == "bag" else "")
 
 
 def _natural(stream: str, table: Table, where: str) -> tuple[tuple[str, str], ...]:
@@ -362,12 +378,16 @@ def _clock_table(series: list[Series], sources: dict[str, Source], clock: Clock 
             raise MapError(f"clock: no source {clock.source!r}" + close_match(clock.source, sources))
         src = sources[clock.source]
         t = src.table(clock.table)
-        return _ClockTable(t.time, t.rate_hz, src.path.name + (f" {t.name}" if src.kind == "bag" else ""))
+        return _ClockTable(t.time, t.rate_hz, _label(src, t))
     mocap = {(s.source, s.table) for s in series if sources[s.source].kind == "c3d" and s.stream == "markers"}
     if len(mocap) == 1:
         s = next(x for x in series if (x.source, x.table) in mocap)
         return _ClockTable(s.time, s.rate_hz, sources[s.source].path.name)
     first = series[0]
+    if len({(s.source, s.table) for s in series}) == 1:  # one table: its own time stamps
+        src = sources[first.source]
+        t = src.table(first.table)
+        return _ClockTable(t.time, t.rate_hz, _label(src, t))
     if all(s.time.shape == first.time.shape and np.array_equal(s.time, first.time) for s in series):
         return _ClockTable(first.time, first.rate_hz, first.origin)
     rates = ", ".join(f"{s.stream} {_rate_text(s.time)}" for s in series)
