@@ -31,6 +31,13 @@ robots: $(STAMP)
 sample-data: $(STAMP)
 	$(BIN)/python scripts/make_sample_data.py sample_data
 
+# The real-robot logs in sample_data/real (Stäubli TX40, PAL TIAGo), imported from the published
+# recordings with the maps committed beside them. REAL_DATA: where the recordings are.
+REAL_DATA ?= ../shared/data/real
+real-data: $(STAMP)
+	$(DIEGOCAL) import $(REAL_DATA)/tx40/pos_read_data.csv $(REAL_DATA)/tx40/curr_data.csv --map sample_data/real/tx40.map.yaml -o sample_data/real/tx40.h5
+	$(DIEGOCAL) import $(REAL_DATA)/tiago/tiago_position.csv $(REAL_DATA)/tiago/tiago_effort.csv --map sample_data/real/tiago.map.yaml -o sample_data/real/tiago.h5
+
 # The main job on the bundled sample data: calibrate, fit, predict held-out, diagnose one hidden
 # effect per domain (what the model gets wrong, the named cause, the held-out gain), report.
 DIAGNOSES := $(OUT)/kinematics.diagnosis.yaml $(OUT)/dynamics.diagnosis.yaml $(OUT)/pneumatics.diagnosis.yaml

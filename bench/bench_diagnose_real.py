@@ -2,8 +2,8 @@
 
     .venv/bin/python bench/bench_diagnose_real.py [--data DIR] [--tx40-blocks 20] [--tiago-blocks 10]
 
-The recordings of ``shared/data/real`` (README there; converted by :mod:`diegocal.io.real` as in
-``bench_real_identification.py``) are diagnosed in the dynamics domain with the library's
+The real-robot logs of ``sample_data/real`` (README there; imported by ``diegocal import``; the
+same logs as ``bench_real_identification.py``) are diagnosed in the dynamics domain with the library's
 defaults except the number of blocks: the TX40 run is one 7.8 s excitation (1563 samples at
 200 Hz after the zero-phase 10 Hz filter), so its residuals stay correlated over ~0.5 s and ten
 blocks leave two validation blocks, too few sub-blocks for the out-of-sample test; 20 blocks of
@@ -26,7 +26,6 @@ BLAS thread (the machine is shared).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -44,16 +43,16 @@ except ImportError:  # pragma: no cover
     pass
 
 from bench_real import tx40_model  # noqa: E402
-from bench_real_identification import FIGAROH, TIAGO_WINDOW, arrays, nominal, tiago_split, tx40_splits  # noqa: E402
+from bench_real_identification import FIGAROH, arrays, nominal, tiago_log, tiago_split, tx40_splits  # noqa: E402
 
 from diegocal.diagnose import DiagnoseOptions, diagnose  # noqa: E402
-from diegocal.io.real import RealOptions, load_tiago, load_tx40  # noqa: E402
+from diegocal.io import load_log  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions  # noqa: E402
 from diegocal.sgp.model import DynamicsModel  # noqa: E402
 
 REPO = HERE.parent
-DEFAULT_DATA = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+DEFAULT_DATA = REPO / "sample_data" / "real"
 
 
 def _fmt(x: float) -> str:
@@ -138,13 +137,13 @@ def main(argv=None) -> int:
     ap.add_argument("--tx40-blocks", type=int, default=20)
     ap.add_argument("--tiago-blocks", type=int, default=10)
     args = ap.parse_args(argv)
-    if not (args.data / "tx40").is_dir():
+    if not (args.data / "tx40.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
         return 0
     t0 = time.time()
     # TX40
     robot = load_robot(BUNDLED_ROBOTS / "tx40")
-    log = load_tx40(args.data / "tx40")
+    log = load_log(args.data / "tx40.h5")
     t = time.time()
     d = diagnose(log, robot, DiagnoseOptions(domain="dynamics", n_blocks=args.tx40_blocks))
     print(f"TX40: {log.n_samples} samples, {log.time[-1] - log.time[0]:.1f} s; diagnose {time.time() - t:.1f} s wall")
@@ -153,7 +152,7 @@ def main(argv=None) -> int:
     judge_splits(tx40_splits(args.data, 1), terms, tx40=True)
     # TIAGo
     robot = load_robot(BUNDLED_ROBOTS / "tiago")
-    log = load_tiago(args.data / "tiago", RealOptions(cutoff_hz=5.0, window=TIAGO_WINDOW))
+    log = tiago_log(args.data)
     t = time.time()
     d = diagnose(log, robot, DiagnoseOptions(domain="dynamics", n_blocks=args.tiago_blocks))
     print(

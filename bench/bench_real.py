@@ -1,28 +1,35 @@
-"""Real-robot conversions checked against rigid-body dynamics (TX40, TIAGo).
+"""Real-robot logs checked against rigid-body dynamics (TX40, TIAGo).
 
-    .venv/bin/python bench/bench_real.py [DATA_DIR]
+    .venv/bin/python bench/bench_real.py [RAW_DIR]
 
-For each robot: conversion time, then per joint the correlation of the measured torque with
+The logs are sample_data/real/{tx40,tiago}.h5 (made by ``diegocal import`` with the maps beside
+them). For each robot: per joint the correlation of the measured torque with
 ``pinocchio.rnea(q, qd, qdd)`` alone and with a friction model — for the TX40 the published
 priors of shared/data/real/README.md (rotor inertia, viscous, Coulomb, offsets, wrist-coupling
 motor terms; nothing fitted), for TIAGo a per-joint least-squares fit of
 [rnea, qd, tanh(qd/0.01), 1] (in-sample; a sanity check of signs and gains, not an
-identification). Last, the TX40 torque RMSE with the priors for several derivative cut-offs.
+identification). Last, the TX40 torque RMSE with the priors for several derivative cut-offs:
+this re-imports the raw 5 kHz recording (RAW_DIR, default ../shared/data/real; skipped without it)
+with tx40.map.yaml's filter cut-off replaced, and times the import.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from diegocal.io.real import RealOptions, load_tiago, load_tx40
+from diegocal.io import load_log
+from diegocal.io.importers import import_log, load_map
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 
 REPO = Path(__file__).resolve().parents[1]
+SAMPLE = REPO / "sample_data" / "real"
+TX40_RAW = ("pos_read_data.csv", "curr_data.csv")
 TX40_PRIORS = dict(
     fv=np.array([8.05, 5.53, 1.97, 1.11, 1.86, 0.65]),
     fs=np.array([7.14, 8.26, 6.34, 2.48, 3.03, 0.282]),
@@ -53,14 +60,10 @@ def corr(a, b) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
-def main(data: Path) -> None:
-    if not (data / "tx40").is_dir():
-        print(f"no real-robot data at {data}; skipped")
-        return
+def main(raw: Path) -> None:
     robot = load_robot(BUNDLED_ROBOTS / "tx40")
-    start = time.perf_counter()
-    log = load_tx40(data / "tx40")
-    print(f"TX40: converted in {time.perf_counter() - start:.2f} s -> {log.n_samples} samples at "
+    log = load_log(SAMPLE / "tx40.h5")
+    print(f"TX40: {SAMPLE / 'tx40.h5'}: {log.n_samples} samples at "
           f"{log.rate_hz:g} Hz, t = {log.time[0]:.2f}..{log.time[-1]:.2f} s")
     qd, qdd, rb = rnea(robot, log)
     meas = log.streams["tau"].select(robot.joint_names).data
@@ -75,17 +78,23 @@ def main(data: Path) -> None:
     rmse = np.sqrt(((meas - model) ** 2).mean())
     print(f"all joints: torque RMSE with the published priors {rmse:.2f}"
           " N·m (README: FIGAROH in-sample fit 2.84 with coupling, 3.36 without)")
-    print(f"{'cut-off Hz':<18}{'RMSE N·m':>9}")
-    for fc in (2.5, 5.0, 10.0, 20.0, 40.0):
-        lg = load_tx40(data / "tx40", RealOptions(cutoff_hz=fc, rate_hz=200.0))
-        a, b, c = rnea(robot, lg)
-        m = lg.streams["tau"].select(robot.joint_names).data
-        print(f"{fc:<18g}{np.sqrt(((m - tx40_model(c, a, b))**2).mean()):9.2f}")
+    if (raw / "tx40").is_dir():
+        print(f"{'cut-off Hz':<18}{'RMSE N·m':>9}{'import s':>10}   (raw 5 kHz recording, {raw / 'tx40'})")
+        mapping = load_map(SAMPLE / "tx40.map.yaml")
+        for fc in (2.5, 5.0, 10.0, 20.0, 40.0):
+            start = time.perf_counter()
+            lg = import_log([raw / "tx40" / f for f in TX40_RAW],
+                            replace(mapping, filter=replace(mapping.filter, cutoff_hz=fc))).log
+            took = time.perf_counter() - start
+            a, b, c = rnea(robot, lg)
+            m = lg.streams["tau"].select(robot.joint_names).data
+            print(f"{fc:<18g}{np.sqrt(((m - tx40_model(c, a, b))**2).mean()):9.2f}{took:10.2f}")
+    else:
+        print(f"cut-off sweep skipped: it re-imports the raw recording, not found at {raw / 'tx40'}")
 
     robot = load_robot(BUNDLED_ROBOTS / "tiago")
-    start = time.perf_counter()
-    log = load_tiago(data / "tiago")
-    print(f"\nTIAGo: converted in {time.perf_counter() - start:.2f} s -> {log.n_samples} samples "
+    log = load_log(SAMPLE / "tiago.h5")
+    print(f"\nTIAGo: {SAMPLE / 'tiago.h5'}: {log.n_samples} samples "
           f"at {log.rate_hz:g} Hz, t = {log.time[0]:.2f}..{log.time[-1]:.2f} s (wrist tau dropped)")
     qd, _, rb = rnea(robot, log)
     tau = log.streams["tau"]

@@ -3,8 +3,8 @@
     .venv/bin/python bench/bench_real_identification.py [--data DIR] [--tx40-stride 2]
                                                         [--tiago-stride 8] [--no-floor]
 
-The recordings of ``shared/data/real`` (Stäubli TX40, PAL TIAGo; README there) are converted
-by :mod:`diegocal.io.real` (zero-phase low-pass, derivatives, documented unit conversions), split
+The real-robot logs of ``sample_data/real`` (Stäubli TX40, PAL TIAGo; README there: imported by
+``diegocal import`` with zero-phase low-pass, derivatives, documented unit conversions), split
 in time into a training and a held-out part, and on each split this script fits
 
 - **PR**: Bayesian linear regression on the base torque regressor + viscous + Coulomb friction
@@ -39,7 +39,6 @@ shared). Fitting never reads anything but the training log.
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import time
@@ -49,14 +48,13 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from diegocal.io import Log, make_stream
-from diegocal.io.real import RealOptions, load_tiago, load_tx40
+from diegocal.io import Log, load_log, make_stream
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics, nmse
 from diegocal.sgp.model import log_arrays
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_DATA = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+DEFAULT_DATA = REPO / "sample_data" / "real"
 TIAGO_WINDOW = (9.2, 67.9)  # s, README rows 921-6791
 TIAGO_SPLIT = 48.0  # s, README row 4800
 NOISE_FLOOR = 0.2  # σ_v ≥ NOISE_FLOOR · std(τ_j) in the diagnostic "SGP floor" row
@@ -93,7 +91,7 @@ def every(log: Log, stride: int) -> Log:
 def tx40_splits(data: Path, stride: int) -> list[Split]:
     """Half/half time split of the TX40 run and its reverse (train on the second half)."""
     robot = load_robot(BUNDLED_ROBOTS / "tx40")
-    log = load_tx40(data / "tx40")
+    log = load_log(data / "tx40.h5")
     h = log.n_samples // 2
     first, second = log.slice(0, h), log.slice(h, log.n_samples)
     joints = tuple(robot.joint_names)
@@ -104,12 +102,19 @@ def tx40_splits(data: Path, stride: int) -> list[Split]:
 def tiago_split(data: Path, stride: int) -> Split:
     """TIAGo trained on 9.2-48.0 s, held out 48.0-67.9 s (README rows 921-4800 / 4800-6791)."""
     robot = load_robot(BUNDLED_ROBOTS / "tiago")
-    log = load_tiago(data / "tiago", RealOptions(cutoff_hz=5.0, window=TIAGO_WINDOW))
+    log = tiago_log(data)
     k = int(np.searchsorted(log.time, TIAGO_SPLIT))
     tau_joints = log.streams["tau"].names
     arm = tuple(j for j in tau_joints if j.startswith("arm_"))
     return Split("tiago", robot, every(log.slice(0, k), stride), log.slice(k, log.n_samples),
                  tau_joints, arm, stride)
+
+
+def tiago_log(data: Path) -> Log:
+    """sample_data/real/tiago.h5 cut to the README's excitation, TIAGO_WINDOW (rows 921-6791)."""
+    log = load_log(data / "tiago.h5")
+    start, stop = np.searchsorted(log.time, TIAGO_WINDOW)
+    return log.slice(int(start), int(stop))
 
 
 # ----------------------------------------------------------------------------- models
@@ -205,13 +210,13 @@ def report(split: Split, results: list[Result]) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="shared/data/real")
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="sample_data/real")
     parser.add_argument("--tx40-stride", type=int, default=2, help="TX40 training subsampling")
     parser.add_argument("--tiago-stride", type=int, default=8, help="TIAGo training subsampling")
     parser.add_argument("--no-floor", action="store_true", help="skip the 'SGP floor' row")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    if not (args.data / "tx40").is_dir() or not (args.data / "tiago").is_dir():
+    if not (args.data / "tx40.h5").exists() or not (args.data / "tiago.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
         return 0
     try:

@@ -6,6 +6,7 @@ import sys
 # Importing a command module registers its commands on the app.
 from diegocal.cli import (  # noqa: F401
     diagnose_cmd,
+    import_cmd,
     inspect_cmd,
     pneumatic_cmd,
     predict_cmd,

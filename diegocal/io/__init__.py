@@ -12,21 +12,17 @@ from diegocal.io.files import (
     write_text,
 )
 from diegocal.io.log import JOINT_STREAMS, Log, Stream, Truth, check_log, make_stream, split_log
-from diegocal.io.real import RealOptions, load_tiago, load_tx40
 
 __all__ = [
     "q_log_path",
     "JOINT_STREAMS",
     "Log",
-    "RealOptions",
     "Stream",
     "Truth",
     "atomic_path",
     "check_log",
     "dump_yaml",
     "load_log",
-    "load_tiago",
-    "load_tx40",
     "load_yaml",
     "make_stream",
     "split_log",

@@ -1,40 +1,48 @@
-"""Real-robot conversions (TX40, TIAGo) against the README's facts and rigid-body dynamics."""
+"""The real-robot logs that ship in sample_data/real (TX40, TIAGo): their conversions, as the maps
+beside them state them, against the README's facts, and the logs against rigid-body dynamics."""
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from diegocal.errors import InputFileError, LogFormatError
+from diegocal.errors import InputFileError
 from diegocal.io import load_log, save_log
-from diegocal.io.real import (
-    TIAGO_JOINTS,
-    RealOptions,
-    excitation_window,
-    load_tiago,
-    load_tx40,
-    reduce_urdf,
-    smooth_derivatives,
-    tiago_torque_from_effort,
-    tx40_joint_from_motor,
-    tx40_torque_from_motor,
-)
+from diegocal.io.importers import MapError, excitation_window, import_log, load_map
+from diegocal.io.urdf import reduce_urdf
 from diegocal.robot import load_robot
 
 REPO = Path(__file__).resolve().parents[2]
-DATA = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
-needs_data = pytest.mark.skipif(not (DATA / "tx40").is_dir(), reason=f"no real data at {DATA}")
-needs_robots = pytest.mark.skipif(not (REPO / "robots" / "tiago" / "robot.urdf").exists(),
-                                  reason="robots/tiago not built (scripts/convert_real.py)")
+SAMPLE = REPO / "sample_data" / "real"
+RAW = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+TIAGO_JOINTS = ("torso_lift_joint",) + tuple(f"arm_{i}_joint" for i in range(1, 8))
+TX40_COLUMNS = [f"Joint_{i}" for i in range(1, 7)]
+
+
+def _tx40_files(tmp_path, motor, current):
+    for fname, rows in (("pos_read_data.csv", motor), ("curr_data.csv", current)):
+        lines = [",".join(TX40_COLUMNS)] + [",".join(repr(float(v)) for v in r) for r in rows]
+        (tmp_path / fname).write_text("\n".join(lines) + "\n")
+    return [tmp_path / "pos_read_data.csv", tmp_path / "curr_data.csv"]
+
+
+def _tx40_convert(tmp_path, motor, current):
+    motor, current = np.atleast_2d(motor), np.atleast_2d(current)
+    if motor.shape[0] == 1:  # a log needs a time base: repeat the row
+        motor, current = np.repeat(motor, 2, axis=0), np.repeat(current, 2, axis=0)
+    mapping = replace(load_map(SAMPLE / "tx40.map.yaml"), filter=None, derive=(), window=None, clock=None)
+    log = import_log(_tx40_files(tmp_path, motor, current), mapping).log
+    return log.streams["q"].data, log.streams["tau"].data
 
 
 # ----------------------------------------------------------------------------- unit conversions
-def test_tx40_first_row_is_the_urdf_zero():
+def test_tx40_first_row_is_the_urdf_zero(tmp_path):
     # README check: row 1 gives 50.265/32 = 70.685/45 = π/2 before the zero offsets
     row = np.array([[3.1958e-05, 50.265, -70.685, 0.0, 0.0, -0.00028762]])
-    q = tx40_joint_from_motor(row)[0]
+    q = _tx40_convert(tmp_path, row, np.zeros_like(row))[0][0]
     assert 50.265 / 32 == pytest.approx(np.pi / 2, abs=1e-4)
     assert 70.685 / 45 == pytest.approx(np.pi / 2, abs=1e-4)
     np.testing.assert_allclose(q[1:3], 0.0, atol=2e-5)  # q2 - π/2, q3 + π/2
@@ -42,52 +50,57 @@ def test_tx40_first_row_is_the_urdf_zero():
     assert q[5] == pytest.approx(-0.00028762 / 32)  # q6 = m6/32 - q5, q5 = 0
 
 
-def test_tx40_wrist_coupling_round_trips():
+def test_tx40_wrist_coupling_round_trips(tmp_path):
     q = np.random.default_rng(0).uniform(-1, 1, (5, 6))
     motor = (q - [0, -np.pi / 2, np.pi / 2, 0, 0, 0]) @ np.diag([32, 32, 45, -48, 45, 32.0]).T
     motor[:, 5] += 32 * (q[:, 4])  # motor 6 = 32 (q5 + q6)
-    np.testing.assert_allclose(tx40_joint_from_motor(motor), q, atol=1e-12)
+    np.testing.assert_allclose(_tx40_convert(tmp_path, motor, np.zeros_like(motor))[0], q, atol=1e-12)
 
 
-def test_tx40_torques_follow_the_transpose_ratio():
+def test_tx40_torques_follow_the_transpose_ratio(tmp_path):
     c = np.array([[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]])
-    np.testing.assert_allclose(tx40_torque_from_motor(c)[0],
+    np.testing.assert_allclose(_tx40_convert(tmp_path, np.zeros_like(c), c)[1][0],
                                [32, 64, 135, -192, 45 * 5 + 32 * 6, 192])
 
 
-def test_tiago_effort_gains_and_torso_gravity():
+def _tiago_files(tmp_path, t, position, effort):
+    for kind, values in (("position", position), ("effort", effort)):
+        head = ["t"] + [f"- {j}_{kind}" for j in TIAGO_JOINTS]
+        rows = [",".join(repr(float(v)) for v in [ti, *row]) for ti, row in zip(t, values, strict=True)]
+        (tmp_path / f"tiago_{kind}.csv").write_text(",".join(head) + "\n" + "\n".join(rows) + "\n")
+    return [tmp_path / "tiago_position.csv", tmp_path / "tiago_effort.csv"]
+
+
+def test_tiago_effort_gains_and_torso_gravity(tmp_path):
     effort = np.array([[1.675, 0.032, 1.654, 0.056, 1.192, 0.0, 0.0, 0.0]])  # first row
-    tau = tiago_torque_from_effort(effort)[0]
-    np.testing.assert_allclose(tau, [1.675 + 9.81 * 18.5, 13.6 * 0.032, 13.6 * 1.654,
-                                     -8.7 * 0.056, -8.7 * 1.192, 0, 0, 0])
+    files = _tiago_files(tmp_path, [0.0, 0.0108], np.zeros((2, 8)), np.repeat(effort, 2, axis=0))
+    mapping = replace(load_map(SAMPLE / "tiago.map.yaml"), filter=None, derive=(), window=None, clock=None)
+    tau = import_log(files, mapping).log.streams["tau"]
+    assert tau.names == TIAGO_JOINTS[:5]  # the wrist efforts are left out
+    np.testing.assert_allclose(tau.data[0], [1.675 + 9.81 * 18.5, 13.6 * 0.032, 13.6 * 1.654,
+                                             -8.7 * 0.056, -8.7 * 1.192])
 
 
-def test_zero_phase_derivatives_of_a_sine():
-    rate = 200.0
-    t = np.arange(0, 20, 1 / rate)
-    w = 2 * np.pi * 0.5
-    q = np.sin(w * t)[:, None]
-    qf, qd, qdd = smooth_derivatives(q, rate, cutoff_hz=5.0)
-    inner = slice(400, -400)  # away from the filter's edge transients
-    np.testing.assert_allclose(qf[inner, 0], np.sin(w * t[inner]), atol=1e-3)
-    np.testing.assert_allclose(qd[inner, 0], w * np.cos(w * t[inner]), atol=1e-2)
-    np.testing.assert_allclose(qdd[inner, 0], -w * w * np.sin(w * t[inner]), atol=3e-2)
-
-
-def test_excitation_window_with_margin():
-    qd = np.zeros((1000, 2))
-    qd[300:700, 1] = 0.5
-    assert excitation_window(qd, 100.0, threshold=0.1, margin_s=0.5) == (250, 750)
-    assert excitation_window(np.zeros((10, 2)), 100.0) == (0, 10)
+def test_tiago_jittered_stamps_are_read_on_a_uniform_100_hz_grid(tmp_path):
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.0077, 0.0123, 400)) - 0.0077  # the recording's jitter
+    q = np.column_stack([np.sin(t + k) for k in range(8)])
+    files = _tiago_files(tmp_path, t, q, np.zeros((t.size, 8)))
+    mapping = replace(load_map(SAMPLE / "tiago.map.yaml"), filter=None, derive=(), window=None)
+    log = import_log(files, mapping).log
+    assert log.rate_hz == 100.0 and log.time[0] == t[0]
+    np.testing.assert_allclose(np.diff(log.time), 0.01, atol=1e-9)
+    np.testing.assert_array_equal(log.streams["q"].data[:, 3], np.interp(log.time, t, q[:, 3]))
 
 
 def test_missing_files_and_columns_are_clear_errors(tmp_path):
+    mapping = load_map(SAMPLE / "tx40.map.yaml")
     with pytest.raises(InputFileError, match="no such file"):
-        load_tx40(tmp_path)
+        import_log([tmp_path / "pos_read_data.csv", tmp_path / "curr_data.csv"], mapping)
     (tmp_path / "pos_read_data.csv").write_text("Joint_1,Joint_2\n1,2\n")
     (tmp_path / "curr_data.csv").write_text("Joint_1,Joint_2\n1,2\n")
-    with pytest.raises(LogFormatError, match="missing columns"):
-        load_tx40(tmp_path)
+    with pytest.raises(MapError, match="no column 'Joint_3'"):
+        import_log([tmp_path / "pos_read_data.csv", tmp_path / "curr_data.csv"], mapping)
 
 
 def test_reduce_urdf_folds_neutral_into_origin(tmp_path):
@@ -120,12 +133,12 @@ def test_reduce_urdf_folds_neutral_into_origin(tmp_path):
 # ----------------------------------------------------------------------------- real recordings
 @pytest.fixture(scope="module")
 def tx40():
-    return load_tx40(DATA / "tx40")
+    return load_log(SAMPLE / "tx40.h5")
 
 
 @pytest.fixture(scope="module")
 def tiago():
-    return load_tiago(DATA / "tiago")
+    return load_log(SAMPLE / "tiago.h5")
 
 
 def _rnea(robot, log):
@@ -136,7 +149,6 @@ def _rnea(robot, log):
     return q, qd, qdd, tau
 
 
-@needs_data
 def test_tx40_log_shape_window_and_round_trip(tx40, tmp_path):
     assert tx40.rate_hz == 200.0 and tx40.robot == "tx40"
     assert set(tx40.streams) == {"q", "qd", "qdd", "tau"}
@@ -146,8 +158,6 @@ def test_tx40_log_shape_window_and_round_trip(tx40, tmp_path):
     np.testing.assert_array_equal(back.streams["tau"].data, tx40.streams["tau"].data)
 
 
-@needs_data
-@needs_robots
 def test_tx40_matches_rnea_with_the_published_priors(tx40):
     """rigid body + the README's rotor inertia, friction, offsets and wrist-coupling terms."""
     robot = load_robot(REPO / "robots" / "tx40")
@@ -171,7 +181,6 @@ def test_tx40_matches_rnea_with_the_published_priors(tx40):
     assert rmse < 3.5  # measured 3.00 N·m (FIGAROH: 2.84 fitted in-sample with coupling)
 
 
-@needs_data
 def test_tiago_log_window_and_streams(tiago):
     assert tiago.rate_hz == 100.0 and tiago.robot == "tiago"
     assert tiago.streams["q"].names == TIAGO_JOINTS
@@ -179,14 +188,14 @@ def test_tiago_log_window_and_streams(tiago):
     # the README's excitation (rows 921-6791, 9.2-67.9 s) lies inside the detected window
     assert 5.0 < tiago.time[0] < 9.2 and 67.9 < tiago.time[-1] < 70.0
     np.testing.assert_allclose(np.diff(tiago.time), 0.01, atol=1e-9)
-    readme = load_tiago(DATA / "tiago", RealOptions(cutoff_hz=5.0, window=(9.2, 67.9)))
+    # the README's rows 921-6791, as the benches cut them out of the log
+    start, stop = np.searchsorted(tiago.time, [9.2, 67.9])
+    readme = tiago.slice(int(start), int(stop))
     assert readme.time[0] >= 9.2 and readme.time[-1] < 67.9
-    with_wrist = load_tiago(DATA / "tiago", wrist_tau=True)
-    assert with_wrist.streams["tau"].names == TIAGO_JOINTS
+    # the window is where a joint moves: the log's own qd finds the same one again
+    assert excitation_window(tiago.streams["qd"].data, 100.0) == (0, tiago.n_samples)
 
 
-@needs_data
-@needs_robots
 def test_tiago_matches_rnea_plus_friction(tiago):
     robot = load_robot(REPO / "robots" / "tiago")
     _, qd, _, rb = _rnea(robot, tiago)
@@ -207,7 +216,6 @@ def test_tiago_matches_rnea_plus_friction(tiago):
         assert np.corrcoef(tau.column(name), rb[:, k])[0, 1] > 0.5  # measured 0.58, 0.82
 
 
-@needs_robots
 def test_bundled_real_robots_load():
     tx = load_robot(REPO / "robots" / "tx40")
     assert tx.joint_names == tuple(f"joint_{i}" for i in range(1, 7))
@@ -216,3 +224,18 @@ def test_bundled_real_robots_load():
     data = ti.model.createData()
     pin.computeSubtreeMasses(ti.model, data)
     assert data.mass[ti.model.getJointId("torso_lift_joint")] == pytest.approx(18.5, abs=0.1)
+
+
+@pytest.mark.skipif(not (RAW / "tx40").is_dir() or not (RAW / "tiago").is_dir(),
+                    reason=f"no raw recordings at {RAW}")
+@pytest.mark.parametrize("name, files", [("tx40", ["pos_read_data.csv", "curr_data.csv"]),
+                                         ("tiago", ["tiago_position.csv", "tiago_effort.csv"])])
+def test_shipped_logs_are_what_the_maps_make_of_the_recordings(name, files):
+    """`make real-data` remakes sample_data/real: the committed logs match the import of the raw files."""
+    made = import_log([RAW / name / f for f in files], load_map(SAMPLE / f"{name}.map.yaml")).log
+    shipped = load_log(SAMPLE / f"{name}.h5")
+    np.testing.assert_array_equal(made.time, shipped.time)
+    assert made.robot == shipped.robot == name and made.rate_hz == shipped.rate_hz
+    for key, stream in shipped.streams.items():
+        assert made.streams[key].names == stream.names
+        np.testing.assert_array_equal(made.streams[key].data, stream.data)

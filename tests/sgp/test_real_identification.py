@@ -1,28 +1,26 @@
 """PR and SGP identified on real TX40 torques, judged on a held-out part of the same run.
 
-A short window of the Stäubli TX40 excitation (shared/data/real, converted by
-:func:`diegocal.io.real.load_tx40`): train on its first 4 s (every 4th sample, 50 Hz), predict the
-next 2 s at the full 200 Hz. Skipped when the data are absent. PR must beat the zero and the
-training-mean predictors on every joint; the SGP (library defaults, and with a noise floor) may
-lose at most SGP_NMSE_MARGIN of held-out nMSE to PR on any joint and 10 % in pooled RMSE. The full
-comparison (both TX40 splits, TIAGo, nominal rigid body) is bench/bench_real_identification.py.
+A short window of the Stäubli TX40 excitation (sample_data/real/tx40.h5, made by `diegocal import`
+with sample_data/real/tx40.map.yaml): train on its first 4 s (every 4th sample, 50 Hz), predict the
+next 2 s at the full 200 Hz. PR must beat the zero and the training-mean predictors on every joint;
+the SGP (library defaults, and with a noise floor) may lose at most SGP_NMSE_MARGIN of held-out nMSE
+to PR on any joint and 10 % in pooled RMSE. The full comparison (both TX40 splits, TIAGo, nominal
+rigid body) is bench/bench_real_identification.py.
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from diegocal.io import Log, make_stream
+from diegocal.io import Log, load_log, make_stream
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics, nmse
 
 REPO = Path(__file__).resolve().parents[2]
-DATA = Path(os.environ.get("DIEGOCAL_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
-pytestmark = pytest.mark.skipif(not (DATA / "tx40").is_dir(), reason=f"no real data at {DATA}")
+DATA = REPO / "sample_data" / "real"
 
 TRAIN = (0.5, 4.5)  # s, training window (the arm moves from 0 to about 7.4 s)
 TEST = (4.5, 6.5)  # s, held out
@@ -42,10 +40,8 @@ def _window(log: Log, lo: float, hi: float, stride: int = 1) -> Log:
 
 @pytest.fixture(scope="module")
 def tx40():
-    from diegocal.io.real import load_tx40
-
     robot = load_robot(BUNDLED_ROBOTS / "tx40")
-    log = load_tx40(DATA / "tx40")
+    log = load_log(DATA / "tx40.h5")
     train, test = _window(log, *TRAIN, STRIDE), _window(log, *TEST)
     measured = test.stream("tau").select(robot.joint_names).data
     return robot, train, test, measured
