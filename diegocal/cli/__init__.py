@@ -5,6 +5,7 @@ import sys
 
 # Importing a command module registers its commands on the app.
 from diegocal.cli import (  # noqa: F401
+    batch_cmd,
     diagnose_cmd,
     import_cmd,
     inspect_cmd,

@@ -13,7 +13,7 @@ from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, command_line, default_output, robot_for_log, robot_for_model, summary, warn
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
-from diegocal.io import load_log, make_stream, q_log_path, save_log, save_yaml
+from diegocal.io import load_log, make_stream, save_log, save_yaml
 from diegocal.io.bundle import header
 from diegocal.io.log import Log
 from diegocal.robot import Robot
@@ -69,6 +69,9 @@ def stac(
     schedule: Annotated[str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")] = "lm-iter",
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the q-phase.")] = 1,
     seed: Annotated[int, typer.Option(help="Random seed (STAC itself is deterministic).")] = 0,
+    joint_angles: Annotated[
+        Path | None, typer.Option("--joint-angles", help="Also write the tracked joint angles to this log (.h5, .csv).")
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
@@ -88,16 +91,9 @@ def stac(
     out = output or default_output(log, ".calib.yaml")
     cal = replace(result.calibration, header=header("calibration", model, log, command_line("diegocal stac")))
     save_yaml(cal.to_dict(), out)
-    qpath = q_log_path(Path(out))
-    save_log(
-        Log(
-            data.time,
-            {"q": make_stream(model.joint_names, result.q)},
-            robot=data.robot,
-            rate_hz=data.rate_hz,
-        ),
-        qpath,
-    )
+    if joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
+        q_log = Log(data.time, {"q": make_stream(model.joint_names, result.q)}, robot=data.robot, rate_hz=data.rate_hz)
+        save_log(q_log, joint_angles)
     if cal.unobservable:
         names = ", ".join(u["pot"] for u in cal.unobservable)
         warn(
@@ -116,7 +112,7 @@ def stac(
     ]
     rows += [(f"σ {g}", v) for g, v in cal.sigma_by_group.items()]
     rows += coverage_rows(cal, model)
-    rows += [("calibration", str(out)), ("joint angles", str(qpath))]
+    rows += [("calibration", str(out))] + ([("joint angles", str(joint_angles))] if joint_angles else [])
     summary(f"stac {Path(log).name}", rows, quiet=quiet)
 
 

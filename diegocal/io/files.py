@@ -114,6 +114,32 @@ def log_robot(path) -> str | None:
     return fields.get("robot") if first.startswith(CSV_HEADER_PREFIX) else None
 
 
+def log_streams(path) -> tuple[str, ...]:
+    """The stream names of a log, read from its header only (HDF5 groups, CSV column prefixes).
+
+    Raises LogFormatError when the file is not a diegocal log (another HDF5 file, another CSV)."""
+    path = _existing(path)
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head == HDF5_SIGNATURE:
+        try:
+            with h5py.File(path, "r") as f:
+                fmt = _attr_str(f.attrs.get("format"))
+                names = tuple(k for k in f if k not in ("time", "truth"))
+        except OSError as exc:
+            raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
+        if fmt != FORMAT:
+            raise LogFormatError(f"{path}: format attribute is {fmt!r}, expected {FORMAT!r}")
+        return names
+    if path.suffix.lower() != ".csv":
+        raise LogFormatError(f"{path}: not a diegocal log (expected an HDF5 .h5 or a .csv file)")
+    first = _nth_line(path, 0)
+    columns = _nth_line(path, 1) if first.startswith("#") else first
+    if (first.startswith("#") and not first.startswith(CSV_HEADER_PREFIX)) or not columns.startswith("time"):
+        raise LogFormatError(f"{path}: not a diegocal CSV log (no '{CSV_HEADER_PREFIX}' header or 'time' column)")
+    return tuple(dict.fromkeys(c.split(".", 1)[0] for c in columns.split(",")[1:] if "." in c))
+
+
 def save_log(log: Log, path) -> None:
     """Write a log; the format follows the suffix (``.h5``/``.hdf5`` or ``.csv``)."""
     save_logs([(log, path)])

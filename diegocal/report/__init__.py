@@ -1,6 +1,9 @@
-"""PDF reports assembled from result files; each section module registers itself on import."""
+"""PDF reports assembled from result files; each section module registers itself on import.
 
-from diegocal.report import diagnose, logs, pneumatic, sgp, stac  # noqa: F401 - imported to register their sections
+The batch section comes first: a batch table is a .csv, which the log section would otherwise take.
+"""
+
+from diegocal.report import batch, diagnose, logs, pneumatic, sgp, stac  # noqa: F401 - imported to register their sections
 from diegocal.report.pdf import write_report
 from diegocal.report.registry import SECTIONS, ReportContext, Section, register_section
 

@@ -1,4 +1,10 @@
-"""`diegocal report`: one multi-page PDF from result files, with a title page saying what was run."""
+"""`diegocal report`: one PDF document from result files.
+
+The document opens with a front page (what was run, the contents with page numbers, and a summary
+in plain words: each section's first paragraph), then one section per result in the order given.
+Every page carries a footer with its section and page number. Sections are drawn first into a
+:class:`Document` (which collects the pages), so that the contents know where each section starts.
+"""
 
 from __future__ import annotations
 
@@ -6,13 +12,61 @@ import datetime as _dt
 import platform
 from pathlib import Path
 
-from matplotlib.backends.backend_pdf import PdfPages
-
 from diegocal import __version__
-from diegocal.errors import InputFileError
+from diegocal.errors import DiegocalError, InputFileError
 from diegocal.io import atomic_path
-from diegocal.report.registry import ReportContext, section_for
-from diegocal.report.style import save_page, text_page
+from diegocal.report.layout import Column, Sheet, table_sheets
+from diegocal.report.registry import ReportContext, Section, section_for
+
+
+class Document:
+    """Pages collected in order (``savefig`` as PdfPages has it), with where each section starts."""
+
+    def __init__(self):
+        self.pages: list = []
+        self.sections: list[tuple[str, int]] = []  # (title, index of its first page)
+
+    def savefig(self, fig, **kw) -> None:
+        self.pages.append(fig)
+
+    def start(self, title: str) -> None:
+        self.sections.append((title, len(self.pages)))
+
+    def section_of(self, index: int) -> str:
+        title = ""
+        for t, first in self.sections:
+            if first <= index:
+                title = t
+        return title
+
+
+def plan_report(results) -> list[tuple[Path, Section]]:
+    """Every result with the section that shows it; one clear error for a file no section knows."""
+    plan = []
+    for r in map(Path, results):
+        if not r.exists():
+            raise InputFileError(f"{r}: no such file or directory")
+        section = section_for(r)
+        if section is None:
+            raise InputFileError(
+                f"{r}: not a result diegocal can report (a log, calib.yaml, pneumatic.yaml, sgp/ model, "
+                "diagnosis.yaml or batch table)"
+            )
+        plan.append((r, section))
+    return plan
+
+
+def abstracts(plan) -> list[tuple[str, list[str]]]:
+    """(section title, plain-words paragraphs) of every result that has an abstract."""
+    out = []
+    for r, section in plan:
+        if section.abstract is None:
+            continue
+        try:
+            out.append((section.title(r), section.abstract(r)))
+        except (DiegocalError, OSError, KeyError, TypeError, ValueError) as exc:
+            out.append((section.title(r), [f"(no summary: {exc})"]))
+    return out
 
 
 def write_report(results, out, context: ReportContext | None = None, command: str = "diegocal report") -> list[str]:
@@ -21,40 +75,88 @@ def write_report(results, out, context: ReportContext | None = None, command: st
     Every result is recognised before anything is written, so an unknown file fails cleanly
     and no half-written PDF is left behind (the write is atomic too).
     """
+    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    from diegocal.report.style import save_page
+
     context = context or ReportContext()
-    results = [Path(r) for r in results]
-    plan = []
-    for r in results:
-        if not r.exists():
-            raise InputFileError(f"{r}: no such file or directory")
-        section = section_for(r)
-        if section is None:
-            raise InputFileError(
-                f"{r}: not a result diegocal can report (a log, calib.yaml, pneumatic.yaml or sgp/ model)"
-            )
-        plan.append((r, section))
+    plan = plan_report(results)
+    doc = Document()
+    for r, section in plan:
+        doc.start(section.title(r))
+        if not section.opens_itself and section.abstract is not None:
+            for sheet in opening_sheets(section, r):
+                save_page(doc, sheet.fig)
+        section.pages(r, doc, context)
+    front = []
+    if len(plan) > 1:  # one result needs no contents: its section opens with its summary
+        summary = abstracts(plan)
+        counting = front_sheets(plan, doc, context, command, summary, offset=0)
+        for sheet in counting:  # the first pass only counts the front pages
+            plt.close(sheet.fig)
+        front = front_sheets(plan, doc, context, command, summary, offset=len(counting))
+    n_front = len(front)
+    pages = [s.fig for s in front] + doc.pages
+    stamp = f"diegocal {__version__}, {_dt.datetime.now(_dt.UTC):%Y-%m-%d}"
     with atomic_path(out) as tmp, PdfPages(tmp) as pdf:
-        save_page(pdf, text_page("diegocal report", _title_lines(plan, context, command)))
-        for r, section in plan:
-            section.pages(r, pdf, context)
+        for i, fig in enumerate(pages):
+            where = "contents and summary" if i < n_front else doc.section_of(i - n_front)
+            footer = f"{where}  ·  page {i + 1} of {len(pages)}  ·  {stamp}"
+            fig.text(0.5, 0.018, footer, ha="center", fontsize=7, color="0.45")
+            pdf.savefig(fig)
         info = pdf.infodict()
         info["Title"] = "diegocal report"
         info["Creator"] = f"diegocal {__version__}"
     return [s.name for _, s in plan]
 
 
-def _title_lines(plan, context: ReportContext, command: str) -> list[str]:
-    now = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    lines = [
-        f"command:  {command}",
-        f"created:  {now}",
-        f"diegocal: {__version__}  (Python {platform.python_version()})",
-    ]
+def opening_sheets(section: Section, path: Path) -> list[Sheet]:
+    """The report-made opening page of a section: its title, its paragraphs and its key table."""
+    title = section.title(path)
+    paragraphs = section.abstract(path)
+    if section.key_table is not None:
+        columns, rows = section.key_table(path)
+        return table_sheets(title, columns, rows, intro=paragraphs)
+    sheet = Sheet(title)
+    for p in paragraphs:
+        sheet.paragraph(p)
+    return [sheet]
+
+
+def front_sheets(plan, doc: Document, context: ReportContext, command: str, summary, offset: int) -> list[Sheet]:
+    """Title, what was run, the contents (page numbers counted after ``offset`` front pages) and the
+    summary: the first paragraph of every section."""
+    now = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    sheets = [Sheet("diegocal report")]
+    facts = f"Written {now} by diegocal {__version__} (Python {platform.python_version()}) with: {command}"
     if context.robot is not None:
-        lines.append(f"robot:    {context.robot}")
-    lines += ["", "results:"]
-    for r, section in plan:
-        facts = section.describe(r)
-        extra = "  ".join(f"{k}={v}" for k, v in facts.items() if v)
-        lines.append(f"  [{section.name}] {r}" + (f"\n      {extra}" if extra else ""))
-    return lines
+        facts += f" Robot directory: {context.robot}."
+    sheets[-1].paragraph(facts, size=8, color="0.3")
+    columns = [Column("section", align="left"), Column("result file", align="left"), Column("page")]
+    rows = []
+    for (title, first), (r, _) in zip(doc.sections, plan, strict=True):
+        rows.append([title.split(": ", 1)[0], _short(r), str(offset + first + 1)])
+    sheets += table_sheets("Contents", columns, rows, sheet=sheets[-1])[1:]
+    if summary:
+        _put(sheets, "Summary", 11, heading=True, room=0.15)
+        for title, paragraphs in summary:
+            _put(sheets, title, 9.5, heading=True)
+            _put(sheets, paragraphs[0] if paragraphs else "", 9)
+    return sheets
+
+
+def _short(path: Path, width: int = 60) -> str:
+    text = str(path)
+    return text if len(text) <= width else "…" + text[-(width - 1) :]
+
+
+def _put(sheets: list[Sheet], text: str, size: float, heading: bool = False, room: float = 0.08) -> None:
+    """A heading or paragraph on the last sheet, or on a new one when it does not fit."""
+    if heading and sheets[-1].room() < room:
+        sheets.append(Sheet("Summary (continued)"))
+    if heading:
+        sheets[-1].heading(text, size=size)
+    elif not sheets[-1].paragraph(text, size=size):
+        sheets.append(Sheet("Summary (continued)"))
+        sheets[-1].paragraph(text, size=size)

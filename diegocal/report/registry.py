@@ -22,10 +22,26 @@ class ReportContext:
 
 @dataclass(frozen=True)
 class Section:
+    """How the report shows one kind of result.
+
+    ``abstract(path)`` gives the section's opening in plain words (paragraphs): what was fitted on
+    what, how good it is on held-out data, what is still wrong. The report's summary page repeats
+    the first paragraph; a section whose pages do not open with it themselves (``opens_itself``
+    False) gets an opening page from the report with the paragraphs and ``key_table(path)`` ->
+    (columns, rows), when given.
+    """
+
     name: str
     recognise: Callable[[Path], bool]
     pages: Callable  # (path, pdf, context) -> None
     describe: Callable[[Path], dict] = lambda path: {}  # title-page facts: {log, robot, command, created}
+    heading: str = ""  # the contents' name for the section, e.g. "Kinematic calibration (STAC)"
+    abstract: Callable[[Path], list[str]] | None = None
+    opens_itself: bool = True
+    key_table: Callable | None = None
+
+    def title(self, path: Path) -> str:
+        return f"{self.heading or self.name}: {Path(path).name}"
 
 
 SECTIONS: list[Section] = []
@@ -50,6 +66,10 @@ def is_bundle(path, kind: str) -> bool:
         return load_bundle(path).kind == kind
     except DiegocalError:
         return False
+
+
+def section_named(name: str) -> Section | None:
+    return next((s for s in SECTIONS if s.name == name), None)
 
 
 def section_for(path: Path) -> Section | None:

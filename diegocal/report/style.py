@@ -52,7 +52,16 @@ def text_page(title: str, lines, fontsize: int = 9):
     return fig
 
 
+def keep_layout(fig) -> None:
+    """Mark a figure laid out by hand (:mod:`diegocal.report.layout`): save_page leaves it as drawn."""
+    fig.diegocal_fixed_layout = True
+
+
 def save_page(pdf, fig) -> None:
-    fig.tight_layout(rect=(0, 0, 1, 0.96)) if fig.axes else None
+    """Lay the page out (unless it was laid out by hand) and add it to the report.
+
+    The bottom 3 % of the page is left free for the report's footer (page numbers)."""
+    if fig.axes and not getattr(fig, "diegocal_fixed_layout", False):
+        fig.tight_layout(rect=(0, 0.03, 1, 0.96))
     pdf.savefig(fig)
     plt.close(fig)

@@ -30,7 +30,9 @@ def _run(*args):
 @pytest.fixture(scope="module")
 def fitted(logs, tree_dir):
     d, _ = logs
-    res = _run("stac", d / "train.h5", "--robot", tree_dir, "--max-iterations", 20, "--quiet")
+    res = _run(
+        "stac", d / "train.h5", "--robot", tree_dir, "--max-iterations", 20, "--joint-angles", d / "q.h5", "--quiet"
+    )
     assert res.exit_code == 0, res.output
     return d / "train.calib.yaml"
 
@@ -45,7 +47,8 @@ def test_stac_writes_calib_and_q(fitted, logs, tree_robot):
     cal = Calibration.from_dict(data)
     truth = Calibration.from_dict(log.truth.params)
     assert np.abs(cal.gain / truth.gain - 1).max() < 0.03
-    q = load_log(d / "train.q.h5").streams["q"]
+    assert data["meta"]["joint_angles"].endswith("q.h5") and not (d / "train.q.h5").exists()
+    q = load_log(d / "q.h5").streams["q"]
     assert q.names == tree_robot.joint_names and q.data.shape == (400, tree_robot.n_joints)
 
 

@@ -1,0 +1,100 @@
+"""Report section for a merged batch table (``COMMAND.batch.csv``; registers itself on import).
+
+One opening paragraph (what ran over which logs, how many succeeded, which failed and why), then
+the table: one row per log with its status and the command's headline numbers; the full set of
+columns is in the CSV.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from diegocal.report.layout import Column, table_sheets
+from diegocal.report.registry import Section, register_section
+from diegocal.report.style import save_page
+
+MAX_REASON = 70  # characters of a failure's reason shown in the table (the CSV has all of it)
+
+
+def recognise(path: Path) -> bool:
+    from diegocal.batch.table import is_table
+
+    return Path(path).is_file() and is_table(path)
+
+
+def _read(path: Path):
+    from diegocal.batch.table import read_table
+
+    return read_table(path)
+
+
+def abstract(path: Path) -> list[str]:
+    fields, _, rows = _read(path)
+    command, source = fields.get("command", "?"), fields.get("source", "?")
+    count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
+    logs = len({r["log"] for r in rows})
+    text = (
+        f"diegocal {command} ran over {logs} log(s) of {source}: {count['done']} run(s) done now, "
+        f"{count['up to date']} already up to date (outputs newer than their log, not rerun), "
+        f"{count['failed']} failed."
+    )
+    failed = [r for r in rows if r["status"] == "failed"]
+    if failed:
+        text += " Failures: " + "; ".join(f"{Path(r['log']).name}: {r['reason']}" for r in failed[:5])
+        text += " …" if len(failed) > 5 else "."
+    return [text, f"Every column of every output is in {Path(path).name}; this page shows the headline numbers."]
+
+
+def pages(path: Path, pdf, context) -> None:
+    from diegocal.batch.table import headline
+
+    fields, columns, rows = _read(path)
+    command = fields.get("command", "")
+    shown = headline(command, columns)
+    if not shown:  # predict: every error column
+        shown = [c for c in columns if c.endswith(("RMSE", "[m]"))][:5]
+    cols = [Column("log", align="left")]
+    if "domain" in columns:
+        cols.append(Column("domain", align="left"))
+    cols += [Column("status", align="left"), Column("time", "s")]
+    cols += [Column(*_name_unit(c), align="right" if _numeric(rows, c) else "left") for c in shown]
+    cols.append(Column("failure reason", align="left"))
+    table = []
+    for r in rows:
+        row = [Path(r["log"]).name] + ([r["domain"]] if "domain" in columns else [])
+        row += [r["status"], _num(r.get("seconds"))] + [_num(r.get(c)) for c in shown]
+        reason = r.get("reason") or ""
+        table.append(row + [reason if len(reason) <= MAX_REASON else reason[: MAX_REASON - 1] + "…"])
+    title = f"Batch {command}: {Path(path).name}"
+    for sheet in table_sheets(title, cols, table, intro=abstract(path)):
+        save_page(pdf, sheet.fig)
+
+
+def _name_unit(column: str) -> tuple[str, str]:
+    if column.endswith("]") and " [" in column:
+        name, unit = column[:-1].rsplit(" [", 1)
+        return name, unit
+    return column, ""
+
+
+def _numeric(rows, column: str) -> bool:
+    values = [r.get(column) for r in rows if r.get(column) not in (None, "")]
+    try:
+        [float(v) for v in values]
+    except ValueError:
+        return False
+    return True
+
+
+def _num(text) -> str:
+    if text in (None, ""):
+        return "–"
+    try:
+        return f"{float(text):.4g}"
+    except ValueError:
+        return str(text)
+
+
+register_section(
+    Section("batch", recognise, pages, lambda p: {"table": str(p)}, heading="Batch results", abstract=abstract)
+)

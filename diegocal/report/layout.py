@@ -1,0 +1,221 @@
+"""Pages typeset top to bottom: headings, paragraphs, tables and plot areas on an A4 sheet.
+
+A :class:`Sheet` is a matplotlib figure with a cursor: each block is placed below the previous
+one, measured after drawing (so wrapped text never runs off the page or into the next block).
+:func:`table_sheets` flows a long table over as many sheets as it needs, repeating the header.
+Sheets keep their layout as drawn (``save_page`` does not re-run tight_layout on them).
+"""
+
+from __future__ import annotations
+
+import functools
+import textwrap
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import matplotlib.pyplot as plt
+from matplotlib.patches import Rectangle
+
+from diegocal.report.style import COLORS, PAGE_SIZE, keep_layout
+
+LEFT, RIGHT = 0.08, 0.92  # text column, fraction of the page width
+TOP, BOTTOM = 0.95, 0.06  # the footer (page numbers) sits below BOTTOM
+GAP = 0.012  # between blocks, fraction of the page height
+ROW_PAD = 1.45  # table row height in units of the font size
+
+
+@dataclass(frozen=True)
+class Column:
+    """A table column: header (with its unit on a second line), alignment and cell format."""
+
+    name: str
+    unit: str = ""
+    align: str = "right"
+    fmt: Callable[[object], str] | None = None
+
+    def header(self) -> str:
+        return f"{self.name}\n[{self.unit}]" if self.unit else self.name
+
+    def cell(self, value) -> str:
+        if self.fmt is not None:
+            return self.fmt(value)
+        if value is None:
+            return "–"
+        if isinstance(value, float):
+            return f"{value:.4g}"
+        return str(value)
+
+
+class Sheet:
+    """One A4 page filled from the top; ``y`` is the cursor in figure coordinates."""
+
+    def __init__(self, title: str | None = None):
+        self.fig = plt.figure(figsize=PAGE_SIZE)
+        keep_layout(self.fig)
+        self.y = TOP
+        if title:
+            self.heading(title, size=14)
+
+    # ------------------------------------------------------------------ measuring
+    def _height(self, artist) -> float:
+        renderer = self.fig.canvas.get_renderer()
+        return artist.get_window_extent(renderer=renderer).height / self.fig.bbox.height
+
+    def _width(self, artist) -> float:
+        renderer = self.fig.canvas.get_renderer()
+        return artist.get_window_extent(renderer=renderer).width / self.fig.bbox.width
+
+    def room(self) -> float:
+        """Height left above the bottom margin, fraction of the page."""
+        return self.y - BOTTOM
+
+    def line(self, size: float) -> float:
+        """Height of one text line of ``size`` points, fraction of the page."""
+        return size * 1.3 / (72 * PAGE_SIZE[1])
+
+    # ------------------------------------------------------------------ blocks
+    def heading(self, text: str, size: float = 11) -> None:
+        t = self.fig.text(LEFT, self.y, text, fontsize=size, fontweight="bold", va="top")
+        self._fit_width(t, text, size, bold=True)
+        self.y -= self._height(t) + GAP
+
+    def paragraph(self, text: str, size: float = 9, indent: float = 0.0, color: str = "black") -> bool:
+        """Wrapped text; returns False (and draws nothing) when it does not fit the page."""
+        width = RIGHT - LEFT - indent
+        chars = int(width * PAGE_SIZE[0] * 72 / (0.52 * size))
+        while True:
+            body = "\n".join(textwrap.wrap(text, chars, break_long_words=True, break_on_hyphens=False)) or " "
+            t = self.fig.text(LEFT + indent, self.y, body, fontsize=size, va="top", linespacing=1.3, color=color)
+            if self._width(t) <= width or chars < 20:
+                break
+            t.remove()
+            chars -= 4
+        h = self._height(t)
+        if self.y - h < BOTTOM:
+            t.remove()
+            return False
+        self.y -= h + GAP
+        return True
+
+    def _fit_width(self, t, text: str, size: float, bold: bool = False) -> None:
+        while self._width(t) > RIGHT - LEFT and size > 6:
+            size -= 0.5
+            t.set_fontsize(size)
+
+    def axes(self, height: float, left: float = 0.1, right: float = 0.95, title_room: float = 0.025, **kw):
+        """An Axes filling ``height`` of the page below the cursor; room is left above it for its
+        title and below it for its tick labels and x label."""
+        bottom_room = 0.045
+        top = self.y - title_room
+        ax = self.fig.add_axes((left, top - height + bottom_room, right - left, height - bottom_room), **kw)
+        self.y -= height + title_room + GAP
+        return ax
+
+    def table(self, columns: Sequence[Column], rows: Sequence[Sequence], size: float = 7.5) -> int:
+        """Draw as many rows as fit (header first); returns how many rows were drawn."""
+        texts = [[c.cell(v) for c, v in zip(columns, row, strict=True)] for row in rows]
+        widths = _column_widths(columns, texts, size)
+        scale = min(1.0, (RIGHT - LEFT) / sum(widths))
+        if scale < 1.0:  # too wide: smaller type, down to 6 pt
+            size = max(6.0, size * scale)
+            widths = _column_widths(columns, texts, size)
+        total = sum(widths)
+        x0 = LEFT
+        row_h = size * ROW_PAD / (72 * PAGE_SIZE[1])
+        head_lines = max(c.header().count("\n") + 1 for c in columns)
+        head_h = row_h * (0.35 + 0.9 * head_lines)
+        n = int((self.y - head_h - BOTTOM) // row_h)
+        n = max(0, min(n, len(texts)))
+        if n == 0 and texts:
+            return 0
+        y = self.y
+        xs = [x0 + sum(widths[:k]) for k in range(len(widths))]
+        for c, x, w in zip(columns, xs, widths, strict=True):
+            self._cell(c.header(), x, w, y - head_h / 2, c.align, size, bold=True)
+        y -= head_h
+        self.fig.add_artist(_rule(x0, y, total, lw=0.8))
+        for i, cells in enumerate(texts[:n]):
+            if i % 2 == 1:
+                self.fig.add_artist(
+                    Rectangle((x0, y - row_h), total, row_h, transform=self.fig.transFigure, color="0.94", lw=0)
+                )
+            for c, x, w, text in zip(columns, xs, widths, cells, strict=True):
+                self._cell(text, x, w, y - row_h / 2, c.align, size)
+            y -= row_h
+        self.fig.add_artist(_rule(x0, y, total, lw=0.6))
+        self.y = y - GAP
+        return n
+
+    def _cell(self, text: str, x: float, w: float, y: float, align: str, size: float, bold: bool = False) -> None:
+        pad = 0.006
+        ha = {"right": "right", "left": "left", "center": "center"}[align]
+        xx = {"right": x + w - pad, "left": x + pad, "center": x + w / 2}[align]
+        self.fig.text(
+            xx, y, text, fontsize=size, ha=ha, va="center", fontweight="bold" if bold else "normal", linespacing=1.1
+        )
+
+
+def _column_widths(columns, texts, size: float) -> list[float]:
+    """Widths (fraction of the page) of the widest cell of each column at ``size`` points (the
+    header in bold), measured with the renderer's font metrics, plus padding."""
+    out = []
+    for k, c in enumerate(columns):
+        head = [text_width(line, size, bold=True) for line in c.header().split("\n")]
+        widest = max(head + [text_width(r[k], size) for r in texts])
+        out.append(widest + 0.016)
+    return out
+
+
+def text_width(text: str, size: float, bold: bool = False) -> float:
+    """Width of one line of text at ``size`` points, fraction of the page width."""
+    from matplotlib.font_manager import FontProperties
+
+    prop = FontProperties(size=size, weight="bold" if bold else "normal")
+    w, _, _ = _renderer().get_text_width_height_descent(text or " ", prop, ismath=False)
+    return w / (72 * PAGE_SIZE[0])  # the renderer works at 72 dpi: width in points
+
+
+@functools.cache
+def _renderer():
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    return RendererAgg(10, 10, 72)
+
+
+def _rule(x: float, y: float, w: float, lw: float = 0.6):
+    from matplotlib.lines import Line2D
+
+    return Line2D([x, x + w], [y, y], lw=lw, color=COLORS["measured"])
+
+
+def table_sheets(
+    title: str,
+    columns: Sequence[Column],
+    rows: Sequence[Sequence],
+    intro: Sequence[str] = (),
+    notes: Sequence[str] = (),
+    sheet: Sheet | None = None,
+    size: float = 7.5,
+) -> list[Sheet]:
+    """A table over as many sheets as it needs: the intro paragraphs first, the header repeated on
+    every sheet ("title (continued)"), the notes after the last row (on a new sheet if need be).
+    Continues on ``sheet`` when given."""
+    sheets = [sheet or Sheet(title)]
+    if sheet is not None:
+        sheet.heading(title)
+    for p in intro:
+        if not sheets[-1].paragraph(p):
+            sheets.append(Sheet(f"{title} (continued)"))
+            sheets[-1].paragraph(p)
+    rest = list(rows)
+    while True:
+        n = sheets[-1].table(columns, rest, size=size)
+        rest = rest[n:]
+        if not rest:
+            break
+        sheets.append(Sheet(f"{title} (continued)"))
+    for p in notes:
+        if not sheets[-1].paragraph(p, size=8, color="0.25"):
+            sheets.append(Sheet(f"{title} (continued)"))
+            sheets[-1].paragraph(p, size=8, color="0.25")
+    return sheets

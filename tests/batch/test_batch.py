@@ -1,0 +1,189 @@
+"""`diegocal batch`: one command over a folder of logs, twice in a row, locally and on a Dask
+LocalCluster; failures of one log are reported in one line and do not stop the others."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.batch import BatchOptions, find_logs, plan_batch, read_table
+from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
+from diegocal.io import save_log
+from diegocal.robot import load_robot, resolve_robot_dir
+from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
+runner = CliRunner()
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory) -> Path:
+    """A folder as a lab has it: two kinematic sessions, a dynamic one, notes and a foreign HDF5 file."""
+    d = tmp_path_factory.mktemp("logs")
+    finger = load_robot(resolve_robot_dir("finger", None))
+    for seed in (1, 2):
+        options = KinematicsOptions(duration=4.0)
+        save_log(simulate_kinematics(finger, options, np.random.default_rng(seed)), d / f"session{seed}.h5")
+    pendulum = load_robot(resolve_robot_dir("pendulum", None))
+    save_log(simulate_dynamics(pendulum, DynamicsOptions(duration=4.0), np.random.default_rng(3)), d / "swing.h5")
+    (d / "notes.csv").write_text("what,when\nnew cable,monday\n")
+    with h5py.File(d / "camera.h5", "w") as f:
+        f["frames"] = np.zeros(3)
+    return d
+
+
+def _copy(source: Path, tmp_path: Path, names) -> Path:
+    d = tmp_path / "logs"
+    d.mkdir()
+    for n in names:
+        shutil.copy2(source / n, d / n)
+    return d
+
+
+def _batch(*args):
+    return runner.invoke(app, ["batch", *map(str, args)])
+
+
+def test_plan_takes_only_the_logs_a_command_can_use(source):
+    plan = plan_batch("stac", source)
+    assert [j.log.name for j in plan.jobs] == ["session1.h5", "session2.h5"]
+    reasons = {p.name: r for p, r in plan.not_applicable.items()}
+    assert "needed by stac" in reasons["swing.h5"]
+    assert "not a diegocal log" in reasons["camera.h5"] and "not a diegocal log" in reasons["notes.csv"]
+    diag = plan_batch("diagnose", str(source / "*.h5"))  # a glob; one job per log and domain
+    assert {(j.log.name, j.domain) for j in diag.jobs} == {
+        ("session1.h5", "kinematics"),
+        ("session2.h5", "kinematics"),
+        ("swing.h5", "dynamics"),
+    }
+
+
+def test_derived_files_are_never_taken_for_logs(source, tmp_path):
+    d = _copy(source, tmp_path, ["session1.h5"])
+    for name in ("session1.prediction.h5", "session1.q.h5"):
+        shutil.copy2(d / "session1.h5", d / name)  # valid logs, but outputs of diegocal
+    (d / "stac.batch.csv").write_text("# diegocal-batch command=stac\nlog,status\n")
+    assert [p.name for p in find_logs(d)] == ["session1.h5"]
+
+
+def test_stac_writes_no_side_file_beside_its_output(source, tmp_path):
+    d = _copy(source, tmp_path, ["session1.h5"])
+    r = runner.invoke(app, ["stac", str(d / "session1.h5"), "--max-iterations", "3", "-q"])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in d.iterdir()) == ["session1.calib.yaml", "session1.h5"]
+
+
+def test_batch_twice_in_a_row_with_two_jobs(source, tmp_path):
+    d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5", "notes.csv"])
+    first = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5")
+    assert first.exit_code == 0, first.output
+    outputs = [d / "session1.calib.yaml", d / "session2.calib.yaml"]
+    stamps = [p.stat().st_mtime_ns for p in outputs]
+    fields, columns, rows = read_table(d / "stac.batch.csv")
+    assert fields["command"] == "stac" and [r["status"] for r in rows] == ["done", "done"]
+    assert {"iterations", "sigma markers [m]", "gain fdp"} <= set(columns)
+    assert all(0 < float(r["sigma markers [m]"]) < 0.01 for r in rows)
+    assert (d / "stac.batch.pdf").read_bytes().startswith(b"%PDF")
+    # outputs beside the logs are not taken for logs; nothing is redone
+    second = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5")
+    assert second.exit_code == 0, second.output
+    assert [p.stat().st_mtime_ns for p in outputs] == stamps
+    assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]] == ["up to date", "up to date"]
+    # a log newer than its output is redone, as make would
+    os.utime(d / "session2.h5", None)
+    third = _batch("stac", d, "--", "--max-iterations", "5")
+    assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]] == ["up to date", "done"], third.output
+
+
+def test_one_failure_does_not_stop_the_others(source, tmp_path):
+    d = _copy(source, tmp_path, ["session1.h5", "session2.h5"])
+    with h5py.File(d / "session2.h5", "r+") as f:  # one marker never seen: stac cannot use this log
+        data = f["markers/data"][()]
+        data[:, 0] = np.nan
+        f["markers/data"][...] = data
+    out = tmp_path / "out"
+    r = _batch("stac", d, "-o", out, "-q", "--", "--max-iterations", "3")
+    assert r.exit_code == 1
+    line = one_line_error(r)
+    assert "session2.h5" in line and "never seen" in line
+    rows = read_table(out / "stac.batch.csv")[2]
+    assert [r["status"] for r in rows] == ["done", "failed"] and "never seen" in rows[1]["reason"]
+    assert (out / "session1.calib.yaml").exists() and not (out / "session2.calib.yaml").exists()
+
+
+def test_list_prints_the_logs_for_make(source):
+    r = _batch("diagnose", source, "--list", "--", "--domain", "dynamics")
+    assert r.exit_code == 0, r.output
+    assert r.output.split() == [str(source / "swing.h5")]
+
+
+def test_usage_and_input_errors(source, tmp_path):
+    assert _batch("fly", source).exit_code == 2
+    assert _batch("stac", source, "--jobs", "2", "--scheduler", "tcp://127.0.0.1:1").exit_code == 2
+    assert _batch("stac", source, "--loss", "huber").exit_code == 2  # options of the command go after --
+    (tmp_path / "empty").mkdir()
+    assert "no log files" in one_line_error(_batch("stac", tmp_path / "empty"))
+    assert "no such folder" in one_line_error(_batch("stac", tmp_path / "nowhere"))
+    assert "no log that stac can use" in one_line_error(_batch("stac", source / "swing.h5"))
+    assert "needs the fitted model" in one_line_error(_batch("predict", source))
+
+
+def test_scheduler_runs_the_same_work_on_a_dask_cluster(source, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    d = _copy(source, tmp_path, ["swing.h5"])
+    shutil.copy2(d / "swing.h5", d / "swing2.h5")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as c:
+        r = _batch("sgp-fit", d, "--scheduler", c.scheduler_address, "-q", "--", "--model", "pr")
+        assert r.exit_code == 0, r.output
+        rows = read_table(d / "sgp-fit.batch.csv")[2]
+        assert [r["status"] for r in rows] == ["done", "done"]
+        assert all(float(r["nMSE theta"]) < 0.05 for r in rows)
+        again = _batch("sgp-fit", d, "--scheduler", c.scheduler_address, "-q", "--", "--model", "pr")
+        assert [r["status"] for r in read_table(d / "sgp-fit.batch.csv")[2]] == ["up to date"] * 2, again.output
+
+
+def test_make_calibrate_twice(source, tmp_path):
+    """mk/batch.mk: `make -j2 calibrate LOGS=folder` fits every kinematic log once; a rerun fits nothing."""
+    if shutil.which("make") is None:
+        pytest.skip("no make")
+    d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5"])
+    out = tmp_path / "out"
+    python = Path(sys.executable)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    cmd = ["make", "-s", "-C", str(REPO), "-j2", "calibrate", f"LOGS={d}", f"BATCH_OUT={out}"]
+    cmd += [f"BIN={python.parent}", "STAMP=", f"DIEGOCAL={python} -m diegocal", "BATCH_ARGS=--max-iterations 5"]
+    first = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    assert first.returncode == 0, first.stderr
+    fitted = sorted(p.name for p in out.glob("*.calib.yaml"))
+    assert fitted == ["session1.calib.yaml", "session2.calib.yaml"]
+    stamps = {p: p.stat().st_mtime_ns for p in out.glob("*.calib.yaml")}
+    second = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    assert second.returncode == 0, second.stderr
+    assert " stac " not in second.stdout.replace("batch stac", "")  # no fit was rerun
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+    assert [r["status"] for r in read_table(out / "stac.batch.csv")[2]] == ["up to date", "up to date"]
+    assert sorted(p.name for p in d.iterdir()) == ["session1.h5", "session2.h5", "swing.h5"]  # nothing beside the logs
+
+
+def test_options_reach_the_command(source, tmp_path):
+    options = BatchOptions(output_dir=tmp_path, extra=("--alpha", "0.05", "--domain", "kinematics"))
+    plan = plan_batch("diagnose", source, options)
+    assert [j.log.name for j in plan.jobs] == ["session1.h5", "session2.h5"]
+    argv = plan.jobs[0].argv
+    assert argv[:4] == (
+        "diagnose",
+        str(source / "session1.h5"),
+        "-o",
+        str(tmp_path / "session1.kinematics.diagnosis.yaml"),
+    )
+    assert argv.count("--domain") == 1 and argv[argv.index("--alpha") + 1] == "0.05" and argv[-1] == "--quiet"
