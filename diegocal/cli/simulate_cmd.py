@@ -13,7 +13,7 @@ from diegocal.cli.common import cli_errors, summary
 from diegocal.io import save_log
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import VOCABULARY, check_effects, parse_effects
-from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+from diegocal.sim.kinematics import SIZE_UNITS, KinematicsOptions, simulate_kinematics
 
 
 @simulate_app.command("kinematics")
@@ -25,9 +25,10 @@ def simulate_kinematics_cmd(
     rate: Annotated[float, typer.Option(help="Sample rate of pots and markers, Hz.")] = 100.0,
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
     effect: Annotated[list[str] | None, typer.Option(
-        "--effect", metavar="NAME[:CHANNEL]",
-        help="Kinematic effect to inject (repeatable): "
-        + ", ".join(k for k, v in VOCABULARY.items() if v == "kinematics") + ".")] = None,
+        "--effect", metavar="NAME[:CHANNEL][=SIZE]",
+        help="Kinematic effect to inject (repeatable); SIZE, when given, is "
+        + "; ".join(f"{k} {SIZE_UNITS[k]}" for k, v in VOCABULARY.items() if v == "kinematics")
+        + ". Without SIZE: the simulator's physical ranges.")] = None,
     occlusion: Annotated[float, typer.Option(help="Fraction of occluded marker samples.")] = 0.1,
     occlusion_run: Annotated[float, typer.Option(help="Mean occlusion length, s.")] = 0.5,
     gain_error: Annotated[float, typer.Option(help="True gain = nominal·(1 + U(±this)).")] = 0.2,

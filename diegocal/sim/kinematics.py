@@ -17,7 +17,8 @@ Readings follow the observation models of :mod:`diegocal.robot.observe` (eq. 2.1
     x_t = R (h_r(q_t) d + h_p(q_t)) + T0 + ε_x  ε_x ~ N(0, marker_noise² I₃)       [m]
 
 Markers are NaN over contiguous occlusion runs (a two-state Markov chain per marker).
-Kinematic effects from DESIGN.md's vocabulary are injected by name (:func:`plan_effects`) and
+Kinematic effects from DESIGN.md's vocabulary are injected by name (:func:`plan_effects`), with
+the simulator's physical default ranges or the size a request gives (:data:`SIZE_UNITS`), and
 recorded in ``/truth`` with their true values. Two of them corrupt the mocap stream itself, as
 labelling errors of a real motion-capture session do: ``marker_outliers`` (ghost markers and
 reflections: a reading a few cm to dm off for a few samples) and ``swapped_labels`` (two nearby
@@ -49,8 +50,22 @@ from diegocal.sim.effects import (
 )
 from diegocal.stac.calibration import Calibration
 
-#: Extra samples simulated on each side so a mocap clock offset has data to shift into.
+#: Extra samples simulated on each side so a mocap clock offset has data to shift into (a
+#: requested shift longer than this simulates a longer run, so the joints then move differently
+#: from a run of the same seed without it).
 PAD = 16
+
+#: What ``--effect CAUSE:CHANNEL=SIZE`` sizes, per cause (the unit is the channel's: V is the pot's
+#: reading unit, m a marker's). Without SIZE the ranges of :func:`plan_effects` apply.
+SIZE_UNITS = {
+    "link_offset": "in m, the distance the joint's origin moves (random direction), so every marker it carries",
+    "sensor_nonlinearity": "in V, the transfer curve's departure from linear at the ends of the pot's range",
+    "backlash": "in V, the dead band's full width on the reading (which lags by up to half of it)",
+    "time_offset": "in s, the mocap clock's shift (sign random; need not be whole samples)",
+    "marker_slip": "in m, the distance the marker moves on its link",
+    "marker_outliers": "in m, the distance of every faulty reading from its marker",
+    "swapped_labels": "in m, the partner's mean distance (the marker nearest SIZE is the partner)",
+}
 
 
 @dataclass(frozen=True)
@@ -284,7 +299,7 @@ class EffectPlan:
     joint_offsets: dict = field(default_factory=dict)  # joint -> (3,) m, in the parent frame
     backlash: dict = field(default_factory=dict)  # pot index -> dead band width, units of s
     nonlinear: dict = field(default_factory=dict)  # pot index -> (s0, c2)
-    shift: int = 0  # markers[t] observe q[t + shift]
+    shift: float = 0.0  # markers[t] observe q(t + shift / rate): samples, not always whole
     slips: dict = field(default_factory=dict)  # marker index -> (sample, (3,) m)
     outliers: list = field(default_factory=list)  # (marker index, start, length, (3,) m)
     swaps: list = field(default_factory=list)  # (marker index, partner index, start, length)
@@ -342,9 +357,12 @@ def _runs(rng, n_samples: int, fraction: float, low: int, high: int) -> list[tup
     return sorted(runs)
 
 
-def _nearest_marker(x: np.ndarray, m: int) -> int:
-    """The marker whose true path (T, M, 3) stays closest to marker m's on average."""
+def _nearest_marker(x: np.ndarray, m: int, distance: float | None = None) -> int:
+    """The marker whose true path (T, M, 3) stays closest to marker m's on average (``distance``
+    given, m: the one whose mean distance is nearest it)."""
     d = np.linalg.norm(x - x[:, m : m + 1], axis=-1).mean(axis=0)
+    if distance is not None:
+        d = np.abs(d - distance)
     d[m] = np.inf
     return int(np.argmin(d))
 
@@ -374,6 +392,11 @@ def plan_effects(
       runs of 1-5 samples (ghosts, reflections, a neighbour's label for an instant).
     - ``swapped_labels:MARKER``: the marker and its nearest neighbour (on average over the run)
       exchange labels in 3-8 % of the samples, in runs of 0.2-1 s.
+
+    A request's ``size`` replaces the drawn magnitude (:data:`SIZE_UNITS`); the direction, sign,
+    time and runs are drawn as without it. A size that makes no sense for the channel (a transfer
+    curve that would turn back, a dead band wider than the pot's range, a clock shift of half the
+    run) raises :class:`EffectError`.
     """
     plan = EffectPlan()
     pots, markers = robot.sensors.pot_names, robot.sensors.marker_names
@@ -382,28 +405,45 @@ def plan_effects(
     for req in options.effects:
         rng = _effect_rng(seed, req)
         req = EffectRequest(req.name, req.channel or _default_channel(req, robot, rng), req.size)
-        channel = req.channel
+        channel, size = req.channel, req.size
         if req.name == "link_offset":
             check_channel(req, robot.joint_names, "joint")
             d = rng.normal(size=3)
-            d *= rng.uniform(0.005, 0.010) / np.linalg.norm(d)
+            d *= (rng.uniform(0.005, 0.010) if size is None else size) / np.linalg.norm(d)
             plan.joint_offsets[channel] = d
             values = {"dxyz": d, "frame": "joint origin, in the parent joint frame"}
         elif req.name == "backlash":
             i = pots.index(check_channel(req, pots, "pot"))
-            width = rng.uniform(0.02, 0.05) * scale[i]
+            width = rng.uniform(0.02, 0.05) * scale[i] if size is None else size / abs(gain[i])
+            span = float(np.ptp(s[:, i]))
+            if size is not None and width >= span:
+                raise EffectError(
+                    f"effect '{req}': a dead band of {abs(gain[i]) * width:g} V is wider than the pot's "
+                    f"range in this run ({abs(gain[i]) * span:.3g} V): the reading would never move"
+                )
             plan.backlash[i] = width
             values = {"width": width, "width_reading": abs(gain[i]) * width}
         elif req.name == "sensor_nonlinearity":
             i = pots.index(check_channel(req, pots, "pot"))
             lo, hi = float(s[:, i].min()), float(s[:, i].max())
             s0, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-9)
-            peak = rng.uniform(0.05, 0.10) * abs(gain[i]) * half * rng.choice([-1.0, 1.0])
+            peak = rng.uniform(0.05, 0.10) * abs(gain[i]) * half if size is None else size
+            peak *= rng.choice([-1.0, 1.0])
+            if abs(peak) >= 0.5 * abs(gain[i]) * half:  # slope g + 2 c2 (s - s0) keeps its sign
+                raise EffectError(
+                    f"effect '{req}': a departure of {abs(peak):g} V would make the transfer curve turn "
+                    f"back; it must be below half the pot's half-range, {0.5 * abs(gain[i]) * half:.3g} V"
+                )
             plan.nonlinear[i] = (s0, peak / half**2)
             values = {"form": "reading += c2 * (s - s0)**2", "s0": s0, "c2": peak / half**2, "peak": peak}
         elif req.name == "time_offset":
             check_channel(req, ["markers"], "clock (use time_offset:markers)")
-            k = int(rng.integers(3, 9)) * int(rng.choice([-1, 1]))
+            k = int(rng.integers(3, 9)) if size is None else size * options.rate_hz  # samples
+            k *= int(rng.choice([-1, 1]))
+            if size is not None and abs(k) >= T / 2:
+                raise EffectError(
+                    f"effect '{req}': a clock shift of {abs(k) / options.rate_hz:g} s is half the run or more"
+                )
             plan.shift = k
             values = {"samples": k, "seconds": k / options.rate_hz, "convention": "markers[t] observe q(t + seconds)"}
         elif req.name == "marker_outliers":
@@ -413,20 +453,23 @@ def plan_effects(
             for m in which:
                 for start, length in _runs(rng, T, fraction, 1, 5):
                     d = rng.normal(size=3)
-                    plan.outliers.append((m, start, length, d * rng.uniform(0.03, 0.15) / np.linalg.norm(d)))
+                    dist = rng.uniform(0.03, 0.15) if size is None else size
+                    plan.outliers.append((m, start, length, d * dist / np.linalg.norm(d)))
             samples = sum(o[2] for o in plan.outliers)
-            values = {"fraction": fraction, "samples": samples, "distance": [0.03, 0.15], "run_samples": [1, 5]}
+            distance = [0.03, 0.15] if size is None else [size, size]
+            values = {"fraction": fraction, "samples": samples, "distance": distance, "run_samples": [1, 5]}
         elif req.name == "swapped_labels":
             m = markers.index(check_channel(req, markers, "marker"))
             if len(markers) < 2 or x is None:
                 raise EffectError(f"effect '{req}': needs a second marker to swap labels with")
-            k = _nearest_marker(x, m)
+            k = _nearest_marker(x, m, size)
             fraction = rng.uniform(0.03, 0.08)
             lo, hi = max(1, round(0.2 * options.rate_hz)), max(1, round(1.0 * options.rate_hz))
             runs = _runs(rng, T, fraction, lo, hi)
             plan.swaps += [(m, k, start, length) for start, length in runs]
             values = {
                 "partner": markers[k],
+                "distance": float(np.nanmean(np.linalg.norm(x[:, k] - x[:, m], axis=-1))),
                 "fraction": fraction,
                 "runs": len(runs),
                 "samples": sum(r[1] for r in runs),
@@ -435,7 +478,7 @@ def plan_effects(
             m = markers.index(check_channel(req, markers, "marker"))
             t_slip = int(rng.uniform(0.3, 0.7) * T)
             d = rng.normal(size=3)
-            d *= rng.uniform(0.01, 0.03) / np.linalg.norm(d)
+            d *= (rng.uniform(0.01, 0.03) if size is None else size) / np.linalg.norm(d)
             plan.slips[m] = (t_slip, d)
             t0 = t_slip / options.rate_hz
             values = {"sample": t_slip, "time": t0, "dxyz": d}
@@ -502,8 +545,10 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
     traj_rng, truth_rng, pot_rng, marker_rng, occ_rng = (np.random.default_rng(s) for s in seeds[:5])
 
     lower, upper = joint_ranges(robot)
-    q_ext, qd_ext = pid_trajectory(lower, upper, T + 2 * PAD, rate, traj_rng, options.hold)
-    q, qd = q_ext[PAD : PAD + T], qd_ext[PAD : PAD + T]
+    shifts = [e.size * rate for e in options.effects if e.name == "time_offset" and e.size is not None]
+    pad = max([PAD, *[int(np.ceil(k)) + 2 for k in shifts]])
+    q_ext, qd_ext = pid_trajectory(lower, upper, T + 2 * pad, rate, traj_rng, options.hold)
+    q, qd = q_ext[pad : pad + T], qd_ext[pad : pad + T]
     fast = offset_robot(robot, {})
     s_nominal = pot_transmission(fast, q) if sensors.pots else np.zeros((T, 0))
     truth = draw_truth(robot, options, s_nominal, q, truth_rng)
@@ -523,8 +568,10 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
         p += pot_rng.normal(0.0, options.pot_noise, p.shape)
         streams["pots"] = make_stream(sensors.pot_names, p)
     if sensors.markers:
-        q_mocap = q_ext[PAD + plan.shift : PAD + plan.shift + T]
+        q_mocap = mocap_clock(q_ext, pad, T, plan.shift)
         x = marker_positions(gen, q_mocap, truth, plan.slips)
+        if plan.shift:
+            _record_displacement(plan, x, marker_positions(gen, q, truth, plan.slips))
         x += marker_rng.normal(0.0, options.marker_noise, x.shape)
         x, corrupted = corrupt_labels(x, plan)
         mask = occlusion_mask(T, len(sensors.markers), options.occlusion, options.occlusion_run * rate, occ_rng)
@@ -543,6 +590,27 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
         rate_hz=rate,
         truth=Truth(params=truth.to_dict(), effects=plan.records, signals=signals),
     )
+
+
+def mocap_clock(q_ext: np.ndarray, pad: int, T: int, shift: float) -> np.ndarray:
+    """Joint angles (T, n) at the mocap's samples, q(t + shift) for the run that starts ``pad``
+    samples into ``q_ext``: a slice for a whole-sample shift, else a cubic spline through the
+    simulated samples (the trajectory is smooth between them)."""
+    if float(shift).is_integer():
+        k = int(shift)
+        return q_ext[pad + k : pad + k + T]
+    from scipy.interpolate import CubicSpline
+
+    return CubicSpline(np.arange(q_ext.shape[0]), q_ext, axis=0)(pad + shift + np.arange(T))
+
+
+def _record_displacement(plan: EffectPlan, shifted: np.ndarray, unshifted: np.ndarray) -> None:
+    """Add to the clock shift's /truth record how far it moves the markers: the RMS over markers
+    and samples of the distance between where they are read and where they are at the pots' time."""
+    dist = np.linalg.norm(shifted - unshifted, axis=-1)
+    for rec in plan.records:
+        if rec["cause"] == "time_offset":
+            rec["values"]["displacement_rms"] = float(np.sqrt(np.mean(dist**2)))
 
 
 def corrupt_labels(x: np.ndarray, plan: EffectPlan) -> tuple[np.ndarray, np.ndarray]:

@@ -248,6 +248,74 @@ def test_swapped_labels_exchange_two_nearby_markers_in_runs(robot, clean):
     assert "markers_corrupted" not in clean.truth.signals
 
 
+def test_sizes_are_honoured_on_the_channel_they_act_on(robot, clean):
+    """``CAUSE:CHANNEL=SIZE`` sets the magnitude in the unit the CLI's help states (SIZE_UNITS)."""
+    names = robot.sensors.marker_names
+    truth = Calibration.from_dict(clean.truth.params)
+    log = simulate(robot, **_noise_free(effects=["link_offset:shoulder=0.013"]))
+    assert np.linalg.norm(_effect(log)["values"]["dxyz"]) == pytest.approx(0.013)
+    moved = np.linalg.norm(log.streams["markers"].data - clean.streams["markers"].data, axis=-1)
+    np.testing.assert_allclose(moved[:, names.index("m_lower")], 0.013, rtol=1e-9)
+
+    i = robot.sensors.pot_names.index("elbow")
+    log = simulate(robot, **_noise_free(effects=["sensor_nonlinearity:elbow=0.02"]))
+    diff = (log.streams["pots"].data - clean.streams["pots"].data)[:, i]
+    assert np.abs(diff).max() == pytest.approx(0.02, rel=1e-6)
+
+    log = simulate(robot, **_noise_free(effects=["backlash:elbow=0.03"]))
+    assert _effect(log)["values"]["width_reading"] == pytest.approx(0.03)
+    lag = (log.streams["pots"].data - clean.streams["pots"].data)[:, i]
+    assert np.abs(lag).max() == pytest.approx(0.015, rel=1e-6)  # half the band, at the true gain
+    assert abs(truth.gain[i]) * _effect(log)["values"]["width"] == pytest.approx(0.03)
+
+    log = simulate(robot, **_noise_free(effects=["marker_slip:m_lower=0.004"]))
+    d = log.streams["markers"].data - clean.streams["markers"].data
+    assert np.linalg.norm(d[:, names.index("m_lower")], axis=-1).max() == pytest.approx(0.004)
+
+    log = simulate(robot, **_noise_free(effects=["marker_outliers=0.007"]))
+    bad = log.truth.signals["markers_corrupted"].data.astype(bool)
+    moved = np.linalg.norm(log.streams["markers"].data - clean.streams["markers"].data, axis=-1)
+    np.testing.assert_allclose(moved[bad], 0.007, rtol=1e-9)
+
+    x0 = clean.streams["markers"].data
+    m = names.index("m_lower")
+    dist = np.linalg.norm(x0 - x0[:, m : m + 1], axis=-1).mean(axis=0)
+    far = int(np.argmax(dist))
+    log = simulate(robot, **_noise_free(effects=[f"swapped_labels:m_lower={dist[far]:.6f}"]))
+    assert _effect(log)["values"]["partner"] == names[far]
+    assert _effect(log)["values"]["distance"] == pytest.approx(dist[far], rel=1e-5)
+
+
+def test_time_offset_size_may_fall_between_samples(robot, clean):
+    """A clock shift of 0.125 s at 100 Hz: markers[t] read the clean markers half-way between
+    samples t ± 12 and t ± 13 (a smooth path; the run is the clean one: 12.5 samples fit the pad),
+    the pots do not move, and /truth says how far the shift moves the markers."""
+    log = simulate(robot, **_noise_free(effects=["time_offset:markers=0.125"]))
+    v = _effect(log)["values"]
+    assert abs(v["seconds"]) == pytest.approx(0.125) and abs(v["samples"]) == pytest.approx(12.5)
+    np.testing.assert_array_equal(log.streams["pots"].data, clean.streams["pots"].data)
+    a, b = log.streams["markers"].data, clean.streams["markers"].data
+    k = 12 if v["seconds"] > 0 else -13
+    T = log.n_samples
+    mid = 0.5 * (b[max(0, -k) + k : T - max(0, k + 1) + k] + b[max(0, -k) + k + 1 : T - max(0, k + 1) + k + 1])
+    got = a[max(0, -k) : T - max(0, k + 1)]
+    err = np.abs(got - mid)
+    assert np.mean(err < 2e-4) > 0.999 and err.max() < 1e-3  # the curvature over 5 ms (a limit stop: a kink)
+    assert np.abs(got - b[max(0, -k) : T - max(0, k + 1)]).max() > 1e-3
+    assert v["displacement_rms"] == pytest.approx(np.sqrt(np.mean(np.sum((a - b) ** 2, -1))), rel=1e-9)
+
+
+def test_bad_sizes_raise_naming_the_effect(robot):
+    with pytest.raises(EffectError, match="turn back"):
+        simulate(robot, effects=["sensor_nonlinearity:elbow=5"], duration=5.0)
+    with pytest.raises(EffectError, match="wider than the pot's range"):
+        simulate(robot, effects=["backlash:elbow=50"], duration=5.0)
+    with pytest.raises(EffectError, match="half the run"):
+        simulate(robot, effects=["time_offset:markers=3"], duration=5.0)
+    with pytest.raises(EffectError, match="positive"):
+        simulate(robot, effects=["marker_slip:m_lower=-0.01"], duration=5.0)
+
+
 def test_effects_without_channel_pick_a_valid_one_reproducibly(robot):
     effects = ["backlash", "link_offset", "marker_slip", "swapped_labels", "marker_outliers"]
     a = simulate(robot, effects=effects, duration=5.0)
@@ -324,6 +392,8 @@ def test_cli_writes_a_log_with_truth(tmp_path):
         (["--effect", "swapped_labels:m99"], "'m99' is not a marker"),
         (["--effect", "marker_outliers:elbow"], "'elbow' is not a marker"),
         (["--effect", "time_offset:pots"], "time_offset:markers"),
+        (["--effect", "link_offset:shoulder=abc"], "is not a number"),
+        (["--effect", "backlash:elbow=50"], "wider than the pot's range"),
         (["--duration", "-2"], "duration must be positive"),
         (["--occlusion", "1.5"], "occlusion fraction"),
         (["--robot", "/no/such/robot"], "not found"),
