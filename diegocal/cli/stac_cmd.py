@@ -90,6 +90,8 @@ def stac(
     result = run_method(method, data.without_truth(), model, options)
     out = output or default_output(log, ".calib.yaml")
     cal = replace(result.calibration, header=header("calibration", model, log, command_line("diegocal stac")))
+    if joint_angles is not None:
+        cal = replace(cal, meta={"joint_angles": str(joint_angles.resolve())})
     save_yaml(cal.to_dict(), out)
     if joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
         q_log = Log(data.time, {"q": make_stream(model.joint_names, result.q)}, robot=data.robot, rate_hz=data.rate_hz)
