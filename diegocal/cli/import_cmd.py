@@ -61,5 +61,5 @@ def import_cmd(
 
         rows.append(("occluded marker samples", f"{float(np.isnan(log.streams['markers'].data[..., 0]).mean()):.1%}"))
     rows += [("note", n) for n in result.notes]
-    rows += [("robot", log.robot or "none (pass --robot to later commands)"), ("written", str(output))]
+    rows += [("robot", log.robot or "none: give --robot, or robot: in the map"), ("written", str(output))]
     summary("import", rows, quiet=quiet)

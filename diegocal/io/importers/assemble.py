@@ -87,6 +87,8 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
     for spec in specs:
         s, conversion = _extract(spec, sources, mapping)
         series.append(s)
+        if _filtered(mapping, s.stream):
+            conversion += f", low-passed {mapping.filter.cutoff_hz:g} Hz"
         rows.append((s.stream, f"from {s.origin}", len(s.names), conversion))
     for src in sources.values():
         for table in src.loaded():
@@ -283,6 +285,12 @@ def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportM
 
 
 # ----------------------------------------------------------------------------- 3. filter, derive
+def _filtered(mapping: ImportMap, stream: str) -> bool:
+    """Whether the map's filter acts on ``stream`` (by default on every joint stream)."""
+    filt = mapping.filter
+    return filt is not None and stream in (filt.streams if filt.streams is not None else JOINT_STREAMS)
+
+
 def _process(series: list[Series], mapping: ImportMap, notes: list[str]) -> list[Series]:
     filt = mapping.filter
     targets = set(filt.streams) if filt and filt.streams is not None else set(JOINT_STREAMS)
