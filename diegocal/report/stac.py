@@ -235,8 +235,8 @@ def pages(path: Path, pdf, context: ReportContext) -> None:
 
 
 def _load_context(raw: dict, path: Path, context: ReportContext):
-    """Robot, log and tracked q named in the bundle header (legacy: ``meta``) when they still
-    exist (else None)."""
+    """Robot, log and tracked q (``stac --joint-angles``) named in the bundle when they still exist
+    (else None)."""
     from diegocal.io import q_log_path
     from diegocal.io.bundle import load_bundle
     from diegocal.robot import load_robot
@@ -248,7 +248,7 @@ def _load_context(raw: dict, path: Path, context: ReportContext):
         robot = load_robot(rdir) if rdir is not None and Path(rdir).exists() else None
         if bundle.log and Path(bundle.log).exists():
             log = load_log(bundle.log).without_truth()
-        qp = q_log_path(Path(path))
+        qp = Path((raw.get("meta") or {}).get("joint_angles") or q_log_path(Path(path)))  # legacy: beside it
         if qp.exists() and log is not None:
             qlog = load_log(qp)
             q = qlog.streams["q"].data if qlog.n_samples == log.n_samples else None
