@@ -28,7 +28,7 @@ def _read(path: Path):
     return read_table(path)
 
 
-def abstract(path: Path) -> list[str]:
+def abstract(path: Path, context=None) -> list[str]:
     fields, _, rows = _read(path)
     command, source = fields.get("command", "?"), fields.get("source", "?")
     count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
@@ -95,6 +95,20 @@ def _num(text) -> str:
         return str(text)
 
 
+def headline(path: Path, context=None) -> str:
+    fields, _, rows = _read(path)
+    count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
+    return f"{fields.get('command', '?')} over {len(rows)} run(s): " + ", ".join(f"{n} {s}" for s, n in count.items())
+
+
 register_section(
-    Section("batch", recognise, pages, lambda p: {"table": str(p)}, heading="Batch results", abstract=abstract)
+    Section(
+        "batch",
+        recognise,
+        pages,
+        lambda p: {"table": str(p)},
+        heading="Batch results",
+        abstract=abstract,
+        headline=headline,
+    )
 )
