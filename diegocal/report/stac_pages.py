@@ -216,10 +216,13 @@ def _heldout_words(ev: Evaluation, recorded: list) -> str:
     rows = list(ev.heldout)
     recorded = [r for r in recorded if isinstance(r, dict) and "markers" in (r.get("mae") or {})]
     if not rows and recorded:
-        return "Held-out prediction recorded in the file: " + "; ".join(
-            f"from {'+'.join(r.get('from', []))} to markers {MM * r['mae']['markers']:.2f} mm"
-            for r in recorded
-        ) + "."
+        return (
+            "Held-out prediction recorded in the file: "
+            + "; ".join(
+                f"from {'+'.join(r.get('from', []))} to markers {MM * r['mae']['markers']:.2f} mm" for r in recorded
+            )
+            + "."
+        )
     if not rows:
         return (
             "No held-out log was given (diegocal report ... --heldout LOG): the errors above are on the fit's own data."
