@@ -152,6 +152,7 @@ class Sheet:
         if scale < 1.0:  # too wide: smaller type, down to 6.5 pt
             size = max(6.5, size * scale)
             widths = _column_widths(columns, texts, size)
+        texts, widths = _clip_to_page(columns, texts, widths, size)
         total = sum(widths)
         x0 = LEFT
         row_h = size * ROW_PAD / (72 * PAGE_SIZE[1])
@@ -199,6 +200,22 @@ def _column_widths(columns, texts, size: float) -> list[float]:
         widest = max(head + [text_width(r[k], size) for r in texts])
         out.append(widest + 0.016)
     return out
+
+
+def _clip_to_page(columns, texts, widths, size: float):
+    """When a table is still wider than the text column, shorten the cells of its widest
+    left-aligned column (text, not numbers) with an ellipsis until it fits."""
+    excess = sum(widths) - (RIGHT - LEFT)
+    left = [k for k, c in enumerate(columns) if c.align == "left"]
+    if excess <= 0 or not left:
+        return texts, widths
+    k = max(left, key=lambda i: widths[i])
+    target = max(widths[k] - excess, 0.08)
+    texts = [list(row) for row in texts]
+    for row in texts:
+        while len(row[k]) > 4 and text_width(row[k], size) + 0.016 > target:
+            row[k] = row[k][: max(3, int(len(row[k]) * 0.9)) - 1].rstrip() + "…"
+    return texts, _column_widths(columns, texts, size)
 
 
 def text_width(text: str, size: float, bold: bool = False) -> float:

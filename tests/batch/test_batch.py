@@ -212,6 +212,11 @@ def test_options_reach_the_command(source, tmp_path):
         str(tmp_path / "session1.kinematics.diagnosis.yaml"),
     )
     assert argv.count("--domain") == 1 and argv[argv.index("--alpha") + 1] == "0.05" and argv[-1] == "--quiet"
+    model = tmp_path / "m.calib.yaml"
+    model.write_text("kind: calibration\n")
+    plan = plan_batch("predict", source, BatchOptions(model=model))  # a calibration predicts pots+markers logs
+    assert [j.argv[:3] for j in plan.jobs] == [("predict", str(model), str(source / f"session{k}.h5")) for k in (1, 2)]
+    assert all(model in j.inputs for j in plan.jobs)  # a newer model makes the predictions stale
 
 
 @pytest.mark.slow
