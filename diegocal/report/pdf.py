@@ -118,6 +118,7 @@ def write_report(results, out, context: ReportContext | None = None, command: st
             footer = f"{where}  ·  page {i + 1} of {len(pages)}  ·  {stamp}"
             fig.text(0.5, 0.018, footer, ha="center", fontsize=7, color="0.45")
             pdf.savefig(fig)
+            plt.close(fig)
         info = pdf.infodict()
         info["Title"] = "diegocal report"
         info["Creator"] = f"diegocal {__version__}"
@@ -146,10 +147,15 @@ def front_sheets(plan, doc: Document, context: ReportContext, command: str, summ
     if context.robot is not None:
         facts += f" Robot directory: {context.robot}."
     sheets[-1].paragraph(facts, size=8, color="0.3")
-    columns = [Column("section", align="left"), Column("result file", align="left"), Column("page")]
+    columns = [
+        Column("section", align="left"),
+        Column("result file", align="left"),
+        Column("from log", align="left"),
+        Column("page"),
+    ]
     rows = []
-    for (title, first), (r, _) in zip(doc.sections, plan, strict=True):
-        rows.append([title.split(": ", 1)[0], _short(r), str(offset + first + 1)])
+    for (title, first), (r, section) in zip(doc.sections, plan, strict=True):
+        rows.append([title.split(": ", 1)[0], _short(r), _source(section, r), str(offset + first + 1)])
     sheets += table_sheets("Contents", columns, rows, sheet=sheets[-1])[1:]
     if summary:
         _put(sheets, "Summary", 11, heading=True, room=0.15)
@@ -158,6 +164,15 @@ def front_sheets(plan, doc: Document, context: ReportContext, command: str, summ
             for p in paragraphs:
                 _put(sheets, p, 9)
     return sheets
+
+
+def _source(section: Section, path: Path) -> str:
+    """The log a result was made from (its provenance), by name; "–" when it does not say."""
+    try:
+        log = (section.describe(path) or {}).get("log")
+    except (DiegocalError, OSError, KeyError, TypeError, ValueError):
+        log = None
+    return Path(str(log)).name if log else "–"
 
 
 def _short(path: Path, width: int = 60) -> str:
