@@ -109,9 +109,10 @@ def test_contents_point_at_the_sections(document):
     for number, page in enumerate(document, start=1):
         assert f"page {number} of {total}" in page.get_text()
     headings = r"Log|Kinematic calibration \(STAC\)|Pneumatic valve-chamber models|Torque model \(SGP\)|Diagnosis"
-    entries = re.findall(rf"^({headings})\n(.+)\n(\d+)$", first, flags=re.M)
+    entries = re.findall(rf"^({headings})\n(.+)\n(.+)\n(\d+)$", first, flags=re.M)  # section, file, log, page
     assert len(entries) == 5, first
-    for heading, result, number in entries:
+    assert [e[2] for e in entries] == ["kin.h5", "kin.h5", "air.h5", "swing.h5", "swing.h5"]  # provenance
+    for heading, result, _, number in entries:
         assert heading in document[int(number) - 1].get_text(), (heading, number)
         assert Path(result).name in document[int(number) - 1].get_text()
 
