@@ -62,7 +62,7 @@ COMMANDS = {
     "predict": CommandSpec("predict", ".prediction.h5"),
 }
 #: Streams a log needs for `predict` with a model of each bundle kind.
-PREDICT_NEEDS = {"calibration": ("pots",), "dynamics": ("q",), "pneumatic": ("pressure", "valve", "pots")}
+PREDICT_NEEDS = {"calibration": ("pots", "markers"), "dynamics": ("q",), "pneumatic": ("pressure", "valve", "pots")}
 
 
 @dataclass(frozen=True)

@@ -33,9 +33,15 @@ def _command(value: str) -> str:
 def batch(
     ctx: typer.Context,
     command: Annotated[
-        str, typer.Argument(callback=_command, help="The command to run: " + ", ".join(COMMAND_NAMES) + ".")
+        str,
+        typer.Argument(
+            callback=_command, metavar="COMMAND", help="The command to run: " + ", ".join(COMMAND_NAMES) + "."
+        ),
     ],
-    source: Annotated[str, typer.Argument(help="A folder of logs, a quoted glob such as 'logs/*.h5', or one log.")],
+    source: Annotated[
+        str,
+        typer.Argument(metavar="FOLDER|GLOB", help="A folder of logs, a quoted glob such as 'logs/*.h5', or one log."),
+    ],
     output_dir: Annotated[
         Path | None,
         typer.Option("-o", "--output-dir", help="Folder for the outputs; by default each output goes beside its log."),

@@ -1,4 +1,4 @@
-"""`diegocal report RESULT... -o report.pdf`."""
+"""`diegocal report RESULT... -o report.pdf`: the document, and its summary in plain words on the terminal."""
 
 import shlex
 import sys
@@ -9,25 +9,45 @@ import typer
 
 from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, default_output, summary
-from diegocal.report import ReportContext, write_report
 
 
 @app.command("report")
 @cli_errors
 def report(
-    results: Annotated[list[Path], typer.Argument(help="Logs and fitted results (calib.yaml, pneumatic.yaml, sgp/).")],
+    results: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Logs and fitted results (calib.yaml, pneumatic.yaml, sgp/, diagnosis.yaml, batch tables)."
+        ),
+    ],
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="PDF to write [default: beside the first result].")
+        Path | None, typer.Option("-o", "--output", help="PDF to write; by default beside the first result.")
     ] = None,
     robot: Annotated[
         Path | None, typer.Option("--robot", help="Robot directory, for sections that draw the robot.")
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    heldout: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--heldout",
+            help="Held-out log (repeatable): each fitted model of the same robot is scored on it.",
+        ),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary on the terminal.")] = False,
 ) -> None:
-    """Write one multi-page PDF: a title page, then one section per result."""
+    """Write one PDF document: contents and summary, then one section per result; print the summary."""
+    from diegocal.errors import InputFileError
+    from diegocal.report import ReportContext, write_report
+    from diegocal.report.pdf import headlines, plan_report
+
+    for h in heldout or ():
+        if not h.is_file():
+            raise InputFileError(f"{h}: no such held-out log")
     out = output or default_output(results[0], ".report.pdf")
     command = "diegocal " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else "diegocal report"
-    sections = write_report(results, out, ReportContext(robot=robot), command=command)
-    summary(
-        f"report → {out}", [(str(r), s) for r, s in zip(results, sections, strict=True)], ("result", "section"), quiet
-    )
+    context = ReportContext(robot=robot, heldout=tuple(heldout or ()))
+    write_report(results, out, context, command=command)
+    if quiet:
+        return
+    rows = [(title, line) for title, line in headlines(plan_report(results), context)]  # cached: not recomputed
+    summary(f"report → {out}: what was calibrated and what was found wrong", rows, ("result", "summary"))

@@ -77,6 +77,8 @@ def stac(
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
     if method not in METHODS:
         raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
+    if joint_angles is not None and joint_angles.suffix.lower() not in (".h5", ".hdf5", ".csv"):
+        raise FitError(f"--joint-angles {joint_angles}: a log is .h5 or .csv")  # before the fit, not after
     data = load_log(log)
     model = robot_for_log(robot, data)
     options = StacOptions(

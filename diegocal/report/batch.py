@@ -28,7 +28,7 @@ def _read(path: Path):
     return read_table(path)
 
 
-def abstract(path: Path) -> list[str]:
+def abstract(path: Path, context=None) -> list[str]:
     fields, _, rows = _read(path)
     command, source = fields.get("command", "?"), fields.get("source", "?")
     count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
@@ -51,13 +51,26 @@ def pages(path: Path, pdf, context) -> None:
     fields, columns, rows = _read(path)
     command = fields.get("command", "")
     shown = headline(command, columns)
+    pairs = _rmse_pairs(shown)
+    if pairs:  # diagnose: one column "baseline → extended" whatever the units, not two per unit
+        shown = [c for c in shown if c not in {x for pair in pairs for x in pair[1:]}]
+        for r in rows:
+            r["held-out RMSE"] = "; ".join(
+                f"{_num(r.get(b))} → {_num(r.get(e))} {u}" for u, b, e in pairs if r.get(b) not in (None, "")
+            )
+        shown.insert(0, "held-out RMSE")
     if not shown:  # predict: every error column
         shown = [c for c in columns if c.endswith(("RMSE", "[m]"))][:5]
     cols = [Column("log", align="left")]
     if "domain" in columns:
         cols.append(Column("domain", align="left"))
     cols += [Column("status", align="left"), Column("time", "s")]
-    cols += [Column(*_name_unit(c), align="right" if _numeric(rows, c) else "left") for c in shown]
+    cols += [
+        Column("held-out RMSE", "baseline → extended", align="left")
+        if c == "held-out RMSE"
+        else Column(*_name_unit(c), align="right" if _numeric(rows, c) else "left")
+        for c in shown
+    ]
     cols.append(Column("failure reason", align="left"))
     table = []
     for r in rows:
@@ -68,6 +81,18 @@ def pages(path: Path, pdf, context) -> None:
     title = f"Batch {command}: {Path(path).name}"
     for sheet in table_sheets(title, cols, table, intro=abstract(path)):
         save_page(pdf, sheet.fig)
+
+
+def _rmse_pairs(columns) -> list[tuple[str, str, str]]:
+    """(unit, baseline column, extended column) of a diagnose table's pooled held-out RMSE columns."""
+    out = []
+    for c in columns:
+        if c.startswith("held-out RMSE baseline ["):
+            unit = c[len("held-out RMSE baseline [") : -1]
+            ext = f"held-out RMSE extended [{unit}]"
+            if ext in columns:
+                out.append((unit, c, ext))
+    return out
 
 
 def _name_unit(column: str) -> tuple[str, str]:
@@ -95,6 +120,20 @@ def _num(text) -> str:
         return str(text)
 
 
+def headline(path: Path, context=None) -> str:
+    fields, _, rows = _read(path)
+    count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
+    return f"{fields.get('command', '?')} over {len(rows)} run(s): " + ", ".join(f"{n} {s}" for s, n in count.items())
+
+
 register_section(
-    Section("batch", recognise, pages, lambda p: {"table": str(p)}, heading="Batch results", abstract=abstract)
+    Section(
+        "batch",
+        recognise,
+        pages,
+        lambda p: {"table": str(p)},
+        heading="Batch results",
+        abstract=abstract,
+        headline=headline,
+    )
 )

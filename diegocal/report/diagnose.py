@@ -9,13 +9,13 @@ that no term explains, shown where it is.
 
 from __future__ import annotations
 
-import textwrap
 from pathlib import Path
 
 import numpy as np
 
+from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
-from diegocal.report.style import COLORS, PAGE_SIZE, axes_or_new, page, save_page
+from diegocal.report.style import COLORS, axes_or_new, save_page
 
 #: What each cause means, in words (DESIGN.md's vocabulary and its extensions).
 PHRASES = {
@@ -101,54 +101,52 @@ def _parameters_text(f: dict) -> str:
     return (" Fitted: " + ", ".join(parts) + ".") if parts else ""
 
 
-def _pooled(rmse: dict) -> float:
-    v = np.array([x for x in (rmse or {}).values() if x is not None], float)
-    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+def pooled_rmse(d: dict) -> dict:
+    """{unit: (baseline, extended)} held-out RMSE pooled over the channels of each unit (never across
+    units: a kinematic diagnosis mixes pots in V and markers in m)."""
+    base, ext = d.get("baseline") or {}, d.get("extended") or {}
+    units = base.get("units") or {}
+    out = {}
+    for unit in dict.fromkeys(units.values() or [base.get("unit", "")]):
+        pair = []
+        for block in (base, ext):
+            x = [
+                v for c, v in (block.get("heldout_rmse") or {}).items() if v is not None and units.get(c, unit) == unit
+            ]
+            pair.append(float(np.sqrt(np.mean(np.square(x)))) if x else float("nan"))
+        out[unit] = tuple(pair)
+    return out
 
 
 def summary_lines(d: dict) -> list[str]:
-    """The summary page's paragraphs."""
+    """The section's opening paragraphs: what was fitted on what, the findings, what they gained."""
     base, ext = d["baseline"], d["extended"]
-    unit = base.get("unit", "")
     findings = d.get("findings") or []
     blocks = d.get("blocks") or {}
     held = sum(b[1] - b[0] for b in blocks.get("heldout", []))
     train = sum(b[1] - b[0] for b in blocks.get("train", []))
     val = sum(b[1] - b[0] for b in blocks.get("validation", []))
+    log = Path(str(d.get("log") or "the log")).name
     out = [
-        f"Domain: {d['domain']}. Baseline model: {base['model']}, fitted on {train:.1f} s of training blocks; "
-        f"candidate terms were chosen on {val:.1f} s of validation blocks and every gain below is measured on "
-        f"{held:.1f} s of held-out blocks that were used for nothing else (contiguous blocks in time, interleaved).",
+        f"Domain {d['domain']}, log {log}. The baseline model ({base['model']}) was fitted on {train:.1f} s of "
+        f"training blocks; candidate terms were chosen on {val:.1f} s of validation blocks, and every gain below is "
+        f"measured on {held:.1f} s of held-out blocks used for nothing else (contiguous blocks in time, interleaved).",
     ]
+    pooled = "; ".join(f"{b:.4g} → {e:.4g} {u}" for u, (b, e) in pooled_rmse(d).items())
     if not findings:
         out.append(
             "Nothing significant: no term of the vocabulary and no binned structure improves the validation "
             f"error beyond chance (family-wise false-alarm rate {d['options']['alpha']:g}) and by at least "
-            f"{d['options']['min_gain']:.0%}. The baseline is as good as this log can tell."
+            f"{d['options']['min_gain']:.0%}. The baseline is as good as this log can tell "
+            f"(held-out RMSE over all channels {pooled})."
         )
     else:
         out.append(
-            f"{len(findings)} finding(s), most important first. Held-out RMSE over all channels: baseline "
-            f"{_pooled(base['heldout_rmse']):.4g} {unit}, extended model {_pooled(ext['heldout_rmse']):.4g} {unit} "
-            f"({ext['model']})."
+            f"{len(findings)} finding(s), most important first. Held-out RMSE over all channels, baseline → "
+            f"extended model ({ext['model']}): {pooled}."
         )
         out += [f"{k + 1}. " + sentence(f) for k, f in enumerate(findings)]
     return out
-
-
-def paragraph_page(title: str, paragraphs, width: int = 100):
-    import matplotlib.pyplot as plt
-
-    fig = plt.figure(figsize=PAGE_SIZE)
-    fig.text(0.07, 0.95, title, fontsize=14, fontweight="bold", va="top")
-    y = 0.91
-    for p in paragraphs:
-        lines = textwrap.wrap(p, width=width) or [""]
-        fig.text(0.07, y, "\n".join(lines), fontsize=9, va="top")
-        y -= 0.018 * len(lines) + 0.015
-        if y < 0.08:
-            break
-    return fig
 
 
 # ----------------------------------------------------------------------------- plots
@@ -171,11 +169,16 @@ def plot_evidence(f: dict, ax=None):
     r = f.get("region")
     if r and r.get("variable") == ev.get("variable"):
         ax.axvspan(r["low"], r["high"], color=COLORS["truth"], alpha=0.12, label="region found")
-    ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.set_xlabel(str(ev.get("variable", "")))
+    ax.axhline(0.0, color="0.5", lw=0.6, label="zero: nothing left to explain")
+    counts = (curves.get("before") or {}).get("count") or []
+    variable = str(ev.get("variable", ""))
+    ax.set_xlabel(
+        f"{variable} [{variable_unit(variable, f.get('domain', ''))}]  "
+        f"(bin medians; {sum(counts)} samples in {len(counts)} bins)"
+    )
     magnitude = " (magnitude)" if curves.get("before") and _is_norm(f) else ""
     ax.set_ylabel(f"mean residual{magnitude} [{unit}]")
-    ax.set_title(f"{f['cause']} on {f['channel']}: residual on validation + held-out blocks")
+    ax.set_title(f"{f['cause']} on {f['channel']}: residual on the validation and held-out blocks")
     ax.legend(fontsize=6)
     return ax
 
@@ -184,59 +187,141 @@ def _is_norm(f: dict) -> bool:
     return f.get("unit") == "m"
 
 
-def runners_table(f: dict, ax=None):
-    """The runners-up of a finding's round with their validation scores, as a table."""
-    ax = axes_or_new(ax)
-    ax.axis("off")
+def variable_unit(variable: str, domain: str) -> str:
+    """The unit of an evidence variable ("q.joint3" rad, "p.fds" V, "du.r_elbow.flex" V per step)."""
+    head = variable.split(".", 1)[0]
+    if head == "p":
+        return "kPa" if domain == "pneumatics" else "V"
+    units = {"time": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s²", "u": "V", "du": "V per step", "v": "V"}
+    return units.get(head, "V/s" if head == "vd" else "?")
+
+
+def runners_table(f: dict) -> tuple[list[Column], list[list]]:
+    """The runners-up of a finding's round: each candidate term with its validation score."""
+    columns = [
+        Column("candidate cause", align="left"),
+        Column("channel [region]", align="left"),
+        Column("validation gain", "%"),
+        Column("t"),
+        Column("threshold t"),
+        Column("significant", align="left"),
+    ]
     rows = []
     for r in f.get("runners_up") or []:
         region = r.get("region")
         where = r["channel"] + (f" [{region['low']:.3g}..{region['high']:.3g}]" if region else "")
-        rows.append(
-            [
-                r["cause"],
-                where,
-                f"{r['validation_gain']:.1%}",
-                f"{r['t']:.1f}",
-                f"{r['threshold_t']:.1f}",
-                "yes" if r["significant"] else "no",
-            ]
+        score = [f"{100 * r['validation_gain']:.1f}", f"{r['t']:.1f}", f"{r['threshold_t']:.1f}"]
+        rows.append([r["cause"], where, *score, "yes" if r["significant"] else "no"])
+    return columns, rows
+
+
+def channel_table(d: dict) -> tuple[list[Column], list[list]]:
+    """Held-out RMSE of every channel, baseline and extended model."""
+    base, ext = d["baseline"], d["extended"]
+    units = base.get("units") or {}
+    columns = [
+        Column("channel", align="left"),
+        Column("unit", align="left"),
+        Column("held-out RMSE, baseline"),
+        Column("held-out RMSE, extended"),
+        Column("change", "%"),
+    ]
+    rows = []
+    for c, b in (base.get("heldout_rmse") or {}).items():
+        e = (ext.get("heldout_rmse") or {}).get(c)
+        change = "–" if b is None or e is None or b < EXACT else _percent(100 * (e - b) / b)
+        rows.append([c, units.get(c, base.get("unit", "")), _g(b), _g(e), change])
+    return columns, rows
+
+
+#: Below this an RMSE is zero to rounding: the model reproduces the channel exactly (a pot that alone
+#: determines its joint's angle), and a relative change is not defined.
+EXACT = 1e-12
+
+
+def _percent(x: float) -> str:
+    return "0" if abs(x) < 0.5 else f"{x:+.0f}"
+
+
+def _g(v) -> str:
+    return "–" if v is None else "0 (exact)" if v < EXACT else f"{v:.4g}"
+
+
+CHANNEL_NOTE = (
+    "RMSE on the held-out blocks, per channel, before and after adding the findings. '0 (exact)': the baseline "
+    "reproduces the channel exactly (a pot that alone fixes its joint's angle), so no relative change is given."
+)
+
+
+CAPTION = (
+    "The residual of the baseline model (orange) and of the extended model (blue) on the validation and held-out "
+    "blocks, averaged in bins of the variable that localises the finding (points at the bin medians); bands: ±2 "
+    "standard errors over contiguous sub-blocks, so that correlated samples are not counted as independent. Green "
+    "shading: the region the finding is confined to. A curve that follows zero within its band has nothing left "
+    "to explain."
+)
+RUNNERS_NOTE = (
+    "The other candidate terms of the same round, fitted on the training blocks and scored on the validation "
+    "blocks (validation gain: the share of the validation error a candidate removes); a candidate is significant "
+    "when its t exceeds the threshold, which holds the family-wise false-alarm rate over all candidates."
+)
+
+
+def abstract(path: Path, context=None) -> list[str]:
+    from diegocal.io import load_yaml
+
+    return summary_lines(load_yaml(path))
+
+
+def headline(path: Path, context=None) -> str:
+    """One line: the findings (what was found wrong) and what fixing them gained on held-out data."""
+    from diegocal.io import load_yaml
+
+    d = load_yaml(path)
+    findings = d.get("findings") or []
+    log = Path(str(d.get("log") or "")).name
+    if not findings:
+        return f"{d['domain']} ({log}): nothing significant"
+    parts = []
+    for f in findings:
+        g = f.get("gain") or {}
+        gain = (
+            f", held-out RMSE {g['rmse_before']:.3g} → {g['rmse_after']:.3g} {f.get('unit', '')}"
+            if g.get("rmse_after") is not None
+            else ""
         )
-    if not rows:
-        ax.text(0.0, 0.5, "no other candidate was tested in this round", fontsize=8)
-        return ax
-    table = ax.table(
-        cellText=rows,
-        colLabels=["cause", "channel [region]", "validation gain", "t", "threshold t", "significant"],
-        loc="upper center",
-        cellLoc="left",
-    )
-    table.auto_set_font_size(False)
-    table.set_fontsize(7)
-    table.scale(1.0, 1.3)
-    ax.set_title("runners-up (fitted on training blocks, scored on validation blocks)", fontsize=8)
-    return ax
+        parts.append(f"{f['cause']} on {f['channel']}{gain}")
+    return f"{d['domain']} ({log}): " + "; ".join(parts)
 
 
 def pages(path: Path, pdf, context) -> None:
     from diegocal.io import load_yaml
 
     d = load_yaml(path)
-    save_page(pdf, paragraph_page(f"Diagnosis: {d['domain']}", summary_lines(d)))
-    findings = d.get("findings") or []
-    for k in range(0, len(findings), 2):
-        chunk = findings[k : k + 2]
-        fig, axes = page(
-            2 * len(chunk),
-            1,
-            title=f"Diagnosis: evidence ({d['domain']})",
-            gridspec_kw={"height_ratios": [3, 2] * len(chunk)},
-        )
-        for i, f in enumerate(chunk):
-            plot_evidence(f, axes[2 * i, 0])
-            axes[2 * i, 0].set_title(textwrap.shorten(f"{k + i + 1}. {sentence(f)}", 150), fontsize=7)
-            runners_table(f, axes[2 * i + 1, 0])
-        save_page(pdf, fig)
+    title = f"Diagnosis, {d['domain']}: {Path(path).name}"
+    notes = (
+        (CHANNEL_NOTE,) if any(_g(v) == "0 (exact)" for v in (d["baseline"].get("heldout_rmse") or {}).values()) else ()
+    )
+    sheets = table_sheets(title, *channel_table(d), intro=summary_lines(d), notes=notes)
+    for k, f in enumerate(d.get("findings") or []):
+        f = {**f, "domain": d["domain"]}
+        columns, rows = runners_table(f)
+        need = 0.5 + (len(rows) + 3) * sheets[-1].line(7.5 * 1.15) + (0.06 if rows else 0.0)  # the whole finding
+        if sheets[-1].room() < need:
+            sheets.append(Sheet(f"{title}: evidence"))
+        sheet = sheets[-1]
+        sheet.heading(f"Finding {k + 1}: {f['cause']} on {f['channel']}")
+        sheet.paragraph(sentence(f))
+        plot_evidence(f, sheet.axes(0.26))
+        sheet.caption(CAPTION)
+        if rows:
+            sheets[-1:] = table_sheets("Runners-up of this round", columns, rows, sheet=sheet, notes=(RUNNERS_NOTE,))
+        else:
+            sheet.paragraph("No other candidate was tested in this round.", size=8)
+    for sheet in sheets:
+        save_page(pdf, sheet.fig)
 
 
-register_section(Section("diagnosis", recognise, pages, describe))
+register_section(
+    Section("diagnosis", recognise, pages, describe, heading="Diagnosis", abstract=abstract, headline=headline)
+)

@@ -79,6 +79,16 @@ class Sheet:
         self._fit_width(t, text, size, bold=True)
         self.y -= self._height(t) + GAP
 
+    def paragraph_height(self, text: str, size: float = 9) -> float:
+        """The height a paragraph would take (with the gap after it), drawing nothing."""
+        y = self.y
+        self.y = 10.0  # far above the page: it always fits
+        self.paragraph(text, size)
+        height = 10.0 - self.y
+        self.fig.texts[-1].remove()
+        self.y = y
+        return height
+
     def paragraph(self, text: str, size: float = 9, indent: float = 0.0, color: str = "black") -> bool:
         """Wrapped text; returns False (and draws nothing) when it does not fit the page."""
         width = RIGHT - LEFT - indent
@@ -111,23 +121,49 @@ class Sheet:
         self.y -= height + title_room + GAP
         return ax
 
-    def table(self, columns: Sequence[Column], rows: Sequence[Sequence], size: float = 7.5) -> int:
-        """Draw as many rows as fit (header first); returns how many rows were drawn."""
+    def axes_row(self, height: float, n: int, gap: float = 0.09, left: float = 0.1, right: float = 0.95, **kw):
+        """``n`` Axes side by side filling ``height`` of the page below the cursor."""
+        width = (right - left - gap * (n - 1)) / n
+        top = self.y - 0.025
+        bottom = top - height + 0.045
+        axes = [self.fig.add_axes((left + k * (width + gap), bottom, width, height - 0.045), **kw) for k in range(n)]
+        self.y -= height + 0.025 + GAP
+        return axes
+
+    def caption(self, text: str) -> bool:
+        """A figure's caption: what each line, band and threshold means (small, grey)."""
+        return self.paragraph(text, size=8, color="0.2")
+
+    def table(
+        self,
+        columns: Sequence[Column],
+        rows: Sequence[Sequence],
+        size: float = 7.5,
+        max_rows: int | None = None,
+        dry: bool = False,
+        reserve: float = 0.0,
+    ) -> int:
+        """Draw as many rows as fit, at most ``max_rows`` (header first); returns how many rows were
+        drawn (with ``dry``, how many would fit, drawing nothing); ``reserve`` keeps that much of the
+        page free below the table when every row fits (for the notes that follow it)."""
         texts = [[c.cell(v) for c, v in zip(columns, row, strict=True)] for row in rows]
         widths = _column_widths(columns, texts, size)
         scale = min(1.0, (RIGHT - LEFT) / sum(widths))
-        if scale < 1.0:  # too wide: smaller type, down to 6 pt
-            size = max(6.0, size * scale)
+        if scale < 1.0:  # too wide: smaller type, down to 6.5 pt
+            size = max(6.5, size * scale)
             widths = _column_widths(columns, texts, size)
+        texts, widths = _clip_to_page(columns, texts, widths, size)
         total = sum(widths)
         x0 = LEFT
         row_h = size * ROW_PAD / (72 * PAGE_SIZE[1])
         head_lines = max(c.header().count("\n") + 1 for c in columns)
         head_h = row_h * (0.35 + 0.9 * head_lines)
         n = int((self.y - head_h - BOTTOM) // row_h)
-        n = max(0, min(n, len(texts)))
-        if n == 0 and texts:
-            return 0
+        if reserve and n >= len(texts):  # all rows fit: do the notes fit below them too?
+            n = min(n, int((self.y - head_h - BOTTOM - reserve) // row_h))
+        n = max(0, min(n, len(texts), len(texts) if max_rows is None else max_rows))
+        if dry or (n == 0 and texts):
+            return n
         y = self.y
         xs = [x0 + sum(widths[:k]) for k in range(len(widths))]
         for c, x, w in zip(columns, xs, widths, strict=True):
@@ -143,7 +179,7 @@ class Sheet:
                 self._cell(text, x, w, y - row_h / 2, c.align, size)
             y -= row_h
         self.fig.add_artist(_rule(x0, y, total, lw=0.6))
-        self.y = y - GAP
+        self.y = max(y - GAP, BOTTOM)
         return n
 
     def _cell(self, text: str, x: float, w: float, y: float, align: str, size: float, bold: bool = False) -> None:
@@ -164,6 +200,22 @@ def _column_widths(columns, texts, size: float) -> list[float]:
         widest = max(head + [text_width(r[k], size) for r in texts])
         out.append(widest + 0.016)
     return out
+
+
+def _clip_to_page(columns, texts, widths, size: float):
+    """When a table is still wider than the text column, shorten the cells of its widest
+    left-aligned column (text, not numbers) with an ellipsis until it fits."""
+    excess = sum(widths) - (RIGHT - LEFT)
+    left = [k for k, c in enumerate(columns) if c.align == "left"]
+    if excess <= 0 or not left:
+        return texts, widths
+    k = max(left, key=lambda i: widths[i])
+    target = max(widths[k] - excess, 0.08)
+    texts = [list(row) for row in texts]
+    for row in texts:
+        while len(row[k]) > 4 and text_width(row[k], size) + 0.016 > target:
+            row[k] = row[k][: max(3, int(len(row[k]) * 0.9)) - 1].rstrip() + "…"
+    return texts, _column_widths(columns, texts, size)
 
 
 def text_width(text: str, size: float, bold: bool = False) -> float:
@@ -208,12 +260,21 @@ def table_sheets(
             sheets.append(Sheet(f"{title} (continued)"))
             sheets[-1].paragraph(p)
     rest = list(rows)
+    reserve = sum(sheets[-1].paragraph_height(p, size=8) for p in notes)  # the notes stay with rows
     while True:
-        n = sheets[-1].table(columns, rest, size=size)
+        fit = sheets[-1].table(columns, rest, size=size, dry=True, reserve=reserve)
+        limit, fresh = None, None
+        if fit < len(rest):  # it spills: when one more page takes the rest, share the rows evenly
+            fresh = Sheet(f"{title} (continued)")
+            if len(rest) - fit <= fresh.table(columns, rest, size=size, dry=True, reserve=reserve):
+                limit = max(1, min(fit, -(-len(rest) // 2)))
+        n = sheets[-1].table(columns, rest, size=size, max_rows=limit, reserve=reserve)
         rest = rest[n:]
         if not rest:
+            if fresh is not None:
+                plt.close(fresh.fig)
             break
-        sheets.append(Sheet(f"{title} (continued)"))
+        sheets.append(fresh or Sheet(f"{title} (continued)"))
     for p in notes:
         if not sheets[-1].paragraph(p, size=8, color="0.25"):
             sheets.append(Sheet(f"{title} (continued)"))

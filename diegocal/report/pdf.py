@@ -56,16 +56,29 @@ def plan_report(results) -> list[tuple[Path, Section]]:
     return plan
 
 
-def abstracts(plan) -> list[tuple[str, list[str]]]:
+def abstracts(plan, context: ReportContext) -> list[tuple[str, list[str]]]:
     """(section title, plain-words paragraphs) of every result that has an abstract."""
     out = []
     for r, section in plan:
         if section.abstract is None:
             continue
         try:
-            out.append((section.title(r), section.abstract(r)))
+            out.append((section.title(r), section.abstract(r, context)))
         except (DiegocalError, OSError, KeyError, TypeError, ValueError) as exc:
             out.append((section.title(r), [f"(no summary: {exc})"]))
+    return out
+
+
+def headlines(plan, context: ReportContext) -> list[tuple[str, str]]:
+    """(section title, one line) of every result whose section has a headline: the terminal's summary."""
+    out = []
+    for r, section in plan:
+        if section.headline is None:
+            continue
+        try:
+            out.append((section.title(r), section.headline(r, context)))
+        except (DiegocalError, OSError, KeyError, TypeError, ValueError) as exc:
+            out.append((section.title(r), f"(no summary: {exc})"))
     return out
 
 
@@ -86,12 +99,12 @@ def write_report(results, out, context: ReportContext | None = None, command: st
     for r, section in plan:
         doc.start(section.title(r))
         if not section.opens_itself and section.abstract is not None:
-            for sheet in opening_sheets(section, r):
+            for sheet in opening_sheets(section, r, context):
                 save_page(doc, sheet.fig)
         section.pages(r, doc, context)
     front = []
     if len(plan) > 1:  # one result needs no contents: its section opens with its summary
-        summary = abstracts(plan)
+        summary = abstracts(plan, context)
         counting = front_sheets(plan, doc, context, command, summary, offset=0)
         for sheet in counting:  # the first pass only counts the front pages
             plt.close(sheet.fig)
@@ -105,18 +118,19 @@ def write_report(results, out, context: ReportContext | None = None, command: st
             footer = f"{where}  ·  page {i + 1} of {len(pages)}  ·  {stamp}"
             fig.text(0.5, 0.018, footer, ha="center", fontsize=7, color="0.45")
             pdf.savefig(fig)
+            plt.close(fig)
         info = pdf.infodict()
         info["Title"] = "diegocal report"
         info["Creator"] = f"diegocal {__version__}"
     return [s.name for _, s in plan]
 
 
-def opening_sheets(section: Section, path: Path) -> list[Sheet]:
+def opening_sheets(section: Section, path: Path, context: ReportContext) -> list[Sheet]:
     """The report-made opening page of a section: its title, its paragraphs and its key table."""
     title = section.title(path)
-    paragraphs = section.abstract(path)
+    paragraphs = section.abstract(path, context)
     if section.key_table is not None:
-        columns, rows = section.key_table(path)
+        columns, rows = section.key_table(path, context)
         return table_sheets(title, columns, rows, intro=paragraphs)
     sheet = Sheet(title)
     for p in paragraphs:
@@ -126,24 +140,39 @@ def opening_sheets(section: Section, path: Path) -> list[Sheet]:
 
 def front_sheets(plan, doc: Document, context: ReportContext, command: str, summary, offset: int) -> list[Sheet]:
     """Title, what was run, the contents (page numbers counted after ``offset`` front pages) and the
-    summary: the first paragraph of every section."""
+    summary: every section's opening paragraphs."""
     now = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     sheets = [Sheet("diegocal report")]
     facts = f"Written {now} by diegocal {__version__} (Python {platform.python_version()}) with: {command}"
     if context.robot is not None:
         facts += f" Robot directory: {context.robot}."
     sheets[-1].paragraph(facts, size=8, color="0.3")
-    columns = [Column("section", align="left"), Column("result file", align="left"), Column("page")]
+    columns = [
+        Column("section", align="left"),
+        Column("result file", align="left"),
+        Column("from log", align="left"),
+        Column("page"),
+    ]
     rows = []
-    for (title, first), (r, _) in zip(doc.sections, plan, strict=True):
-        rows.append([title.split(": ", 1)[0], _short(r), str(offset + first + 1)])
+    for (title, first), (r, section) in zip(doc.sections, plan, strict=True):
+        rows.append([title.split(": ", 1)[0], _short(r), _source(section, r), str(offset + first + 1)])
     sheets += table_sheets("Contents", columns, rows, sheet=sheets[-1])[1:]
     if summary:
         _put(sheets, "Summary", 11, heading=True, room=0.15)
         for title, paragraphs in summary:
             _put(sheets, title, 9.5, heading=True)
-            _put(sheets, paragraphs[0] if paragraphs else "", 9)
+            for p in paragraphs:
+                _put(sheets, p, 9)
     return sheets
+
+
+def _source(section: Section, path: Path) -> str:
+    """The log a result was made from (its provenance), by name; "–" when it does not say."""
+    try:
+        log = (section.describe(path) or {}).get("log")
+    except (DiegocalError, OSError, KeyError, TypeError, ValueError):
+        log = None
+    return Path(str(log)).name if log else "–"
 
 
 def _short(path: Path, width: int = 60) -> str:

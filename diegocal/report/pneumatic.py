@@ -1,13 +1,18 @@
 """Report section for pneumatic.yaml (thesis ch. 4 figures; registers itself on import).
 
-Pages: fitted parameters and drift table; Fig. 4.13 (drift of open-loop prediction against
-horizon, all chambers); Fig. 4.10 (steady-state curves: fitted s(u) and, when the fit recorded a
-locked-cylinder sweep log, the measured sweep); Fig. 4.11 (next-step Δp overlay) and Fig. 4.12
-(pressure integrated from grid points) for a typical chamber, rebuilt from the fit log in ``meta``.
+Pages: an opening in plain words with the key numbers and Table 4.1 (what c1..c9 mean, their
+units and bounds); the fitted parameters of every chamber with the next-step error and the 2-s
+drift, split across pages; Fig. 4.13 (drift of open-loop prediction against horizon, all chambers,
+on the fit log and on held-out logs given with ``--heldout``); Fig. 4.10 (steady-state curves:
+fitted s(u) and, when the fit recorded a locked-cylinder sweep log, the measured sweep); Fig. 4.11
+(next-step Δp overlay) and Fig. 4.12 (pressure integrated from grid points) for a typical
+chamber, rebuilt from the fit log. Pressures are in the pressure stream's unit, kPa for the
+bundled robots.
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -17,44 +22,69 @@ from diegocal.io import load_log, load_yaml
 from diegocal.pneumatic.data import ChamberData, extract
 from diegocal.pneumatic.files import PneumaticModel, load_model
 from diegocal.pneumatic.model import steady_state
-from diegocal.pneumatic.params import NAMES
-from diegocal.pneumatic.predict import next_step, predict_with_resets
+from diegocal.pneumatic.params import SPECS
+from diegocal.pneumatic.predict import drift, next_step, predict_with_resets
+from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
-from diegocal.report.style import COLORS, axes_or_new, page, save_page, text_page
+from diegocal.report.style import COLORS, axes_or_new, save_page
 
 U_GRID = np.linspace(3.0, 7.0, 161)  # §4.5: commands 3-7 V
+UNIT = "kPa"  # the pressure stream's unit in the bundled robots ("pu" in diegocal.pneumatic)
+#: The thesis's drift levels (§4.5.4): "less than 10 % of Pc - Pr, and usually less than 4 %".
+LEVELS = ((4.0, "4 %: the thesis's usual drift", ":"), (10.0, "10 %: the thesis's bound", "--"))
 
 
-def plot_drift_curves(model: PneumaticModel, ax=None):
-    """Fig. 4.13: RMS prediction error vs horizon per chamber, in units of (Pc - Pr)/10."""
+def _levels(ax, vertical: bool = False) -> None:
+    for x, label, ls in LEVELS:
+        (ax.axvline if vertical else ax.axhline)(x, ls=ls, color=COLORS["residual"], lw=0.9, label=label)
+
+
+def plot_drift_curves(model: PneumaticModel, ax=None, heldout=None):
+    """Fig. 4.13: RMS prediction error vs horizon per chamber, in % of (Pc - Pr).
+
+    heldout : {chamber: Drift} on a held-out log, drawn as the pooled curve only (or None)
+    """
     ax = axes_or_new(ax)
     step_s = float(model.meta.get("drift", {}).get("curve_step_s", 0.1))
+    starts = model.meta.get("drift", {}).get("starts", "?")
     curves = [np.asarray(c.raw.get("drift_curve", []), float) for c in model.chambers.values()]
     curves = [c for c in curves if c.size]
-    for c in curves:
-        ax.plot(np.arange(c.size) * step_s, 10 * c, lw=0.5, color=COLORS["model"], alpha=0.4)
+    for k, c in enumerate(curves):
+        label = "one chamber (fit log)" if k == 0 else None
+        ax.plot(np.arange(c.size) * step_s, 100 * c, lw=0.5, color=COLORS["model"], alpha=0.4, label=label)
     if curves:
         n = min(c.size for c in curves)
         pooled = np.sqrt(np.mean([c[:n] ** 2 for c in curves], axis=0))
-        ax.plot(np.arange(n) * step_s, 10 * pooled, lw=2, color="k", label="all chambers (pooled)")
-        ax.legend()
-    ax.axhline(1.0, ls="--", color=COLORS["residual"], lw=0.8)
-    ax.set_xlabel("time since last measured pressure [s]")
-    ax.set_ylabel("RMS error [(Pc - Pr)/10]")
+        ax.plot(np.arange(n) * step_s, 100 * pooled, lw=2, color="k", label="all chambers pooled (fit log)")
+    if heldout:
+        n = min(d.rms.size for d in heldout.values())
+        pooled = np.sqrt(np.mean([(d.rms[:n] / d.span) ** 2 for d in heldout.values()], axis=0))
+        t = next(iter(heldout.values())).horizon[:n]
+        ax.plot(t, 100 * pooled, lw=2, color=COLORS["baseline"], label="all chambers pooled (held-out log)")
+    _levels(ax)
+    ax.set_xlabel(f"time since the last measured pressure [s]  ({starts} starts per chamber)")
+    ax.set_ylabel("RMS error [% of Pc − Pr]")
     ax.set_title(f"Drift of open-loop pressure prediction, {len(curves)} chambers (Fig. 4.13)")
+    ax.legend(fontsize=6, loc="upper left")
     return ax
 
 
-def plot_drift_histogram(model: PneumaticModel, ax=None):
-    """Distribution of the 2-s drift over chambers, % of (Pc - Pr)."""
+def plot_drift_histogram(model: PneumaticModel, ax=None, heldout=None):
+    """Distribution of the 2-s drift over chambers, % of (Pc - Pr); held-out drifts beside."""
     ax = axes_or_new(ax)
     d = np.array([c.raw.get("drift_2s", np.nan) for c in model.chambers.values()], float) * 100
-    ax.hist(d[np.isfinite(d)], bins=20, color=COLORS["model"])
-    for x in (4, 10):
-        ax.axvline(x, ls="--", color=COLORS["residual"], lw=0.8)
-    ax.set_xlabel("RMS error after 2 s [% of Pc - Pr]")
+    d = d[np.isfinite(d)]
+    top = max([12.0, *d] + ([100 * x.final for x in heldout.values()] if heldout else []))
+    bins = np.linspace(0, top, 25)
+    ax.hist(d, bins=bins, color=COLORS["model"], alpha=0.8, label=f"fit log ({d.size} chambers)")
+    if heldout:
+        h = np.array([x.final for x in heldout.values()]) * 100
+        ax.hist(h, bins=bins, histtype="step", lw=1.5, color=COLORS["baseline"], label=f"held-out log ({h.size})")
+    _levels(ax, vertical=True)
+    ax.set_xlabel("RMS error 2 s after the last measured pressure [% of Pc − Pr]")
     ax.set_ylabel("chambers")
-    ax.set_title(f"2-s drift: median {np.nanmedian(d):.1f} %, max {np.nanmax(d):.1f} %")
+    ax.set_title(f"2-s drift on the fit log: median {np.median(d):.1f} %, worst {d.max():.1f} %")
+    ax.legend(fontsize=6)
     return ax
 
 
@@ -79,10 +109,10 @@ def plot_steady_state(model: PneumaticModel, sweep=None, names=None, ax=None):
             color=color,
             label=name if len(names) <= 10 else None,
         )
-    ax.set_xlabel("valve command u [V]")
-    ax.set_ylabel("pressure")
+    ax.set_xlabel(f"valve command u [V]  ({U_GRID.size} points, 3-7 V as in §4.5)")
+    ax.set_ylabel(f"steady-state pressure s(u) [{UNIT}]")
     src = "fitted s(u) (lines) and measured sweep (dots)" if sweep else "fitted s(u)"
-    ax.set_title(f"Steady-state pressure: {src} (Fig. 4.10)")
+    ax.set_title(f"{len(names)} chamber(s): {src} (Fig. 4.10)")
     if len(names) <= 10:
         ax.legend(fontsize=6)
     return ax
@@ -94,11 +124,12 @@ def plot_delta_p(data: ChamberData, params, ax=None, window=(0.0, 10.0)):
     sel = np.flatnonzero((data.time[:-1] >= window[0]) & (data.time[:-1] < window[1]) & data.steps)
     pred = next_step(params, data)[sel]
     ax.plot(data.time[sel], data.p[sel + 1] - data.p[sel], color="0.7", lw=1.5, label="measured")
-    ax.plot(data.time[sel], pred - data.p[sel], color=COLORS["model"], lw=0.7, label="model")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("Δp per step")
+    ax.plot(data.time[sel], pred - data.p[sel], color=COLORS["model"], lw=0.7, label="model, from the measured p_t")
+    h_ms = 1000 * float(np.median(np.diff(data.time)))
+    ax.set_xlabel(f"time [s]  ({sel.size} steps)")
+    ax.set_ylabel(f"Δp per {h_ms:.0f} ms step [{UNIT}]")
     ax.set_title(f"{data.name}: pressure change, measured vs model (Fig. 4.11)")
-    ax.legend()
+    ax.legend(fontsize=6, loc="lower left")
     return ax
 
 
@@ -108,47 +139,154 @@ def plot_integrated(data: ChamberData, params, predicted=None, ax=None, window=(
     pred = predict_with_resets(params, data) if predicted is None else predicted
     sel = (data.time >= window[0]) & (data.time < window[1])
     ax.plot(data.time[sel], data.p[sel], color="0.7", lw=1.5, label="measured")
-    ax.plot(data.time[sel], pred[sel], color=COLORS["model"], lw=0.7, label="integrated model")
-    for t in data.time[sel][::200]:
-        ax.axvline(t, ls=":", color="0.5", lw=0.6)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("pressure")
+    ax.plot(data.time[sel], pred[sel], color=COLORS["model"], lw=0.7, label="model integrated open loop")
+    for k, t in enumerate(data.time[sel][::200]):
+        label = "re-initialised with the measured pressure" if k == 0 else None
+        ax.axvline(t, ls=":", color="0.5", lw=0.6, label=label)
+    ax.set_xlabel(f"time [s]  ({int(sel.sum())} samples)")
+    ax.set_ylabel(f"pressure [{UNIT}]")
     ax.set_title(f"{data.name}: open-loop pressure from the dotted grid lines (Fig. 4.12)")
-    ax.legend()
+    ax.legend(fontsize=6, loc="best")
     return ax
 
 
-def _table_lines(model: PneumaticModel) -> list[str]:
-    lines = [
-        f"log: {model.meta.get('log', '-')}",
-        f"robot: {model.meta.get('robot', '-')}",
-        f"jacobian: {model.meta.get('jacobian', '-')}, starts: {model.meta.get('starts', '-')}",
-        "",
-    ]
-    head = f"{'chamber':<22}" + "".join(f"{n:>8}" for n in NAMES) + f"{'rmse':>7}{'drift':>7}"
-    lines.append(head)
-    for name, c in model.chambers.items():
-        v = c.params.vector()
-        lines.append(
-            f"{name[:21]:<22}"
-            + "".join(f"{x:8.3g}" for x in v)
-            + f"{c.raw.get('rmse', np.nan):7.2f}{100 * c.raw.get('drift_2s', np.nan):6.1f}%"
+# ----------------------------------------------------------------------------- held-out, words, tables
+@functools.lru_cache(maxsize=4)
+def heldout_drift(path: str, heldout: tuple[str, ...]) -> tuple[str | None, dict]:
+    """(held-out log, {chamber: Drift}) on the first held-out log that has the chambers' data."""
+    from diegocal.report.registry import ReportContext
+
+    model = load_model(path)
+    robot = _robot_name(model)
+    for hpath in ReportContext(heldout=tuple(map(Path, heldout))).heldout_for(robot, ("pressure", "valve", "pots")):
+        log = load_log(hpath)
+        out = {}
+        for name in model.chambers:
+            try:
+                out[name] = drift(model.chambers[name].params, _chamber_data(model, log, name))
+            except DiegocalError:
+                continue
+        if out:
+            return str(hpath), out
+    return None, {}
+
+
+def _robot_name(model: PneumaticModel) -> str | None:
+    rec = model.meta.get("robot")
+    return Path(str(rec)).name if rec else None
+
+
+def _drifts(model: PneumaticModel) -> np.ndarray:
+    return 100 * np.array([c.raw.get("drift_2s", np.nan) for c in model.chambers.values()], float)
+
+
+def _heldout(path: Path, context) -> tuple[str | None, dict]:
+    return heldout_drift(str(Path(path).resolve()), tuple(str(p) for p in context.heldout))
+
+
+def abstract(path: Path, context) -> list[str]:
+    """The section's opening in plain words."""
+    model = load_model(path)
+    d = _drifts(model)
+    d = d[np.isfinite(d)]
+    n = len(model.chambers)
+    samples = sorted({int(c.raw.get("n_samples", 0)) for c in model.chambers.values()})
+    log = Path(str(model.meta.get("log", "?"))).name
+    text = (
+        f"The 9-parameter valve-chamber model (thesis eq. 4.10, Table 4.1) was fitted to each of {n} chambers "
+        f"by next-step least squares on {log} ({'/'.join(map(str, samples))} samples per chamber). Predicting the "
+        f"pressure open loop from the valve command and the joint motion, 2 s after the last measured pressure the "
+        f"error is {np.median(d):.1f} % of Pc − Pr for the median chamber and {d.max():.1f} % for the worst "
+        f"on the fit log; {(d < 4).sum()} of {d.size} chambers stay under the thesis's usual 4 %, "
+        f"{(d < 10).sum()} under its 10 % bound."
+    )
+    hpath, held = _heldout(path, context)
+    if held:
+        h = np.array([x.final for x in held.values()]) * 100
+        text += (
+            f" On held-out data ({Path(hpath).name}, {len(held)} chambers) the 2-s drift is {np.median(h):.1f} % "
+            f"for the median chamber and {h.max():.1f} % for the worst; {(h < 4).sum()} under 4 %, "
+            f"{(h < 10).sum()} under 10 %."
         )
-        for t in c.params.terms:  # extra terms (diagnose's extended model)
-            vals = ", ".join(f"{p.name} {p.value:.4g} ± {p.stderr:.2g} {p.unit}" for p in t.parameters)
-            lines.append(f"{'':<4}+ {t.cause}: {vals}")
+    else:
+        text += " No held-out log was given (diegocal report ... --heldout LOG)."
+    out = [text]
+    names = list(model.chambers)
+    worst = [names[k] for k in np.argsort(-_drifts(model))[:3] if np.isfinite(_drifts(model)[k])]
     skipped = model.meta.get("skipped") or {}
+    wrong = [f"the chambers that drift most are {', '.join(worst)}"] if worst else []
     if skipped:
-        lines += ["", "not fitted:"] + [f"  {k}: {v}"[:110] for k, v in skipped.items()]
-    return lines
+        wrong.append(f"{len(skipped)} chamber(s) not fitted: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
+    extra = sorted({t.cause for c in model.chambers.values() for t in c.params.terms})
+    if extra:
+        wrong.append("the model carries terms beyond eq. 4.10 found by diagnose: " + ", ".join(extra))
+    out.append("Still open: " + "; ".join(wrong) + ".")
+    return out
+
+
+def headline(path: Path, context) -> str:
+    model = load_model(path)
+    d = _drifts(model)
+    text = f"{len(model.chambers)} chambers; 2-s drift median {np.nanmedian(d):.1f} %, worst {np.nanmax(d):.1f} %"
+    text += " (fit log)"
+    _, held = _heldout(path, context)
+    if held:
+        h = 100 * np.array([x.final for x in held.values()])
+        text += f", {np.median(h):.1f} % / {h.max():.1f} % held-out"
+    return text + f"; {(d < 4).sum()} of {d.size} under 4 %"
+
+
+def parameter_table(model: PneumaticModel, held: dict) -> tuple[list[Column], list[list]]:
+    """One row per chamber: c1..c9 with Table 4.1's units, next-step RMSE and 2-s drift."""
+    columns = [Column("chamber", align="left")]
+    columns += [Column(spec.name, _unit(spec.unit)) for spec in SPECS]
+    columns += [Column("next-step\nRMSE", UNIT), Column("2-s drift\nfit log", "%")]
+    if held:
+        columns.append(Column("2-s drift\nheld-out", "%"))
+    rows = []
+    for name, c in model.chambers.items():
+        row = [name] + [f"{x:.3g}" for x in c.params.vector()]
+        row += [f"{c.raw.get('rmse', np.nan):.3g}", f"{100 * c.raw.get('drift_2s', np.nan):.1f}"]
+        if held:
+            row.append(f"{100 * held[name].final:.1f}" if name in held else "–")
+        rows.append(row)
+    return columns, rows
+
+
+def _unit(unit: str) -> str:
+    return unit.replace("pu", UNIT).replace("^3", "³")
+
+
+def table41() -> tuple[list[Column], list[list]]:
+    """Thesis Table 4.1: what each parameter means, its unit and the bounds of the fit."""
+    columns = [
+        Column("parameter", align="left"),
+        Column("meaning (thesis Table 4.1)", align="left"),
+        Column("unit", align="left"),
+        Column("bounds", align="left"),
+    ]
+    rows = []
+    for spec in SPECS:
+        lo = "" if not np.isfinite(spec.lower) else f"{spec.lower:g} < "
+        hi = "" if not np.isfinite(spec.upper) else f" < {spec.upper:g}"
+        rows.append([spec.name, spec.meaning, _unit(spec.unit), f"{lo}{spec.name}{hi}" if lo or hi else "–"])
+    return columns, rows
+
+
+TABLE_NOTES = (
+    "u is the valve command in V; v the volume sensor (the joint's pot) centred and scaled to [-1, 1] on the fit "
+    "log, so c4..c6 are per unit of that normalised reading. c_b = (Pc + Pr)/2 and c_s = (Pc − Pr)/2 come from "
+    "the supply and room pressures in sensors.yaml, c_γ = 0.1 V is fixed (§4.4). Next-step RMSE: error of the "
+    "one-step prediction the fit minimises, on the fit log. 2-s drift: RMS error 2 s after the last measured "
+    "pressure, in % of Pc − Pr. Standard errors are in pneumatic.yaml; one written as nan there is not determined "
+    "by the data (the fit's Jacobian is rank-deficient along that parameter).",
+)
 
 
 def _typical(model: PneumaticModel) -> str:
     names = list(model.chambers)
     d = np.array([model.chambers[n].raw.get("drift_2s", np.nan) for n in names], float)
-    return (
-        names[int(np.nanargmin(np.abs(d - np.nanmedian(d))))] if np.isfinite(d).any() else names[0]
-    )
+    return names[int(np.nanargmin(np.abs(d - np.nanmedian(d))))] if np.isfinite(d).any() else names[0]
 
 
 def _chamber_data(model: PneumaticModel, log, name: str) -> ChamberData:
@@ -158,42 +296,90 @@ def _chamber_data(model: PneumaticModel, log, name: str) -> ChamberData:
 
 def pneumatic_pages(path: Path, pdf, context) -> None:
     model = load_model(path)
-    lines = _table_lines(model)
-    for start in range(0, len(lines), 80):
-        save_page(
-            pdf, text_page(f"Pneumatic models: {path.name}", lines[start : start + 80], fontsize=6)
-        )
-    fig, axes = page(2, 1, title="Multi-step prediction (§4.5.4)")
-    plot_drift_curves(model, axes[0, 0])
-    plot_drift_histogram(model, axes[1, 0])
-    save_page(pdf, fig)
+    hpath, held = _heldout(path, context)
+    title = f"Pneumatic valve-chamber models: {path.name}"
+    key = [Column("quantity", align="left"), Column("value"), Column("unit", align="left")]
+    sheets = table_sheets(title, key, _key_rows(model, hpath, held), intro=abstract(path, context))
+    sheets[-1:] = table_sheets("The nine parameters", *table41(), sheet=sheets[-1])
+    sheets += table_sheets("Fitted parameters per chamber", *parameter_table(model, held), notes=TABLE_NOTES, size=7)
+    extra = [(n, t) for n, c in model.chambers.items() for t in c.params.terms]
+    if extra:
+        cols = [Column("chamber", align="left"), Column("term", align="left"), Column("fitted values", align="left")]
+        rows = [
+            [n, t.cause, ", ".join(f"{p.name} {p.value:.4g} ± {p.stderr:.2g} {p.unit}" for p in t.parameters)]
+            for n, t in extra
+        ]
+        sheets += table_sheets("Terms beyond eq. 4.10 (from diagnose)", cols, rows)
+    for sheet in sheets:
+        save_page(pdf, sheet.fig)
+
+    sheet = Sheet(f"{title}: multi-step prediction (§4.5.4)")
+    plot_drift_curves(model, sheet.axes(0.36), held)
+    plot_drift_histogram(model, sheet.axes(0.3), held)
+    sheet.caption(
+        "From 48 evenly spaced start points per chamber the pressure is predicted open loop from the measured "
+        "valve command and joint motion and compared with the measured pressure. Top: RMS error against the time "
+        "since the last measured pressure, in % of Pc − Pr (the thesis plots the same in units of (Pc − Pr)/10); "
+        "thin blue lines one chamber each, thick lines all chambers pooled. Bottom: the error at 2 s, one count "
+        "per chamber. Red lines: the thesis's drift levels, 'less than 10 % ... and usually less than 4 %'."
+    )
+    save_page(pdf, sheet.fig)
+
     sweep = _sweep(model)
-    fig, axes = page(2, 1, title="Steady-state pressure (§4.3.1, §4.5.2)")
-    plot_steady_state(model, sweep, ax=axes[0, 0])
-    typical = sorted(model.chambers, key=lambda n: model.chambers[n].raw.get("drift_2s", 0))
-    picks = [typical[0], typical[len(typical) // 2], typical[-1]]
-    plot_steady_state(model, sweep, names=list(dict.fromkeys(picks)), ax=axes[1, 0])
-    save_page(pdf, fig)
-    log_path = Path(model.meta.get("log", ""))
+    sheet = Sheet(f"{title}: steady-state pressure (§4.3.1, §4.5.2)")
+    plot_steady_state(model, sweep, ax=sheet.axes(0.36))
+    ranked = sorted(model.chambers, key=lambda n: model.chambers[n].raw.get("drift_2s", 0))
+    picks = list(dict.fromkeys([ranked[0], ranked[len(ranked) // 2], ranked[-1]]))
+    plot_steady_state(model, sweep, names=picks, ax=sheet.axes(0.3))
+    sheet.caption(
+        "The pressure each chamber settles to at a constant valve command with the joint at rest (mid travel, "
+        "v̇ = 0), from the fitted c1..c3 (eq. 4.10a-c). Top: every chamber. Bottom: the chambers with the smallest, "
+        "the median and the largest 2-s drift."
+        + (" Dots: the measured locked-cylinder sweep." if sweep else " No locked-cylinder sweep was recorded.")
+    )
+    save_page(pdf, sheet.fig)
+
+    log_path = Path(str(model.meta.get("log", "")))
     if not log_path.is_file():
-        save_page(
-            pdf, text_page("Pneumatic: fit log not found", [f"{log_path}: Fig. 4.11/4.12 need it"])
-        )
         return
     log = load_log(log_path)
     name = _typical(model)
     data = _chamber_data(model, log, name)
     params = model.chambers[name].params
     t0 = float(data.time[0])
-    fig, axes = page(2, 1, title=f"Next-step fit, {name} (median drift)")
-    plot_delta_p(data, params, axes[0, 0], (t0, t0 + 10.0))
-    plot_delta_p(data, params, axes[1, 0], (t0 + 2.0, t0 + 3.0))
-    save_page(pdf, fig)
+    sheet = Sheet(f"{title}: one chamber, {name} (median drift)")
+    plot_delta_p(data, params, sheet.axes(0.16), (t0, t0 + 10.0))
+    plot_delta_p(data, params, sheet.axes(0.16), (t0 + 2.0, t0 + 3.0))
     pred = predict_with_resets(params, data)
-    fig, axes = page(2, 1, title=f"Open-loop prediction, {name}")
-    plot_integrated(data, params, pred, axes[0, 0], (t0, t0 + 10.0))
-    plot_integrated(data, params, pred, axes[1, 0], (t0 + 2.0, t0 + 4.0))
-    save_page(pdf, fig)
+    plot_integrated(data, params, pred, sheet.axes(0.16), (t0, t0 + 10.0))
+    plot_integrated(data, params, pred, sheet.axes(0.16), (t0 + 2.0, t0 + 4.0))
+    sheet.caption(
+        "Top two: the change of pressure over one step, measured (grey) and predicted by the model from the measured "
+        "pressure (blue), the quantity the fit minimises (Fig. 4.11); the second zooms into one second. Bottom two: "
+        "the pressure integrated open loop from the measured one at the dotted lines, every 2 s (Fig. 4.12)."
+    )
+    save_page(pdf, sheet.fig)
+
+
+def _key_rows(model: PneumaticModel, hpath, held: dict) -> list[list]:
+    d = _drifts(model)
+    rmse = np.array([c.raw.get("rmse", np.nan) for c in model.chambers.values()], float)
+    rows = [
+        ["fit log", Path(str(model.meta.get("log", "–"))).name, ""],
+        ["chambers fitted", len(model.chambers), ""],
+        ["chambers not fitted", len(model.meta.get("skipped") or {}), ""],
+        ["next-step RMSE, median chamber (fit log)", f"{np.nanmedian(rmse):.3g}", UNIT],
+        ["2-s drift, median / worst chamber (fit log)", f"{np.nanmedian(d):.1f} / {np.nanmax(d):.1f}", "% of Pc − Pr"],
+        ["chambers under 4 % / under 10 % (fit log)", f"{(d < 4).sum()} / {(d < 10).sum()}", ""],
+    ]
+    if held:
+        h = 100 * np.array([x.final for x in held.values()])
+        rows += [
+            ["held-out log", Path(hpath).name, ""],
+            ["2-s drift, median / worst chamber (held-out)", f"{np.median(h):.1f} / {h.max():.1f}", "% of Pc − Pr"],
+            ["chambers under 4 % / under 10 % (held-out)", f"{(h < 4).sum()} / {(h < 10).sum()}", ""],
+        ]
+    return rows
 
 
 def _sweep(model: PneumaticModel):
@@ -224,4 +410,14 @@ def _describe(path: Path) -> dict:
     }
 
 
-register_section(Section("pneumatic", _recognise, pneumatic_pages, _describe))
+register_section(
+    Section(
+        "pneumatic",
+        _recognise,
+        pneumatic_pages,
+        _describe,
+        heading="Pneumatic valve-chamber models",
+        abstract=abstract,
+        headline=headline,
+    )
+)

@@ -15,20 +15,39 @@ from pathlib import Path
 
 @dataclass(frozen=True)
 class ReportContext:
-    """What every section may want to know: the robot directory, if the user named one."""
+    """What every section may want to know: the robot directory, if the user named one, and
+    held-out logs (``--heldout``) on which a section may score its model."""
 
     robot: Path | None = None
+    heldout: tuple[Path, ...] = ()
+
+    def heldout_for(self, robot: str | None, needs: tuple[str, ...]) -> list[Path]:
+        """The held-out logs of ``robot`` (by the log's robot attribute; any when either is unknown)
+        that have every stream in ``needs``."""
+        from diegocal.errors import DiegocalError
+        from diegocal.io.files import log_robot, log_streams
+
+        out = []
+        for path in self.heldout:
+            try:
+                name, streams = log_robot(path), log_streams(path)
+            except DiegocalError:
+                continue
+            if (robot is None or name is None or name == robot) and all(s in streams for s in needs):
+                out.append(Path(path))
+        return out
 
 
 @dataclass(frozen=True)
 class Section:
     """How the report shows one kind of result.
 
-    ``abstract(path)`` gives the section's opening in plain words (paragraphs): what was fitted on
+    ``abstract(path, context)`` gives the section's opening in plain words (paragraphs): what was fitted on
     what, how good it is on held-out data, what is still wrong. The report's summary page repeats
     the first paragraph; a section whose pages do not open with it themselves (``opens_itself``
-    False) gets an opening page from the report with the paragraphs and ``key_table(path)`` ->
-    (columns, rows), when given.
+    False) gets an opening page from the report with the paragraphs and ``key_table(path, context)`` ->
+    (columns, rows), when given. Abstracts are asked for twice (summary page and section); sections
+    cache what is costly.
     """
 
     name: str
@@ -36,9 +55,10 @@ class Section:
     pages: Callable  # (path, pdf, context) -> None
     describe: Callable[[Path], dict] = lambda path: {}  # title-page facts: {log, robot, command, created}
     heading: str = ""  # the contents' name for the section, e.g. "Kinematic calibration (STAC)"
-    abstract: Callable[[Path], list[str]] | None = None
+    abstract: Callable[[Path, ReportContext], list[str]] | None = None
     opens_itself: bool = True
     key_table: Callable | None = None
+    headline: Callable[[Path, ReportContext], str] | None = None  # one line for the terminal's summary
 
     def title(self, path: Path) -> str:
         return f"{self.heading or self.name}: {Path(path).name}"

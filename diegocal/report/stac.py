@@ -16,7 +16,7 @@ import numpy as np
 from diegocal.errors import DiegocalError
 from diegocal.io import load_log, load_yaml
 from diegocal.report.registry import ReportContext, Section, is_bundle, register_section
-from diegocal.report.style import COLORS, axes_or_new, page, save_page, text_page
+from diegocal.report.style import COLORS, axes_or_new
 from diegocal.stac.calibration import Calibration
 
 
@@ -58,7 +58,7 @@ def plot_sigma(cal: Calibration, ax=None):
     for key, label in (("sigma_pots", "pots (V)"), ("sigma_markers", "markers (m)")):
         ax.semilogy(it, [h.get(key) or np.nan for h in cal.history], label=label)
     ax.set_xlabel("iteration")
-    ax.set_ylabel("σ")
+    ax.set_ylabel("noise σ [V for pots, m for markers]")
     ax.legend()
     ax.set_title("Dynamic variance adjustment (§2.3.5)")
     return ax
@@ -197,41 +197,10 @@ def cross_sensor_lines(rows) -> list[str]:
 
 # ----------------------------------------------------------------------------- pages
 def pages(path: Path, pdf, context: ReportContext) -> None:
-    raw = load_yaml(path)
-    cal = Calibration.from_dict(raw, source=str(path))
-    save_page(pdf, text_page(f"Calibration {Path(path).name}", param_lines(cal)[:90], fontsize=7))
-    robot, log, q = _load_context(raw, path, context)
-    fig, axes = page(2, 2, title="STAC: markers and convergence")
-    if robot is not None:
-        sk = skeleton(cal, robot)
-        plot_markers_on_robot(sk, axes[0, 0], (0, 2))
-        plot_markers_on_robot(sk, axes[0, 1], (1, 2))
-        axes[0, 0].set_title("marker positions, side view (Figs. 2.8-2.9)")
-        axes[0, 1].set_title("front view")
-    else:
-        axes[0, 0].text(0.1, 0.5, "robot directory not found: no skeleton", transform=axes[0, 0].transAxes)
-    if cal.history:
-        plot_cost(cal, axes[1, 0])
-        plot_sigma(cal, axes[1, 1])
-    save_page(pdf, fig)
-    if robot is not None and log is not None and q is not None:
-        try:
-            res = residuals_by_type(cal, robot, log, q)
-        except DiegocalError:
-            res = {}
-        if res:
-            fig, axes = page(len(res), 1, title="Residuals per sensor type")
-            for ax, (g, (r, unit)) in zip(axes[:, 0], res.items(), strict=True):
-                plot_residual_hist(r, g, unit, ax)
-            save_page(pdf, fig)
-    if raw.get("prediction"):
-        save_page(
-            pdf,
-            text_page(
-                "Cross-sensor prediction on novel data (Tables 2.1-2.2)",
-                cross_sensor_lines(raw["prediction"]),
-            ),
-        )
+    """The section's pages, assembled in :mod:`diegocal.report.stac_pages`."""
+    from diegocal.report.stac_pages import pages as document_pages
+
+    document_pages(Path(path), pdf, context)
 
 
 def _load_context(raw: dict, path: Path, context: ReportContext):
@@ -257,4 +226,26 @@ def _load_context(raw: dict, path: Path, context: ReportContext):
     return robot, log, q
 
 
-register_section(Section("stac", recognise, pages, describe))
+def _abstract(path: Path, context: ReportContext) -> list[str]:
+    from diegocal.report.stac_pages import abstract
+
+    return abstract(Path(path), context)
+
+
+def _headline(path: Path, context: ReportContext) -> str:
+    from diegocal.report.stac_pages import headline
+
+    return headline(Path(path), context)
+
+
+register_section(
+    Section(
+        "stac",
+        recognise,
+        pages,
+        describe,
+        heading="Kinematic calibration (STAC)",
+        abstract=_abstract,
+        headline=_headline,
+    )
+)

@@ -17,6 +17,20 @@ COLORS = {
     "band": "tab:blue",
 }
 
+#: Unit of each log stream (DESIGN.md, "Log format"; pressure: kPa in the bundled robots).
+STREAM_UNITS = {
+    "pots": "V",
+    "markers": "m",
+    "q": "rad",
+    "qd": "rad/s",
+    "qdd": "rad/s²",
+    "tau": "N·m",
+    "tau_std": "N·m",
+    "tau_measured": "N·m",
+    "pressure": "kPa",
+    "valve": "V",
+}
+
 plt.rcParams.update(
     {
         "font.size": 8,

@@ -152,16 +152,41 @@ def test_scheduler_runs_the_same_work_on_a_dask_cluster(source, tmp_path):
         assert [r["status"] for r in read_table(d / "sgp-fit.batch.csv")[2]] == ["up to date"] * 2, again.output
 
 
-def test_make_calibrate_twice(source, tmp_path):
-    """mk/batch.mk: `make -j2 calibrate LOGS=folder` fits every kinematic log once; a rerun fits nothing."""
+def _make(goal: str, logs: Path, out: Path, *extra: str) -> tuple[list[str], dict]:
     if shutil.which("make") is None:
         pytest.skip("no make")
-    d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5"])
-    out = tmp_path / "out"
     python = Path(sys.executable)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    cmd = ["make", "-s", "-C", str(REPO), "-j2", "calibrate", f"LOGS={d}", f"BATCH_OUT={out}"]
-    cmd += [f"BIN={python.parent}", "STAMP=", f"DIEGOCAL={python} -m diegocal", "BATCH_ARGS=--max-iterations 5"]
+    cmd = ["make", "-s", "-C", str(REPO), "-j2", goal, f"LOGS={logs}", f"BATCH_OUT={out}", *extra]
+    return cmd + [f"BIN={python.parent}", "STAMP=", f"DIEGOCAL={python} -m diegocal"], env
+
+
+def test_make_rules_plan_one_fit_per_log_and_none_when_up_to_date(source, tmp_path):
+    """mk/batch.mk, dry run: one stac per kinematic log into BATCH_OUT, none once the outputs are newer."""
+    d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5"])
+    out = tmp_path / "out"
+    cmd, env = _make("calibrate", d, out, "-n")
+    plan = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    assert plan.returncode == 0, plan.stderr
+    fits = [line for line in plan.stdout.splitlines() if " stac " in line and " batch " not in line]
+    assert sorted(f.split(" -o ")[1].split()[0] for f in fits) == [
+        str(out / "session1.calib.yaml"),
+        str(out / "session2.calib.yaml"),
+    ]
+    out.mkdir()
+    for name in ("session1", "session2"):  # outputs newer than their logs: nothing to refit
+        (out / f"{name}.calib.yaml").write_text("method: stac\n")
+    again = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    assert [line for line in again.stdout.splitlines() if " stac " in line and " batch " not in line] == []
+    assert "batch stac" in again.stdout  # the merged table is still written
+
+
+@pytest.mark.slow
+def test_make_calibrate_twice(source, tmp_path):
+    """mk/batch.mk: `make -j2 calibrate LOGS=folder` fits every kinematic log once; a rerun fits nothing."""
+    d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5"])
+    out = tmp_path / "out"
+    cmd, env = _make("calibrate", d, out, "BATCH_ARGS=--max-iterations 5")
     first = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     assert first.returncode == 0, first.stderr
     fitted = sorted(p.name for p in out.glob("*.calib.yaml"))
@@ -187,3 +212,42 @@ def test_options_reach_the_command(source, tmp_path):
         str(tmp_path / "session1.kinematics.diagnosis.yaml"),
     )
     assert argv.count("--domain") == 1 and argv[argv.index("--alpha") + 1] == "0.05" and argv[-1] == "--quiet"
+    model = tmp_path / "m.calib.yaml"
+    model.write_text("kind: calibration\n")
+    plan = plan_batch("predict", source, BatchOptions(model=model))  # a calibration predicts pots+markers logs
+    assert [j.argv[:3] for j in plan.jobs] == [("predict", str(model), str(source / f"session{k}.h5")) for k in (1, 2)]
+    assert all(model in j.inputs for j in plan.jobs)  # a newer model makes the predictions stale
+
+
+@pytest.mark.slow
+def test_make_identify_and_pneumatic_models_twice_on_a_mixed_folder(source, tmp_path):
+    """`make -j2 identify` and `make -j2 pneumatic-models`: per log and per chamber (merged per log);
+    the rerun remakes nothing and only rewrites the merged tables."""
+    from diegocal.sim.pneumatics import PneumaticSimOptions, simulate_pneumatics
+    from tests.pneumatic.conftest import SENSORS, URDF
+
+    d = _copy(source, tmp_path, ["session1.h5", "swing.h5"])
+    robot_dir = tmp_path / "tiny_pneu"
+    robot_dir.mkdir()
+    (robot_dir / "robot.urdf").write_text(URDF)
+    (robot_dir / "sensors.yaml").write_text(SENSORS)
+    tiny = load_robot(robot_dir)
+    save_log(simulate_pneumatics(tiny, PneumaticSimOptions(duration=4.0, seed=1)), d / "air.h5")
+    out = tmp_path / "out"
+    for goal in ("identify", "pneumatic-models"):
+        extra = (f"BATCH_ROBOT={robot_dir}",) if goal == "pneumatic-models" else ()
+        cmd, env = _make(goal, d, out, *extra)
+        first = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+        assert first.returncode == 0, first.stderr
+    assert sorted(p.name for p in (out / "air.chambers").glob("*.yaml")) == sorted(
+        f"{c.name}.yaml" for c in tiny.sensors.chambers
+    )
+    assert (out / "air.pneumatic.yaml").exists() and (out / "swing.sgp" / "sgp.yaml").exists()
+    stamps = {p: p.stat().st_mtime_ns for p in out.rglob("*.yaml") if "batch" not in p.name}
+    for goal in ("identify", "pneumatic-models"):
+        extra = (f"BATCH_ROBOT={robot_dir}",) if goal == "pneumatic-models" else ()
+        cmd, env = _make(goal, d, out, *extra)
+        again = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+        assert again.returncode == 0, again.stderr
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+    assert [r["status"] for r in read_table(out / "pneumatic-fit.batch.csv")[2]] == ["up to date"]

@@ -26,8 +26,9 @@ def test_report_on_a_comparison_directory(arm2, simulate, tmp_path):
     assert r.exit_code == 0, r.output
     data = out.read_bytes()
     assert data.startswith(b"%PDF")
-    # title + comparison + 2 models × (summary, fit, uncertainty) + pr again × 3
-    assert len(re.findall(rb"/Type\s*/Page\b(?!s)", data)) == 1 + 1 + 3 * 3
+    # contents + 2 section openings (plain words, nMSE table) + comparison + 2 models × (summary, fit,
+    # uncertainty) + pr again × 3
+    assert len(re.findall(rb"/Type\s*/Page\b(?!s)", data)) == 1 + 2 + 1 + 3 * 3
 
 
 def test_empty_directory_is_not_an_sgp_result(tmp_path):

@@ -1,0 +1,408 @@
+"""The STAC section as a document (calib.yaml; the plots live in :mod:`diegocal.report.stac`).
+
+Pages: an opening in plain words with the key numbers (fit log, convergence, noise levels,
+residuals at the fitted joint angles, held-out prediction error); the pot and marker tables with
+units and standard errors; the markers on the robot and the convergence; the residual histograms.
+
+Residuals need the joint angles of every frame: read from the log stac wrote with
+``--joint-angles`` when the calibration names one, otherwise tracked again here (the q-phase of
+eq. 2.21 from pots and markers with the calibration fixed). Held-out logs come from
+``diegocal report --heldout LOG``: joint angles tracked from the pots alone predict the markers
+(thesis §2.7.2, Table 2.1).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from diegocal.errors import DiegocalError
+from diegocal.report.layout import Column, Sheet, table_sheets
+from diegocal.report.style import save_page
+
+GAIN_UNIT = {"rotary": "V/rad", "linear": "V/m", "tendon": "V/m", "encoder": "1"}
+MM = 1000.0
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """What the report measures of a calibration: residuals on its own log, held-out errors.
+
+    residuals : {type: (residuals (N,), unit)} at the fitted joint angles (markers: distance, m)
+    heldout : [(log path, frames, {target: MAE})] markers predicted from the pots alone
+    heldout_errors : (N,) per-sample marker distances on the first held-out log, m
+    """
+
+    fit_log: str | None
+    frames: int | None
+    duration: float | None
+    residuals: dict
+    heldout: tuple
+    heldout_errors: np.ndarray | None
+    note: str = ""
+
+
+def _bundle(path: Path):
+    from diegocal.io.bundle import load_bundle
+
+    return load_bundle(path)
+
+
+def _calibration(path: Path):
+    from diegocal.stac.calibration import Calibration
+
+    return Calibration.from_dict(_bundle(path).data, source=str(path))
+
+
+def _robot(path: Path, context):
+    from diegocal.robot import load_robot
+
+    rec = _bundle(path).robot
+    rdir = context.robot or rec["dir"]
+    if rdir is None or not Path(rdir).is_dir():
+        from diegocal.robot import resolve_robot_dir
+
+        rdir = resolve_robot_dir(rec["name"], None) if rec["name"] else None
+    return load_robot(rdir) if rdir is not None else None
+
+
+@functools.lru_cache(maxsize=4)
+def evaluate(path: str, robot_dir: str | None, heldout: tuple[str, ...]) -> Evaluation:
+    """Residuals and held-out errors of the calibration at ``path`` (cached: the summary page and the
+    section both ask)."""
+    from diegocal.io import load_log
+    from diegocal.report.registry import ReportContext
+    from diegocal.report.stac import residuals_by_type
+    from diegocal.stac.predict import predict
+    from diegocal.stac.result import StacOptions
+
+    context = ReportContext(robot=Path(robot_dir) if robot_dir else None, heldout=tuple(map(Path, heldout)))
+    cal, bundle = _calibration(Path(path)), _bundle(Path(path))
+    try:
+        robot = _robot(Path(path), context)
+    except DiegocalError as exc:
+        return Evaluation(bundle.log, None, None, {}, (), None, f"robot not found ({exc})")
+    if robot is None:
+        return Evaluation(bundle.log, None, None, {}, (), None, "the calibration names no robot directory")
+    residuals, frames, duration, note = {}, None, None, ""
+    options = StacOptions(quiet=True)
+    if bundle.log and Path(bundle.log).is_file():
+        log = load_log(bundle.log).without_truth()
+        frames, duration = log.n_samples, log.duration
+        q = _joint_angles(bundle.data, log)
+        try:
+            if q is None:  # track again: the q-phase from every sensor, the calibration fixed
+                q = predict(log, robot, cal, ("pots", "markers"), ("markers",), options).q
+            residuals = residuals_by_type(cal, robot, log, q)
+        except DiegocalError as exc:
+            note = f"residuals not computed ({exc})"
+    else:
+        note = f"the fit log {bundle.log} is not found: no residuals"
+    held, errors = [], None
+    for hpath in context.heldout_for(robot.name, ("pots", "markers")):
+        try:
+            hlog = load_log(hpath).without_truth()
+            pred = predict(hlog, robot, cal, ("pots",), ("markers",), options)
+        except DiegocalError:
+            continue
+        held.append((str(hpath), hlog.n_samples, dict(pred.mae)))
+        if errors is None:
+            idx = [hlog.streams["markers"].names.index(n) for n in pred.marker_names]
+            d = np.linalg.norm(pred.markers - hlog.streams["markers"].data[:, idx], axis=-1)
+            errors = d[np.isfinite(d)]
+    return Evaluation(bundle.log, frames, duration, residuals, tuple(held), errors, note)
+
+
+def _joint_angles(raw: dict, log):
+    """The tracked q stac wrote on request (``--joint-angles``), if it matches the log."""
+    from diegocal.io import load_log
+
+    path = (raw.get("meta") or {}).get("joint_angles") or raw.get("joint_angles")
+    if not path or not Path(path).is_file():
+        return None
+    qlog = load_log(path)
+    return qlog.streams["q"].data if qlog.has("q") and qlog.n_samples == log.n_samples else None
+
+
+def _evaluation(path: Path, context) -> Evaluation:
+    robot = str(context.robot) if context.robot else None
+    return evaluate(str(Path(path).resolve()), robot, tuple(str(p) for p in context.heldout))
+
+
+def _rms(r) -> float:
+    return float(np.sqrt(np.mean(np.square(r)))) if len(r) else float("nan")
+
+
+def held_at_nominal(cal) -> tuple[set, set]:
+    """(pots whose gain and bias stayed nominal, pots whose bias alone did): from calib.yaml's
+    ``unobservable`` and ``gauges`` lists when it has them, else from the missing standard errors."""
+    unobservable = {u["pot"] for u in getattr(cal, "unobservable", ()) or ()}
+    gauges = {g.get("pot") for g in getattr(cal, "gauges", ()) or ()}
+    gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
+    bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
+    for i, n in enumerate(cal.pot_names):
+        if not np.isfinite(gse[i]) and not np.isfinite(bse[i]):
+            unobservable.add(n)
+        elif not np.isfinite(bse[i]):
+            gauges.add(n)
+    return unobservable, gauges - unobservable
+
+
+# ----------------------------------------------------------------------------- words
+def abstract(path: Path, context) -> list[str]:
+    """The section's opening in plain words."""
+    cal, ev = _calibration(path), _evaluation(path, context)
+    log = Path(ev.fit_log).name if ev.fit_log else "an unnamed log"
+    span = f" ({ev.frames} frames, {ev.duration:.3g} s)" if ev.frames else ""
+    conv = "converged" if cal.fit.converged else "stopped before converging"
+    text = (
+        f"STAC (thesis ch. 2) calibrated the gain and bias of {len(cal.pot_names)} pots, the positions of "
+        f"{len(cal.marker_names)} markers on their links and the mocap frame from {log}{span}; it {conv} after "
+        f"{cal.fit.iterations} iterations ({cal.fit.seconds:.1f} s)."
+    )
+    if ev.residuals:
+        parts = [_residual_words(g, r, u) for g, (r, u) in ev.residuals.items()]
+        text += " At the fitted joint angles the residuals are " + ", ".join(parts) + "."
+    held = _heldout_words(ev, _bundle(path).data.get("prediction") or [])
+    paragraphs = [f"{text} {held}" if held else text]
+    unobservable, gauges = held_at_nominal(cal)
+    wrong = []
+    if unobservable:
+        wrong.append(
+            f"{len(unobservable)} pot(s) ({', '.join(sorted(unobservable))}) keep their nominal gain and bias: "
+            "no marker moves with their joints"
+        )
+    if gauges:
+        wrong.append(
+            f"{len(gauges)} pot bias(es) are held at nominal because the markers cannot fix that joint's zero "
+            "(a gauge: an offset of the joint is absorbed exactly by the markers on its link), so their standard "
+            "errors are not given"
+        )
+    if not cal.fit.converged:
+        wrong.append("the fit did not converge: raise --max-iterations")
+    if ev.note:
+        wrong.append(ev.note)
+    if wrong:
+        paragraphs.append("What the data leave open: " + "; ".join(wrong) + ".")
+    return paragraphs
+
+
+def headline(path: Path, context) -> str:
+    """One line: what was calibrated and how well, on the fit log and held-out."""
+    cal, ev = _calibration(path), _evaluation(path, context)
+    text = f"{len(cal.pot_names)} pots, {len(cal.marker_names)} markers"
+    if "markers" in ev.residuals:
+        text += f"; marker residual {MM * _rms(ev.residuals['markers'][0]):.2f} mm RMS"
+    if ev.heldout:
+        text += f"; held-out markers from pots {MM * ev.heldout[0][2].get('markers', np.nan):.2f} mm MAE"
+    unobservable, gauges = held_at_nominal(cal)
+    if unobservable:
+        text += f"; {len(unobservable)} pot(s) unobservable"
+    return text
+
+
+def _residual_words(group: str, r, unit: str) -> str:
+    if unit.startswith("m"):
+        return f"{group} {MM * _rms(r):.2f} mm RMS distance ({len(r)} samples)"
+    return f"{group} pots {MM * _rms(r):.2f} mV RMS ({len(r)} samples)"
+
+
+def _heldout_words(ev: Evaluation, recorded: list) -> str:
+    """The held-out result in words: scored here on --heldout logs, else the MAE rows older versions of
+    `diegocal predict` recorded in calib.yaml (``prediction``)."""
+    rows = list(ev.heldout)
+    recorded = [r for r in recorded if isinstance(r, dict) and "markers" in (r.get("mae") or {})]
+    if not rows and recorded:
+        return (
+            "Held-out prediction recorded in the file: "
+            + "; ".join(
+                f"from {'+'.join(r.get('from', []))} to markers {MM * r['mae']['markers']:.2f} mm" for r in recorded
+            )
+            + "."
+        )
+    if not rows:
+        return (
+            "No held-out log was given (diegocal report ... --heldout LOG): the errors above are on the fit's own data."
+        )
+    fit = ev.residuals.get("markers")
+    parts = []
+    for p, frames, mae in rows:
+        s = f"{Path(p).name} ({frames} frames): {MM * mae.get('markers', np.nan):.2f} mm"
+        parts.append(s)
+    text = (
+        "On held-out data, joint angles tracked from the pots alone predict the markers to a mean distance of "
+        + "; ".join(parts)
+        + " (thesis Table 2.1's test)"
+    )
+    if fit is not None and rows:
+        ratio = rows[0][2].get("markers", np.nan) / max(np.mean(fit[0]), 1e-12)
+        text += f", {ratio:.1f} times the mean marker residual of the fit itself" + (
+            ": the calibration carries over to new data." if ratio < 2 else ": part of it does not carry over."
+        )
+    return text
+
+
+# ----------------------------------------------------------------------------- tables
+def key_rows(cal, ev: Evaluation) -> list[list]:
+    rows = [["fit log", Path(ev.fit_log).name if ev.fit_log else "–", ""]]
+    if ev.frames:
+        rows += [["frames (samples)", ev.frames, ""], ["duration", f"{ev.duration:.3g}", "s"]]
+    rows += [
+        ["method", cal.method, ""],
+        ["iterations", cal.fit.iterations, ""],
+        ["converged", "yes" if cal.fit.converged else "no", ""],
+    ]
+    for g, v in cal.sigma_by_group.items():
+        unit = "mm" if g == "markers" else "mV"
+        rows.append([f"noise σ, {g} (estimated, §2.3.5)", f"{MM * v:.3g}", unit])
+    for g, (r, unit) in ev.residuals.items():
+        rows.append([f"residual RMS, {g} ({len(r)} samples)", f"{MM * _rms(r):.3g}", "mm" if unit[0] == "m" else "mV"])
+    for p, frames, mae in ev.heldout:
+        for t, v in mae.items():
+            what = f"held-out MAE, {t} from pots: {Path(p).name} ({frames} frames)"
+            rows.append([what, f"{MM * v:.3g}", "mm" if t == "markers" else "mV"])
+    angle = np.degrees(np.arccos(np.clip((np.trace(cal.mocap_R) - 1) / 2, -1, 1)))
+    rows.append(["mocap frame: rotation from the base link", f"{angle:.1f}", "deg"])
+    rows.append(["mocap frame: translation", ", ".join(f"{x:.3f}" for x in cal.mocap_T), "m"])
+    return rows
+
+
+def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
+    kinds = {p.name: p.kind for p in robot.sensors.pots} if robot is not None else {}
+    unobservable, gauges = held_at_nominal(cal)
+    gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
+    bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
+    columns = [
+        Column("pot", align="left"),
+        Column("kind", align="left"),
+        Column("gain"),
+        Column("± SE"),
+        Column("gain unit", align="left"),
+        Column("bias", "V"),
+        Column("± SE", "V"),
+        Column("note", align="left"),
+    ]
+    rows = []
+    for i, n in enumerate(cal.pot_names):
+        note = "nominal: unobservable" if n in unobservable else "bias nominal: gauge" if n in gauges else ""
+        kind = kinds.get(n, "")
+        gain = [f"{cal.gain[i]:.5g}", _se(gse[i]), GAIN_UNIT.get(kind, "V per unit")]
+        rows.append([n, kind, *gain, f"{cal.bias[i]:.4f}", _se(bse[i]), note])
+    notes = [
+        "Reading = gain · (joint angle, rad, or anchor distance / tendon excursion, m) + bias (thesis eq. 2.18-2.20). "
+        "± SE: one standard error from the fit's Fisher information (eq. 2.21). A dash means not estimated: "
+        "'bias nominal: gauge' pots read a joint whose zero the markers cannot fix (rotating the markers on the "
+        "link absorbs any offset), so the bias keeps its sensors.yaml value; 'nominal: unobservable' pots read "
+        "joints no marker moves with, so gain and bias both keep their sensors.yaml values."
+    ]
+    return columns, rows, notes
+
+
+def marker_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
+    nominal = {m.name: np.asarray(m.xyz, float) for m in robot.sensors.markers} if robot is not None else {}
+    se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full_like(cal.marker_xyz, np.nan)
+    columns = [
+        Column("marker", align="left"),
+        Column("link", align="left"),
+        Column("x", "mm"),
+        Column("y", "mm"),
+        Column("z", "mm"),
+        Column("± SE (largest axis)", "mm"),
+        Column("moved from the seed", "mm"),
+    ]
+    rows = []
+    for i, n in enumerate(cal.marker_names):
+        xyz = cal.marker_xyz[i]
+        moved = MM * np.linalg.norm(xyz - nominal[n]) if n in nominal else None
+        s = np.nanmax(se[i]) if np.isfinite(se[i]).any() else np.nan
+        shift = "–" if moved is None else f"{moved:.1f}"
+        rows.append([n, cal.marker_links[i], *(f"{MM * v:.1f}" for v in xyz), _se(MM * s, 2), shift])
+    notes = [
+        "Marker positions in their link's frame (thesis eq. 2.10's d_i). 'Moved from the seed': distance from the "
+        "position sensors.yaml gives, the calibration's starting point."
+    ]
+    return columns, rows, notes
+
+
+def _se(v, digits: int = 2) -> str:
+    return "–" if not np.isfinite(v) else f"{v:.{digits}g}"
+
+
+# ----------------------------------------------------------------------------- pages
+def pages(path: Path, pdf, context) -> None:
+    from diegocal.report.stac import (
+        plot_cost,
+        plot_markers_on_robot,
+        plot_residual_hist,
+        plot_sigma,
+        skeleton,
+    )
+
+    cal, ev = _calibration(path), _evaluation(path, context)
+    try:
+        robot = _robot(path, context)
+    except DiegocalError:
+        robot = None
+    title = f"Kinematic calibration (STAC): {path.name}"
+    key = [Column("quantity", align="left"), Column("value"), Column("unit", align="left")]
+    sheets = table_sheets(title, key, key_rows(cal, ev), intro=abstract(path, context))
+    _more(sheets, "Pot gains and biases", *pot_table(cal, robot))
+    _more(sheets, "Marker positions", *marker_table(cal, robot))
+    for sheet in sheets:
+        save_page(pdf, sheet.fig)
+
+    sheet = Sheet(f"{title}: markers and convergence")
+    if robot is not None:
+        sk = skeleton(cal, robot)
+        side, front = sheet.axes_row(0.38, 2)
+        plot_markers_on_robot(sk, side, (0, 2))
+        plot_markers_on_robot(sk, front, (1, 2))
+        for ax in (side, front):  # the caption says what the symbols are; a legend would cover markers
+            ax.get_legend().remove()
+            ax.set_aspect("equal", adjustable="datalim")
+        side.set_title(f"side view, {len(cal.marker_names)} markers (Figs. 2.8-2.9)")
+        front.set_title("front view")
+        sheet.caption(
+            "The robot at its neutral pose (grey: links between joint origins). Open orange circles: the seed, the "
+            "origin of each marker's link; filled blue: the calibrated marker positions; the thin blue line joins "
+            "each marker to its link's origin."
+        )
+    if cal.history:
+        cost_ax, sigma_ax = sheet.axes_row(0.26, 2)
+        plot_cost(cal, cost_ax)
+        plot_sigma(cal, sigma_ax)
+        sheet.caption(
+            "Left: the cost (negative log-likelihood, eq. 2.5) after each outer iteration, shifted so that its "
+            "minimum is 1 (log scale); it need not fall monotonically, because re-estimating σ changes the "
+            "likelihood itself. Right: the noise level σ of each sensor type, re-estimated every iteration "
+            "(dynamic variance adjustment, §2.3.5): pots in V, markers in m."
+        )
+    save_page(pdf, sheet.fig)
+
+    if ev.residuals:
+        sheet = Sheet(f"{title}: residuals")
+        panels = list(ev.residuals.items())
+        if ev.heldout_errors is not None:
+            panels.append(("held-out markers", (ev.heldout_errors, "m (distance)")))
+        height = min(0.25, (sheet.room() - 0.1) / len(panels) - 0.025 - 0.012)  # room for titles and caption
+        for g, (r, unit) in panels:
+            ax = sheet.axes(height)
+            plot_residual_hist(r, g, unit, ax)
+            ax.set_ylabel("samples")
+        sheet.caption(
+            "Residuals at the fitted joint angles (the fit log): pots, reading minus model, V; markers, distance "
+            "between measured and modelled position, m (occluded samples left out). 'held-out markers': distance "
+            "between measured markers and those predicted from the pots alone on the held-out log."
+        )
+        save_page(pdf, sheet.fig)
+
+
+def _more(sheets: list[Sheet], title: str, columns, rows, notes) -> None:
+    """A table below the last sheet's content when a quarter page is left, else from a new page."""
+    if sheets[-1].room() > 0.25:
+        sheets[-1:] = table_sheets(title, columns, rows, notes=notes, sheet=sheets[-1])
+    else:
+        sheets += table_sheets(title, columns, rows, notes=notes)

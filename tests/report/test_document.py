@@ -1,0 +1,161 @@
+"""The report as a document: contents with right page numbers, every section opening in plain words
+with held-out numbers, typeset tables split across pages, nothing off the page or overlapping.
+
+Pages are read back with pymupdf (text and its position), as a reader of the PDF would see them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
+from diegocal.io import save_log
+from diegocal.report import ReportContext, write_report
+from diegocal.report.layout import Column, table_sheets
+from diegocal.robot import load_robot, resolve_robot_dir
+from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+from diegocal.sim.pneumatics import PneumaticSimOptions, simulate_pneumatics
+from tests.pneumatic.conftest import SENSORS, URDF
+
+pymupdf = pytest.importorskip("pymupdf")
+runner = CliRunner()
+
+
+def _cli(*args):
+    r = runner.invoke(app, [str(a) for a in args])
+    assert r.exit_code == 0, r.output
+    return r
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> tuple[list[Path], list[Path]]:
+    """Small real results of every kind: a log, a calibration, a torque model, a diagnosis, with
+    held-out logs of the same robots."""
+    d = tmp_path_factory.mktemp("results")
+    finger = load_robot(resolve_robot_dir("finger", None))
+    session = simulate_kinematics(finger, KinematicsOptions(duration=6.0), np.random.default_rng(4))
+    split = 400
+    save_log(session.slice(0, split), d / "kin.h5")
+    save_log(session.slice(split, session.n_samples), d / "kin_heldout.h5")
+    pendulum = load_robot(resolve_robot_dir("pendulum", None))
+    for name, seed in (("swing.h5", 1), ("swing_heldout.h5", 2)):
+        save_log(simulate_dynamics(pendulum, DynamicsOptions(duration=4.0), np.random.default_rng(seed)), d / name)
+    _cli("stac", d / "kin.h5", "-o", d / "kin.calib.yaml", "--max-iterations", 10, "-q")
+    _cli("sgp-fit", d / "swing.h5", "--model", "pr", "-o", d / "swing.sgp", "-q")
+    _cli("diagnose", d / "swing.h5", "-o", d / "swing.diagnosis.yaml", "-q")
+    robot_dir = d / "tiny_pneu"
+    robot_dir.mkdir()
+    (robot_dir / "robot.urdf").write_text(URDF)
+    (robot_dir / "sensors.yaml").write_text(SENSORS)
+    tiny = load_robot(robot_dir)
+    for name, seed in (("air.h5", 1), ("air_heldout.h5", 2)):
+        save_log(simulate_pneumatics(tiny, PneumaticSimOptions(duration=6.0, seed=seed)), d / name)
+    _cli("pneumatic-fit", d / "air.h5", "--robot", robot_dir, "--all", "-o", d / "air.pneumatic.yaml", "-q")
+    found = [d / "kin.h5", d / "kin.calib.yaml", d / "air.pneumatic.yaml", d / "swing.sgp", d / "swing.diagnosis.yaml"]
+    return found, [d / "kin_heldout.h5", d / "swing_heldout.h5", d / "air_heldout.h5"]
+
+
+@pytest.fixture(scope="module")
+def document(results, tmp_path_factory):
+    found, heldout = results
+    out = tmp_path_factory.mktemp("doc") / "report.pdf"
+    write_report(found, out, ReportContext(heldout=tuple(heldout)), command="diegocal report (test)")
+    return pymupdf.open(out)
+
+
+def _spans(page):
+    """(ink box, text, size) of every text span: the box spans the glyphs from the baseline, not
+    the font's whole line height (which pymupdf reports and which overlaps between table rows)."""
+    out = []
+    for block in page.get_text("dict")["blocks"]:
+        for line in block.get("lines", []):
+            for s in line["spans"]:
+                if s["text"].strip():
+                    x0, _, x1, _ = s["bbox"]
+                    y, z = s["origin"][1], s["size"]
+                    out.append((pymupdf.Rect(x0, y - 0.72 * z, x1, y + 0.18 * z), s["text"], z))
+    return out
+
+
+def test_nothing_runs_off_the_page_or_overlaps(document):
+    for number, page in enumerate(document, start=1):
+        spans = _spans(page)
+        box = page.rect
+        outside = [t for r, t, _ in spans if not box.contains(r)]
+        assert not outside, f"page {number}: text off the page: {outside[:3]}"
+        clash = [
+            (t1, t2)
+            for (r1, t1, _), (r2, t2, _) in itertools.combinations(spans, 2)
+            if (r1 & r2).get_area() > 0.25 * min(r1.get_area(), r2.get_area())
+        ]
+        assert not clash, f"page {number}: overlapping text {clash[:3]}"
+        words = sum(len(t.split()) for _, t, _ in spans)
+        assert words >= 40, f"page {number} holds almost nothing ({words} words)"
+        assert min(z for _, _, z in spans) >= 5.5, f"page {number}: type below 5.5 pt (8-pt exponents are 5.6)"
+
+
+def test_contents_point_at_the_sections(document):
+    first = document[0].get_text()
+    assert "Contents" in first and "Summary" in first
+    total = document.page_count
+    for number, page in enumerate(document, start=1):
+        assert f"page {number} of {total}" in page.get_text()
+    headings = r"Log|Kinematic calibration \(STAC\)|Pneumatic valve-chamber models|Torque model \(SGP\)|Diagnosis"
+    entries = re.findall(rf"^({headings})\n(.+)\n(.+)\n(\d+)$", first, flags=re.M)  # section, file, log, page
+    assert len(entries) == 5, first
+    assert [e[2] for e in entries] == ["kin.h5", "kin.h5", "air.h5", "swing.h5", "swing.h5"]  # provenance
+    for heading, result, _, number in entries:
+        assert heading in document[int(number) - 1].get_text(), (heading, number)
+        assert Path(result).name in document[int(number) - 1].get_text()
+
+
+def test_sections_open_in_plain_words_with_held_out_numbers(document):
+    text = " ".join(" ".join(page.get_text() for page in document).split())  # lines rejoined
+    assert "calibrated the gain and bias of 7 pots" in text  # the finger's
+    assert re.search(r"On held-out data, joint angles tracked from the pots alone predict the markers", text)
+    assert re.search(r"On held-out data \(swing_heldout.h5, \d+ samples\) nMSE", text)
+    assert "inside the predicted ±2σ band" in text
+    assert "Domain dynamics, log swing.h5" in text
+    assert re.search(r"On held-out data \(air_heldout.h5, 4 chambers\) the 2-s drift is", text)
+    assert "[1/(s V)]" in text and "10 %: the thesis's bound" in text  # c7's unit (Table 4.1), a drift level
+    for unit in ("[mm]", "[V]", "[N·m]", "[s]"):
+        assert unit in text
+
+
+def test_a_long_table_is_split_with_its_header_and_notes():
+    columns = [Column("chamber", align="left"), Column("c1", "V"), Column("c2", "1/V")]
+    rows = [[f"chamber{k:03d}", f"{k / 10:.2f}", f"{k:.0f}"] for k in range(150)]
+    sheets = table_sheets("Parameters", columns, rows, intro=["A table too long for one page."], notes=["Note."])
+    assert len(sheets) >= 2
+    texts = [" ".join(t.get_text() for t in s.fig.texts) for s in sheets]
+    assert all("chamber" in t and "[1/V]" in t for t in texts)  # the header on every page
+    assert "(continued)" in texts[1]
+    cells = re.findall(r"chamber\d{3}", " ".join(texts))
+    assert sorted(cells) == sorted(r[0] for r in rows)  # every row once
+    assert "Note." in texts[-1] and "Note." not in texts[0]
+    counts = [len(re.findall(r"chamber\d{3}", t)) for t in texts]
+    assert counts[-1] >= 0.3 * max(counts)  # the last page is not a stub
+    for s in sheets:
+        assert s.room() >= 0
+
+
+def test_report_command_prints_what_was_calibrated_and_found(results, tmp_path):
+    found, heldout = results
+    found = [p for p in found if p.name in ("kin.calib.yaml", "swing.diagnosis.yaml")]
+    r = runner.invoke(app, ["report", *map(str, found), "--heldout", str(heldout[0]), "-o", str(tmp_path / "r.pdf")])
+    assert r.exit_code == 0, r.output
+    assert "what was calibrated and what was found wrong" in r.output
+    assert "7 pots" in r.output and "dynamics (swing.h5)" in r.output
+    missing = tmp_path / "nowhere.h5"
+    assert "no such held-out log" in one_line_error(
+        runner.invoke(app, ["report", str(found[0]), "--heldout", str(missing), "-o", str(tmp_path / "x.pdf")])
+    )
+    assert not (tmp_path / "x.pdf").exists()
