@@ -138,21 +138,26 @@ class Bundle:
 
     @property
     def robot(self) -> dict:
-        """``{name, dir, hash}`` (None values where the file does not say; legacy files may
-        give only a name or a directory in ``meta.robot``)."""
-        rec = self.data.get("robot")
-        if isinstance(rec, dict):
-            return {"name": rec.get("name"), "dir": rec.get("dir"), "hash": rec.get("hash")}
-        legacy = (self.data.get("meta") or {}).get("robot")
-        text = rec if isinstance(rec, str) else legacy if isinstance(legacy, str) else None
-        if text is None:
-            return {"name": None, "dir": None, "hash": None}
-        is_dir = "/" in text
-        return {"name": Path(text).name if is_dir else text, "dir": text if is_dir else None, "hash": None}
+        """``{name, dir, hash}`` of the robot it was fitted for (:func:`robot_of`)."""
+        return robot_of(self.data)
 
     @property
     def log(self) -> str | None:
         return self.data.get("log") or (self.data.get("meta") or {}).get("log")
+
+
+def robot_of(data: dict) -> dict:
+    """``{name, dir, hash}`` of a fitted output's mapping (None values where the file does not say;
+    legacy files may give only a name or a directory in ``robot`` or ``meta.robot``)."""
+    rec = data.get("robot")
+    if isinstance(rec, dict):
+        return {"name": rec.get("name"), "dir": rec.get("dir"), "hash": rec.get("hash")}
+    legacy = (data.get("meta") or {}).get("robot")
+    text = rec if isinstance(rec, str) else legacy if isinstance(legacy, str) else None
+    if text is None:
+        return {"name": None, "dir": None, "hash": None}
+    is_dir = "/" in text
+    return {"name": Path(text).name if is_dir else text, "dir": text if is_dir else None, "hash": None}
 
 
 def bundle_kind(path) -> str:

@@ -21,19 +21,23 @@ class ReportContext:
     robot: Path | None = None
     heldout: tuple[Path, ...] = ()
 
-    def heldout_for(self, robot: str | None, needs: tuple[str, ...]) -> list[Path]:
-        """The held-out logs of ``robot`` (by the log's robot attribute; any when either is unknown)
-        that have every stream in ``needs``."""
+    def heldout_for(self, robot: dict | str | None, needs: tuple[str, ...]) -> list[Path]:
+        """The held-out logs of ``robot`` that have every stream in ``needs``. ``robot`` is a
+        bundle's robot record (:attr:`diegocal.io.bundle.Bundle.robot`) or a name; a log matches
+        when its robot attribute is that name or directory (any log when either is unknown)."""
         from diegocal.errors import DiegocalError
         from diegocal.io.files import log_robot, log_streams
 
+        rec = robot if isinstance(robot, dict) else {"name": robot, "dir": None}
+        known = {str(v) for v in (rec.get("name"), rec.get("dir")) if v}
         out = []
         for path in self.heldout:
             try:
                 name, streams = log_robot(path), log_streams(path)
             except DiegocalError:
                 continue
-            if (robot is None or name is None or name == robot) and all(s in streams for s in needs):
+            mine = not known or name is None or name in known or Path(name).name == rec.get("name")
+            if mine and all(s in streams for s in needs):
                 out.append(Path(path))
         return out
 

@@ -154,8 +154,10 @@ def plot_nmse_comparison(summaries: dict, ax=None):
 
 # ----------------------------------------------------------------------------- pages
 def summary_lines(summary: dict) -> list[str]:
+    from diegocal.io.bundle import robot_of
+
     lines = [
-        f"kind: {summary['kind']}   robot: {summary['robot']}   samples: {summary['n_samples']}",
+        f"kind: {summary['kind']}   robot: {robot_of(summary)['name']}   samples: {summary['n_samples']}",
         f"inference: {summary['inference']}"
         + (f" ({summary['n_inducing']} inducing inputs)" if summary.get("n_inducing") else ""),
         f"GP inputs: {', '.join(summary.get('gp_inputs') or []) or '-'}",

@@ -30,12 +30,12 @@ def heldout_scores(path: str, heldout: tuple[str, ...]) -> tuple[str | None, int
     """(held-out log, samples, {joint: (nMSE, share inside ±2σ)}) on the first held-out log of the
     model's robot with q and tau; (None, 0, {}) when there is none."""
     from diegocal.io import load_log
+    from diegocal.io.bundle import load_bundle
     from diegocal.report.registry import ReportContext
-    from diegocal.sgp import load_model, load_summary, nmse
+    from diegocal.sgp import load_model, nmse
 
-    summary = load_summary(Path(path))
     context = ReportContext(heldout=tuple(map(Path, heldout)))
-    for hpath in context.heldout_for(str(summary.get("robot") or "") or None, ("q", "tau")):
+    for hpath in context.heldout_for(load_bundle(Path(path)).robot, ("q", "tau")):
         try:
             model = load_model(Path(path))
             log = load_log(hpath)
@@ -61,6 +61,7 @@ def _scores(model: Path, context):
 
 
 def abstract(path: Path, context) -> list[str]:
+    from diegocal.io.bundle import robot_of
     from diegocal.sgp import load_summary
 
     out = []
@@ -70,7 +71,7 @@ def abstract(path: Path, context) -> list[str]:
         log = Path(str((s.get("meta") or {}).get("log") or s.get("log") or "?")).name
         inference = s.get("inference", "?") + (f", {s['n_inducing']} inducing inputs" if s.get("n_inducing") else "")
         text = (
-            f"{model.name}: a {KIND_WORDS.get(s.get('kind'), s.get('kind'))} torque model of robot {s.get('robot')} "
+            f"{model.name}: a {KIND_WORDS.get(s.get('kind'), s.get('kind'))} torque model of robot {robot_of(s)['name']} "
             f"was fitted to {len(joints)} joint(s) from {s.get('n_samples')} samples of {log} ({inference}). "
             f"In-sample nMSE (squared error over the torque's variance): "
             + ", ".join(f"{j} {v:.2g}" for j, v in joints.items())
