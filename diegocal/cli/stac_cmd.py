@@ -69,11 +69,21 @@ def stac(
     schedule: Annotated[str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")] = "lm-iter",
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the q-phase.")] = 1,
     seed: Annotated[int, typer.Option(help="Random seed (STAC itself is deterministic).")] = 0,
+    cv: Annotated[
+        bool,
+        typer.Option(
+            "--cv",
+            help="Static poses: also calibrate without each pose and print its markers' error predicted "
+            "from its pots (leave-one-pose-out; a pose starts where a pot moves by 1 % of its range).",
+        ),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
     if method not in METHODS:
         raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
+    if cv and method != "stac":
+        raise FitError("--cv is for --method stac")
     data = load_log(log)
     model = robot_for_log(robot, data)
     options = StacOptions(
@@ -87,7 +97,14 @@ def stac(
     result = run_method(method, data.without_truth(), model, options)
     out = output or default_output(log, ".calib.yaml")
     cal = replace(result.calibration, header=header("calibration", model, log, command_line("diegocal stac")))
-    save_yaml(cal.to_dict(), out)
+    mapping = cal.to_dict()
+    pose_cv = None
+    if cv:
+        from diegocal.stac.static import leave_one_pose_out
+
+        pose_cv = leave_one_pose_out(data, model, options)
+        mapping["cv"] = pose_cv.to_dict()
+    save_yaml(mapping, out)
     qpath = q_log_path(Path(out))
     save_log(
         Log(
@@ -98,6 +115,12 @@ def stac(
         ),
         qpath,
     )
+    if cal.rejected:
+        times = ", ".join(f"{data.time[f]:.4g}" for f in cal.rejected[:8]) + (", ..." if len(cal.rejected) > 8 else "")
+        warn(
+            f"the markers of {len(cal.rejected)} frame(s) disagree with their pots (t = {times} s): written off "
+            f"as another pose's (listed under 'rejected' in {out})"
+        )
     if cal.unobservable:
         names = ", ".join(u["pot"] for u in cal.unobservable)
         warn(
@@ -116,8 +139,37 @@ def stac(
     ]
     rows += [(f"σ {g}", v) for g, v in cal.sigma_by_group.items()]
     rows += coverage_rows(cal, model)
+    if cal.rejected:
+        rows.append(("frames written off (markers)", len(cal.rejected)))
+    if pose_cv is not None:
+        rows += cv_rows(pose_cv)
     rows += [("calibration", str(out)), ("joint angles", str(qpath))]
     summary(f"stac {Path(log).name}", rows, quiet=quiet)
+    if pose_cv is not None:
+        show = np.argsort(-np.nan_to_num(pose_cv.error, nan=-1.0))[:10]
+        flagged = set(pose_cv.outliers().tolist())
+        summary(
+            "leave-one-pose-out marker error (worst first; * above 5 x the median)",
+            [
+                (int(pose_cv.pose[i]), f"{pose_cv.start[i]:.4g}", int(pose_cv.samples[i]),
+                 f"{1000 * pose_cv.error[i]:.2f}" + (" *" if pose_cv.pose[i] in flagged else ""))
+                for i in show
+            ],
+            columns=("pose", "start (s)", "samples", "error (mm)"),
+            quiet=quiet,
+        )
+
+
+def cv_rows(pose_cv) -> list:
+    """Summary rows of a leave-one-pose-out evaluation."""
+    flagged = pose_cv.outliers()
+    rows = [
+        ("poses (leave-one-out)", len(pose_cv.pose)),
+        ("pose marker error mean / median (mm)", f"{1000 * pose_cv.mean:.3g} / {1000 * pose_cv.median:.3g}"),
+    ]
+    if len(flagged):
+        rows.append(("poses > 5 x median error", ", ".join(str(int(k)) for k in flagged)))
+    return rows
 
 
 def coverage_rows(cal: Calibration, robot: Robot) -> list:
