@@ -10,7 +10,17 @@ import numpy as np
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, command_line, default_output, robot_for_log, robot_for_model, summary, warn
+from diegocal.cli.common import (
+    cli_errors,
+    command_line,
+    default_output,
+    errors,
+    progress_enabled,
+    robot_for_log,
+    robot_for_model,
+    summary,
+    warn,
+)
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
 from diegocal.io import load_log, make_stream, q_log_path, save_log, save_yaml
@@ -54,7 +64,10 @@ def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> Sta
 @cli_errors
 def stac(
     log: Annotated[Path, typer.Argument(help="Log with pots and markers streams.")],
-    robot: Annotated[str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option("--robot", help="Robot directory or bundled robot name [default: the log's robot]."),
+    ] = None,
     output: Annotated[
         Path | None, typer.Option("-o", "--output", help="calib.yaml [default: <log>.calib.yaml].")
     ] = None,
@@ -102,7 +115,7 @@ def stac(
     if cv:
         from diegocal.stac.static import leave_one_pose_out
 
-        pose_cv = leave_one_pose_out(data, model, options)
+        pose_cv = leave_one_pose_out(data, model, options, progress=_progress("leave-one-pose-out", quiet))
         mapping["cv"] = pose_cv.to_dict()
     save_yaml(mapping, out)
     qpath = q_log_path(Path(out))
@@ -158,6 +171,25 @@ def stac(
             columns=("pose", "start (s)", "samples", "error (mm)"),
             quiet=quiet,
         )
+
+
+def _progress(label: str, quiet: bool):
+    """A ``progress(k, K)`` callback drawing a bar on stderr (None when quiet or not a terminal)."""
+    if not progress_enabled(quiet):
+        return None
+    from rich.progress import Progress
+
+    bar = Progress(console=errors, transient=True)
+    task = bar.add_task(label, total=None)
+
+    def step(k: int, total: int) -> None:
+        if k == 0:
+            bar.start()
+        bar.update(task, completed=k, total=total)
+        if k == total - 1:
+            bar.stop()
+
+    return step
 
 
 def cv_rows(pose_cv) -> list:

@@ -286,7 +286,8 @@ def shift_joint_origins(model: pin.Model, offsets: dict) -> pin.Model:
 
 def load_robot(source, joints=None) -> Robot:
     """Load a robot: a directory (``robot.urdf`` + ``sensors.yaml``, DESIGN.md) or, for dynamics
-    alone, a URDF file (no sensors; the base link is the URDF's root).
+    alone, a URDF file or a directory with ``robot.urdf`` only (no sensors; the base link is the
+    URDF's root).
 
     Any URDF Pinocchio loads is accepted; the model is reduced to the joints the sensors use plus
     ``joints`` (the joint names the data use, e.g. :func:`data_joints` of a log; None: not known),
@@ -295,6 +296,8 @@ def load_robot(source, joints=None) -> Robot:
     from diegocal.io import load_yaml
 
     source = Path(source)
+    if source.is_dir() and not (source / "sensors.yaml").exists() and (source / "robot.urdf").is_file():
+        source = source / "robot.urdf"  # sensors.yaml omitted: dynamics alone (DESIGN.md)
     if source.is_file() and source.suffix.lower() == ".urdf":
         urdf, directory = source, None
         loaded = load_urdf(urdf)
@@ -305,7 +308,7 @@ def load_robot(source, joints=None) -> Robot:
         directory = source
         sensors_file = directory / "sensors.yaml"
         if not sensors_file.exists():
-            raise RobotConfigError(f"{directory}: no sensors.yaml")
+            raise RobotConfigError(f"{directory}: no sensors.yaml (and no robot.urdf)")
         sensors = parse_sensors(load_yaml(sensors_file), source=str(sensors_file))
         urdf = directory / sensors.urdf
         if not urdf.exists():

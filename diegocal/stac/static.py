@@ -17,14 +17,17 @@ mocap frame (:func:`diegocal.stac.robust.gross_frames`). What it adds is the eva
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from diegocal.errors import FitError
+from diegocal.errors import DiegocalError, FitError
 from diegocal.io import Log, Stream
 from diegocal.robot import Robot
 from diegocal.stac.result import StacOptions
+
+LOG = logging.getLogger(__name__)
 
 #: A pot moving by more than this fraction of its range between two samples starts a new pose.
 POSE_TOL = 0.01
@@ -54,7 +57,7 @@ class PoseCV:
     ----------
     pose : (K,) int, pose index; start : (K,) s, its first sample's time; samples : (K,) int
     error : (K,) m, mean distance between the pose's markers and their prediction from its pots by
-        a calibration fitted without it (NaN where the pose has no visible marker)
+        a calibration fitted without it (NaN where the pose has no visible marker or that fit failed)
     """
 
     pose: np.ndarray
@@ -107,11 +110,13 @@ def leave_one_pose_out(
         if progress is not None:
             progress(i, len(ids))
         held = poses == k
-        cal = calibrate(take(log, np.flatnonzero(~held)), robot, options).calibration
         test = take(log, np.flatnonzero(held))
         if not np.isfinite(test.stream("markers").data).all(axis=-1).any():
             continue
-        pred = predict(test, robot, cal, ("pots",), ("markers",), options)
-        error[i] = pred.mae["markers"]
+        try:
+            cal = calibrate(take(log, np.flatnonzero(~held)), robot, options).calibration
+            error[i] = predict(test, robot, cal, ("pots",), ("markers",), options).mae["markers"]
+        except DiegocalError as exc:  # one pose's fit failing leaves its error NaN, not the others'
+            LOG.warning(f"leave-one-pose-out: the fit without pose {k} failed ({exc})")
     first = np.array([np.flatnonzero(poses == k)[0] for k in ids])
     return PoseCV(ids, log.time[first], np.array([(poses == k).sum() for k in ids]), error)

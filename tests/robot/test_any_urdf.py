@@ -251,3 +251,29 @@ def test_full_tiago_calibration_loses_exactly_its_three_gauges(tmp_path, sample_
     bias = col["bias"] - len(ARM) + np.array([bias_to_fix(robot, j) for j in gauge_joints(robot)])
     assert (normalised_singular_values(J) < 1e-9).sum() == 3
     assert normalised_singular_values(np.delete(J, bias, axis=1)).min() > 1e-5
+
+
+def test_dynamics_from_the_urdf_alone_end_to_end(tmp_path):
+    """`--robot` naming the URDF file itself (dynamics alone): simulate, sgp-fit and predict, the
+    last two without --robot (the log names its URDF, the model records it); a directory with
+    robot.urdf and no sensors.yaml is the same robot."""
+    from typer.testing import CliRunner
+
+    from diegocal.cli import app
+    from diegocal.io import load_log, load_yaml
+
+    urdf = _gadget(tmp_path) / "robot.urdf"
+    run = CliRunner().invoke
+    res = run(app, ["simulate", "dynamics", "--robot", str(urdf), "-o", str(tmp_path / "d.h5"), "--duration", "6",
+                    "--rate", "50", "-q"])
+    assert res.exit_code == 0, res.output
+    assert load_log(tmp_path / "d.h5").robot == str(urdf.resolve())
+    res = run(app, ["sgp-fit", str(tmp_path / "d.h5"), "--model", "pr", "-q"])
+    assert res.exit_code == 0, res.output
+    head = load_yaml(tmp_path / "d.sgp" / "sgp.yaml")["robot"]
+    assert head["dir"] == str(urdf.resolve()) and set(head["locked"]) == {"float", "plane"}
+    res = run(app, ["predict", str(tmp_path / "d.sgp"), str(tmp_path / "d.h5"), "-o", str(tmp_path / "p.h5")])
+    assert res.exit_code == 0, res.output
+    (urdf.parent / "sensors.yaml").unlink()
+    same = load_robot(urdf.parent)
+    assert same.joint_names == load_robot(urdf).joint_names and same.source == urdf
