@@ -9,6 +9,7 @@ point's position is ``base_T_world @ world_T_link @ xyz``.
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -315,8 +316,16 @@ def load_robot(source, joints=None) -> Robot:
             raise RobotConfigError(f"{directory}: URDF {sensors.urdf!r} not found")
         loaded = load_urdf(urdf)
     model = loaded.model
-    used = sensor_joints(model, sensors) | set(joints or ())
     known = set(model.names[1:])
+    unknown = sorted(set(joints or ()) - known)
+    if unknown:
+        match = difflib.get_close_matches(unknown[0], sorted(known), n=1, cutoff=0.6)
+        hint = f" — did you mean {match[0]!r}?" if match else ""
+        raise UnknownNameError(
+            f"log channel(s) {', '.join(repr(u) for u in unknown[:4])} of the joint streams (q, qd, qdd, tau) "
+            f"are not joints of {urdf.name}{hint}"
+        )
+    used = sensor_joints(model, sensors) | set(joints or ())
     keep = (used & known) or None  # nothing named: every one-DoF joint
     reduction = reduce_model(model, keep, sensors.locked)
     name = model.name or (directory.name if directory is not None else urdf.stem)

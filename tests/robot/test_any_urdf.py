@@ -136,8 +136,12 @@ def test_urdf_file_alone_keeps_every_one_dof_joint(tmp_path):
     assert set(robot.joint_names) == {"rail", "spin", "shoulder", "elbow", "finger_a", "finger_b"}
     assert set(robot.locked) == {"float", "plane"} and robot.sensors.base_link == "world_link"
     assert robot.reference == str(urdf.resolve())
-    only = load_robot(urdf, joints=("shoulder", "elbow", "not_a_joint"))
+    only = load_robot(urdf, joints=("shoulder", "elbow"))
     assert only.joint_names == ("shoulder", "elbow")
+    from diegocal.errors import UnknownNameError
+
+    with pytest.raises(UnknownNameError, match="'elbw' of the joint streams .* not joints of robot.urdf — did you"):
+        load_robot(urdf, joints=("shoulder", "elbw"))
 
 
 def test_a_used_multi_dof_joint_is_one_clear_error(tmp_path):
