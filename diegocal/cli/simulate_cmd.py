@@ -71,8 +71,8 @@ def simulate_kinematics_cmd(
 
 def _static_poses(output, robot, seed, poses, samples, wrong, gain_error, bias_error, marker_offset, pot_noise,
                   marker_noise, quiet) -> None:
-    """`simulate kinematics --poses N`: a static-pose session (sim.kinematics.simulate_static_poses)."""
-    from diegocal.sim.kinematics import StaticPoseOptions, simulate_static_poses
+    """`simulate kinematics --poses N`: a static-pose session (sim.static_poses.simulate_static_poses)."""
+    from diegocal.sim.static_poses import StaticPoseOptions, simulate_static_poses
 
     options = StaticPoseOptions(n_poses=poses, samples=samples, wrong=wrong, gain_error=gain_error,
                                 bias_error=bias_error, marker_offset=marker_offset, pot_noise=pot_noise,

@@ -21,7 +21,7 @@ import erd  # noqa: E402
 from diegocal.cli import app  # noqa: E402
 from diegocal.io import load_log, load_yaml, save_yaml  # noqa: E402
 from diegocal.robot import load_robot  # noqa: E402
-from diegocal.sim.kinematics import StaticPoseOptions, simulate_static_poses  # noqa: E402
+from diegocal.sim.static_poses import StaticPoseOptions, simulate_static_poses  # noqa: E402
 from diegocal.stac import StacOptions, calibrate  # noqa: E402
 from diegocal.stac.calibration import Calibration  # noqa: E402
 from diegocal.stac.model import Observation  # noqa: E402
