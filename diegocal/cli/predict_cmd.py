@@ -75,7 +75,10 @@ def predict(
         str, typer.Option("--from", help="STAC: sensor types to track from (comma list).")
     ] = "pots",
     sensors_to: Annotated[str, typer.Option("--to", help="STAC: sensor types to predict (comma list).")] = "markers",
-    robot: Annotated[Path | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
+    robot: Annotated[
+        Path | None,
+        typer.Option("--robot", help="Robot directory or URDF [default: the log's robot, else the model's]."),
+    ] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
     seed: Annotated[int, typer.Option("--seed")] = 0,

@@ -37,9 +37,18 @@ def simulate_kinematics_cmd(
         help="Mean distance of true markers from nominal, m.")] = 0.03,
     pot_noise: Annotated[float, typer.Option(help="Pot noise standard deviation, V.")] = 0.005,
     marker_noise: Annotated[float, typer.Option(help="Marker noise per axis, m.")] = 0.002,
+    poses: Annotated[int, typer.Option(
+        "--poses", min=0, help="Static poses instead of a moving session (0: moving); --duration, --rate, "
+        "--effect and occlusion then do not apply.")] = 0,
+    pose_samples: Annotated[int, typer.Option("--pose-samples", min=1, help="Samples per static pose.")] = 1,
+    wrong_poses: Annotated[int, typer.Option(
+        "--wrong-poses", min=0, help="Static poses filed with another pose's mocap frame.")] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate a kinematic calibration session (thesis §2.5.1) with truth in /truth."""
+    if poses:
+        return _static_poses(output, robot, seed, poses, pose_samples, wrong_poses, gain_error, bias_error,
+                             marker_offset, pot_noise, marker_noise, quiet)
     effects = check_effects(parse_effects(effect), "kinematics")
     options = KinematicsOptions(
         duration=duration, rate_hz=rate, effects=effects, occlusion=occlusion,
@@ -59,3 +68,21 @@ def simulate_kinematics_cmd(
         rows.append((f"effect {e['cause']}", e["channel"]))
     rows.append(("written", str(output)))
     summary("simulate kinematics", rows, quiet=quiet)
+
+
+def _static_poses(output, robot, seed, poses, samples, wrong, gain_error, bias_error, marker_offset, pot_noise,
+                  marker_noise, quiet) -> None:
+    """`simulate kinematics --poses N`: a static-pose session (sim.static_poses.simulate_static_poses)."""
+    from diegocal.sim.static_poses import StaticPoseOptions, simulate_static_poses
+
+    options = StaticPoseOptions(n_poses=poses, samples=samples, wrong=wrong, gain_error=gain_error,
+                                bias_error=bias_error, marker_offset=marker_offset, pot_noise=pot_noise,
+                                marker_noise=marker_noise).check()
+    model = load_robot(resolve_robot_dir(robot, None))
+    log = simulate_static_poses(model, options, np.random.default_rng(seed))
+    save_log(log, output)
+    rows = [("robot", log.robot), ("poses", poses), ("samples", log.n_samples)]
+    for e in log.truth.effects:
+        rows.append((f"effect {e['cause']}", f"poses {e['values']['poses']}"))
+    rows.append(("written", str(output)))
+    summary("simulate kinematics (static poses)", rows, quiet=quiet)

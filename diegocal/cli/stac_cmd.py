@@ -10,7 +10,17 @@ import numpy as np
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, command_line, default_output, robot_for_log, robot_for_model, summary, warn
+from diegocal.cli.common import (
+    cli_errors,
+    command_line,
+    default_output,
+    errors,
+    progress_enabled,
+    robot_for_log,
+    robot_for_model,
+    summary,
+    warn,
+)
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
 from diegocal.io import load_log, make_stream, save_log, save_yaml
@@ -54,7 +64,10 @@ def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> Sta
 @cli_errors
 def stac(
     log: Annotated[Path, typer.Argument(help="Log with pots and markers streams.")],
-    robot: Annotated[str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option("--robot", help="Robot directory or bundled robot name [default: the log's robot]."),
+    ] = None,
     output: Annotated[
         Path | None, typer.Option("-o", "--output", help="calib.yaml [default: <log>.calib.yaml].")
     ] = None,
@@ -72,6 +85,14 @@ def stac(
     joint_angles: Annotated[
         Path | None, typer.Option("--joint-angles", help="Also write the tracked joint angles to this log (.h5, .csv).")
     ] = None,
+    cv: Annotated[
+        bool,
+        typer.Option(
+            "--cv",
+            help="Static poses: also calibrate without each pose and print its markers' error predicted "
+            "from its pots (leave-one-pose-out; a pose starts where a pot moves by 1 % of its range).",
+        ),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
@@ -79,6 +100,8 @@ def stac(
         raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
     if joint_angles is not None and joint_angles.suffix.lower() not in (".h5", ".hdf5", ".csv"):
         raise FitError(f"--joint-angles {joint_angles}: a log is .h5 or .csv")  # before the fit, not after
+    if cv and method != "stac":
+        raise FitError("--cv is for --method stac")
     data = load_log(log)
     model = robot_for_log(robot, data)
     options = StacOptions(
@@ -92,12 +115,25 @@ def stac(
     result = run_method(method, data.without_truth(), model, options)
     out = output or default_output(log, ".calib.yaml")
     cal = replace(result.calibration, header=header("calibration", model, log, command_line("diegocal stac")))
+    mapping = cal.to_dict()
+    pose_cv = None
+    if cv:
+        from diegocal.stac.static import leave_one_pose_out
+
+        pose_cv = leave_one_pose_out(data, model, options, progress=_progress("leave-one-pose-out", quiet))
+        mapping["cv"] = pose_cv.to_dict()
     if joint_angles is not None:
-        cal = replace(cal, meta={"joint_angles": str(joint_angles.resolve())})
-    save_yaml(cal.to_dict(), out)
+        mapping["meta"] = {"joint_angles": str(joint_angles.resolve())}
+    save_yaml(mapping, out)
     if joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
         q_log = Log(data.time, {"q": make_stream(model.joint_names, result.q)}, robot=data.robot, rate_hz=data.rate_hz)
         save_log(q_log, joint_angles)
+    if cal.rejected:
+        times = ", ".join(f"{data.time[f]:.4g}" for f in cal.rejected[:8]) + (", ..." if len(cal.rejected) > 8 else "")
+        warn(
+            f"the markers of {len(cal.rejected)} frame(s) disagree with their pots (t = {times} s): written off "
+            f"as another pose's (listed under 'rejected' in {out})"
+        )
     if cal.unobservable:
         names = ", ".join(u["pot"] for u in cal.unobservable)
         warn(
@@ -116,8 +152,56 @@ def stac(
     ]
     rows += [(f"σ {g}", v) for g, v in cal.sigma_by_group.items()]
     rows += coverage_rows(cal, model)
+    if cal.rejected:
+        rows.append(("frames written off (markers)", len(cal.rejected)))
+    if pose_cv is not None:
+        rows += cv_rows(pose_cv)
     rows += [("calibration", str(out))] + ([("joint angles", str(joint_angles))] if joint_angles else [])
     summary(f"stac {Path(log).name}", rows, quiet=quiet)
+    if pose_cv is not None:
+        show = np.argsort(-np.nan_to_num(pose_cv.error, nan=-1.0))[:10]
+        flagged = set(pose_cv.outliers().tolist())
+        summary(
+            "leave-one-pose-out marker error (worst first; * above 5 x the median)",
+            [
+                (int(pose_cv.pose[i]), f"{pose_cv.start[i]:.4g}", int(pose_cv.samples[i]),
+                 f"{1000 * pose_cv.error[i]:.2f}" + (" *" if pose_cv.pose[i] in flagged else ""))
+                for i in show
+            ],
+            columns=("pose", "start (s)", "samples", "error (mm)"),
+            quiet=quiet,
+        )
+
+
+def _progress(label: str, quiet: bool):
+    """A ``progress(k, K)`` callback drawing a bar on stderr (None when quiet or not a terminal)."""
+    if not progress_enabled(quiet):
+        return None
+    from rich.progress import Progress
+
+    bar = Progress(console=errors, transient=True)
+    task = bar.add_task(label, total=None)
+
+    def step(k: int, total: int) -> None:
+        if k == 0:
+            bar.start()
+        bar.update(task, completed=k, total=total)
+        if k == total - 1:
+            bar.stop()
+
+    return step
+
+
+def cv_rows(pose_cv) -> list:
+    """Summary rows of a leave-one-pose-out evaluation."""
+    flagged = pose_cv.outliers()
+    rows = [
+        ("poses (leave-one-out)", len(pose_cv.pose)),
+        ("pose marker error mean / median (mm)", f"{1000 * pose_cv.mean:.3g} / {1000 * pose_cv.median:.3g}"),
+    ]
+    if len(flagged):
+        rows.append(("poses > 5 x median error", ", ".join(str(int(k)) for k in flagged)))
+    return rows
 
 
 def coverage_rows(cal: Calibration, robot: Robot) -> list:

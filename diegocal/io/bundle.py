@@ -94,6 +94,8 @@ def save_robot_copy(robot, directory) -> None:
 
     directory = Path(directory)
     source = Path(getattr(robot, "source", None) or robot.directory)
+    if source.is_dir() and not (source / "sensors.yaml").is_file():
+        source = source / robot.sensors.urdf
     if source.is_file():
         urdf, sensors = source, {"urdf": "robot.urdf", "base_link": robot.sensors.base_link}
     else:

@@ -11,8 +11,10 @@ shifts ``q_k`` by δ in every frame and the bias of every pot reading joint k by
   upstream of a base link that is not the URDF root): moving those markers back about (along)
   its axis, ``d -> Rot(a, -δ) d``, absorbs the offset (always the case for the last joint of a
   chain);
-* **root gauge** — the joint's axis is fixed in the base frame and the joint moves every marker:
-  rotating the mocap frame about that axis, ``(R, T0)``, absorbs the offset.
+* **root gauge** — the joint moves every marker and its axis is fixed in the base frame (the
+  base hangs from the world and every joint between them is prismatic, along the axis of a
+  revolute joint: a robot's lift carrying its arm's first joint): rotating the mocap frame about
+  that axis, ``(R, T0)``, absorbs the offset; for a prismatic joint, shifting it along the axis.
 
 Both need every pot that depends on the joint to be linear in q (rotary, encoder, tendon): a
 linear pot spanning the joint (eq. 2.19-2.20) measures a length that an offset changes
@@ -24,7 +26,23 @@ moving-base robot, that the full calibration Jacobian loses exactly these direct
 
 from __future__ import annotations
 
+import numpy as np
+
 from diegocal.robot.model import Robot
+
+
+def axis_fixed_in_base(kin, k: int) -> bool:
+    """Whether joint ``k``'s motion is the same in the base frame whatever the other joints do:
+    every joint upstream of it is prismatic (and, for a revolute k, slides along k's axis line).
+    ``kin`` is the robot's :class:`diegocal.robot.batch.BatchKinematics` (its base hangs from the
+    world)."""
+    up = [j for j in np.flatnonzero(kin._anc[k + 1]) if j != k]
+    if not all(kin.prismatic[j] for j in up):
+        return False
+    if kin.prismatic[k] or not up:
+        return True
+    axis = kin.joint_poses(np.zeros((1, kin.n))).axis[0]
+    return all(np.linalg.norm(np.cross(axis[j], axis[k])) < 1e-9 for j in up)
 
 
 def _upstream(model, k: int, joint: int) -> bool:
@@ -45,7 +63,10 @@ def gauge_joints(robot: Robot) -> tuple[str, ...]:
     -------
     tuple of joint names, in :attr:`Robot.joint_names` order (empty when there are no markers).
     """
+    from diegocal.robot.batch import BatchKinematics
+
     model = robot.model
+    kin = BatchKinematics(robot)
     marker_joint = [model.frames[robot.frame_id(m.link)].parentJoint for m in robot.sensors.markers]
     if not marker_joint:
         return ()
@@ -65,7 +86,7 @@ def gauge_joints(robot: Robot) -> tuple[str, ...]:
             continue
         far_side = model.parents[k] if _upstream(model, k, base_joint) else k
         leaf = all(j == far_side for j in moved)
-        root = model.parents[k] == base_joint and len(moved) == len(marker_joint)
+        root = base_joint == 0 and len(moved) == len(marker_joint) and axis_fixed_in_base(kin, k - 1)
         if leaf or root:
             out.append(robot.joint_names[k - 1])
     return tuple(out)

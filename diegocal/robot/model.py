@@ -9,6 +9,7 @@ point's position is ``base_T_world @ world_T_link @ xyz``.
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -286,7 +287,8 @@ def shift_joint_origins(model: pin.Model, offsets: dict) -> pin.Model:
 
 def load_robot(source, joints=None) -> Robot:
     """Load a robot: a directory (``robot.urdf`` + ``sensors.yaml``, DESIGN.md) or, for dynamics
-    alone, a URDF file (no sensors; the base link is the URDF's root).
+    alone, a URDF file or a directory with ``robot.urdf`` only (no sensors; the base link is the
+    URDF's root).
 
     Any URDF Pinocchio loads is accepted; the model is reduced to the joints the sensors use plus
     ``joints`` (the joint names the data use, e.g. :func:`data_joints` of a log; None: not known),
@@ -295,6 +297,8 @@ def load_robot(source, joints=None) -> Robot:
     from diegocal.io import load_yaml
 
     source = Path(source)
+    if source.is_dir() and not (source / "sensors.yaml").exists() and (source / "robot.urdf").is_file():
+        source = source / "robot.urdf"  # sensors.yaml omitted: dynamics alone (DESIGN.md)
     if source.is_file() and source.suffix.lower() == ".urdf":
         urdf, directory = source, None
         loaded = load_urdf(urdf)
@@ -305,15 +309,23 @@ def load_robot(source, joints=None) -> Robot:
         directory = source
         sensors_file = directory / "sensors.yaml"
         if not sensors_file.exists():
-            raise RobotConfigError(f"{directory}: no sensors.yaml")
+            raise RobotConfigError(f"{directory}: no sensors.yaml (and no robot.urdf)")
         sensors = parse_sensors(load_yaml(sensors_file), source=str(sensors_file))
         urdf = directory / sensors.urdf
         if not urdf.exists():
             raise RobotConfigError(f"{directory}: URDF {sensors.urdf!r} not found")
         loaded = load_urdf(urdf)
     model = loaded.model
-    used = sensor_joints(model, sensors) | set(joints or ())
     known = set(model.names[1:])
+    unknown = sorted(set(joints or ()) - known)
+    if unknown:
+        match = difflib.get_close_matches(unknown[0], sorted(known), n=1, cutoff=0.6)
+        hint = f" — did you mean {match[0]!r}?" if match else ""
+        raise UnknownNameError(
+            f"log channel(s) {', '.join(repr(u) for u in unknown[:4])} of the joint streams (q, qd, qdd, tau) "
+            f"are not joints of {urdf.name}{hint}"
+        )
+    used = sensor_joints(model, sensors) | set(joints or ())
     keep = (used & known) or None  # nothing named: every one-DoF joint
     reduction = reduce_model(model, keep, sensors.locked)
     name = model.name or (directory.name if directory is not None else urdf.stem)

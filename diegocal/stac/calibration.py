@@ -39,6 +39,12 @@ from diegocal.errors import InputFileError
 from diegocal.io.bundle import HEADER_KEYS
 from diegocal.robot import Robot
 
+#: Why calib.yaml's ``rejected`` frames were written off (robust losses; stac/robust.py).
+REJECTED_REASON = (
+    "their pots disagree, far beyond their noise (chi-square tail 1e-6), with the joint angles their "
+    "markers need: the markers are not this frame's (another pose's mocap frame?); written off as occluded"
+)
+
 
 @dataclass(frozen=True)
 class FitInfo:
@@ -69,6 +75,8 @@ class Calibration:
     terms : extra terms of the observation model (:mod:`diegocal.stac.terms`), () for STAC's own
     unobservable : ({pot, joints, reason}, ...) pots kept at their nominal gain and bias
     gauges : ({joint, pot, kind, reason}, ...) joint zeros fixed by keeping a pot's bias nominal
+    rejected : frame indices (0-based, in the fitted log) whose markers a robust fit wrote off
+        (:func:`diegocal.stac.robust.gross_frames`)
     header : the bundle header (:func:`diegocal.io.bundle.header`), written first
     """
 
@@ -93,6 +101,7 @@ class Calibration:
     terms: tuple = ()
     unobservable: tuple = ()
     gauges: tuple = ()
+    rejected: tuple = ()
     header: dict = field(default_factory=dict)
 
     @classmethod
@@ -157,6 +166,8 @@ class Calibration:
             out["unobservable"] = [dict(u) for u in self.unobservable]
         if self.gauges:
             out["gauges"] = [dict(g) for g in self.gauges]
+        if self.rejected:
+            out["rejected"] = {"frames": [int(f) for f in self.rejected], "reason": REJECTED_REASON}
         if self.meta:
             out["meta"] = dict(self.meta)
         if self.terms:
@@ -203,6 +214,7 @@ class Calibration:
                 terms=_terms(data.get("terms")),
                 unobservable=tuple(dict(u) for u in (data.get("unobservable") or ())),
                 gauges=tuple(dict(g) for g in (data.get("gauges") or ())),
+                rejected=tuple(int(f) for f in ((data.get("rejected") or {}).get("frames") or ())),
                 header={k: data[k] for k in HEADER_KEYS if k in data},
             )
         except (KeyError, TypeError, ValueError) as exc:

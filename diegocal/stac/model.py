@@ -26,6 +26,7 @@ from diegocal.errors import FitError, UnknownNameError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
 from diegocal.robot.batch import BatchKinematics
+from diegocal.robot.gauges import axis_fixed_in_base
 from diegocal.stac.calibration import Calibration
 
 LOG = logging.getLogger(__name__)
@@ -147,6 +148,7 @@ class Observation:
         self.fixed_gain = np.zeros(len(self.pot_index), dtype=bool)  # unobservable: gain and bias nominal
         self.unobservable: tuple = ()  # ({pot, joints, reason}, ...) set by check_observable
         self.gauges: tuple = ()  # ({joint, pot, kind, reason}, ...) set by check_observable
+        self.rejected = np.zeros(0, dtype=int)  # frames whose markers a robust fit wrote off
         self.sparsity = self._sparsity()
 
     def _sparsity(self) -> Sparsity:
@@ -187,6 +189,15 @@ class Observation:
         sub.pots, sub.markers, sub.valid = self.pots[frames], self.markers[frames], self.valid[frames]
         sub.n_frames = sub.pots.shape[0]
         return sub
+
+    def without_markers(self, frames: np.ndarray) -> Observation:
+        """The same observation with every marker of ``frames`` (T,) bool written off (as if
+        occluded), recorded in ``rejected`` (frame indices, cumulative)."""
+        out = copy.copy(self)
+        out.markers = np.where(frames[:, None, None], np.nan, self.markers)
+        out.valid = self.valid & ~frames[:, None]
+        out.rejected = np.union1d(self.rejected, np.flatnonzero(frames)).astype(int)
+        return out
 
     # ------------------------------------------------------------------ checks
     def check_observable(self) -> None:
@@ -241,7 +252,7 @@ class Observation:
                 continue
             if (marker_joints[moved] == k + 1).all():
                 out[k] = "leaf"
-            elif kin.base_joint == 0 and kin.parent[k] < 0 and moved.all() and not kin.prismatic[k]:
+            elif kin.base_joint == 0 and moved.all() and axis_fixed_in_base(kin, k):
                 out[k] = "root"
         return out
 
@@ -258,9 +269,10 @@ class Observation:
         When every marker moved by joint k sits on k's own child link, an offset δ of q_k is
         exactly absorbed by rotating those markers about k's axis (d → Rot(a, −δ) d) and shifting
         the biases of the pots that read q_k (b → b − gain · r · δ): the likelihood is flat along
-        it (leaf gauge). When a joint hangs from a fixed base and moves every marker, rotating the
-        mocap frame about its axis does the same (root gauge). The first rotary/encoder pot (else
-        tendon) reading such a joint keeps its nominal bias.
+        it (leaf gauge). When a joint moves every marker along or about an axis fixed in a fixed
+        base (:func:`diegocal.robot.gauges.axis_fixed_in_base`), moving the mocap frame does the
+        same (root gauge). The first rotary/encoder pot (else tendon) reading such a joint keeps
+        its nominal bias.
         """
         fixed = np.zeros(self.n_pots, dtype=bool)
         for k in self._gauge_kinds(marker_joints):
@@ -281,6 +293,11 @@ class Observation:
                 why = (
                     f"every marker joint {joint} moves is on link {link}: turning them about its axis "
                     "absorbs any offset of its zero"
+                )
+            elif self.kin.prismatic[k]:
+                why = (
+                    f"joint {joint} moves every marker along an axis fixed in the base: shifting the mocap "
+                    "frame absorbs any offset of its zero"
                 )
             else:
                 why = (
@@ -428,6 +445,7 @@ class Observation:
             sigma_by_group={k: float(v) for k, v in sigma.items()},
             unobservable=self.unobservable,
             gauges=self.gauges,
+            rejected=tuple(int(f) for f in self.rejected),
         )
         return cal if fit is None else replace(cal, fit=fit)
 

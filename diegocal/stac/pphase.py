@@ -81,12 +81,14 @@ def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inne
     for _ in range(inner):
         cb = (np.einsum("mij,mj->i", G, d) + Pm.sum(0)) / sw.sum()  # eq. 2.13
         R = _proper_rotation(np.einsum("mijk,mj->ik", C, d) + D.sum(0))  # eq. 2.14-2.15
-        d = (np.einsum("mijk,ki->mj", C, R) + np.einsum("mij,i->mj", G, cb) - K) / sw[:, None]  # eq. 2.17
+        d_new = (np.einsum("mijk,ki->mj", C, R) + np.einsum("mij,i->mj", G, cb) - K) / np.maximum(sw, 1e-300)[:, None]
+        d = np.where(sw[:, None] > 0, d_new, d)  # eq. 2.17; a marker with no weight keeps its position
     T = cx - R @ cb  # eq. 2.16
     # standard error of each mean from the spread of the marker in its link frame
     local = np.einsum("tmji,tmj->tmi", Rl, (x - cx) @ R + cb - pl)  # h_rᵀ (R⁻¹ (x − T0) − h_p)
     n = (w > 0).sum(0)
-    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(sw[:, None] * (n[:, None] - 1) / n[:, None], 1e-300)
+    dof = np.where(n > 1, sw * (n - 1) / np.maximum(n, 1), np.nan)[:, None]  # NaN: a marker seen < 2 times
+    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(dof, 1e-300)
     se = np.sqrt(var * (w**2).sum(0)[:, None]) / sw[:, None]
     return R, T, d, se
 

@@ -59,7 +59,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from diegocal.errors import FitError
+from diegocal.errors import FitError, NumericalError
 from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac import robust
@@ -228,8 +228,44 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
     t0 = time.perf_counter()
     obs = Observation(log, robot)
     obs.check_observable()
-    params = obs.nominal(options.marker_seed)
     history: list[IterationRecord] = []
+    if options.loss == "linear":
+        fine = _fit(obs, obs.nominal(options.marker_seed), options, t0, history)
+    else:
+        # the convex (Huber) fit first; frames filed with markers not their own have their markers
+        # written off and the fit is redone (robust.py); then a redescending loss from there
+        huber = replace(options, loss="huber")
+        for _ in range(MAX_REJECTIONS):
+            fine = _fit(obs, obs.nominal(options.marker_seed), huber, t0, history)
+            gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, options.batch_size))
+            if not gross.any():
+                break
+            obs = obs.without_markers(gross)
+        if options.loss != "huber":
+            fine = _alternate(obs, fine.params, fine.q, fine.sigma, options, t0, history, fine.lam)
+    params, sigma, q = fine.params, fine.sigma, fine.q
+    # standard errors with q marginalised (the Schur complement of the last joint step, one
+    # converged iteration from the solution), not the p-phase's conditional-on-q ones, which
+    # ignore the joint-angle uncertainty
+    se = fine.se_joint or fine.se
+    if obs.n_pots and fine.se_joint is None:
+        _, _, se = theta_step(
+            obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames), options.batch_size, jobs=options.jobs
+        )
+    fit = FitInfo(history[-1].cost, len(history), fine.converged, time.perf_counter() - t0)
+    cal = obs.to_calibration(params, se, sigma, "stac", fit)
+    cal = _with_history(cal, history)
+    return StacResult(cal, q, tuple(history))
+
+
+#: Passes of "write off the markers of gross frames and fit again" (robust losses only).
+MAX_REJECTIONS = 3
+
+
+def _fit(obs: Observation, params: Params, options: StacOptions, t0: float, history: list) -> _Stage:
+    """The STAC schedule from θ: a coarse stage on a subset of the frames (module docstring), then
+    the alternation on all frames (``options.loss`` is linear or Huber's here)."""
+    robot = obs.robot
     stride = -(-obs.n_frames // options.coarse_frames) if options.coarse_frames else 1
     # a redescending loss is not convex: its first stage (the coarse one, or a full one) uses Huber's
     first = replace(options, loss="huber") if options.loss in REDESCENDING else options
@@ -247,20 +283,7 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
         if first is not options:
             warm = _alternate(obs, params, q, sigma, first, t0, history, lam)
             params, sigma, q, lam = warm.params, warm.sigma, warm.q, warm.lam
-    fine = _alternate(obs, params, q, sigma, options, t0, history, lam)
-    params, sigma, q = fine.params, fine.sigma, fine.q
-    # standard errors with q marginalised (the Schur complement of the last joint step, one
-    # converged iteration from the solution), not the p-phase's conditional-on-q ones, which
-    # ignore the joint-angle uncertainty
-    se = fine.se_joint or fine.se
-    if obs.n_pots and fine.se_joint is None:
-        _, _, se = theta_step(
-            obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames), options.batch_size, jobs=options.jobs
-        )
-    fit = FitInfo(history[-1].cost, len(history), fine.converged, time.perf_counter() - t0)
-    cal = obs.to_calibration(params, se, sigma, "stac", fit)
-    cal = _with_history(cal, history)
-    return StacResult(cal, q, tuple(history))
+    return _alternate(obs, params, q, sigma, options, t0, history, lam)
 
 
 @dataclass(frozen=True)
@@ -314,8 +337,11 @@ def _alternate(
         if options.joint and bfgs is None and obs.n_pots:
             params_j, _, se_joint = theta_step(obs, params, noise, q, lam, options.batch_size, jobs=options.jobs)
             q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red)
-            ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
-            cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
+            try:
+                ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
+                cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
+            except NumericalError:  # a step so far off that a redescending loss drops every marker
+                cost_j = np.inf
             if cost_j < cost:
                 q, lam, st, ph, cost, stepped = q_j, lam_j, st_j, ph_j, cost_j, True
         if not stepped:
