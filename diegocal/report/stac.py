@@ -1,10 +1,8 @@
 """Report section for calib.yaml (thesis ch. 2 figures; registers itself on import).
 
-Pages: parameter table; marker positions before/after on the robot skeleton (Figs. 2.8-2.9);
-convergence of the cost (``fit.history``); residual histograms per sensor type (reloads the
-log named in the header and the tracked joint angles ``<stem>.q.h5`` when they exist); what the
-data could not determine (``unobservable`` pots, ``gauges``) in words on the first page; and the
-cross-sensor MAE table (Tables 2.1-2.2) of files where an older ``diegocal predict`` recorded one.
+The plots live here: marker positions before/after on the robot skeleton (Figs. 2.8-2.9),
+convergence of the cost (``fit.history``), noise levels, residual histograms per sensor type. The
+pages, tables and words are assembled in :mod:`diegocal.report.stac_pages`.
 """
 
 from __future__ import annotations
@@ -13,8 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from diegocal.errors import DiegocalError
-from diegocal.io import load_log, load_yaml
 from diegocal.report.registry import ReportContext, Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new
 from diegocal.stac.calibration import Calibration
@@ -148,82 +144,12 @@ def residuals_by_type(cal: Calibration, robot, log, q) -> dict:
     return out
 
 
-def coverage_lines(cal: Calibration) -> list[str]:
-    """What the data could not determine (calib.yaml's ``unobservable`` and ``gauges``), in words."""
-    lines = []
-    if cal.unobservable:
-        lines.append(f"Unobservable: {len(cal.unobservable)} pot(s) keep their nominal gain and bias")
-        lines += [f"  {u['pot']}: {u['reason']}" for u in cal.unobservable]
-    if cal.gauges:
-        lines.append(f"Gauges: {len(cal.gauges)} joint zero(s) the markers cannot fix")
-        lines += [f"  {g['joint']}: {g['reason']}" for g in cal.gauges]
-    return lines + [""] if lines else []
-
-
-def param_lines(cal: Calibration) -> list[str]:
-    lines = [
-        f"method: {cal.method}   iterations: {cal.fit.iterations}   converged: {cal.fit.converged}",
-        "σ by type: " + ", ".join(f"{k} {v:.3g}" for k, v in cal.sigma_by_group.items()),
-        "",
-        *coverage_lines(cal),
-        f"{'pot':<20}{'gain':>10}{'± se':>10}{'bias':>10}{'± se':>10}",
-    ]
-    gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
-    bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
-    nominal = {u["pot"] for u in cal.unobservable}
-    gauge = {g["pot"] for g in cal.gauges}
-    for i, n in enumerate(cal.pot_names):
-        note = "  nominal (unobservable)" if n in nominal else "  bias nominal (gauge)" if n in gauge else ""
-        lines.append(f"{n:<20}{cal.gain[i]:>10.4f}{gse[i]:>10.2g}{cal.bias[i]:>10.4f}{bse[i]:>10.2g}{note}")
-    return lines
-
-
-def cross_sensor_lines(rows) -> list[str]:
-    """Tables 2.1-2.2: MAE of each target type given each source set."""
-    targets = sorted({t for r in rows for t in r.get("mae", {})})
-    lines = [f"{'sensor set':<32}" + "".join(f"{t:>12}" for t in targets)]
-    for r in rows:
-        src = set(r.get("from", []))
-        cells = []
-        for t in targets:
-            v = r["mae"].get(t)
-            cells.append(f"{'-' if v is None else (f'({v:.4f})' if t in src else f'{v:.4f}'):>12}")
-        lines.append(f"{'+'.join(r.get('from', [])):<32}" + "".join(cells))
-    return lines + [
-        "",
-        "MAE: markers in m (mean distance), pots in sensor units; (…) = same type as a source.",
-    ]
-
-
 # ----------------------------------------------------------------------------- pages
 def pages(path: Path, pdf, context: ReportContext) -> None:
     """The section's pages, assembled in :mod:`diegocal.report.stac_pages`."""
     from diegocal.report.stac_pages import pages as document_pages
 
     document_pages(Path(path), pdf, context)
-
-
-def _load_context(raw: dict, path: Path, context: ReportContext):
-    """Robot, log and tracked q (``stac --joint-angles``) named in the bundle when they still exist
-    (else None)."""
-    from diegocal.io import q_log_path
-    from diegocal.io.bundle import load_bundle
-    from diegocal.robot import load_robot
-
-    robot = log = q = None
-    try:
-        bundle = load_bundle(path)
-        rdir = context.robot or bundle.robot["dir"]
-        robot = load_robot(rdir) if rdir is not None and Path(rdir).exists() else None
-        if bundle.log and Path(bundle.log).exists():
-            log = load_log(bundle.log).without_truth()
-        qp = Path((raw.get("meta") or {}).get("joint_angles") or q_log_path(Path(path)))  # legacy: beside it
-        if qp.exists() and log is not None:
-            qlog = load_log(qp)
-            q = qlog.streams["q"].data if qlog.n_samples == log.n_samples else None
-    except (DiegocalError, OSError, KeyError):
-        pass
-    return robot, log, q
 
 
 def _abstract(path: Path, context: ReportContext) -> list[str]:

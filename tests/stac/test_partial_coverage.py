@@ -18,7 +18,8 @@ import erd  # noqa: E402
 
 from diegocal.cli import app  # noqa: E402
 from diegocal.io import load_log, load_yaml  # noqa: E402
-from diegocal.report.stac import param_lines  # noqa: E402
+from diegocal.report.registry import ReportContext  # noqa: E402
+from diegocal.report.stac_pages import abstract, pot_table  # noqa: E402
 from diegocal.robot import load_robot  # noqa: E402
 from diegocal.stac.calibration import Calibration  # noqa: E402
 from diegocal.stac.model import Observation  # noqa: E402
@@ -87,6 +88,10 @@ def test_icub_coverage_is_said_once_in_the_summary_and_the_report(icub_run):
     assert "unobservable (nominal)" in output and "gauges (bias nominal)" in output
     data = load_yaml(calib)
     assert data["unobservable"][0]["pot"] == "neck_yaw_pot" and data["gauges"]
-    text = "\n".join(param_lines(Calibration.from_dict(data)))
-    assert "Unobservable: 1 pot(s)" in text and "neck_yaw_pot: no marker moves with joint neck_yaw" in text
-    assert "Gauges:" in text and "nominal (unobservable)" in text
+    opening = " ".join(abstract(calib, ReportContext()))  # the report's words
+    assert "1 pot(s) (neck_yaw_pot) keep their nominal gain and bias: no marker moves with their joints" in opening
+    assert "held at nominal because the markers cannot fix that joint's zero" in opening
+    _, rows, _ = pot_table(Calibration.from_dict(data), None)  # the report's pot table
+    notes = {r[0]: r[-1] for r in rows}
+    assert notes["neck_yaw_pot"] == "nominal: unobservable"
+    assert {notes[g["pot"]] for g in data["gauges"]} == {"bias nominal: gauge"}

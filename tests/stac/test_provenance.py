@@ -14,8 +14,7 @@ from diegocal.cli import app
 from diegocal.cli.testing import one_line_error
 from diegocal.io import load_yaml, save_log
 from diegocal.io.bundle import robot_hash
-from diegocal.report.registry import ReportContext
-from diegocal.report.stac import _load_context
+from diegocal.report.stac_pages import evaluate
 from diegocal.stac.calibration import Calibration
 
 runner = CliRunner()
@@ -47,8 +46,9 @@ def test_predict_and_report_need_no_robot(fitted, tmp_path):
     d, calib = fitted
     res = _run("predict", calib, d / "held.h5", "-o", tmp_path / "p.h5", "-q")
     assert res.exit_code == 0, res.output
-    robot, log, q = _load_context(load_yaml(calib), calib, ReportContext())
-    assert robot is not None and log is not None and q is not None
+    ev = evaluate(str(calib), None, (str(d / "held.h5"),))  # robot, fit log and held-out log found by the report
+    assert not ev.note and ev.frames == 300 and ev.residuals
+    assert len(ev.heldout) == 1 and ev.heldout_errors is not None and len(ev.heldout_errors)
 
 
 def test_predict_refuses_a_changed_robot(fitted, tree_dir, tmp_path):
