@@ -71,7 +71,8 @@ def abstract(path: Path, context) -> list[str]:
         log = Path(str((s.get("meta") or {}).get("log") or s.get("log") or "?")).name
         inference = s.get("inference", "?") + (f", {s['n_inducing']} inducing inputs" if s.get("n_inducing") else "")
         text = (
-            f"{model.name}: a {KIND_WORDS.get(s.get('kind'), s.get('kind'))} torque model of robot {robot_of(s)['name']} "
+            f"{model.name}: a {KIND_WORDS.get(s.get('kind'), s.get('kind'))} torque model of robot "
+            f"{robot_of(s)['name']} "
             f"was fitted to {len(joints)} joint(s) from {s.get('n_samples')} samples of {log} ({inference}). "
             f"In-sample nMSE (squared error over the torque's variance): "
             + ", ".join(f"{j} {v:.2g}" for j, v in joints.items())

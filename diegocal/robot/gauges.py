@@ -56,6 +56,22 @@ def _moves(robot: Robot, k: int, joint: int) -> bool:
     return _upstream(robot.model, k, joint) != _upstream(robot.model, k, base_joint)
 
 
+def spanned_by_linear_pot(robot: Robot, pots=None) -> np.ndarray:
+    """(n,) bool, in :attr:`Robot.joint_names` order: joints that some linear pot of ``pots``
+    (default: every pot of the robot) spans, its two anchors on either side of the joint. Such a
+    joint's zero is no gauge: the anchors' distance (eq. 2.19-2.20) changes non-uniformly with it."""
+    model = robot.model
+    pots = robot.sensors.pots if pots is None else pots
+    out = np.zeros(robot.n_joints, dtype=bool)
+    for p in pots:
+        if p.kind != "linear":
+            continue
+        ja, jb = (model.frames[robot.frame_id(a.link)].parentJoint for a in p.anchors)
+        for k in range(1, model.njoints):
+            out[k - 1] |= _upstream(model, k, ja) != _upstream(model, k, jb)
+    return out
+
+
 def gauge_joints(robot: Robot) -> tuple[str, ...]:
     """Names of the joints whose zero is a gauge freedom of marker-based calibration.
 
@@ -71,18 +87,11 @@ def gauge_joints(robot: Robot) -> tuple[str, ...]:
     if not marker_joint:
         return ()
     base_joint = model.frames[robot.base_frame].parentJoint
-    anchor_joints = [
-        tuple(model.frames[robot.frame_id(a.link)].parentJoint for a in p.anchors)
-        for p in robot.sensors.pots
-        if p.kind == "linear"
-    ]
+    spanned = spanned_by_linear_pot(robot)
     out = []
     for k in range(1, model.njoints):
         moved = [j for j in marker_joint if _moves(robot, k, j)]
-        spanned = any(
-            _upstream(model, k, ja) != _upstream(model, k, jb) for ja, jb in anchor_joints
-        )
-        if not moved or spanned:
+        if not moved or spanned[k - 1]:
             continue
         far_side = model.parents[k] if _upstream(model, k, base_joint) else k
         leaf = all(j == far_side for j in moved)

@@ -26,7 +26,7 @@ from diegocal.errors import FitError, UnknownNameError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
 from diegocal.robot.batch import BatchKinematics
-from diegocal.robot.gauges import axis_fixed_in_base
+from diegocal.robot.gauges import axis_fixed_in_base, spanned_by_linear_pot
 from diegocal.stac.calibration import Calibration
 
 LOG = logging.getLogger(__name__)
@@ -243,12 +243,14 @@ class Observation:
         self.gauges = self._gauge_records(joints)
 
     def _gauge_kinds(self, marker_joints: np.ndarray) -> dict:
-        """{joint index: 'leaf' | 'root'} of the joints whose zero the markers cannot fix."""
+        """{joint index: 'leaf' | 'root'} of the joints whose zero the markers cannot fix (none that
+        a linear pot of the log spans: :func:`diegocal.robot.gauges.gauge_joints`' rule)."""
         anc, kin = self.kin._anc, self.kin
+        spanned = spanned_by_linear_pot(self.robot, self.pot_specs)
         out = {}
         for k in range(self.robot.n_joints):
             moved = anc[marker_joints, k]
-            if not moved.any():
+            if not moved.any() or spanned[k]:
                 continue
             if (marker_joints[moved] == k + 1).all():
                 out[k] = "leaf"
