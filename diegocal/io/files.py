@@ -88,15 +88,16 @@ def load_yaml(path) -> dict:
 
 
 # ----------------------------------------------------------------------------- logs
-def load_log(path) -> Log:
-    """Read a log from ``.h5`` or ``.csv``; one clear :class:`LogFormatError` when invalid."""
+def load_log(path, nan_ok: bool = False) -> Log:
+    """Read a log from ``.h5`` or ``.csv``; one clear :class:`LogFormatError` when invalid.
+    ``nan_ok`` accepts NaN in every stream (for describing a log, not for fitting it)."""
     path = _existing(path)
     with open(path, "rb") as fh:
         head = fh.read(8)
     if head == HDF5_SIGNATURE:
-        return _load_h5(path)
+        return _load_h5(path, nan_ok)
     if path.suffix.lower() == ".csv":
-        return _load_csv(path)
+        return _load_csv(path, nan_ok)
     raise LogFormatError(f"{path}: not a diegocal log (expected an HDF5 .h5 or a .csv file)")
 
 
@@ -218,7 +219,7 @@ def _read_stream(group, where: str) -> Stream:
     return Stream(names, data.astype(np.float64, copy=False))
 
 
-def _load_h5(path: Path) -> Log:
+def _load_h5(path: Path, nan_ok: bool = False) -> Log:
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
@@ -260,6 +261,7 @@ def _load_h5(path: Path) -> Log:
             robot=robot or None,
             rate_hz=float(rate) if rate is not None else None,
             truth=truth,
+            nan_ok=nan_ok,
         )
     except LogFormatError as exc:
         raise LogFormatError(f"{path}: {exc}") from None
@@ -300,7 +302,7 @@ def _save_csv(log: Log, path: Path) -> None:
         np.savetxt(fh, table, delimiter=",", fmt="%.17g")
 
 
-def _load_csv(path: Path) -> Log:
+def _load_csv(path: Path, nan_ok: bool = False) -> Log:
     import pandas as pd
 
     robot, rate = None, None
@@ -359,7 +361,7 @@ def _load_csv(path: Path) -> Log:
             cols = cols.reshape(len(time), len(names), 3)
         streams[stream] = Stream(tuple(names), np.ascontiguousarray(cols))
     try:
-        return Log(time=np.ascontiguousarray(time), streams=streams, robot=robot, rate_hz=rate)
+        return Log(time=np.ascontiguousarray(time), streams=streams, robot=robot, rate_hz=rate, nan_ok=nan_ok)
     except LogFormatError as exc:
         raise LogFormatError(f"{path}: {exc}") from None
 

@@ -112,6 +112,8 @@ class Log:
     robot : str or None, the robot's name (looked up in the bundled ``robots/``)
     rate_hz : float or None, nominal sample rate
     truth : Truth or None, simulator ground truth
+    nan_ok : bool, accept NaN in every stream (``diegocal inspect`` shows where they are; every
+        fitting command reads logs without it and refuses NaN outside markers)
     """
 
     time: np.ndarray
@@ -119,9 +121,10 @@ class Log:
     robot: str | None = None
     rate_hz: float | None = None
     truth: Truth | None = None
+    nan_ok: bool = field(default=False, compare=False, repr=False)
 
     def __post_init__(self):
-        check_log(self)
+        check_log(self, allow_nan=self.nan_ok)
 
     @property
     def n_samples(self) -> int:
@@ -188,8 +191,9 @@ def split_log(log: Log, at: float, unit: str = "fraction") -> tuple[Log, Log]:
     return log.slice(0, k), log.slice(k, log.n_samples)
 
 
-def check_stream(name: str, stream: Stream, n_samples: int) -> None:
-    """Validate one stream's shape, names and values against the log's length."""
+def check_stream(name: str, stream: Stream, n_samples: int, allow_nan: bool = False) -> None:
+    """Validate one stream's shape, names and values against the log's length (NaN only in
+    markers, unless ``allow_nan``)."""
     names = stream.names
     if not all(isinstance(n, str) and n for n in names):
         raise LogFormatError(f"stream '{name}': channel names must be non-empty strings")
@@ -202,7 +206,7 @@ def check_stream(name: str, stream: Stream, n_samples: int) -> None:
         raise LogFormatError(f"stream '{name}': expected data of shape {want}, got {data.shape}")
     if data.dtype != np.float64:
         raise LogFormatError(f"stream '{name}': expected float64 data, got {data.dtype}")
-    if name not in NAN_ALLOWED and data.size and not np.isfinite(data).all():
+    if name not in NAN_ALLOWED and not allow_nan and data.size and not np.isfinite(data).all():
         bad = np.argwhere(~np.isfinite(data.reshape(n_samples, -1)))
         t, k = int(bad[0][0]), int(bad[0][1])
         raise LogFormatError(
@@ -211,7 +215,7 @@ def check_stream(name: str, stream: Stream, n_samples: int) -> None:
         )
 
 
-def check_log(log: Log) -> None:
+def check_log(log: Log, allow_nan: bool = False) -> None:
     """Validate a whole log; raises :class:`LogFormatError` with one clear line."""
     time = log.time
     if not isinstance(time, np.ndarray) or time.ndim != 1:
@@ -229,7 +233,7 @@ def check_log(log: Log) -> None:
     for name, stream in log.streams.items():
         if not isinstance(stream, Stream):
             raise LogFormatError(f"stream '{name}': expected a Stream, got {type(stream).__name__}")
-        check_stream(name, stream, time.shape[0])
+        check_stream(name, stream, time.shape[0], allow_nan)
 
 
 def make_stream(names, data) -> Stream:

@@ -35,6 +35,28 @@ def test_inspect_describes_streams_and_occlusion(log_file):
     assert "p1" in result.output
 
 
+def test_inspect_shows_where_a_log_has_nan_and_that_fits_will_refuse_it(tmp_path):
+    T = 20
+    tau = np.ones((T, 2))
+    tau[[3, 4], 1] = np.nan  # two dropped torque samples
+    path = tmp_path / "nan.h5"
+    save_log(Log(np.arange(T) * 0.01, {"tau": make_stream(["j1", "j2"], tau)}, robot="x", nan_ok=True), path)
+    result = runner.invoke(app, ["inspect", str(path)])
+    assert result.exit_code == 0, result.output
+    assert "10.0" in result.output  # j2: 2 of 20 samples NaN
+    assert "warning: NaN in stream(s) tau" in result.output
+    assert "[truth: yes]" not in result.output
+    refused = runner.invoke(app, ["sgp-fit", str(path), "--robot", "arm3", "--model", "pr"])
+    assert refused.exit_code == 1 and "NaN or infinite value at sample 3" in one_line_error(refused)
+
+
+def test_inspect_says_a_simulated_log_has_truth(tmp_path):
+    path = tmp_path / "sim.h5"
+    runner.invoke(app, ["simulate", "dynamics", "--robot", "pendulum", "--duration", "1", "-o", str(path), "-q"])
+    result = runner.invoke(app, ["inspect", str(path)])
+    assert result.exit_code == 0 and "[truth: yes]" in result.output  # not eaten as rich markup
+
+
 @pytest.mark.parametrize(
     "content, message",
     [
