@@ -56,6 +56,14 @@ def select(log: Log, mask: np.ndarray) -> Log:
     return Log(time=log.time[mask], streams=streams, robot=log.robot, rate_hz=log.rate_hz, truth=truth)
 
 
+def same_robot(log: Log, robot) -> dict:
+    """The true friction of a simulated training log as ``DynamicsOptions`` fields (``viscous``,
+    ``coulomb`` per joint), so that a test log is of the *same* robot: the simulator draws them
+    from each call's seed otherwise. Reads ``/truth`` to build test data only (fits never do)."""
+    params = log.truth.params
+    return {k: tuple(float(params[k][j]) for j in robot.joint_names) for k in ("viscous", "coulomb")}
+
+
 def score_arrays(
     mean, std, clean, measured, names, regions: dict, experiment: str, seed: int, method: str, test: str
 ) -> list:
