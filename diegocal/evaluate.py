@@ -224,33 +224,18 @@ def paired_se(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return d.mean(axis=0), d.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.full(d.shape[1:], np.inf)
 
 
-def choose_by_validation(per_block: np.ndarray, fallback: int, simpler=()) -> np.ndarray:
+def choose_by_validation(per_block: np.ndarray, fallback: int) -> np.ndarray:
     """Per output, the option of lowest mean held-out error, unless it beats the ``fallback``
     option by at most one standard error of their paired per-block difference: then the
     fallback (the one-standard-error rule, Hastie et al., *Elements of Statistical Learning*
-    §7.10, with the simplest model as the fallback). Then, if the choice is not the fallback, the
-    first option of ``simpler`` (indices, simplest first, each simpler than the rest) that is
-    behind the choice by at most one standard error of their paired difference replaces it: the
-    same rule along an order of complexity. ``per_block`` (options, blocks, outputs); returns
-    option indices (outputs,). Ties of the mean go to the earlier option."""
+    §7.10, with the simplest model as the fallback). ``per_block`` (options, blocks, outputs);
+    returns option indices (outputs,). Ties of the mean go to the earlier option."""
     choice = np.argmin(per_block.mean(axis=1), axis=0)
-
-    def within_one_se(simple, c, j) -> bool:
-        gain = per_block[simple, :, j] - per_block[c, :, j]
-        return bool(np.all(np.isfinite(gain)) and gain.mean() <= gain.std(ddof=1) / np.sqrt(len(gain)))
-
     for j, c in enumerate(choice):
-        if c == fallback:
-            continue
-        if within_one_se(fallback, c, j):
-            choice[j] = fallback
-            continue
-        for s in simpler:
-            if s == c:
-                break
-            if within_one_se(s, c, j):
-                choice[j] = s
-                break
+        gain = per_block[fallback, :, j] - per_block[c, :, j]
+        if c != fallback and np.all(np.isfinite(gain)):
+            if gain.mean() <= gain.std(ddof=1) / np.sqrt(len(gain)):
+                choice[j] = fallback
     return choice
 
 

@@ -18,7 +18,7 @@ length-scale is short get points densely, inputs the GP ignores none, and an out
 switched off (σ_z at its floor) needs a single point.
 
 Why this replaced 300 k-means centres (issue #14): on the 3-link arm with a hidden cable friction on
-joint 3 (4,000 samples), joint 3's GP has a length-scale of 0.2 training stds in its velocity (the
+joint 3 (4,000 samples), joint 3's GP has a length-scale of 0.15 training stds in its velocity (the
 friction's sign change); 300 k-means centres in the 9 standardised inputs left a mean missed
 variance of 0.9 σ_v² per sample, and the held-out nMSE rose from the exact posterior's 0.0086 to
 0.017-0.038 (by k-means seed). Greedy selection reaches 0.01 σ_v² with about 400 points and

@@ -53,8 +53,7 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #:   extrapolates badly (TX40, reverse split: SGP 20 N·m RMSE against PR's 3.7 before the
 #:   validation). A GP is kept only if it beats PR by more than one standard error of the
 #:   blocked CV (the one-standard-error rule): a GP that buys nothing lets W drift (3-link arm at
-#:   1000 samples, vertical joint 1: one seed of five at 6.8 against PR's 0.15 without the rule),
-#:   and "released" is kept over "learnt" unless learnt beats it by more than one standard error;
+#:   1000 samples, vertical joint 1: one seed of five at 6.8 against PR's 0.15 without the rule);
 #: - no extra start: the SGP's three starts are SGPOptions.restarts, shared by every kind.
 #: W keeps §3.3.4's ML-II σ_w (a zero-mean prior learnt from the data, as for PR): a flat prior
 #: left the weakly excited parameters of a single figure-eight free to drift.
