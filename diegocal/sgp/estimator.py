@@ -20,17 +20,13 @@ from diegocal.errors import FitError, NumericalError
 from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.parallel import single_threaded, thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood, per_output
-from diegocal.sgp.guard import Guard, GuardCandidates
+from diegocal.sgp.guard import FTOL, Guard, GuardCandidates
 from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import is_amplitude, is_lengthscale
 
 __all__ = ["Guard", "SemiParametricGP"]
 
 LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
-# L-BFGS-B stops when an iteration improves the objective by less than FTOL relative to |f|;
-# scipy's default (2.2e-9) spends about half of the evaluations on the last 0.1 nat of a
-# likelihood of several thousand nats (bench/bench_sgp_scale.py; held-out accuracy unchanged).
-FTOL = 1e-6
 
 
 class SemiParametricGP(GuardCandidates):
