@@ -10,22 +10,45 @@ from __future__ import annotations
 
 import shlex
 import sys
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, fail, robot_for_log, summary
+from diegocal.cli.common import cli_errors, default_output, errors, fail, progress_enabled, robot_for_log, summary
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
+from diegocal.evaluate import score
 from diegocal.io import Log, load_log, make_stream, save_log
 from diegocal.io.bundle import header
 from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sgp import KINDS, SGPOptions, fit_dynamics, load_model, nmse
+from diegocal.sgp import KINDS, SGPOptions, fit_dynamics, load_model
 from diegocal.sgp.model import INFERENCE, INPUT_STREAMS, log_arrays
 from diegocal.sgp.store import save_model
+
+
+@contextmanager
+def fit_progress(quiet: bool):
+    """A progress bar on stderr for the fit's stages (ML-II starts, cross-validation, posterior);
+    yields the ``progress`` callable of :func:`fit_dynamics`, or None with --quiet or no terminal."""
+    if not progress_enabled(quiet):
+        yield None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=errors, transient=True) as bar:
+        tasks = {}
+
+        def update(kind: str, stage: str, done: int, total: int) -> None:
+            key = (kind, stage)
+            if key not in tasks:
+                tasks[key] = bar.add_task(f"{kind}: {stage}", total=total)
+            bar.update(tasks[key], completed=done, total=total)
+
+        yield update
 
 
 def _command() -> str:
@@ -59,9 +82,18 @@ def sgp_fit(
         str, typer.Option("--friction", help="Friction columns: viscous,coulomb | none.")
     ] = "viscous,coulomb",
     inference: Annotated[
-        str, typer.Option("--inference", help="auto | exact | sparse (auto: exact up to 3000).")
+        str,
+        typer.Option("--inference", help=f"auto | exact | sparse (auto: exact up to {SGPOptions.exact_max} samples)."),
     ] = "auto",
-    n_inducing: Annotated[int, typer.Option("--n-inducing", min=1)] = 300,
+    n_inducing: Annotated[
+        int,
+        typer.Option(
+            "--n-inducing",
+            min=1,
+            help="Sparse inference: at most this many inducing inputs per joint (chosen until they "
+            "miss at most 1 % of the noise variance).",
+        ),
+    ] = SGPOptions.n_inducing,
     guard: Annotated[bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")] = True,
     gp_inputs: Annotated[str | None, typer.Option("--gp-inputs", help="Streams the GP sees, e.g. q,qd.")] = None,
     restarts: Annotated[
@@ -77,11 +109,20 @@ def sgp_fit(
         ),
     ] = SGPOptions.min_noise,
     seed: Annotated[int, typer.Option("--seed")] = 0,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,
+    jobs: Annotated[
+        int,
+        typer.Option(
+            "--jobs",
+            "-j",
+            min=1,
+            help="Threads for independent work (hyperparameter starts, cross-validation folds, "
+            "joints), each on one BLAS thread.",
+        ),
+    ] = 1,
     output: Annotated[
         Path | None, typer.Option("-o", "--output", help="Model directory [default: <log>.sgp/].")
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
 ) -> None:
     """Fit a torque model: parametric (rigid body + friction) part, GP part and hyperparameters."""
     kind = _choice("--model", model, KINDS)
@@ -105,7 +146,8 @@ def sgp_fit(
     )
     data = load_log(log)
     rob = robot_for_log(robot, data)
-    fitted = fit_dynamics(data, rob, opts)
+    with fit_progress(quiet) as progress:
+        fitted = fit_dynamics(data, rob, opts, progress=progress)
     out = output or default_output(log, ".sgp")
     meta = {
         "log": str(log),
@@ -124,6 +166,11 @@ def sgp_fit(
     ] + rows
     hyper = fitted.hyperparameters_
     rows += [(f"guard {j}", hyper[j]["guard_choice"]) for j in fitted.joint_names if "guard_choice" in hyper[j]]
+    rows += [
+        (f"inducing {j}", f"{hyper[j]['n_inducing']} (missed prior variance {hyper[j]['sparse_gap']:.2g} σ_v²)")
+        for j in fitted.joint_names
+        if "n_inducing" in hyper[j]
+    ]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
     summary(f"sgp-fit → {out}", rows, quiet=quiet)
@@ -152,10 +199,9 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
     if data.has("tau"):
         measured = data.stream("tau").select(names).data
         streams["tau_measured"] = make_stream(names, measured)
-        err = nmse(pred.tau, measured)
-        inside = np.mean(np.abs(pred.tau - measured) <= 2 * pred.tau_std, axis=0)
-        rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, err, strict=True)]
-        rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, inside, strict=True)]
+        sc = score(measured, pred.tau, names, std=pred.tau_std)
+        rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, sc.nmse, strict=True)]
+        rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, sc.coverage, strict=True)]
     out = opts.output or default_output(log_path, ".prediction.h5")
     save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), out)
     summary(f"predict → {out}", rows, quiet=opts.quiet)

@@ -144,9 +144,9 @@ def diagnose(log, robot, options: DiagnoseOptions | None = None) -> Diagnosis:
     only contend (a 60-s UR5 log: 6.6 s against 17.8 s with the default threads on 2 cores);
     ``options.jobs`` spreads independent units over processes instead.
     """
-    from threadpoolctl import threadpool_limits
+    from diegocal.parallel import one_blas_thread
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return _diagnose(log, robot, options or DiagnoseOptions())
 
 

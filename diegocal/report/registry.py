@@ -71,9 +71,12 @@ class Section:
 SECTIONS: list[Section] = []
 
 
-def register_section(section: Section) -> Section:
-    """Add a section; later registrations of the same name replace earlier ones."""
-    SECTIONS[:] = [s for s in SECTIONS if s.name != section.name] + [section]
+def register_section(section: Section, before: str | None = None) -> Section:
+    """Add a section; later registrations of the same name replace earlier ones. ``before``: the
+    name of a section this one must be tried before (a more specific kind of the same file)."""
+    rest = [s for s in SECTIONS if s.name != section.name]
+    at = next((i for i, s in enumerate(rest) if s.name == before), len(rest))
+    SECTIONS[:] = rest[:at] + [section] + rest[at:]
     return section
 
 

@@ -1,8 +1,9 @@
 """Report section for sgp/ model directories (thesis ch. 3 figures; registers itself on import).
 
 Recognises a directory holding ``sgp.yaml`` (one model), or a directory whose sub-directories
-are models (a comparison of methods, e.g. ``results/{pr,gp,prgp,sgp}.sgp``). Plain logs are left
-to the log section. Pages: summary; measured vs predicted torques with ±2σ bands on the training
+are models (a comparison of methods, e.g. ``results/{pr,gp,prgp,sgp}.sgp``), and the log that
+``diegocal predict`` writes for such a model (held-out nMSE and ±2σ coverage per joint); other
+logs are left to the log section. Pages: summary; measured vs predicted torques with ±2σ bands on the training
 set; thesis Fig. 3.10-style prediction ±2σ along each joint angle with the other inputs held at
 their training mean; the latent std over a (q_j, qd_j) slice with the training samples; and, for
 a comparison, nMSE per joint and method.
@@ -52,9 +53,7 @@ def plot_torque_band(model, joint: int, ax=None, max_samples: int = 1500):
     pred = model.predict_arrays(U[:, :n], U[:, n : 2 * n], U[:, 2 * n :])
     k = np.arange(len(U))
     mu, sd = pred.tau[:, joint], pred.tau_std[:, joint]
-    ax.fill_between(
-        k, mu - 2 * sd, mu + 2 * sd, color=COLORS["band"], alpha=0.25, lw=0, label="±2σ"
-    )
+    ax.fill_between(k, mu - 2 * sd, mu + 2 * sd, color=COLORS["band"], alpha=0.25, lw=0, label="±2σ")
     ax.plot(k, model.tau_[: len(U), joint], color=COLORS["measured"], lw=0.6, label="measured")
     ax.plot(k, mu, color=COLORS["model"], lw=0.8, label=model.options.kind)
     if model.options.kind in ("sgp", "prgp"):
@@ -93,9 +92,7 @@ def plot_angle_slice(model, joint: int, ax=None):
     grid = np.linspace(lo, hi, SLICE_POINTS)
     pred = model.predict_arrays(*_slice_states(model, joint, grid))
     mu, sd = pred.tau[:, joint], pred.tau_std_latent[:, joint]
-    ax.fill_between(
-        grid, mu - 2 * sd, mu + 2 * sd, color=COLORS["band"], alpha=0.25, lw=0, label="±2σ (latent)"
-    )
+    ax.fill_between(grid, mu - 2 * sd, mu + 2 * sd, color=COLORS["band"], alpha=0.25, lw=0, label="±2σ (latent)")
     ax.plot(grid, mu, color=COLORS["model"], label=model.options.kind)
     seen = model.U_[:, joint]
     ax.plot(
@@ -152,6 +149,83 @@ def plot_nmse_comparison(summaries: dict, ax=None):
     return ax
 
 
+def is_prediction(path: Path) -> bool:
+    """A log written by ``diegocal predict`` for a dynamics model: predicted ``tau`` with its
+    ``tau_std`` and the ``tau_measured`` it is scored against."""
+    from diegocal.io import load_log
+    from diegocal.report.logs import LOG_SUFFIXES
+
+    path = Path(path)
+    if path.suffix.lower() not in LOG_SUFFIXES or not path.is_file():
+        return False
+    try:
+        return all(load_log(path).has(s) for s in ("tau", "tau_std", "tau_measured"))
+    except Exception:  # noqa: BLE001 - not a readable log: not ours
+        return False
+
+
+def heldout_score(log):
+    """:class:`diegocal.evaluate.Score` of a prediction log: nMSE, RMSE, ±2σ coverage per joint."""
+    from diegocal.evaluate import score
+
+    pred = log.stream("tau")
+    measured = log.stream("tau_measured").select(pred.names).data
+    std = log.stream("tau_std").select(pred.names).data
+    return score(measured, pred.data, pred.names, std=std)
+
+
+def plot_prediction_band(log, joint: int, ax=None, max_samples: int = 1500):
+    """Held-out: measured vs predicted torque of one joint with the ±2σ band (eq. 3.20)."""
+    ax = axes_or_new(ax)
+    pred = log.stream("tau")
+    name = pred.names[joint]
+    t = log.time[:max_samples]
+    mu = pred.data[:max_samples, joint]
+    sd = log.stream("tau_std").select([name]).data[:max_samples, 0]
+    ax.fill_between(t, mu - 2 * sd, mu + 2 * sd, color=COLORS["band"], alpha=0.25, lw=0, label="±2σ")
+    ax.plot(
+        t,
+        log.stream("tau_measured").select([name]).data[:max_samples, 0],
+        color=COLORS["measured"],
+        lw=0.6,
+        label="measured",
+    )
+    ax.plot(t, mu, color=COLORS["model"], lw=0.8, label="predicted")
+    sc = heldout_score(log)
+    ax.set_title(f"{name}: held out (nMSE {sc.nmse[joint]:.3g}, within ±2σ {sc.coverage[joint]:.2f})")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("τ [N·m]")
+    ax.legend(ncol=3, fontsize=6)
+    return ax
+
+
+def prediction_pages(path: Path, pdf, context) -> None:
+    """A prediction log: per joint held-out nMSE, RMSE and ±2σ coverage (0.95 expected for a
+    calibrated predictive std), then measured vs predicted with the band."""
+    from diegocal.io import load_log
+
+    log = load_log(path)
+    sc = heldout_score(log)
+    lines = [
+        f"samples: {log.n_samples}   robot: {log.robot or '-'}",
+        "",
+        f"{'joint':20s} {'nMSE':>10} {'RMSE':>10} {'within ±2σ':>11}",
+    ]
+    lines += [
+        f"{j:20s} {e:10.4g} {r:10.4g} {c:11.3f}"
+        for j, e, r, c in zip(sc.channels, sc.nmse, sc.rmse, sc.coverage, strict=True)
+    ]
+    lines += ["", "within ±2σ: the fraction of measured torques inside the predicted mean ± 2 std", "(0.95 expected)."]
+    save_page(pdf, text_page(f"Held-out prediction: {path.name}", lines))
+    n = len(sc.channels)
+    for start in range(0, n, MAX_JOINTS_PER_PAGE):
+        joints = range(start, min(n, start + MAX_JOINTS_PER_PAGE))
+        fig, axes = page(len(joints), 1, title=f"{path.name}: held out (±2σ)")
+        for ax, j in zip(axes[:, 0], joints, strict=True):
+            plot_prediction_band(log, j, ax=ax)
+        save_page(pdf, fig)
+
+
 # ----------------------------------------------------------------------------- pages
 def summary_lines(summary: dict) -> list[str]:
     from diegocal.io.bundle import robot_of
@@ -179,15 +253,15 @@ def summary_lines(summary: dict) -> list[str]:
             parts.append(f"sigma_z {entry['sigma_z']:.3g}")
         if "guard_choice" in entry:
             parts.append(f"guard: {entry['guard_choice']}")
+        if "n_inducing" in entry:
+            parts.append(f"{entry['n_inducing']} inducing inputs (missing {entry['sparse_gap']:.2g} σ_v²)")
         lines.append(f"  {j}: " + ", ".join(parts))
         for name, ell in (entry.get("lengthscales") or {}).items():
             lines.append(f"      l {name:24s} {ell:.3g}")
     par = summary.get("parameters") or {}
     if par:
         lines += ["", f"base parameters ({len(par)}): value ± std"]
-        lines += [
-            f"  {k:24s} {v['value']:+.4g} ± {v['std']:.2g}" for k, v in list(par.items())[:40]
-        ]
+        lines += [f"  {k:24s} {v['value']:+.4g} ± {v['std']:.2g}" for k, v in list(par.items())[:40]]
         if len(par) > 40:
             lines.append(f"  ... {len(par) - 40} more in sgp.yaml")
     meta = summary.get("meta") or {}
@@ -227,3 +301,5 @@ def pages(path: Path, pdf, context) -> None:
 
 
 register_section(Section("sgp", recognise, pages, describe))
+# a dynamics prediction is a log too: tried before the plain log section
+register_section(Section("sgp prediction", is_prediction, prediction_pages, lambda p: {"log": str(p)}), before="log")

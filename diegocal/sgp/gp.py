@@ -41,10 +41,12 @@ import numpy as np
 from scipy.linalg import blas, cho_solve, lapack, solve_triangular
 
 from diegocal.errors import NumericalError
+from diegocal.parallel import thread_map
 from diegocal.sgp.kernels import Kernel
 
 LOG_2PI = float(np.log(2.0 * np.pi))
 JITTERS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)  # relative to the mean diagonal
+QUERY_CHUNK = 2000  # queries predicted at once (memory O(QUERY_CHUNK · N) per output)
 
 
 def factor(A: np.ndarray, what: str = "covariance") -> tuple[np.ndarray, float]:
@@ -193,12 +195,15 @@ class ExactBlock:
     def finalize(self, alpha: np.ndarray, F: np.ndarray) -> None:
         self.alpha, self.F = alpha, F
 
-    def predict(self, Uq: np.ndarray):
-        """(GP mean (Nq,), latent Z variance given W (Nq,), F_jᵀ A⁻¹ k_q as (Nq, m))."""
+    def predict(self, Uq: np.ndarray, variance: bool = True):
+        """(GP mean (Nq,), latent Z variance given W (Nq,), F_jᵀ A⁻¹ k_q as (Nq, m)); without
+        ``variance`` the last two are None (the mean alone costs O(Nq N), not O(Nq N²))."""
         Nq, m = len(Uq), self.F.shape[1]
         if self.kernel is None:
-            return np.zeros(Nq), np.zeros(Nq), np.zeros((Nq, m))
+            return (np.zeros(Nq), np.zeros(Nq), np.zeros((Nq, m))) if variance else (np.zeros(Nq), None, None)
         kq = self.kernel(Uq, self.U, self.theta)  # (Nq, N)
+        if not variance:
+            return kq @ self.alpha, None, None
         v = solve_triangular(self.L, kq.T, lower=True, check_finite=False)
         Ainv_k = solve_triangular(self.L, v, lower=True, trans="T", check_finite=False)
         var = self.kernel.diag(Uq, self.theta) - np.sum(v * v, axis=0)
@@ -239,6 +244,12 @@ class SparseBlock:
         # tr(K_nn − Q) ≥ 0: how much prior variance the inducing inputs miss
         self.trace_gap = max(float(np.sum(kernel.diag(U, theta)) - np.sum(self.V * self.V)), 0.0)
 
+    @property
+    def gap(self) -> float:
+        """Mean prior variance per sample that the inducing inputs miss, in units of σ_v²
+        (:mod:`diegocal.sgp.inducing`)."""
+        return self.trace_gap / (len(self.U) * self.noise_var)
+
     def _Binv(self, X):
         x, _ = lapack.dpotrs(self.LB, X, lower=1)
         return x
@@ -260,8 +271,10 @@ class SparseBlock:
         self.gamma = solve_triangular(self.Lmm, self.V @ alpha, lower=True, trans="T", check_finite=False)
         self.H = solve_triangular(self.Lmm, self._Binv(self.V @ F), lower=True, trans="T", check_finite=False) / s2
 
-    def predict(self, Uq: np.ndarray):
+    def predict(self, Uq: np.ndarray, variance: bool = True):
         Kqm = self.kernel(Uq, self.Z, self.theta)
+        if not variance:
+            return Kqm @ self.gamma, None, None
         a = solve_triangular(self.Lmm, Kqm.T, lower=True, check_finite=False)
         b = solve_triangular(self.LB, a, lower=True, check_finite=False)  # S = L_mm B L_mmᵀ
         var = self.kernel.diag(Uq, self.theta) - np.sum(a * a, 0) + np.sum(b * b, 0)
@@ -313,22 +326,30 @@ class Posterior:
             return np.zeros((0, 0))
         return cho_solve((self.M_chol, True), np.eye(m))
 
-    def predict(self, Uq: np.ndarray, Fq: np.ndarray):
+    def predict(self, Uq: np.ndarray, Fq: np.ndarray, variance: bool = True):
         """Posterior at queries. Uq (Nq, p) scaled inputs, Fq (Nq, n, m) scaled features.
 
-        Returns mean (Nq, n), latent variance (Nq, n) (eq. 3.20), parametric part f ŵ (Nq, n).
+        Returns mean (Nq, n), latent variance (Nq, n) (eq. 3.20; None without ``variance``: the
+        mean alone is O(Nq N) per output, the variance O(Nq N²) exact), parametric part f ŵ
+        (Nq, n). Queries are taken in chunks of QUERY_CHUNK, so that an exact posterior of N
+        samples needs O(QUERY_CHUNK · N) memory however many queries there are.
         """
         Nq, n = len(Uq), len(self.blocks)
-        mean, var, par = np.zeros((Nq, n)), np.zeros((Nq, n)), np.zeros((Nq, n))
-        for j, blk in enumerate(self.blocks):
-            gp_mean, gp_var, FtAk = blk.predict(Uq)
-            par[:, j] = Fq[:, j] @ self.w_mean
-            mean[:, j] = par[:, j] + gp_mean
-            var[:, j] = gp_var
-            if self.w_mean.size:
-                r = Fq[:, j] - FtAk  # R&W eq. (2.42): W's uncertainty seen through f - Fᵀ A⁻¹ k
-                s = solve_triangular(self.M_chol, r.T, lower=True, check_finite=False)
-                var[:, j] += np.sum(s * s, axis=0)
+        mean, par = np.zeros((Nq, n)), np.zeros((Nq, n))
+        var = np.zeros((Nq, n)) if variance else None
+        for a in range(0, Nq, QUERY_CHUNK):
+            rows = slice(a, min(a + QUERY_CHUNK, Nq))
+            for j, blk in enumerate(self.blocks):
+                gp_mean, gp_var, FtAk = blk.predict(Uq[rows], variance)
+                par[rows, j] = Fq[rows, j] @ self.w_mean
+                mean[rows, j] = par[rows, j] + gp_mean
+                if not variance:
+                    continue
+                var[rows, j] = gp_var
+                if self.w_mean.size:
+                    r = Fq[rows, j] - FtAk  # R&W eq. (2.42): W's uncertainty seen through f - Fᵀ A⁻¹ k
+                    s = solve_triangular(self.M_chol, r.T, lower=True, check_finite=False)
+                    var[rows, j] += np.sum(s * s, axis=0)
         return mean, var, par
 
 
@@ -353,13 +374,30 @@ def _shared_w(blocks, Y, F, sigma_w2):
     return a, G, B, b, LM, w, alpha
 
 
-def _blocks(kernels, U, hp: Hyperparameters, noise, inducing, keep_kernel=False) -> list:
-    return [
-        SparseBlock(k, U, hp.theta[j], noise[j], inducing, keep_kernel)
-        if k is not None and inducing is not None
-        else ExactBlock(k, U, hp.theta[j], noise[j], keep_kernel)
-        for j, k in enumerate(kernels)
-    ]
+def per_output(inducing, n: int) -> list:
+    """Inducing inputs as a list of n entries, (M_j, p) arrays or None (exact): ``inducing`` is
+    None (all exact), one (M, p) array shared by every output, or a sequence of n such entries."""
+    if inducing is None:
+        return [None] * n
+    if isinstance(inducing, np.ndarray) and inducing.ndim == 2:
+        return [inducing] * n
+    out = list(inducing)
+    if len(out) != n:
+        raise ValueError(f"expected inducing inputs for {n} outputs, got {len(out)}")
+    return out
+
+
+def _blocks(kernels, U, hp: Hyperparameters, noise, inducing, keep_kernel=False, jobs: int = 1) -> list:
+    """One factorised block per output (``jobs`` threads: the outputs are independent)."""
+    Z = per_output(inducing, len(kernels))
+
+    def block(j):
+        k = kernels[j]
+        if k is not None and Z[j] is not None:
+            return SparseBlock(k, U, hp.theta[j], noise[j], Z[j], keep_kernel)
+        return ExactBlock(k, U, hp.theta[j], noise[j], keep_kernel)
+
+    return thread_map(block, range(len(kernels)), jobs)
 
 
 def _log_likelihood(blocks, Y, m, sw2, LM, alpha) -> float:
@@ -372,11 +410,12 @@ def _log_likelihood(blocks, Y, m, sw2, LM, alpha) -> float:
     return -0.5 * float(np.sum(Y * alpha)) - 0.5 * logdet - 0.5 * N * n * LOG_2PI - penalty
 
 
-def fit_posterior(kernels, U, Y, F, hp: Hyperparameters, inducing: np.ndarray | None = None) -> Posterior:
-    """Posterior for fixed hyperparameters; ``inducing`` (M, p) switches GP blocks to DTC/VFE
-    (then ``log_likelihood`` is the VFE bound)."""
+def fit_posterior(kernels, U, Y, F, hp: Hyperparameters, inducing=None, jobs: int = 1) -> Posterior:
+    """Posterior for fixed hyperparameters; ``inducing`` (:func:`per_output`: one (M, p) array,
+    or one per output, None = exact) switches GP blocks to DTC/VFE (then ``log_likelihood`` is
+    the VFE bound); ``jobs`` threads factorise the outputs' blocks."""
     noise = np.exp(2.0 * hp.log_sigma_v)
-    blocks = _blocks(kernels, U, hp, noise, inducing)
+    blocks = _blocks(kernels, U, hp, noise, inducing, jobs=jobs)
     sw2 = np.exp(2.0 * hp.log_sigma_w)
     _, _, _, _, LM, w, alpha = _shared_w(blocks, Y, F, sw2)
     for j, blk in enumerate(blocks):
@@ -385,9 +424,7 @@ def fit_posterior(kernels, U, Y, F, hp: Hyperparameters, inducing: np.ndarray | 
     return Posterior(blocks, w, LM, noise, float(ll))
 
 
-def negative_log_likelihood(
-    vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool = True, inducing: np.ndarray | None = None
-):
+def negative_log_likelihood(vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool = True, inducing=None):
     """−log p(y | hyperparameters) and its gradient w.r.t. the packed log-hyperparameters.
 
     Gradient: ``∂(−log p)/∂θ = −½ tr(W_j ∂A_j/∂θ)`` with ``W = α αᵀ − K⁻¹`` (R&W eq. 5.9),

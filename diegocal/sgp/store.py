@@ -29,27 +29,35 @@ import numpy as np
 from diegocal.errors import InputFileError
 from diegocal.io import atomic_path, load_yaml, save_yaml
 from diegocal.robot import load_robot
-from diegocal.sgp.gp import Hyperparameters
+from diegocal.sgp.gp import Hyperparameters, per_output
 
 FORMAT = "diegocal-sgp"
 VERSION = 1
 
 
 def _pack_hyper(prefix: str, hp: Hyperparameters | None, inducing, out: dict) -> None:
+    """Packed hyperparameters and, per output j with inducing inputs, ``{prefix}_inducing_{j}``."""
     if hp is None:
         return
     out[f"{prefix}_vec"] = hp.pack()
     out[f"{prefix}_sizes"] = np.array([t.size for t in hp.theta], dtype=int)
     if inducing is not None:
-        out[f"{prefix}_inducing"] = inducing
+        for j, Z in enumerate(per_output(inducing, len(hp.theta))):
+            if Z is not None:
+                out[f"{prefix}_inducing_{j}"] = Z
 
 
-def _unpack_hyper(prefix: str, arrays) -> tuple[Hyperparameters | None, np.ndarray | None]:
+def _unpack_hyper(prefix: str, arrays) -> tuple[Hyperparameters | None, list | np.ndarray | None]:
+    """(hyperparameters, inducing inputs per output (None: exact) or None); a file of an older
+    version holds one array ``{prefix}_inducing`` shared by every output."""
     if f"{prefix}_vec" not in arrays:
         return None, None
-    hp = Hyperparameters.unpack(arrays[f"{prefix}_vec"], list(arrays[f"{prefix}_sizes"]))
-    ind = arrays[f"{prefix}_inducing"] if f"{prefix}_inducing" in arrays else None
-    return hp, ind
+    sizes = list(arrays[f"{prefix}_sizes"])
+    hp = Hyperparameters.unpack(arrays[f"{prefix}_vec"], sizes)
+    if f"{prefix}_inducing" in arrays:
+        return hp, arrays[f"{prefix}_inducing"]
+    ind = [arrays.get(f"{prefix}_inducing_{j}") for j in range(len(sizes))]
+    return hp, (ind if any(z is not None for z in ind) else None)
 
 
 def summary_dict(model, meta: dict | None = None) -> dict:
@@ -65,7 +73,7 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "joints_without_tau": list(model.joints_without_tau),
         "n_samples": int(len(model.U_)),
         "inference": est.inference,
-        "n_inducing": None if est.inducing_ is None else int(len(est.inducing_)),
+        "n_inducing": None if est.inducing_ is None else int(sum(len(z) for z in est.inducing_ if z is not None)),
         "gp_inputs": [model.input_names[d] for d in model.gp_dims] if model.options.kind != "pr" else [],
         "log_likelihood": float(est.log_likelihood_),
         "nmse_in_sample": {j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)},

@@ -4,7 +4,8 @@ True dynamics: rigid body + viscous + Coulomb friction (eq. 3.29) + cable-like f
 as it approaches its upper limit (``position_friction``, q₃ ≥ 1.35 rad). The parametric part is
 eq. 3.30's full linear-in-parameter model (rigid body + viscous + Coulomb). Train on a horizontal
 figure-eight; test on a similar horizontal one (new seed: centre, size and period jittered) and on
-a vertical one (generalisation to unseen states).
+a vertical one (generalisation to unseen states), both of the same robot (the training run's
+friction; before issue #14 each test log drew its own).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
-from experiments.sgp.common import run_methods
+from experiments.sgp.common import run_methods, same_robot
 
 CABLE = (1.35, 2.3)
 
@@ -33,9 +34,10 @@ class ArmConfig:
 
 
 def arm_data(robot, seed: int, cfg: ArmConfig):
+    """Training log and test logs of one robot: the tests keep the training run's friction."""
     rng = np.random.default_rng(seed)
 
-    def sim(trajectory, duration):
+    def sim(trajectory, duration, friction=None):
         opts = DynamicsOptions(
             trajectory=trajectory,
             duration=duration,
@@ -44,13 +46,15 @@ def arm_data(robot, seed: int, cfg: ArmConfig):
             regions={"joint3": CABLE},
             effect_scale=cfg.cable,
             noise=cfg.noise,
+            **(friction or {}),
         )
         return simulate_dynamics(robot, opts, rng)
 
     train = sim("figure8-horizontal", cfg.train_s)
+    same = same_robot(train, robot)
     tests = {
-        "horizontal": sim("figure8-horizontal", cfg.test_s),
-        "vertical": sim("figure8-vertical", cfg.test_s),
+        "horizontal": sim("figure8-horizontal", cfg.test_s, same),
+        "vertical": sim("figure8-vertical", cfg.test_s, same),
     }
     return train, tests
 

@@ -45,7 +45,7 @@ from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import Guard, SemiParametricGP, SquaredExponential, Subspace
 from diegocal.sgp.model import default_guard
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
-from experiments.sgp.common import METHODS, score_arrays, select
+from experiments.sgp.common import METHODS, same_robot, score_arrays, select
 
 AXES = ("pole", "wheel")
 INPUTS = ("q.pole", "q.wheel", "qd.pole", "qd.wheel", "m")
@@ -68,7 +68,7 @@ class WheelConfig:
     rate_hz: float = 100.0
     decimate: int = 2
     noise: float = 0.002
-    restarts: int = 1
+    restarts: int = 2
     maxiter: int = 200
 
 
@@ -107,7 +107,7 @@ class ForwardModel:
     recorded acceleration (noise included). Learned: ``w_`` (6,) or None (GP), ``estimator_``.
     """
 
-    def __init__(self, method: str, seed: int = 0, restarts: int = 1, maxiter: int = 200, guard: Guard | None = None):
+    def __init__(self, method: str, seed: int = 0, restarts: int = 2, maxiter: int = 200, guard: Guard | None = None):
         self.kind, self.guarded = METHODS[method]
         self.method, self.seed, self.restarts, self.maxiter = method, seed, restarts, maxiter
         self.guard = guard or WHEEL_GUARD
@@ -150,15 +150,21 @@ def wheel_data(robot, seed: int, cfg: WheelConfig):
     """Training (pole-down) and the two test logs, from one seed."""
     rng = np.random.default_rng(seed)
 
-    def sim(trajectory, duration):
+    def sim(trajectory, duration, viscous=None):
         opts = DynamicsOptions(
-            trajectory=trajectory, duration=duration, rate_hz=cfg.rate_hz, coulomb=0.0, noise=cfg.noise
+            trajectory=trajectory,
+            duration=duration,
+            rate_hz=cfg.rate_hz,
+            coulomb=0.0,
+            viscous=viscous,
+            noise=cfg.noise,
         )
         log = simulate_dynamics(robot, opts, rng)
         return select(log, np.arange(log.n_samples) % cfg.decimate == 0)
 
     train = sim("pole-down", cfg.train_s)
-    return train, {"pole-down": sim("pole-down", cfg.test_s), "pole-up": sim("pole-up", cfg.test_s)}
+    viscous = same_robot(train, robot)["viscous"]  # the tests are of the same robot
+    return train, {"pole-down": sim("pole-down", cfg.test_s, viscous), "pole-up": sim("pole-up", cfg.test_s, viscous)}
 
 
 def run_reaction_wheel(seeds=(0, 1, 2, 3, 4), cfg: WheelConfig = WheelConfig(), methods=None, guard=None) -> list:

@@ -1,5 +1,5 @@
 """The experiment harness scores what it should: nMSE against the noise-free torque normalised by
-its variance, coverage of the measured torque by mean ± 1.96 σ, per region and joint."""
+its variance, coverage of the measured torque by mean ± 2σ, per region and joint."""
 
 from __future__ import annotations
 

@@ -113,7 +113,7 @@ def test_sparse_close_to_exact_on_the_same_data(arm2, case, fitted, tmp_path):
 
 
 def test_guard_switches_gp_inputs_and_bounds(case, fitted):
-    from diegocal.sgp.estimator import RELEASED_LENGTHSCALE
+    from diegocal.sgp.guard import RELEASED_LENGTHSCALE
     from diegocal.sgp.model import MAX_LENGTHSCALE
 
     train = case[0]
@@ -135,7 +135,7 @@ def test_guard_switches_gp_inputs_and_bounds(case, fitted):
             assert ell <= MAX_LENGTHSCALE * std[name] * (1 + 1e-9) or released
     assert choices <= {"learnt", "released", "parametric"}
     assert on.gp_.n_starts_ == 3 and set(on.gp_.validation_scores_) >= {"learnt", "parametric"}
-    assert off.gp_.n_starts_ == 2 and not hasattr(off.gp_, "validation_scores_")
+    assert off.gp_.n_starts_ == 3 and not hasattr(off.gp_, "validation_scores_")
     explicit = replace(SGPOptions(kind="sgp", guard=False), gp_inputs=("q",))
     assert explicit.resolved_gp_inputs() == ("q",)
 
