@@ -544,7 +544,12 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
         _pooled(adapter.score(new, val, exclude), channels),
     )
     kept = bool(np.isfinite(after) and after**2 <= (1.0 - options.min_gain) * before**2)
-    note = {"validation_rmse_before": before, "validation_rmse_after": after, "kept": kept}
+    note = {
+        "model": adapter.describe(new),
+        "validation_rmse_before": before,
+        "validation_rmse_after": after,
+        "kept": kept,
+    }
     if kept:
         hb, ha = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
     out = []
