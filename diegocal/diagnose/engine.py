@@ -505,7 +505,24 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             )
             findings.append(Finding(term, "unexplained", None, None, evidence))
             say(f"unexplained structure on {t.term.channel}{unit} against {region.variable}")
-    fitted, findings = _absorb(adapter, fitted, findings, (train, val, held), exclude, options, unit)
+    absorbed, findings = _absorb(adapter, fitted, findings, (train, val, held), exclude, options, unit)
+    if absorbed is not fitted:  # the evidence plots of what it absorbed: before and after
+        res_new = adapter.residuals(absorbed)
+        findings = [
+            replace(
+                f,
+                evidence={
+                    **f.evidence,
+                    "curves": _curves(
+                        res, res_new, f.channel, f.evidence["variable"], shown, length, train, options.n_bins, exclude
+                    ),
+                },
+            )
+            if f.kind == "unexplained"
+            else f
+            for f in findings
+        ]
+        fitted = absorbed
 
     baseline_score = adapter.score(baseline, held, exclude)
     extended_score = adapter.score(fitted, held, exclude)

@@ -338,6 +338,10 @@ def test_cli_unexplained_structure_is_absorbed_by_the_sgp(arm3, tmp_path):
     gain = found[0]["gain"]
     assert gain["rmse_after"] < 0.5 * gain["rmse_before"], gain
     assert found[0]["evidence"]["nonparametric"]["kept"] is True
+    curves = found[0]["evidence"]["curves"]  # the evidence plot: binned residual before and after
+    assert max(map(abs, filter(None, curves["after"]["mean"]))) < 0.5 * max(
+        map(abs, filter(None, curves["before"]["mean"]))
+    )
     base, ext = d["baseline"]["heldout_rmse"][joint], d["extended"]["heldout_rmse"][joint]
     assert base > 3 * NOISE and ext < 1.5 * NOISE, (base, ext)
     assert "gp[" in d["extended"]["model"] and joint in d["extended"]["model"].split("gp[")[1]
