@@ -107,6 +107,10 @@ class Adapter(Protocol):
 
     def save(self, fitted, path, header: dict) -> Path: ...
 
+    # Optional: ``absorb(fitted, channels, train) -> fitted | None``, the model extended with a
+    # non-parametric part fitted on the training samples for the ``unexplained`` channels (the
+    # dynamics SGP's GP); None when the domain has none. See :func:`run_unit`, step 3.
+
 
 # ----------------------------------------------------------------------------- options and results
 @dataclass(frozen=True)
@@ -405,7 +409,10 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
        each fitted on the training blocks and tested on the validation blocks; the winner's term
        is added and the model refitted, until no candidate is significant (or ``max_rounds``).
        What stays significant in the binned test is ``unexplained``.
-    3. Extend: the last fit is the extended model (``adapter.save`` writes it).
+    3. Extend: the last fit is the extended model (``adapter.save`` writes it). Where something
+       stays ``unexplained`` and the adapter has ``absorb``, its non-parametric part is fitted on
+       the training blocks and kept if it lowers the validation error of those channels (the
+       blocks that chose the terms; the held-out blocks stay unseen).
     4. Measure the gain: held-out blocks only, never used to select.
     """
     from diegocal.diagnose.show import binned_candidate, region_of, show
@@ -498,6 +505,24 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             )
             findings.append(Finding(term, "unexplained", None, None, evidence))
             say(f"unexplained structure on {t.term.channel}{unit} against {region.variable}")
+    absorbed, findings = _absorb(adapter, fitted, findings, (train, val, held), exclude, options, unit)
+    if absorbed is not fitted:  # the evidence plots of what it absorbed: before and after
+        res_new = adapter.residuals(absorbed)
+        findings = [
+            replace(
+                f,
+                evidence={
+                    **f.evidence,
+                    "curves": _curves(
+                        res, res_new, f.channel, f.evidence["variable"], shown, length, train, options.n_bins, exclude
+                    ),
+                },
+            )
+            if f.kind == "unexplained"
+            else f
+            for f in findings
+        ]
+        fitted = absorbed
 
     baseline_score = adapter.score(baseline, held, exclude)
     extended_score = adapter.score(fitted, held, exclude)
@@ -514,6 +539,45 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         exclude,
         dict(res.units),
     )
+
+
+def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, unit: str):
+    """Step 3 for what stays ``unexplained``: the adapter's non-parametric extension (``absorb``),
+    kept when it removes at least ``min_gain`` of the validation mean squared error pooled over
+    the unexplained channels (as a term must); each unexplained finding then gets its held-out
+    RMSE before → after and the evidence ``nonparametric``. ``masks``: train, validation, held out."""
+    train, val, held = masks
+    say = options.progress or (lambda text: None)
+    absorb = getattr(adapter, "absorb", None)
+    channels = tuple(dict.fromkeys(f.channel for f in findings if f.kind == "unexplained"))
+    if absorb is None or not channels:
+        return fitted, findings
+    say(f"fitting the non-parametric part{unit} for {', '.join(channels)}")
+    new = absorb(fitted, channels, train)
+    if new is None:
+        return fitted, findings
+    before, after = (
+        _pooled(adapter.score(fitted, val, exclude), channels),
+        _pooled(adapter.score(new, val, exclude), channels),
+    )
+    kept = bool(np.isfinite(after) and after**2 <= (1.0 - options.min_gain) * before**2)
+    note = {
+        "model": adapter.describe(new),
+        "validation_rmse_before": before,
+        "validation_rmse_after": after,
+        "kept": kept,
+    }
+    if kept:
+        hb, ha = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
+    out = []
+    for f in findings:
+        if f.kind == "unexplained":
+            f = replace(f, evidence={**f.evidence, "nonparametric": note})
+            if kept:
+                f = replace(f, heldout_before=hb, heldout_after=ha)
+        out.append(f)
+    say(f"non-parametric part {'kept' if kept else 'dropped'}{unit}: validation RMSE {before:.4g} → {after:.4g}")
+    return (new if kept else fitted), out
 
 
 def _same(a: Term, b: Term) -> bool:

@@ -69,8 +69,11 @@ def sentence(f: dict) -> str:
     g = f.get("gain") or {}
     unit = f.get("unit") or ""
     if g.get("reduction") is not None:
+        how = "adding it to the model explains"
+        if f["cause"] == "unexplained":
+            how = "the extended model's non-parametric part absorbs"
         gain = (
-            f"; adding it to the model explains {g['reduction']:.0%} of the held-out error "
+            f"; {how} {g['reduction']:.0%} of the held-out error "
             f"(RMSE {g['rmse_before']:.3g} → {g['rmse_after']:.3g} {unit})"
         )
     else:

@@ -149,6 +149,7 @@ def test_clean_arm3_logs_give_no_findings(arm3, seed):
     assert d.findings == (), [f.term.label for f in d.findings]
     u = d.units[0]
     assert u.extended_model == u.baseline_model
+    assert u.fitted.model is None  # nothing unexplained: no non-parametric part was fitted
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda"])
@@ -299,7 +300,78 @@ def test_cli_diagnose_then_predict_with_the_extended_model(arm3, tmp_path):
     assert res.exit_code == 0, res.output
 
 
+# ----------------------------------------------------------------------------- unexplained: the SGP absorbs it
+def with_bump(robot, seed, duration=30.0):
+    """A log with a torque that no term of the vocabulary expresses, added to the simulated one
+    here (not a simulator effect): a smooth bump in the angle of a random joint (not the first),
+    a Gaussian of width a tenth of its visited range centred in its middle 60 %, independent of the
+    velocity (a position_friction needs sign(qd), a spring is linear), RMS U(3, 10) × noise."""
+    from diegocal.io import make_stream
+
+    log = simulate(robot, seed=seed, duration=duration)
+    rng = np.random.default_rng([seed, 7])
+    j = int(rng.integers(1, robot.n_joints))
+    q = log.stream("q").data[:, j]
+    lo, hi = np.quantile(q, [0.2, 0.8])
+    width = 0.1 * float(np.subtract(*np.quantile(q, [0.95, 0.05])))
+    bump = np.exp(-0.5 * ((q - rng.uniform(lo, hi)) / width) ** 2)
+    bump *= rng.uniform(3.0, 10.0) * NOISE / np.sqrt(np.mean(bump**2))
+    tau = log.stream("tau").data.copy()
+    tau[:, j] += bump
+    return log.with_streams(tau=make_stream(log.stream("tau").names, tau)), robot.joint_names[j]
+
+
+def test_cli_unexplained_structure_is_absorbed_by_the_sgp(arm3, tmp_path):
+    """A bump no term expresses: reported ``unexplained`` on its joint; the extended model is an
+    SGP whose GP absorbs it (held-out RMSE on the joint at the noise, against 5-9 × for the
+    baseline), a bundle `predict` uses."""
+    log, joint = with_bump(arm3, seed=0)
+    path = tmp_path / "run.h5"
+    save_log(log, path)
+    res = runner.invoke(app, ["diagnose", str(path), "--domain", "dynamics", "--robot", str(arm3.directory)])
+    assert res.exit_code == 0, res.output
+    from diegocal.io import load_yaml
+
+    d = load_yaml(tmp_path / "run.diagnosis.yaml")
+    found = [f for f in d["findings"] if f["kind"] == "unexplained"]
+    assert [f["channel"] for f in found] == [joint], [(f["cause"], f["channel"]) for f in d["findings"]]
+    gain = found[0]["gain"]
+    assert gain["rmse_after"] < 0.5 * gain["rmse_before"], gain
+    assert found[0]["evidence"]["nonparametric"]["kept"] is True
+    curves = found[0]["evidence"]["curves"]  # the evidence plot: binned residual before and after
+    assert max(map(abs, filter(None, curves["after"]["mean"]))) < 0.5 * max(
+        map(abs, filter(None, curves["before"]["mean"]))
+    )
+    base, ext = d["baseline"]["heldout_rmse"][joint], d["extended"]["heldout_rmse"][joint]
+    assert base > 3 * NOISE and ext < 1.5 * NOISE, (base, ext)
+    assert "gp[" in d["extended"]["model"] and joint in d["extended"]["model"].split("gp[")[1]
+    extended = tmp_path / "run.extended.sgp"
+    bundle = load_bundle(extended)
+    assert bundle.kind == "dynamics" and bundle.data["options"]["kind"] == "sgp"
+    out = tmp_path / "pred.h5"
+    res = runner.invoke(app, ["predict", str(extended), str(path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    err = load_log(out).stream("tau").data - log.stream("tau").data
+    assert np.sqrt(np.mean(err**2, axis=0)).max() < 1.5 * NOISE
+
+
 # ----------------------------------------------------------------------------- naming rates (slow)
+@pytest.mark.slow
+def test_unexplained_structure_rate_over_ten_seeds(arm3):
+    """Ten random bumps (:func:`with_bump`) on 30-s logs: at least 8 are reported ``unexplained``
+    on their joint with the extended model's held-out RMSE there under half the baseline's
+    (measured 9/10 on seeds 0-9; the miss, 4.4 × noise, gives no finding)."""
+    ok = 0
+    for seed in range(10):
+        log, joint = with_bump(arm3, seed)
+        d = run(log, arm3)
+        u = d.units[0]
+        i = u.baseline_score.channels.index(joint)
+        flagged = any(f.kind == "unexplained" and f.channel == joint for f in d.findings)
+        ok += flagged and u.extended_score.rmse[i] < 0.5 * u.baseline_score.rmse[i]
+    assert ok >= 8, ok
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "cause", ["torque_offset", "spring", "armature", "torque_lag", "position_friction", "coupled_friction"]
