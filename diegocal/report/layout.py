@@ -253,10 +253,12 @@ def table_sheets(
     notes: Sequence[str] = (),
     sheet: Sheet | None = None,
     size: float = 7.5,
+    balance: bool = True,
 ) -> list[Sheet]:
     """A table over as many sheets as it needs: the intro paragraphs first, the header repeated on
     every sheet ("title (continued)"), the notes after the last row (on a new sheet if need be).
-    Continues on ``sheet`` when given."""
+    Continues on ``sheet`` when given. ``balance``: when the rows spill onto one more sheet, share
+    them evenly (no stub last page); without it, fill each sheet (more content follows the table)."""
     sheets = [sheet or Sheet(title)]
     if sheet is not None:
         sheet.heading(title)
@@ -269,7 +271,7 @@ def table_sheets(
     while True:
         fit = sheets[-1].table(columns, rest, size=size, dry=True, reserve=reserve)
         limit, fresh = None, None
-        if fit < len(rest):  # it spills: when one more page takes the rest, share the rows evenly
+        if fit < len(rest) and balance:  # it spills: when one more page takes the rest, share the rows evenly
             fresh = Sheet(f"{title} (continued)")
             if len(rest) - fit <= fresh.table(columns, rest, size=size, dry=True, reserve=reserve):
                 limit = max(1, min(fit, -(-len(rest) // 2)))

@@ -69,6 +69,7 @@ def plot_band(x, measured, mean, std, ax=None, parametric=None, label: str = "mo
     """Measured vs predicted torque of one joint with the ±2σ band of a measured torque (eq. 3.20);
     ``parametric``: the parametric part alone, dashed. Arrays (T,): x (s or sample), torques N·m."""
     ax = axes_or_new(ax)
+    x, measured, mean, std, parametric = gaps_broken(x, measured, mean, std, parametric)
     ax.fill_between(x, mean - 2 * std, mean + 2 * std, color=COLORS["band"], alpha=0.25, lw=0, label="±2σ")
     ax.plot(x, mean, color=COLORS["model"], lw=1.4, label=label)  # wide, below: the measured line shows on it
     ax.plot(x, measured, color=COLORS["measured"], lw=0.5, label="measured")
@@ -77,6 +78,17 @@ def plot_band(x, measured, mean, std, ax=None, parametric=None, label: str = "mo
     headroom(ax)
     ax.legend(ncol=4, fontsize=6, loc="upper right", handlelength=1.5, columnspacing=1.0)
     return ax
+
+
+def gaps_broken(x, *ys):
+    """``x`` (T,) and the series ``ys`` (T,) with NaN put into every gap of ``x`` wider than three
+    median steps (a diagnosis's training blocks are not contiguous): no line is drawn across a gap."""
+    x = np.asarray(x, float)
+    steps = np.diff(x)
+    if len(steps) < 2:
+        return (x, *ys)
+    at = np.flatnonzero(steps > 3 * np.median(steps)) + 1
+    return (np.insert(x, at, np.nan), *(None if y is None else np.insert(np.asarray(y, float), at, np.nan) for y in ys))
 
 
 def headroom(ax, share: float = 0.25) -> None:
@@ -279,11 +291,12 @@ def flow(
 
 
 def more(sheets: list[Sheet], title: str, columns, rows, notes, room: float = 0.2) -> None:
-    """A table below the last sheet's content when ``room`` is left there, else from a new page."""
+    """A table below the last sheet's content when ``room`` is left there, else from a new page; a
+    long table fills its pages (figures follow it)."""
     if sheets[-1].room() > room:
-        sheets[-1:] = table_sheets(title, columns, rows, notes=notes, sheet=sheets[-1])
+        sheets[-1:] = table_sheets(title, columns, rows, notes=notes, sheet=sheets[-1], balance=False)
     else:
-        sheets += table_sheets(title, columns, rows, notes=notes)
+        sheets += table_sheets(title, columns, rows, notes=notes, balance=False)
 
 
 def band_caption(kind: str, where: str) -> str:
