@@ -257,16 +257,15 @@ CHANNEL_NOTE = (
 
 
 CAPTION = (
-    "The residual of the baseline model (orange) and of the extended model (blue) on the validation and held-out "
+    "Residual of the baseline model (orange) and of the extended model (blue) on the validation and held-out "
     "blocks, averaged in bins of the variable that localises the finding (points at the bin medians); bands: ±2 "
-    "standard errors over contiguous sub-blocks, so that correlated samples are not counted as independent. Green "
-    "shading: the region the finding is confined to. A curve that follows zero within its band has nothing left "
-    "to explain."
+    "standard errors over contiguous sub-blocks (correlated samples are not counted as independent); green: the "
+    "region the finding is confined to. A curve that follows zero within its band has nothing left to explain."
 )
 RUNNERS_NOTE = (
-    "The other candidate terms of the same round, fitted on the training blocks and scored on the validation "
-    "blocks (validation gain: the share of the validation error a candidate removes); a candidate is significant "
-    "when its t exceeds the threshold, which holds the family-wise false-alarm rate over all candidates."
+    "The other candidate terms of the round, fitted on the training blocks and scored on the validation blocks "
+    "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
+    "which holds the family-wise false-alarm rate over all candidates."
 )
 
 
@@ -297,6 +296,61 @@ def headline(path: Path, context=None) -> str:
     return f"{d['domain']} ({log}): " + "; ".join(parts)
 
 
+#: Height of a finding's evidence plot (fraction of the page), and the least it may shrink to so
+#: that the finding fits below what is already on the page.
+PLOT_HEIGHT, PLOT_MIN = 0.26, 0.17
+
+
+def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool, after: int | None) -> list[Sheet]:
+    """Finding ``k`` (from 0) on ``sheet``: heading, its sentence (unless ``repeat`` is False: the
+    summary just above says it), the evidence plot and its caption, the runners-up; ``after``: the
+    number of a finding drawn above on the same sheet, whose caption and notes this one refers to.
+    Returns the sheets it ends on (more than one only for a runners-up table longer than a page)."""
+    sheet.heading(f"Finding {k + 1}: {f['cause']} on {f['channel']}")
+    if repeat:
+        sheet.paragraph(sentence(f))
+    plot_evidence(f, sheet.axes(plot_height))
+    sheet.caption(CAPTION if after is None else f"Lines, bands and shading as in Finding {after}'s figure above.")
+    columns, rows = runners_table(f)
+    if not rows:
+        sheet.paragraph("No other candidate was tested in this round.", size=8)
+        return [sheet]
+    note = RUNNERS_NOTE if after is None else f"Columns as in Finding {after}'s table above."
+    return table_sheets("Runners-up of this round", columns, rows, sheet=sheet, notes=(note,))
+
+
+def finding_height(f: dict, k: int, plot_height: float, repeat: bool, after: int | None) -> float:
+    """The height a finding takes on a page (drawn on a scratch sheet and measured); above 1 when it
+    does not fit on one page."""
+    import matplotlib.pyplot as plt
+
+    scratch = Sheet()
+    top = scratch.y
+    drawn = draw_finding(scratch, f, k, plot_height, repeat, after)
+    height = top - drawn[-1].y + (len(drawn) - 1)
+    for s in drawn:
+        plt.close(s.fig)
+    return height
+
+
+def place_finding(sheets: list[Sheet], f: dict, k: int, title: str, last_on: dict) -> None:
+    """Finding ``k`` below what the last sheet holds when it fits whole there (its plot shrunk down to
+    PLOT_MIN if need be), else from the top of a new sheet: several findings share a page, none is
+    split (unless it is longer than a page)."""
+    sheet = sheets[-1]
+    first_sheet = len(sheets) == 1  # the summary above already says the finding in words
+    after = last_on.get(id(sheet))
+    for h in (PLOT_HEIGHT, PLOT_MIN):
+        if finding_height(f, k, h, not first_sheet, after) <= sheet.room():
+            break
+    else:
+        sheets.append(Sheet(f"{title}: evidence"))
+        sheet, h, after = sheets[-1], PLOT_HEIGHT, None
+    repeat = not (first_sheet and sheet is sheets[0])
+    sheets[-1:] = draw_finding(sheet, f, k, h, repeat, after)
+    last_on[id(sheets[-1])] = k + 1
+
+
 def pages(path: Path, pdf, context) -> None:
     from diegocal.io import load_yaml
 
@@ -306,21 +360,9 @@ def pages(path: Path, pdf, context) -> None:
         (CHANNEL_NOTE,) if any(_g(v) == "0 (exact)" for v in (d["baseline"].get("heldout_rmse") or {}).values()) else ()
     )
     sheets = table_sheets(title, *channel_table(d), intro=summary_lines(d), notes=notes)
+    last_on: dict = {}  # id(sheet) -> number of the last finding drawn on it
     for k, f in enumerate(d.get("findings") or []):
-        f = {**f, "domain": d["domain"]}
-        columns, rows = runners_table(f)
-        need = 0.5 + (len(rows) + 3) * sheets[-1].line(7.5 * 1.15) + (0.06 if rows else 0.0)  # the whole finding
-        if sheets[-1].room() < need:
-            sheets.append(Sheet(f"{title}: evidence"))
-        sheet = sheets[-1]
-        sheet.heading(f"Finding {k + 1}: {f['cause']} on {f['channel']}")
-        sheet.paragraph(sentence(f))
-        plot_evidence(f, sheet.axes(0.26))
-        sheet.caption(CAPTION)
-        if rows:
-            sheets[-1:] = table_sheets("Runners-up of this round", columns, rows, sheet=sheet, notes=(RUNNERS_NOTE,))
-        else:
-            sheet.paragraph("No other candidate was tested in this round.", size=8)
+        place_finding(sheets, {**f, "domain": d["domain"]}, k, title, last_on)
     for sheet in sheets:
         save_page(pdf, sheet.fig)
 

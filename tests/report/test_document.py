@@ -6,7 +6,6 @@ Pages are read back with pymupdf (text and its position), as a reader of the PDF
 
 from __future__ import annotations
 
-import itertools
 import re
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 from diegocal.sim.pneumatics import PneumaticSimOptions, simulate_pneumatics
 from tests.pneumatic.conftest import SENSORS, URDF
+from tests.report.checks import check_pages
 
 pymupdf = pytest.importorskip("pymupdf")
 runner = CliRunner()
@@ -37,8 +37,9 @@ def _cli(*args):
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory) -> tuple[list[Path], list[Path]]:
-    """Small real results of every kind: a log, a calibration, a torque model, a diagnosis, with
-    held-out logs of the same robots."""
+    """Small real results of every kind: a log, a calibration, pneumatic models, a comparison of two
+    torque models (pr and sgp), a torque prediction on a held-out log, a diagnosis, with held-out logs
+    of the same robots."""
     d = tmp_path_factory.mktemp("results")
     finger = load_robot(resolve_robot_dir("finger", None))
     session = simulate_kinematics(finger, KinematicsOptions(duration=6.0), np.random.default_rng(4))
@@ -49,7 +50,9 @@ def results(tmp_path_factory) -> tuple[list[Path], list[Path]]:
     for name, seed in (("swing.h5", 1), ("swing_heldout.h5", 2)):
         save_log(simulate_dynamics(pendulum, DynamicsOptions(duration=4.0), np.random.default_rng(seed)), d / name)
     _cli("stac", d / "kin.h5", "-o", d / "kin.calib.yaml", "--max-iterations", 10, "-q")
-    _cli("sgp-fit", d / "swing.h5", "--model", "pr", "-o", d / "swing.sgp", "-q")
+    for kind in ("pr", "sgp"):
+        _cli("sgp-fit", d / "swing.h5", "--model", kind, "-o", d / "swing_models" / f"{kind}.sgp", "-q")
+    _cli("predict", d / "swing_models" / "sgp.sgp", d / "swing_heldout.h5", "-o", d / "swing.prediction.h5", "-q")
     _cli("diagnose", d / "swing.h5", "-o", d / "swing.diagnosis.yaml", "-q")
     robot_dir = d / "tiny_pneu"
     robot_dir.mkdir()
@@ -59,7 +62,8 @@ def results(tmp_path_factory) -> tuple[list[Path], list[Path]]:
     for name, seed in (("air.h5", 1), ("air_heldout.h5", 2)):
         save_log(simulate_pneumatics(tiny, PneumaticSimOptions(duration=6.0, seed=seed)), d / name)
     _cli("pneumatic-fit", d / "air.h5", "--robot", robot_dir, "--all", "-o", d / "air.pneumatic.yaml", "-q")
-    found = [d / "kin.h5", d / "kin.calib.yaml", d / "air.pneumatic.yaml", d / "swing.sgp", d / "swing.diagnosis.yaml"]
+    found = [d / "kin.h5", d / "kin.calib.yaml", d / "air.pneumatic.yaml", d / "swing_models"]
+    found += [d / "swing.prediction.h5", d / "swing.diagnosis.yaml"]
     return found, [d / "kin_heldout.h5", d / "swing_heldout.h5", d / "air_heldout.h5"]
 
 
@@ -71,35 +75,8 @@ def document(results, tmp_path_factory):
     return pymupdf.open(out)
 
 
-def _spans(page):
-    """(ink box, text, size) of every text span: the box spans the glyphs from the baseline, not
-    the font's whole line height (which pymupdf reports and which overlaps between table rows)."""
-    out = []
-    for block in page.get_text("dict")["blocks"]:
-        for line in block.get("lines", []):
-            for s in line["spans"]:
-                if s["text"].strip():
-                    x0, _, x1, _ = s["bbox"]
-                    y, z = s["origin"][1], s["size"]
-                    out.append((pymupdf.Rect(x0, y - 0.72 * z, x1, y + 0.18 * z), s["text"], z))
-    return out
-
-
 def test_nothing_runs_off_the_page_or_overlaps(document):
-    for number, page in enumerate(document, start=1):
-        spans = _spans(page)
-        box = page.rect
-        outside = [t for r, t, _ in spans if not box.contains(r)]
-        assert not outside, f"page {number}: text off the page: {outside[:3]}"
-        clash = [
-            (t1, t2)
-            for (r1, t1, _), (r2, t2, _) in itertools.combinations(spans, 2)
-            if (r1 & r2).get_area() > 0.25 * min(r1.get_area(), r2.get_area())
-        ]
-        assert not clash, f"page {number}: overlapping text {clash[:3]}"
-        words = sum(len(t.split()) for _, t, _ in spans)
-        assert words >= 40, f"page {number} holds almost nothing ({words} words)"
-        assert min(z for _, _, z in spans) >= 5.5, f"page {number}: type below 5.5 pt (8-pt exponents are 5.6)"
+    check_pages(document)
 
 
 def test_contents_point_at_the_sections(document):
@@ -108,10 +85,14 @@ def test_contents_point_at_the_sections(document):
     total = document.page_count
     for number, page in enumerate(document, start=1):
         assert f"page {number} of {total}" in page.get_text()
-    headings = r"Log|Kinematic calibration \(STAC\)|Pneumatic valve-chamber models|Torque model \(SGP\)|Diagnosis"
+    headings = (
+        r"Log|Kinematic calibration \(STAC\)|Pneumatic valve-chamber models|Torque model \(SGP\)|"
+        r"Held-out torque prediction|Diagnosis"
+    )
     entries = re.findall(rf"^({headings})\n(.+)\n(.+)\n(\d+)$", first, flags=re.M)  # section, file, log, page
-    assert len(entries) == 5, first
-    assert [e[2] for e in entries] == ["kin.h5", "kin.h5", "air.h5", "swing.h5", "swing.h5"]  # provenance
+    assert len(entries) == 6, first
+    # provenance (a prediction log does not say which log it was made from)
+    assert [e[2] for e in entries] == ["kin.h5", "kin.h5", "air.h5", "swing.h5", "–", "swing.h5"]
     for heading, result, _, number in entries:
         assert heading in document[int(number) - 1].get_text(), (heading, number)
         assert Path(result).name in document[int(number) - 1].get_text()

@@ -1,22 +1,40 @@
 """The sgp report section: recognises model directories and dynamics predictions (not plain logs)
-and draws their pages."""
+and typesets their pages: a comparison table, per-joint tables with held-out numbers, the identified
+parameters with units, figures with captions; no monospace text dump, nothing off the page."""
 
 import re
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
-from diegocal.io import save_log
-from diegocal.report.registry import section_for
-from diegocal.sgp import SGPOptions, fit_dynamics
+from diegocal.io import load_log, save_log
+from diegocal.report.registry import ReportContext, section_for
+from diegocal.report.sgp import heldout_score
+from diegocal.report.sgp_text import joint_table, verdict
+from diegocal.sgp import SGPOptions, fit_dynamics, load_summary
+from tests.report.checks import check_pages, page_texts
 
+pymupdf = pytest.importorskip("pymupdf")
 runner = CliRunner()
+
+
+def _fonts(document) -> set[str]:
+    return {
+        span["font"]
+        for page in document
+        for b in page.get_text("dict")["blocks"]
+        for line in b.get("lines", [])
+        for span in line["spans"]
+    }
 
 
 def test_report_on_a_comparison_directory(arm2, simulate, tmp_path):
     log, _ = simulate(arm2, T=60, seed=0)
+    held, _ = simulate(arm2, T=40, seed=1)
     save_log(log, tmp_path / "train.h5")
+    save_log(held, tmp_path / "held.h5")
     results = tmp_path / "results"
     for kind in ("pr", "sgp"):
         fit_dynamics(log, arm2, SGPOptions(kind=kind, maxiter=20)).save(results / f"{kind}.sgp")
@@ -24,13 +42,25 @@ def test_report_on_a_comparison_directory(arm2, simulate, tmp_path):
     assert section_for(results).name == "sgp"
     assert section_for(tmp_path / "train.h5").name == "log"  # plain logs stay with the log section
     out = tmp_path / "r.pdf"
-    r = runner.invoke(app, ["report", str(results), str(results / "pr.sgp"), "-o", str(out), "-q"])
+    r = runner.invoke(app, ["report", str(results), "--heldout", str(tmp_path / "held.h5"), "-o", str(out), "-q"])
     assert r.exit_code == 0, r.output
-    data = out.read_bytes()
-    assert data.startswith(b"%PDF")
-    # contents + 2 section openings (plain words, nMSE table) + comparison + 2 models × (summary, fit,
-    # uncertainty) + pr again × 3
-    assert len(re.findall(rb"/Type\s*/Page\b(?!s)", data)) == 1 + 2 + 1 + 3 * 3
+    doc = pymupdf.open(out)
+    check_pages(doc)
+    assert not any("Mono" in f for f in _fonts(doc))  # typeset, no monospace text dump
+    pages = page_texts(doc)
+    text = " ".join(pages)
+    assert "A comparison of 2 torque models" in text and "Lowest nMSE on held-out data (held.h5)" in text
+    assert text.count("Comparison per model and joint") == 1  # one comparison table
+    for kind in ("pr", "sgp"):
+        nmse = load_summary(results / f"{kind}.sgp")["nmse_in_sample"]
+        for joint, value in nmse.items():  # each model and joint a row, its numbers from the model
+            assert re.search(rf"{kind}\.sgp {joint} {re.escape(f'{value:.3g}')} ", text), (kind, joint)
+    assert text.count("Identified parameters") == 2  # each model's base parameters, with units and SE
+    for unit in ("kg·m²", "kg·m", "N·m·s/rad", "± SE"):
+        assert unit in text
+    assert "parametric only" in text or "GP kept as learnt" in text  # the guard's choice in words
+    assert "held-out log (nMSE" in text and "(40 samples)" in text  # held-out bands, sample counts on axes
+    assert "Orange dashed: the parametric part alone" in text  # every line explained
 
 
 def test_empty_directory_is_not_an_sgp_result(tmp_path):
@@ -39,8 +69,22 @@ def test_empty_directory_is_not_an_sgp_result(tmp_path):
     assert sec is None or sec.name != "sgp"
 
 
-def test_a_prediction_log_gets_its_heldout_coverage_page(arm2, simulate, tmp_path):
-    """`predict`'s log for a dynamics model is reported with nMSE and ±2σ coverage per joint."""
+def test_a_sparse_fit_shows_its_inducing_inputs(arm2, simulate, tmp_path):
+    log, _ = simulate(arm2, T=80, seed=3)
+    opts = SGPOptions(kind="sgp", maxiter=15, inference="sparse", n_inducing=12, guard=False)
+    fit_dynamics(log, arm2, opts).save(tmp_path / "m.sgp")
+    columns, rows, notes = joint_table([tmp_path / "m.sgp"], ReportContext())
+    names = [c.name for c in columns]
+    assert "inducing\ninputs" in names and "missed\nvariance" in names
+    hyper = load_summary(tmp_path / "m.sgp")["hyperparameters"]
+    k = names.index("inducing\ninputs")
+    assert [row[k] for row in rows] == [str(hyper[j]["n_inducing"]) for j in arm2.joint_names]
+    assert "Missed variance" in notes[0]
+
+
+def test_a_prediction_log_gets_its_heldout_section(arm2, simulate, tmp_path):
+    """`predict`'s log for a dynamics model: an opening in plain words with a verdict, nMSE, RMSE and
+    ±2σ coverage per joint in a table, measured vs predicted with the band."""
     log, _ = simulate(arm2, T=60, seed=0)
     held, _ = simulate(arm2, T=40, seed=1)
     save_log(held, tmp_path / "held.h5")
@@ -52,12 +96,24 @@ def test_a_prediction_log_gets_its_heldout_coverage_page(arm2, simulate, tmp_pat
     assert "within ±2σ" in r.output
     assert section_for(tmp_path / "p.h5").name == "sgp prediction"
     assert section_for(tmp_path / "held.h5").name == "log"  # a log without a prediction stays a log
-    from diegocal.io import load_log
-    from diegocal.report.sgp import heldout_score
-
     sc = heldout_score(load_log(tmp_path / "p.h5"))
     assert sc.channels == tuple(arm2.joint_names) and np.all((sc.coverage >= 0) & (sc.coverage <= 1))
     out = tmp_path / "r.pdf"
     r = runner.invoke(app, ["report", str(tmp_path / "p.h5"), "-o", str(out), "-q"])
     assert r.exit_code == 0, r.output
-    assert len(re.findall(rb"/Type\s*/Page\b(?!s)", out.read_bytes())) == 1 + 1  # table, bands (one result: no front page)
+    doc = pymupdf.open(out)
+    check_pages(doc)
+    text = " ".join(page_texts(doc))
+    assert "Held-out torque prediction: p.h5" in text
+    assert "predicted by diegocal predict for 40 samples" in text and "Verdict:" in text
+    for j, e, rmse, c in zip(sc.channels, sc.nmse, sc.rmse, sc.coverage, strict=True):
+        row = f"{j} 40 {e:.3g} {rmse:.3g} "
+        assert row in text, row
+        assert f"{j}: nMSE {e:.3g}, {100 * c:.0f} % inside ±2σ" in text  # each joint's band, titled
+
+
+def test_verdict_words():
+    assert verdict(0.004, 0.95) == "good; ±2σ right"
+    assert verdict(0.05, 0.3) == "fair; ±2σ too narrow"
+    assert verdict(0.5, 1.0) == "poor; ±2σ too wide"
+    assert verdict(2.0) == "useless"

@@ -1,0 +1,78 @@
+"""Diagnosis pages: several findings share a page when they fit whole, none is split across pages.
+
+A real diagnosis of a simulated 3-link arm with three injected effects (seeded), read back with pymupdf.
+"""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.io import load_yaml
+from tests.report.checks import check_pages, page_texts
+
+pymupdf = pytest.importorskip("pymupdf")
+runner = CliRunner()
+
+
+def _cli(*args):
+    r = runner.invoke(app, [str(a) for a in args])
+    assert r.exit_code == 0, r.output
+
+
+@pytest.fixture(scope="module")
+def diagnosis(tmp_path_factory):
+    d = tmp_path_factory.mktemp("diag")
+    effects = ["position_friction:joint3", "torque_offset:joint1", "spring:joint2"]
+    _cli(
+        "simulate", "dynamics", "--robot", "arm3", "--duration", 20, "--rate", 50, "--seed", 5,
+        *[a for e in effects for a in ("--effect", e)], "-o", d / "arm.h5", "-q",
+    )  # fmt: skip
+    _cli("diagnose", d / "arm.h5", "-o", d / "arm.diagnosis.yaml", "-q")
+    _cli("report", d / "arm.diagnosis.yaml", "-o", d / "r.pdf", "-q")
+    return load_yaml(d / "arm.diagnosis.yaml"), pymupdf.open(d / "r.pdf")
+
+
+def test_findings_are_kept_whole_and_share_pages(diagnosis):
+    d, doc = diagnosis
+    findings = d["findings"]
+    assert len(findings) >= 2, "the simulated effects should be found"
+    check_pages(doc)
+    pages = page_texts(doc)
+
+    def page_of(pattern: str) -> list[int]:
+        return [i for i, t in enumerate(pages) if re.search(pattern, t)]
+
+    for k, f in enumerate(findings, start=1):
+        head = page_of(rf"Finding {k}: {f['cause']} on {f['channel']}")
+        assert len(head) == 1, (k, head)
+        # the finding's plot title and its runners-up (or the words saying there are none) on its page
+        assert f"{f['cause']} on {f['channel']}: residual on the validation" in pages[head[0]]
+        if f.get("runners_up"):
+            assert "Runners-up of this round" in pages[head[0]]
+            last = f["runners_up"][-1]
+            assert f"{last['cause']} {last['channel']}" in pages[head[0]]  # the table's last row too
+    # the summary page holds the first finding when it fits, so there are fewer pages than findings + 1
+    assert page_of(r"Finding 1:") == [0]
+    assert doc.page_count < len(findings) + 1
+
+
+def test_small_findings_share_a_page(diagnosis, tmp_path):
+    """Findings without runners-up (a round that tested one candidate) are small: two fit on a page,
+    the second referring to the first's caption."""
+    from diegocal.io import save_yaml
+
+    d, _ = diagnosis
+    small = {**d, "findings": [{k: v for k, v in f.items() if k != "runners_up"} for f in d["findings"]]}
+    save_yaml(small, tmp_path / "small.diagnosis.yaml")
+    _cli("report", tmp_path / "small.diagnosis.yaml", "-o", tmp_path / "s.pdf", "-q")
+    doc = pymupdf.open(tmp_path / "s.pdf")
+    check_pages(doc)
+    pages = page_texts(doc)
+    shared = [t for t in pages if len(re.findall(r"Finding \d+: ", t)) >= 2]
+    assert shared, "no page holds two findings"
+    assert all("Lines, bands and shading as in Finding" in t for t in shared)
+    assert doc.page_count <= (len(d["findings"]) + 2) // 2
