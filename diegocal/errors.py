@@ -39,5 +39,10 @@ class NumericalError(DiegocalError, ArithmeticError):
     """A numerical step failed (singular matrix, failed Cholesky); the message says what to change."""
 
 
+class OptionError(DiegocalError, ValueError):
+    """An option's value is unknown or out of range, found only after parsing (it needs the robot
+    or the data to tell); the CLI exits 2, as for the parser's own usage errors."""
+
+
 class FitError(DiegocalError, RuntimeError):
     """A fit cannot proceed with the given data (too few samples, unobservable parameters)."""
