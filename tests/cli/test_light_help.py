@@ -1,6 +1,5 @@
 """`diegocal --help` and every `COMMAND --help` answer at once: in a fresh interpreter, a help
-loads no heavy library and none of diegocal's fitting code (counted in ``sys.modules``, not timed;
-the times are in README's CLI section).
+loads no heavy library and none of diegocal's fitting code (counted in ``sys.modules``, not timed).
 
 Heavy, measured with ``python -X importtime -c "import X"`` (2-core machine, load ~4): scipy.signal
 1.5 s, distributed 0.76 s, pandas 0.58 s, scipy.optimize 0.47 s, matplotlib 0.38 s (pyplot 0.86 s),
