@@ -40,8 +40,9 @@ class NumericalError(DiegocalError, ArithmeticError):
 
 
 class OptionError(DiegocalError, ValueError):
-    """An option's value is unknown or out of range, found only after parsing (it needs the robot
-    or the data to tell); the CLI exits 2, as for the parser's own usage errors."""
+    """An option's value is malformed, not a word the option takes, or out of its range, found by
+    the library rather than the parser; the CLI exits 2, as for the parser's own usage errors. (A
+    name the robot or the log does not know is bad input, exit 1: UnknownNameError.)"""
 
 
 class FitError(DiegocalError, RuntimeError):

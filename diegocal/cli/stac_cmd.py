@@ -101,8 +101,9 @@ def stac(
     method: Annotated[
         Literal[STAC_METHODS],
         typer.Option(
+            metavar="METHOD",
             help="stac: sensors and joint angles together (thesis ch. 2); classical: marker regression "
-            "on pot angles (§2.2.1); ekf: extended Kalman filter (§2.4); nominal: sensors.yaml as it is."
+            "on pot angles (§2.2.1); ekf: extended Kalman filter (§2.4.1); nominal: sensors.yaml as it is.",
         ),
     ] = "stac",
     loss: Annotated[

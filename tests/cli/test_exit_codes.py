@@ -1,6 +1,10 @@
-"""Exit codes, one table for every command: a usage error (a missing argument, a bad option value)
-exits 2, bad input (a file that is missing or is not what the command needs, an output folder that
-does not exist) exits 1; each with one line and no traceback (README, DESIGN.md "Command line").
+"""Exit codes, one table for every command: a usage error exits 2, bad input exits 1; each with one
+line and no traceback (README, DESIGN.md "Command line").
+
+Usage error: a missing argument, an unknown option, or a value the option's help rules out without
+reading any file (not one of its words, out of its range, a log written as .txt). Bad input: what
+takes the files to tell (a file missing or not what the command needs, a name the robot or the log
+does not know, an output folder that does not exist).
 
 The paths need not exist for the usage errors: the parser refuses the value before any file is
 opened. ``{tmp}`` is a fresh folder, ``{text}`` a text file in it; ``{missing}`` is a folder that
@@ -141,6 +145,7 @@ BAD_INPUT = [  # exit 1
     ("simulate pneumatics -o {tmp}/s.h5 --robot {tmp}/norobot", "norobot"),
     ("simulate kinematics -o {tmp}/s.h5 --robot {tmp}/norobot", "norobot"),
     ("simulate dynamics -o {tmp}/s.h5 --robot {tmp}/norobot", "norobot"),
+    ("simulate pneumatics -o {tmp}/s.h5 --duration 1 --effect valve_delay:nochamber", "not a chamber of this robot"),
     # an output whose folder does not exist is refused before any work, and the folder not made
     ("stac {text} -o {missing}/c.yaml", "does not exist"),
     ("stac {text} --joint-angles {missing}/q.h5", "does not exist"),
