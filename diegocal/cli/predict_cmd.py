@@ -104,7 +104,9 @@ def predict(
             help="Robot directory or URDF file; by default the log's robot, else the model's.",
         ),
     ] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the joint-angle tracking.")] = 1,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Threads for the joint-angle tracking of STAC models.")
+    ] = 1,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (the predictions are deterministic).")] = 0,
 ) -> None:
