@@ -39,5 +39,11 @@ class NumericalError(DiegocalError, ArithmeticError):
     """A numerical step failed (singular matrix, failed Cholesky); the message says what to change."""
 
 
+class OptionError(DiegocalError, ValueError):
+    """An option's value is malformed, not a word the option takes, or out of its range, found by
+    the library rather than the parser; the CLI exits 2, as for the parser's own usage errors. (A
+    name the robot or the log does not know is bad input, exit 1: UnknownNameError.)"""
+
+
 class FitError(DiegocalError, RuntimeError):
     """A fit cannot proceed with the given data (too few samples, unobservable parameters)."""

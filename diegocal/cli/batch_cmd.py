@@ -13,9 +13,10 @@ import typer
 from rich.markup import escape
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, console, errors, summary
+from diegocal.cli.choices import BATCH_COMMANDS
+from diegocal.cli.common import cli_errors, console, errors, output_path, summary
 
-COMMAND_NAMES = ("stac", "sgp-fit", "pneumatic-fit", "diagnose", "predict")
+COMMAND_NAMES = BATCH_COMMANDS
 
 
 def _command(value: str) -> str:
@@ -44,7 +45,12 @@ def batch(
     ],
     output_dir: Annotated[
         Path | None,
-        typer.Option("-o", "--output-dir", help="Folder for the outputs; by default each output goes beside its log."),
+        typer.Option(
+            "-o",
+            "--output-dir",
+            callback=output_path,
+            help="Folder for the outputs (created if its parent exists); by default each output goes beside its log.",
+        ),
     ] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Logs processed at once on this machine.")] = 1,
     scheduler: Annotated[
@@ -59,7 +65,11 @@ def batch(
     ] = False,
     table: Annotated[
         Path | None,
-        typer.Option("--table", help="Merged table to write (CSV); by default COMMAND.batch.csv in the output folder."),
+        typer.Option(
+            "--table",
+            callback=output_path,
+            help="Merged table to write (CSV); by default COMMAND.batch.csv in the output folder.",
+        ),
     ] = None,
     list_only: Annotated[
         bool, typer.Option("--list", help="Only print the logs the command applies to, one per line (for make).")
@@ -80,7 +90,7 @@ def batch(
             console.print(str(log), highlight=False, soft_wrap=True)
         return
     if output_dir is not None:
-        output_dir.mkdir(parents=True, exist_ok=True)
+        output_dir.mkdir(exist_ok=True)  # its parent exists (output_path)
 
     def progress(outcome, done: int, total: int) -> None:
         if quiet:

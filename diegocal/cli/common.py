@@ -13,7 +13,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from diegocal.errors import DiegocalError
+from diegocal.cli.choices import LOG_SUFFIXES
+from diegocal.errors import DiegocalError, OptionError
 
 console = Console(stderr=False)
 errors = Console(stderr=True)
@@ -60,8 +61,63 @@ def usage_error(command: str, message: str) -> typer.Exit:
     return typer.Exit(2)
 
 
+def output_path(value):
+    """Callback of every option naming an output (a file, or a directory a command creates): its
+    folder must exist (a command never creates folders: a mistyped path would scatter results);
+    exit 1 with one line otherwise, before any work. Takes one path or a tuple of them."""
+    for path in value if isinstance(value, (tuple, list)) else (value,):
+        if path is None:
+            continue
+        folder = Path(path).parent
+        if not folder.is_dir():
+            what = "is not a folder" if folder.exists() else "does not exist"
+            raise fail(f"{path}: the folder {folder} {what}; create it first")
+    return value
+
+
+def log_output(value):
+    """Callback of options naming a log to write: a .h5, .hdf5 or .csv file (else a usage error,
+    exit 2) in an existing folder (:func:`output_path`)."""
+    for path in value if isinstance(value, (tuple, list)) else (value,):
+        if path is not None and Path(path).suffix.lower() not in LOG_SUFFIXES:
+            raise typer.BadParameter(f"{path}: a log is written as .h5, .hdf5 or .csv")
+    return output_path(value)
+
+
+def comma_list(allowed: tuple[str, ...], none_word: str | None = None):
+    """A callback checking a comma-separated option at parse time (a bad word is a usage error,
+    exit 2); ``none_word`` alone stands for the empty list."""
+
+    def check(text: str | None) -> str | None:
+        if text is None:
+            return None
+        words = [w.strip() for w in text.split(",") if w.strip()]
+        if none_word is not None and words == [none_word]:
+            return text
+        bad = [w for w in words if w not in allowed]
+        if bad or not words:
+            also = f" or {none_word}" if none_word else ""
+            raise typer.BadParameter(f"{text!r}: expected a comma-separated list of {', '.join(allowed)}{also}")
+        return text
+
+    return check
+
+
+def positive(value: float | None) -> float | None:
+    """Callback of options that must be more than 0 (a duration, a rate): else exit 2."""
+    if value is not None and not value > 0:
+        raise typer.BadParameter(f"{value:g} is not more than 0")
+    return value
+
+
+def split_words(text: str | None) -> tuple[str, ...]:
+    """``"a, b"`` -> ``("a", "b")``."""
+    return tuple(w.strip() for w in (text or "").split(",") if w.strip())
+
+
 def cli_errors(fn):
-    """Turn library errors into one line and exit 1 (STYLE.md: the CLI alone does this).
+    """Turn library errors into one line and exit 1 (STYLE.md: the CLI alone does this); a bad
+    option value the library finds (:class:`~diegocal.errors.OptionError`) exits 2.
 
     Unexpected exceptions also become one line, with a pointer to DIEGOCAL_DEBUG=1 for the traceback.
     """
@@ -70,8 +126,10 @@ def cli_errors(fn):
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
-        except (typer.Exit, typer.Abort):
+        except (typer.Exit, typer.Abort, typer.TyperException):  # exits, and usage errors (exit 2)
             raise
+        except OptionError as exc:  # a bad option value the parser could not see: a usage error
+            raise typer.BadParameter(str(exc)) from None
         except DiegocalError as exc:
             raise fail(str(exc)) from None
         except OSError as exc:

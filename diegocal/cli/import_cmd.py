@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, summary
+from diegocal.cli.common import cli_errors, log_output, positive, summary
 
 HELP = (
     "Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock.\n\n"
@@ -25,17 +25,19 @@ HELP = (
 @cli_errors
 def import_cmd(
     sources: Annotated[list[Path], typer.Argument(
-        metavar="SRC...",
+        metavar="SRC",
         help="C3D (.c3d), ROS bags (.bag, .db3, .mcap or a ROS 2 bag folder), CSV exports "
         "(rostopic echo -p, lab tables, diegocal CSV).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Log to write (.h5 or .csv).")],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", callback=log_output, help="Log to write (.h5 or .csv).")
+    ],
     map_file: Annotated[Path | None, typer.Option(
         "--map", help="Import map (YAML): sources, columns -> channels, units, transmission, clock, "
         "filter, derive, window. Without it each file gives its natural streams.")] = None,
     rate: Annotated[float | None, typer.Option(
-        min=1e-6, help="Clock of the log, Hz; replaces the map's clock. Default: the map's clock, else the "
-        "C3D's time stamps, else those the files share.")] = None,
-    robot: Annotated[str | None, typer.Option(help="Robot the log names; default: the map's robot.")] = None,
+        callback=positive, help="Clock of the log in Hz, replacing the map's clock; by default the map's clock, "
+        "else the C3D's time stamps, else those the files share.")] = None,
+    robot: Annotated[str | None, typer.Option(help="Robot the log names; by default the map's robot.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock."""
@@ -43,8 +45,6 @@ def import_cmd(
     from diegocal.io import save_log
     from diegocal.io.importers import ImportMap, import_log, load_map
 
-    if output.suffix.lower() not in (".h5", ".hdf5", ".csv"):
-        raise LogFormatError(f"{output}: unknown log suffix {output.suffix!r} (use .h5 or .csv)")
     if any(output.resolve() == Path(s).resolve() for s in sources):
         raise LogFormatError(f"{output}: the output would overwrite a source file")
     mapping = load_map(map_file) if map_file is not None else ImportMap()

@@ -4,64 +4,81 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
-import numpy as np
 import typer
 
 from diegocal.cli.app import app, simulate_app
-from diegocal.cli.common import cli_errors, command_line, default_output, errors, robot_for_log, summary
+from diegocal.cli.choices import PNEUMATIC_EXPERIMENTS
+from diegocal.cli.common import (
+    cli_errors,
+    command_line,
+    default_output,
+    errors,
+    log_output,
+    output_path,
+    positive,
+    robot_for_log,
+    summary,
+    usage_error,
+)
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import DiegocalError, FitError, InputFileError
-from diegocal.io import Log, load_log, load_yaml, make_stream, save_log, save_yaml
-from diegocal.io.bundle import header
-from diegocal.pneumatic.data import chamber_data, extract
-from diegocal.pneumatic.files import load_model, merge_models, model_dict
-from diegocal.pneumatic.fit import FitOptions, fit_chambers
-from diegocal.pneumatic.predict import drift, predict_with_resets
-from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sim.effects import check_effects, parse_effects
-from diegocal.sim.pneumatics import EXPERIMENTS, PneumaticSimOptions, simulate_pneumatics
 
 
 @app.command("pneumatic-fit")
 @cli_errors
 def pneumatic_fit(
-    log: Annotated[Path, typer.Argument(help="Log with pressure, valve and pots streams.")],
+    log: Annotated[Path, typer.Argument(help="Log with pressure, valve and pots streams (.h5 or .csv).")],
     chamber: Annotated[
-        list[str] | None, typer.Option("--chamber", "-c", help="Chamber to fit (repeatable).")
+        list[str] | None,
+        typer.Option("--chamber", "-c", help="Chamber to fit, as sensors.yaml names it (repeatable)."),
     ] = None,
     all_chambers: Annotated[
-        bool, typer.Option("--all", help="Fit every chamber of the robot.")
+        bool, typer.Option("--all", help="Fit every chamber of the robot (instead of --chamber).")
     ] = False,
     robot: Annotated[
-        Path | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")
+        Path | None,
+        typer.Option(
+            "--robot",
+            help="Robot directory; by default the robot the log names.",
+        ),
     ] = None,
     output: Annotated[
         Path | None,
-        typer.Option("-o", "--output", help="pneumatic.yaml [default: LOG.pneumatic.yaml]."),
+        typer.Option(
+            "-o",
+            "--output",
+            callback=output_path,
+            help="Pneumatic model to write (YAML); by default LOG.pneumatic.yaml beside the log.",
+        ),
     ] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Parallel processes.")] = 1,
-    starts: Annotated[
-        int, typer.Option(min=1, help="Starting points per chamber (multi-start).")
-    ] = 1,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Chambers fitted at once, in processes.")] = 1,
+    starts: Annotated[int, typer.Option(min=1, help="Starting points per chamber (multi-start).")] = 1,
     seed: Annotated[int, typer.Option(help="Seed of the random starting points.")] = 0,
     fd_jacobian: Annotated[
-        bool, typer.Option("--fd-jacobian", help="Finite-difference Jacobian (reference).")
+        bool,
+        typer.Option("--fd-jacobian", help="Use a finite-difference Jacobian (a reference for the analytic one)."),
     ] = False,
     steady_state: Annotated[
         Path | None,
-        typer.Option(
-            "--steady-state", help="Locked-cylinder sweep log, kept for the report (Fig. 4.10)."
-        ),
+        typer.Option("--steady-state", help="Locked-cylinder sweep log, kept for the report (Fig. 4.10)."),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Fit the 9-parameter valve-chamber model (thesis §4.5.3) by next-step least squares."""
     if all_chambers == bool(chamber):
-        raise InputFileError("name the chambers to fit: --chamber NAME (repeatable) or --all")
+        raise usage_error("pneumatic-fit", "name the chambers to fit: --chamber NAME (repeatable) or --all")
     if steady_state is not None and not steady_state.exists():
         raise InputFileError(f"{steady_state}: no such file")
+    import numpy as np
+
+    from diegocal.io import load_log, save_yaml
+    from diegocal.io.bundle import header
+    from diegocal.pneumatic.data import chamber_data
+    from diegocal.pneumatic.files import model_dict
+    from diegocal.pneumatic.fit import FitOptions, fit_chambers
+
     data = load_log(log)
     for stream in ("pressure", "valve", "pots"):  # log-level problems fail the whole command
         data.stream(stream, needed_by="pneumatic-fit")
@@ -77,9 +94,7 @@ def pneumatic_fit(
             if not all_chambers:
                 raise
             skipped[name] = str(exc)
-    options = FitOptions(
-        jacobian="2-point" if fd_jacobian else "analytic", starts=starts, seed=seed
-    )
+    options = FitOptions(jacobian="2-point" if fd_jacobian else "analytic", starts=starts, seed=seed)
     batch = fit_chambers(datasets, options, jobs=jobs)
     batch.skipped.update(skipped)
     for name, reason in batch.skipped.items():
@@ -96,10 +111,7 @@ def pneumatic_fit(
     drifts = np.array([f.drift_2s for f in batch.fits.values()])
     rows = [("chambers fitted", len(batch.fits)), ("skipped", len(batch.skipped))]
     if len(batch.fits) <= 8:
-        rows += [
-            (f"{n}: rmse / drift 2 s", f"{f.rmse:.3g} / {f.drift_2s:.1%}")
-            for n, f in batch.fits.items()
-        ]
+        rows += [(f"{n}: rmse / drift 2 s", f"{f.rmse:.3g} / {f.drift_2s:.1%}") for n, f in batch.fits.items()]
     rows += [
         ("2-s drift median / max (of Pc-Pr)", f"{np.median(drifts):.1%} / {drifts.max():.1%}"),
         ("chambers with drift < 4% / < 10%", f"{(drifts < 0.04).sum()} / {(drifts < 0.10).sum()}"),
@@ -112,10 +124,15 @@ def pneumatic_fit(
 @cli_errors
 def pneumatic_merge(
     files: Annotated[list[Path], typer.Argument(help="pneumatic.yaml files to merge.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Merged pneumatic.yaml.")],
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    output: Annotated[
+        Path, typer.Option("-o", "--output", callback=output_path, help="Merged pneumatic model to write (YAML).")
+    ],
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Merge per-chamber pneumatic.yaml files (from `make -j`) into one."""
+    from diegocal.io import load_yaml, save_yaml
+    from diegocal.pneumatic.files import merge_models
+
     merged = merge_models([load_yaml(f) for f in files], files)
     save_yaml(merged, output)
     rows = [("files", len(files)), ("chambers", len(merged["chambers"])), ("written", str(output))]
@@ -125,14 +142,14 @@ def pneumatic_merge(
 @simulate_app.command("pneumatics")
 @cli_errors
 def simulate_pneumatics_cmd(
-    output: Annotated[Path, typer.Option("--output", "-o", help="Log to write (.h5 or .csv).")],
+    output: Annotated[Path, typer.Option("--output", "-o", callback=log_output, help="Log to write (.h5 or .csv).")],
     robot: Annotated[str, typer.Option(help="Robot directory or bundled robot name.")] = "diego",
-    duration: Annotated[float, typer.Option(help="Length of each session, s.")] = 60.0,
+    duration: Annotated[
+        float, typer.Option(callback=positive, help="Length of each session in s (more than 0).")
+    ] = 60.0,
     experiment: Annotated[
-        str,
-        typer.Option(
-            help=f"{' or '.join(EXPERIMENTS)}: flailing (§4.5.3) or locked sweep (§4.5.2)."
-        ),
+        Literal[PNEUMATIC_EXPERIMENTS],
+        typer.Option(help="dynamic: the robot flails (§4.5.3); steady-state: locked-cylinder sweep (§4.5.2)."),
     ] = "dynamic",
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
     effect: Annotated[
@@ -146,14 +163,19 @@ def simulate_pneumatics_cmd(
             "A random chamber unless named.",
         ),
     ] = None,
-    sessions: Annotated[
-        int, typer.Option(min=1, help="Independent sessions, simulated together.")
-    ] = 1,
+    sessions: Annotated[int, typer.Option(min=1, help="Independent sessions, simulated together.")] = 1,
     substeps: Annotated[int, typer.Option(min=1, help="Integration steps per 10 ms tick.")] = 20,
-    pressure_noise: Annotated[float, typer.Option(help="Pressure noise (averaged), kPa.")] = 0.3,
+    pressure_noise: Annotated[
+        float, typer.Option(min=0.0, help="Standard deviation of the pressure noise (averaged), kPa.")
+    ] = 0.3,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate valve-chamber systems with the thin-plate physics (thesis §4.2), truth in /truth."""
+    from diegocal.io import save_log
+    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.sim.effects import check_effects, parse_effects
+    from diegocal.sim.pneumatics import PneumaticSimOptions, simulate_pneumatics
+
     effects = check_effects(parse_effects(effect), "pneumatics")
     options = PneumaticSimOptions(
         duration=duration,
@@ -183,14 +205,19 @@ def simulate_pneumatics_cmd(
 def predict_pneumatic(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
     """`predict pneumatic.yaml LOG`: open-loop pressure from u, v, vdot (§4.5.4), reset every 2 s;
     prints the 2-s drift per chamber (Fig. 4.13's figure of merit)."""
+    import numpy as np
+
+    from diegocal.io import Log, load_log, make_stream, save_log
+    from diegocal.pneumatic.data import extract
+    from diegocal.pneumatic.files import load_model
+    from diegocal.pneumatic.predict import drift, predict_with_resets
+
     model = load_model(model_path)
     log = load_log(log_path)
     pred, rows, drifts = {}, [], []
     for name, ch in model.chambers.items():
         raw = ch.raw
-        data = extract(
-            log, name, ch.volume_sensor, ch.params.supply, ch.params.room, check_span=False
-        )
+        data = extract(log, name, ch.volume_sensor, ch.params.supply, ch.params.room, check_span=False)
         pred[name] = predict_with_resets(ch.params, data)
         d = drift(ch.params, data)
         drifts.append(d.final)

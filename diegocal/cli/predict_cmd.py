@@ -15,7 +15,8 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors
+from diegocal.cli.choices import SENSOR_TYPES
+from diegocal.cli.common import cli_errors, comma_list, log_output, split_words
 from diegocal.errors import InputFileError
 
 
@@ -69,19 +70,45 @@ def predict(
         Path,
         typer.Argument(help="Any fitted model: calib.yaml, pneumatic.yaml, an sgp/ directory, or a diagnosis.yaml."),
     ],
-    log: Annotated[Path, typer.Argument(help="Held-out log to predict.")],
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="Where to write the prediction.")] = None,
+    log: Annotated[Path, typer.Argument(help="Held-out log to predict (.h5 or .csv).")],
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "-o",
+            "--output",
+            callback=log_output,
+            help="Log to write the prediction to (.h5 or .csv); by default LOG.prediction.h5 beside the log.",
+        ),
+    ] = None,
     sensors_from: Annotated[
-        str, typer.Option("--from", help="STAC: sensor types to track from (comma list).")
+        str,
+        typer.Option(
+            "--from",
+            callback=comma_list(SENSOR_TYPES),
+            help="STAC models: the sensor types to track the joint angles from, comma-separated "
+            f"({', '.join(SENSOR_TYPES)}; pots is every pot).",
+        ),
     ] = "pots",
-    sensors_to: Annotated[str, typer.Option("--to", help="STAC: sensor types to predict (comma list).")] = "markers",
+    sensors_to: Annotated[
+        str,
+        typer.Option(
+            "--to",
+            callback=comma_list(SENSOR_TYPES),
+            help="STAC models: the sensor types to predict, comma-separated.",
+        ),
+    ] = "markers",
     robot: Annotated[
         Path | None,
-        typer.Option("--robot", help="Robot directory or URDF [default: the log's robot, else the model's]."),
+        typer.Option(
+            "--robot",
+            help="Robot directory or URDF file; by default the log's robot, else the model's.",
+        ),
     ] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1)] = 1,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
-    seed: Annotated[int, typer.Option("--seed")] = 0,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Threads for the joint-angle tracking of STAC models.")
+    ] = 1,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (the predictions are deterministic).")] = 0,
 ) -> None:
     """Predict a held-out log with a fitted model and report the error (the model file is only read)."""
     kind, model = resolve_model(model)
@@ -89,7 +116,7 @@ def predict(
         check_log_robot(model, log)
     if kind not in PREDICTORS:
         raise InputFileError(f"{model}: predicting with a {kind} model is not available in this build")
-    opts = PredictOptions(output, _split(sensors_from), _split(sensors_to), robot, jobs, quiet, seed)
+    opts = PredictOptions(output, split_words(sensors_from), split_words(sensors_to), robot, jobs, quiet, seed)
     PREDICTORS[kind](model, log, opts)
 
 
@@ -114,7 +141,3 @@ def check_log_robot(model: Path, log: Path) -> None:
             f"{log} is a log of robot {name} ({source}), but {model} was fitted on {record.get('name')} "
             f"({record.get('dir')}): their robot.urdf or sensors.yaml differ"
         )
-
-
-def _split(text: str) -> tuple[str, ...]:
-    return tuple(t.strip() for t in text.split(",") if t.strip())

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, summary
+from diegocal.cli.common import cli_errors, default_output, output_path, summary
 
 
 @app.command("report")
@@ -21,10 +21,20 @@ def report(
         ),
     ],
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="PDF to write; by default beside the first result.")
+        Path | None,
+        typer.Option(
+            "-o",
+            "--output",
+            callback=output_path,
+            help="PDF document to write; by default RESULT.report.pdf beside the first result.",
+        ),
     ] = None,
     robot: Annotated[
-        Path | None, typer.Option("--robot", help="Robot directory, for sections that draw the robot.")
+        Path | None,
+        typer.Option(
+            "--robot",
+            help="Robot directory, for sections that draw the robot; by default the robot each result records.",
+        ),
     ] = None,
     heldout: Annotated[
         list[Path] | None,

@@ -13,20 +13,33 @@ import sys
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, errors, fail, progress_enabled, robot_for_log, summary
+from diegocal.cli.choices import (
+    FRICTION_KINDS,
+    SGP_EXACT_MAX,
+    SGP_INFERENCE,
+    SGP_INPUT_STREAMS,
+    SGP_KINDS,
+    SGP_MIN_NOISE,
+    SGP_N_INDUCING,
+    SGP_RESTARTS,
+)
+from diegocal.cli.common import (
+    cli_errors,
+    comma_list,
+    default_output,
+    errors,
+    output_path,
+    progress_enabled,
+    robot_for_log,
+    split_words,
+    summary,
+)
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
-from diegocal.evaluate import score
-from diegocal.io import Log, load_log, make_stream, save_log
-from diegocal.io.bundle import header
-from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sgp import KINDS, SGPOptions, fit_dynamics, load_model
-from diegocal.sgp.model import INFERENCE, INPUT_STREAMS, log_arrays
-from diegocal.sgp.store import save_model
 
 
 @contextmanager
@@ -56,34 +69,38 @@ def _command() -> str:
     return "diegocal " + " ".join(shlex.quote(a) for a in args) if args else "diegocal sgp-fit"
 
 
-def _friction(text: str) -> tuple[str, ...]:
-    parts = tuple(t.strip() for t in text.split(",") if t.strip())
-    if parts in ((), ("none",)):
-        return ()
-    bad = [p for p in parts if p not in ("viscous", "coulomb")]
-    if bad:
-        raise fail(f"--friction: unknown kind(s) {', '.join(bad)}; use viscous,coulomb or none")
-    return parts
-
-
-def _choice(name: str, value: str, allowed) -> str:
-    if value not in allowed:
-        raise fail(f"{name}: {value!r} is not one of {', '.join(allowed)}")
-    return value
-
-
 @app.command("sgp-fit")
 @cli_errors
 def sgp_fit(
     log: Annotated[Path, typer.Argument(help="Log with q, qd, qdd and tau streams (.h5 or .csv).")],
-    robot: Annotated[str | None, typer.Option("--robot", help="Robot directory [default: the log's robot].")] = None,
-    model: Annotated[str, typer.Option("--model", "-m", help="sgp | pr | gp | prgp.")] = "sgp",
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            "--robot",
+            help="Robot directory or bundled robot name; by default the robot the log names.",
+        ),
+    ] = None,
+    model: Annotated[
+        Literal[SGP_KINDS],
+        typer.Option(
+            "--model",
+            "-m",
+            help="sgp: parametric part (rigid body and friction) and GP learnt jointly (eq. 3.1-3.20); pr: "
+            "the parametric part alone (§3.3.3); gp: a GP alone (§3.3.2); prgp: pr, then a GP on its "
+            "residuals (§3.4.1).",
+        ),
+    ] = "sgp",
     friction: Annotated[
-        str, typer.Option("--friction", help="Friction columns: viscous,coulomb | none.")
+        str,
+        typer.Option(
+            "--friction",
+            callback=comma_list(FRICTION_KINDS, "none"),
+            help="Friction columns of the parametric part, comma-separated: viscous, coulomb, or none.",
+        ),
     ] = "viscous,coulomb",
     inference: Annotated[
-        str,
-        typer.Option("--inference", help=f"auto | exact | sparse (auto: exact up to {SGPOptions.exact_max} samples)."),
+        Literal[SGP_INFERENCE],
+        typer.Option("--inference", help=f"GP inference; auto is exact up to {SGP_EXACT_MAX} samples, then sparse."),
     ] = "auto",
     n_inducing: Annotated[
         int,
@@ -93,12 +110,19 @@ def sgp_fit(
             help="Sparse inference: at most this many inducing inputs per joint (chosen until they "
             "miss at most 1 % of the noise variance).",
         ),
-    ] = SGPOptions.n_inducing,
+    ] = SGP_N_INDUCING,
     guard: Annotated[bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")] = True,
-    gp_inputs: Annotated[str | None, typer.Option("--gp-inputs", help="Streams the GP sees, e.g. q,qd.")] = None,
+    gp_inputs: Annotated[
+        str | None,
+        typer.Option(
+            "--gp-inputs",
+            callback=comma_list(SGP_INPUT_STREAMS),
+            help="Streams the GP sees, comma-separated (q, qd, qdd); by default q,qd with the guard, else q,qd,qdd.",
+        ),
+    ] = None,
     restarts: Annotated[
-        int, typer.Option("--restarts", min=0, help="Extra hyperparameter starts.")
-    ] = SGPOptions.restarts,
+        int, typer.Option("--restarts", min=0, help="Extra hyperparameter starts of ML-II.")
+    ] = SGP_RESTARTS,
     min_noise: Annotated[
         float,
         typer.Option(
@@ -107,8 +131,8 @@ def sgp_fit(
             help="Floor of the noise std σ_v relative to std(tau) per joint; raise it (e.g. 0.2) for "
             "low-pass filtered torques, whose correlated noise ML-II otherwise fits.",
         ),
-    ] = SGPOptions.min_noise,
-    seed: Annotated[int, typer.Option("--seed")] = 0,
+    ] = SGP_MIN_NOISE,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the random hyperparameter starts and subsets.")] = 0,
     jobs: Annotated[
         int,
         typer.Option(
@@ -120,28 +144,33 @@ def sgp_fit(
         ),
     ] = 1,
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Model directory [default: <log>.sgp/].")
+        Path | None,
+        typer.Option(
+            "-o",
+            "--output",
+            callback=output_path,
+            help="Model directory to write; by default LOG.sgp/ beside the log.",
+        ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
 ) -> None:
     """Fit a torque model: parametric (rigid body + friction) part, GP part and hyperparameters."""
-    kind = _choice("--model", model, KINDS)
-    inf = _choice("--inference", inference, INFERENCE)
-    streams = None
-    if gp_inputs is not None:
-        streams = tuple(s.strip() for s in gp_inputs.split(",") if s.strip())
-        for s in streams:
-            _choice("--gp-inputs", s, INPUT_STREAMS)
+    from diegocal.io import load_log
+    from diegocal.io.bundle import header
+    from diegocal.sgp import SGPOptions, fit_dynamics
+    from diegocal.sgp.store import save_model
+
+    words = split_words(friction)
     opts = SGPOptions(
-        kind=kind,
-        friction=_friction(friction),
-        inference=inf,
+        kind=model,
+        friction=() if words == ("none",) else words,
+        inference=inference,
         n_inducing=n_inducing,
         restarts=restarts,
         seed=seed,
         jobs=jobs,
         guard=guard,
-        gp_inputs=streams,
+        gp_inputs=split_words(gp_inputs) if gp_inputs is not None else None,
         min_noise=min_noise,
     )
     data = load_log(log)
@@ -159,7 +188,7 @@ def sgp_fit(
     rows = [(f"nMSE in-sample {j}", float(v)) for j, v in zip(fitted.joint_names, fitted.nmse_in_sample_, strict=True)]
     par = fitted.parametric_
     rows = [
-        ("model", kind),
+        ("model", model),
         ("samples", len(fitted.U_)),
         ("inference", fitted.gp_.inference),
         ("base parameters", 0 if par is None else len(par.names)),
@@ -178,6 +207,12 @@ def sgp_fit(
 
 def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
     """`diegocal predict sgp/ LOG`: write predicted ``tau`` and ``tau_std`` as a log."""
+    from diegocal.evaluate import score
+    from diegocal.io import Log, load_log, make_stream, save_log
+    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.sgp import load_model
+    from diegocal.sgp.model import log_arrays
+
     data = load_log(log_path)
     robot = load_robot(resolve_robot_dir(opts.robot, data.robot)) if opts.robot else None
     model = load_model(model_path, robot=robot)

@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, summary, usage_error
+from diegocal.cli.common import cli_errors, log_output, summary, usage_error
 
 
 def parse_at(text: str) -> tuple[float, str]:
@@ -47,9 +47,15 @@ def split(
     ],
     output: Annotated[
         tuple[Path, Path] | None,
-        typer.Option("-o", "--output", help="TRAIN HELDOUT [default: <log>.train.h5 <log>.heldout.h5 beside it]."),
+        typer.Option(
+            "-o",
+            "--output",
+            callback=log_output,
+            help="The two logs to write, TRAIN then HELDOUT (.h5 or .csv); by default LOG.train.h5 and "
+            "LOG.heldout.h5 beside the log.",
+        ),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Cut a log in two contiguous parts in time: TRAIN to fit on, HELDOUT to predict."""
     from diegocal.io import load_log, save_logs, split_log

@@ -2,39 +2,44 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
-import numpy as np
 import typer
 
 from diegocal.cli.app import app
+from diegocal.cli.choices import STAC_LOSSES, STAC_METHODS, STAC_SCHEDULES
 from diegocal.cli.common import (
     cli_errors,
     command_line,
     default_output,
     errors,
+    log_output,
+    output_path,
     progress_enabled,
     robot_for_log,
     robot_for_model,
     summary,
+    usage_error,
     warn,
 )
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
-from diegocal.io import load_log, make_stream, save_log, save_yaml
-from diegocal.io.bundle import header
-from diegocal.io.log import Log
-from diegocal.robot import Robot
-from diegocal.stac.calibration import Calibration
-from diegocal.stac.result import StacOptions, StacResult
 
-METHODS = ("stac", "classical", "ekf", "nominal")
+if TYPE_CHECKING:
+    from diegocal.io.log import Log
+    from diegocal.robot import Robot
+    from diegocal.stac.calibration import Calibration
+    from diegocal.stac.result import StacOptions, StacResult
+
+METHODS = STAC_METHODS
 
 
 def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> StacResult:
-    """Dispatch to the calibration method; classical/EKF are imported lazily."""
+    """Dispatch to the calibration method; each is imported when it runs."""
+    from diegocal.stac.calibration import Calibration
+    from diegocal.stac.result import StacResult
+
     if method == "stac":
         from diegocal.stac.stac import calibrate
 
@@ -60,30 +65,70 @@ def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> Sta
     raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
 
 
+def cost_label(method: str, loss: str) -> str | None:
+    """What each method's ``fit.cost`` is, for the summary (None: the method has none)."""
+    if method == "stac":
+        robust = "" if loss == "linear" else f", markers under the {loss} loss"
+        return f"−log-likelihood, eq. 2.5 (nats{robust}; without constants, so it may be < 0)"
+    if method == "classical":
+        loss_text = "squared marker residuals" if loss == "linear" else f"{loss} ρ of the marker residuals"
+        return f"½ Σ {loss_text}, eq. 2.4 (m²)"
+    if method == "ekf":
+        return "½ Σ νᵀS⁻¹ν, the EKF innovations' normalised squared error"
+    return None
+
+
 @app.command("stac")
 @cli_errors
 def stac(
-    log: Annotated[Path, typer.Argument(help="Log with pots and markers streams.")],
+    log: Annotated[Path, typer.Argument(help="Log with pots and markers streams (.h5 or .csv).")],
     robot: Annotated[
         str | None,
-        typer.Option("--robot", help="Robot directory or bundled robot name [default: the log's robot]."),
+        typer.Option(
+            "--robot",
+            help="Robot directory or bundled robot name; by default the robot the log names.",
+        ),
     ] = None,
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="calib.yaml [default: <log>.calib.yaml].")
-    ] = None,
-    method: Annotated[str, typer.Option(help="stac | classical | ekf | nominal.")] = "stac",
-    loss: Annotated[
-        str,
+        Path | None,
         typer.Option(
-            help="linear (Gaussian, eq. 2.21) | huber | tukey (robust to mocap outliers, swapped labels)."
+            "-o",
+            "--output",
+            callback=output_path,
+            help="Calibration to write (YAML); by default LOG.calib.yaml beside the log.",
+        ),
+    ] = None,
+    method: Annotated[
+        Literal[STAC_METHODS],
+        typer.Option(
+            metavar="METHOD",
+            help="stac: sensors and joint angles together (thesis ch. 2); classical: marker regression "
+            "on pot angles (§2.2.1); ekf: extended Kalman filter (§2.4.1); nominal: sensors.yaml as it is.",
+        ),
+    ] = "stac",
+    loss: Annotated[
+        Literal[STAC_LOSSES],
+        typer.Option(
+            help="Marker loss: linear is Gaussian (eq. 2.21); huber and tukey are robust to mocap outliers "
+            "and swapped labels."
         ),
     ] = "linear",
-    max_iterations: Annotated[int, typer.Option("--max-iterations", min=1)] = 50,
-    schedule: Annotated[str, typer.Option(help="q-phase schedule: lm-iter | lm-batch | bfgs.")] = "lm-iter",
+    max_iterations: Annotated[
+        int, typer.Option("--max-iterations", min=1, help="Most alternations of the q- and p-phases.")
+    ] = 50,
+    schedule: Annotated[
+        Literal[STAC_SCHEDULES],
+        typer.Option(help="q-phase schedule (§2.6.1): one LM step per alternation, LM to the end, or BFGS."),
+    ] = "lm-iter",
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Threads for the q-phase.")] = 1,
     seed: Annotated[int, typer.Option(help="Random seed (STAC itself is deterministic).")] = 0,
     joint_angles: Annotated[
-        Path | None, typer.Option("--joint-angles", help="Also write the tracked joint angles to this log (.h5, .csv).")
+        Path | None,
+        typer.Option(
+            "--joint-angles",
+            callback=log_output,
+            help="Also write the tracked joint angles to this log (.h5 or .csv).",
+        ),
     ] = None,
     cv: Annotated[
         bool,
@@ -93,15 +138,18 @@ def stac(
             "from its pots (leave-one-pose-out; a pose starts where a pot moves by 1 % of its range).",
         ),
     ] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
 ) -> None:
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
-    if method not in METHODS:
-        raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
-    if joint_angles is not None and joint_angles.suffix.lower() not in (".h5", ".hdf5", ".csv"):
-        raise FitError(f"--joint-angles {joint_angles}: a log is .h5 or .csv")  # before the fit, not after
     if cv and method != "stac":
-        raise FitError("--cv is for --method stac")
+        raise usage_error("stac", "--cv is for --method stac")
+    from dataclasses import replace
+
+    from diegocal.io import load_log, make_stream, save_log, save_yaml
+    from diegocal.io.bundle import header
+    from diegocal.io.log import Log
+    from diegocal.stac.result import StacOptions
+
     data = load_log(log)
     model = robot_for_log(robot, data)
     options = StacOptions(
@@ -147,10 +195,12 @@ def stac(
         ("markers", len(cal.marker_names)),
         ("iterations", cal.fit.iterations),
         ("converged", str(cal.fit.converged)),
-        ("cost", cal.fit.cost),
-        ("seconds", cal.fit.seconds),
     ]
-    rows += [(f"σ {g}", v) for g, v in cal.sigma_by_group.items()]
+    label = cost_label(method, loss)
+    if label is not None:
+        rows.append((label, cal.fit.cost))
+    rows.append(("seconds", cal.fit.seconds))
+    rows += [(f"σ {g} ({'m' if g == 'markers' else 'sensor unit'})", v) for g, v in cal.sigma_by_group.items()]
     rows += coverage_rows(cal, model)
     if cal.rejected:
         rows.append(("frames written off (markers)", len(cal.rejected)))
@@ -159,13 +209,19 @@ def stac(
     rows += [("calibration", str(out))] + ([("joint angles", str(joint_angles))] if joint_angles else [])
     summary(f"stac {Path(log).name}", rows, quiet=quiet)
     if pose_cv is not None:
+        import numpy as np
+
         show = np.argsort(-np.nan_to_num(pose_cv.error, nan=-1.0))[:10]
         flagged = set(pose_cv.outliers().tolist())
         summary(
             "leave-one-pose-out marker error (worst first; * above 5 x the median)",
             [
-                (int(pose_cv.pose[i]), f"{pose_cv.start[i]:.4g}", int(pose_cv.samples[i]),
-                 f"{1000 * pose_cv.error[i]:.2f}" + (" *" if pose_cv.pose[i] in flagged else ""))
+                (
+                    int(pose_cv.pose[i]),
+                    f"{pose_cv.start[i]:.4g}",
+                    int(pose_cv.samples[i]),
+                    f"{1000 * pose_cv.error[i]:.2f}" + (" *" if pose_cv.pose[i] in flagged else ""),
+                )
                 for i in show
             ],
             columns=("pose", "start (s)", "samples", "error (mm)"),
@@ -225,8 +281,14 @@ IMPLAUSIBLE = 20.0
 def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
     """`diegocal predict calib.yaml LOG --from pots --to markers` (thesis §2.7.2). Writes the
     prediction, never into the model it reads."""
+    import numpy as np
+
+    from diegocal.io import load_log, make_stream, save_log
     from diegocal.io.bundle import load_bundle
+    from diegocal.io.log import Log
+    from diegocal.stac.calibration import Calibration
     from diegocal.stac.predict import predict
+    from diegocal.stac.result import StacOptions
 
     bundle = load_bundle(model_path)
     cal = Calibration.from_dict(bundle.data, source=str(model_path))
@@ -260,11 +322,18 @@ def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> Non
     unit = {"markers": "m"}
     rows = [(f"{t} ({unit.get(t, 'sensor unit')})", pred.mae[t]) for t in pred.targets]
     summary(
-        f"cross-sensor prediction MAE from {'+'.join(pred.sources)} (thesis Tables 2.1-2.2)",
+        f"cross-sensor prediction MAE from {sources_text(opts.sensors_from, pred.sources)} (thesis Tables 2.1-2.2)",
         rows + [("prediction", str(out))],
         columns=("target", "MAE"),
         quiet=opts.quiet,
     )
+
+
+def sources_text(asked: tuple[str, ...], used: tuple[str, ...]) -> str:
+    """The sensor types as the user named them, and what they stood for when it differs:
+    ``pots (linear+rotary)``."""
+    text = "+".join(asked)
+    return text if set(asked) == set(used) else f"{text} ({'+'.join(used)})"
 
 
 register_predictor("calib", predict_calib)

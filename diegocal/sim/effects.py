@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from diegocal.errors import DiegocalError, UnknownNameError
+from diegocal.errors import OptionError, UnknownNameError
 from diegocal.io.files import to_plain
 
 #: Cause id -> domain, from DESIGN.md's diagnosis vocabulary, extended with the causes real
@@ -42,11 +42,11 @@ VOCABULARY: dict[str, str] = {
 DOMAINS = ("kinematics", "dynamics", "pneumatics")
 
 
-class EffectError(DiegocalError, ValueError):
+class EffectError(OptionError):
     """An ``--effect`` request is malformed, unknown, or belongs to another domain."""
 
 
-class SimOptionError(DiegocalError, ValueError):
+class SimOptionError(OptionError):
     """A simulator option is out of range (negative duration, occlusion fraction >= 1, ...)."""
 
 

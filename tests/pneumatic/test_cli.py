@@ -173,4 +173,4 @@ def test_merge_and_simulate_errors_are_one_line(files, robot_dir, tmp_path):
             "wild",
         )
     )
-    assert "unknown experiment" in msg
+    assert "'wild' is not one of" in msg

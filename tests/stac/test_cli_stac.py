@@ -31,9 +31,10 @@ def _run(*args):
 def fitted(logs, tree_dir):
     d, _ = logs
     res = _run(
-        "stac", d / "train.h5", "--robot", tree_dir, "--max-iterations", 20, "--joint-angles", d / "q.h5", "--quiet"
+        "stac", d / "train.h5", "--robot", tree_dir, "--max-iterations", 20, "--joint-angles", d / "q.h5"
     )
     assert res.exit_code == 0, res.output
+    assert "−log-likelihood, eq. 2.5 (nats" in " ".join(res.output.split())  # the cost says what it is
     return d / "train.calib.yaml"
 
 
@@ -70,6 +71,7 @@ def test_predict_and_report(fitted, logs, tree_dir, tmp_path):
     )
     assert res.exit_code == 0, res.output
     assert "MAE" in res.output and "markers" in res.output
+    assert "MAE from pots (" in " ".join(res.output.split())  # as asked, then the pot kinds it stands for
     pred = load_log(tmp_path / "pred.h5")
     assert {"q", "pots", "markers"} <= set(pred.streams)
     assert fitted.read_bytes() == before  # predict never writes into the model it reads
@@ -140,8 +142,8 @@ def test_markers_all_on_base_are_unobservable(tmp_path):
 
 def test_unknown_method_and_loss(logs, tree_dir, tmp_path):
     _, log = logs
-    assert "unknown method" in _bad(tmp_path, log, tree_dir, "--method", "magic")
-    assert "unknown loss" in _bad(tmp_path, log, tree_dir, "--loss", "cauchy")
+    assert "'--method': 'magic' is not one of" in _bad(tmp_path, log, tree_dir, "--method", "magic")
+    assert "'--loss': 'cauchy' is not one of" in _bad(tmp_path, log, tree_dir, "--loss", "cauchy")
 
 
 def test_predict_unknown_sensor_type(fitted, logs, tree_dir):

@@ -1,0 +1,185 @@
+"""Exit codes, one table for every command: a usage error exits 2, bad input exits 1; each with one
+line and no traceback (README, DESIGN.md "Command line").
+
+Usage error: a missing argument, an unknown option, or a value the option's help rules out without
+reading any file (not one of its words, out of its range, a log written as .txt). Bad input: what
+takes the files to tell (a file missing or not what the command needs, a name the robot or the log
+does not know, an output folder that does not exist).
+
+The paths need not exist for the usage errors: the parser refuses the value before any file is
+opened. ``{tmp}`` is a fresh folder, ``{text}`` a text file in it; ``{missing}`` is a folder that
+does not exist, and no command may create it.
+"""
+
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
+
+runner = CliRunner()
+
+#: cases of commands edited on other branches (issue #16) that still fail: expected failures,
+#: strict, to drop once those branches are merged and the fixes in the notes applied
+SIMULATE_CMD = "diegocal/cli/simulate_cmd.py (other branch): -o needs callback=log_output"
+SIMULATE_DYNAMICS_CMD = "diegocal/cli/simulate_dynamics_cmd.py (other branch): -o needs callback=log_output"
+DIAGNOSE_CMD = "diegocal/cli/diagnose_cmd.py (other branch): -o needs callback=output_path"
+PENDING = {
+    "simulate kinematics -o {tmp}/s.txt --duration 1": SIMULATE_CMD,
+    "simulate kinematics -o {missing}/s.h5 --duration 1": SIMULATE_CMD,
+    "simulate dynamics -o {tmp}/s.txt --duration 1": SIMULATE_DYNAMICS_CMD,
+    "simulate dynamics -o {missing}/s.h5 --duration 1": SIMULATE_DYNAMICS_CMD,
+    "diagnose {text} -o {missing}/d.yaml": DIAGNOSE_CMD,
+}
+
+USAGE = [  # exit 2
+    # missing arguments and options, unknown commands and options
+    ("stac", ""),
+    ("nosuch", "No such command"),
+    ("stac {tmp}/r.h5 --nosuch", "No such option"),
+    ("stac {tmp}/r.h5 --robot", "requires an argument"),
+    ("predict {tmp}/m.yaml", "Missing argument 'LOG'"),
+    ("pneumatic-merge {tmp}/a.yaml", "Missing option"),
+    ("import {tmp}/a.csv", "Missing option"),
+    ("split {tmp}/r.h5", "Missing option '--at'"),
+    ("report", "Missing argument"),
+    ("inspect", "Missing argument"),
+    ("batch stac", "Missing argument"),
+    ("simulate pneumatics", "Missing option"),
+    # stac
+    ("stac {tmp}/r.h5 --method magic", "'magic' is not one of"),
+    ("stac {tmp}/r.h5 --loss cauchy", "'cauchy' is not one of"),
+    ("stac {tmp}/r.h5 --schedule fast", "'fast' is not one of"),
+    ("stac {tmp}/r.h5 --max-iterations 0", "--max-iterations"),
+    ("stac {tmp}/r.h5 --jobs 0", "--jobs"),
+    ("stac {tmp}/r.h5 --seed abc", "--seed"),
+    ("stac {tmp}/r.h5 --joint-angles {tmp}/q.txt", "a log is written as .h5"),
+    ("stac {tmp}/r.h5 --cv --method classical", "--cv is for --method stac"),
+    # sgp-fit
+    ("sgp-fit {tmp}/r.h5 --model foo", "'foo' is not one of"),
+    ("sgp-fit {tmp}/r.h5 -m foo", "'foo' is not one of"),
+    ("sgp-fit {tmp}/r.h5 --friction dry", "viscous, coulomb or none"),
+    ("sgp-fit {tmp}/r.h5 --inference fast", "'fast' is not one of"),
+    ("sgp-fit {tmp}/r.h5 --n-inducing 0", "--n-inducing"),
+    ("sgp-fit {tmp}/r.h5 --gp-inputs q,tau", "q, qd, qdd"),
+    ("sgp-fit {tmp}/r.h5 --restarts -3", "--restarts"),
+    ("sgp-fit {tmp}/r.h5 --min-noise -1", "--min-noise"),
+    ("sgp-fit {tmp}/r.h5 --jobs 0", "--jobs"),
+    ("sgp-fit {tmp}/r.h5 --seed 1.5", "--seed"),
+    # predict
+    ("predict {tmp}/m.yaml {tmp}/r.h5 --from wrist", "'wrist': expected a comma-separated list"),
+    ("predict {tmp}/m.yaml {tmp}/r.h5 --to pots,elbows", "'pots,elbows': expected"),
+    ("predict {tmp}/m.yaml {tmp}/r.h5 --jobs 0", "--jobs"),
+    ("predict {tmp}/m.yaml {tmp}/r.h5 -o {tmp}/p.txt", "a log is written as .h5"),
+    # pneumatic-fit, simulate pneumatics
+    ("pneumatic-fit {tmp}/r.h5 --all --starts 0", "--starts"),
+    ("pneumatic-fit {tmp}/r.h5 --all --jobs 0", "--jobs"),
+    ("pneumatic-fit {tmp}/r.h5", "--chamber NAME (repeatable) or --all"),
+    ("pneumatic-fit {tmp}/r.h5 --all -c elbow", "--chamber NAME (repeatable) or --all"),
+    ("simulate pneumatics -o {tmp}/s.h5 --duration -5", "-5 is not more than 0"),
+    ("simulate pneumatics -o {tmp}/s.h5 --duration 0", "0 is not more than 0"),
+    ("simulate pneumatics -o {tmp}/s.h5 --experiment wild", "'wild' is not one of"),
+    ("simulate pneumatics -o {tmp}/s.h5 --sessions 0", "--sessions"),
+    ("simulate pneumatics -o {tmp}/s.h5 --substeps 0", "--substeps"),
+    ("simulate pneumatics -o {tmp}/s.h5 --pressure-noise -1", "--pressure-noise"),
+    ("simulate pneumatics -o {tmp}/s.txt", "a log is written as .h5"),
+    ("simulate pneumatics -o {tmp}/s.h5 --effect nosuch", "not a pneumatics effect"),
+    ("simulate pneumatics -o {tmp}/s.h5 --effect backlash", "it is a kinematics effect"),
+    ("simulate pneumatics -o {tmp}/s.h5 --effect valve_delay=-1", "size must be a positive number"),
+    # import, split, batch, report
+    ("import {tmp}/a.csv -o {tmp}/o.h5 --rate 0", "0 is not more than 0"),
+    ("import {tmp}/a.csv -o {tmp}/o.txt", "a log is written as .h5"),
+    ("split {tmp}/r.h5 --at abc", "expected a fraction"),
+    ("split {tmp}/r.h5 --at 0.5 -o {tmp}/a.h5 {tmp}/a.h5", "two new files"),
+    ("split {tmp}/r.h5 --at 0.5 -o {tmp}/a.h5 {tmp}/b.txt", "a log is written as .h5"),
+    ("batch magic {tmp}", "'magic' is not one of"),
+    ("batch stac {tmp} --jobs 0", "--jobs"),
+    ("batch stac {tmp} --jobs 2 --scheduler tcp://localhost:1", "not both"),
+    # diagnose
+    ("diagnose {tmp}/r.h5 --domain space", "'space' is not one of"),
+    ("diagnose {tmp}/r.h5 --friction dry", "viscous,coulomb or none"),
+    ("diagnose {tmp}/r.h5 --inertia guessed", "not one of"),
+    ("diagnose {tmp}/r.h5 --alpha 0", "--alpha"),
+    ("diagnose {tmp}/r.h5 --min-gain 1", "--min-gain"),
+    ("diagnose {tmp}/r.h5 --blocks 4", "--blocks"),
+    ("diagnose {tmp}/r.h5 --jobs 0", "--jobs"),
+    # simulate kinematics, simulate dynamics
+    ("simulate kinematics -o {tmp}/s.h5 --duration -5", "-5"),
+    ("simulate kinematics -o {tmp}/s.h5 --rate 0", "rate"),
+    ("simulate kinematics -o {tmp}/s.h5 --occlusion 2", "occlusion"),
+    ("simulate kinematics -o {tmp}/s.h5 --occlusion-run 0", "occlusion"),
+    ("simulate kinematics -o {tmp}/s.h5 --gain-error -1", "gain-error"),
+    ("simulate kinematics -o {tmp}/s.h5 --pot-noise -1", "pot-noise"),
+    ("simulate kinematics -o {tmp}/s.h5 --marker-noise -1", "marker-noise"),
+    ("simulate kinematics -o {tmp}/s.h5 --poses -1", "--poses"),
+    ("simulate kinematics -o {tmp}/s.h5 --pose-samples 0", "--pose-samples"),
+    ("simulate kinematics -o {tmp}/s.txt --duration 1", ".h5"),
+    ("simulate kinematics -o {tmp}/s.h5 --effect nosuch", "not a kinematics effect"),
+    ("simulate dynamics -o {tmp}/s.h5 --duration -5", "-5"),
+    ("simulate dynamics -o {tmp}/s.h5 --rate 0", "rate"),
+    ("simulate dynamics -o {tmp}/s.h5 --trajectory loop", "'loop'"),
+    ("simulate dynamics -o {tmp}/s.h5 --noise -1", "noise"),
+    ("simulate dynamics -o {tmp}/s.h5 --viscous -1", "viscous"),
+    ("simulate dynamics -o {tmp}/s.h5 --coulomb -1", "coulomb"),
+    ("simulate dynamics -o {tmp}/s.h5 --region theta", "JOINT:LOW:HIGH"),
+    ("simulate dynamics -o {tmp}/s.txt --duration 1", ".h5"),
+    ("simulate dynamics -o {tmp}/s.h5 --effect nosuch", "not a dynamics effect"),
+]
+
+BAD_INPUT = [  # exit 1
+    ("stac {tmp}/nosuch.h5", "nosuch.h5"),
+    ("stac {text}", "not a diegocal log"),
+    ("sgp-fit {tmp}/nosuch.h5", "nosuch.h5"),
+    ("predict {tmp}/nosuch.yaml {text}", "nosuch.yaml"),
+    ("predict {text} {text}", "expected a YAML mapping"),
+    ("pneumatic-fit {tmp}/nosuch.h5 --all", "nosuch.h5"),
+    ("pneumatic-fit {text} --all --steady-state {tmp}/nosuch.h5", "nosuch.h5: no such file"),
+    ("pneumatic-merge {tmp}/nosuch.yaml -o {tmp}/m.yaml", "nosuch.yaml"),
+    ("inspect {tmp}/nosuch.h5", "nosuch.h5"),
+    ("inspect {text}", "not a diegocal log"),
+    ("report {tmp}/nosuch.h5", "nosuch.h5"),
+    ("split {tmp}/nosuch.h5 --at 0.5", "nosuch.h5"),
+    ("import {tmp}/nosuch.csv -o {tmp}/o.h5", "nosuch.csv"),
+    ("batch stac {tmp}/nosuch", "nosuch"),
+    ("diagnose {tmp}/nosuch.h5", "nosuch.h5"),
+    ("simulate pneumatics -o {tmp}/s.h5 --robot {tmp}/norobot", "norobot"),
+    ("simulate kinematics -o {tmp}/s.h5 --robot {tmp}/norobot", "norobot"),
+    ("simulate dynamics -o {tmp}/s.h5 --robot {tmp}/norobot", "norobot"),
+    ("simulate pneumatics -o {tmp}/s.h5 --duration 1 --effect valve_delay:nochamber", "not a chamber of this robot"),
+    # an output whose folder does not exist is refused before any work, and the folder not made
+    ("stac {text} -o {missing}/c.yaml", "does not exist"),
+    ("stac {text} --joint-angles {missing}/q.h5", "does not exist"),
+    ("sgp-fit {text} -o {missing}/x", "does not exist"),
+    ("predict {text} {text} -o {missing}/p.h5", "does not exist"),
+    ("pneumatic-fit {text} --all -o {missing}/p.yaml", "does not exist"),
+    ("pneumatic-merge {text} -o {missing}/m.yaml", "does not exist"),
+    ("report {text} -o {missing}/r.pdf", "does not exist"),
+    ("split {text} --at 0.5 -o {tmp}/a.h5 {missing}/b.h5", "does not exist"),
+    ("import {text} -o {missing}/o.h5", "does not exist"),
+    ("batch stac {tmp} -o {missing}/out", "does not exist"),
+    ("batch stac {tmp} --table {missing}/t.csv", "does not exist"),
+    ("simulate pneumatics -o {missing}/s.h5", "does not exist"),
+    ("diagnose {text} -o {missing}/d.yaml", "does not exist"),
+    ("simulate kinematics -o {missing}/s.h5 --duration 1", "does not exist"),
+    ("simulate dynamics -o {missing}/s.h5 --duration 1", "does not exist"),
+    ("stac {text} -o {text}/c.yaml", "is not a folder"),
+]
+
+
+def _cases(table, code):
+    for line, needle in table:
+        marks = [pytest.mark.xfail(strict=True, reason=PENDING[line])] if line in PENDING else []
+        yield pytest.param(line, code, needle, id=line.replace("{", "").replace("}", ""), marks=marks)
+
+
+@pytest.mark.parametrize("line, code, needle", [*_cases(USAGE, 2), *_cases(BAD_INPUT, 1)])
+def test_exit_code(tmp_path, line, code, needle):
+    text = tmp_path / "notes.txt"
+    text.write_text("not a log\n")
+    missing = tmp_path / "missing"
+    args = [a.format(tmp=tmp_path, text=text, missing=missing) for a in line.split()]
+    result = runner.invoke(app, args)
+    message = one_line_error(result)
+    assert result.exit_code == code, result.output
+    assert message.startswith("error:") and needle in message, message
+    assert not missing.exists()
