@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, errors, summary
+from diegocal.cli.common import cli_errors, default_output, errors, output_path, summary
 from diegocal.errors import DiegocalError, MissingStreamError
 
 #: The bundle kind of each domain's extended model.
@@ -79,7 +79,12 @@ def diagnose_cmd(
     ] = None,
     output: Annotated[
         Path | None,
-        typer.Option("-o", "--output", help="diagnosis.yaml to write; by default LOG.diagnosis.yaml beside the log."),
+        typer.Option(
+            "-o",
+            "--output",
+            callback=output_path,
+            help="diagnosis.yaml to write; by default LOG.diagnosis.yaml beside the log.",
+        ),
     ] = None,
     friction: Annotated[
         str,

@@ -5,15 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from diegocal.cli.app import simulate_app
-from diegocal.cli.common import cli_errors, summary
-from diegocal.io import save_log
-from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sim.dynamics import TRAJECTORIES, DynamicsOptions, simulate_dynamics
-from diegocal.sim.effects import SimOptionError, check_effects, parse_effects
+from diegocal.cli.choices import TRAJECTORIES
+from diegocal.cli.common import cli_errors, log_output, summary
+from diegocal.errors import OptionError
 
 
 def parse_region(text: str) -> tuple[str, tuple[float, float]]:
@@ -24,7 +21,7 @@ def parse_region(text: str) -> tuple[str, tuple[float, float]]:
             raise ValueError
         return parts[0], (float(parts[1]), float(parts[2]))
     except ValueError:
-        raise SimOptionError(
+        raise OptionError(
             f"--region {text!r}: expected JOINT:LOW:HIGH in rad, e.g. theta:2.0:2.5"
         ) from None
 
@@ -32,7 +29,7 @@ def parse_region(text: str) -> tuple[str, tuple[float, float]]:
 @simulate_app.command("dynamics")
 @cli_errors
 def simulate_dynamics_cmd(
-    output: Annotated[Path, typer.Option("--output", "-o", help="Log to write (.h5 or .csv).")],
+    output: Annotated[Path, typer.Option("--output", "-o", callback=log_output, help="Log to write (.h5 or .csv).")],
     robot: Annotated[str, typer.Option(help="Robot directory or bundled robot name.")] = "arm3",
     duration: Annotated[float, typer.Option(help="Log length, s.")] = 20.0,
     rate: Annotated[float, typer.Option(help="Sample rate, Hz.")] = 100.0,
@@ -69,6 +66,13 @@ def simulate_dynamics_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate q, qd, qdd, tau of any robot (thesis eq. 3.29 + effects) with truth in /truth."""
+    import numpy as np
+
+    from diegocal.io import save_log
+    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+    from diegocal.sim.effects import check_effects, parse_effects
+
     effects = check_effects(parse_effects(effect), "dynamics")
     regions = dict(parse_region(r) for r in region or ())
     options = DynamicsOptions(

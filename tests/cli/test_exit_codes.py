@@ -22,14 +22,9 @@ runner = CliRunner()
 #: cases of commands edited on other branches (issue #16) that still fail: expected failures,
 #: strict, to drop once those branches are merged and the fixes in the notes applied
 SIMULATE_CMD = "diegocal/cli/simulate_cmd.py (other branch): -o needs callback=log_output"
-SIMULATE_DYNAMICS_CMD = "diegocal/cli/simulate_dynamics_cmd.py (other branch): -o needs callback=log_output"
-DIAGNOSE_CMD = "diegocal/cli/diagnose_cmd.py (other branch): -o needs callback=output_path"
 PENDING = {
     "simulate kinematics -o {tmp}/s.txt --duration 1": SIMULATE_CMD,
     "simulate kinematics -o {missing}/s.h5 --duration 1": SIMULATE_CMD,
-    "simulate dynamics -o {tmp}/s.txt --duration 1": SIMULATE_DYNAMICS_CMD,
-    "simulate dynamics -o {missing}/s.h5 --duration 1": SIMULATE_DYNAMICS_CMD,
-    "diagnose {text} -o {missing}/d.yaml": DIAGNOSE_CMD,
 }
 
 USAGE = [  # exit 2

@@ -26,7 +26,6 @@ LIGHT_DIEGOCAL = ("diegocal", "diegocal.errors", "diegocal.cli")
 #: are light, to drop them from here), and the other helps are counted with them stubbed out.
 PENDING = {
     "diegocal.cli.simulate_cmd": "imports numpy, diegocal.io, robot and sim at module level",
-    "diegocal.cli.simulate_dynamics_cmd": "imports numpy, diegocal.io, robot and sim at module level",
 }
 
 SCRIPT = """
