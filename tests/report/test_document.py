@@ -50,6 +50,7 @@ def results(tmp_path_factory) -> tuple[list[Path], list[Path]]:
     for name, seed in (("swing.h5", 1), ("swing_heldout.h5", 2)):
         save_log(simulate_dynamics(pendulum, DynamicsOptions(duration=4.0), np.random.default_rng(seed)), d / name)
     _cli("stac", d / "kin.h5", "-o", d / "kin.calib.yaml", "--max-iterations", 10, "-q")
+    (d / "swing_models").mkdir()
     for kind in ("pr", "sgp"):
         _cli("sgp-fit", d / "swing.h5", "--model", kind, "-o", d / "swing_models" / f"{kind}.sgp", "-q")
     _cli("predict", d / "swing_models" / "sgp.sgp", d / "swing_heldout.h5", "-o", d / "swing.prediction.h5", "-q")
