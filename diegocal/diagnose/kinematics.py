@@ -6,15 +6,15 @@ every frame with θ fixed, so that q is tracked everywhere. Channels: each pot (
 baseline fitted to the log mapped into its terms (:func:`diegocal.stac.terms.apply_terms`).
 
 Candidates (:mod:`diegocal.stac.terms`), linearised at the current fit: the column
-∂(prediction)/∂θ_term over every pot and marker row of a frame. Because q is re-estimated per
-frame, every column is projected out of that frame's q directions (the Schur complement),
-
-.. math:: c_t \\leftarrow c_t - J_t (J_t^T W J_t)^{-1} J_t^T W c_t,
-
-J_t the observation Jacobian w.r.t. q_t (eq. 2.22-2.23), W = diag(1/σ²) the sensors' weights,
-so that no term is "explained" by moving q. Each candidate also re-fits (``refit``) the
-calibration parameters it could take over: a pot term its pot's gain and bias, a link offset the
-positions of the markers it moves and the mocap translation, a marker slip its marker's position.
+∂(prediction)/∂θ_term over every pot and marker row of a frame, projected out of that frame's q
+directions and out of the calibration STAC fits for the whole log
+(:mod:`diegocal.diagnose.kinematics_lin`), so that no term is "explained" by moving q or by
+re-fitting what the baseline already fits: a link offset by the markers' positions, the mocap
+frame and the pots' gains (a longer knuckle is a larger lever about the abduction axis, which
+the abduction pot's gain absorbs in part); a pot term by the gains and biases of the pots that
+read its joints. A clock shift is a family over shifts (:data:`TIME_SHIFTS`), each variant the
+predicted markers' change over its shift: a shift of many samples is far from its linearisation
+at zero. A marker slip re-fits its marker's position (``refit``).
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
 trend, by a threshold with a family-wise false-alarm rate).
@@ -33,10 +33,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose.engine import Candidate, Fault, Residuals
+from diegocal.diagnose.kinematics_lin import Linearised
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.model import MARKERS, Observation
 from diegocal.stac.predict import predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import calibrate
@@ -48,6 +48,7 @@ from diegocal.stac.terms import (
     make_term,
     pot_columns,
     pot_extra,
+    shift_clock,
 )
 from diegocal.terms import Region, Term
 
@@ -55,9 +56,6 @@ from diegocal.terms import Region, Term
 SLIP_STEPS = 4
 #: Half width (samples) of the running median a marker outlier is measured against.
 OUTLIER_WINDOW = 8
-#: A candidate acts on the channels that carry at least this share of its largest channel's
-#: weighted column energy (its projection spreads tiny parts over every sensor of the chain).
-CHANNEL_SHARE = 0.02
 #: Dead-band widths tried for a backlash (a family), in multiples of BAND_SIGMAS pot σ.
 BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
 #: A marker outlier is at least this many σ off its neighbours' trend: the chi² level of a
@@ -66,6 +64,11 @@ BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
 OUTLIER_SIGMAS = 8.0
 #: GN refinements of the continuous terms after each STAC fit of an extended model.
 REFINE = 1
+#: Clock shifts tried for a time offset (a family, both signs), s: a shift of several samples
+#: moves the markers by far more than their linearisation at zero predicts (a PID-driven joint
+#: turns through a radian in a quarter second), so each variant is the change of the predicted
+#: markers over its own shift.
+TIME_SHIFTS = (0.01, 0.02, 0.035, 0.06, 0.1, 0.15, 0.22, 0.33, 0.5)
 
 
 @dataclass
@@ -119,6 +122,8 @@ class KinematicsAdapter:
         if term.cause in POT_CAUSES and not term.extra:
             j = self.pot_names.index(term.channel)
             return replace(term, extra=pot_extra(term.cause, self.raw_pots[train, j], 0.005))
+        if term.cause == "time_offset" and "span" in term.extra:  # a family variant's column only
+            return replace(term, extra={k: v for k, v in term.extra.items() if k != "span"})
         return term
 
     def _fit_once(self, terms, train, previous: KinFit | None = None) -> KinFit:
@@ -211,28 +216,29 @@ class KinematicsAdapter:
         return Residuals(channels, units, variables, chv)
 
     # ------------------------------------------------------------------ candidates
-    def _linearise(self, fitted: KinFit) -> _Lin:
-        return _Lin.at(fitted, self)
+    def _linearise(self, fitted: KinFit) -> Linearised:
+        return Linearised.at(fitted, self)
 
-    def _term_columns(self, lin: _Lin, fitted: KinFit, term: Term):
-        """(columns (T, R, k), refit (T, R, k0) or None) of a term on the mapped rows, projected."""
+    def _term_columns(self, lin: Linearised, fitted: KinFit, term: Term):
+        """(columns (T, R, k), None) of a term on the mapped rows, projected out of every frame's q
+        and of the calibration's span (:meth:`Linearised.beyond_calibration`); None for a term without
+        continuous columns."""
         P = lin.P
         if term.cause in POT_CAUSES:
             j = self.pot_names.index(term.channel)
             f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])
-            g = lin.project_pot(j)  # (T, R)
-            refit = []
-            for i in lin.sharing(j):  # gain and bias of every pot reading a joint this one reads
-                gi = g if i == j else lin.project_pot(i)
-                refit += [gi * lin.s[:, i, None], gi]
-            return g[..., None] * f[:, None, :], np.stack(refit, axis=-1)
+            return lin.beyond_gain_bias(lin.project_pot(j)[..., None] * f[:, None, :], j), None
         if term.cause == "link_offset":
-            return lin.project(lin.link_offset_basis(term.channel)), lin.project(lin.refit_markers(term.channel))
+            return lin.beyond_calibration(lin.project(lin.link_offset_basis(term.channel))), None
         if term.cause == "time_offset":
             v = np.zeros((lin.T, lin.R, 1))
-            xd = np.gradient(fitted.markers, self.time, axis=0)  # (T, M', 3)
+            span = term.extra.get("span")
+            if span:  # the predicted markers' change over the shift, per second of it
+                xd = (shift_clock(fitted.markers, self.time, -span) - fitted.markers) / span
+            else:
+                xd = np.gradient(fitted.markers, self.time, axis=0)  # (T, M', 3)
             v[:, P:, 0] = xd.reshape(lin.T, -1)
-            return lin.project(np.nan_to_num(v)), None
+            return lin.beyond_calibration(lin.project(np.nan_to_num(v))), None
         return None
 
     def candidates(self, fitted: KinFit, residuals: Residuals, train) -> list[Candidate]:
@@ -241,34 +247,34 @@ class KinematicsAdapter:
         have = {(t.cause, t.channel) for t in fitted.terms}
         sigma_p = lin.sigma_p
         out = []
+
+        def offer(term, family=""):  # a term the calibration takes up entirely is no candidate
+            cols, _ = self._term_columns(lin, fitted, term)
+            if np.any(cols):
+                out.append(Candidate(term, lin.channels(cols), family=family))
+
         for j, name in enumerate(self.pot_names):
             for cause in POT_CAUSES:
                 if (cause, name) in have:
                     continue
                 extra = pot_extra(cause, self.raw_pots[train, j], float(sigma_p[j]))
                 bands = BAND_SCALES if cause == "backlash" else (1.0,)
-                shared = None
                 for b in bands:  # backlash: a family over dead-band widths
                     ex = dict(extra, width=extra["width"] * b) if cause == "backlash" else extra
                     term = make_term(cause, name, extra=ex)
-                    cols, refit = self._term_columns(lin, fitted, term)
-                    shared = shared or lin.channels(refit)
                     fam = f"backlash:{name}" if cause == "backlash" else ""
-                    out.append(Candidate(term, lin.channels(cols), family=fam, refit=shared))
+                    offer(term, fam)
         for joint in lin.observed_joints():
-            if ("link_offset", joint) in have:
-                continue
-            term = make_term("link_offset", joint)
-            cols, refit = self._term_columns(lin, fitted, term)
-            out.append(Candidate(term, lin.channels(cols), refit=lin.channels(refit)))
+            if ("link_offset", joint) not in have:
+                offer(make_term("link_offset", joint))
         if ("time_offset", "markers") not in have:
-            term = make_term("time_offset", "markers")
-            cols, _ = self._term_columns(lin, fitted, term)
-            out.append(Candidate(term, lin.channels(cols)))
+            for span in (0.0, *TIME_SHIFTS, *(-t for t in TIME_SHIFTS)):
+                term = make_term("time_offset", "markers", extra={"span": span} if span else None)
+                offer(term, "time_offset:markers")
         out += self._slip_family(lin, fitted, have, train)
         return out
 
-    def _slip_family(self, lin: _Lin, fitted: KinFit, have, train) -> list[Candidate]:
+    def _slip_family(self, lin: Linearised, fitted: KinFit, have, train) -> list[Candidate]:
         """Per marker a family over change times: a grid inside the training runs and one time in
         the middle of each gap between them (the training frames cannot place a slip inside a
         gap more finely; its middle halves the worst error)."""
@@ -382,167 +388,6 @@ class KinematicsAdapter:
         data = self.calibration(fitted).to_dict()
         save_yaml({**header, "kind": "calibration", **data}, path)
         return path
-
-
-# ----------------------------------------------------------------------------- linearisation
-@dataclass
-class _Lin:
-    """The observation Jacobian and the Schur projector of every frame at a fit (mapped rows:
-    P pots, then 3 per mapped marker).
-
-    J : (T, R, n); K : (T, n, R) = (JᵀWJ)⁻¹ JᵀW; w : (T, R) weights 1/σ² (0 where occluded)
-    """
-
-    adapter: KinematicsAdapter
-    fitted: KinFit
-    obs: Observation
-    params: object
-    J: np.ndarray
-    K: np.ndarray
-    w: np.ndarray
-    s: np.ndarray
-    Rl: np.ndarray
-    sigma_p: np.ndarray
-    _pots: dict = field(default_factory=dict)
-
-    @property
-    def T(self) -> int:
-        return self.J.shape[0]
-
-    @property
-    def R(self) -> int:
-        return self.J.shape[1]
-
-    @property
-    def P(self) -> int:
-        return self.obs.n_pots
-
-    @classmethod
-    def at(cls, fitted: KinFit, adapter: KinematicsAdapter) -> _Lin:
-        a = fitted.applied
-        obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
-        params = obs.params_from(fitted.cal)
-        sig = dict(fitted.cal.sigma_by_group)
-        sigma_p = np.array([sig.get(k, fitted.cal.sigma_pots) for k in obs.kinds], float)
-        sig_x = float(sig.get(MARKERS, fitted.cal.sigma_markers))
-        # a pot type fitted exactly (one pot per joint, its σ collapsed) pins its joints, but no
-        # weight may swamp the others' in floating point
-        floor = 1e-3 * float(np.max(np.concatenate([sigma_p, [sig_x / 0.1]])))
-        sigma_p = np.maximum(sigma_p, floor)
-        T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, a.robot.n_joints
-        J = np.zeros((T, P + 3 * M, n))
-        s_all = np.zeros((T, P))
-        Rl_all = np.zeros((T, M, 3, 3))
-        for i in range(0, T, 500):
-            sl = slice(i, min(i + 500, T))
-            s, ds, Rl, _, Jx = obs.evaluate(fitted.q[sl], params.xyz)
-            J[sl, :P] = params.gain[None, :, None] * ds
-            J[sl, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(s.shape[0], 3 * M, n)
-            s_all[sl], Rl_all[sl] = s, Rl
-        w = np.zeros((T, P + 3 * M))
-        w[:, :P] = 1.0 / sigma_p**2
-        w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
-        JW = np.swapaxes(J, 1, 2) * w[:, None, :]
-        H = JW @ J
-        diag = np.einsum("bii->bi", H)
-        diag += 1e-9 * diag + 1e-12
-        K = np.linalg.solve(H, JW)
-        return cls(adapter, fitted, obs, params, J, K, w, s_all, Rl_all, sigma_p)
-
-    def project(self, C: np.ndarray) -> np.ndarray:
-        """Columns (T, R, k) minus their part along the frame's q directions (module docstring)."""
-        return C - self.J @ (self.K @ C)
-
-    def project_pot(self, j: int) -> np.ndarray:
-        """The projected unit column of pot j: (T, R) (computed once per pot)."""
-        if j not in self._pots:
-            out = -self.J @ self.K[:, :, j : j + 1]
-            out[:, j, 0] += 1.0
-            self._pots[j] = out[..., 0]
-        return self._pots[j]
-
-    def sharing(self, j: int) -> list[int]:
-        """Pots (mapped order) that read a joint pot j reads (j first)."""
-        A = self.obs.A != 0
-        if self.obs.kinds[j] == "linear" or not A[j].any():
-            return [j]
-        others = [i for i in range(self.P) if i != j and self.obs.kinds[i] != "linear" and np.any(A[i] & A[j])]
-        return [j, *others]
-
-    def residual_rows(self) -> np.ndarray:
-        """(T, R) residuals of the mapped rows (reading − prediction)."""
-        a, f = self.fitted.applied, self.fitted
-        rp = np.asarray(a.log.stream("pots").data, float) - f.pots
-        rm = np.asarray(a.log.stream("markers").data, float) - f.markers
-        return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
-
-    def mapped_index(self, name: str) -> int:
-        return self.obs.marker_names.index(name)
-
-    def marker_basis(self, m: int) -> np.ndarray:
-        """∂x_m/∂d_m = R Rl (T, R, 3) on marker m's rows."""
-        C = np.zeros((self.T, self.R, 3))
-        P = self.P
-        C[:, P + 3 * m : P + 3 * m + 3] = np.einsum("ij,tjk->tik", self.params.R, self.Rl[:, m])
-        return C
-
-    def _moves(self, joint: str) -> np.ndarray:
-        kin = self.obs.kin
-        k = self.adapter.robot.joint_index(joint)
-        jl, _, _ = kin.link_info(self.obs.marker_links)
-        return kin._anc[jl, k].astype(float) - kin._anc[kin.base_joint, k]
-
-    def observed_joints(self) -> list[str]:
-        return [j for j in self.adapter.robot.joint_names if np.any(self._moves(j) != 0)]
-
-    def link_offset_basis(self, joint: str) -> np.ndarray:
-        """∂x/∂δ (T, R, 3) of a translation δ of the joint's origin in its parent joint's frame:
-        every marker it moves shifts by R R_parent δ (linear pots: not modelled, rows 0)."""
-        kin = self.obs.kin
-        k = self.adapter.robot.joint_index(joint)
-        poses = kin.joint_poses(self.fitted.q)
-        par = kin.parent[k]
-        Rp = poses.R[:, par] if par >= 0 else poses.root_R
-        RRp = np.einsum("ij,tjk->tik", self.params.R, Rp)
-        C = np.zeros((self.T, self.R, 3))
-        P = self.P
-        for m, sgn in enumerate(self._moves(joint)):
-            if sgn:
-                C[:, P + 3 * m : P + 3 * m + 3] = sgn * RRp
-        return C
-
-    def refit_markers(self, joint: str) -> np.ndarray:
-        """Refit columns of a link offset: positions of the markers the joint moves (a joint whose
-        parent is fixed to the base moves everything alike: the mocap frame, not re-fitted here,
-        takes its offset up)."""
-        cols = [self.marker_basis(m) for m, sgn in enumerate(self._moves(joint)) if sgn]
-        return np.concatenate(cols, axis=-1)
-
-    def channels(self, C: np.ndarray | None) -> dict | None:
-        """Mapped rows (T, R, k) -> {channel: (T, k) pot or (T, 3, k) marker} on the log's
-        channels (slips merged back), channels the columns do not touch left out."""
-        if C is None:
-            return None
-        P, k = self.P, C.shape[-1]
-        Cw = np.nan_to_num(C * C) * self.w[..., None]
-        energy = np.concatenate([Cw[:, :P].sum(axis=(0, 2)), Cw[:, P:].reshape(self.T, -1, 3, k).sum(axis=(0, 2, 3))])
-        keep = energy >= CHANNEL_SHARE * (energy.max() if energy.size else 0.0)
-        out = {}
-        for i, n in enumerate(self.obs.pot_names):
-            if keep[i] and energy[i] > 0:
-                out[n] = np.ascontiguousarray(C[:, i])  # a copy: C itself is not kept alive
-        mk = C[:, P:].reshape(self.T, -1, 3, k)
-        a = self.fitted.applied
-        names = list(self.obs.marker_names)
-        for n in self.adapter.marker_names:
-            j = P + names.index(n)
-            second = [(names.index(v), first) for v, (o, first) in a.slips.items() if o == n]
-            if any(keep[x] and energy[x] > 0 for x in [j, *[P + v for v, _ in second]]):
-                col = mk[:, j - P].copy()
-                for v, first in second:
-                    col[first:] = mk[first:, v]
-                out[n] = col
-        return out
 
 
 class _FromSample:
