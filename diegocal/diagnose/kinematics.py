@@ -87,6 +87,7 @@ class KinFit:
     pots: np.ndarray
     markers: np.ndarray
     train: np.ndarray = field(repr=False)
+    deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) deleted residuals
 
 
 class KinematicsAdapter:
@@ -104,6 +105,7 @@ class KinematicsAdapter:
         self.marker_names = tuple(self.log.stream("markers").names)
         self.time = np.asarray(self.log.time, float)
         self._baseline: KinFit | None = None
+        self._lin = None
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
 
     # ------------------------------------------------------------------ fit
@@ -221,7 +223,11 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ candidates
     def _linearise(self, fitted: KinFit) -> Linearised:
-        return Linearised.at(fitted, self)
+        """The linearisation at a fit (the last one kept: scores and candidates share it)."""
+        if self._lin is None or self._lin[0] is not fitted:
+            self._lin = None  # free the old one first
+            self._lin = (fitted, Linearised.at(fitted, self))
+        return self._lin[1]
 
     def _term_columns(self, lin: Linearised, fitted: KinFit, term: Term):
         """(columns (T, R, k), None) of a term on the mapped rows, projected out of every frame's q
@@ -348,8 +354,15 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ scores and output
     def score(self, fitted: KinFit, mask, exclude: dict | None = None) -> Score:
-        rp, rm, xm = self._residual_arrays(fitted)
-        rp, rm = rp.copy(), rm.copy()
+        """RMSE per channel on ``mask`` of each sensor's deleted residual: its reading against the
+        model's prediction at the q the frame's other sensors give
+        (:meth:`Linearised.deleted_residuals`). A reading's own residual would reward a model
+        for following it: a rotary pot that largely fixes its joint's q has a small residual
+        whatever its transfer curve, and a term that corrects it moves q back onto the other
+        sensors, so its own residual grows while every other sensor's shrinks."""
+        if fitted.deleted is None:
+            fitted.deleted = self._linearise(fitted).deleted_residuals()
+        rp, rm = fitted.deleted[0].copy(), self._merge(fitted.applied, fitted.deleted[1])
         for c, ex in (exclude or {}).items():
             ex = np.asarray(ex, bool)
             if c in self.pot_names:

@@ -135,6 +135,26 @@ class Linearised:
         rm = np.asarray(a.log.stream("markers").data, float) - f.markers
         return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
 
+    def deleted_residuals(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each sensor's residual with q tracked from every other sensor of its frame (leave one
+        sensor out): pots (T, P) r / (1 − h), h the diagonal of J K; markers (T, M, 3)
+        (I − H_m)⁻¹ r_m, H_m the marker's 3 × 3 block of J K (exact for the linearised frame).
+        A reading that alone fixes a direction of q (h = 1) has none: NaN."""
+        r = self.residual_rows()
+        P, T = self.P, self.T
+        M = (self.R - P) // 3
+        h = np.einsum("tpn,tnp->tp", self.J[:, :P], self.K[:, :, :P])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rp = np.where(1.0 - h > 1e-12, r[:, :P] / (1.0 - h), np.nan)
+        Jm = self.J[:, P:].reshape(T, M, 3, -1)
+        Km = self.K[:, :, P:].reshape(T, -1, M, 3)
+        A = np.eye(3) - np.einsum("tmin,tnmj->tmij", Jm, Km)
+        rm = r[:, P:].reshape(T, M, 3)
+        ok = np.isfinite(rm).all(-1) & (np.abs(np.linalg.det(A)) > 1e-12)
+        out = np.full_like(rm, np.nan)
+        out[ok] = np.linalg.solve(A[ok], rm[ok][..., None])[..., 0]
+        return rp, out
+
     def mapped_index(self, name: str) -> int:
         return self.obs.marker_names.index(name)
 
