@@ -117,10 +117,11 @@ class EngineOptions:
         channels, rounds' candidates and units): clean data gives a finding with probability at
         most ``alpha`` from chance alone
     min_gain : practical significance: a finding must remove at least this fraction of the
-        validation error of its own channel when it names one it acts on (a pot, a joint), else of
-        all its channels' (a link's payload, the mocap clock): the channels its held-out gain is
-        measured on (:meth:`Finding.gain`). A real but negligible model error is not worth a term;
-        pooling a pot's term with every sensor its q projection touches would dilute it.
+        validation error of all its channels, or of its own channel when it names one it acts on
+        most (a pot, a joint: where its held-out gain is measured, :meth:`Finding.gain`). A real
+        but negligible model error is not worth a term; pooling a pot's term with every sensor its
+        q projection touches dilutes it, and its own channel alone misses it where the pot fixes
+        its joint's q (its in-sample residual follows it).
     unexplained_min_gain : the same for ``unexplained``: a binned correction spends ``n_bins``
         parameters on one channel where a term spends one to three, so it must pay more (on clean
         thin-plate chambers the 9-parameter model's known valve approximation leaves binned
@@ -149,8 +150,8 @@ class Tested:
     test : :class:`~diegocal.diagnose.stats.OutOfSample` on the validation rows
     threshold : the Bonferroni critical t it had to pass
     significant : t above the threshold and validation gain at least ``min_gain``
-    channel_gain : the validation gain on the term's own channel when it names one it acts on
-        (None: the term's channel is not a residual channel)
+    channel_gain : the larger of the validation gains on the term's own channel (when it names
+        one it acts on most) and on all its channels (None: it has no such channel)
     """
 
     term: Term
@@ -164,8 +165,8 @@ class Tested:
 
     @property
     def gain(self) -> float:
-        """Fraction of the validation error removed: on the term's own channel where it has one
-        (as the held-out gain), else over all its channels."""
+        """Fraction of the validation error removed: over all its channels, or on its own channel
+        where it has one and that is larger."""
         return self.test.gain if self.channel_gain is None else self.channel_gain
 
     def to_dict(self) -> dict:
@@ -402,9 +403,9 @@ def evaluate_candidates(
         k = cand.n_params
         term = cand.term.with_values(fit.coef[:k], fit.se)
         own = _own_gain(cand, fit, va, chans) if len(chans) > 1 else None
-        gain = test.gain if own is None else own
+        gain = test.gain if own is None else max(own, test.gain)
         sig = bool(test.t > thr and gain >= options.min_gain)
-        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, own))
+        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain))
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 

@@ -68,6 +68,10 @@ BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
 OUTLIER_SIGMAS = 7.0
 #: GN refinements of the continuous terms after each STAC fit of an extended model.
 REFINE = 1
+#: Further refinements while a clock shift still moves by more than CLOCK_TOL of itself: a shift of
+#: many samples is far from its first, linear, estimate (0.18 s after one step for 0.21 s).
+CLOCK_REFINE = 3
+CLOCK_TOL = 0.02
 #: Clock shifts tried for a time offset (a family, both signs), s: a shift of several samples
 #: moves the markers by far more than their linearisation at zero predicts (a PID-driven joint
 #: turns through a radian in a quarter second), so each variant is the change of the predicted
@@ -116,11 +120,13 @@ class KinematicsAdapter:
         fitted = self._fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
-        for _ in range(REFINE):
+        for i in range(REFINE + CLOCK_REFINE):
             if not any(t.cause in (*POT_CAUSES, "link_offset", "time_offset") for t in terms):
                 break
-            terms = self._refine(fitted)
-            fitted = self._fit_once(terms, train, fitted)
+            if i >= REFINE and not _clock_moved(terms, fitted.terms):
+                break
+            terms = fitted.terms
+            fitted = self._fit_once(self._refine(fitted), train, fitted)
         return fitted
 
     def _own(self, term: Term, train) -> Term:
@@ -134,8 +140,16 @@ class KinematicsAdapter:
 
     def _fit_once(self, terms, train, previous: KinFit | None = None) -> KinFit:
         """STAC on the training frames of the log mapped into ``terms``, then q tracked on every
-        frame (from ``previous``'s q: the pot terms act on its model readings)."""
-        applied = apply_terms(terms, self.log, self.robot, None if previous is None else previous.pots)
+        frame (from ``previous``'s q: the pot terms act on its model readings).
+
+        An extended model's STAC starts its markers where ``previous`` put them (``marker_seed``
+        'nominal' on a robot carrying those positions; a slipped marker's second one at the first's
+        plus the slip): from the link origins it can end in a degenerate optimum (a pot type's σ
+        collapsed to 0, tendons 3 x their noise) once a marker is split."""
+        robot, options = self.robot, self.options
+        if previous is not None:
+            robot, options = _seeded(robot, previous.cal), replace(options, marker_seed="nominal")
+        applied = apply_terms(terms, self.log, robot, None if previous is None else previous.pots)
         idx = np.flatnonzero(train)
         sub = Log(
             applied.log.time[idx],
@@ -143,7 +157,7 @@ class KinematicsAdapter:
             robot=applied.log.robot,
             rate_hz=applied.log.rate_hz,
         )
-        cal = calibrate(sub, applied.robot, self.options).calibration
+        cal = calibrate(sub, applied.robot, options).calibration
         terms = tuple(self._slip_value(t, cal) for t in terms)
         q0 = None if previous is None else previous.q
         both = ("pots", "markers")
@@ -425,6 +439,20 @@ class _FromSample:
         out = np.array(self.base, dtype=dtype)
         out[: self.first] = 0.0
         return out
+
+
+def _seeded(robot, cal: Calibration):
+    """``robot`` with its markers' nominal positions at a calibration's (those it names)."""
+    xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
+    markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
+    return type(robot)(robot.model, replace(robot.sensors, markers=markers), robot.name, robot.directory)
+
+
+def _clock_moved(before, after) -> bool:
+    """Whether a time offset's value changed by more than CLOCK_TOL of itself between two fits."""
+    a = {t.channel: float(t.values[0]) for t in before if t.cause == "time_offset"}
+    b = {t.channel: float(t.values[0]) for t in after if t.cause == "time_offset"}
+    return any(abs(b[c] - a[c]) > CLOCK_TOL * max(abs(b[c]), 1e-3) for c in b if c in a)
 
 
 def _slip_samples(train: np.ndarray, steps: int) -> list[int]:
