@@ -2,10 +2,13 @@
 
 For each domain, ``--logs`` simulated logs each hide one effect of the domain's vocabulary (causes
 taken in turn; channel, magnitude and region drawn from the seed) and ``--logs`` clean logs hide
-none. Dynamics: a torque of 3-10× the noise on a random joint, as the issue asks. Kinematics and
-pneumatics: the simulators' physical default ranges; a link offset is hidden on a joint another
-joint carries (the offset of a joint hanging from the base is the mocap frame's, which no
-calibration can tell apart). Every log is diagnosed with the defaults a user gets, except that a
+none. Dynamics: a torque of 3-10× the noise on a random joint, as the issue asks. Kinematics: an
+effect of 3-10× the noise of the channel it is read on (:func:`_sized_kinematic_effect`: pot noise
+for a pot's nonlinearity or backlash, marker noise per axis for the distance a link offset, a slip,
+an outlier or a swap moves a marker, and for the RMS distance a clock shift moves the markers); a
+link offset is hidden on a joint another joint carries (the offset of a joint hanging from the base
+is the mocap frame's, which no calibration can tell apart). Pneumatics: the simulator's physical
+default ranges. Every log is diagnosed with the defaults a user gets, except that a
 cause the default baseline already contains is diagnosed against a baseline without it
 (:data:`BASELINE_FOR`). A hidden effect counts as *named* when the top finding has its cause and
 channel and a positive held-out gain; a clean log is a *false alarm* when it gives any finding.
@@ -88,6 +91,7 @@ BASELINE_FOR = {
 #: rightly names the joint with the most of the simulator's own friction first).
 ROBOT_FOR = {"coulomb_friction": {"coulomb": 0.0}, "viscous_friction": {"viscous": 0.0}}
 TORQUE_NOISE = 0.01  # N·m, the dynamics simulator's default
+POT_NOISE, MARKER_NOISE = 0.005, 0.002  # V and m per axis, the kinematics simulator's defaults
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,7 @@ class Outcome:
     seconds: float
     error: str = ""
     also: tuple = ()  # other channels that name the same effect (a swapped pair's partner)
+    ratio: float = float("nan")  # the hidden effect's size on its channel / that channel's noise
 
     @property
     def named(self) -> bool:
@@ -122,11 +127,14 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
     if domain == "kinematics":
         from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 
-        if cause == "link_offset":  # a joint carried by another: a base joint's offset is the mocap frame's
-            moving = [j for j in robot.joint_names if robot.model.parents[robot.model.getJointId(j)] > 0]
-            pick = moving[int(np.random.default_rng([seed, 1]).integers(len(moving)))]
-            effects = check_effects([f"link_offset:{pick}"], domain)
-        log = simulate_kinematics(robot, KinematicsOptions(duration=case["duration"], effects=effects), rng)
+        opts = KinematicsOptions(duration=case["duration"], pot_noise=POT_NOISE, marker_noise=MARKER_NOISE)
+        if cause:
+            request = _sized_kinematic_effect(robot, cause, seed, opts)
+            effects = check_effects([request], domain)
+            if cause == "link_offset":  # along the link: the URDF origin's direction
+                joint = effects[0].channel
+                opts = replace(opts, directions={joint: tuple(_origin(robot, joint))})
+        log = simulate_kinematics(robot, replace(opts, effects=effects), rng)
     elif domain == "dynamics":
         from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
@@ -167,6 +175,62 @@ def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, di
     return f"{cause}:{joint}={size:.6g}", regions
 
 
+def _sized_kinematic_effect(robot, cause: str, seed: int, options) -> str:
+    """``cause[:channel]=size`` with an effect of U(3, 10) × the noise of the channel it is read on
+    (units of the simulator's ``SIZE_UNITS``): a pot nonlinearity's departure at the range's ends
+    and a backlash's lag (half its dead band) in pot noise; in marker noise (per axis, m) the
+    distance a link offset moves every marker it carries, a slip its marker, an outlier its
+    reading, and a swapped pair's distance (the simulator takes the pair nearest it: the realised
+    ratio is what :func:`size_ratio` reports); a clock shift of ratio × marker noise / the markers'
+    RMS speed (on the clean run of the same seed), so the RMS distance it moves them is ratio ×
+    marker noise. Channels are the simulator's seeded choice, except a link offset's: a joint
+    another joint carries (a base joint's offset is the mocap frame's)."""
+    from diegocal.sim.kinematics import marker_positions, offset_robot, simulate_kinematics
+    from diegocal.stac.calibration import Calibration
+
+    rng = np.random.default_rng([seed, 1])
+    ratio = rng.uniform(3.0, 10.0)
+    if cause == "link_offset":
+        carried = [
+            j
+            for j in robot.joint_names
+            if robot.model.parents[robot.model.getJointId(j)] > 0 and np.linalg.norm(_origin(robot, j)) > 0
+        ]
+        return f"link_offset:{carried[int(rng.integers(len(carried)))]}={ratio * MARKER_NOISE:.6g}"
+    if cause == "sensor_nonlinearity":
+        return f"{cause}={ratio * POT_NOISE:.6g}"
+    if cause == "backlash":
+        return f"{cause}={2.0 * ratio * POT_NOISE:.6g}"
+    if cause == "time_offset":
+        clean = simulate_kinematics(robot, options, np.random.default_rng(seed))  # the same run
+        truth = Calibration.from_dict(clean.truth.params)
+        x = marker_positions(offset_robot(robot, {}), clean.truth.signals["q"].data, truth)
+        speed = np.linalg.norm(np.gradient(x, clean.time, axis=0), axis=-1)
+        return f"time_offset:markers={ratio * MARKER_NOISE / float(np.sqrt(np.mean(speed**2))):.6g}"
+    return f"{cause}={ratio * MARKER_NOISE:.6g}"
+
+
+def _origin(robot, joint: str) -> np.ndarray:
+    """The joint's origin in its parent joint's frame (URDF ``<origin xyz>``), m: a link offset
+    along it makes the link longer or shorter."""
+    return np.array(robot.model.jointPlacements[robot.model.getJointId(joint)].translation, float)
+
+
+def size_ratio(effect: dict) -> float:
+    """The hidden effect's realised size on its channel over that channel's noise (from /truth)."""
+    v = effect["values"]
+    size = {
+        "link_offset": lambda: np.linalg.norm(v["dxyz"]) / MARKER_NOISE,
+        "marker_slip": lambda: np.linalg.norm(v["dxyz"]) / MARKER_NOISE,
+        "sensor_nonlinearity": lambda: abs(v["peak"]) / POT_NOISE,
+        "backlash": lambda: 0.5 * v["width_reading"] / POT_NOISE,
+        "time_offset": lambda: v["displacement_rms"] / MARKER_NOISE,
+        "marker_outliers": lambda: v["distance"][0] / MARKER_NOISE,
+        "swapped_labels": lambda: v["distance"] / MARKER_NOISE,
+    }.get(effect["cause"])
+    return float(size()) if size else float("nan")
+
+
 def _chambers(log, robot, channel: str | None, seed: int) -> tuple[str, ...]:
     names = [c.name for c in robot.sensors.chambers]
     rng = np.random.default_rng(seed + 1)
@@ -184,6 +248,7 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
     hidden = log.truth.effects[0] if cause else {}
     channel = hidden.get("channel")
     also = (hidden["values"]["partner"],) if cause == "swapped_labels" else ()  # a swap names either label
+    ratio = size_ratio(hidden) if domain == "kinematics" and cause else float("nan")
     options = replace(DiagnoseOptions(domain=domain), **BASELINE_FOR.get(cause, {}))
     if domain == "pneumatics":
         options = replace(options, chambers=_chambers(log, robot, channel, seed))
@@ -191,14 +256,16 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
     try:
         result = diagnose(log, robot, options)
     except DiegocalError as exc:
-        return Outcome(domain, cause, channel, seed, "", 0, float("nan"), time.perf_counter() - start, str(exc), also)
+        return Outcome(
+            domain, cause, channel, seed, "", 0, float("nan"), time.perf_counter() - start, str(exc), also, ratio
+        )
     seconds = time.perf_counter() - start
     findings = result.findings
     top, gain = "", float("nan")
     if findings:
         top = f"{findings[0].cause}:{findings[0].channel}"
         gain = float(findings[0].gain().get("reduction", float("nan")))
-    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds, also=also)
+    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds, also=also, ratio=ratio)
 
 
 def plan(domain: str, n_logs: int, seed: int) -> list[tuple[str, str | None, int]]:
@@ -212,8 +279,8 @@ def plan(domain: str, n_logs: int, seed: int) -> list[tuple[str, str | None, int
 
 def table(outcomes: list[Outcome]) -> str:
     rows = [
-        "| domain | cause | logs | named | false alarms | s per log (median) | errors |",
-        "|---|---|---|---|---|---|---|",
+        "| domain | cause | logs | named | false alarms | size / noise | s per log (median) | errors |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     by = {}
     for o in outcomes:
@@ -224,9 +291,11 @@ def table(outcomes: list[Outcome]) -> str:
         alarms = sum(o.n_findings > 0 for o in group) if cause == "(clean)" else None
         sec = float(np.median([o.seconds for o in group]))
         errs = sum(bool(o.error) for o in group)
+        ratios = [o.ratio for o in group if np.isfinite(o.ratio)]
+        size = f"{min(ratios):.1f}-{max(ratios):.1f}" if ratios else ""
         rows.append(
             f"| {domain} | {cause} | {n} | {'' if named is None else f'{named}/{n}'} | "
-            f"{'' if alarms is None else f'{alarms}/{n}'} | {sec:.1f} | {errs} |"
+            f"{'' if alarms is None else f'{alarms}/{n}'} | {size} | {sec:.1f} | {errs} |"
         )
     for domain in sorted({o.domain for o in outcomes}):
         hid = [o for o in outcomes if o.domain == domain and o.cause]
@@ -235,7 +304,7 @@ def table(outcomes: list[Outcome]) -> str:
         fa = sum(o.n_findings > 0 for o in cln) / max(len(cln), 1)
         rows.append(
             f"| **{domain}** | all | {len(hid)} + {len(cln)} | **{rate:.0%}** (goal ≥ 90 %) | "
-            f"**{fa:.0%}** (goal ≤ 5 %) | {np.median([o.seconds for o in hid + cln]):.1f} | |"
+            f"**{fa:.0%}** (goal ≤ 5 %) | | {np.median([o.seconds for o in hid + cln]):.1f} | |"
         )
     return "\n".join(rows)
 
@@ -266,7 +335,7 @@ def main(argv=None) -> int:
             verdict = "named" if o.named else ("alarm" if (o.cause is None and o.n_findings) else "")
             print(
                 f"{o.domain:10s} {str(o.cause):20s} {str(o.channel):16s} seed {o.seed:<12d} top {o.top or '-':40s} "
-                f"gain {o.gain:6.2f} {o.seconds:6.1f} s {verdict} {o.error}"
+                f"gain {o.gain:6.2f} {o.seconds:6.1f} s size/noise {o.ratio:5.1f} {verdict} {o.error}"
             )
     print(table(outcomes))
     print(f"load average at the end: {os.getloadavg()[0]:.1f}")

@@ -12,8 +12,19 @@ from diegocal.cli.app import simulate_app
 from diegocal.cli.common import cli_errors, summary
 from diegocal.io import save_log
 from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sim.effects import VOCABULARY, check_effects, parse_effects
+from diegocal.sim.effects import VOCABULARY, SimOptionError, check_effects, parse_effects
 from diegocal.sim.kinematics import SIZE_UNITS, KinematicsOptions, simulate_kinematics
+
+
+def parse_direction(text: str) -> tuple[str, tuple[float, float, float]]:
+    """``JOINT:DX:DY:DZ`` -> (joint, (x, y, z))."""
+    parts = text.rsplit(":", 3)
+    try:
+        if len(parts) != 4:
+            raise ValueError
+        return parts[0], (float(parts[1]), float(parts[2]), float(parts[3]))
+    except ValueError:
+        raise SimOptionError(f"--direction {text!r}: expected JOINT:DX:DY:DZ, e.g. pip:1:0:0") from None
 
 
 @simulate_app.command("kinematics")
@@ -29,6 +40,10 @@ def simulate_kinematics_cmd(
         help="Kinematic effect to inject (repeatable); SIZE, when given, is "
         + "; ".join(f"{k} {SIZE_UNITS[k]}" for k, v in VOCABULARY.items() if v == "kinematics")
         + ". Without SIZE: the simulator's physical ranges.")] = None,
+    direction: Annotated[list[str] | None, typer.Option(
+        "--direction", metavar="JOINT:DX:DY:DZ",
+        help="Direction of JOINT's link offset in its parent joint's frame (repeatable); "
+        "default random.")] = None,
     occlusion: Annotated[float, typer.Option(help="Fraction of occluded marker samples.")] = 0.1,
     occlusion_run: Annotated[float, typer.Option(help="Mean occlusion length, s.")] = 0.5,
     gain_error: Annotated[float, typer.Option(help="True gain = nominal·(1 + U(±this)).")] = 0.2,
@@ -51,7 +66,8 @@ def simulate_kinematics_cmd(
                              marker_offset, pot_noise, marker_noise, quiet)
     effects = check_effects(parse_effects(effect), "kinematics")
     options = KinematicsOptions(
-        duration=duration, rate_hz=rate, effects=effects, occlusion=occlusion,
+        duration=duration, rate_hz=rate, effects=effects, directions=dict(map(parse_direction, direction or ())),
+        occlusion=occlusion,
         occlusion_run=occlusion_run, gain_error=gain_error, bias_error=bias_error,
         marker_offset=marker_offset, pot_noise=pot_noise, marker_noise=marker_noise).check()
     model = load_robot(resolve_robot_dir(robot, None))

@@ -102,11 +102,20 @@ class Diagnosis:
 
     @property
     def findings(self) -> tuple[Finding, ...]:
-        """Every unit's findings, most important first: data faults, then terms by validation
-        gain, then what stays unexplained."""
+        """Every unit's findings, most important first: data faults, then terms in the order the
+        rounds found them (each round's term removes the most validation error given the ones
+        before; validation gains of different rounds are fractions of different errors, on
+        different channels), units' terms of the same round by validation gain, then what stays
+        unexplained."""
         order = {"fault": 0, "term": 1, "unexplained": 2}
-        items = [f for u in self.units for f in u.findings]
-        return tuple(sorted(items, key=lambda f: (order[f.kind], -f.evidence.get("validation_gain", 0.0))))
+        items = []
+        for u in self.units:
+            rounds = 0
+            for f in u.findings:
+                gain = f.evidence.get("validation_gain", 0.0)
+                items.append((order[f.kind], rounds if f.kind == "term" else 0, -gain, f))
+                rounds += f.kind == "term"
+        return tuple(item[-1] for item in sorted(items, key=lambda item: item[:3]))
 
     def save_extended(self, path, header: dict) -> Path:
         """Write the extended model (a bundle of the domain's kind) to ``path``."""

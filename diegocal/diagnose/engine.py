@@ -120,8 +120,12 @@ class EngineOptions:
     alpha : family-wise false-alarm rate over every test of a log (Bonferroni across candidates,
         channels, rounds' candidates and units): clean data gives a finding with probability at
         most ``alpha`` from chance alone
-    min_gain : practical significance: a finding must remove at least this fraction of its
-        channels' validation error (a real but negligible model error is not worth a term)
+    min_gain : practical significance: a finding must remove at least this fraction of the
+        validation error of all its channels, or of its own channel when it names one it acts on
+        most (a pot, a joint: where its held-out gain is measured, :meth:`Finding.gain`). A real
+        but negligible model error is not worth a term; pooling a pot's term with every sensor its
+        q projection touches dilutes it, and its own channel alone misses it where the pot fixes
+        its joint's q (its in-sample residual follows it).
     unexplained_min_gain : the same for ``unexplained``: a binned correction spends ``n_bins``
         parameters on one channel where a term spends one to three, so it must pay more (on clean
         thin-plate chambers the 9-parameter model's known valve approximation leaves binned
@@ -150,6 +154,8 @@ class Tested:
     test : :class:`~diegocal.diagnose.stats.OutOfSample` on the validation rows
     threshold : the Bonferroni critical t it had to pass
     significant : t above the threshold and validation gain at least ``min_gain``
+    channel_gain : the larger of the validation gains on the term's own channel (when it names
+        one it acts on most) and on all its channels (None: it has no such channel)
     """
 
     term: Term
@@ -159,10 +165,13 @@ class Tested:
     significant: bool
     n_params: int
     candidate: Candidate = field(repr=False)
+    channel_gain: float | None = None
 
     @property
     def gain(self) -> float:
-        return self.test.gain
+        """Fraction of the validation error removed: over all its channels, or on its own channel
+        where it has one and that is larger."""
+        return self.test.gain if self.channel_gain is None else self.channel_gain
 
     def to_dict(self) -> dict:
         return {
@@ -204,7 +213,8 @@ class Finding:
         if self.heldout_before is None or self.heldout_after is None:
             return {}
         acts_on = self.evidence.get("channels", (self.channel,))
-        if self.channel in self.heldout_before.channels and self.channel in acts_on:  # not a joint's namesake pot
+        own = self.evidence.get("own_channel", True)  # False: it acts mostly elsewhere (a joint's namesake pot)
+        if own and self.channel in self.heldout_before.channels and self.channel in acts_on:
             chans = [self.channel]
         else:
             chans = [c for c in self.evidence.get("channels", ()) if c in self.heldout_before.channels]
@@ -336,6 +346,28 @@ def _test(cand: Candidate, fit: _Fit, stack: _Stack, channels, validation: np.nd
     return out_of_sample_test(r[ok], A[ok] @ fit.coef, samp[ok], validation)
 
 
+def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> float | None:
+    """Fraction of the validation error of the candidate's own channel (its term's channel, when
+    the fitted correction acts on it more than on any other) that the correction removes; None
+    when it has none (a joint's link offset seen mostly by markers, whatever a pot of the same
+    name gets from it)."""
+    own = cand.term.channel
+    if own not in cand.columns or own not in channels:
+        return None
+    r, _ = stack.residual(channels)
+    a = _columns(cand, stack, channels) @ fit.coef
+    sizes = [stack.samples.size * stack.dims[c] for c in channels]
+    edges = np.concatenate([[0], np.cumsum(sizes)])
+    energy = [float(np.nansum(a[edges[i] : edges[i + 1]] ** 2)) for i in range(len(channels))]
+    i = list(channels).index(own)
+    if energy[i] < max(energy):
+        return None
+    r, a = r[edges[i] : edges[i + 1]], a[edges[i] : edges[i + 1]]
+    ok = np.isfinite(r) & np.isfinite(a)
+    before = float(r[ok] @ r[ok])
+    return 1.0 - float((r[ok] - a[ok]) @ (r[ok] - a[ok])) / before if before > 0 else 0.0
+
+
 def _candidate_channels(cand: Candidate) -> tuple[str, ...]:
     names = list(cand.columns)
     for c in cand.refit or {}:
@@ -374,8 +406,10 @@ def evaluate_candidates(
         thr = critical_t(options.alpha, n_tests, test.df)
         k = cand.n_params
         term = cand.term.with_values(fit.coef[:k], fit.se)
-        sig = bool(test.t > thr and test.gain >= options.min_gain)
-        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand))
+        own = _own_gain(cand, fit, va, chans) if len(chans) > 1 else None
+        gain = test.gain if own is None else max(own, test.gain)
+        sig = bool(test.t > thr and gain >= options.min_gain)
+        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain))
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 
@@ -463,6 +497,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         evidence = {
             "channels": list(best.channels),
             "validation_gain": float(best.gain),
+            "own_channel": best.channel_gain is not None or len(best.channels) == 1,
             "t": float(best.test.t),
             "threshold_t": float(best.threshold),
             "variable": variable,

@@ -6,15 +6,15 @@ every frame with θ fixed, so that q is tracked everywhere. Channels: each pot (
 baseline fitted to the log mapped into its terms (:func:`diegocal.stac.terms.apply_terms`).
 
 Candidates (:mod:`diegocal.stac.terms`), linearised at the current fit: the column
-∂(prediction)/∂θ_term over every pot and marker row of a frame. Because q is re-estimated per
-frame, every column is projected out of that frame's q directions (the Schur complement),
-
-.. math:: c_t \\leftarrow c_t - J_t (J_t^T W J_t)^{-1} J_t^T W c_t,
-
-J_t the observation Jacobian w.r.t. q_t (eq. 2.22-2.23), W = diag(1/σ²) the sensors' weights,
-so that no term is "explained" by moving q. Each candidate also re-fits (``refit``) the
-calibration parameters it could take over: a pot term its pot's gain and bias, a link offset the
-positions of the markers it moves and the mocap translation, a marker slip its marker's position.
+∂(prediction)/∂θ_term over every pot and marker row of a frame, projected out of that frame's q
+directions and out of the calibration STAC fits for the whole log
+(:mod:`diegocal.diagnose.kinematics_lin`), so that no term is "explained" by moving q or by
+re-fitting what the baseline already fits: a link offset by the markers' positions, the mocap
+frame and the pots' gains (a longer knuckle is a larger lever about the abduction axis, which
+the abduction pot's gain absorbs in part); a pot term by the gains and biases of the pots that
+read its joints. A clock shift is a family over shifts (:data:`TIME_SHIFTS`), each variant the
+predicted markers' change over its shift: a shift of many samples is far from its linearisation
+at zero. A marker slip re-fits its marker's position (``refit``).
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
 trend, by a threshold with a family-wise false-alarm rate).
@@ -26,6 +26,7 @@ every sensor with θ fixed. The extended model is a calib.yaml (kind ``calibrati
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -33,10 +34,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose.engine import Candidate, Fault, Residuals
+from diegocal.diagnose.kinematics_lin import Linearised
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.model import MARKERS, Observation
 from diegocal.stac.predict import predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import calibrate
@@ -48,6 +49,7 @@ from diegocal.stac.terms import (
     make_term,
     pot_columns,
     pot_extra,
+    shift_clock,
 )
 from diegocal.terms import Region, Term
 
@@ -55,17 +57,26 @@ from diegocal.terms import Region, Term
 SLIP_STEPS = 4
 #: Half width (samples) of the running median a marker outlier is measured against.
 OUTLIER_WINDOW = 8
-#: A candidate acts on the channels that carry at least this share of its largest channel's
-#: weighted column energy (its projection spreads tiny parts over every sensor of the chain).
-CHANNEL_SHARE = 0.02
 #: Dead-band widths tried for a backlash (a family), in multiples of BAND_SIGMAS pot σ.
 BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
-#: A marker outlier is at least this many σ off its neighbours' trend: the chi² level of a
-#: family-wise 1 % assumes Gaussian residuals, and the tracked residuals' tails are heavier (frames
-#: with few visible markers); ghosts and reflections are centimetres off (tens of σ).
-OUTLIER_SIGMAS = 8.0
+#: A marker outlier is at least this many σ (its marker's own scale) off its neighbours' trend:
+#: the chi² level of a family-wise 1 % assumes Gaussian residuals, and the tracked residuals' tails
+#: are heavier on a large robot (clean 60-s Diego San logs: 12-16 readings beyond 5 σ where chi²
+#: expects 2, the largest at 5.6-5.8 σ against chi²'s 6.0 σ); on the finger they are chi²'s (the
+#: largest of 30 s at 4.8-5.3 σ against 5.6 σ). A practical margin over Diego San's largest, not
+#: a derived level. Ghosts and reflections are centimetres off (tens of σ).
+OUTLIER_SIGMAS = 7.0
 #: GN refinements of the continuous terms after each STAC fit of an extended model.
 REFINE = 1
+#: Further refinements while a clock shift still moves by more than CLOCK_TOL of itself: a shift of
+#: many samples is far from its first, linear, estimate (0.18 s after one step for 0.21 s).
+CLOCK_REFINE = 3
+CLOCK_TOL = 0.02
+#: Clock shifts tried for a time offset (a family, both signs), s: a shift of several samples
+#: moves the markers by far more than their linearisation at zero predicts (a PID-driven joint
+#: turns through a radian in a quarter second), so each variant is the change of the predicted
+#: markers over its own shift.
+TIME_SHIFTS = (0.01, 0.02, 0.035, 0.06, 0.1, 0.15, 0.22, 0.33, 0.5)
 
 
 @dataclass
@@ -80,6 +91,7 @@ class KinFit:
     pots: np.ndarray
     markers: np.ndarray
     train: np.ndarray = field(repr=False)
+    deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) deleted residuals
 
 
 class KinematicsAdapter:
@@ -97,6 +109,7 @@ class KinematicsAdapter:
         self.marker_names = tuple(self.log.stream("markers").names)
         self.time = np.asarray(self.log.time, float)
         self._baseline: KinFit | None = None
+        self._lin = None
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
 
     # ------------------------------------------------------------------ fit
@@ -107,11 +120,13 @@ class KinematicsAdapter:
         fitted = self._fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
-        for _ in range(REFINE):
+        for i in range(REFINE + CLOCK_REFINE):
             if not any(t.cause in (*POT_CAUSES, "link_offset", "time_offset") for t in terms):
                 break
-            terms = self._refine(fitted)
-            fitted = self._fit_once(terms, train, fitted)
+            if i >= REFINE and not _clock_moved(terms, fitted.terms):
+                break
+            terms = fitted.terms
+            fitted = self._fit_once(self._refine(fitted), train, fitted)
         return fitted
 
     def _own(self, term: Term, train) -> Term:
@@ -119,12 +134,22 @@ class KinematicsAdapter:
         if term.cause in POT_CAUSES and not term.extra:
             j = self.pot_names.index(term.channel)
             return replace(term, extra=pot_extra(term.cause, self.raw_pots[train, j], 0.005))
+        if term.cause == "time_offset" and "span" in term.extra:  # a family variant's column only
+            return replace(term, extra={k: v for k, v in term.extra.items() if k != "span"})
         return term
 
     def _fit_once(self, terms, train, previous: KinFit | None = None) -> KinFit:
         """STAC on the training frames of the log mapped into ``terms``, then q tracked on every
-        frame (from ``previous``'s q: the pot terms act on its model readings)."""
-        applied = apply_terms(terms, self.log, self.robot, None if previous is None else previous.pots)
+        frame (from ``previous``'s q: the pot terms act on its model readings).
+
+        An extended model's STAC starts its markers where ``previous`` put them (``marker_seed``
+        'nominal' on a robot carrying those positions; a slipped marker's second one at the first's
+        plus the slip): from the link origins it can end in a degenerate optimum (a pot type's σ
+        collapsed to 0, tendons 3 x their noise) once a marker is split."""
+        robot, options = self.robot, self.options
+        if previous is not None:
+            robot, options = _seeded(robot, previous.cal), replace(options, marker_seed="nominal")
+        applied = apply_terms(terms, self.log, robot, None if previous is None else previous.pots)
         idx = np.flatnonzero(train)
         sub = Log(
             applied.log.time[idx],
@@ -132,7 +157,7 @@ class KinematicsAdapter:
             robot=applied.log.robot,
             rate_hz=applied.log.rate_hz,
         )
-        cal = calibrate(sub, applied.robot, self.options).calibration
+        cal = calibrate(sub, applied.robot, options).calibration
         terms = tuple(self._slip_value(t, cal) for t in terms)
         q0 = None if previous is None else previous.q
         both = ("pots", "markers")
@@ -211,28 +236,33 @@ class KinematicsAdapter:
         return Residuals(channels, units, variables, chv)
 
     # ------------------------------------------------------------------ candidates
-    def _linearise(self, fitted: KinFit) -> _Lin:
-        return _Lin.at(fitted, self)
+    def _linearise(self, fitted: KinFit) -> Linearised:
+        """The linearisation at a fit (the last one kept: scores and candidates share it)."""
+        if self._lin is None or self._lin[0] is not fitted:
+            self._lin = None  # free the old one first
+            self._lin = (fitted, Linearised.at(fitted, self))
+        return self._lin[1]
 
-    def _term_columns(self, lin: _Lin, fitted: KinFit, term: Term):
-        """(columns (T, R, k), refit (T, R, k0) or None) of a term on the mapped rows, projected."""
+    def _term_columns(self, lin: Linearised, fitted: KinFit, term: Term):
+        """(columns (T, R, k), None) of a term on the mapped rows, projected out of every frame's q
+        and of the calibration's span (:meth:`Linearised.beyond_calibration`); None for a term without
+        continuous columns."""
         P = lin.P
         if term.cause in POT_CAUSES:
             j = self.pot_names.index(term.channel)
             f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])
-            g = lin.project_pot(j)  # (T, R)
-            refit = []
-            for i in lin.sharing(j):  # gain and bias of every pot reading a joint this one reads
-                gi = g if i == j else lin.project_pot(i)
-                refit += [gi * lin.s[:, i, None], gi]
-            return g[..., None] * f[:, None, :], np.stack(refit, axis=-1)
+            return lin.beyond_gain_bias(lin.project_pot(j)[..., None] * f[:, None, :], j), None
         if term.cause == "link_offset":
-            return lin.project(lin.link_offset_basis(term.channel)), lin.project(lin.refit_markers(term.channel))
+            return lin.beyond_calibration(lin.project(lin.link_offset_basis(term.channel))), None
         if term.cause == "time_offset":
             v = np.zeros((lin.T, lin.R, 1))
-            xd = np.gradient(fitted.markers, self.time, axis=0)  # (T, M', 3)
+            span = term.extra.get("span")
+            if span:  # the predicted markers' change over the shift, per second of it
+                xd = (shift_clock(fitted.markers, self.time, -span) - fitted.markers) / span
+            else:
+                xd = np.gradient(fitted.markers, self.time, axis=0)  # (T, M', 3)
             v[:, P:, 0] = xd.reshape(lin.T, -1)
-            return lin.project(np.nan_to_num(v)), None
+            return lin.beyond_calibration(lin.project(np.nan_to_num(v))), None
         return None
 
     def candidates(self, fitted: KinFit, residuals: Residuals, train) -> list[Candidate]:
@@ -241,34 +271,34 @@ class KinematicsAdapter:
         have = {(t.cause, t.channel) for t in fitted.terms}
         sigma_p = lin.sigma_p
         out = []
+
+        def offer(term, family=""):  # a term the calibration takes up entirely is no candidate
+            cols, _ = self._term_columns(lin, fitted, term)
+            if np.any(cols):
+                out.append(Candidate(term, lin.channels(cols), family=family))
+
         for j, name in enumerate(self.pot_names):
             for cause in POT_CAUSES:
                 if (cause, name) in have:
                     continue
                 extra = pot_extra(cause, self.raw_pots[train, j], float(sigma_p[j]))
                 bands = BAND_SCALES if cause == "backlash" else (1.0,)
-                shared = None
                 for b in bands:  # backlash: a family over dead-band widths
                     ex = dict(extra, width=extra["width"] * b) if cause == "backlash" else extra
                     term = make_term(cause, name, extra=ex)
-                    cols, refit = self._term_columns(lin, fitted, term)
-                    shared = shared or lin.channels(refit)
                     fam = f"backlash:{name}" if cause == "backlash" else ""
-                    out.append(Candidate(term, lin.channels(cols), family=fam, refit=shared))
+                    offer(term, fam)
         for joint in lin.observed_joints():
-            if ("link_offset", joint) in have:
-                continue
-            term = make_term("link_offset", joint)
-            cols, refit = self._term_columns(lin, fitted, term)
-            out.append(Candidate(term, lin.channels(cols), refit=lin.channels(refit)))
+            if ("link_offset", joint) not in have:
+                offer(make_term("link_offset", joint))
         if ("time_offset", "markers") not in have:
-            term = make_term("time_offset", "markers")
-            cols, _ = self._term_columns(lin, fitted, term)
-            out.append(Candidate(term, lin.channels(cols)))
+            for span in (0.0, *TIME_SHIFTS, *(-t for t in TIME_SHIFTS)):
+                term = make_term("time_offset", "markers", extra={"span": span} if span else None)
+                offer(term, "time_offset:markers")
         out += self._slip_family(lin, fitted, have, train)
         return out
 
-    def _slip_family(self, lin: _Lin, fitted: KinFit, have, train) -> list[Candidate]:
+    def _slip_family(self, lin: Linearised, fitted: KinFit, have, train) -> list[Candidate]:
         """Per marker a family over change times: a grid inside the training runs and one time in
         the middle of each gap between them (the training frames cannot place a slip inside a
         gap more finely; its middle halves the worst error)."""
@@ -319,7 +349,12 @@ class KinematicsAdapter:
         e = rm - _running_median(rm, OUTLIER_WINDOW)
         e2 = np.einsum("tmi,tmi->tm", e, e)
         ok = np.isfinite(e2)
-        scale = np.median(e2[ok]) / chi2.median(3) if ok.any() else 0.0
+        # each marker's own scale: the q tracking leaves markers on different links more or less
+        # of their noise (on Diego San the scales spread over ±15 %)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: no scale
+            scale = np.nanmedian(np.where(ok, e2, np.nan), axis=0) / chi2.median(3)
+        scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.inf)
         z2 = max(chi2.isf(0.01 / n_tests, 3), OUTLIER_SIGMAS**2)
         flag = ok & (e2 > z2 * scale) & ~swapped
         if flag.sum() >= 1:
@@ -333,8 +368,15 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ scores and output
     def score(self, fitted: KinFit, mask, exclude: dict | None = None) -> Score:
-        rp, rm, xm = self._residual_arrays(fitted)
-        rp, rm = rp.copy(), rm.copy()
+        """RMSE per channel on ``mask`` of each sensor's deleted residual: its reading against the
+        model's prediction at the q the frame's other sensors give
+        (:meth:`Linearised.deleted_residuals`). A reading's own residual would reward a model
+        for following it: a rotary pot that largely fixes its joint's q has a small residual
+        whatever its transfer curve, and a term that corrects it moves q back onto the other
+        sensors, so its own residual grows while every other sensor's shrinks."""
+        if fitted.deleted is None:
+            fitted.deleted = self._linearise(fitted).deleted_residuals()
+        rp, rm = fitted.deleted[0].copy(), self._merge(fitted.applied, fitted.deleted[1])
         for c, ex in (exclude or {}).items():
             ex = np.asarray(ex, bool)
             if c in self.pot_names:
@@ -384,167 +426,6 @@ class KinematicsAdapter:
         return path
 
 
-# ----------------------------------------------------------------------------- linearisation
-@dataclass
-class _Lin:
-    """The observation Jacobian and the Schur projector of every frame at a fit (mapped rows:
-    P pots, then 3 per mapped marker).
-
-    J : (T, R, n); K : (T, n, R) = (JᵀWJ)⁻¹ JᵀW; w : (T, R) weights 1/σ² (0 where occluded)
-    """
-
-    adapter: KinematicsAdapter
-    fitted: KinFit
-    obs: Observation
-    params: object
-    J: np.ndarray
-    K: np.ndarray
-    w: np.ndarray
-    s: np.ndarray
-    Rl: np.ndarray
-    sigma_p: np.ndarray
-    _pots: dict = field(default_factory=dict)
-
-    @property
-    def T(self) -> int:
-        return self.J.shape[0]
-
-    @property
-    def R(self) -> int:
-        return self.J.shape[1]
-
-    @property
-    def P(self) -> int:
-        return self.obs.n_pots
-
-    @classmethod
-    def at(cls, fitted: KinFit, adapter: KinematicsAdapter) -> _Lin:
-        a = fitted.applied
-        obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
-        params = obs.params_from(fitted.cal)
-        sig = dict(fitted.cal.sigma_by_group)
-        sigma_p = np.array([sig.get(k, fitted.cal.sigma_pots) for k in obs.kinds], float)
-        sig_x = float(sig.get(MARKERS, fitted.cal.sigma_markers))
-        # a pot type fitted exactly (one pot per joint, its σ collapsed) pins its joints, but no
-        # weight may swamp the others' in floating point
-        floor = 1e-3 * float(np.max(np.concatenate([sigma_p, [sig_x / 0.1]])))
-        sigma_p = np.maximum(sigma_p, floor)
-        T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, a.robot.n_joints
-        J = np.zeros((T, P + 3 * M, n))
-        s_all = np.zeros((T, P))
-        Rl_all = np.zeros((T, M, 3, 3))
-        for i in range(0, T, 500):
-            sl = slice(i, min(i + 500, T))
-            s, ds, Rl, _, Jx = obs.evaluate(fitted.q[sl], params.xyz)
-            J[sl, :P] = params.gain[None, :, None] * ds
-            J[sl, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(s.shape[0], 3 * M, n)
-            s_all[sl], Rl_all[sl] = s, Rl
-        w = np.zeros((T, P + 3 * M))
-        w[:, :P] = 1.0 / sigma_p**2
-        w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
-        JW = np.swapaxes(J, 1, 2) * w[:, None, :]
-        H = JW @ J
-        diag = np.einsum("bii->bi", H)
-        diag += 1e-9 * diag + 1e-12
-        K = np.linalg.solve(H, JW)
-        return cls(adapter, fitted, obs, params, J, K, w, s_all, Rl_all, sigma_p)
-
-    def project(self, C: np.ndarray) -> np.ndarray:
-        """Columns (T, R, k) minus their part along the frame's q directions (module docstring)."""
-        return C - self.J @ (self.K @ C)
-
-    def project_pot(self, j: int) -> np.ndarray:
-        """The projected unit column of pot j: (T, R) (computed once per pot)."""
-        if j not in self._pots:
-            out = -self.J @ self.K[:, :, j : j + 1]
-            out[:, j, 0] += 1.0
-            self._pots[j] = out[..., 0]
-        return self._pots[j]
-
-    def sharing(self, j: int) -> list[int]:
-        """Pots (mapped order) that read a joint pot j reads (j first)."""
-        A = self.obs.A != 0
-        if self.obs.kinds[j] == "linear" or not A[j].any():
-            return [j]
-        others = [i for i in range(self.P) if i != j and self.obs.kinds[i] != "linear" and np.any(A[i] & A[j])]
-        return [j, *others]
-
-    def residual_rows(self) -> np.ndarray:
-        """(T, R) residuals of the mapped rows (reading − prediction)."""
-        a, f = self.fitted.applied, self.fitted
-        rp = np.asarray(a.log.stream("pots").data, float) - f.pots
-        rm = np.asarray(a.log.stream("markers").data, float) - f.markers
-        return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
-
-    def mapped_index(self, name: str) -> int:
-        return self.obs.marker_names.index(name)
-
-    def marker_basis(self, m: int) -> np.ndarray:
-        """∂x_m/∂d_m = R Rl (T, R, 3) on marker m's rows."""
-        C = np.zeros((self.T, self.R, 3))
-        P = self.P
-        C[:, P + 3 * m : P + 3 * m + 3] = np.einsum("ij,tjk->tik", self.params.R, self.Rl[:, m])
-        return C
-
-    def _moves(self, joint: str) -> np.ndarray:
-        kin = self.obs.kin
-        k = self.adapter.robot.joint_index(joint)
-        jl, _, _ = kin.link_info(self.obs.marker_links)
-        return kin._anc[jl, k].astype(float) - kin._anc[kin.base_joint, k]
-
-    def observed_joints(self) -> list[str]:
-        return [j for j in self.adapter.robot.joint_names if np.any(self._moves(j) != 0)]
-
-    def link_offset_basis(self, joint: str) -> np.ndarray:
-        """∂x/∂δ (T, R, 3) of a translation δ of the joint's origin in its parent joint's frame:
-        every marker it moves shifts by R R_parent δ (linear pots: not modelled, rows 0)."""
-        kin = self.obs.kin
-        k = self.adapter.robot.joint_index(joint)
-        poses = kin.joint_poses(self.fitted.q)
-        par = kin.parent[k]
-        Rp = poses.R[:, par] if par >= 0 else poses.root_R
-        RRp = np.einsum("ij,tjk->tik", self.params.R, Rp)
-        C = np.zeros((self.T, self.R, 3))
-        P = self.P
-        for m, sgn in enumerate(self._moves(joint)):
-            if sgn:
-                C[:, P + 3 * m : P + 3 * m + 3] = sgn * RRp
-        return C
-
-    def refit_markers(self, joint: str) -> np.ndarray:
-        """Refit columns of a link offset: positions of the markers the joint moves (a joint whose
-        parent is fixed to the base moves everything alike: the mocap frame, not re-fitted here,
-        takes its offset up)."""
-        cols = [self.marker_basis(m) for m, sgn in enumerate(self._moves(joint)) if sgn]
-        return np.concatenate(cols, axis=-1)
-
-    def channels(self, C: np.ndarray | None) -> dict | None:
-        """Mapped rows (T, R, k) -> {channel: (T, k) pot or (T, 3, k) marker} on the log's
-        channels (slips merged back), channels the columns do not touch left out."""
-        if C is None:
-            return None
-        P, k = self.P, C.shape[-1]
-        Cw = np.nan_to_num(C * C) * self.w[..., None]
-        energy = np.concatenate([Cw[:, :P].sum(axis=(0, 2)), Cw[:, P:].reshape(self.T, -1, 3, k).sum(axis=(0, 2, 3))])
-        keep = energy >= CHANNEL_SHARE * (energy.max() if energy.size else 0.0)
-        out = {}
-        for i, n in enumerate(self.obs.pot_names):
-            if keep[i] and energy[i] > 0:
-                out[n] = np.ascontiguousarray(C[:, i])  # a copy: C itself is not kept alive
-        mk = C[:, P:].reshape(self.T, -1, 3, k)
-        a = self.fitted.applied
-        names = list(self.obs.marker_names)
-        for n in self.adapter.marker_names:
-            j = P + names.index(n)
-            second = [(names.index(v), first) for v, (o, first) in a.slips.items() if o == n]
-            if any(keep[x] and energy[x] > 0 for x in [j, *[P + v for v, _ in second]]):
-                col = mk[:, j - P].copy()
-                for v, first in second:
-                    col[first:] = mk[first:, v]
-                out[n] = col
-        return out
-
-
 class _FromSample:
     """Columns (T, ...) that are zero before sample ``first``: a slip variant, made only when the
     engine reads it (np.asarray), so that a family of change times shares one array."""
@@ -558,6 +439,20 @@ class _FromSample:
         out = np.array(self.base, dtype=dtype)
         out[: self.first] = 0.0
         return out
+
+
+def _seeded(robot, cal: Calibration):
+    """``robot`` with its markers' nominal positions at a calibration's (those it names)."""
+    xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
+    markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
+    return type(robot)(robot.model, replace(robot.sensors, markers=markers), robot.name, robot.directory)
+
+
+def _clock_moved(before, after) -> bool:
+    """Whether a time offset's value changed by more than CLOCK_TOL of itself between two fits."""
+    a = {t.channel: float(t.values[0]) for t in before if t.cause == "time_offset"}
+    b = {t.channel: float(t.values[0]) for t in after if t.cause == "time_offset"}
+    return any(abs(b[c] - a[c]) > CLOCK_TOL * max(abs(b[c]), 1e-3) for c in b if c in a)
 
 
 def _slip_samples(train: np.ndarray, steps: int) -> list[int]:
@@ -581,12 +476,9 @@ def _running_median(x: np.ndarray, half: int) -> np.ndarray:
 
     pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])
     win = sliding_window_view(pad, 2 * half + 1, axis=0)
-    with np.errstate(all="ignore"):
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            return np.nanmedian(win, axis=-1)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(win, axis=-1)
 
 
 def adapters(log, robot, options) -> list[KinematicsAdapter]:

@@ -85,6 +85,9 @@ class KinematicsOptions:
     pot_noise : float, standard deviation of pot noise, sensor units (V)
     marker_noise : float, standard deviation of marker noise per axis, m
     hold : (float, float), s, range of the time a joint holds one random target
+    directions : joint -> (3,) direction of that joint's ``link_offset`` in its parent joint's
+        frame (normalised here; e.g. the joint's URDF origin: the link is longer or shorter);
+        a joint not named gets a random direction
     """
 
     duration: float = 250.0
@@ -98,6 +101,7 @@ class KinematicsOptions:
     pot_noise: float = 0.005
     marker_noise: float = 0.002
     hold: tuple[float, float] = (0.5, 3.0)
+    directions: dict = field(default_factory=dict)
 
     @property
     def n_samples(self) -> int:
@@ -124,6 +128,13 @@ class KinematicsOptions:
         if not 0 < self.hold[0] <= self.hold[1]:
             raise SimOptionError(f"hold must be 0 < low <= high, got {self.hold}")
         check_effects(self.effects, "kinematics")
+        offsets = {e.channel for e in self.effects if e.name == "link_offset"}
+        for joint, d in self.directions.items():
+            d = np.asarray(d, float)
+            if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+                raise SimOptionError(f"direction of {joint}'s link offset must be 3 finite numbers, not all 0; got {d}")
+            if joint not in offsets:
+                raise SimOptionError(f"a direction is given for {joint} but no link_offset:{joint} is requested")
         return self
 
 
@@ -382,7 +393,8 @@ def plan_effects(
     set the scale of pot effects; ``gain`` (P,) the true pot gains; ``x`` (T, M, 3) the clean
     marker paths choose a swapped label's partner.
 
-    - ``link_offset:JOINT``: the joint's origin moves by 5-10 mm (random direction).
+    - ``link_offset:JOINT``: the joint's origin moves by 5-10 mm (random direction, or the
+      options' ``directions[JOINT]``).
     - ``backlash:POT``: play operator of width 0.02-0.05 rad (equivalent) on s.
     - ``sensor_nonlinearity:POT``: ``c2 (s - s0)²`` added, peak 5-10 % of the half-range.
     - ``time_offset:markers``: markers[t] observe q(t + k/rate), |k| = 3..8 samples.
@@ -409,6 +421,8 @@ def plan_effects(
         if req.name == "link_offset":
             check_channel(req, robot.joint_names, "joint")
             d = rng.normal(size=3)
+            if channel in options.directions:
+                d = np.asarray(options.directions[channel], float)
             d *= (rng.uniform(0.005, 0.010) if size is None else size) / np.linalg.norm(d)
             plan.joint_offsets[channel] = d
             values = {"dxyz": d, "frame": "joint origin, in the parent joint frame"}

@@ -286,6 +286,15 @@ def test_sizes_are_honoured_on_the_channel_they_act_on(robot, clean):
     assert _effect(log)["values"]["distance"] == pytest.approx(dist[far], rel=1e-5)
 
 
+def test_link_offset_direction_is_honoured(robot):
+    log = simulate(robot, **_noise_free(effects=["link_offset:elbow=0.01"], directions={"elbow": (0.0, 0.0, -2.0)}))
+    np.testing.assert_allclose(_effect(log)["values"]["dxyz"], [0.0, 0.0, -0.01], atol=1e-15)
+    with pytest.raises(SimOptionError, match="no link_offset:shoulder"):
+        simulate(robot, effects=["link_offset:elbow"], directions={"shoulder": (1.0, 0.0, 0.0)})
+    with pytest.raises(SimOptionError, match="not all 0"):
+        simulate(robot, effects=["link_offset:elbow"], directions={"elbow": (0.0, 0.0, 0.0)})
+
+
 def test_time_offset_size_may_fall_between_samples(robot, clean):
     """A clock shift of 0.125 s at 100 Hz: markers[t] read the clean markers half-way between
     samples t ± 12 and t ± 13 (a smooth path; the run is the clean one: 12.5 samples fit the pad),
@@ -375,6 +384,10 @@ def test_cli_writes_a_log_with_truth(tmp_path):
     assert log.n_samples == 500 and log.robot == str(TINY.resolve())  # not bundled: its directory
     assert log.truth.effects[0]["cause"] == "backlash"
     assert log.truth.params["sigma"]["markers"] == 0.001
+    out3 = tmp_path / "k3.h5"
+    res = _simulate_cli(out3, "--effect", "link_offset:elbow=0.02", "--direction", "elbow:0:3:4")
+    assert res.exit_code == 0, res.output
+    np.testing.assert_allclose(load_log(out3).truth.effects[0]["values"]["dxyz"], [0.0, 0.012, 0.016])
     out2 = tmp_path / "k2.h5"
     res = _simulate_cli(out2, "--effect", "swapped_labels", "--effect", "marker_outliers:m_head")
     assert res.exit_code == 0, res.output
@@ -394,6 +407,7 @@ def test_cli_writes_a_log_with_truth(tmp_path):
         (["--effect", "time_offset:pots"], "time_offset:markers"),
         (["--effect", "link_offset:shoulder=abc"], "is not a number"),
         (["--effect", "backlash:elbow=50"], "wider than the pot's range"),
+        (["--effect", "link_offset:elbow", "--direction", "elbow:1:0"], "expected JOINT:DX:DY:DZ"),
         (["--duration", "-2"], "duration must be positive"),
         (["--occlusion", "1.5"], "occlusion fraction"),
         (["--robot", "/no/such/robot"], "not found"),

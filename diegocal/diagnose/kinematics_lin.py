@@ -1,0 +1,409 @@
+"""Linearisation of the kinematic observation model at a fit, for the candidates of
+:mod:`diegocal.diagnose.kinematics` (thesis eq. 2.10-2.23).
+
+A candidate term's columns ∂(prediction)/∂θ_term are made comparable with the baseline's residual
+in two steps:
+
+1. the Schur complement of each frame's q (eq. 2.22-2.23), :meth:`Linearised.project`,
+
+   .. math:: c_t \\leftarrow c_t - J_t (J_t^T W J_t)^{-1} J_t^T W c_t,
+
+   J_t the observation Jacobian w.r.t. q_t, W = diag(1/σ²) the sensors' weights, so that no term
+   is "explained" by moving q;
+2. Frisch-Waugh-Lovell against the calibration STAC fits once for the whole log (θ of eq. 2.10:
+   every pot's gain and bias, every marker's position, the mocap frame),
+   :meth:`Linearised.beyond_calibration`: the projected calibration directions are fitted to the
+   columns on the training frames and what they cannot do is kept. STAC's residual is already
+   orthogonal to those directions, so fitting it on the kept columns equals fitting it on the term
+   and the whole calibration at once, without the (T, R, k0) re-fit columns (k0 = 2P + 3M + 6:
+   154 on Diego San). Directions the calibration takes up entirely are dropped (a joint origin
+   moved along its axis is the markers' positions when the axes below are parallel to it; moved
+   across the link, angle offsets of the joint and its parent, i.e. pot biases).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from diegocal.stac.model import MARKERS, Observation
+
+#: A candidate acts on the channels that carry at least this share of its largest channel's
+#: weighted column energy (its projection spreads tiny parts over every sensor of the chain).
+CHANNEL_SHARE = 0.02
+#: A direction of a term keeps less than this fraction of its squared norm once the calibration's
+#: span is projected out: the calibration takes it up (not identifiable).
+IDENTIFIABLE = 1e-6
+
+
+@dataclass
+class Linearised:
+    """The observation Jacobian and the Schur projector of every frame at a fit (mapped rows:
+    P pots, then 3 per mapped marker).
+
+    J : (T, R, n); K : (T, n, R) = (JᵀWJ + D)⁻¹ JᵀW; w : (T, R) weights 1/σ² (0 where occluded);
+    D : (T, n) the tiny diagonal that keeps JᵀWJ invertible
+    """
+
+    adapter: object  # the KinematicsAdapter (its robot)
+    fitted: object  # the KinFit linearised at
+    obs: Observation
+    params: object
+    J: np.ndarray
+    K: np.ndarray
+    w: np.ndarray
+    s: np.ndarray
+    Rl: np.ndarray
+    sigma_p: np.ndarray
+    D: np.ndarray
+    _pots: dict = field(default_factory=dict)
+    _cal_gram: np.ndarray | None = None
+    _cal_pinv: np.ndarray | None = None
+    _pot_pinv: dict = field(default_factory=dict)
+    _RRl: np.ndarray | None = None
+    _x: np.ndarray | None = None
+    _xs: np.ndarray | None = None
+
+    @property
+    def T(self) -> int:
+        return self.J.shape[0]
+
+    @property
+    def R(self) -> int:
+        return self.J.shape[1]
+
+    @property
+    def P(self) -> int:
+        return self.obs.n_pots
+
+    @classmethod
+    def at(cls, fitted, adapter) -> Linearised:
+        a = fitted.applied
+        obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
+        params = obs.params_from(fitted.cal)
+        sig = dict(fitted.cal.sigma_by_group)
+        sigma_p = np.array([sig.get(k, fitted.cal.sigma_pots) for k in obs.kinds], float)
+        sig_x = float(sig.get(MARKERS, fitted.cal.sigma_markers))
+        # a pot type fitted exactly (one pot per joint, its σ collapsed) pins its joints, but no
+        # weight may swamp the others' in floating point
+        floor = 1e-3 * float(np.max(np.concatenate([sigma_p, [sig_x / 0.1]])))
+        sigma_p = np.maximum(sigma_p, floor)
+        T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, a.robot.n_joints
+        J = np.zeros((T, P + 3 * M, n))
+        s_all = np.zeros((T, P))
+        Rl_all = np.zeros((T, M, 3, 3))
+        for i in range(0, T, 500):
+            sl = slice(i, min(i + 500, T))
+            s, ds, Rl, _, Jx = obs.evaluate(fitted.q[sl], params.xyz)
+            J[sl, :P] = params.gain[None, :, None] * ds
+            J[sl, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(s.shape[0], 3 * M, n)
+            s_all[sl], Rl_all[sl] = s, Rl
+        w = np.zeros((T, P + 3 * M))
+        w[:, :P] = 1.0 / sigma_p**2
+        w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
+        JW = np.swapaxes(J, 1, 2) * w[:, None, :]
+        H = JW @ J
+        diag = np.einsum("bii->bi", H)
+        D = 1e-9 * diag + 1e-12  # keeps unobserved joints' H invertible
+        diag += D
+        K = np.linalg.solve(H, JW)
+        return cls(adapter, fitted, obs, params, J, K, w, s_all, Rl_all, sigma_p, D)
+
+    def project(self, C: np.ndarray) -> np.ndarray:
+        """Columns (T, R, k) minus their part along the frame's q directions (module docstring)."""
+        if C.shape[-1] > 3:
+            return C - self.J @ (self.K @ C)
+        out = np.empty(C.shape)
+        for k in range(C.shape[-1]):  # a column at a time: einsum beats batched matmul twice over
+            c = C[..., k]
+            out[..., k] = c - np.einsum("trn,tn->tr", self.J, np.einsum("tnr,tr->tn", self.K, c))
+        return out
+
+    def project_pot(self, j: int) -> np.ndarray:
+        """The projected unit column of pot j: (T, R) (computed once per pot)."""
+        if j not in self._pots:
+            out = -np.einsum("trn,tn->tr", self.J, self.K[:, :, j])
+            out[:, j] += 1.0
+            self._pots[j] = out
+        return self._pots[j]
+
+    def residual_rows(self) -> np.ndarray:
+        """(T, R) residuals of the mapped rows (reading − prediction)."""
+        a, f = self.fitted.applied, self.fitted
+        rp = np.asarray(a.log.stream("pots").data, float) - f.pots
+        rm = np.asarray(a.log.stream("markers").data, float) - f.markers
+        return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
+
+    def deleted_residuals(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each sensor's residual with q tracked from every other sensor of its frame (leave one
+        sensor out): pots (T, P) r / (1 − h), h the diagonal of J K; markers (T, M, 3)
+        (I − H_m)⁻¹ r_m, H_m the marker's 3 × 3 block of J K (exact for the linearised frame).
+        A reading that alone fixes a direction of q (h = 1) has none: NaN."""
+        r = self.residual_rows()
+        P, T = self.P, self.T
+        M = (self.R - P) // 3
+        h = np.einsum("tpn,tnp->tp", self.J[:, :P], self.K[:, :, :P])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rp = np.where(1.0 - h > 1e-12, r[:, :P] / (1.0 - h), np.nan)
+        Jm = self.J[:, P:].reshape(T, M, 3, -1)
+        Km = self.K[:, :, P:].reshape(T, -1, M, 3)
+        A = np.eye(3) - np.einsum("tmin,tnmj->tmij", Jm, Km)
+        rm = r[:, P:].reshape(T, M, 3)
+        ok = np.isfinite(rm).all(-1) & (np.abs(np.linalg.det(A)) > 1e-12)
+        out = np.full_like(rm, np.nan)
+        out[ok] = np.linalg.solve(A[ok], rm[ok][..., None])[..., 0]
+        return rp, out
+
+    def mapped_index(self, name: str) -> int:
+        return self.obs.marker_names.index(name)
+
+    def marker_basis(self, m: int) -> np.ndarray:
+        """∂x_m/∂d_m = R Rl (T, R, 3) on marker m's rows."""
+        C = np.zeros((self.T, self.R, 3))
+        P = self.P
+        C[:, P + 3 * m : P + 3 * m + 3] = self.RRl[:, m]
+        return C
+
+    def _moves(self, joint: str) -> np.ndarray:
+        kin = self.obs.kin
+        k = self.adapter.robot.joint_index(joint)
+        jl, _, _ = kin.link_info(self.obs.marker_links)
+        return kin._anc[jl, k].astype(float) - kin._anc[kin.base_joint, k]
+
+    def observed_joints(self) -> list[str]:
+        return [j for j in self.adapter.robot.joint_names if np.any(self._moves(j) != 0)]
+
+    def link_offset_basis(self, joint: str) -> np.ndarray:
+        """∂x/∂δ (T, R, 3) of a translation δ of the joint's origin in its parent joint's frame:
+        every marker it moves shifts by R R_parent δ (linear pots: not modelled, rows 0)."""
+        kin = self.obs.kin
+        k = self.adapter.robot.joint_index(joint)
+        poses = kin.joint_poses(self.fitted.q)
+        par = kin.parent[k]
+        Rp = poses.R[:, par] if par >= 0 else poses.root_R
+        RRp = np.einsum("ij,tjk->tik", self.params.R, Rp)
+        C = np.zeros((self.T, self.R, 3))
+        P = self.P
+        for m, sgn in enumerate(self._moves(joint)):
+            if sgn:
+                C[:, P + 3 * m : P + 3 * m + 3] = sgn * RRp
+        return C
+
+    # ------------------------------------------------------------------ the calibration's span
+    @property
+    def RRl(self) -> np.ndarray:
+        """R R_l (T, M, 3, 3): each marker's link frame in the mocap frame."""
+        if self._RRl is None:
+            self._RRl = np.einsum("ij,tmjk->tmik", self.params.R, self.Rl)
+        return self._RRl
+
+    @property
+    def x_mocap(self) -> np.ndarray:
+        """Predicted markers relative to the mocap translation (T, M, 3), m (0 where missing)."""
+        if self._x is None:
+            self._x = np.nan_to_num(self.fitted.markers - self.params.T)
+        return self._x
+
+    @property
+    def x_skew(self) -> np.ndarray:
+        """[x]× (T, M, 3, 3) of :attr:`x_mocap`."""
+        if self._xs is None:
+            self._xs = _skew(self.x_mocap)
+        return self._xs
+
+    def _calibration_basis(self, sl: slice) -> np.ndarray:
+        """∂(prediction)/∂θ_cal (B, R, k0) on frames ``sl`` for every parameter STAC fits once for
+        the whole log (thesis eq. 2.10): each pot's gain and bias, each marker's position on its
+        link, the mocap frame's translation and (small) rotation."""
+        P, M = self.P, self.obs.n_markers
+        s = self.s[sl]
+        B = s.shape[0]
+        F = np.zeros((B, self.R, 2 * P + 3 * M + 6))
+        i = np.arange(P)
+        F[:, i, 2 * i] = s
+        F[:, i, 2 * i + 1] = 1.0
+        x = self.x_mocap[sl]
+        c = 2 * P + 3 * M
+        for m in range(M):
+            rows = slice(P + 3 * m, P + 3 * m + 3)
+            F[:, rows, 2 * P + 3 * m : 2 * P + 3 * m + 3] = self.RRl[sl, m]
+            F[:, rows, c : c + 3] = np.eye(3)
+            for k in range(3):  # d/dω of exp([ω]×) x at ω = 0: e_k × x
+                F[:, rows, c + 3 + k] = np.cross(np.eye(3)[k], x[:, m])
+        return F
+
+    def _calibration_dot(self, V: np.ndarray) -> np.ndarray:
+        """Fᵀ V (k0, k) summed over frames, for rows V (T, R, k) (F: :meth:`_calibration_basis`),
+        from F's structure rather than F itself."""
+        P, M = self.P, self.obs.n_markers
+        k = V.shape[-1]
+        out = np.zeros((2 * P + 3 * M + 6, k))
+        out[0 : 2 * P : 2] = np.einsum("tp,tpk->pk", self.s, V[:, :P])
+        out[1 : 2 * P : 2] = V[:, :P].sum(axis=0)
+        Vm = V[:, P:].reshape(V.shape[0], M, 3, k)
+        out[2 * P : 2 * P + 3 * M] = np.einsum("tmil,tmik->mlk", self.RRl, Vm).reshape(3 * M, k)
+        c = 2 * P + 3 * M
+        out[c : c + 3] = Vm.sum(axis=(0, 1))
+        out[c + 3 : c + 6] = np.einsum("tmij,tmjk->ik", self.x_skew, Vm)  # (e_j × x)·v = (x × v)_j
+        return out
+
+    def _calibration_apply(self, beta: np.ndarray) -> np.ndarray:
+        """F β (T, R, k) for coefficients β (k0, k)."""
+        P, M = self.P, self.obs.n_markers
+        k = beta.shape[-1]
+        out = np.empty((self.T, self.R, k))
+        out[:, :P] = self.s[..., None] * beta[0 : 2 * P : 2][None] + beta[1 : 2 * P : 2][None]
+        c = 2 * P + 3 * M
+        xm = np.einsum("tmil,mlk->tmik", self.RRl, beta[2 * P : c].reshape(M, 3, k)) + beta[c : c + 3][None, None]
+        xm -= np.einsum("tmij,jk->tmik", self.x_skew, beta[c + 3 : c + 6])  # ω × x = −[x]× ω
+        out[:, P:] = xm.reshape(self.T, 3 * M, k)
+        return out
+
+    def _op_basis(self, op: np.ndarray, f) -> np.ndarray:
+        """op F (B, n, k0) for a per-frame operator op (B, n, R) on frames ``f``, from F's
+        structure (:meth:`_calibration_basis`)."""
+        P, M = self.P, self.obs.n_markers
+        B, n = op.shape[:2]
+        out = np.empty((B, n, 2 * P + 3 * M + 6))
+        out[:, :, 0 : 2 * P : 2] = op[:, :, :P] * self.s[f][:, None, :]
+        out[:, :, 1 : 2 * P : 2] = op[:, :, :P]
+        om = op[:, :, P:].reshape(B, n, M, 3)
+        out[:, :, 2 * P : 2 * P + 3 * M] = np.einsum("tnmi,tmik->tnmk", om, self.RRl[f]).reshape(B, n, 3 * M)
+        c = 2 * P + 3 * M
+        out[:, :, c : c + 3] = om.sum(axis=2)
+        out[:, :, c + 3 : c + 6] = -np.einsum("tnmi,tmik->tnk", om, self.x_skew[f])  # e_k × x = −[x]× e_k
+        return out
+
+    def _gram(self) -> np.ndarray:
+        """(S F)ᵀ W (S F) over the training frames (k0, k0), S = I − J K the per-frame q projector:
+        Fᵀ W F − (Jᵀ W F)ᵀ K F − (K F)ᵀ D (K F) (expand it with Jᵀ W J = H − D, K = H⁻¹ Jᵀ W);
+        Fᵀ W F from F's structure (the markers' rows are orthonormal R R_l, weighted alike on their
+        three axes)."""
+        if self._cal_gram is not None:
+            return self._cal_gram
+        P, M = self.P, self.obs.n_markers
+        tr = self.fitted.train
+        w, s = self.w[tr], self.s[tr]
+        k0 = 2 * P + 3 * M + 6
+        G = np.zeros((k0, k0))  # upper triangle first
+        i = np.arange(P)
+        G[2 * i, 2 * i] = np.einsum("tp,tp->p", w[:, :P], s * s)
+        G[2 * i, 2 * i + 1] = np.einsum("tp,tp->p", w[:, :P], s)
+        G[2 * i + 1, 2 * i + 1] = w[:, :P].sum(axis=0)
+        wm = w[:, P::3]  # (T, M): one weight per marker
+        Q, X = self.RRl[tr], self.x_skew[tr]  # (T, M, 3, 3)
+        c = 2 * P + 3 * M
+        QtT = np.einsum("tm,tmji->mij", wm, Q)  # Σ w Qᵀ
+        QtX = -np.einsum("tm,tmji,tmjk->mik", wm, Q, X)  # Σ w Qᵀ (−[x]×)
+        for m in range(M):
+            r = slice(2 * P + 3 * m, 2 * P + 3 * m + 3)
+            G[r, r] = wm[:, m].sum() * np.eye(3)
+            G[r, c : c + 3], G[r, c + 3 : c + 6] = QtT[m], QtX[m]
+        G[c : c + 3, c : c + 3] = wm.sum() * np.eye(3)
+        G[c : c + 3, c + 3 : c + 6] = -np.einsum("tm,tmik->ik", wm, X)
+        G[c + 3 : c + 6, c + 3 : c + 6] = np.einsum("tm,tmji,tmjk->ik", wm, X, X)
+        G = np.triu(G) + np.triu(G, 1).T
+        frames = np.flatnonzero(tr)
+        for a in range(0, frames.size, 250):
+            f = frames[a : a + 250]
+            JW = np.swapaxes(self.J[f], 1, 2) * self.w[f][:, None, :]
+            A, B = self._op_basis(JW, f), self._op_basis(self.K[f], f)
+            G -= A.reshape(-1, k0).T @ B.reshape(-1, k0) + _wgram(B, self.D[f])
+        self._cal_gram = 0.5 * (G + G.T)
+        self._cal_pinv = np.linalg.pinv(self._cal_gram, rcond=1e-10, hermitian=True)
+        return self._cal_gram
+
+    def beyond_calibration(self, C: np.ndarray) -> np.ndarray:
+        """Projected columns (T, R, k) minus their weighted least-squares fit, on the training
+        frames, by the projected calibration basis (:meth:`_calibration_basis`): what a term does
+        that no re-fit of the pots' gains and biases, the markers' positions and the mocap frame
+        (and no per-frame q) can do. The baseline's residual is already orthogonal to those
+        directions (STAC's fit is their optimum), so by Frisch-Waugh-Lovell fitting the residual on
+        these columns alone equals fitting it on the term and a re-fit of the whole calibration.
+        Directions of the term that the calibration takes up entirely (a joint origin moved along
+        the joint's axis when the axes below are parallel to it: the markers' positions) are set to
+        zero rather than left as numerical noise."""
+        C = np.nan_to_num(C)
+        wt = self.w * self.fitted.train[:, None]
+        b = self._calibration_dot(wt[..., None] * C)  # (S F)ᵀ W C = Fᵀ W C, as S C = C
+        self._gram()
+        beta = self._cal_pinv @ b  # (k0, k)
+        return self._identifiable(C, C - self.project(self._calibration_apply(beta)))
+
+    def beyond_gain_bias(self, C: np.ndarray, j: int) -> np.ndarray:
+        """:meth:`beyond_calibration` for a pot term's columns (T, R, k) of pot j, with the
+        calibration's span cut to the gains and biases of the pots that read a joint pot j reads
+        (their projected columns are cached: no further projection). A pot term's columns lie on
+        its own row before projection and on the q directions of its joints after it; the other
+        calibration directions (markers' positions, the mocap frame, unrelated pots) are
+        orthogonal to them up to what the q projection spreads."""
+        C = np.nan_to_num(C)
+        N = np.stack([c for i in self.sharing(j) for c in (self.project_pot(i) * self.s[:, i, None],
+                                                           self.project_pot(i))], axis=-1)
+        wt = self.w * self.fitted.train[:, None]
+        if j not in self._pot_pinv:
+            self._pot_pinv[j] = np.linalg.pinv(_wgram(N, wt), rcond=1e-10, hermitian=True)
+        b = (N * wt[..., None]).reshape(-1, N.shape[-1]).T @ C.reshape(-1, C.shape[-1])
+        return self._identifiable(C, C - N @ (self._pot_pinv[j] @ b))
+
+    def sharing(self, j: int) -> list[int]:
+        """Pots (mapped order) that read a joint pot j reads (j first)."""
+        A = self.obs.A != 0
+        if self.obs.kinds[j] == "linear" or not A[j].any():
+            return [j]
+        others = [i for i in range(self.P) if i != j and self.obs.kinds[i] != "linear" and np.any(A[i] & A[j])]
+        return [j, *others]
+
+    def _identifiable(self, C: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``out`` (the columns C (T, R, k) orthogonalised) with the directions that kept less than
+        IDENTIFIABLE of their weighted squared norm set to zero."""
+        wt = self.w * self.fitted.train[:, None]
+        lam, V = np.linalg.eigh(_wgram(out, wt))
+        raw = np.einsum("kl,ka,la->a", _wgram(C, wt), V, V)
+        gone = lam <= IDENTIFIABLE * np.maximum(raw, 1e-300)
+        if gone.any():
+            keep = V[:, ~gone]
+            out = out @ (keep @ keep.T)
+        return out
+
+    def channels(self, C: np.ndarray | None) -> dict | None:
+        """Mapped rows (T, R, k) -> {channel: (T, k) pot or (T, 3, k) marker} on the log's
+        channels (slips merged back), channels the columns do not touch left out."""
+        if C is None:
+            return None
+        P, k = self.P, C.shape[-1]
+        Cw = np.nan_to_num(C * C) * self.w[..., None]
+        energy = np.concatenate([Cw[:, :P].sum(axis=(0, 2)), Cw[:, P:].reshape(self.T, -1, 3, k).sum(axis=(0, 2, 3))])
+        keep = energy >= CHANNEL_SHARE * (energy.max() if energy.size else 0.0)
+        out = {}
+        for i, n in enumerate(self.obs.pot_names):
+            if keep[i] and energy[i] > 0:
+                out[n] = np.ascontiguousarray(C[:, i])  # a copy: C itself is not kept alive
+        mk = C[:, P:].reshape(self.T, -1, 3, k)
+        a = self.fitted.applied
+        names = list(self.obs.marker_names)
+        for n in self.adapter.marker_names:
+            j = P + names.index(n)
+            second = [(names.index(v), first) for v, (o, first) in a.slips.items() if o == n]
+            if any(keep[x] and energy[x] > 0 for x in [j, *[P + v for v, _ in second]]):
+                col = mk[:, j - P].copy()
+                for v, first in second:
+                    col[first:] = mk[first:, v]
+                out[n] = col
+        return out
+
+
+def _skew(x: np.ndarray) -> np.ndarray:
+    """[x]× (..., 3, 3) of vectors x (..., 3): [x]× v = x × v."""
+    out = np.zeros((*x.shape, 3))
+    out[..., 0, 1], out[..., 0, 2] = -x[..., 2], x[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = x[..., 2], -x[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -x[..., 1], x[..., 0]
+    return out
+
+
+def _wgram(A: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Σ_rows w A Aᵀ (k, k) for columns A (..., k) and row weights w (...) (BLAS, not einsum)."""
+    X = (A * np.sqrt(w)[..., None]).reshape(-1, A.shape[-1])
+    return X.T @ X
