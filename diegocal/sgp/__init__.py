@@ -12,7 +12,7 @@ Lower level: :class:`SemiParametricGP` on plain arrays (any features), kernels i
 :mod:`diegocal.sgp.regressor`.
 """
 
-from diegocal.sgp.estimator import Guard, SemiParametricGP
+from diegocal.sgp.estimator import Guard, SemiParametricGP, Stages
 from diegocal.sgp.gp import Hyperparameters
 from diegocal.sgp.kernels import Constant, Kernel, SquaredExponential, Subspace
 from diegocal.sgp.model import (
@@ -41,6 +41,7 @@ __all__ = [
     "SGPOptions",
     "SemiParametricGP",
     "SquaredExponential",
+    "Stages",
     "Subspace",
     "TorquePrediction",
     "base_parameters",

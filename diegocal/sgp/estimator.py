@@ -20,11 +20,11 @@ from diegocal.errors import FitError, NumericalError
 from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.parallel import single_threaded, thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood, per_output
-from diegocal.sgp.guard import FTOL, Guard, GuardCandidates
+from diegocal.sgp.guard import FTOL, PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import is_amplitude, is_lengthscale
 
-__all__ = ["Guard", "SemiParametricGP"]
+__all__ = ["Guard", "SemiParametricGP", "Stages"]
 
 LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
 
@@ -109,6 +109,26 @@ class SemiParametricGP(GuardCandidates):
         return U, Y, F
 
     # ------------------------------------------------------------------ fit
+    def _standardise(self, U, Y, F):
+        """Check the arrays, set the scaling attributes; returns U, Y, F, Us, Fs."""
+        U, Y, F = self._check(U, Y, F)
+        if len(Y) < 3:
+            raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
+        self.u_mean_ = U.mean(0)
+        self.u_std_ = np.where(U.std(0) > 0, U.std(0), 1.0)
+        rms = np.sqrt(np.mean(F**2, axis=(0, 1))) if F.shape[2] else np.zeros(0)
+        self.f_scale_ = np.where(rms > 0, rms, 1.0)
+        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+        self._raw = (U, F)  # the two-stage candidate's GP scales them as this estimator does
+        return (U, Y, F, *self._scale(U, F))
+
+    @single_threaded
+    def learn(self, U, Y, F) -> Hyperparameters:
+        """The hyperparameters :meth:`fit` would learn, without the posterior (arrays as in fit)."""
+        _, Y, _, Us, Fs = self._standardise(U, Y, F)
+        self.stages_ = None
+        return self._learn(Us, Y, Fs, np.random.default_rng(self.seed))
+
     @single_threaded
     def fit(
         self,
@@ -117,47 +137,89 @@ class SemiParametricGP(GuardCandidates):
         F,
         hyperparameters: Hyperparameters | None = None,
         inducing=None,
+        stages: Stages | None = None,
+        residual_inducing=None,
     ) -> SemiParametricGP:
         """Learn hyperparameters (unless given) and the posterior.
 
         U : (N, p) inputs; Y : (N, n) observations (y's unit); F : (N, n, m) features.
         ``hyperparameters``/``inducing`` (scaled inputs: one (M, p) array, or per output an
-        (M_j, p) array or None, :func:`~diegocal.sgp.gp.per_output`) restore a saved fit exactly.
+        (M_j, p) array or None, :func:`~diegocal.sgp.gp.per_output`), ``stages`` and
+        ``residual_inducing`` (the two-stage GPs' inducing inputs) restore a saved fit exactly.
         """
-        U, Y, F = self._check(U, Y, F)
-        N, n = Y.shape
-        if N < 3:
-            raise FitError(f"need at least 3 samples to fit, got {N}")
-        self.u_mean_ = U.mean(0)
-        self.u_std_ = np.where(U.std(0) > 0, U.std(0), 1.0)
-        rms = np.sqrt(np.mean(F**2, axis=(0, 1))) if F.shape[2] else np.zeros(0)
-        self.f_scale_ = np.where(rms > 0, rms, 1.0)
-        Us, Fs = self._scale(U, F)
-        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+        U, Y, F, Us, Fs = self._standardise(U, Y, F)
+        n = Y.shape[1]
         rng = np.random.default_rng(self.seed)
+        self.stages_ = stages
         if hyperparameters is None:
-            hyperparameters = self._learn(Us, Y, Fs, rng)
+            hyperparameters = self._learn(Us, Y, Fs, rng)  # sets stages_ (Guard.two_stage)
         self.hyper_ = hyperparameters
-        if inducing is None and self.inference == "sparse" and any(k is not None for k in self.kernels):
-            inducing = self._inducing(Us, hyperparameters, rng)
+        kernels = self._joint_kernels()
+        if inducing is None and self.inference == "sparse" and any(k is not None for k in kernels):
+            inducing = self._inducing(Us, hyperparameters, rng, kernels)
         self.inducing_ = None if inducing is None else per_output(inducing, n)
-        self.posterior_ = fit_posterior(self.kernels, Us, Y, Fs, hyperparameters, inducing, jobs=self.jobs)
+        self.posterior_ = fit_posterior(kernels, Us, Y, Fs, hyperparameters, inducing, jobs=self.jobs)
+        self._fit_stages(U, Y, F, Us, Fs, residual_inducing)
         self._say("posterior", 1, 1)
-        w = self.posterior_.w_mean / self.f_scale_
-        cov = self.posterior_.w_cov / np.outer(self.f_scale_, self.f_scale_)
-        self.w_, self.w_cov_ = w, cov
+        self._raw = None
+        source = self.posterior_ if self.pr_posterior_ is None or self._modes().count("joint") else self.pr_posterior_
+        self.w_ = source.w_mean / self.f_scale_
+        self.w_cov_ = source.w_cov / np.outer(self.f_scale_, self.f_scale_)
         self.log_likelihood_ = self.posterior_.log_likelihood
         return self
 
-    def _inducing(self, Us, hp: Hyperparameters, rng) -> list:
+    def _modes(self) -> list:
+        """Per output: "joint" (the joint posterior predicts it), TWO_STAGE or PARAMETRIC."""
+        n = len(self.kernels)
+        return ["joint"] * n if self.stages_ is None else [self.stages_.mode(j) for j in range(n)]
+
+    def _joint_kernels(self) -> list:
+        """The joint posterior's kernels: None for the outputs the stages predict (PR rows of W)."""
+        return [k if m == "joint" else None for k, m in zip(self.kernels, self._modes(), strict=True)]
+
+    def _fit_stages(self, U, Y, F, Us, Fs, residual_inducing) -> None:
+        """``pr_posterior_`` (PR) when an output is not joint, ``residual_`` (the GPs on PR's
+        residual, a :class:`SemiParametricGP` without features) when one is TWO_STAGE."""
+        modes = self._modes()
+        self.pr_posterior_ = self.residual_ = None
+        if all(m == "joint" for m in modes):
+            return
+        self.pr_posterior_, res = self._pr_residual(self.stages_.pr, Us, Y, Fs)
+        if TWO_STAGE in modes:
+            kernels = [k if m == TWO_STAGE else None for k, m in zip(self.kernels, modes, strict=True)]
+            est = self._residual_estimator(kernels)
+            self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
+
+    def _residual_estimator(self, kernels=None) -> SemiParametricGP:
+        """The two-stage candidate's GPs on PR's residual: PRGP's second stage with this
+        estimator's kernels and settings, its length-scales under the guard's cap (no features)."""
+        say = self.progress
+        return SemiParametricGP(
+            self.kernels if kernels is None else kernels,
+            use_features=False,
+            restarts=self.restarts,
+            seed=self.seed,
+            inference=self.inference,
+            n_inducing=self.n_inducing,
+            sparse_tolerance=self.sparse_tolerance,
+            hyper_max=self.hyper_max,
+            maxiter=self.maxiter,
+            min_noise=self.min_noise,
+            jobs=self.jobs,
+            progress=None if say is None else (lambda stage, d, t: say(f"{stage}, GP on PR's residual", d, t)),
+            guard=Guard(max_lengthscale=self.guard.max_lengthscale),
+        )
+
+    def _inducing(self, Us, hp: Hyperparameters, rng, kernels=None) -> list:
         """Per output, inducing inputs by greedy conditional variance (:mod:`diegocal.sgp.inducing`)
         until the mean missed prior variance is ``sparse_tolerance`` σ_v² (at most ``n_inducing``
         points); None (an exact block) for an output without GP or one that needs more than half
         of the samples (then the exact factor is as cheap)."""
-        pool_seeds = rng.integers(2**32, size=len(self.kernels))  # one stream per output: any jobs
+        kernels = self.kernels if kernels is None else kernels
+        pool_seeds = rng.integers(2**32, size=len(kernels))  # one stream per output: any jobs
 
         def select(j):
-            k = self.kernels[j]
+            k = kernels[j]
             if k is None:
                 return None
             sel = greedy_inducing(
@@ -364,9 +426,15 @@ class SemiParametricGP(GuardCandidates):
                 extended = self._extend(x, sizes, data)
                 if extended is not None:
                     options["extended"] = extended
-            options["parametric"] = self._parametric_only(x0, resid, bounds, data)
+            options[PARAMETRIC] = self._parametric_only(x0, resid, bounds, data)
+            if self.guard.two_stage:  # before the fallback: it wins ties of the mean
+                self._two_stage_hp = self._two_stage(options[PARAMETRIC], Us, Y, Fs)
+                options = {**{k: v for k, v in options.items() if k != PARAMETRIC}, TWO_STAGE: options[PARAMETRIC]}
+                options[PARAMETRIC] = options[TWO_STAGE]  # in the joint posterior both are PR rows
             blocks = np.array_split(idx, folds)  # contiguous in time order
             x = self._validate(options, blocks, Us, Y, Fs, sizes)
+            if self.guard.two_stage:
+                self.stages_ = Stages(self.selection_, *self._two_stage_hp)
         return Hyperparameters.unpack(x, sizes)
 
     # ------------------------------------------------------------------ predict
@@ -381,8 +449,30 @@ class SemiParametricGP(GuardCandidates):
         if not self.use_features:
             F = F[:, :, :0]
         Us, Fs = self._scale(U, F)
-        return self.posterior_.predict(Us, Fs, variance)
+        mean, var, par = self.posterior_.predict(Us, Fs, variance)
+        if self.pr_posterior_ is None:
+            return mean, var, par
+        m_pr, v_pr, p_pr = self.pr_posterior_.predict(Us, Fs, variance)
+        res = self.residual_.predict(U, F, variance) if self.residual_ is not None else None
+        for j, mode in enumerate(self._modes()):
+            if mode == "joint":
+                continue
+            mean[:, j], par[:, j] = m_pr[:, j], p_pr[:, j]
+            if variance:
+                var[:, j] = v_pr[:, j]
+            if mode == TWO_STAGE:  # PRGP: the two stages' means and (independent) variances add
+                mean[:, j] += res[0][:, j]
+                if variance:
+                    var[:, j] += res[1][:, j]
+        return mean, var, par
 
     @property
     def noise_var_(self) -> np.ndarray:
-        return self.posterior_.noise_var
+        """(n,) σ_v² of the model that predicts each output."""
+        out = self.posterior_.noise_var.copy()
+        for j, mode in enumerate(self._modes()):
+            if mode == PARAMETRIC:
+                out[j] = self.pr_posterior_.noise_var[j]
+            elif mode == TWO_STAGE:
+                out[j] = self.residual_.noise_var_[j]
+        return out

@@ -64,6 +64,7 @@ DEFAULT_GUARD = Guard(
     validation_fraction=0.2,
     restarts=0,
     release_capped=True,
+    two_stage=True,
 )
 GUARD_GP_INPUTS = ("q", "qd")
 
@@ -434,7 +435,8 @@ class DynamicsModel:
             resid = tau - self.pr_.predict(U, F, variance=False)[0]
             self.gp_ = self._estimator("gp", T, False).fit(U, resid, F, st.get("hyper"), st.get("inducing"))
         else:
-            self.gp_ = self._estimator(o.kind, T, o.guard_active).fit(U, tau, F, st.get("hyper"), st.get("inducing"))
+            est = self._estimator(o.kind, T, o.guard_active)
+            self.gp_ = est.fit(U, tau, F, st.get("hyper"), st.get("inducing"), st.get("stages"), st.get("inducing_res"))
         self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd, self.time_, variance=False).tau, self.tau_)
         return self
 
@@ -456,26 +458,32 @@ class DynamicsModel:
 
     @property
     def hyperparameters_(self) -> dict:
+        """σ_w, and per joint σ_v, σ_z and length-scales (the input's unit) of the model that
+        predicts it: for a joint the guard gave two stages (``guard_choice`` "two-stage"), those
+        of its GP on PR's residual, with PR's σ_v as ``sigma_v_pr``."""
         est = self.gp_
         hp = est.hyper_
         out = {"sigma_w": float(np.exp(hp.log_sigma_w)) if self.options.kind != "gp" else None}
-        names = [self.input_names[d] for d in self.gp_dims]
         pr_noise = np.exp(self.pr_.hyper_.log_sigma_v) if self.options.kind == "prgp" else None
+        stages = getattr(est, "stages_", None)
         for j, joint in enumerate(self.joint_names):
-            entry = {"sigma_v": float(np.exp(hp.log_sigma_v[j]))}
-            if pr_noise is not None:
-                entry["sigma_v_pr"] = float(pr_noise[j])
+            gp, dims, noise = est, self.gp_dims, pr_noise
+            if stages is not None and stages.mode(j) == "two-stage":
+                gp, noise = est.residual_, np.exp(stages.pr.log_sigma_v)
+            entry = {"sigma_v": float(np.exp(gp.hyper_.log_sigma_v[j]))}
+            if noise is not None:
+                entry["sigma_v_pr"] = float(noise[j])
             if est.kernels[j] is not None:
-                th = hp.theta[j]
+                th = gp.hyper_.theta[j]
                 entry["sigma_z"] = float(np.exp(th[0]))
                 # length-scales back in the input's unit (inputs were standardised)
-                ell = np.exp(th[1 : 1 + len(self.gp_dims)]) * est.u_std_[self.gp_dims]
-                entry["lengthscales"] = {nm: float(v) for nm, v in zip(names, ell, strict=True)}
+                ell = np.exp(th[1 : 1 + len(dims)]) * est.u_std_[dims]
+                entry["lengthscales"] = {self.input_names[d]: float(v) for d, v in zip(dims, ell, strict=True)}
                 if hasattr(est, "selection_"):  # the guard's cross-validated choice (fits only)
                     entry["guard_choice"] = est.selection_[j]
-                if est.inference == "sparse":  # inducing inputs, and the prior variance they miss
-                    entry["n_inducing"] = int(est.n_inducing_[j])
-                    entry["sparse_gap"] = float(est.sparse_gap_[j])
+                if gp.inference == "sparse":  # inducing inputs, and the prior variance they miss
+                    entry["n_inducing"] = int(gp.n_inducing_[j])
+                    entry["sparse_gap"] = float(gp.sparse_gap_[j])
             out[joint] = entry
         return out
 
@@ -516,6 +524,9 @@ class DynamicsModel:
         }
         if self.options.kind == "prgp":
             st["hyper_pr"], st["inducing_pr"] = self.pr_.hyper_, self.pr_.inducing_
+        if getattr(self.gp_, "stages_", None) is not None:  # the guard's two stages (Guard.two_stage)
+            st["stages"] = self.gp_.stages_
+            st["inducing_res"] = None if self.gp_.residual_ is None else self.gp_.residual_.inducing_
         return st
 
     def save(self, directory, meta: dict | None = None) -> None:

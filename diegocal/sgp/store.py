@@ -30,6 +30,7 @@ from diegocal.errors import InputFileError
 from diegocal.io import atomic_path, load_yaml, save_yaml
 from diegocal.robot import load_robot
 from diegocal.sgp.gp import Hyperparameters, per_output
+from diegocal.sgp.guard import Stages
 
 FORMAT = "diegocal-sgp"
 VERSION = 1
@@ -100,6 +101,11 @@ def save_model(model, directory, meta: dict | None = None, header: dict | None =
     arrays.update({f"base_{k}": np.asarray(v) for k, v in st["base"].items()})
     _pack_hyper("hyper", st["hyper"], st["inducing"], arrays)
     _pack_hyper("hyper_pr", st.get("hyper_pr"), st.get("inducing_pr"), arrays)
+    stages = st.get("stages")
+    if stages is not None:  # the guard's two stages: PR, the GPs on its residual, the choice
+        arrays["stage_selection"] = np.array(stages.selection, dtype=str)
+        _pack_hyper("stage_pr", stages.pr, None, arrays)
+        _pack_hyper("stage_res", stages.residual, st.get("inducing_res"), arrays)
     with atomic_path(directory / "model.npz") as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
     robot = model.robot
@@ -168,6 +174,10 @@ def load_model(directory, robot=None):
         "hyper_pr": hyper_pr,
         "inducing_pr": inducing_pr,
     }
+    if "stage_selection" in arrays:  # a file without it predicts every joint by the joint posterior
+        stage_res, state["inducing_res"] = _unpack_hyper("stage_res", arrays)
+        selection = tuple(str(c) for c in arrays["stage_selection"])
+        state["stages"] = Stages(selection, _unpack_hyper("stage_pr", arrays)[0], stage_res)
     model.fit_arrays(q, qd, qdd, arrays["tau"], state=state, time=arrays.get("time"))
     hp = summary.get("hyperparameters") or {}
     choices = [(hp.get(j) or {}).get("guard_choice") for j in model.joint_names]

@@ -1,0 +1,70 @@
+"""The guard's two stages (Guard.two_stage): an output the guard gives to PR is predicted by PR
+itself, one it gives two stages by PRGP itself (thesis §3.4.1: PR, then a GP on its residual),
+whatever the other outputs' GPs do to the shared W; and the choice between a joint GP and two
+stages is the one-standard-error rule, W at PR being the simpler model."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages
+from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE
+
+from .test_guard import _data
+
+
+@pytest.fixture(scope="module")
+def data():
+    return _data(np.random.default_rng(5), 160, (-1.0, 1.0), (0.0, 1.0))
+
+
+def _kernels():
+    return [SquaredExponential(3) for _ in range(2)]
+
+
+def test_two_stages_predict_as_pr_and_prgp(data):
+    """Restore a fit whose guard chose two stages for output 0 and PR for output 1: output 0 is
+    PR's mean plus the residual GP's (variances added), output 1 is PR's, to rounding."""
+    U, Y, F, _ = data
+    pr = SemiParametricGP([None, None], seed=0).fit(U, Y, F)
+    res_gp = SemiParametricGP(_kernels(), use_features=False, seed=0).fit(U, Y - pr.predict(U, F)[0], F)
+    guarded = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0).fit(U, Y, F)  # any joint fit
+    stages = Stages((TWO_STAGE, PARAMETRIC), pr.hyper_, res_gp.hyper_)
+    est = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0).fit(U, Y, F, guarded.hyper_, stages=stages)
+    Uq, _, Fq, _ = _data(np.random.default_rng(6), 50, (-1.5, 1.5), (0.0, 2.0))
+    mean, var, par = est.predict(Uq, Fq)
+    m_pr, v_pr, p_pr = pr.predict(Uq, Fq)
+    m_gp, v_gp, _ = res_gp.predict(Uq, Fq)
+    np.testing.assert_allclose(mean[:, 0], m_pr[:, 0] + m_gp[:, 0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(var[:, 0], v_pr[:, 0] + v_gp[:, 0], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(mean[:, 1], m_pr[:, 1], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(var[:, 1], v_pr[:, 1], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(par, p_pr, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(est.noise_var_, [res_gp.noise_var_[0], pr.noise_var_[1]])
+    np.testing.assert_allclose(est.w_, pr.w_)  # no output is joint: the W that predicts is PR's
+
+
+def test_the_guard_offers_two_stages_and_keeps_pr_where_no_gp_earns_its_place(data):
+    U, Y, F, clean = data
+    est = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0).fit(U, Y, F)
+    assert TWO_STAGE in est.validation_scores_
+    assert est.selection_[0] != PARAMETRIC  # the friction on output 0 is worth a GP
+    without = SemiParametricGP(_kernels(), guard=replace(DEFAULT_GUARD, two_stage=False), seed=0).fit(U, Y, F)
+    assert TWO_STAGE not in without.validation_scores_
+
+
+def test_a_joint_gp_must_beat_two_stages_by_one_standard_error():
+    """_choose on options (learnt, two-stage, parametric) × 5 blocks × 3 outputs."""
+    pr = np.array([1.0, 1.2, 0.9, 1.1, 1.0])
+    wiggle = 0.01 * np.array([1, -1, 1, -1, 1])
+    per_block = np.stack(
+        [
+            np.column_stack([pr - 0.30, pr - 0.31 + 3 * wiggle, pr + 0.1]),  # learnt
+            np.column_stack([pr - 0.10, pr - 0.30, pr + 0.1]),  # two-stage
+            np.column_stack([pr, pr, pr]),  # parametric
+        ]
+    )
+    # output 0: learnt beats two stages consistently; output 1: by less than one SE -> two stages;
+    # output 2: no GP beats PR
+    assert SemiParametricGP._choose(per_block, ["learnt", TWO_STAGE, PARAMETRIC]).tolist() == [0, 1, 2]
