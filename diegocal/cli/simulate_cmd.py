@@ -5,15 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from diegocal.cli.app import simulate_app
-from diegocal.cli.common import cli_errors, summary
-from diegocal.io import save_log
-from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sim.effects import VOCABULARY, SimOptionError, check_effects, parse_effects
-from diegocal.sim.kinematics import SIZE_UNITS, KinematicsOptions, simulate_kinematics
+from diegocal.cli.choices import EFFECTS as VOCABULARY
+from diegocal.cli.choices import KINEMATIC_SIZE_UNITS as SIZE_UNITS
+from diegocal.cli.common import cli_errors, log_output, summary
+from diegocal.errors import OptionError
 
 
 def parse_direction(text: str) -> tuple[str, tuple[float, float, float]]:
@@ -24,13 +22,13 @@ def parse_direction(text: str) -> tuple[str, tuple[float, float, float]]:
             raise ValueError
         return parts[0], (float(parts[1]), float(parts[2]), float(parts[3]))
     except ValueError:
-        raise SimOptionError(f"--direction {text!r}: expected JOINT:DX:DY:DZ, e.g. pip:1:0:0") from None
+        raise OptionError(f"--direction {text!r}: expected JOINT:DX:DY:DZ, e.g. pip:1:0:0") from None
 
 
 @simulate_app.command("kinematics")
 @cli_errors
 def simulate_kinematics_cmd(
-    output: Annotated[Path, typer.Option("--output", "-o", help="Log to write (.h5 or .csv).")],
+    output: Annotated[Path, typer.Option("--output", "-o", callback=log_output, help="Log to write (.h5 or .csv).")],
     robot: Annotated[str, typer.Option(help="Robot directory or bundled robot name.")] = "diego",
     duration: Annotated[float, typer.Option(help="Session length, s (thesis: 250 s).")] = 250.0,
     rate: Annotated[float, typer.Option(help="Sample rate of pots and markers, Hz.")] = 100.0,
@@ -61,6 +59,13 @@ def simulate_kinematics_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate a kinematic calibration session (thesis §2.5.1) with truth in /truth."""
+    import numpy as np
+
+    from diegocal.io import save_log
+    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.sim.effects import check_effects, parse_effects
+    from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
     if poses:
         return _static_poses(output, robot, seed, poses, pose_samples, wrong_poses, gain_error, bias_error,
                              marker_offset, pot_noise, marker_noise, quiet)
@@ -89,6 +94,10 @@ def simulate_kinematics_cmd(
 def _static_poses(output, robot, seed, poses, samples, wrong, gain_error, bias_error, marker_offset, pot_noise,
                   marker_noise, quiet) -> None:
     """`simulate kinematics --poses N`: a static-pose session (sim.static_poses.simulate_static_poses)."""
+    import numpy as np
+
+    from diegocal.io import save_log
+    from diegocal.robot import load_robot, resolve_robot_dir
     from diegocal.sim.static_poses import StaticPoseOptions, simulate_static_poses
 
     options = StaticPoseOptions(n_poses=poses, samples=samples, wrong=wrong, gain_error=gain_error,
