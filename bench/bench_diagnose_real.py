@@ -122,7 +122,8 @@ def friction_check(d, alpha: float = 0.01) -> None:
     - low-velocity, sign(qd)·exp(−|qd|/v): friction near zero velocity other than the Coulomb
       level (Stribeck: above it; negative: a smooth change of sign), v = 0.02-0.5 × std(qd), the
       best on the training blocks."""
-    from diegocal.diagnose.engine import Candidate, EngineOptions, evaluate_candidates
+    from diegocal.diagnose.engine import Candidate, EngineOptions
+    from diegocal.diagnose.selection import evaluate_candidates
     from diegocal.diagnose.stats import cluster_length
     from diegocal.evaluate import sub_blocks
     from diegocal.terms import Parameter, Term

@@ -8,9 +8,10 @@ Public API::
     result.to_dict()         # diagnosis.yaml (DESIGN.md, "Diagnosis output")
     result.save_extended(path)   # the extended model, a bundle `predict` accepts
 
-The engine (:mod:`.engine`, statistics in :mod:`.stats`, the Show step in :mod:`.show`) is
-domain-free; each domain gives it an adapter: :mod:`.dynamics`, :mod:`.kinematics`,
-:mod:`.pneumatics` (their function ``adapters(log, robot, options) -> list[Adapter]``).
+The engine (:mod:`.engine`, the choice of candidates in :mod:`.selection`, statistics in :mod:`.stats`,
+the Show step in :mod:`.show`, a finding's evidence curves in :mod:`.evidence`) is domain-free; each
+domain gives it an adapter: :mod:`.dynamics`, :mod:`.kinematics`, :mod:`.pneumatics` (their function
+``adapters(log, robot, options) -> list[Adapter]``).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 For each channel and each state variable the domain names (its own joint's angle and velocity,
 the sign of the velocity, a lagged valve command, time), the residual's mean per quantile bin of
 the variable, fitted on the training samples, is tested on the validation samples like any
-candidate (:func:`~diegocal.diagnose.engine.evaluate_candidates`): a binned mean is the most flexible
+candidate (:func:`~diegocal.diagnose.selection.evaluate_candidates`): a binned mean is the most flexible
 term that depends on that variable alone. Beside it, the residual's correlation time (whiteness)
 and a CUSUM change-point test in time (:func:`~diegocal.diagnose.stats.change_point`).
 
@@ -79,7 +79,7 @@ def show(res, weights: dict, train, validation, shown, length: int, options, tim
     change-point test. Returns a plain mapping (diagnosis.yaml's ``residual_tests``)."""
     from dataclasses import replace
 
-    from diegocal.diagnose.engine import evaluate_candidates
+    from diegocal.diagnose.selection import evaluate_candidates
     from diegocal.evaluate import sub_blocks
 
     out = {}

@@ -13,7 +13,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from toy import ToyAdapter, make_data  # noqa: E402
 
-from diegocal.diagnose.engine import EngineOptions, choose, evaluate_candidates, run_unit  # noqa: E402
+from diegocal.diagnose.engine import EngineOptions, run_unit  # noqa: E402
+from diegocal.diagnose.selection import choose, evaluate_candidates  # noqa: E402
 from diegocal.diagnose.stats import out_of_sample_test  # noqa: E402
 from diegocal.evaluate import split_blocks  # noqa: E402
 

@@ -1,0 +1,47 @@
+"""The evidence of a finding: the variable that localises it and the residual's binned mean against
+that variable before and after it (issue #13, report section: "the evidence plot (residual against
+the variable that localises it, before and after, with its band)").
+
+Called by :func:`~diegocal.diagnose.engine.run_unit`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diegocal.diagnose.engine import Residuals
+from diegocal.terms import Term
+
+
+def evidence_variable(term: Term, res: Residuals) -> str | None:
+    """The variable that localises a term: its region's, else its channel's first variable."""
+    if term.region is not None and term.region.variable in res.variables:
+        return term.region.variable
+    for c in [term.channel, *res.channels]:
+        names = res.channel_variables.get(c)
+        if names:
+            return names[0]
+    return None
+
+
+def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclude) -> dict:
+    """Residual mean per bin of ``variable`` on the shown (validation + held-out) samples, before
+    and (when ``res_new`` is given) after, with block standard errors: the evidence plot's data."""
+    from diegocal.diagnose.stats import binned_means, quantile_edges
+    from diegocal.evaluate import sub_blocks
+
+    x = np.asarray(res.variables[variable], float)
+    edges = quantile_edges(x[train], n_bins)
+    cl = sub_blocks(shown, length)
+    out = {}
+    for name, r in (("before", res), ("after", res_new)):
+        if r is None or channel not in r.channels:
+            continue
+        v = np.array(r.channels[channel], float)
+        if exclude and channel in exclude:
+            v[np.asarray(exclude[channel], bool)] = np.nan
+        scalar = v if v.ndim == 1 else np.linalg.norm(v, axis=1)
+        out[name] = binned_means(np.where(shown, scalar, np.nan), x, cl, edges, variable).to_dict()
+    out["unit"] = res.units.get(channel, "")
+    out["channel"] = channel
+    return out
