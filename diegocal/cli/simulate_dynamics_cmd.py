@@ -34,6 +34,10 @@ def simulate_dynamics_cmd(
     duration: Annotated[float, typer.Option(help="Log length, s.")] = 20.0,
     rate: Annotated[float, typer.Option(help="Sample rate, Hz.")] = 100.0,
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
+    robot_seed: Annotated[int | None, typer.Option(
+        "--robot-seed", help="Record the robot of the session simulated with this --seed (its friction and "
+        "effects), with this session's own trajectory and noise: held-out logs of one robot. Default: --seed."
+    )] = None,
     trajectory: Annotated[
         str, typer.Option(help=f"One of: {', '.join(TRAJECTORIES)}.")
     ] = "excitation",
@@ -84,6 +88,7 @@ def simulate_dynamics_cmd(
         viscous=viscous,
         coulomb=coulomb,
         regions=regions,
+        robot_seed=robot_seed,
     )
     model = load_robot(resolve_robot_dir(robot, None))
     for joint in regions:

@@ -89,6 +89,9 @@ class DynamicsOptions:
     disturbance std for the integrated trajectories (None: scaled to the robot).
     ``figure8_size``: the figure-eight's half-width and half-height as fractions of the chain
     length from the first joint to the last link (arm3: 1.0 m); ``figure8_period`` s.
+    ``robot_seed``: the seed whose robot this session records (its friction and its effects'
+    channels, sizes and regions, drawn as a session of that seed draws them), so that logs of
+    several seeds can be of one robot; None: this session's own seed (a robot of its own).
     """
 
     duration: float = 20.0
@@ -104,6 +107,7 @@ class DynamicsOptions:
     disturbance: float | None = None
     figure8_size: tuple = (0.12, 0.06)  # fractions of the arm's reach
     figure8_period: float = 4.0
+    robot_seed: int | None = None
 
 
 @dataclass(frozen=True)
@@ -426,6 +430,8 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     time = time_base(options.duration, options.rate_hz)
     # independent streams: adding an effect or noise changes nothing else
     model_rng, rng, noise_rng = rng.spawn(3)
+    if options.robot_seed is not None:  # another session's robot: the generator that session spawned
+        model_rng = np.random.default_rng(options.robot_seed).spawn(3)[0]
     dyn = build_true_dynamics(robot, options, model_rng)
     kind = options.trajectory
     if kind == "excitation":

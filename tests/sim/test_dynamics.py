@@ -208,6 +208,22 @@ def test_cli_end_to_end(tmp_path):
     np.testing.assert_array_equal(load_log(again).streams["tau"].data, log.streams["tau"].data)
 
 
+def test_robot_seed_records_another_sessions_robot(tmp_path):
+    """--robot-seed S: the friction and the effects of the session of --seed S (a held-out log of
+    the same robot), with this session's own trajectory and noise."""
+    base = ["simulate", "dynamics", "--robot", "arm3", "--duration", "2", "--effect", "armature", "-q"]
+    for name, extra in (("a.h5", ["--seed", "1"]), ("b.h5", ["--seed", "2", "--robot-seed", "1"]), ("c.h5", ["--seed", "2"])):
+        res = runner.invoke(app, base + ["-o", str(tmp_path / name)] + extra)
+        assert res.exit_code == 0, res.output
+    a, b, c = (load_log(tmp_path / n) for n in ("a.h5", "b.h5", "c.h5"))
+    for key in ("viscous", "coulomb"):
+        assert b.truth.params[key] == a.truth.params[key]
+        assert c.truth.params[key] != a.truth.params[key]  # a seed of its own draws another robot
+    assert b.truth.effects == a.truth.effects
+    assert not np.allclose(b.streams["q"].data, a.streams["q"].data)  # its own trajectory
+    np.testing.assert_array_equal(b.streams["q"].data, c.streams["q"].data)
+
+
 @pytest.mark.parametrize(
     "extra, message",
     [
