@@ -137,10 +137,16 @@ class Linearised:
 
     def deleted_residuals(self) -> tuple[np.ndarray, np.ndarray]:
         """Each sensor's residual with q tracked from every other sensor of its frame (leave one
-        sensor out): pots (T, P) r / (1 − h), h the diagonal of J K; markers (T, M, 3)
-        (I − H_m)⁻¹ r_m, H_m the marker's 3 × 3 block of J K (exact for the linearised frame).
-        A reading that alone fixes a direction of q (h = 1) has none: NaN."""
+        sensor out), exact for the linearised frame: pots (T, P) (r − J K r) / (1 − h), h the
+        diagonal of J K; markers (T, M, 3) (I − H_m)⁻¹ (r_m − (J K r)_m), H_m the marker's 3 × 3
+        block of J K. J K r is zero where the fit's q solves this weighting's normal equations
+        (the textbook r / (1 − h)); it is kept because the fit's q need not: a pot whose σ
+        collapsed pinned its joint in the fit, whose own residual is then ~0, while the other
+        sensors' pull on that joint is what its deleted residual is. A reading that alone fixes a
+        direction of q (h = 1) has none: NaN."""
         r = self.residual_rows()
+        a = np.einsum("trn,tn->tr", self.J, np.einsum("tnr,tr->tn", self.K, np.nan_to_num(r)))
+        r = r - a
         P, T = self.P, self.T
         M = (self.R - P) // 3
         h = np.einsum("tpn,tnp->tp", self.J[:, :P], self.K[:, :, :P])

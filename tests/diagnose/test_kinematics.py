@@ -142,6 +142,31 @@ def test_schur_projection_is_orthogonal_to_q(baseline):
     assert np.allclose(lin.project_pot(0), lin.project(raw_g)[..., 0])
 
 
+def test_deleted_residuals_are_leave_one_sensor_out_refits(baseline, monkeypatch):
+    """Each sensor's deleted residual is its reading against the frame's q refitted without it
+    (weighted least squares on the linearised frame), also where the fit's q does not solve the
+    normal equations (a pot whose σ collapsed pinned its joint: its own residual ~0 whatever the
+    other sensors say). Residuals are replaced by random ones to make Jᵀ W r ≠ 0."""
+    adapter, fitted, _ = baseline
+    lin = Linearised.at(fitted, adapter)
+    r = np.random.default_rng(0).normal(0.0, 0.01, (lin.T, lin.R))
+    monkeypatch.setattr(lin, "residual_rows", lambda: r)
+    rp, rm = lin.deleted_residuals()
+    for t in (0, lin.T // 2, lin.T - 1):
+        J, w = lin.J[t], lin.w[t]
+        H = J.T @ (w[:, None] * J) + np.diag(lin.D[t])
+        rows = {i: [i] for i in range(lin.P)} | {
+            lin.P + m: list(range(lin.P + 3 * m, lin.P + 3 * m + 3)) for m in range((lin.R - lin.P) // 3)}
+        for key, idx in rows.items():
+            keep = np.setdiff1d(np.arange(lin.R), idx)
+            Hk = H - J[idx].T @ (w[idx, None] * J[idx])
+            dq = np.linalg.solve(Hk, J[keep].T @ (w[keep] * r[t, keep]))
+            loo = r[t, idx] - J[idx] @ dq
+            got = rp[t, key] if key < lin.P else rm[t, key - lin.P]
+            if np.all(np.isfinite(got)):
+                np.testing.assert_allclose(got, loo, rtol=1e-6, atol=1e-9)
+
+
 def test_calibration_span_from_its_structure_equals_the_dense_basis(baseline):
     """Fᵀ V, F β and (S F)ᵀ W (S F) from F's structure equal the same products with F written out
     (two routes; F: every pot's gain and bias, every marker's position, the mocap frame)."""
