@@ -427,7 +427,7 @@ class SemiParametricGP(GuardCandidates):
                 if extended is not None:
                     options["extended"] = extended
             options[PARAMETRIC] = self._parametric_only(x0, resid, bounds, data)
-            if self.guard.two_stage:  # before the fallback: it wins ties of the mean
+            if self.guard.two_stage:  # judged against the others' choice (GuardCandidates._choose)
                 self._two_stage_hp = self._two_stage(options[PARAMETRIC], Us, Y, Fs)
                 options = {**{k: v for k, v in options.items() if k != PARAMETRIC}, TWO_STAGE: options[PARAMETRIC]}
                 options[PARAMETRIC] = options[TWO_STAGE]  # in the joint posterior both are PR rows

@@ -54,6 +54,10 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #:   validation). A GP is kept only if it beats PR by more than one standard error of the
 #:   blocked CV (the one-standard-error rule): a GP that buys nothing lets W drift (3-link arm at
 #:   1000 samples, vertical joint 1: one seed of five at 6.8 against PR's 0.15 without the rule);
+#: - two stages (Guard.two_stage: PR, then a capped GP on its residual) replace that choice where
+#:   they beat it by more than one standard error: the issue #14 arm's joint 3, 0.0085 -> 0.0065
+#:   (bench/bench_sgp_case.py); given the ties instead, they lost the reaction wheel's pole-up
+#:   pole axis (0.086, PR's, against 0.018) by keeping PR's friction-biased W;
 #: - no extra start: the SGP's three starts are SGPOptions.restarts, shared by every kind.
 #: W keeps §3.3.4's ML-II σ_w (a zero-mean prior learnt from the data, as for PR): a flat prior
 #: left the weakly excited parameters of a single figure-eight free to drift.
