@@ -118,6 +118,13 @@ def plot_steady_state(model: PneumaticModel, sweep=None, names=None, ax=None):
     return ax
 
 
+def _legend_above_data(ax) -> None:
+    """One row of legend in a band added above the data, so that it covers none of it."""
+    low, high = ax.get_ylim()
+    ax.set_ylim(low, high + 0.3 * (high - low))
+    ax.legend(fontsize=6, loc="upper center", ncol=3, frameon=False)
+
+
 def plot_delta_p(data: ChamberData, params, ax=None, window=(0.0, 10.0)):
     """Fig. 4.11: measured p_{t+h} - p_t (light) and the model's one-step change (dark)."""
     ax = axes_or_new(ax)
@@ -129,7 +136,7 @@ def plot_delta_p(data: ChamberData, params, ax=None, window=(0.0, 10.0)):
     ax.set_xlabel(f"time [s]  ({sel.size} steps)")
     ax.set_ylabel(f"Δp per {h_ms:.0f} ms step [{UNIT}]")
     ax.set_title(f"{data.name}: pressure change, measured vs model (Fig. 4.11)")
-    ax.legend(fontsize=6, loc="lower left")
+    _legend_above_data(ax)
     return ax
 
 
@@ -146,7 +153,7 @@ def plot_integrated(data: ChamberData, params, predicted=None, ax=None, window=(
     ax.set_xlabel(f"time [s]  ({int(sel.sum())} samples)")
     ax.set_ylabel(f"pressure [{UNIT}]")
     ax.set_title(f"{data.name}: open-loop pressure from the dotted grid lines (Fig. 4.12)")
-    ax.legend(fontsize=6, loc="best")
+    _legend_above_data(ax)
     return ax
 
 
