@@ -229,6 +229,7 @@ def predict_pneumatic(model_path: Path, log_path: Path, opts: PredictOptions) ->
         {"pressure": make_stream(names, np.column_stack([pred[n] for n in names]))},
         robot=log.robot,
         rate_hz=log.rate_hz,
+        source=opts.source,
     )
     save_log(result, out)
     drifts = np.array(drifts)

@@ -16,7 +16,7 @@ import typer
 
 from diegocal.cli.app import app
 from diegocal.cli.choices import SENSOR_TYPES
-from diegocal.cli.common import cli_errors, comma_list, log_output, split_words
+from diegocal.cli.common import cli_errors, comma_list, command_line, log_output, split_words
 from diegocal.errors import InputFileError
 
 
@@ -31,6 +31,7 @@ class PredictOptions:
     jobs: int
     quiet: bool
     seed: int
+    source: dict | None = None  # what made the prediction log (Log.source): command, model, log, created
 
 
 PREDICTORS: dict[str, Callable[[Path, Path, PredictOptions], None]] = {}
@@ -116,7 +117,15 @@ def predict(
         check_log_robot(model, log)
     if kind not in PREDICTORS:
         raise InputFileError(f"{model}: predicting with a {kind} model is not available in this build")
-    opts = PredictOptions(output, split_words(sensors_from), split_words(sensors_to), robot, jobs, quiet, seed)
+    from datetime import datetime, timezone
+
+    source = {
+        "command": command_line("diegocal predict"),
+        "model": str(model.resolve()),
+        "log": str(log.resolve()),
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    opts = PredictOptions(output, split_words(sensors_from), split_words(sensors_to), robot, jobs, quiet, seed, source)
     PREDICTORS[kind](model, log, opts)
 
 

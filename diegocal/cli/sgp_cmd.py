@@ -238,7 +238,7 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
         rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, sc.nmse, strict=True)]
         rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, sc.coverage, strict=True)]
     out = opts.output or default_output(log_path, ".prediction.h5")
-    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), out)
+    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz, source=opts.source), out)
     summary(f"predict → {out}", rows, quiet=opts.quiet)
 
 

@@ -308,7 +308,7 @@ def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> Non
         streams["pots"] = make_stream(pred.pot_names, pred.pots)
     if pred.marker_names:
         streams["markers"] = make_stream(pred.marker_names, pred.markers)
-    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), out)
+    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz, source=opts.source), out)
     for target, mae in pred.mae.items():
         sigma = cal.sigma_by_group.get(target, cal.sigma_markers if target == "markers" else cal.sigma_pots)
         if np.isfinite(sigma) and sigma > 0 and mae > IMPLAUSIBLE * sigma:

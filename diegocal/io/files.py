@@ -193,6 +193,8 @@ def _save_h5(log: Log, path: Path) -> None:
             f.attrs["robot"] = log.robot
         if log.rate_hz is not None:
             f.attrs["rate_hz"] = float(log.rate_hz)
+        if log.source:
+            f.attrs["source"] = dump_yaml(log.source)
         f.create_dataset("time", data=log.time)
         for name, stream in log.streams.items():
             _write_stream(f.create_group(name), stream)
@@ -254,6 +256,7 @@ def _load_h5(path: Path, nan_ok: bool = False) -> Log:
         _say_unknown(unknown_streams(streams, str(path)), path)
         robot = _attr_str(f.attrs.get("robot"))
         rate = f.attrs.get("rate_hz")
+        source = yaml.safe_load(_attr_str(f.attrs.get("source")) or "null")
     try:
         return Log(
             time=time,
@@ -262,6 +265,7 @@ def _load_h5(path: Path, nan_ok: bool = False) -> Log:
             rate_hz=float(rate) if rate is not None else None,
             truth=truth,
             nan_ok=nan_ok,
+            source=source if isinstance(source, dict) else None,
         )
     except LogFormatError as exc:
         raise LogFormatError(f"{path}: {exc}") from None

@@ -114,6 +114,8 @@ class Log:
     truth : Truth or None, simulator ground truth
     nan_ok : bool, accept NaN in every stream (``diegocal inspect`` shows where they are; every
         fitting command reads logs without it and refuses NaN outside markers)
+    source : dict or None, what made a derived log (``diegocal predict``: command, model, log,
+        created); None for a recording or a simulation. Kept in HDF5 files only.
     """
 
     time: np.ndarray
@@ -122,6 +124,7 @@ class Log:
     rate_hz: float | None = None
     truth: Truth | None = None
     nan_ok: bool = field(default=False, compare=False, repr=False)
+    source: dict | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         check_log(self, allow_nan=self.nan_ok)

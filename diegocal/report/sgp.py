@@ -446,6 +446,14 @@ def _prediction(path: Path):
     return log, heldout_score(log)
 
 
+def describe_prediction(path: Path) -> dict:
+    """Title-page facts of a prediction log: what made it (Log.source; {} for a file made before
+    predict recorded it)."""
+    from diegocal.io import load_log
+
+    return dict(load_log(path).source or {})
+
+
 def prediction_abstract(path: Path, context=None) -> list[str]:
     return sgp_text.prediction_paragraphs(path, *_prediction(path))
 
@@ -500,7 +508,7 @@ register_section(
         "sgp prediction",
         is_prediction,
         prediction_pages,
-        lambda p: {},  # a prediction log does not record the log it was made from
+        describe_prediction,
         heading=PREDICTION_HEADING,
         abstract=prediction_abstract,
         headline=prediction_headline,

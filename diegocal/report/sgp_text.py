@@ -441,10 +441,16 @@ def prediction_paragraphs(path: Path, log, sc) -> list[str]:
     nm = dict(zip(names, sc.nmse, strict=True))
     cover = dict(zip(names, sc.coverage, strict=True))
     robot = f" of robot {log.robot}" if log.robot else ""
+    source = log.source or {}
+    if source.get("model") and source.get("log"):
+        made = (f" by model {Path(source['model']).name} for {log.n_samples} samples ({log.duration:.3g} s) of log "
+                f"{Path(source['log']).name}, beside the torques measured in it.")
+    else:
+        made = (f" for {log.n_samples} samples ({log.duration:.3g} s) of a log, beside the torques measured in it. "
+                "The file does not name the model or the log it was made from.")
     text = (
-        f"{Path(path).name}: the torques of {len(names)} joint(s){robot} predicted by diegocal predict for "
-        f"{log.n_samples} samples ({log.duration:.3g} s) of a log, beside the torques measured in it. The file does "
-        "not name the model or the log it was made from. nMSE (squared error over the measured torque's variance: "
+        f"{Path(path).name}: the torques of {len(names)} joint(s){robot} predicted by diegocal predict{made}"
+        " nMSE (squared error over the measured torque's variance: "
         "0 is perfect, 1 no better than the mean torque): "
         + _joint_list(nm)
         + "; RMSE "

@@ -105,7 +105,10 @@ def test_a_prediction_log_gets_its_heldout_section(arm2, simulate, tmp_path):
     check_pages(doc)
     text = " ".join(page_texts(doc))
     assert "Held-out torque prediction: p.h5" in text
-    assert "predicted by diegocal predict for 40 samples" in text and "Verdict:" in text
+    assert "predicted by diegocal predict by model pr.sgp for 40 samples" in text and "Verdict:" in text
+    assert "of log held.h5" in text  # the prediction log records what made it (Log.source)
+    source = load_log(tmp_path / "p.h5").source
+    assert source["model"] == str((tmp_path / "pr.sgp").resolve()) and source["log"] == str(tmp_path / "held.h5")
     for j, e, rmse, c in zip(sc.channels, sc.nmse, sc.rmse, sc.coverage, strict=True):
         row = f"{j} 40 {e:.3g} {rmse:.3g} "
         assert row in text, row
