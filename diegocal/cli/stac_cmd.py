@@ -188,6 +188,12 @@ def stac(
             f"{len(cal.unobservable)} pot(s) unobservable (no marker moves with their joints): {names}; "
             f"their gain and bias keep their nominal values (listed under 'unobservable' in {out})"
         )
+    if cal.sigma_unresolved:
+        names = ", ".join(u["group"] for u in cal.sigma_unresolved)
+        warn(
+            f"σ {names}: not resolved by this log (the other sensors cannot tell its noise apart from zero), "
+            f"held at its detection limit (listed under sigma: unresolved in {out})"
+        )
     rows = [
         ("method", cal.method),
         ("frames", data.n_samples),

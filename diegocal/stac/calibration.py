@@ -45,6 +45,17 @@ REJECTED_REASON = (
     "markers need: the markers are not this frame's (another pose's mocap frame?); written off as occluded"
 )
 
+#: Why calib.yaml lists a sensor type under ``sigma: unresolved`` (stac/qphase.py floor_factor).
+UNRESOLVED_REASON = (
+    "its readings keep fewer than sqrt(2N) residual degrees of freedom once q is fitted: the other sensors "
+    "cannot tell its noise apart from zero, so sigma is held at that detection limit"
+)
+
+
+def unresolved(groups) -> tuple:
+    """calib.yaml's ``sigma: unresolved`` records of the sensor types ``groups``."""
+    return tuple({"group": g, "reason": UNRESOLVED_REASON} for g in groups)
+
 
 @dataclass(frozen=True)
 class FitInfo:
@@ -76,6 +87,8 @@ class Calibration:
     unobservable : ({pot, joints, reason}, ...) pots kept at their nominal gain and bias
     gauges : ({joint, pot, kind, reason}, ...) joint zeros fixed by keeping a pot's bias nominal
     rejected : frame indices (0-based, in the fitted log) whose markers a robust fit wrote off
+    sigma_unresolved : ({group, reason}, ...) sensor types whose σ the data do not resolve (held
+        at its detection limit, :func:`diegocal.stac.qphase.floor_factor`)
         (:func:`diegocal.stac.robust.gross_frames`)
     header : the bundle header (:func:`diegocal.io.bundle.header`), written first
     """
@@ -102,6 +115,7 @@ class Calibration:
     unobservable: tuple = ()
     gauges: tuple = ()
     rejected: tuple = ()
+    sigma_unresolved: tuple = ()
     header: dict = field(default_factory=dict)
 
     @classmethod
@@ -158,6 +172,8 @@ class Calibration:
         }
         if self.sigma_by_group:
             out["sigma"]["by_group"] = {k: _f(v) for k, v in self.sigma_by_group.items()}
+        if self.sigma_unresolved:
+            out["sigma"]["unresolved"] = [dict(u) for u in self.sigma_unresolved]
         if self.history:
             out["fit"]["history"] = [
                 {k: (_f(v) if isinstance(v, float) else v) for k, v in h.items()} for h in self.history
@@ -215,6 +231,7 @@ class Calibration:
                 unobservable=tuple(dict(u) for u in (data.get("unobservable") or ())),
                 gauges=tuple(dict(g) for g in (data.get("gauges") or ())),
                 rejected=tuple(int(f) for f in ((data.get("rejected") or {}).get("frames") or ())),
+                sigma_unresolved=tuple(dict(u) for u in (sigma.get("unresolved") or ())),
                 header={k: data[k] for k in HEADER_KEYS if k in data},
             )
         except (KeyError, TypeError, ValueError) as exc:

@@ -100,9 +100,12 @@ def group_sigma(obs, params, st, used: dict | None, sigma: dict) -> dict:
     few % of swapped or ghost readings inflate σ by a bounded ~10-20 %, not without limit. The
     q-phase's degrees of freedom ``used`` enter as in :func:`diegocal.stac.qphase.group_sigma`
     (a median would not do: readings the q-phase fits exactly, a joint seen by its pot alone,
-    pull it to zero, and σ collapses). ``obs``: Observation; ``params``: Params; ``st``: State at
+    pull it to zero, and σ collapses), and so does its floor at the detection limit
+    (:func:`diegocal.stac.qphase.floor_factor`). ``obs``: Observation; ``params``: Params; ``st``: State at
     the current q. Returns {group: σ} in V or m.
     """
+    from diegocal.stac.qphase import MIN_REDUNDANCY, floor_factor  # qphase imports this module
+
     used = used or {}
     out = {}
     rp = params.gain * st.s + params.bias - obs.pots
@@ -114,9 +117,9 @@ def group_sigma(obs, params, st, used: dict | None, sigma: dict) -> dict:
         else:
             sq, nu = rp[:, obs.kinds == g].ravel() ** 2, 1
         n = nu * sq.size
-        dof = max(n - used.get(g, 0.0), 0.05 * n)
+        dof = max(n - used.get(g, 0.0), MIN_REDUNDANCY * n)
         clipped = np.minimum(sq, (SCALE_CLIP * sigma[g]) ** 2).sum()
-        out[g] = float(np.sqrt(clipped / (_kappa(nu, SCALE_CLIP) * dof)))
+        out[g] = float(np.sqrt(clipped / (_kappa(nu, SCALE_CLIP) * dof) * floor_factor(n, dof)))
     return out
 
 

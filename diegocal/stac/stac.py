@@ -10,9 +10,11 @@ sensor type, §2.3.5)
 eq. 2.21 at fixed θ, :mod:`.qphase`) and the dynamic
 variance adjustment σ_g = RMS residual of sensor type g. Each block is a descent step, so the
 cost recorded per iteration is non-increasing (up to the robust weights of Huber's loss).
-σ is re-estimated (with the q-phase's degrees of freedom, see :func:`.qphase.group_sigma`)
-in every iteration after (q, θ) have settled for it (SIGMA_SETTLE); that fixed-point iteration
-converges linearly, so every third estimate is extrapolated by Aitken's Δ² (:func:`_aitken`).
+σ is re-estimated (with the q-phase's degrees of freedom, see :func:`.qphase.group_sigma`; a
+type the data do not resolve is held at its detection limit, :func:`.qphase.floor_factor`, and
+listed in the calibration's ``sigma_unresolved``) in every iteration after (q, θ) have settled
+for it (SIGMA_SETTLE); that fixed-point iteration converges linearly, so every third estimate
+is extrapolated by Aitken's Δ² (:func:`_aitken`).
 The alternation has converged when the (q, θ) step moves the cost by less than 10 x
 ``tolerance`` per reading and σ by less than SIGMA_TOL.
 
@@ -63,11 +65,11 @@ from diegocal.errors import FitError, NumericalError
 from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac import robust
-from diegocal.stac.calibration import FitInfo
+from diegocal.stac.calibration import FitInfo, unresolved
 from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.pphase import p_phase
-from diegocal.stac.qphase import Noise, normal_equations, pot_sigmas, q_step, rho
+from diegocal.stac.qphase import Noise, normal_equations, pot_sigmas, q_step, resolvable, rho
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 from diegocal.stac.robust import LOSSES, REDESCENDING
 
@@ -172,7 +174,8 @@ def _noise(obs, sigma, options) -> Noise:
 
 def _update_sigma(obs, params, st, used, loss: str = "linear", sigma: dict | None = None) -> dict:
     """§2.3.5: re-estimate σ per type from the residuals, with the q-phase's degrees of freedom;
-    under a robust loss from residuals clipped at a few current σ (:func:`.robust.group_sigma`)."""
+    under a robust loss from residuals clipped at a few current σ (:func:`.robust.group_sigma`).
+    A group the data do not resolve is held at its detection limit (:func:`.qphase.floor_factor`)."""
     from diegocal.stac.qphase import group_sigma
 
     new = group_sigma(obs, params, st, used) if loss == "linear" else robust.group_sigma(obs, params, st, used, sigma)
@@ -242,7 +245,8 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
                 break
             obs = obs.without_markers(gross)
         if options.loss != "huber":
-            fine = _alternate(obs, fine.params, fine.q, fine.sigma, options, t0, history, fine.lam)
+            stage = _alternate(obs, fine.params, fine.q, fine.sigma, options, t0, history, fine.lam)
+            fine = replace(stage, unresolved=fine.unresolved)  # σ stays the Huber stage's
     params, sigma, q = fine.params, fine.sigma, fine.q
     # standard errors with q marginalised (the Schur complement of the last joint step, one
     # converged iteration from the solution), not the p-phase's conditional-on-q ones, which
@@ -254,7 +258,7 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
         )
     fit = FitInfo(history[-1].cost, len(history), fine.converged, time.perf_counter() - t0)
     cal = obs.to_calibration(params, se, sigma, "stac", fit)
-    cal = _with_history(cal, history)
+    cal = replace(_with_history(cal, history), sigma_unresolved=unresolved(fine.unresolved))
     return StacResult(cal, q, tuple(history))
 
 
@@ -289,7 +293,8 @@ def _fit(obs: Observation, params: Params, options: StacOptions, t0: float, hist
 @dataclass(frozen=True)
 class _Stage:
     """Where one run of the alternation ended: θ, its p-phase SEs (conditional on q), the joint
-    step's SEs (q marginalised; None without joint steps), σ per type, q (T, n), LM damping (T,)."""
+    step's SEs (q marginalised; None without joint steps), σ per type, q (T, n), LM damping (T,),
+    the groups whose σ the last re-estimate held at its detection limit."""
 
     params: Params
     se: dict
@@ -298,6 +303,7 @@ class _Stage:
     q: np.ndarray
     lam: np.ndarray
     converged: bool
+    unresolved: tuple = ()
 
 
 def _alternate(
@@ -324,6 +330,7 @@ def _alternate(
     noise = _noise(obs, sigma, options)
     se_joint = None
     converged, prev_fixed, sigma_change = False, np.inf, np.inf
+    resolved = {g: True for g in obs.groups}
     sigmas: list[dict] = []
     n_obs = obs.pots.size + 3 * int(obs.valid.sum())
     lam = np.full(obs.n_frames, 1e-2) if lam is None else lam
@@ -373,9 +380,10 @@ def _alternate(
         frozen = options.loss in REDESCENDING  # σ from the Huber stage (robust.py)
         if not frozen and (change < SIGMA_SETTLE * max(abs(cost), 1.0) or (warm and not np.isfinite(prev_fixed))):
             new = _update_sigma(obs, params, st, used, options.loss, sigma)
+            resolved = resolvable(obs, used)
             sigmas.append(new)
-            if len(sigmas) == 3:
-                new = _aitken(sigmas)
+            if len(sigmas) == 3:  # a group at its floor is not extrapolated past it
+                new = {g: v if resolved[g] else new[g] for g, v in _aitken(sigmas).items()}
             sigma_change = max(abs(new[g] / sigma[g] - 1.0) for g in new)
             sigma = new
             cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
@@ -400,7 +408,8 @@ def _alternate(
         if change < 10 * options.tolerance * n_obs and (sigma_change < sigma_tol or frozen):
             converged = True
             break
-    return _Stage(params, ph.se, se_joint, sigma, q, lam, converged)
+    unresolved = tuple(g for g, ok in resolved.items() if not ok)
+    return _Stage(params, ph.se, se_joint, sigma, q, lam, converged, unresolved)
 
 
 def _rms_pots(obs, sigma) -> float:
