@@ -92,8 +92,8 @@ def test_contents_point_at_the_sections(document):
     )
     entries = re.findall(rf"^({headings})\n(.+)\n(.+)\n(\d+)$", first, flags=re.M)  # section, file, log, page
     assert len(entries) == 6, first
-    # provenance (a prediction log does not say which log it was made from)
-    assert [e[2] for e in entries] == ["kin.h5", "kin.h5", "air.h5", "swing.h5", "–", "swing.h5"]
+    # provenance: every result names the log it was made from (a prediction, the log it predicted)
+    assert [e[2] for e in entries] == ["kin.h5", "kin.h5", "air.h5", "swing.h5", "swing_heldout.h5", "swing.h5"]
     for heading, result, _, number in entries:
         assert heading in document[int(number) - 1].get_text(), (heading, number)
         assert Path(result).name in document[int(number) - 1].get_text()
