@@ -117,13 +117,13 @@ def predict(
         check_log_robot(model, log)
     if kind not in PREDICTORS:
         raise InputFileError(f"{model}: predicting with a {kind} model is not available in this build")
-    from datetime import datetime, timezone
+    from datetime import UTC, datetime
 
     source = {
         "command": command_line("diegocal predict"),
         "model": str(model.resolve()),
         "log": str(log.resolve()),
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     opts = PredictOptions(output, split_words(sensors_from), split_words(sensors_to), robot, jobs, quiet, seed, source)
     PREDICTORS[kind](model, log, opts)

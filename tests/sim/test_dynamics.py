@@ -212,7 +212,8 @@ def test_robot_seed_records_another_sessions_robot(tmp_path):
     """--robot-seed S: the friction and the effects of the session of --seed S (a held-out log of
     the same robot), with this session's own trajectory and noise."""
     base = ["simulate", "dynamics", "--robot", "arm3", "--duration", "2", "--effect", "armature", "-q"]
-    for name, extra in (("a.h5", ["--seed", "1"]), ("b.h5", ["--seed", "2", "--robot-seed", "1"]), ("c.h5", ["--seed", "2"])):
+    runs = {"a.h5": ["--seed", "1"], "b.h5": ["--seed", "2", "--robot-seed", "1"], "c.h5": ["--seed", "2"]}
+    for name, extra in runs.items():
         res = runner.invoke(app, base + ["-o", str(tmp_path / name)] + extra)
         assert res.exit_code == 0, res.output
     a, b, c = (load_log(tmp_path / n) for n in ("a.h5", "b.h5", "c.h5"))
