@@ -154,7 +154,7 @@ def uncertainty_words(coverage: dict) -> str:
     parts = []
     if narrow:
         parts.append(
-            f"the band is too narrow on {', '.join(narrow)} (the model is surer than its errors warrant: an effect "
+            f"too narrow on {', '.join(narrow)} (the model is surer than its errors warrant: an effect "
             "it does not model, or a noise level learnt too low)"
         )
     if wide:
@@ -162,7 +162,7 @@ def uncertainty_words(coverage: dict) -> str:
     rest = [j for j in coverage if j not in narrow and j not in wide]
     if rest:
         parts.append(f"about right on {', '.join(rest)}")
-    return "; ".join(parts)
+    return "the ±2σ band is " + "; ".join(parts)
 
 
 def model_paragraphs(model: Path, context) -> list[str]:
