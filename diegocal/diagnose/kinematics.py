@@ -14,7 +14,9 @@ frame and the pots' gains (a longer knuckle is a larger lever about the abductio
 the abduction pot's gain absorbs in part); a pot term by the gains and biases of the pots that
 read its joints. A clock shift is a family over shifts (:data:`TIME_SHIFTS`), each variant the
 predicted markers' change over its shift: a shift of many samples is far from its linearisation
-at zero. A marker slip re-fits its marker's position (``refit``).
+at zero. A marker slip re-fits its marker's position (``refit``); its change time is a family:
+in each run of training frames the time a change-point scan fits best, and the middle of each
+gap between runs (:func:`_slip_samples`).
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
 trend, by a threshold with a family-wise false-alarm rate).
@@ -53,8 +55,6 @@ from diegocal.stac.terms import (
 )
 from diegocal.terms import Region, Term
 
-#: Change times tried per marker for a slip (a family) inside each run of training frames.
-SLIP_STEPS = 4
 #: Half width (samples) of the running median a marker outlier is measured against.
 OUTLIER_WINDOW = 8
 #: Dead-band widths tried for a backlash (a family), in multiples of BAND_SIGMAS pot σ.
@@ -299,20 +299,24 @@ class KinematicsAdapter:
         return out
 
     def _slip_family(self, lin: Linearised, fitted: KinFit, have, train) -> list[Candidate]:
-        """Per marker a family over change times: a grid inside the training runs and one time in
-        the middle of each gap between them (the training frames cannot place a slip inside a
-        gap more finely; its middle halves the worst error)."""
+        """Per marker a family over change times (:func:`_slip_samples`: the best in each run of
+        training frames by a change-point scan of the marker's projected position columns, and the
+        middle of each gap between runs: the training frames cannot place a slip inside a gap more
+        finely; its middle halves the worst error)."""
         out = []
-        starts = _slip_samples(train, SLIP_STEPS)
+        r = lin.residual_rows()
+        ok = np.isfinite(r)
+        r, w = np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * train[:, None]
         for name in self.marker_names:
             if ("marker_slip", name) in have:
                 continue
-            refit = lin.channels(lin.project(lin.marker_basis(lin.mapped_index(name))))  # (T, R, 3)
-            for k in starts:
-                cols = {c: _FromSample(v, k) for c, v in refit.items()}
+            cols = lin.project(lin.marker_basis(lin.mapped_index(name)))  # (T, R, 3)
+            refit = lin.channels(cols)
+            for k in _slip_samples(train, cols, r, w):
+                cols_k = {c: _FromSample(v, k) for c, v in refit.items()}
                 region = Region("time", float(self.time[k]), float(self.time[-1]))
                 term = make_term("marker_slip", name, region=region)
-                out.append(Candidate(term, cols, family=f"marker_slip:{name}", refit=refit))
+                out.append(Candidate(term, cols_k, family=f"marker_slip:{name}", refit=refit))
         return out
 
     # ------------------------------------------------------------------ faults
@@ -455,19 +459,36 @@ def _clock_moved(before, after) -> bool:
     return any(abs(b[c] - a[c]) > CLOCK_TOL * max(abs(b[c]), 1e-3) for c in b if c in a)
 
 
-def _slip_samples(train: np.ndarray, steps: int) -> list[int]:
-    """Candidate slip samples: ``steps`` per run of training frames, one mid-gap between runs
-    (none in the first and last 5 % of the log)."""
+def _slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndarray) -> list[int]:
+    """Candidate slip samples of a marker: in each run of training frames the change time that
+    fits best, and the middle of each gap between runs (none in the first and last 5 % of the log).
+
+    The scan fits the marker's (projected) position columns ``cols`` (T, R, 3) to the residual rows
+    ``r`` (T, R) with weights ``w`` (T, R) (zero off the training frames) separately before and
+    after each change time k; the best k maximises the sum of the two fits' weighted gains
+    bᵀ G⁻¹ b, from prefix sums of the per-frame G = Cᵀ W C and b = Cᵀ W r (O(T)). A change at a
+    run's first frame is a change in the gap before it: the gap's middle stands for it."""
     T = train.size
+    Cw = cols * w[..., None]
+    G = np.cumsum(np.einsum("trk,trl->tkl", Cw, cols), axis=0)  # Σ over frames ≤ t
+    b = np.cumsum(np.einsum("trk,tr->tk", Cw, r), axis=0)
+    fit = _gain(G[:-1], b[:-1]) + _gain(G[-1] - G[:-1], b[-1] - b[:-1])  # change at k = 1..T-1
     edges = np.flatnonzero(np.diff(np.concatenate([[0], train.astype(int), [0]])))
     runs = list(zip(edges[0::2], edges[1::2], strict=True))
     out = []
-    for i, (a, b) in enumerate(runs):
-        out += [int(a + (b - a) * j / steps) for j in range(steps)]
+    for i, (a, e) in enumerate(runs):
+        if e - a > 2:  # a change after the run's first frame and before its last
+            out.append(int(a + 1 + np.argmax(fit[a : e - 1])))
         if i + 1 < len(runs):
-            out.append(int((b + runs[i + 1][0]) // 2))
+            out.append(int((e + runs[i + 1][0]) // 2))
     lo, hi = int(0.05 * T), int(0.95 * T)
     return sorted({k for k in out if lo <= k <= hi})
+
+
+def _gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares
+    fit of those columns removes."""
+    return np.einsum("ki,ki->k", b, np.einsum("kij,kj->ki", np.linalg.pinv(G, hermitian=True), b))
 
 
 def _running_median(x: np.ndarray, half: int) -> np.ndarray:

@@ -126,6 +126,35 @@ def baseline(finger):
     return adapter, adapter.fit((), blocks.mask("train")), blocks
 
 
+def test_slip_time_scan_equals_brute_force_refits():
+    """The change-point scan of a slip (prefix sums) picks, in each training run, the change time
+    a least-squares refit before and after every time picks; a slip inside a gap is its middle."""
+    from diegocal.diagnose.kinematics import _slip_samples
+
+    rng = np.random.default_rng(3)
+    T, R = 400, 6
+    train = np.zeros(T, bool)
+    train[:150], train[200:300], train[340:] = True, True, True
+    cols = rng.normal(size=(T, R, 3))
+    w = rng.uniform(0.5, 2.0, size=(T, R)) * train[:, None]
+
+    def brute(r, a, e):
+        sse = []
+        for k in range(a + 1, e):
+            A = np.concatenate([cols, cols * (np.arange(T) >= k)[:, None, None]], axis=-1)
+            sw = np.sqrt(w)[train].reshape(-1)
+            Aw, rw = A[train].reshape(-1, 6) * sw[:, None], r[train].reshape(-1) * sw
+            sse.append(np.sum((rw - Aw @ np.linalg.lstsq(Aw, rw, rcond=None)[0]) ** 2))
+        return a + 1 + int(np.argmin(sse))
+
+    for k0 in (237, 170):  # inside the second run; inside the gap before it
+        r = cols @ np.array([1.0, -2.0, 0.5]) * (np.arange(T) >= k0)[:, None] + 0.3 * rng.normal(size=(T, R))
+        got = _slip_samples(train, cols, r, w)
+        want = {brute(r, 0, 150), 175, brute(r, 200, 300), 320, brute(r, 340, 400)}
+        assert got == sorted(k for k in want if 20 <= k <= 380)  # not in the first or last 5 %
+        assert (k0 in got) if train[k0] else (175 in got and brute(r, 200, 300) == 201)
+
+
 def test_schur_projection_is_orthogonal_to_q(baseline):
     """Projected candidate columns carry nothing a change of the frame's q could explain:
     Jᵀ W c = 0 per frame (the Schur complement of the brief)."""
