@@ -35,8 +35,8 @@ from diegocal.diagnose.engine import (
 )
 from diegocal.errors import DiegocalError, MissingStreamError
 from diegocal.evaluate import Blocks, split_blocks
+from diegocal.vocabulary import DOMAINS
 
-DOMAINS = ("kinematics", "dynamics", "pneumatics")
 #: The streams that make a domain diagnosable (DESIGN.md: ``diagnose --domain`` defaults).
 DOMAIN_STREAMS = {
     "kinematics": ("pots", "markers"),

@@ -12,34 +12,7 @@ from dataclasses import dataclass
 
 from diegocal.errors import OptionError, UnknownNameError
 from diegocal.io.files import to_plain
-
-#: Cause id -> domain, from DESIGN.md's diagnosis vocabulary, extended with the causes real
-#: torque data asks for (issue #13): ``armature`` (rotor inertia, torque ∝ qdd), ``coupled_friction``
-#: (a motor driving two joints, e.g. the TX40's wrist), ``torque_lag`` (the torque sensor lags).
-VOCABULARY: dict[str, str] = {
-    "link_offset": "kinematics",
-    "sensor_nonlinearity": "kinematics",
-    "backlash": "kinematics",
-    "time_offset": "kinematics",
-    "marker_slip": "kinematics",
-    "marker_outliers": "kinematics",
-    "swapped_labels": "kinematics",
-    "coulomb_friction": "dynamics",
-    "viscous_friction": "dynamics",
-    "position_friction": "dynamics",
-    "payload": "dynamics",
-    "spring": "dynamics",
-    "torque_offset": "dynamics",
-    "armature": "dynamics",
-    "coupled_friction": "dynamics",
-    "torque_lag": "dynamics",
-    "valve_delay": "pneumatics",
-    "chamber_leak": "pneumatics",
-    "supply_droop": "pneumatics",
-    "pressure_offset": "pneumatics",
-}
-
-DOMAINS = ("kinematics", "dynamics", "pneumatics")
+from diegocal.vocabulary import DOMAINS, VOCABULARY  # noqa: F401  (the simulators' names for them)
 
 
 class EffectError(OptionError):

@@ -49,23 +49,15 @@ from diegocal.sim.effects import (
     effect_record,
 )
 from diegocal.stac.calibration import Calibration
+from diegocal.vocabulary import KINEMATIC_SIZE_UNITS
 
 #: Extra samples simulated on each side so a mocap clock offset has data to shift into (a
 #: requested shift longer than this simulates a longer run, so the joints then move differently
 #: from a run of the same seed without it).
 PAD = 16
 
-#: What ``--effect CAUSE:CHANNEL=SIZE`` sizes, per cause (the unit is the channel's: V is the pot's
-#: reading unit, m a marker's). Without SIZE the ranges of :func:`plan_effects` apply.
-SIZE_UNITS = {
-    "link_offset": "in m, the distance the joint's origin moves (random direction), so every marker it carries",
-    "sensor_nonlinearity": "in V, the transfer curve's departure from linear at the ends of the pot's range",
-    "backlash": "in V, the dead band's full width on the reading (which lags by up to half of it)",
-    "time_offset": "in s, the mocap clock's shift (sign random; need not be whole samples)",
-    "marker_slip": "in m, the distance the marker moves on its link",
-    "marker_outliers": "in m, the distance of every faulty reading from its marker",
-    "swapped_labels": "in m, the partner's mean distance (the marker nearest SIZE is the partner)",
-}
+#: What ``--effect CAUSE:CHANNEL=SIZE`` sizes, per cause (:data:`diegocal.vocabulary.KINEMATIC_SIZE_UNITS`).
+SIZE_UNITS = KINEMATIC_SIZE_UNITS
 
 
 @dataclass(frozen=True)

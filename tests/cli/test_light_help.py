@@ -18,8 +18,9 @@ import typer.main
 from diegocal.cli import app
 
 HEAVY = ("numpy", "scipy", "h5py", "pandas", "pinocchio", "matplotlib", "dask", "distributed", "sklearn", "torch")
-#: the diegocal modules a help may load: the package, its errors and the command line itself
-LIGHT_DIEGOCAL = ("diegocal", "diegocal.errors", "diegocal.cli")
+#: the diegocal modules a help may load: the package, its errors, its vocabularies (plain data) and
+#: the command line itself
+LIGHT_DIEGOCAL = ("diegocal", "diegocal.errors", "diegocal.vocabulary", "diegocal.cli")
 
 #: Command modules that still import heavy modules at module level: being edited on other
 #: branches (issue #16); their commands' help is an expected failure (strict: it fails once they
