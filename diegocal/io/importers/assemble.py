@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from diegocal.errors import LogFormatError
-from diegocal.io.importers.mapping import STREAMS, Clock, ImportMap, MapError, StreamSpec, per_channel
+from diegocal.io.importers.mapping import STREAMS, Clock, ImportMap, MapError, StreamSpec, number, per_channel
 from diegocal.io.importers.signals import (
     default_max_gap,
     derivatives,
@@ -252,7 +252,7 @@ def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportM
             kt = per_channel(spec.torque_constant, names, None, f"{where}: torque_constant")[k]
             if kt is None:
                 raise MapError(f"{where}: channel {names[k]!r} is in {unit}: give `torque_constant` (N·m/A)")
-            f *= _float(kt, f"{where}: torque_constant")
+            f *= number(kt, f"{where}: torque_constant")
         if f != 1.0:
             data[:, k] = data[:, k] * f
             converted = True
@@ -272,8 +272,8 @@ def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportM
         # motor = R · joint: positions q = R⁻¹ m; torques by virtual work τ = Rᵀ c
         data = np.linalg.solve(ratio, data.T).T if stream in _POSITION_LIKE else data @ ratio
         text += ", motor -> joint side"
-    scale = np.array([_float(v, f"{where}: scale") for v in per_channel(spec.scale, names, 1.0, f"{where}: scale")])
-    offset = np.array([_float(v, f"{where}: offset")
+    scale = np.array([number(v, f"{where}: scale") for v in per_channel(spec.scale, names, 1.0, f"{where}: scale")])
+    offset = np.array([number(v, f"{where}: offset")
                        for v in per_channel(spec.offset, names, 0.0, f"{where}: offset")])
     if (scale != 1.0).any():
         data = data * (scale[:, None] if data.ndim == 3 else scale)
@@ -442,14 +442,4 @@ def _window(time, streams, rate, mapping: ImportMap, notes: list[str]):
                            f"(the log spans {time[0]:.6g}..{time[-1]:.6g} s)")
     cut = {k: make_stream(s.names, s.data[start:stop]) for k, s in streams.items()}
     return time[start:stop], cut
-
-
-def _float(value, what: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise MapError(f"{what}: expected a number, got {value!r}") from None
-    if not np.isfinite(x):
-        raise MapError(f"{what}: expected a finite number, got {value!r}")
-    return x
 

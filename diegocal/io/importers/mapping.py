@@ -221,7 +221,7 @@ def _source(name, spec, pre) -> SourceSpec:
         time=None if spec.get("time") is None else str(spec["time"]),
         time_unit=None if spec.get("time_unit") is None else str(spec["time_unit"]),
         rate_hz=_positive(spec.get("rate_hz"), f"{pre}source {name!r}: rate_hz"),
-        time_offset=_number(spec.get("time_offset", 0.0), f"{pre}source {name!r}: time_offset"),
+        time_offset=number(spec.get("time_offset", 0.0), f"{pre}source {name!r}: time_offset"),
         zero_time=bool(spec.get("zero_time", False)),
         stamp=stamp,
         max_gap_s=_positive(spec.get("max_gap_s"), f"{pre}source {name!r}: max_gap_s"),
@@ -328,9 +328,9 @@ def _window(spec, pre) -> Window | None:
     if isinstance(spec, dict):
         _known_keys(spec, ("threshold", "margin_s"), pre + "window: unknown key")
         return Window(auto=True, threshold=_positive(spec.get("threshold", 0.02), pre + "window: threshold"),
-                      margin_s=_number(spec.get("margin_s", 0.25), pre + "window: margin_s"))
+                      margin_s=number(spec.get("margin_s", 0.25), pre + "window: margin_s"))
     if isinstance(spec, list) and len(spec) == 2:
-        lo, hi = (_number(v, pre + "window") for v in spec)
+        lo, hi = (number(v, pre + "window") for v in spec)
         if not lo < hi:
             raise MapError(f"{pre}window: start {lo} s must be before stop {hi} s")
         return Window(start=lo, stop=hi)
@@ -360,7 +360,8 @@ def _list(value, what: str) -> list:
     return value
 
 
-def _number(value, what: str) -> float:
+def number(value, what: str) -> float:
+    """A map value as a finite float (a YAML boolean is not a number); MapError naming ``what``."""
     if isinstance(value, bool):
         raise MapError(f"{what}: expected a number, got {value!r}")
     try:
@@ -375,7 +376,7 @@ def _number(value, what: str) -> float:
 def _positive(value, what: str) -> float | None:
     if value is None:
         return None
-    x = _number(value, what)
+    x = number(value, what)
     if x <= 0:
         raise MapError(f"{what}: expected a positive number, got {value!r}")
     return x
