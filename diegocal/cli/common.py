@@ -8,6 +8,7 @@ import os
 import shlex
 import sys
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -40,6 +41,13 @@ def _install_warning_handler() -> None:
 
 
 _install_warning_handler()
+
+
+#: The `--robot` option of a command that reads a log: its default is the robot the log names.
+RobotOfLog = Annotated[
+    str | None,
+    typer.Option("--robot", help="Robot directory or bundled robot name; by default the robot the log names."),
+]
 
 
 def command_line(default: str) -> str:

@@ -29,6 +29,7 @@ from diegocal.cli.choices import (
     SGP_RESTARTS,
 )
 from diegocal.cli.common import (
+    RobotOfLog,
     cli_errors,
     comma_list,
     default_output,
@@ -73,13 +74,7 @@ def _command() -> str:
 @cli_errors
 def sgp_fit(
     log: Annotated[Path, typer.Argument(help="Log with q, qd, qdd and tau streams (.h5 or .csv).")],
-    robot: Annotated[
-        str | None,
-        typer.Option(
-            "--robot",
-            help="Robot directory or bundled robot name; by default the robot the log names.",
-        ),
-    ] = None,
+    robot: RobotOfLog = None,
     model: Annotated[
         Literal[SGP_KINDS],
         typer.Option(

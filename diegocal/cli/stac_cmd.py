@@ -10,6 +10,7 @@ import typer
 from diegocal.cli.app import app
 from diegocal.cli.choices import STAC_LOSSES, STAC_METHODS, STAC_SCHEDULES
 from diegocal.cli.common import (
+    RobotOfLog,
     cli_errors,
     command_line,
     default_output,
@@ -82,13 +83,7 @@ def cost_label(method: str, loss: str) -> str | None:
 @cli_errors
 def stac(
     log: Annotated[Path, typer.Argument(help="Log with pots and markers streams (.h5 or .csv).")],
-    robot: Annotated[
-        str | None,
-        typer.Option(
-            "--robot",
-            help="Robot directory or bundled robot name; by default the robot the log names.",
-        ),
-    ] = None,
+    robot: RobotOfLog = None,
     output: Annotated[
         Path | None,
         typer.Option(
