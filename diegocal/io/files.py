@@ -256,7 +256,10 @@ def _load_h5(path: Path, nan_ok: bool = False) -> Log:
         _say_unknown(unknown_streams(streams, str(path)), path)
         robot = _attr_str(f.attrs.get("robot"))
         rate = f.attrs.get("rate_hz")
-        source = yaml.safe_load(_attr_str(f.attrs.get("source")) or "null")
+        try:
+            source = yaml.safe_load(_attr_str(f.attrs.get("source")) or "null")
+        except yaml.YAMLError:
+            raise LogFormatError(f"{path}: the 'source' attribute is not YAML") from None
     try:
         return Log(
             time=time,

@@ -139,6 +139,19 @@ def test_wrong_format_and_version(tmp_path):
         load_log(tmp_path / "b.csv")
 
 
+def test_source_round_trips_and_a_broken_one_is_one_error(tmp_path):
+    from dataclasses import replace
+
+    source = {"command": "diegocal predict m.sgp held.h5", "model": "/x/m.sgp", "log": "/x/held.h5"}
+    save_log(replace(good_log(), source=source), tmp_path / "p.h5")
+    assert load_log(tmp_path / "p.h5").source == source
+    np.testing.assert_array_equal(load_log(tmp_path / "p.h5").time, good_log().time)
+    with h5py.File(tmp_path / "p.h5", "a") as f:
+        f.attrs["source"] = "{unclosed: [1, 2"
+    with pytest.raises(LogFormatError, match="'source' attribute is not YAML"):
+        load_log(tmp_path / "p.h5")
+
+
 def test_csv_duplicates_and_bad_columns(tmp_path):
     (tmp_path / "d.csv").write_text("time,pots.a,pots.a\n0,1,2\n")
     with pytest.raises(LogFormatError, match="duplicate column 'pots.a'"):
