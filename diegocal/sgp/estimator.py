@@ -123,11 +123,12 @@ class SemiParametricGP(GuardCandidates):
         return (U, Y, F, *self._scale(U, F))
 
     @single_threaded
-    def learn(self, U, Y, F) -> Hyperparameters:
-        """The hyperparameters :meth:`fit` would learn, without the posterior (arrays as in fit)."""
+    def learn(self, U, Y, F, start: Hyperparameters | None = None) -> Hyperparameters:
+        """The hyperparameters :meth:`fit` would learn, without the posterior (arrays as in fit);
+        ``start``: one ML-II start from these instead of §3.3.4's heuristics and the restarts."""
         _, Y, _, Us, Fs = self._standardise(U, Y, F)
         self.stages_ = None
-        return self._learn(Us, Y, Fs, np.random.default_rng(self.seed))
+        return self._learn(Us, Y, Fs, np.random.default_rng(self.seed), start)
 
     @single_threaded
     def fit(
@@ -190,7 +191,7 @@ class SemiParametricGP(GuardCandidates):
             est = self._residual_estimator(kernels)
             self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
 
-    def _residual_estimator(self, kernels=None) -> SemiParametricGP:
+    def _residual_estimator(self, kernels=None, inference=None, jobs=None) -> SemiParametricGP:
         """The two-stage candidate's GPs on PR's residual: PRGP's second stage with this
         estimator's kernels and settings, its length-scales under the guard's cap (no features)."""
         say = self.progress
@@ -199,13 +200,13 @@ class SemiParametricGP(GuardCandidates):
             use_features=False,
             restarts=self.restarts,
             seed=self.seed,
-            inference=self.inference,
+            inference=self.inference if inference is None else inference,
             n_inducing=self.n_inducing,
             sparse_tolerance=self.sparse_tolerance,
             hyper_max=self.hyper_max,
             maxiter=self.maxiter,
             min_noise=self.min_noise,
-            jobs=self.jobs,
+            jobs=self.jobs if jobs is None else jobs,
             progress=None if say is None else (lambda stage, d, t: say(f"{stage}, GP on PR's residual", d, t)),
             guard=Guard(max_lengthscale=self.guard.max_lengthscale),
         )
@@ -372,7 +373,7 @@ class SemiParametricGP(GuardCandidates):
         ok = np.isfinite(res.fun) and res.fun < 1e24
         return (float(res.fun), res.x) if ok else None
 
-    def _learn(self, Us, Y, Fs, rng) -> Hyperparameters:
+    def _learn(self, Us, Y, Fs, rng, start: Hyperparameters | None = None) -> Hyperparameters:
         """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.
 
         With ``guard.validation_fraction`` the GP then has to earn its place, output by output,
@@ -392,6 +393,8 @@ class SemiParametricGP(GuardCandidates):
         n_extra = self.restarts + (self.guard.restarts if has_gp else 0)
         x0 = np.clip(hp0.pack(), lo, hi)
         starts = self._starts(x0, bounds, resid, rng, n_extra if has_gp else 0)
+        if start is not None:
+            starts = [np.clip(start.pack(), lo, hi)]
         self.n_starts_ = len(starts)
         data = Us[idx], Y[idx], Fs[idx]
 
@@ -432,7 +435,7 @@ class SemiParametricGP(GuardCandidates):
                 options = {**{k: v for k, v in options.items() if k != PARAMETRIC}, TWO_STAGE: options[PARAMETRIC]}
                 options[PARAMETRIC] = options[TWO_STAGE]  # in the joint posterior both are PR rows
             blocks = np.array_split(idx, folds)  # contiguous in time order
-            x = self._validate(options, blocks, Us, Y, Fs, sizes)
+            x = self._validate(options, blocks, Us, Y, Fs, sizes, bounds, resid)
             if self.guard.two_stage:
                 self.stages_ = Stages(self.selection_, *self._two_stage_hp)
         return Hyperparameters.unpack(x, sizes)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages
+from diegocal.sgp.gp import fit_posterior
 from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE
 
 from .test_guard import _data
@@ -72,3 +73,52 @@ def test_two_stages_must_beat_the_guards_other_choice_by_one_standard_error():
     # 4: learnt does not beat PR by one SE, two stages do; 5: two stages beat PR consistently but
     # by 0.05 % of its nMSE (under MIN_TWO_STAGE_GAIN): PR
     assert SemiParametricGP._choose(per_block, ["learnt", TWO_STAGE, PARAMETRIC]).tolist() == [0, 0, 2, 1, 1, 2]
+
+
+def test_two_stages_are_confirmed_with_each_folds_gp_learnt_without_its_block(data):
+    """The confirmation of two stages (GuardCandidates._two_stage_nested): a fold's GP is learnt
+    on the other blocks only, so a disturbance in the validation block's measurements moves the
+    fold's prediction of that block far less than it moves the plain cross-validation's, whose
+    hyperparameters were learnt on every sample (the disturbance reaches the fold only through
+    its start, the all-sample optimum)."""
+    U, Y, F, _ = data
+    blocks = np.array_split(np.arange(len(U)), 5)
+    fit_idx, val_idx = np.concatenate(blocks[:2] + blocks[3:]), blocks[2]
+    disturbed = Y.copy()
+    disturbed[val_idx, 0] += 0.2 * np.sin(40.0 * U[val_idx, 1])  # a wiggle the GP can chase
+    nested, plain = [], []
+    for y in (Y, disturbed):
+        est = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0)
+        est.learn(U, y, F)
+        Us, Fs = est._scale(U, F)
+        nested.append(est._two_stage_fold([0], fit_idx, val_idx, y)[:, 0])
+        fold = (Us[fit_idx], y[fit_idx], Fs[fit_idx], Us[val_idx], Fs[val_idx])
+        plain.append(est._two_stage_mean(*est._two_stage_hp, *fold)[:, 0])
+    moved_plain = np.abs(plain[1] - plain[0]).max()
+    assert moved_plain > 1e-3  # the disturbance reaches the plain cross-validation
+    assert np.abs(nested[1] - nested[0]).max() < 0.1 * moved_plain
+
+
+def test_joint_gps_are_confirmed_with_each_folds_hyperparameters_learnt_without_its_block(data):
+    """The same for the joint candidates on a small cross-validation (GuardCandidates._joint_nested):
+    the fold's hyperparameters are learnt on the other blocks from the all-sample optimum."""
+    U, Y, F, _ = data
+    blocks = np.array_split(np.arange(len(U)), 5)
+    fit_idx, val_idx = np.concatenate(blocks[:2] + blocks[3:]), blocks[2]
+    disturbed = Y.copy()
+    disturbed[val_idx, 0] += 0.2 * np.sin(40.0 * U[val_idx, 1])
+    nested, plain = [], []
+    for y in (Y, disturbed):
+        est = SemiParametricGP(_kernels(), guard=replace(DEFAULT_GUARD, validation_fraction=0.0), seed=0)
+        learnt = est.learn(U, y, F)  # ML-II on every sample, no guard
+        Us, Fs = est._scale(U, F)
+        hp0, resid = est._initial(Us, y, Fs)
+        data = (Us, y, Fs)
+        sizes = [k.n_params for k in est.kernels]
+        fold = est._joint_fold(learnt.pack(), fit_idx, val_idx, data, sizes, est._bounds(hp0, resid), resid)
+        nested.append(fold[:, 0])
+        post = fit_posterior(est.kernels, Us[fit_idx], y[fit_idx], Fs[fit_idx], learnt)
+        plain.append(post.predict(Us[val_idx], Fs[val_idx], variance=False)[0][:, 0])
+    moved_plain = np.abs(plain[1] - plain[0]).max()
+    assert moved_plain > 1e-3
+    assert np.abs(nested[1] - nested[0]).max() < 0.1 * moved_plain
