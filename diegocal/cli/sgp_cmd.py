@@ -39,6 +39,7 @@ from diegocal.cli.common import (
     robot_for_log,
     split_words,
     summary,
+    warn,
 )
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 
@@ -232,9 +233,31 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
         sc = score(measured, pred.tau, names, std=pred.tau_std)
         rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, sc.nmse, strict=True)]
         rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, sc.coverage, strict=True)]
+        _warn_coverage(names, sc.coverage)
     out = opts.output or default_output(log_path, ".prediction.h5")
     save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz, source=opts.source), out)
     summary(f"predict → {out}", rows, quiet=opts.quiet)
+
+
+#: ±2σ coverage outside this range is reported (issue #14's calibration band; 0.954 if calibrated).
+COVERAGE_BAND = (0.85, 0.99)
+
+
+def _warn_coverage(names, coverage) -> None:
+    """One warning line naming the joints whose measured torques fall within ±2σ of the
+    prediction less or more often than COVERAGE_BAND: the model's uncertainty is then not to be
+    taken at its word on this log."""
+    lo, hi = COVERAGE_BAND
+    low = [f"{j} {c:.2f}" for j, c in zip(names, coverage, strict=True) if c < lo]
+    high = [f"{j} {c:.2f}" for j, c in zip(names, coverage, strict=True) if c > hi]
+    parts = []
+    if low:
+        why = "states the training log did not constrain, a drifted robot, or noise that is not white"
+        parts.append(f"below {lo} on {', '.join(low)}: the predictive std understates the error ({why})")
+    if high:
+        parts.append(f"above {hi} on {', '.join(high)}: the predictive std overstates the error")
+    if parts:
+        warn("fraction of measured torques within ±2σ (0.95 if calibrated) " + "; ".join(parts))
 
 
 register_predictor("sgp", predict_sgp)

@@ -142,3 +142,23 @@ def test_fit_and_predict_when_a_joint_has_no_torque(arm2, simulate, arm2_dir, tm
     assert r.exit_code == 0, r.output
     pred = load_log(pred_path)
     assert pred.stream("tau").names == ("elbow",) and pred.stream("q").names == ("shoulder", "elbow")
+
+
+def test_predict_warns_when_the_torques_fall_outside_the_two_sigma_band_too_often(logs, arm2_dir):
+    """A test log whose elbow torque is off by a constant the model cannot know: the summary's
+    coverage falls below 0.85 and one warning line names the joint; the shoulder is not named."""
+    train, test = logs
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-m", "pr", "-q"])
+    assert r.exit_code == 0, r.output
+    model_dir = train.with_name("train.sgp")
+    r = runner.invoke(app, ["predict", str(model_dir), str(test), "-q"])
+    assert r.exit_code == 0 and "warning" not in r.output, r.output  # calibrated: no warning
+    log = load_log(test)
+    tau = log.stream("tau")
+    shifted = tau.data + np.array([0.0, 5.0 * tau.data[:, 1].std()])
+    drifted = test.with_name("drifted.h5")
+    save_log(Log(log.time, {**log.streams, "tau": make_stream(tau.names, shifted)}, robot=log.robot), drifted)
+    r = runner.invoke(app, ["predict", str(model_dir), str(drifted), "-q"])
+    assert r.exit_code == 0, r.output
+    warnings = [line for line in r.output.splitlines() if line.startswith("warning")]
+    assert len(warnings) == 1 and "below 0.85 on elbow" in warnings[0] and "shoulder" not in warnings[0], r.output
