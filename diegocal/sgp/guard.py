@@ -69,7 +69,8 @@ class Guard:
         at its floor): an output whose cross-validated nMSE no GP lowers by more than one
         standard error falls back to PR (:meth:`~SemiParametricGP._validate`). The
         hyperparameters are learnt on all samples; each block is predicted by the posterior of
-        the others.
+        the others; a winner is then confirmed with each fold's hyperparameters re-learnt
+        without its block (nested; the joint GPs only on small cross-validations).
     restarts : int
         Extra starts on top of the estimator's ``restarts``.
     fix_sigma_w : bool
@@ -310,7 +311,7 @@ class GuardCandidates:
         gp = fit_posterior(self.kernels, Us, res, Fs[:, :, :0], hp_res)
         return post.predict(Uq, Fq, variance=False)[0] + gp.predict(Uq, Fq[:, :, :0], variance=False)[0]
 
-    def _two_stage_nested(self, outputs: list, blocks, Y) -> np.ndarray:
+    def _two_stage_nested(self, outputs: list, blocks, data) -> np.ndarray:
         """(blocks, n) nMSE of the two-stage candidate in the blocked cross-validation, its GPs'
         hyperparameters re-learnt without the validation block (nested cross-validation) for
         ``outputs`` (the other columns are not scored: inf).
@@ -323,17 +324,19 @@ class GuardCandidates:
         against 0.038); with the hyperparameters re-learnt per fold they score 0.0299 and the
         joint keeps PR (TX40 first-half and TIAGo gains kept: bench_real_identification).
         Each fold's ML-II runs on the fold's training samples from one start, the all-sample
-        optimum: the start has seen the block, the optimum it converges to is the fold's own
-        (a disturbance of the block moves the fold's prediction 3e-5 against the plain
-        cross-validation's 0.1: tests/sgp/test_two_stage.py). Three starts per fold cost the
+        optimum: the start has seen the block and picks which local optimum of the fold's own
+        likelihood the fold lands in (a disturbance of the block moves the fold's prediction
+        3e-5 against the plain cross-validation's 0.1: tests/sgp/test_two_stage.py). Three starts per fold cost the
         issue #14 case 69 CPU-s against 29 and chose the same."""
+        Us, Y, Fs = data
         done = []
 
         def fold(b):
             val_idx = blocks[b]
             out = np.full(Y.shape[1], np.inf)
             try:
-                mean = self._two_stage_fold(outputs, np.concatenate(blocks[:b] + blocks[b + 1 :]), val_idx, Y)
+                fit_idx = np.concatenate(blocks[:b] + blocks[b + 1 :])
+                mean = self._two_stage_fold(outputs, fit_idx, val_idx, (Us, Y, Fs))
                 out = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
             except (NumericalError, FitError):
                 pass
@@ -343,12 +346,13 @@ class GuardCandidates:
 
         return np.array(thread_map(fold, range(len(blocks)), self.jobs))
 
-    def _joint_nested(self, x, blocks, data, sizes, bounds, resid) -> np.ndarray:
-        """(blocks, n) nMSE of a joint candidate (packed hyperparameters ``x``) in the blocked
-        cross-validation, its hyperparameters re-learnt without the validation block (nested
-        cross-validation; released length-scales stay released). Run where the cross-validation
-        has at most NESTED_JOINT_MAX samples: there one block moves the ML-II optimum most
-        (its influence shrinks as 1/√N) and the refits are cheap.
+    def _joint_nested(self, x, blocks, data, sizes, bounds, resid, extend: bool = False) -> np.ndarray:
+        """(blocks, n) nMSE of a joint candidate in the blocked cross-validation, its
+        hyperparameters re-learnt without the validation block (nested cross-validation) from
+        ``x`` (released length-scales stay released; ``extend``: then stretched as
+        :meth:`_extend` does, the "extended" candidate). Run where the cross-validation has at
+        most NESTED_JOINT_MAX samples: there one block moves the ML-II optimum most (its pull
+        shrinks as 1/√N) and the refits are cheap.
 
         Why: 3-link arm at 200 samples (bench_sgp_experiments, 20 seeds), joints 1 and 2 are fitted
         by PR to the noise, yet the guard kept a GP on them in some seeds, on cross-validated
@@ -356,7 +360,8 @@ class GuardCandidates:
         against PR's 0.000108); nested, 0.000141 ± 0.00003, and joint 3 0.079 ± 0.017 against
         0.093 ± 0.026 (PRGP 0.088). On the issue #14 case (1,000 samples in the
         cross-validation) the nested check changed no choice and cost 12-17 CPU-s (29 → 41-48).
-        Each fold's ML-II starts from ``x`` (one start), as in :meth:`_two_stage_nested`."""
+        Each fold's ML-II starts from ``x`` (one start), as in :meth:`_two_stage_nested`; the
+        input scaling, the bounds and ``resid`` (σ_z's cap) are the all-sample ones."""
         Y = data[1]
         done = []
 
@@ -365,7 +370,7 @@ class GuardCandidates:
             out = np.full(Y.shape[1], np.inf)
             try:
                 fit_idx = np.concatenate(blocks[:b] + blocks[b + 1 :])
-                mean = self._joint_fold(x, fit_idx, val_idx, data, sizes, bounds, resid)
+                mean = self._joint_fold(x, fit_idx, val_idx, data, sizes, bounds, resid, extend)
                 out = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
             except NumericalError:
                 pass
@@ -375,23 +380,38 @@ class GuardCandidates:
 
         return np.array(thread_map(fold, range(len(blocks)), self.jobs))
 
-    def _joint_fold(self, x, fit_idx, val_idx, data, sizes, bounds, resid) -> np.ndarray:
+    def _joint_fold(self, x, fit_idx, val_idx, data, sizes, bounds, resid, extend: bool = False) -> np.ndarray:
         """A joint candidate's mean at ``val_idx``, its hyperparameters re-learnt on ``fit_idx``
-        from ``x`` (released length-scales stay released); ``data`` = (Us, Y, Fs), scaled."""
+        from ``x`` (the released length-scales, at RELEASED_LENGTHSCALE, stay released; with
+        ``extend``, then stretched by :meth:`_extend`); ``data`` = (Us, Y, Fs), inputs and features
+        scaled. NumericalError when the refit fails (the fold is then scored inf, not with ``x``)."""
         Us, Y, Fs = data
         big = np.log(RELEASED_LENGTHSCALE) - 1e-6
-        n = len(self.kernels)
-        bounds = [(v, v) if i > n and v >= big else b for i, (v, b) in enumerate(zip(x, bounds, strict=True))]
+        pinned = {
+            k + i
+            for _, k, names in self._slots()
+            for i, name in enumerate(names)
+            if is_lengthscale(name) and x[k + i] >= big
+        }
+        bounds = [(x[i], x[i]) if i in pinned else b for i, b in enumerate(bounds)]
         fit = (Us[fit_idx], Y[fit_idx], Fs[fit_idx])
         found = self._optimise(x, bounds, sizes, resid, *fit, self.maxiter)
-        hp = Hyperparameters.unpack(x if found is None else found[1], sizes)
+        if found is None:
+            raise NumericalError("the fold's hyperparameter refit failed")
+        vec = found[1]
+        if extend:
+            stretched = self._extend(vec, sizes, fit)
+            vec = vec if stretched is None else stretched
+        hp = Hyperparameters.unpack(vec, sizes)
         return fit_posterior(self.kernels, *fit, hp).predict(Us[val_idx], Fs[val_idx], variance=False)[0]
 
-    def _two_stage_fold(self, outputs: list, fit_idx, val_idx, Y) -> np.ndarray:
+    def _two_stage_fold(self, outputs: list, fit_idx, val_idx, data) -> np.ndarray:
         """The two-stage candidate's mean at ``val_idx`` (samples of the last fit), PR and the GPs
-        of ``outputs`` on its residual, hyperparameters re-learnt on ``fit_idx`` only."""
+        of ``outputs`` on its residual, hyperparameters re-learnt on ``fit_idx`` only (PR's σ_w
+        and σ_v are the all-sample ones, as in the plain cross-validation and the fallback);
+        ``data`` = (Us, Y, Fs), inputs and features scaled."""
         U, F = self._raw
-        Us, Fs = self._scale(U, F)
+        Us, Y, Fs = data
         hp_pr, hp_res = self._two_stage_hp
         kernels = [k if j in outputs else None for j, k in enumerate(self.kernels)]
         theta = tuple(t if j in outputs else np.zeros(0) for j, t in enumerate(hp_res.theta))
@@ -411,10 +431,12 @@ class GuardCandidates:
         over the blocks (one held-out block could be unrepresentative, e.g. a robot at rest at
         the end of a run). Ties go to the earlier option; σ_w is the earliest chosen option's.
         Where two stages win, their scores are replaced by the nested ones
-        (:meth:`_two_stage_nested`) and the choice is made again; so are the learnt and released
-        candidates' where a joint candidate wins and the cross-validation is small
-        (:meth:`_joint_nested`; ``bounds`` and ``resid``, the ML-II bounds and the parametric
-        residual std, are for its refits).
+        (:meth:`_two_stage_nested`) and the choice is made again; so are the joint candidates'
+        where one of them wins and the cross-validation is small (:meth:`_joint_nested`;
+        ``bounds`` and ``resid``, the ML-II bounds and the parametric residual std, are for its
+        refits), and two stages are confirmed again where that second choice gives them an
+        output. ``validation_scores_`` holds the scores the final choice was made on: nested for
+        the outputs and candidates confirmed, plain for the others.
 
         A GP must earn its place: an output keeps one only if it beats the parametric fallback
         by more than one standard error of their paired per-block difference
@@ -454,19 +476,17 @@ class GuardCandidates:
         for (c, b), err in zip(cells, thread_map(score, cells, self.jobs), strict=True):
             per_block[c, b] = err
         choice = self._choose(per_block, labels)
-        if TWO_STAGE in labels:  # confirm two stages where they would win, hyperparameters per fold
-            t = labels.index(TWO_STAGE)
-            contenders = [j for j, c in enumerate(choice) if c == t]
-            if contenders:
-                per_block[t][:, contenders] = self._two_stage_nested(contenders, blocks, Y)[:, contenders]
-                choice = self._choose(per_block, labels)
+        confirmed = set()  # outputs whose two-stage scores are the nested ones
+        choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
         contended = [j for j, c in enumerate(choice) if labels[c] in JOINT]
         if contended and len(np.concatenate(blocks)) <= NESTED_JOINT_MAX:  # confirm the joint GPs
             for c, label in enumerate(labels):
-                if label in ("learnt", "released"):  # "extended" is a stretch, not an optimum: kept
-                    nested = self._joint_nested(options[c], blocks, (Us, Y, Fs), sizes, bounds, resid)
+                if label in JOINT:  # "extended": the learnt refit per fold, then stretched
+                    start = options[labels.index("learnt")] if label == "extended" else options[c]
+                    nested = self._joint_nested(start, blocks, (Us, Y, Fs), sizes, bounds, resid, label == "extended")
                     per_block[c][:, contended] = nested[:, contended]
             choice = self._choose(per_block, labels)
+            choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
         self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
         self.selection_ = tuple(labels[c] for c in choice)
         out = options[int(choice.min())].copy()
@@ -474,6 +494,20 @@ class GuardCandidates:
             out[1 + j] = options[choice[j]][1 + j]
             out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
         return out
+
+    def _confirm_two_stage(self, per_block, labels, choice, confirmed: set, blocks, data) -> np.ndarray:
+        """Where two stages are chosen on plain scores (outputs not in ``confirmed``), replace
+        their per-block scores by the nested ones (:meth:`_two_stage_nested`) and choose again;
+        ``per_block`` and ``confirmed`` are updated in place."""
+        if TWO_STAGE not in labels:
+            return choice
+        t = labels.index(TWO_STAGE)
+        new = [j for j, c in enumerate(choice) if c == t and j not in confirmed]
+        if not new:
+            return choice
+        per_block[t][:, new] = self._two_stage_nested(new, blocks, data)[:, new]
+        confirmed.update(new)
+        return self._choose(per_block, labels)
 
     @staticmethod
     def _choose(per_block: np.ndarray, labels: list) -> np.ndarray:

@@ -10,9 +10,9 @@ import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages
 from diegocal.sgp.gp import fit_posterior
-from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE
+from diegocal.sgp.guard import JOINT, PARAMETRIC, TWO_STAGE
 
-from .test_guard import _data
+from .test_guard import W_TRUE, _data
 
 
 @pytest.fixture(scope="module")
@@ -91,12 +91,13 @@ def test_two_stages_are_confirmed_with_each_folds_gp_learnt_without_its_block(da
         est = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0)
         est.learn(U, y, F)
         Us, Fs = est._scale(U, F)
-        nested.append(est._two_stage_fold([0], fit_idx, val_idx, y)[:, 0])
+        nested.append(est._two_stage_fold([0], fit_idx, val_idx, (Us, y, Fs))[:, 0])
         fold = (Us[fit_idx], y[fit_idx], Fs[fit_idx], Us[val_idx], Fs[val_idx])
         plain.append(est._two_stage_mean(*est._two_stage_hp, *fold)[:, 0])
     moved_plain = np.abs(plain[1] - plain[0]).max()
     assert moved_plain > 1e-3  # the disturbance reaches the plain cross-validation
     assert np.abs(nested[1] - nested[0]).max() < 0.1 * moved_plain
+    _assert_predicts_as_well(nested[0], plain[0], Y[val_idx, 0], F[val_idx, 0])
 
 
 def test_joint_gps_are_confirmed_with_each_folds_hyperparameters_learnt_without_its_block(data):
@@ -122,3 +123,34 @@ def test_joint_gps_are_confirmed_with_each_folds_hyperparameters_learnt_without_
     moved_plain = np.abs(plain[1] - plain[0]).max()
     assert moved_plain > 1e-3
     assert np.abs(nested[1] - nested[0]).max() < 0.1 * moved_plain
+    _assert_predicts_as_well(nested[0], plain[0], Y[val_idx, 0], F[val_idx, 0])
+
+
+def _assert_predicts_as_well(nested, plain, y, features):
+    """The fold's own model predicts its block about as well as the plain cross-validation's
+    and far better than the parametric part alone would with the friction left out (a fold
+    that dropped its GP, or scaled its inputs wrongly, would not)."""
+    mse = lambda m: float(np.mean((m - y) ** 2))  # noqa: E731
+    assert mse(nested) < 1.5 * mse(plain)
+    assert mse(nested) < 0.1 * mse(features @ W_TRUE)
+
+
+def test_nested_scores_decide_the_guards_choice(data, monkeypatch):
+    """The wiring of the confirmations in _validate: plain cross-validation scores that the
+    nested ones overturn. Output 0 (the friction) wins with a joint GP in the plain scores; when
+    every joint candidate's nested score is worse than PR's, it takes two stages, and when the
+    nested two-stage scores are worse too, PR (and validation_scores_ holds the nested ones)."""
+    U, Y, F, _ = data
+    guard = replace(DEFAULT_GUARD, extend_capped=False)
+    assert SemiParametricGP(_kernels(), guard=guard, seed=0).fit(U, Y, F).selection_[0] in JOINT
+
+    def worse(*args, **kwargs):
+        return np.full((5, 2), 10.0) + np.arange(5)[:, None]  # 5 blocks, nMSE far above PR's
+
+    monkeypatch.setattr(SemiParametricGP, "_joint_nested", worse)
+    est = SemiParametricGP(_kernels(), guard=guard, seed=0).fit(U, Y, F)
+    assert est.selection_[0] == TWO_STAGE
+    monkeypatch.setattr(SemiParametricGP, "_two_stage_nested", worse)
+    est = SemiParametricGP(_kernels(), guard=guard, seed=0).fit(U, Y, F)
+    assert est.selection_[0] == PARAMETRIC
+    assert est.validation_scores_[TWO_STAGE][0] == est.validation_scores_["learnt"][0] == 12.0
