@@ -267,6 +267,10 @@ class Product(Sum):
         )
 
 
+#: A released length-scale (Guard.release_capped), in input stds: the kernel is constant along it.
+RELEASED_LENGTHSCALE = 1e3
+
+
 def is_lengthscale(name: str) -> bool:
     """True for a log length-scale parameter name (used by priors and bounds)."""
     return name.rsplit(".", 1)[-1].startswith("log_ell")
