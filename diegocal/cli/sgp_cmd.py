@@ -190,7 +190,7 @@ def sgp_fit(
         ("base parameters", 0 if par is None else len(par.names)),
     ] + rows
     hyper = fitted.hyperparameters_
-    rows += [(f"guard {j}", hyper[j]["guard_choice"]) for j in fitted.joint_names if "guard_choice" in hyper[j]]
+    rows += [(f"guard {j}", _guard_text(hyper[j])) for j in fitted.joint_names if "guard_choice" in hyper[j]]
     rows += [
         (f"inducing {j}", f"{hyper[j]['n_inducing']} (missed prior variance {hyper[j]['sparse_gap']:.2g} σ_v²)")
         for j in fitted.joint_names
@@ -237,6 +237,15 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
     out = opts.output or default_output(log_path, ".prediction.h5")
     save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz, source=opts.source), out)
     summary(f"predict → {out}", rows, quiet=opts.quiet)
+
+
+def _guard_text(entry: dict) -> str:
+    """The guard's choice for one joint and the cross-validated nMSE of every candidate it
+    weighed, lowest first (the choice may not be the lowest: a GP must beat PR, two stages the
+    other choice, by one standard error)."""
+    scores = sorted((entry.get("guard_validation") or {}).items(), key=lambda kv: kv[1])
+    weighed = ", ".join(f"{label} {value:.3g}" for label, value in scores)
+    return entry["guard_choice"] + (f" (cross-validated nMSE: {weighed})" if weighed else "")
 
 
 #: ±2σ coverage outside this range is reported (issue #14's calibration band; 0.954 if calibrated).

@@ -489,6 +489,9 @@ class DynamicsModel:
                 entry["lengthscales"] = {self.input_names[d]: float(v) for d, v in zip(dims, ell, strict=True)}
                 if hasattr(est, "selection_"):  # the guard's cross-validated choice (fits only)
                     entry["guard_choice"] = est.selection_[j]
+                    scores = getattr(est, "validation_scores_", None)  # a fit's, not a restored model's
+                    if scores is not None:  # the blocked cross-validation's nMSE the choice was made on
+                        entry["guard_validation"] = {k: float(v[j]) for k, v in scores.items()}
                 if gp.inference == "sparse":  # inducing inputs, and the prior variance they miss
                     entry["n_inducing"] = int(gp.n_inducing_[j])
                     entry["sparse_gap"] = float(gp.sparse_gap_[j])

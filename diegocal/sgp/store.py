@@ -181,6 +181,10 @@ def load_model(directory, robot=None):
     model.fit_arrays(q, qd, qdd, arrays["tau"], state=state, time=arrays.get("time"))
     hp = summary.get("hyperparameters") or {}
     choices = [(hp.get(j) or {}).get("guard_choice") for j in model.joint_names]
-    if all(choices):  # the guard's cross-validated choice, as fitted (reporting only)
+    if all(choices):  # the guard's cross-validated choice and scores, as fitted (reporting only)
         model.gp_.selection_ = tuple(choices)
+        weighed = [(hp.get(j) or {}).get("guard_validation") for j in model.joint_names]
+        if all(weighed):
+            labels = list(weighed[0])
+            model.gp_.validation_scores_ = {k: np.array([w.get(k, np.nan) for w in weighed]) for k in labels}
     return model

@@ -59,11 +59,15 @@ def test_sgp_fit_writes_hyperparameters(logs, arm2_dir, tmp_path):
     # the guard's cross-validated choice per joint, in the summary and the file
     for joint in ("shoulder", "elbow"):
         choice = s["hyperparameters"][joint]["guard_choice"]
-        assert choice in ("learnt", "released", "extended", "parametric") and f"guard {joint}" in r.output
+        assert choice in ("learnt", "released", "extended", "two-stage", "parametric") and f"guard {joint}" in r.output
+        # and the cross-validated nMSE of every candidate it weighed, the chosen one among them
+        weighed = s["hyperparameters"][joint]["guard_validation"]
+        assert {choice, "parametric"} <= set(weighed) and all(v > 0 for v in weighed.values())
         assert s["hyperparameters"][joint]["sigma_v"] >= 0.05 * 0.999 * np.std(
             load_log(train).stream("tau").data[:, ["shoulder", "elbow"].index(joint)]
         )
     assert not any(n.endswith((".fv", ".fc")) for n in s["parameters"])
+    assert r.output.count("cross-validated nMSE") == 2
 
 
 def _without(log, stream):
