@@ -342,6 +342,9 @@ def model_pages(path: Path, sheets: list[Sheet], context, title: str, comparison
     scales = sgp_text.lengthscale_table(summary)
     if scales is not None:
         more(sheets, "GP length-scales", *scales)
+    guard = sgp_text.guard_table(summary)
+    if guard is not None:
+        more(sheets, "The guard's cross-validation", *guard)
     params = sgp_text.parameter_table(summary, prismatic_joints(model.robot))
     if params[1]:
         more(sheets, "Identified parameters", *params)

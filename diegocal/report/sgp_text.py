@@ -29,14 +29,17 @@ GUARD_WORDS = {
     "learnt": "GP kept as learnt",
     "released": "GP, caps released",
     "extended": "GP, stretched",
+    "two-stage": "two stages",
     "parametric": "parametric only",
 }
 GUARD_NOTE = (
     "Guard: which of its candidates predicted contiguous blocks of the training log best (blocked "
     "cross-validation). 'GP kept as learnt': the GP with its maximum-likelihood hyperparameters; 'GP, caps "
     "released': length-scales stuck at their upper bound released; 'GP, stretched': the GP stretched towards its "
-    "linear limit, so that it extrapolates a trend instead of reverting to zero; 'parametric only': the GP did not "
-    "beat the parametric part by one standard error and was switched off for that joint."
+    "linear limit, so that it extrapolates a trend instead of reverting to zero; 'two stages': the parametric "
+    "fit, then a GP on its residual (PRGP's stages), kept where it beat the other choice by one standard error; "
+    "'parametric only': the GP did not beat the parametric part by one standard error and was switched off for "
+    "that joint. A winner is confirmed with its hyperparameters re-learnt without the block it predicts."
 )
 #: Description and unit (revolute joint, prismatic joint) of each full parameter (thesis eq. 3.30).
 PARAMETER_WORDS = {
@@ -392,6 +395,29 @@ def lengthscale_table(summary: dict) -> tuple[list[Column], list[list], list[str
     )
     if off:
         note += f" Not shown: {', '.join(off)} (GP switched off by the guard)."
+    return columns, rows, [note]
+
+
+def guard_table(summary: dict) -> tuple[list[Column], list[list], list[str]] | None:
+    """The guard's evidence: per joint, the cross-validated nMSE of every candidate it weighed
+    (``guard_validation`` in sgp.yaml), the chosen one starred; None for a model without it."""
+    hyper = summary.get("hyperparameters") or {}
+    joints = [j for j in summary.get("nmse_in_sample") or {} if (hyper.get(j) or {}).get("guard_validation")]
+    if not joints:
+        return None
+    labels = [k for k in GUARD_WORDS if any(k in hyper[j]["guard_validation"] for j in joints)]
+    columns = [Column("joint", align="left")] + [Column(GUARD_WORDS[k].replace(", ", ",\n")) for k in labels]
+    rows = []
+    for j in joints:
+        weighed, chosen = hyper[j]["guard_validation"], hyper[j].get("guard_choice")
+        cells = ["–" if k not in weighed else _g(weighed[k]) + (" *" if k == chosen else "") for k in labels]
+        rows.append([j, *cells])
+    note = (
+        "Cross-validated nMSE of each of the guard's candidates on contiguous blocks of the training log, each "
+        "block predicted by the candidate fitted without it (* the guard's choice). The choice is not always the "
+        "lowest: a GP must beat 'parametric only', and two stages the other choice, by one standard error of the "
+        "per-block difference; numbers on the training log's own blocks, not on new trajectories."
+    )
     return columns, rows, [note]
 
 

@@ -59,6 +59,12 @@ def test_report_on_a_comparison_directory(arm2, simulate, tmp_path):
     for unit in ("kg·m²", "kg·m", "N·m·s/rad", "± SE"):
         assert unit in text
     assert "parametric only" in text or "GP kept as learnt" in text  # the guard's choice in words
+    # the guard's evidence: each candidate's cross-validated nMSE, the chosen one starred (sgp only)
+    assert text.count("The guard's cross-validation") == 1
+    hyper = load_summary(results / "sgp.sgp")["hyperparameters"]
+    for joint in ("shoulder", "elbow"):
+        chosen = hyper[joint]["guard_validation"][hyper[joint]["guard_choice"]]
+        assert f"{chosen:.3g} *" in text, joint
     assert "held-out log (nMSE" in text and "(40 samples)" in text  # held-out bands, sample counts on axes
     assert "Orange dashed: the parametric part alone" in text  # every line explained
 
