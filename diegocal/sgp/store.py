@@ -184,7 +184,11 @@ def load_model(directory, robot=None):
     if all(choices):  # the guard's cross-validated choice and scores, as fitted (reporting only)
         model.gp_.selection_ = tuple(choices)
         weighed = [(hp.get(j) or {}).get("guard_validation") for j in model.joint_names]
-        if all(weighed):
-            labels = list(weighed[0])
-            model.gp_.validation_scores_ = {k: np.array([w.get(k, np.nan) for w in weighed]) for k in labels}
+        if all(isinstance(w, dict) and w for w in weighed):  # an edited file's odd entry is left out
+            try:
+                scores = {k: np.array([float(w.get(k, np.nan)) for w in weighed]) for k in weighed[0]}
+            except (TypeError, ValueError):
+                scores = None
+            if scores is not None:
+                model.gp_.validation_scores_ = scores
     return model

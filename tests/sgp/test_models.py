@@ -5,6 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from diegocal.io import load_yaml, save_yaml
 from diegocal.sgp import DynamicsModel, SGPOptions, fit_dynamics, load_model, nmse
 
 BUMP = (1, 0.0, 1.2, 1.5)  # extra viscous friction on the elbow for q ∈ (0, 1.2) rad: unmodelled
@@ -185,3 +186,19 @@ def test_a_torque_stream_with_no_joint_of_the_robot_is_an_error(arm2, case):
     streams = dict(train.streams, tau=make_stream(["wrist"], train.stream("tau").data[:, :1]))
     with pytest.raises(DiegocalError, match="wrist"):
         fit_dynamics(Log(train.time, streams, robot=train.robot), arm2, SGPOptions(kind="pr"))
+
+
+def test_an_edited_guard_validation_entry_is_left_out_on_load(fitted, tmp_path):
+    """sgp.yaml's guard_validation is reporting only: a hand-edited entry that is not a map of
+    numbers does not stop the model from loading and predicting; well-formed, it is restored."""
+    model = fitted("sgp")
+    path = tmp_path / "m.sgp"
+    model.save(path, meta={"log": "train.h5"})
+    assert load_model(path).hyperparameters_ == model.hyperparameters_
+    summary = load_yaml(path / "sgp.yaml")
+    joint = model.joint_names[0]
+    summary["hyperparameters"][joint]["guard_validation"] = {"learnt": "oops"}
+    save_yaml(summary, path / "sgp.yaml")
+    back = load_model(path)
+    assert "guard_validation" not in back.hyperparameters_[joint]
+    assert back.hyperparameters_[joint]["guard_choice"] == model.hyperparameters_[joint]["guard_choice"]
