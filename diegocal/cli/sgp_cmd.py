@@ -266,7 +266,8 @@ def _warn_coverage(names, coverage) -> None:
     if high:
         parts.append(f"above {hi} on {', '.join(high)}: the predictive std overstates the error")
     if parts:
-        warn("fraction of measured torques within ±2σ (0.95 if calibrated) " + "; ".join(parts))
+        hint = "; `diegocal diagnose` on the training log names effects the model lacks" if low else ""
+        warn("fraction of measured torques within ±2σ (0.95 if calibrated) " + "; ".join(parts) + hint)
 
 
 register_predictor("sgp", predict_sgp)
