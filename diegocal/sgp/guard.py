@@ -335,7 +335,8 @@ class GuardCandidates(NestedConfirmation):
         rule was tried for issue #14 and not kept: better on the 3-link arm at 4,000 samples, seed
         11, joint 3 0.0052 against 0.0066, but the thesis arm's vertical joint 3 went from 0.47 to
         0.87 over 5 seeds.)
-        Sets ``selection_`` (label per output) and ``validation_scores_`` (label -> (n,))."""
+        Sets ``selection_`` (label per output), ``validation_scores_`` (label -> (n,)) and
+        ``validation_blocks_`` (label -> (blocks, n), the per-block nMSE they average)."""
         labels, options = list(options), list(options.values())
         per_block = np.zeros((len(options), len(blocks), Y.shape[1]))
         cells = [(c, b) for c in range(len(options)) for b in range(len(blocks))]
@@ -375,6 +376,7 @@ class GuardCandidates(NestedConfirmation):
             choice = self._choose(per_block, labels)
             choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
         self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
+        self.validation_blocks_ = dict(zip(labels, per_block, strict=True))  # (blocks, n) each
         self.selection_ = tuple(labels[c] for c in choice)
         out = options[int(choice.min())].copy()
         for j, k, names in self._slots():
