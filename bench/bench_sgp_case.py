@@ -40,8 +40,8 @@ FITS = {
 }
 
 
-def simulate(robot, seed: int, friction=None):
-    opts = DynamicsOptions(duration=40.0, effects=parse_effects(["position_friction:joint3"]), **(friction or {}))
+def simulate(robot, seed: int, friction=None, duration: float = 40.0):
+    opts = DynamicsOptions(duration=duration, effects=parse_effects(["position_friction:joint3"]), **(friction or {}))
     return simulate_dynamics(robot, opts, np.random.default_rng(seed))
 
 

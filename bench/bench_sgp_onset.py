@@ -25,12 +25,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/ is not installed
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_sgp_case import simulate as simulate_case  # noqa: E402
 from bench_sgp_scale import N_TEST, arrays, simulate  # noqa: E402
 
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
-from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics  # noqa: E402
-from diegocal.sim.effects import parse_effects  # noqa: E402
 from experiments.sgp.common import same_robot  # noqa: E402
 
 KINDS = ("pr", "prgp", "sgp")
@@ -78,12 +77,8 @@ def scale_case(robot) -> None:
 
 
 def short_run(robot) -> None:
-    def sim(seed, friction=None):
-        opts = DynamicsOptions(duration=6.0, effects=parse_effects(["position_friction:joint3"]), **(friction or {}))
-        return simulate_dynamics(robot, opts, np.random.default_rng(seed))
-
-    train = sim(11)
-    test = sim(12, same_robot(train, robot))
+    train = simulate_case(robot, 11, duration=6.0)
+    test = simulate_case(robot, 12, same_robot(train, robot), duration=6.0)
     low = train.truth.effects[0]["region"]["low"]
     measured = test.stream("tau").data[:, 2]
     print(f"\n== 2. 6-s run (seed 11), tested on seed 12's trajectory; region starts at q3 = {low:.2f} rad")

@@ -20,6 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 ROLES = ("train", "validation", "heldout")
+#: The fraction of measured values within ±2σ of a prediction that counts as calibrated (0.954
+#: for Gaussian errors; issue #14's band): below, the band is too narrow, above, too wide.
+COVERAGE_BAND = (0.85, 0.99)
 #: The default role of consecutive blocks, repeated: 60 % train, 20 % validation, 20 % held out,
 #: interleaved so that an effect that starts mid-session (a marker slip) or a region visited only
 #: now and then is seen by every role.

@@ -248,14 +248,12 @@ def _guard_text(entry: dict) -> str:
     return entry["guard_choice"] + (f" (cross-validated nMSE: {weighed})" if weighed else "")
 
 
-#: ±2σ coverage outside this range is reported (issue #14's calibration band; 0.954 if calibrated).
-COVERAGE_BAND = (0.85, 0.99)
-
-
 def _warn_coverage(names, coverage) -> None:
     """One warning line naming the joints whose measured torques fall within ±2σ of the
-    prediction less or more often than COVERAGE_BAND: the model's uncertainty is then not to be
-    taken at its word on this log."""
+    prediction less or more often than :data:`diegocal.evaluate.COVERAGE_BAND`: the model's
+    uncertainty is then not to be taken at its word on this log."""
+    from diegocal.evaluate import COVERAGE_BAND
+
     lo, hi = COVERAGE_BAND
     low = [f"{j} {c:.2f}" for j, c in zip(names, coverage, strict=True) if c < lo]
     high = [f"{j} {c:.2f}" for j, c in zip(names, coverage, strict=True) if c > hi]

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.errors import DiegocalError
+from diegocal.evaluate import COVERAGE_BAND
 from diegocal.report.layout import Column
 
 KIND_WORDS = {
@@ -139,9 +140,10 @@ def verdict(nmse: float, coverage: float | None = None) -> str:
     fit = "good" if nmse < NMSE_GOOD else "fair" if nmse < NMSE_FAIR else "poor" if nmse < 1 else "useless"
     if coverage is None or not np.isfinite(coverage):
         return fit
-    if coverage < 0.8:
+    lo, hi = COVERAGE_BAND
+    if coverage < lo:
         return f"{fit}; ±2σ too narrow"
-    if coverage > 0.995:
+    if coverage > hi:
         return f"{fit}; ±2σ too wide"
     return f"{fit}; ±2σ right"
 
@@ -152,8 +154,9 @@ def _joint_list(values: dict, fmt: str = ".2g", scale: float = 1.0, suffix: str 
 
 def uncertainty_words(coverage: dict) -> str:
     """Whether the predicted ±2σ band is as wide as the errors it should cover, in words."""
-    narrow = [j for j, c in coverage.items() if c < 0.8]
-    wide = [j for j, c in coverage.items() if c > 0.995]
+    lo, hi = COVERAGE_BAND
+    narrow = [j for j, c in coverage.items() if c < lo]
+    wide = [j for j, c in coverage.items() if c > hi]
     parts = []
     if narrow:
         parts.append(
@@ -514,6 +517,7 @@ def prediction_table(sc) -> tuple[list[Column], list[list]]:
 
 
 PREDICTION_NOTE = (
-    "Verdict: good below nMSE 0.01, fair below 0.1, poor below 1; the ±2σ band is right when it holds 80-99.5 % "
-    "of the measured torques (95 % expected of a calibrated predictive std), too narrow below, too wide above."
+    "Verdict: good below nMSE 0.01, fair below 0.1, poor below 1; the ±2σ band is right when it holds "
+    f"{100 * COVERAGE_BAND[0]:.0f}-{100 * COVERAGE_BAND[1]:.0f} % of the measured torques (95 % expected of a "
+    "calibrated predictive std), too narrow below, too wide above."
 )
