@@ -42,6 +42,7 @@ from diegocal.cli.common import (
     warn,
 )
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
+from diegocal.sgp.store import region_text
 
 
 @contextmanager
@@ -245,7 +246,7 @@ def _guard_text(entry: dict) -> str:
     other choice, by one standard error)."""
     scores = sorted((entry.get("guard_validation") or {}).items(), key=lambda kv: kv[1])
     weighed = ", ".join(f"{label} {value:.3g}" for label, value in scores)
-    return entry["guard_choice"] + (f" (cross-validated nMSE: {weighed})" if weighed else "")
+    return entry["guard_choice"] + region_text(entry) + (f" (cross-validated nMSE: {weighed})" if weighed else "")
 
 
 def _warn_coverage(names, coverage) -> None:

@@ -18,6 +18,7 @@ import numpy as np
 from diegocal.errors import DiegocalError
 from diegocal.evaluate import COVERAGE_BAND
 from diegocal.report.layout import Column
+from diegocal.sgp.store import region_text
 
 KIND_WORDS = {
     "sgp": "semi-parametric (rigid-body and friction regression plus a Gaussian process on what it leaves)",
@@ -320,6 +321,7 @@ def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], 
                 row += ["–", "–", "–"] if sc is None else [_g(sc[0]), _g(sc[1]), f"{100 * sc[2]:.0f}"]
             choice = h.get("guard_choice")
             guard = GUARD_WORDS.get(choice, choice) if choice else ("no GP" if kind == "pr" else "GP (no guard)")
+            guard += region_text(h)
             row += [guard, _g(h.get("sigma_v")), _g(h.get("sigma_z"))]
             if sparse:
                 row += [str(h["n_inducing"]) if "n_inducing" in h else "exact", _g(h.get("sparse_gap"), ".2g")]

@@ -22,11 +22,14 @@ from diegocal.parallel import single_threaded, thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood, per_output
 from diegocal.sgp.guard import FTOL, PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
-from diegocal.sgp.kernels import is_amplitude, is_lengthscale
+from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
 
 __all__ = ["Guard", "SemiParametricGP", "Stages"]
 
 LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
+# A Region kernel's ratio r (the amplitude above its onset over the one below) lies in these.
+REGION_RATIO_BOUND = (1e-3, 1e3)
+
 
 
 class SemiParametricGP(GuardCandidates):
@@ -53,6 +56,9 @@ class SemiParametricGP(GuardCandidates):
         :mod:`diegocal.parallel`)
     progress : callable(stage: str, done: int, total: int) or None, told as each hyperparameter
         start, the cross-validation and the posterior finish (the CLI's progress bar)
+    region_inputs : tuple of (int or None) per output, or None: the input column along which the
+        two-stage candidate's GP of that output may be cut in two (its joint's angle:
+        :class:`~diegocal.sgp.kernels.Region`, :meth:`~GuardCandidates._region_scan`)
     """
 
     def __init__(
@@ -72,6 +78,7 @@ class SemiParametricGP(GuardCandidates):
         min_noise: float = 1e-4,
         jobs: int = 1,
         progress=None,
+        region_inputs=None,
     ):
         if inference not in ("exact", "sparse"):
             raise ValueError(f"inference must be 'exact' or 'sparse', got {inference!r}")
@@ -89,6 +96,7 @@ class SemiParametricGP(GuardCandidates):
         self.min_noise = float(min_noise)
         self.jobs = max(1, int(jobs))
         self.progress = progress
+        self.region_inputs = None if region_inputs is None else tuple(region_inputs)
 
     def _say(self, stage: str, done: int, total: int) -> None:
         if self.progress is not None:
@@ -189,14 +197,20 @@ class SemiParametricGP(GuardCandidates):
         if TWO_STAGE in modes:
             kernels = [k if m == TWO_STAGE else None for k, m in zip(self.kernels, modes, strict=True)]
             est = self._residual_estimator(kernels)
-            self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
+            hp = self.stages_.residual
+            hp = hp if hp is None else with_region_off(hp, est.kernels)
+            self.residual_ = est.fit(U, res, F, hp, residual_inducing)
 
     def _residual_estimator(self, kernels=None, inference=None, jobs=None) -> SemiParametricGP:
         """The two-stage candidate's GPs on PR's residual: PRGP's second stage with this
         estimator's kernels and settings, its length-scales under the guard's cap (no features)."""
         say = self.progress
+        kernels = self.kernels if kernels is None else kernels
+        if self.region_inputs is not None:
+            pairs = zip(kernels, self.region_inputs, strict=True)
+            kernels = [k if k is None or d is None else Region(d, k) for k, d in pairs]
         return SemiParametricGP(
-            self.kernels if kernels is None else kernels,
+            kernels,
             use_features=False,
             restarts=self.restarts,
             seed=self.seed,
@@ -260,6 +274,10 @@ class SemiParametricGP(GuardCandidates):
             for i, name in enumerate(k.names):
                 if is_amplitude(name):
                     t[i] = 0.5 * np.log(var[j])
+                elif name.endswith("region_onset"):
+                    t[i] = REGION_OFF
+                elif name.endswith("log_region_width"):
+                    t[i] = np.log(REGION_WIDTH)
             thetas.append(t)
         # "some large number": 10 × std(y) in unit-RMS feature coordinates; 1000 × when fixed (flat)
         sigma_w = (1e3 if self.guard.fix_sigma_w else 10.0) * float(np.max(self.y_std_))
@@ -293,10 +311,16 @@ class SemiParametricGP(GuardCandidates):
             k = self.kernels[j]
             if k is None:
                 continue
-            for name in k.names:
+            for i, name in enumerate(k.names):
                 if is_lengthscale(name):
                     lo.append(np.log(1e-2))
                     hi.append(np.log(g.max_lengthscale) if g.max_lengthscale else np.log(1e3))
+                elif is_fixed(name):  # held at the start (_learn: at a given start's)
+                    lo.append(hp0.theta[j][i])
+                    hi.append(hp0.theta[j][i])
+                elif name.endswith("log_region_ratio"):
+                    lo.append(np.log(REGION_RATIO_BOUND[0]))
+                    hi.append(np.log(REGION_RATIO_BOUND[1]))
                 else:
                     lo.append(np.log(1e-6 * self.y_std_[j]))
                     top = np.log(self.y_std_[j]) + 3.0
@@ -353,6 +377,16 @@ class SemiParametricGP(GuardCandidates):
         starts += [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(n_extra - 2)]
         return [np.clip(s, lo, hi) for s in starts]
 
+    def _pin_fixed(self, bounds, vec) -> list:
+        """``bounds`` with the fixed parameters (:func:`is_fixed`, a Region's onset and width) at
+        ``vec``'s values."""
+        out = list(bounds)
+        for _, k, names in self._slots():
+            for i, name in enumerate(names):
+                if is_fixed(name):
+                    out[k + i] = (vec[k + i], vec[k + i])
+        return out
+
     def _optimise(self, start, bounds, sizes, resid, U, Y, F, maxiter):
         def objective(vec):
             try:
@@ -394,6 +428,8 @@ class SemiParametricGP(GuardCandidates):
         x0 = np.clip(hp0.pack(), lo, hi)
         starts = self._starts(x0, bounds, resid, rng, n_extra if has_gp else 0)
         if start is not None:
+            bounds = self._pin_fixed(bounds, start.pack())
+            lo, hi = [b[0] for b in bounds], [b[1] for b in bounds]
             starts = [np.clip(start.pack(), lo, hi)]
         self.n_starts_ = len(starts)
         data = Us[idx], Y[idx], Fs[idx]
@@ -479,3 +515,14 @@ class SemiParametricGP(GuardCandidates):
             elif mode == TWO_STAGE:
                 out[j] = self.residual_.noise_var_[j]
         return out
+
+
+def with_region_off(hp: Hyperparameters, kernels) -> Hyperparameters:
+    """``hp`` for ``kernels``: an output whose kernel is a :class:`Region` but whose parameters are
+    the inner kernel's only (a model saved before Region kernels existed) gets the onset off."""
+    theta = []
+    for t, k in zip(hp.theta, kernels, strict=True):
+        if isinstance(k, Region) and t.size == k.n_params - 3:
+            t = np.concatenate([[REGION_OFF, np.log(REGION_WIDTH), 0.0], t])
+        theta.append(np.asarray(t, float))
+    return Hyperparameters(hp.log_sigma_w, hp.log_sigma_v, tuple(theta))

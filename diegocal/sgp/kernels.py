@@ -267,6 +267,119 @@ class Product(Sum):
         )
 
 
+class Region(Kernel):
+    """A kernel cut in two at an onset along input ``dim``: ``k_0`` within each side, nothing
+    across, the side above the onset scaled by a ratio r (the changepoint kernel of Garnett et al.
+    2010 and Lloyd et al. 2014, both sides of one base kernel):
+
+    .. math:: k(x, x') = [b(x) b(x') + r^2 a(x) a(x')] \\, k_0(x, x'), \\quad
+              a = \\mathrm{sigmoid}((x_{dim} - c)/w), \\; b = 1 - a
+
+    Why: a friction confined to part of a joint's range (a cable, a hose, a hard stop) is a step
+    in that joint's angle, and an SE kernel carries a step some length-scales to each side of it,
+    where the residual has none (issue #14: the 3-link arm's joint 3, onset 1.78 rad, an SE GP on
+    PR's residual had twice PR's error just below the onset and covered 0.05 of it within ±2σ).
+    Cut at the onset, each side is its own GP of the same length-scales.
+
+    ``theta = [c, log w, log r, theta_0]``, c and w in the units of input ``dim`` (standardised);
+    ``c = REGION_OFF`` puts every input below it: the kernel is then ``k_0``. ML-II holds c and w
+    (:func:`is_fixed`): the likelihood is flat in c between two samples and the step must sit
+    between the right two (3-link arm, issue #14: an onset 0.01 rad below the friction's doubled
+    the held-out error), so :meth:`~diegocal.sgp.guard.GuardCandidates._region_scan` places it by
+    a search over the samples; their gradients serve tests and other uses.
+    """
+
+    def __init__(self, dim: int, kernel: Kernel):
+        self.dim = int(dim)
+        self.kernel = kernel
+        self.names = ("region_onset", "log_region_width", "log_region_ratio") + tuple(
+            f"inner.{n}" for n in kernel.names
+        )
+
+    @property
+    def lengthscale_inputs(self):
+        return (None, None, None, *self.kernel.lengthscale_inputs)
+
+    def _above(self, X, theta) -> tuple[np.ndarray, np.ndarray]:
+        """(a, ∂a/∂c) per row; ∂a/∂log w = ∂a/∂c · (x - c)."""
+        z = (np.asarray(X)[:, self.dim] - theta[0]) / np.exp(theta[1])
+        a = 0.5 * (1.0 + np.tanh(0.5 * z))  # sigmoid(z), no overflow
+        return a, -a * (1.0 - a) / np.exp(theta[1])
+
+    def _sides(self, X1, X2, theta):
+        a1, d1 = self._above(X1, theta)
+        a2, d2 = (a1, d1) if X2 is X1 else self._above(X2, theta)
+        return a1, d1, a2, d2
+
+    def __call__(self, X1, X2, theta):
+        a1, _, a2, _ = self._sides(X1, X2, theta)
+        K0 = self.kernel(X1, X2, theta[3:])
+        if not (a1.any() or a2.any()):  # off: every input below the onset
+            return K0
+        return self._scale(a1, a2, theta) * K0
+
+    def _scale(self, a1, a2, theta) -> np.ndarray:
+        """S = b bᵀ + r² a aᵀ, (N1, N2)."""
+        return np.outer(1.0 - a1, 1.0 - a2) + np.exp(2.0 * theta[2]) * np.outer(a1, a2)
+
+    def diag(self, X, theta):
+        a, _ = self._above(X, theta)
+        return ((1.0 - a) ** 2 + np.exp(2.0 * theta[2]) * a**2) * self.kernel.diag(X, theta[3:])
+
+    def _head(self, X1, X2, theta, P) -> np.ndarray:
+        """``Σ P ∘ ∂S/∂(c, log w, log r)`` with P = W ∘ k_0: by vector products, no N×N product."""
+        a1, d1, a2, d2 = self._sides(X1, X2, theta)
+        r2 = np.exp(2.0 * theta[2])
+        Pa2, Pb2 = P @ a2, P @ (1.0 - a2)
+        out = np.zeros(3)
+        out[2] = 2.0 * r2 * (a1 @ Pa2)
+        x1 = np.asarray(X1)[:, self.dim] - theta[0]
+        x2 = np.asarray(X2)[:, self.dim] - theta[0]
+        for p, (g1, g2) in enumerate(((d1, d2), (d1 * x1, d2 * x2))):
+            if g1.any() or g2.any():  # ∂S = -g1 bᵀ - b g2ᵀ + r² (g1 aᵀ + a g2ᵀ)
+                Pg2 = P @ g2
+                out[p] = -(g1 @ Pb2) - ((1.0 - a1) @ Pg2) + r2 * (g1 @ Pa2 + a1 @ Pg2)
+        return out
+
+    def gradients(self, X, theta):
+        a, d = self._above(X, theta)
+        x = np.asarray(X)[:, self.dim] - theta[0]
+        r2 = np.exp(2.0 * theta[2])
+        S = self._scale(a, a, theta)
+        K0 = self.kernel(X, X, theta[3:])
+        for g in (d, d * x):
+            yield (-np.outer(g, 1.0 - a) - np.outer(1.0 - a, g) + r2 * (np.outer(g, a) + np.outer(a, g))) * K0
+        yield 2.0 * r2 * np.outer(a, a) * K0
+        for g in self.kernel.gradients(X, theta[3:]):
+            yield S * g
+
+    def weighted_gradient(self, X1, X2, theta, W, K=None):
+        a1, _, a2, _ = self._sides(X1, X2, theta)
+        K0 = self.kernel(X1, X2, theta[3:])
+        if not (a1.any() or a2.any()):  # off: k = k_0, zero gradient in c, w, r
+            return np.concatenate([np.zeros(3), self.kernel.weighted_gradient(X1, X2, theta[3:], W, K0)])
+        head = self._head(X1, X2, theta, W * K0)
+        inner = self.kernel.weighted_gradient(X1, X2, theta[3:], W * self._scale(a1, a2, theta), K0)
+        return np.concatenate([head, inner])
+
+    def weighted_diag_gradient(self, X, theta, w):
+        a, d = self._above(X, theta)
+        r2 = np.exp(2.0 * theta[2])
+        d0 = self.kernel.diag(X, theta[3:])
+        x = np.asarray(X)[:, self.dim] - theta[0]
+        ds = 2.0 * (r2 * a - (1.0 - a))  # ∂[(1-a)² + r² a²]/∂a
+        head = [np.sum(w * d0 * ds * d), np.sum(w * d0 * ds * d * x), np.sum(w * d0 * 2.0 * r2 * a**2)]
+        inner = self.kernel.weighted_diag_gradient(X, theta[3:], w * ((1.0 - a) ** 2 + r2 * a**2))
+        return np.concatenate([head, inner])
+
+
+#: The onset of a Region kernel that is off: above every standardised input, so k = k_0.
+REGION_OFF = 1e3
+#: A Region kernel's width, in stds of its input: a step sharper than the samples' spacing along
+#: it (a joint at 1 rad/s sampled at 100 Hz moves some 0.02 stds between samples).
+REGION_WIDTH = 1e-3
+
+
 #: A released length-scale (Guard.release_capped), in input stds: the kernel is constant along it.
 RELEASED_LENGTHSCALE = 1e3
 
@@ -279,3 +392,9 @@ def is_lengthscale(name: str) -> bool:
 def is_amplitude(name: str) -> bool:
     """True for a log signal standard deviation (σ_z) parameter name."""
     return name.rsplit(".", 1)[-1] == "log_sigma_z"
+
+
+
+def is_fixed(name: str) -> bool:
+    """True for a parameter ML-II holds at its start (a Region kernel's onset and width)."""
+    return name.rsplit(".", 1)[-1] in ("region_onset", "log_region_width")

@@ -192,3 +192,12 @@ def load_model(directory, robot=None):
             if scores is not None:
                 model.gp_.validation_scores_ = scores
     return model
+
+
+def region_text(entry: dict) -> str:
+    """", cut at q.joint3 ≥ 1.78 rad" for a joint whose two-stage GP is cut at an onset in its
+    angle (sgp.yaml ``hyperparameters.<joint>.region``), else ""."""
+    region = entry.get("region")
+    if not isinstance(region, dict) or not isinstance(region.get("onset"), (int, float)):
+        return ""
+    return f", cut at {region.get('input', 'its angle')} ≥ {region['onset']:.3g} rad"

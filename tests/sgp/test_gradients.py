@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from diegocal.sgp.gp import Hyperparameters, negative_log_likelihood
-from diegocal.sgp.kernels import Constant, Kernel, SquaredExponential, Subspace
+from diegocal.sgp.kernels import REGION_OFF, Constant, Kernel, Region, SquaredExponential, Subspace
 
 
 def _problem(n_out=2, N=25, p=3, m=4, seed=0):
@@ -60,12 +60,32 @@ def test_sparse_vfe_gradient_matches_finite_differences(features):
     _check(kernels, U, Y, F if features else F[:, :, :0], rng, inducing=Z)
 
 
-@pytest.mark.parametrize("compose", ["sum", "product"])
+@pytest.mark.parametrize("compose", ["sum", "product", "region"])
 def test_composite_kernel_gradient(compose):
     U, Y, F, rng = _problem(n_out=1)
     a, b = Subspace([0], SquaredExponential(1)), Subspace([1, 2], SquaredExponential(2))
-    k = a + Constant() if compose == "sum" else a * b
+    k = {"sum": a + Constant(), "product": a * b, "region": Region(2, a * b)}[compose]
     _check([k], U, Y, F, rng)
+
+
+def test_region_kernel_is_its_base_when_off_and_cut_in_two_when_sharp():
+    """Off (onset above every input) the Region kernel is k_0 exactly; with a hard step the
+    covariance across the onset is 0 and the side above is k_0 scaled by r²."""
+    rng = np.random.default_rng(4)
+    X = rng.standard_normal((40, 3))
+    base = Subspace([0, 2], SquaredExponential(2))
+    t0 = rng.normal(0, 0.4, base.n_params)
+    region = Region(1, base)
+    K0 = base(X, X, t0)
+    off = np.concatenate([[REGION_OFF, np.log(0.02), 0.7], t0])
+    np.testing.assert_array_equal(region(X, X, off), K0)
+    np.testing.assert_array_equal(region.diag(X, off), base.diag(X, t0))
+    sharp = np.concatenate([[0.1, np.log(1e-9), np.log(3.0)], t0])
+    above = X[:, 1] >= 0.1
+    K = region(X, X, sharp)
+    np.testing.assert_allclose(K[np.ix_(above, ~above)], 0.0, atol=1e-300)
+    np.testing.assert_allclose(K[np.ix_(above, above)], 9.0 * K0[np.ix_(above, above)], rtol=1e-12)
+    np.testing.assert_allclose(K[np.ix_(~above, ~above)], K0[np.ix_(~above, ~above)], rtol=1e-12)
 
 
 def _kernel_zoo():
@@ -76,10 +96,11 @@ def _kernel_zoo():
         "subspace": sub,
         "sum": sub + Constant(),
         "product": Subspace([0], SquaredExponential(1)) * Subspace([1, 2], SquaredExponential(2)),
+        "region": Region(1, sub),
     }
 
 
-@pytest.mark.parametrize("name", ["se", "subspace", "sum", "product"])
+@pytest.mark.parametrize("name", ["se", "subspace", "sum", "product", "region"])
 def test_weighted_gradient_equals_dense_contraction(name):
     """Σ_ab W_ab ∂K_ab/∂θ_p: the closed form equals contracting the dense derivatives (X1 = X2)
     and central finite differences of Σ W ∘ k(X1, X2) (cross-covariances, sparse inference);

@@ -1,0 +1,87 @@
+"""The two-stage GP cut at an onset in its joint's angle (kernels.Region, guard._region_scan): a
+friction confined to part of the range is found where it starts, and predicted better than by an
+uncut GP; a residual without a step is left uncut."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace
+from diegocal.sgp.gp import Hyperparameters
+from diegocal.sgp.guard import TWO_STAGE
+from diegocal.sgp.kernels import REGION_OFF
+
+ONSET = 0.5  # rad: output 0 has a friction above it
+W_TRUE = np.array([1.0, 0.5])
+
+
+def _run(seed, N=900, duration=30.0):
+    """A joint swept by a sum of sines (angle, velocity, 100 Hz-like samples in time order): two
+    outputs linear in (sin angle, a command), output 0 with a Coulomb + viscous friction above
+    ONSET, noise 0.02."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, duration, N)
+    f = rng.uniform(0.15, 0.35, 2)
+    p = rng.uniform(0, 2 * np.pi, 2)
+    angle = 0.6 * np.sin(2 * np.pi * f[0] * t + p[0]) + 0.35 * np.sin(2 * np.pi * f[1] * t + p[1])
+    velocity = np.gradient(angle, t)
+    U = np.column_stack([angle, velocity])
+    F = np.zeros((N, 2, 2))
+    F[:, :, 0] = np.sin(angle)[:, None]
+    F[:, :, 1] = np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6))[:, None]
+    clean = F @ W_TRUE
+    clean[:, 0] += (angle >= ONSET) * (0.3 * np.tanh(velocity / 0.05) + 0.2 * velocity)
+    return U, clean + 0.02 * rng.standard_normal(clean.shape), F, clean
+
+
+@pytest.fixture(scope="module")
+def fits():
+    U, Y, F, _ = _run(0)
+    guard = replace(DEFAULT_GUARD, max_lengthscale=3.0)
+    out = {}
+    for label, regions in (("cut", (0, 0)), ("uncut", None)):
+        kernels = [Subspace([0, 1], SquaredExponential(2)) for _ in range(2)]
+        out[label] = SemiParametricGP(kernels, guard=guard, seed=0, region_inputs=regions).fit(U, Y, F)
+    return out, (U, Y, F)
+
+
+def test_the_onset_is_placed_between_the_right_two_samples_and_a_smooth_residual_is_not_cut(fits):
+    out, (U, _, _) = fits
+    est = out["cut"]
+    theta = est.stages_.residual.theta
+    onset = theta[0][0] * est.u_std_[0] + est.u_mean_[0]
+    below, above = U[U[:, 0] < ONSET, 0].max(), U[U[:, 0] >= ONSET, 0].min()
+    assert below < onset <= above  # no training angle between the friction's onset and the cut
+    assert theta[1][0] == REGION_OFF  # output 1: PR explains it, no step
+
+
+def test_the_cut_two_stages_predict_a_new_run_better_than_uncut_ones(fits):
+    """Against the noiseless torque of another run: PR plus the cut GP on its residual, against PR
+    plus the uncut GP (each estimator's two-stage candidate, whatever its guard then chose: on
+    this run its blocked cross-validation scores the cut and the joint GP alike)."""
+    out, (U, Y, F) = fits
+    Uq, _, Fq, clean = _run(1)
+    err = {}
+    for label, est in out.items():
+        (Us, Fs), (Uqs, Fqs) = est._scale(U, F), est._scale(Uq, Fq)
+        mean = est._two_stage_mean(*est._two_stage_hp, Us, Y, Fs, Uqs, Fqs)
+        err[label] = np.mean((mean[:, 0] - clean[:, 0]) ** 2)
+    assert err["cut"] < err["uncut"] / 3, err
+
+
+def test_a_model_saved_before_region_kernels_loads_uncut(fits):
+    """Stages whose residual GP has the base kernel's parameters only (a file of an earlier
+    version) restore with the onset off: the same prediction as the uncut GP's parameters."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    hp_pr, hp_res = est._two_stage_hp
+    assert hp_res.theta[1][0] == REGION_OFF
+    old = Hyperparameters(hp_res.log_sigma_w, hp_res.log_sigma_v, (hp_res.theta[0], hp_res.theta[1][3:]))
+    means = []
+    for residual in (hp_res, old):
+        stages = Stages((TWO_STAGE, TWO_STAGE), hp_pr, residual)
+        kernels = [Subspace([0, 1], SquaredExponential(2)) for _ in range(2)]
+        restored = SemiParametricGP(kernels, guard=est.guard, seed=0, region_inputs=(0, 0))
+        means.append(restored.fit(U, Y, F, est.hyper_, stages=stages).predict(U, F)[0])
+    np.testing.assert_array_equal(means[0], means[1])
