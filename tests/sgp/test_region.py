@@ -85,3 +85,27 @@ def test_a_model_saved_before_region_kernels_loads_uncut(fits):
         restored = SemiParametricGP(kernels, guard=est.guard, seed=0, region_inputs=(0, 0))
         means.append(restored.fit(U, Y, F, est.hyper_, stages=stages).predict(U, F)[0])
     np.testing.assert_array_equal(means[0], means[1])
+
+
+def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkeypatch):
+    """Each fold's estimator standardises its inputs by the fold's own mean and std; the onset
+    it holds must still be the same angle (rad)."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    hp_res = est._two_stage_hp[1]
+    onset = hp_res.theta[0][0] * est.u_std_[0] + est.u_mean_[0]
+    made = []
+    build = type(est)._residual_estimator
+
+    def spy(self, *args, **kwargs):
+        made.append(build(self, *args, **kwargs))
+        return made[-1]
+
+    monkeypatch.setattr(type(est), "_residual_estimator", spy)
+    monkeypatch.setattr(est, "_raw", (U, F), raising=False)
+    Us, Fs = est._scale(U, F)
+    fit_idx, val_idx = np.arange(len(U) // 2), np.arange(len(U) // 2, len(U))  # a fold's scaling differs
+    est._two_stage_fold([0], fit_idx, val_idx, (Us, Y, Fs))
+    fold = made[-1]
+    assert not np.isclose(fold.u_mean_[0], est.u_mean_[0])
+    np.testing.assert_allclose(fold.hyper_.theta[0][0] * fold.u_std_[0] + fold.u_mean_[0], onset, rtol=1e-12)
