@@ -56,18 +56,32 @@ def test_the_onset_is_placed_between_the_right_two_samples_and_a_smooth_residual
     assert theta[1][0] == REGION_OFF  # output 1: PR explains it, no step
 
 
-def test_the_cut_two_stages_predict_a_new_run_better_than_uncut_ones(fits):
-    """Against the noiseless torque of another run: PR plus the cut GP on its residual, against PR
-    plus the uncut GP (each estimator's two-stage candidate, whatever its guard then chose: on
-    this run its blocked cross-validation scores the cut and the joint GP alike)."""
-    out, (U, Y, F) = fits
+def test_the_guard_keeps_the_cut_and_predicts_a_new_run_better_than_without_it(fits):
+    """Against the noiseless torque of another run: the guarded SGP that may cut (the guard keeps
+    two stages, cut) against the same SGP without region inputs."""
+    out, _ = fits
     Uq, _, Fq, clean = _run(1)
-    err = {}
-    for label, est in out.items():
-        (Us, Fs), (Uqs, Fqs) = est._scale(U, F), est._scale(Uq, Fq)
-        mean = est._two_stage_mean(*est._two_stage_hp, Us, Y, Fs, Uqs, Fqs)
-        err[label] = np.mean((mean[:, 0] - clean[:, 0]) ** 2)
+    err = {label: np.mean((est.predict(Uq, Fq)[0][:, 0] - clean[:, 0]) ** 2) for label, est in out.items()}
+    assert out["cut"].selection_[0] == TWO_STAGE
     assert err["cut"] < err["uncut"] / 3, err
+
+
+def test_a_cut_that_loses_gives_its_output_back_to_the_uncut_two_stages(fits, monkeypatch):
+    """Where the nested cross-validation rejects the cut, the output's two stages are the uncut
+    GP again, scored by the plain cross-validation."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    monkeypatch.setattr(est, "_two_stage_hp", est._two_stage_hp)  # restored after the test
+    labels = list(est.validation_blocks_)
+    per_block = np.array([est.validation_blocks_[label].copy() for label in labels])
+    blocks = np.array_split(np.arange(len(U)), 5)
+    monkeypatch.setattr(type(est), "_two_stage_nested", lambda self, outputs, b, data: np.full((len(b), 2), np.inf))
+    Us, Fs = est._scale(U, F)
+    confirmed = set()
+    est._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
+    assert est._two_stage_hp[1].theta[0][0] == REGION_OFF
+    assert np.all(np.isfinite(per_block[labels.index(TWO_STAGE)][:, 0]))
+    assert 0 not in confirmed
 
 
 def test_a_model_saved_before_region_kernels_loads_uncut(fits):
