@@ -11,6 +11,7 @@ from __future__ import annotations
 import shlex
 import sys
 from contextlib import contextmanager
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Literal
@@ -109,6 +110,14 @@ def sgp_fit(
         ),
     ] = SGP_N_INDUCING,
     guard: Annotated[bool, typer.Option("--guard/--no-guard", help="SGP guard: keep the GP off the physics.")] = True,
+    region: Annotated[
+        bool,
+        typer.Option(
+            "--region",
+            help="SGP guard: let each joint's two-stage GP be cut at an onset in the joint's angle (a friction "
+            "confined to part of the range); the guard's nested cross-validation decides. Slower.",
+        ),
+    ] = False,
     gp_inputs: Annotated[
         str | None,
         typer.Option(
@@ -155,6 +164,7 @@ def sgp_fit(
     from diegocal.io import load_log
     from diegocal.io.bundle import header
     from diegocal.sgp import SGPOptions, fit_dynamics
+    from diegocal.sgp.model import default_guard
     from diegocal.sgp.store import save_model
 
     words = split_words(friction)
@@ -170,6 +180,8 @@ def sgp_fit(
         gp_inputs=split_words(gp_inputs) if gp_inputs is not None else None,
         min_noise=min_noise,
     )
+    if region:
+        opts = replace(opts, guard_options=replace(default_guard(opts.friction), region=True))
     data = load_log(log)
     rob = robot_for_log(robot, data)
     with fit_progress(quiet) as progress:

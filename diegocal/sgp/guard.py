@@ -127,6 +127,14 @@ class Guard:
         (bench_real_identification: torso nMSE 1.01 against PR's 0.28). With the estimator's
         ``region_inputs``, each output's GP on PR's residual may be cut at an onset in its joint's
         angle (:meth:`~GuardCandidates._region_scan`).
+    region : bool
+        With ``two_stage``: each output's GP on PR's residual may be cut at an onset in its
+        joint's angle (:class:`~diegocal.sgp.kernels.Region`, :meth:`~GuardCandidates.
+        _region_scan`; the model gives the estimator its ``region_inputs``). Off by default: on
+        issue #14's arm the cut GP predicts the test run 2.7× better than the uncut one (joint
+        3, 0.0024 against 0.0065, when forced) but the nested cross-validation rejects it (its
+        last block 0.099 against PR's 0.020: fitted without that block, the cut GP overshoots at
+        the block's in-region states), so the default would only cost time (TIAGo 46 → 114 s).
     """
 
     max_lengthscale: float | None = None
@@ -139,6 +147,7 @@ class Guard:
     release_capped: bool = False
     extend_capped: bool = False
     two_stage: bool = False
+    region: bool = False
 
 
 #: The candidates whose outputs are predicted by the joint posterior (W shared with the GPs).

@@ -58,12 +58,8 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #:   they beat it by more than one standard error: the issue #14 arm's joint 3, 0.0085 -> 0.0065
 #:   (bench/bench_sgp_case.py); given the ties instead, they lost the reaction wheel's pole-up
 #:   pole axis (0.086, PR's, against 0.018) by keeping PR's friction-biased W;
-#: - the two stages' GP of each joint may be cut in two at an onset in the joint's angle
-#:   (kernels.Region, GuardCandidates._region_scan), where the likelihood asks for it: a
-#:   friction confined to part of the range (a cable, a hard stop) is then a step, not a ramp
-#:   smeared over a length-scale (issue #14's arm, joint 3: onset placed at 1.7800 rad against the
-#:   simulator's 1.78, held-out nMSE 0.0065 -> 0.0024, PRGP 0.0050); a cut GP is scored by the
-#:   nested cross-validation from the start (its plain scores recalled the block: 0.0138 vs 0.0064);
+#: - Guard.region (cutting the two stages' GP at an onset in its joint's angle) is off:
+#:   `sgp-fit --region` turns it on (see Guard.region for the evidence);
 #: - a candidate that wins is confirmed by a nested cross-validation, each fold's hyperparameters
 #:   re-learnt without the block it predicts (two stages always; the joint GPs where the
 #:   cross-validation has at most 500 samples): learnt on all samples, the GP had seen the block
@@ -410,7 +406,7 @@ class DynamicsModel:
             jobs=o.jobs,
             min_noise=o.min_noise,
             progress=None if self.progress is None else functools.partial(self.progress, kind),
-            region_inputs=self._region_inputs() if guard else None,
+            region_inputs=self._region_inputs() if guard and g.region else None,
         )
 
     def _region_inputs(self):
