@@ -43,7 +43,6 @@ from diegocal.cli.common import (
     warn,
 )
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
-from diegocal.sgp.store import region_text
 
 
 @contextmanager
@@ -256,6 +255,8 @@ def _guard_text(entry: dict) -> str:
     """The guard's choice for one joint and the cross-validated nMSE of every candidate it
     weighed, lowest first (the choice may not be the lowest: a GP must beat PR, two stages the
     other choice, by one standard error)."""
+    from diegocal.sgp.store import region_text
+
     scores = sorted((entry.get("guard_validation") or {}).items(), key=lambda kv: kv[1])
     weighed = ", ".join(f"{label} {value:.3g}" for label, value in scores)
     return entry["guard_choice"] + region_text(entry) + (f" (cross-validated nMSE: {weighed})" if weighed else "")
