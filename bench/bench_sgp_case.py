@@ -1,6 +1,6 @@
 """Issue #14's case: the 3-link arm with a hidden cable-like friction on joint 3, 4,000 samples.
 
-    python bench/bench_sgp_case.py
+    python bench/bench_sgp_case.py [--duration 40] [--region]
 
 ``diegocal simulate dynamics --robot arm3 --effect position_friction:joint3 --duration 40
 --seed 11`` trains; the test logs are ``--seed 12``'s trajectory twice: as the issue ran it (the
@@ -15,10 +15,12 @@ machine's load average is printed: compare CPU, not wall).
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/ is 
 from diegocal.evaluate import block_mse, paired_se, score, split_blocks  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
+from diegocal.sgp.model import DEFAULT_GUARD  # noqa: E402
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics  # noqa: E402
 from diegocal.sim.effects import parse_effects  # noqa: E402
 from experiments.sgp.common import same_robot  # noqa: E402
@@ -46,14 +49,21 @@ def simulate(robot, seed: int, friction=None, duration: float = 40.0):
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=40.0, help="training run, s (100 Hz)")
+    parser.add_argument("--region", action="store_true", help="add 'SGP region': SGP auto with sgp-fit --region")
+    args = parser.parse_args()
+    fits = dict(FITS)
+    if args.region:
+        fits["SGP region"] = SGPOptions(kind="sgp", guard_options=replace(DEFAULT_GUARD, region=True))
     sys.stdout.reconfigure(line_buffering=True)
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     print(f"diegocal commit {head or 'unknown'}; load average {os.getloadavg()[0]:.1f}")
     robot = load_robot(BUNDLED_ROBOTS / "arm3")
-    train = simulate(robot, 11)
+    train = simulate(robot, 11, duration=args.duration)
     tests = {"seed 12": simulate(robot, 12), "same robot": simulate(robot, 12, same_robot(train, robot))}
     models, cpu = {}, {}
-    for label, options in FITS.items():
+    for label, options in fits.items():
         start = time.process_time()
         models[label] = fit_dynamics(train, robot, options)
         cpu[label] = time.process_time() - start
