@@ -126,3 +126,23 @@ def test_verdict_words():
     assert verdict(0.05, 0.3) == "fair; ±2σ too narrow"
     assert verdict(0.5, 1.0) == "poor; ±2σ too wide"
     assert verdict(2.0) == "useless"
+
+
+def test_the_joint_table_names_a_cut_gp(arm2, simulate, tmp_path):
+    """A joint whose two-stage GP is cut (sgp.yaml hyperparameters.<joint>.region) shows where;
+    a hand-edited region that is not a map with a numeric onset shows nothing more."""
+    from diegocal.io import load_yaml, save_yaml
+    from diegocal.sgp.store import region_text
+
+    log, _ = simulate(arm2, T=80, seed=3)
+    fit_dynamics(log, arm2, SGPOptions(kind="sgp", maxiter=15)).save(tmp_path / "m.sgp")
+    path = tmp_path / "m.sgp" / "sgp.yaml"
+    s = load_yaml(path)
+    s["hyperparameters"]["shoulder"].update(guard_choice="two-stage", region={"input": "q.shoulder", "onset": 0.5})
+    s["hyperparameters"]["elbow"].update(guard_choice="two-stage", region={"onset": "high"})
+    save_yaml(s, path)
+    _, rows, _ = joint_table([tmp_path / "m.sgp"], ReportContext())
+    cells = {row[0]: " ".join(map(str, row)) for row in rows}
+    assert "two stages, cut at q.shoulder ≥ 0.5 rad" in cells["shoulder"]
+    assert "cut at" not in cells["elbow"] and "two stages" in cells["elbow"]
+    assert region_text({"region": None}) == ""
