@@ -110,7 +110,8 @@ class HeldOut:
 
 @functools.lru_cache(maxsize=8)
 def heldout_prediction(path: str, heldout: tuple[str, ...]) -> HeldOut | None:
-    """The model at ``path`` on the first held-out log of its robot with q and tau, or None."""
+    """The model at ``path`` on the first held-out log of its robot with q and tau, or None; a
+    prediction log (``diegocal predict``'s output) is scored against its ``tau_measured``."""
     from diegocal.evaluate import score
     from diegocal.io import load_log
     from diegocal.io.bundle import load_bundle
@@ -123,7 +124,9 @@ def heldout_prediction(path: str, heldout: tuple[str, ...]) -> HeldOut | None:
             model = load_model(Path(path))
             log = load_log(hpath)
             pred = model.predict(log)
-            measured = log.stream("tau").select(model.joint_names).data
+            # a prediction log (predict's output) holds the prediction in tau, the torque in tau_measured
+            torque = "tau_measured" if "tau_measured" in log.streams else "tau"
+            measured = log.stream(torque).select(model.joint_names).data
         except DiegocalError:
             continue
         sc = score(measured, pred.tau, model.joint_names, std=pred.tau_std, unit="N·m")

@@ -146,3 +146,22 @@ def test_the_joint_table_names_a_cut_gp(arm2, simulate, tmp_path):
     assert "two stages, cut at q.shoulder ≥ 0.5 rad" in cells["shoulder"]
     assert "cut at" not in cells["elbow"] and "two stages" in cells["elbow"]
     assert region_text({"region": None}) == ""
+
+
+def test_a_prediction_log_as_heldout_is_scored_against_its_measured_torque(arm2, simulate, tmp_path):
+    """`report MODEL --heldout p.h5` with `predict`'s own output: scored against tau_measured, as
+    the measured log is (its tau is the prediction: it once scored nMSE 0 and 100 % coverage)."""
+    from diegocal.report.sgp_text import heldout_prediction
+
+    log, _ = simulate(arm2, T=60, seed=0)
+    held, _ = simulate(arm2, T=40, seed=1)
+    save_log(held, tmp_path / "held.h5")
+    fit_dynamics(log, arm2, SGPOptions(kind="pr")).save(tmp_path / "pr.sgp")
+    args = ["predict", str(tmp_path / "pr.sgp"), str(tmp_path / "held.h5"), "-o", str(tmp_path / "p.h5")]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    model = str((tmp_path / "pr.sgp").resolve())
+    from_log = heldout_prediction(model, (str(tmp_path / "held.h5"),))
+    from_prediction = heldout_prediction(model, (str(tmp_path / "p.h5"),))
+    np.testing.assert_allclose(from_prediction.score.nmse, from_log.score.nmse, rtol=1e-9)
+    assert np.all(from_prediction.score.nmse > 0)
