@@ -141,8 +141,9 @@ def test_the_joint_table_names_a_cut_gp(arm2, simulate, tmp_path):
     s["hyperparameters"]["shoulder"].update(guard_choice="two-stage", region={"input": "q.shoulder", "onset": 0.5})
     s["hyperparameters"]["elbow"].update(guard_choice="two-stage", region={"onset": "high"})
     save_yaml(s, path)
-    _, rows, _ = joint_table([tmp_path / "m.sgp"], ReportContext())
+    _, rows, notes = joint_table([tmp_path / "m.sgp"], ReportContext())
     cells = {row[0]: " ".join(map(str, row)) for row in rows}
+    assert any("'cut at q ≥ c'" in n for n in notes)
     assert "two stages, cut at q.shoulder ≥ 0.5 rad" in cells["shoulder"]
     assert "cut at" not in cells["elbow"] and "two stages" in cells["elbow"]
     assert region_text({"region": None}) == ""
