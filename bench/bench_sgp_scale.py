@@ -41,6 +41,7 @@ import subprocess
 import sys
 import time
 import tracemalloc
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,7 @@ from diegocal.evaluate import block_mse, paired_se, split_blocks  # noqa: E402
 from diegocal.parallel import one_blas_thread  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
+from diegocal.sgp.model import DEFAULT_GUARD  # noqa: E402
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics  # noqa: E402
 from diegocal.sim.effects import parse_effects  # noqa: E402
 from experiments.sgp.common import same_robot  # noqa: E402
@@ -159,16 +161,19 @@ def has_gpytorch() -> bool:
 
 
 # ----------------------------------------------------------------------------- table 1
-def rows_at(N: int, gpytorch: bool) -> list:
-    """(label, options | "sklearn" | "gpytorch") of the fits run at N."""
+def rows_at(N: int, gpytorch: bool, region: bool = False, references: bool = True) -> list:
+    """(label, options | "sklearn" | "gpytorch") of the fits run at N; ``region``: also the SGP
+    with Guard.region (``sgp-fit --region``); without ``references`` no scikit-learn/GPyTorch."""
     auto = "exact" if N <= SGPOptions.exact_max else "sparse"
     other = "sparse" if auto == "exact" else "exact"
     rows = [("pr", SGPOptions(kind="pr")), ("prgp", SGPOptions(kind="prgp")), (f"sgp auto ({auto})", SGPOptions())]
     if N >= 2000 and (other == "sparse" or N <= EXACT_MAX):
         rows.append((f"sgp {other}", SGPOptions(inference=other)))
-    if N <= SKLEARN_MAX:
+    if region:
+        rows.append(("sgp region", SGPOptions(guard_options=replace(DEFAULT_GUARD, region=True))))
+    if references and N <= SKLEARN_MAX:
         rows.append(("sklearn", "sklearn"))
-    if gpytorch and N <= GPYTORCH_MAX:
+    if references and gpytorch and N <= GPYTORCH_MAX:
         rows.append(("gpytorch", "gpytorch"))
     return rows
 
@@ -191,6 +196,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help=f"sizes {QUICK}")
     ap.add_argument("--sizes", default=None, help="comma list of training sizes")
     ap.add_argument("--no-gpytorch", action="store_true")
+    ap.add_argument("--region", action="store_true", help="add the SGP with sgp-fit --region")
+    ap.add_argument("--no-references", action="store_true", help="no scikit-learn or GPyTorch rows")
     args = ap.parse_args(argv)
     sizes = QUICK if args.quick else SIZES
     if args.sizes:
@@ -213,23 +220,24 @@ def main(argv=None) -> int:
     print(line + "\n" + "-" * len(line))
     blocks = {}
     for N in sizes:
-        for label, opts in rows_at(N, gpytorch):
+        for label, opts in rows_at(N, gpytorch, args.region, not args.no_references):
             wall, cpu, mib, predict = fit_one(robot, train, N, opts)
             sq = (predict(qt, qdt, qddt) - taut) ** 2 / taut.var(axis=0)
             blocks[(N, label.split(" (")[0])] = block_mse(sq, labels)
             err = np.array2string(sq.mean(axis=0), precision=5)
             mem = "-" if label == "gpytorch" else f"{mib:.1f}"
             print(f"{N:6d}  {label:18s} {wall:8.1f} {cpu:8.1f} {mem:>9}  {err}")
-    print(f"\n{load()}\n\nSGP (auto) against PR and PRGP, per joint: nMSE difference ± one SE over {BLOCKS} blocks")
-    for N in sizes:
-        cells = []
-        for ref in ("pr", "prgp"):
-            diff, se = paired_se(blocks[(N, "sgp auto")], blocks[(N, ref)])
-            se = np.maximum(se, 1e-3 * blocks[(N, ref)].mean(axis=0))  # equal to rounding is tied
-            for j, (d, s) in enumerate(zip(diff, se, strict=True)):
-                word = "better" if d < -s else "worse" if d > s else "tied"
-                cells.append(f"vs {ref} j{j + 1} {word} ({d:+.2g} ± {s:.2g})")
-        print(f"{N:6d}  " + "; ".join(cells))
+    for sgp in ("sgp auto", "sgp region") if args.region else ("sgp auto",):
+        print(f"\n{load()}\n\n{sgp} against PR and PRGP, per joint: nMSE difference ± one SE over {BLOCKS} blocks")
+        for N in sizes:
+            cells = []
+            for ref in ("pr", "prgp"):
+                diff, se = paired_se(blocks[(N, sgp)], blocks[(N, ref)])
+                se = np.maximum(se, 1e-3 * blocks[(N, ref)].mean(axis=0))  # equal to rounding is tied
+                for j, (d, s) in enumerate(zip(diff, se, strict=True)):
+                    word = "better" if d < -s else "worse" if d > s else "tied"
+                    cells.append(f"vs {ref} j{j + 1} {word} ({d:+.2g} ± {s:.2g})")
+            print(f"{N:6d}  " + "; ".join(cells))
     return 0
 
 
