@@ -585,8 +585,7 @@ class _OutputLikelihood:
 
     def with_samples(self, extra) -> _OutputLikelihood:
         """The same likelihood on its samples and ``extra`` (indices)."""
-        out = _OutputLikelihood(self.kernel, self.Us, self.y, self.log_sigma_v, np.union1d(self.samples, extra))
-        return out
+        return _OutputLikelihood(self.kernel, self.Us, self.y, self.log_sigma_v, np.union1d(self.samples, extra))
 
     def __call__(self, theta) -> float:
         idx = self.samples
