@@ -134,7 +134,7 @@ class Guard:
         issue #14's arm the cut GP predicts the test run 2.7× better than the uncut one (joint
         3, 0.0024 against 0.0065, when forced) but the nested cross-validation rejects it (its
         last block 0.099 against PR's 0.020: fitted without that block, the cut GP overshoots at
-        the block's in-region states), so the default would only cost time (TIAGo 46 → 114 s).
+        the block's in-region states), so the default would only cost time (TIAGo 75 → 115 s wall).
     """
 
     max_lengthscale: float | None = None
