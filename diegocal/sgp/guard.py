@@ -502,7 +502,7 @@ class GuardCandidates(NestedConfirmation):
         cut = self._cut_outputs() if TWO_STAGE in labels else []
         if cut:
             t = labels.index(TWO_STAGE)
-            per_block[t][:, cut] = self._two_stage_nested(cut, blocks, data)[:, cut]
+            per_block[t][:, cut] = self._two_stage_nested(cut, blocks, data, every_sample=True)[:, cut]
             confirmed.update(cut)
         choice = self._choose(per_block, labels)
         lost = [j for j in cut if choice[j] != labels.index(TWO_STAGE)]

@@ -75,7 +75,10 @@ def test_a_cut_that_loses_gives_its_output_back_to_the_uncut_two_stages(fits, mo
     labels = list(est.validation_blocks_)
     per_block = np.array([est.validation_blocks_[label].copy() for label in labels])
     blocks = np.array_split(np.arange(len(U)), 5)
-    monkeypatch.setattr(type(est), "_two_stage_nested", lambda self, outputs, b, data: np.full((len(b), 2), np.inf))
+    def rejected(self, outputs, b, data, **_):
+        return np.full((len(b), 2), np.inf)
+
+    monkeypatch.setattr(type(est), "_two_stage_nested", rejected)
     Us, Fs = est._scale(U, F)
     confirmed = set()
     est._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
@@ -123,3 +126,26 @@ def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkey
     fold = made[-1]
     assert not np.isclose(fold.u_mean_[0], est.u_mean_[0])
     np.testing.assert_allclose(fold.hyper_.theta[0][0] * fold.u_std_[0] + fold.u_mean_[0], onset, rtol=1e-12)
+
+
+def test_a_cut_gp_is_scored_on_every_sample_outside_the_block(fits, monkeypatch):
+    """With every_sample (the cut outputs' nested scores) each fold is fitted on every training
+    sample outside the block's time span, not only on the other blocks' (subset) samples."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    seen = []
+
+    def fold(self, outputs, fit_idx, val_idx, data):
+        seen.append((fit_idx, val_idx))
+        return np.zeros((len(val_idx), 2))
+
+    monkeypatch.setattr(type(est), "_two_stage_fold", fold)
+    blocks = np.array_split(np.arange(0, len(U), 3), 5)  # a subset's blocks, as above hyper_max
+    Us, Fs = est._scale(U, F)
+    for every in (False, True):
+        seen.clear()
+        est._two_stage_nested([0], blocks, (Us, Y, Fs), every_sample=every)
+        for fit_idx, val_idx in seen:
+            outside = np.flatnonzero((np.arange(len(U)) < val_idx.min()) | (np.arange(len(U)) > val_idx.max()))
+            expected = outside if every else np.setdiff1d(np.concatenate(blocks), val_idx)
+            np.testing.assert_array_equal(np.sort(fit_idx), expected)
