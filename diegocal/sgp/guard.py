@@ -130,11 +130,12 @@ class Guard:
     region : bool
         With ``two_stage``: each output's GP on PR's residual may be cut at an onset in its
         joint's angle (:class:`~diegocal.sgp.kernels.Region`, :meth:`~GuardCandidates.
-        _region_scan`; the model gives the estimator its ``region_inputs``). Off by default: on
-        issue #14's arm the cut GP predicts the test run 2.7× better than the uncut one (joint
-        3, 0.0024 against 0.0065, when forced) but the nested cross-validation rejects it (its
-        last block 0.099 against PR's 0.020: fitted without that block, the cut GP overshoots at
-        the block's in-region states), so the default would only cost time (TIAGo 75 → 115 s wall).
+        _region_scan`; the model gives the estimator its ``region_inputs``), a cut GP scored by
+        the nested cross-validation on every sample outside each block. Off by default (``sgp-fit
+        --region``): on issue #14's arm it beats PRGP on joint 3 at 2,000 and 4,000 samples
+        (0.0017 against 0.0068 and 0.0041), but it costs 10-14 CPU-s per fit (the scale targets:
+        exact 5,000 samples ≤ 30 s) and its every-sample folds tilt the choice toward the cut, which
+        the real robots and the thesis experiments (≤ 1,000 samples) cannot test.
     """
 
     max_lengthscale: float | None = None
