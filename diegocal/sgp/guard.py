@@ -133,7 +133,7 @@ class Guard:
         _region_scan`; the model gives the estimator its ``region_inputs``), a cut GP scored by
         the nested cross-validation on every sample outside each block. Off by default (``sgp-fit
         --region``): on issue #14's arm it beats PRGP on joint 3 at 2,000 and 4,000 samples
-        (0.0017 against 0.0068 and 0.0041), but it costs 10-14 CPU-s per fit (the scale targets:
+        (0.0017 against 0.0068 and 0.0041), but it costs 10-22 CPU-s per fit (the scale targets:
         exact 5,000 samples ≤ 30 s) and its every-sample folds tilt the choice toward the cut, which
         the real robots and the thesis experiments (≤ 1,000 samples) cannot test.
     """
