@@ -523,16 +523,12 @@ class GuardCandidates(NestedConfirmation):
         """(blocks, n) nMSE of the two-stage candidate in the plain blocked cross-validation (its
         hyperparameters the all-sample ones)."""
         Us, Y, Fs = data
-        out = np.zeros((len(blocks), Y.shape[1]))
-        for b, val_idx in enumerate(blocks):
-            fit_idx = np.concatenate(blocks[:b] + blocks[b + 1 :])
-            try:
-                fit, query = (Us[fit_idx], Y[fit_idx], Fs[fit_idx]), (Us[val_idx], Fs[val_idx])
-                mean = self._two_stage_mean(*self._two_stage_hp, *fit, *query)
-                out[b] = np.mean((mean - Y[val_idx]) ** 2, axis=0) / self.y_std_**2
-            except NumericalError:
-                out[b] = np.inf
-        return out
+        return self._nested_scores(
+            lambda f, v: self._two_stage_mean(*self._two_stage_hp, Us[f], Y[f], Fs[f], Us[v], Fs[v]),
+            blocks,
+            Y,
+            "cross-validation of the uncut two stages",
+        )
 
     def _confirm_two_stage(self, per_block, labels, choice, confirmed: set, blocks, data) -> np.ndarray:
         """Where two stages are chosen on plain scores (outputs not in ``confirmed``), replace

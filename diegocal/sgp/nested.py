@@ -49,8 +49,7 @@ class NestedConfirmation:
 
         def fold(fit_idx, val_idx):
             if every_sample:
-                outside = np.r_[0 : val_idx.min(), val_idx.max() + 1 : n]
-                fit_idx = outside
+                fit_idx = np.r_[0 : val_idx.min(), val_idx.max() + 1 : n]
             return self._two_stage_fold(outputs, fit_idx, val_idx, data)
 
         return self._nested_scores(
@@ -85,7 +84,8 @@ class NestedConfirmation:
 
     def _nested_scores(self, fold_mean, blocks, Y, stage: str) -> np.ndarray:
         """(blocks, n) nMSE of ``fold_mean(fit_idx, val_idx)`` (a model fitted on the other
-        blocks, its mean on this one) per block; inf where the fold's fit fails. The folds run
+        blocks, its mean on this one; also the plain cross-validation's, given a mean with fixed
+        hyperparameters) per block; inf where the fold's fit fails. The folds run
         in ``jobs`` threads; ``stage`` names them on the progress bar."""
         done = []
 
