@@ -19,7 +19,7 @@ from diegocal.evaluate import choose_by_validation
 from diegocal.parallel import thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, RELEASED_LENGTHSCALE, Region, is_amplitude, is_lengthscale
-from diegocal.sgp.nested import NestedConfirmation
+from diegocal.sgp.nested import NestedConfirmation, evenly
 
 # L-BFGS-B stops when an iteration improves the objective by less than FTOL relative to |f|;
 # scipy's default (2.2e-9) spends about half of the evaluations on the last 0.1 nat of a
@@ -325,9 +325,33 @@ class GuardCandidates(NestedConfirmation):
         hp_pr = self._pr_hyper(parametric)
         _, res = self._pr_residual(hp_pr, Us, Y, Fs)
         U, F = self._raw
-        hp_res = self._residual_estimator().learn(U, res, F)
+        hp_res = self._learn_residual(U, res, F, [j for j, k in enumerate(self.kernels) if k is not None])
         self._uncut_residual = hp_res  # the fallback of a cut that loses (_validate)
         return hp_pr, self._region_scan(hp_res, U, res, F)
+
+    def _learn_residual(self, U, res, F, outputs, start=None, inference=None, jobs=None, quiet=False):
+        """The hyperparameters of the GPs on PR's residual ``res`` for ``outputs``, learnt by ML-II
+        one output at a time (from ``start``, a Hyperparameters of every output, if given; the
+        other outputs' kernel parameters are empty). Without features their likelihoods are
+        independent, and one optimiser over all outputs stops when the *sum* no longer improves
+        by FTOL, which on issue #14's scale-bench arm at 5,000 samples took 25 CPU-s against 9 for
+        the three outputs apart (the same joint-3 optimum to 0.006 in log ℓ)."""
+        n = len(self.kernels)
+        log_sigma_w, log_sigma_v, theta = 0.0, np.zeros(n), [np.zeros(0)] * n
+        for j in outputs:
+            kernels = [k if i == j else None for i, k in enumerate(self.kernels)]
+            est = self._residual_estimator(kernels, inference, jobs)
+            if quiet:
+                est.progress = None
+            one = None
+            if start is not None:
+                masked = tuple(t if i == j else np.zeros(0) for i, t in enumerate(start.theta))
+                one = Hyperparameters(start.log_sigma_w, start.log_sigma_v, masked)
+            hp = est.learn(U, res, F, start=one)
+            if j == outputs[0]:
+                log_sigma_w, log_sigma_v = hp.log_sigma_w, hp.log_sigma_v.copy()
+            log_sigma_v[j], theta[j] = hp.log_sigma_v[j], hp.theta[j]
+        return Hyperparameters(log_sigma_w, log_sigma_v, tuple(theta))
 
     def _region_scan(self, hp_res: Hyperparameters, U, res, F) -> Hyperparameters:
         """The two-stage GPs cut at an onset in their joint's angle where the likelihood asks for
@@ -347,7 +371,7 @@ class GuardCandidates(NestedConfirmation):
         if not cut:
             return hp_res
         _, _, _, Us, _ = est._standardise(U, res, F)
-        spaced = np.unique(np.linspace(0, len(Us) - 1, min(len(Us), REGION_SCAN_MAX)).round().astype(int))
+        spaced = evenly(np.arange(len(Us)), REGION_SCAN_MAX)
         starts = {}
         for j in cut:
             kernel, base = est.kernels[j], hp_res.theta[j]
@@ -361,20 +385,19 @@ class GuardCandidates(NestedConfirmation):
                 return theta
 
             grid = np.quantile(Us[:, kernel.dim], REGION_QUANTILES)
-            pairs = [(b, a) for b in REGION_AMPLITUDES for a in REGION_AMPLITUDES]
-            _, i, pair = min((likelihood(cut_at(c, *p)), i, p) for i, c in enumerate(grid) for p in pairs)
+            scores = likelihood.hard_cuts(base[3:], grid, REGION_AMPLITUDES)
+            i, below, above = np.unravel_index(int(np.argmin(scores)), scores.shape)
+            pair = REGION_AMPLITUDES[below], REGION_AMPLITUDES[above]
             bracket = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
             theta, gain = self._place_onset(likelihood, cut_at(grid[i], *pair), base, bracket)
             if gain > REGION_MIN_NATS:
                 starts[j] = (theta, bracket, likelihood)
         if not starts:
             return hp_res
-        kernels = [k if j in starts else None for j, k in enumerate(self.kernels)]
         theta = tuple(starts[j][0] if j in starts else np.zeros(0) for j in range(len(self.kernels)))
         try:
-            hp = self._residual_estimator(kernels).learn(
-                U, res, F, start=Hyperparameters(hp_res.log_sigma_w, hp_res.log_sigma_v, theta)
-            )
+            start = Hyperparameters(hp_res.log_sigma_w, hp_res.log_sigma_v, theta)
+            hp = self._learn_residual(U, res, F, sorted(starts), start)
         except (NumericalError, FitError):
             return hp_res
         log_sigma_v, out = hp_res.log_sigma_v.copy(), list(hp_res.theta)
@@ -393,31 +416,46 @@ class GuardCandidates(NestedConfirmation):
     @staticmethod
     def _place_onset(likelihood, theta, uncut, bracket) -> tuple[np.ndarray, float]:
         """(``theta`` with its onset at the midpoint of two consecutive training angles in
-        ``bracket`` that maximises the likelihood, the likelihood's gain over ``uncut``): the
-        likelihood on its spaced samples and every sample in the bracket, the midpoints tried
-        coarse (REGION_PLACE_MAX evenly among them) then every one between the best's
-        neighbours."""
-        lo, hi = bracket
+        ``bracket`` that maximises the likelihood, the likelihood's gain over ``uncut``).
+
+        Coarse to fine: REGION_PLACE_MAX midpoints evenly among those left are tried, with the
+        likelihood on its spaced samples and at most REGION_SCAN_MAX samples in their range, and
+        the range narrows to the best one's neighbours until it holds no more midpoints than are
+        tried (then every sample in it counts, and so every midpoint is told apart). The gain is
+        the likelihood's on its spaced samples and at most REGION_SCAN_MAX samples in the bracket.
+        (Every sample of a bracket, as before, took 1,000 samples per likelihood at 20,000 and
+        16 CPU-s per fit.)"""
         x = likelihood.angles
-        local = likelihood.with_samples(np.flatnonzero((x >= lo) & (x <= hi)))
-        v = np.unique(x[(x >= lo) & (x <= hi)])
-        mids = (v[1:] + v[:-1]) / 2 if len(v) > 1 else np.array([theta[0]])
+
+        def near(lo, hi):  # the likelihood on its samples and ≤ REGION_SCAN_MAX in [lo, hi]
+            return likelihood.with_samples(evenly(np.flatnonzero((x >= lo) & (x <= hi)), REGION_SCAN_MAX))
 
         def at(c):
             t = theta.copy()
             t[0] = c
             return t
 
-        tried = mids[np.unique(np.linspace(0, len(mids) - 1, min(len(mids), REGION_PLACE_MAX)).round().astype(int))]
-        k = int(np.argmin([local(at(c)) for c in tried]))
-        fine = mids[(mids >= tried[max(k - 1, 0)]) & (mids <= tried[min(k + 1, len(tried) - 1)])]
-        f, c = min((local(at(c)), c) for c in fine)
-        return at(c), local(uncut) - f
+        lo, hi = bracket
+        v = np.unique(x[(x >= lo) & (x <= hi)])
+        mids = (v[1:] + v[:-1]) / 2 if len(v) > 1 else np.array([theta[0]])
+        while True:
+            local = near(mids[0], mids[-1])
+            tried = evenly(mids, REGION_PLACE_MAX)
+            k = int(np.argmin([local(at(c)) for c in tried]))
+            if len(tried) == len(mids):
+                break
+            mids = mids[(mids >= tried[max(k - 1, 0)]) & (mids <= tried[min(k + 1, len(tried) - 1)])]
+        judge = near(lo, hi)
+        return at(tried[k]), judge(uncut) - judge(at(tried[k]))
 
-    def _two_stage_mean(self, hp_pr, hp_res, Us, Y, Fs, Uq, Fq) -> np.ndarray:
-        """The two-stage candidate fitted on (Us, Y, Fs) and predicted at (Uq, Fq): (Nq, n)."""
+    def _two_stage_mean(self, hp_pr, hp_res, Us, Y, Fs, Uq, Fq, outputs=None) -> np.ndarray:
+        """The two-stage candidate fitted on (Us, Y, Fs) and predicted at (Uq, Fq): (Nq, n);
+        ``outputs``: only their GPs (the others' columns are PR's)."""
         post, res = self._pr_residual(hp_pr, Us, Y, Fs)
-        gp = fit_posterior(self._residual_estimator().kernels, Us, res, Fs[:, :, :0], hp_res)
+        kernels = self._residual_estimator().kernels
+        if outputs is not None:
+            kernels = [k if j in outputs else None for j, k in enumerate(kernels)]
+        gp = fit_posterior(kernels, Us, res, Fs[:, :, :0], hp_res)
         return post.predict(Uq, Fq, variance=False)[0] + gp.predict(Uq, Fq[:, :, :0], variance=False)[0]
 
     def _validate(self, options: dict, blocks, Us, Y, Fs, sizes, bounds, resid) -> np.ndarray:
@@ -495,18 +533,27 @@ class GuardCandidates(NestedConfirmation):
 
     def _choose_cut(self, per_block, labels, confirmed: set, blocks, data) -> np.ndarray:
         """The first choice, with the outputs whose two-stage GP is cut (:meth:`_region_scan`)
-        scored by the nested cross-validation (learnt on all samples, the cut GP's plain scores
-        recalled the blocks: issue #14's arm, joint 3, 0.0138 plain against 0.0064 nested); where
-        the cut then loses, its output's two stages go back to the uncut GP, scored plain (and
+        scored on folds of every sample outside each block (:meth:`_outside`), they and PR both:
+        a cut GP's side above its onset sees rare states, and the ≤ 1,000-sample subset's folds
+        left it too few of them (issue #14's arm at 4,000 samples: 37 against the final model's
+        310; fitted on those the cut GP overshot the last block, 0.099 against PR's 0.020). The
+        cut is screened by the plain scores (the all-sample hyperparameters) and, where it wins,
+        confirmed by the nested ones (re-learnt per fold: 0.0011 there). Where the cut loses, its
+        output's two stages go back to the uncut GP, scored plain on the subset's folds (and
         confirmed nested by :meth:`_confirm_two_stage` if they win). ``per_block``,
         ``confirmed`` and ``_two_stage_hp`` are updated in place."""
         cut = self._cut_outputs() if TWO_STAGE in labels else []
-        if cut:
-            t = labels.index(TWO_STAGE)
-            per_block[t][:, cut] = self._two_stage_nested(cut, blocks, data, every_sample=True)[:, cut]
-            confirmed.update(cut)
+        if not cut:
+            return self._choose(per_block, labels)
+        t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
+        per_block[p][:, cut] = self._parametric_outside(blocks, data)[:, cut]
+        per_block[t][:, cut] = self._two_stage_plain(cut, blocks, data, every_sample=True)[:, cut]
+        won = [j for j in cut if self._choose(per_block, labels)[j] == t]
+        if won:
+            per_block[t][:, won] = self._two_stage_nested(won, blocks, data, every_sample=True)[:, won]
+            confirmed.update(won)
         choice = self._choose(per_block, labels)
-        lost = [j for j in cut if choice[j] != labels.index(TWO_STAGE)]
+        lost = [j for j in cut if choice[j] != t]
         if lost:
             hp_pr, hp = self._two_stage_hp
             uncut = self._uncut_residual
@@ -514,21 +561,37 @@ class GuardCandidates(NestedConfirmation):
             for j in lost:
                 log_sigma_v[j], theta[j] = uncut.log_sigma_v[j], uncut.theta[j]
             self._two_stage_hp = hp_pr, Hyperparameters(hp.log_sigma_w, log_sigma_v, tuple(theta))
-            per_block[t][:, lost] = self._two_stage_plain(blocks, data)[:, lost]
+            per_block[t][:, lost] = self._two_stage_plain(lost, blocks, data)[:, lost]
             confirmed.difference_update(lost)
             choice = self._choose(per_block, labels)
         return choice
 
-    def _two_stage_plain(self, blocks, data) -> np.ndarray:
+    def _two_stage_plain(self, outputs, blocks, data, every_sample: bool = False) -> np.ndarray:
         """(blocks, n) nMSE of the two-stage candidate in the plain blocked cross-validation (its
-        hyperparameters the all-sample ones)."""
+        hyperparameters the all-sample ones), the GPs of ``outputs`` only (the other columns are
+        PR's); ``every_sample``: each block predicted from every sample outside it
+        (:meth:`_outside`)."""
         Us, Y, Fs = data
-        return self._nested_scores(
-            lambda f, v: self._two_stage_mean(*self._two_stage_hp, Us[f], Y[f], Fs[f], Us[v], Fs[v]),
-            blocks,
-            Y,
-            "cross-validation of the uncut two stages",
-        )
+        outside = self._outside if every_sample else (lambda f, v: f)
+
+        def mean(f, v):
+            f = outside(f, v)
+            return self._two_stage_mean(*self._two_stage_hp, Us[f], Y[f], Fs[f], Us[v], Fs[v], outputs)
+
+        stage = "every sample" if every_sample else "the subset"
+        return self._nested_scores(mean, blocks, Y, f"cross-validation of two stages on {stage}")
+
+    def _parametric_outside(self, blocks, data) -> np.ndarray:
+        """(blocks, n) nMSE of PR (the parametric fallback) with each block predicted from every
+        sample outside it (:meth:`_outside`): the folds a cut GP is scored on."""
+        Us, Y, Fs = data
+        hp_pr = self._two_stage_hp[0]
+
+        def mean(f, v):
+            f = self._outside(f, v)
+            return fit_posterior([None] * Y.shape[1], Us[f], Y[f], Fs[f], hp_pr).predict(Us[v], Fs[v], variance=False)[0]
+
+        return self._nested_scores(mean, blocks, Y, "cross-validation of PR on every sample")
 
     def _confirm_two_stage(self, per_block, labels, choice, confirmed: set, blocks, data) -> np.ndarray:
         """Where two stages are chosen on plain scores (outputs not in ``confirmed``), replace
@@ -583,6 +646,33 @@ class _OutputLikelihood:
     def with_samples(self, extra) -> _OutputLikelihood:
         """The same likelihood on its samples and ``extra`` (indices)."""
         return _OutputLikelihood(self.kernel, self.Us, self.y, self.log_sigma_v, np.union1d(self.samples, extra))
+
+    def hard_cuts(self, inner, onsets, amplitudes) -> np.ndarray:
+        """(onsets, A, A) negative log likelihood of the cut GP at each onset (a hard step: the
+        two sides independent), the base kernel ``inner`` scaled by each of ``amplitudes`` (A)
+        below and above: each side's k_0 is diagonalised once and every amplitude then costs
+        O(n), where the kernel itself (:meth:`__call__`) factorises all A² pairs. The region
+        scan's (a start for :meth:`GuardCandidates._place_onset`, which uses the kernel)."""
+        idx = self.samples
+        X, y = self.Us[idx], self.y[idx]
+        K0 = self.kernel.kernel(X, X, inner)
+        noise = np.exp(2.0 * self.log_sigma_v)
+        s2 = np.asarray(amplitudes, float)[:, None] ** 2
+
+        def side(mask):
+            if not mask.any():
+                return np.zeros(len(s2))
+            lam, V = np.linalg.eigh(K0[np.ix_(mask, mask)])
+            d = s2 * np.maximum(lam, 0.0) + noise  # (A, n_side)
+            z2 = (V.T @ y[mask]) ** 2
+            return 0.5 * (np.log(d).sum(1) + (z2 / d).sum(1) + mask.sum() * np.log(2 * np.pi))
+
+        x = X[:, self.kernel.dim]
+        out = np.empty((len(onsets), len(s2), len(s2)))
+        for i, c in enumerate(onsets):
+            below = x < c
+            out[i] = side(below)[:, None] + side(~below)[None, :]
+        return out
 
     def __call__(self, theta) -> float:
         idx = self.samples

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace
-from diegocal.sgp.gp import Hyperparameters
+from diegocal.sgp.gp import Hyperparameters, fit_posterior
+from diegocal.sgp import nested
 from diegocal.sgp.guard import TWO_STAGE
 from diegocal.sgp.kernels import REGION_OFF
 
@@ -66,25 +67,73 @@ def test_the_guard_keeps_the_cut_and_predicts_a_new_run_better_than_without_it(f
     assert err["cut"] < err["uncut"] / 3, err
 
 
+def _choose_cut(est, U, Y, F, monkeypatch, plain=None, nested=None):
+    """Run the guard's first choice on the fitted cut estimator, its every-sample plain and
+    nested scores of the cut replaced by ``plain`` and ``nested`` ((blocks, n) or None: the
+    real ones); returns (confirmed outputs, the nested calls' outputs)."""
+    monkeypatch.setattr(est, "_two_stage_hp", est._two_stage_hp)  # restored after the test
+    monkeypatch.setattr(est, "_raw", (U, F), raising=False)
+    labels = list(est.validation_blocks_)
+    per_block = np.array([est.validation_blocks_[label].copy() for label in labels])
+    blocks = np.array_split(np.arange(len(U)), 5)
+    calls = []
+    real_plain = type(est)._two_stage_plain
+
+    def stub_plain(self, outputs, b, data, every_sample=False):
+        return plain if every_sample and plain is not None else real_plain(self, outputs, b, data, every_sample)
+
+    def stub_nested(self, outputs, b, data, **_):
+        calls.append(list(outputs))
+        return nested
+
+    monkeypatch.setattr(type(est), "_two_stage_plain", stub_plain)
+    if nested is not None:
+        monkeypatch.setattr(type(est), "_two_stage_nested", stub_nested)
+    Us, Fs = est._scale(U, F)
+    confirmed = set()
+    est._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
+    assert np.all(np.isfinite(per_block[labels.index(TWO_STAGE)][:, 0]))
+    return confirmed, calls
+
+
 def test_a_cut_that_loses_gives_its_output_back_to_the_uncut_two_stages(fits, monkeypatch):
     """Where the nested cross-validation rejects the cut, the output's two stages are the uncut
     GP again, scored by the plain cross-validation."""
     out, (U, Y, F) = fits
     est = out["cut"]
-    monkeypatch.setattr(est, "_two_stage_hp", est._two_stage_hp)  # restored after the test
-    labels = list(est.validation_blocks_)
-    per_block = np.array([est.validation_blocks_[label].copy() for label in labels])
-    blocks = np.array_split(np.arange(len(U)), 5)
-    def rejected(self, outputs, b, data, **_):
-        return np.full((len(b), 2), np.inf)
-
-    monkeypatch.setattr(type(est), "_two_stage_nested", rejected)
-    Us, Fs = est._scale(U, F)
-    confirmed = set()
-    est._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
+    zeros, worst = np.zeros((5, 2)), np.full((5, 2), np.inf)
+    confirmed, calls = _choose_cut(est, U, Y, F, monkeypatch, plain=zeros, nested=worst)
+    assert calls == [[0]]  # its plain scores won: confirmed nested, and the nested ones lose
     assert est._two_stage_hp[1].theta[0][0] == REGION_OFF
-    assert np.all(np.isfinite(per_block[labels.index(TWO_STAGE)][:, 0]))
     assert 0 not in confirmed
+
+
+def test_a_cut_whose_plain_scores_lose_is_not_confirmed_nested(fits, monkeypatch):
+    """The every-sample plain scores screen the cut: where they lose to the guard's other choice,
+    the (costly) nested refits are not run and the output goes back to the uncut GP."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    big = np.full((5, 2), 10.0)
+    confirmed, calls = _choose_cut(est, U, Y, F, monkeypatch, plain=big, nested=np.zeros((5, 2)))
+    assert calls == []
+    assert est._two_stage_hp[1].theta[0][0] == REGION_OFF
+    assert 0 not in confirmed
+
+
+def test_a_cut_output_is_judged_against_pr_on_the_same_folds(fits, monkeypatch):
+    """PR's scores for a cut output come from the same every-sample folds as the cut GP's."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    monkeypatch.setattr(est, "_raw", (U, F), raising=False)
+    Us, Fs = est._scale(U, F)
+    blocks = np.array_split(np.arange(0, len(U), 3), 5)  # a subset's blocks, as above hyper_max
+    scores = est._parametric_outside(blocks, (Us, Y, Fs))
+    hp_pr = est._two_stage_hp[0]
+    for b, val in enumerate(blocks):
+        fit = est._outside(None, val)
+        post = fit_posterior([None, None], Us[fit], Y[fit], Fs[fit], hp_pr)
+        mean = post.predict(Us[val], Fs[val], variance=False)[0]
+        np.testing.assert_allclose(scores[b], np.mean((mean - Y[val]) ** 2, axis=0) / est.y_std_**2)
 
 
 def test_a_model_saved_before_region_kernels_loads_uncut(fits):
@@ -123,7 +172,7 @@ def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkey
     Us, Fs = est._scale(U, F)
     fit_idx, val_idx = np.arange(len(U) // 2), np.arange(len(U) // 2, len(U))  # a fold's scaling differs
     est._two_stage_fold([0], fit_idx, val_idx, (Us, Y, Fs))
-    fold = made[-1]
+    fold = next(e for e in made if hasattr(e, "hyper_"))  # the one that fitted (others learnt)
     assert not np.isclose(fold.u_mean_[0], est.u_mean_[0])
     np.testing.assert_allclose(fold.hyper_.theta[0][0] * fold.u_std_[0] + fold.u_mean_[0], onset, rtol=1e-12)
 
@@ -140,6 +189,7 @@ def test_a_cut_gp_is_scored_on_every_sample_outside_the_block(fits, monkeypatch)
         return np.zeros((len(val_idx), 2))
 
     monkeypatch.setattr(type(est), "_two_stage_fold", fold)
+    monkeypatch.setattr(est, "_raw", (U, F), raising=False)
     blocks = np.array_split(np.arange(0, len(U), 3), 5)  # a subset's blocks, as above hyper_max
     Us, Fs = est._scale(U, F)
     for every in (False, True):
@@ -149,3 +199,17 @@ def test_a_cut_gp_is_scored_on_every_sample_outside_the_block(fits, monkeypatch)
             outside = np.flatnonzero((np.arange(len(U)) < val_idx.min()) | (np.arange(len(U)) > val_idx.max()))
             expected = outside if every else np.setdiff1d(np.concatenate(blocks), val_idx)
             np.testing.assert_array_equal(np.sort(fit_idx), expected)
+
+
+def test_a_cut_gps_folds_are_capped_at_outside_max_samples_evenly_in_time(fits, monkeypatch):
+    """Above OUTSIDE_MAX samples outside the block (a long log; the folds are fitted exactly),
+    the fold keeps that many, evenly spaced in time, none inside the block's span."""
+    out, (U, _, F) = fits
+    est = out["cut"]
+    monkeypatch.setattr(est, "_raw", (U, F), raising=False)
+    monkeypatch.setattr(nested, "OUTSIDE_MAX", 100)
+    val = np.arange(300, 480)
+    fit = est._outside(None, val)
+    assert len(fit) == 100 and fit[0] == 0 and fit[-1] == len(U) - 1
+    assert not np.any((fit >= 300) & (fit < 480))
+    assert np.ptp(np.diff(fit[fit < 300])) <= 1  # evenly: steps differ by rounding only
