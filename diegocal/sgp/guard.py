@@ -589,7 +589,8 @@ class GuardCandidates(NestedConfirmation):
 
         def mean(f, v):
             f = self._outside(f, v)
-            return fit_posterior([None] * Y.shape[1], Us[f], Y[f], Fs[f], hp_pr).predict(Us[v], Fs[v], variance=False)[0]
+            post = fit_posterior([None] * Y.shape[1], Us[f], Y[f], Fs[f], hp_pr)
+            return post.predict(Us[v], Fs[v], variance=False)[0]
 
         return self._nested_scores(mean, blocks, Y, "cross-validation of PR on every sample")
 

@@ -7,9 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace
+from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace, nested
 from diegocal.sgp.gp import Hyperparameters, fit_posterior
-from diegocal.sgp import nested
 from diegocal.sgp.guard import TWO_STAGE
 from diegocal.sgp.kernels import REGION_OFF
 
