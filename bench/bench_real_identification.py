@@ -1,7 +1,7 @@
 """Real robots: PR vs SGP inverse-dynamics identification judged on held-out torques (thesis ch. 3).
 
     .venv/bin/python bench/bench_real_identification.py [--data DIR] [--tx40-stride 2]
-                                                        [--tiago-stride 8] [--no-floor] [--region]
+                                                        [--tiago-stride 8] [--no-floor] [--no-region]
 
 The real-robot logs of ``sample_data/real`` (Stäubli TX40, PAL TIAGo; README there: imported by
 ``diegocal import`` with zero-phase low-pass, derivatives, documented unit conversions), split
@@ -152,10 +152,10 @@ class Result:
     std: np.ndarray | None = None
 
 
-def fit_predict(split: Split, method: str, seed: int, region: bool = False) -> Result:
+def fit_predict(split: Split, method: str, seed: int, no_region: bool = False) -> Result:
     """Fit ``method`` ("pr", "sgp", "sgp floor") on the split's training part, predict held-out;
-    ``region``: the SGPs with Guard.region (``sgp-fit --region``)."""
-    guard = replace(default_guard(SGPOptions().friction), region=True) if region else None
+    ``no_region``: the SGPs without Guard.region (``sgp-fit --no-region``)."""
+    guard = replace(default_guard(SGPOptions().friction), region=False) if no_region else None
     if method == "sgp floor":
         options = SGPOptions(kind="sgp", seed=seed, min_noise=NOISE_FLOOR, guard_options=guard)
     else:
@@ -239,7 +239,7 @@ def main(argv=None) -> int:
     parser.add_argument("--tiago-stride", type=int, default=8, help="TIAGo training subsampling")
     parser.add_argument("--no-floor", action="store_true", help="skip the 'SGP floor' row")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--region", action="store_true", help="SGP with Guard.region (sgp-fit --region)")
+    parser.add_argument("--no-region", action="store_true", help="SGP without Guard.region (sgp-fit --no-region)")
     args = parser.parse_args(argv)
     if not (args.data / "tx40.h5").exists() or not (args.data / "tiago.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
@@ -255,7 +255,7 @@ def main(argv=None) -> int:
                                                                      args.tiago_stride)]
     print("TIAGo: arm_5..7 efforts unusable (README): not fitted, not scored; torso in N.")
     for split in splits:
-        results = baselines(split) + [fit_predict(split, m, args.seed, args.region) for m in methods]
+        results = baselines(split) + [fit_predict(split, m, args.seed, args.no_region) for m in methods]
         report(split, results)
     if not args.no_floor:
         print(f"\nSGP floor = the SGP with σ_v ≥ {NOISE_FLOOR}·std(τ_j), SGPOptions(min_noise=...); "

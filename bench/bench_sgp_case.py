@@ -1,6 +1,6 @@
 """Issue #14's case: the 3-link arm with a hidden cable-like friction on joint 3, 4,000 samples.
 
-    python bench/bench_sgp_case.py [--duration 40] [--region]
+    python bench/bench_sgp_case.py [--duration 40] [--no-region]
 
 ``diegocal simulate dynamics --robot arm3 --effect position_friction:joint3 --duration 40
 --seed 11`` trains; the test logs are ``--seed 12``'s trajectory twice: as the issue ran it (the
@@ -51,11 +51,11 @@ def simulate(robot, seed: int, friction=None, duration: float = 40.0):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=40.0, help="training run, s (100 Hz)")
-    parser.add_argument("--region", action="store_true", help="add 'SGP region': SGP auto with sgp-fit --region")
+    parser.add_argument("--no-region", action="store_true", help="add 'SGP no region': SGP auto with sgp-fit --no-region")
     args = parser.parse_args()
     fits = dict(FITS)
-    if args.region:
-        fits["SGP region"] = SGPOptions(kind="sgp", guard_options=replace(DEFAULT_GUARD, region=True))
+    if args.no_region:
+        fits["SGP no region"] = SGPOptions(kind="sgp", guard_options=replace(DEFAULT_GUARD, region=False))
     sys.stdout.reconfigure(line_buffering=True)
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     print(f"diegocal commit {head or 'unknown'}; load average {os.getloadavg()[0]:.1f}")

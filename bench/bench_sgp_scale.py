@@ -161,16 +161,16 @@ def has_gpytorch() -> bool:
 
 
 # ----------------------------------------------------------------------------- table 1
-def rows_at(N: int, gpytorch: bool, region: bool = False, references: bool = True) -> list:
-    """(label, options | "sklearn" | "gpytorch") of the fits run at N; ``region``: also the SGP
-    with Guard.region (``sgp-fit --region``); without ``references`` no scikit-learn/GPyTorch."""
+def rows_at(N: int, gpytorch: bool, no_region: bool = False, references: bool = True) -> list:
+    """(label, options | "sklearn" | "gpytorch") of the fits run at N; ``no_region``: also the SGP
+    without Guard.region (``sgp-fit --no-region``); without ``references`` no scikit-learn/GPyTorch."""
     auto = "exact" if N <= SGPOptions.exact_max else "sparse"
     other = "sparse" if auto == "exact" else "exact"
     rows = [("pr", SGPOptions(kind="pr")), ("prgp", SGPOptions(kind="prgp")), (f"sgp auto ({auto})", SGPOptions())]
     if N >= 2000 and (other == "sparse" or N <= EXACT_MAX):
         rows.append((f"sgp {other}", SGPOptions(inference=other)))
-    if region:
-        rows.append(("sgp region", SGPOptions(guard_options=replace(DEFAULT_GUARD, region=True))))
+    if no_region:
+        rows.append(("sgp no region", SGPOptions(guard_options=replace(DEFAULT_GUARD, region=False))))
     if references and N <= SKLEARN_MAX:
         rows.append(("sklearn", "sklearn"))
     if references and gpytorch and N <= GPYTORCH_MAX:
@@ -196,7 +196,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help=f"sizes {QUICK}")
     ap.add_argument("--sizes", default=None, help="comma list of training sizes")
     ap.add_argument("--no-gpytorch", action="store_true")
-    ap.add_argument("--region", action="store_true", help="add the SGP with sgp-fit --region")
+    ap.add_argument("--no-region", action="store_true", help="add the SGP with sgp-fit --no-region")
     ap.add_argument("--no-references", action="store_true", help="no scikit-learn or GPyTorch rows")
     args = ap.parse_args(argv)
     sizes = QUICK if args.quick else SIZES
@@ -220,14 +220,14 @@ def main(argv=None) -> int:
     print(line + "\n" + "-" * len(line))
     blocks = {}
     for N in sizes:
-        for label, opts in rows_at(N, gpytorch, args.region, not args.no_references):
+        for label, opts in rows_at(N, gpytorch, args.no_region, not args.no_references):
             wall, cpu, mib, predict = fit_one(robot, train, N, opts)
             sq = (predict(qt, qdt, qddt) - taut) ** 2 / taut.var(axis=0)
             blocks[(N, label.split(" (")[0])] = block_mse(sq, labels)
             err = np.array2string(sq.mean(axis=0), precision=5)
             mem = "-" if label == "gpytorch" else f"{mib:.1f}"
             print(f"{N:6d}  {label:18s} {wall:8.1f} {cpu:8.1f} {mem:>9}  {err}")
-    for sgp in ("sgp auto", "sgp region") if args.region else ("sgp auto",):
+    for sgp in ("sgp auto", "sgp no region") if args.no_region else ("sgp auto",):
         print(f"\n{load()}\n\n{sgp} against PR and PRGP, per joint: nMSE difference ± one SE over {BLOCKS} blocks")
         for N in sizes:
             cells = []

@@ -112,11 +112,11 @@ def sgp_fit(
     region: Annotated[
         bool,
         typer.Option(
-            "--region",
+            "--region/--no-region",
             help="SGP guard: let each joint's two-stage GP be cut at an onset in the joint's angle (a friction "
-            "confined to part of the range); the guard's nested cross-validation decides. Slower.",
+            "confined to part of the range); the guard's nested cross-validation decides.",
         ),
-    ] = False,
+    ] = True,
     gp_inputs: Annotated[
         str | None,
         typer.Option(
@@ -179,8 +179,8 @@ def sgp_fit(
         gp_inputs=split_words(gp_inputs) if gp_inputs is not None else None,
         min_noise=min_noise,
     )
-    if region:
-        opts = replace(opts, guard_options=replace(default_guard(opts.friction), region=True))
+    if not region:
+        opts = replace(opts, guard_options=replace(default_guard(opts.friction), region=False))
     data = load_log(log)
     rob = robot_for_log(robot, data)
     with fit_progress(quiet) as progress:

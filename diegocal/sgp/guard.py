@@ -130,12 +130,15 @@ class Guard:
     region : bool
         With ``two_stage``: each output's GP on PR's residual may be cut at an onset in its
         joint's angle (:class:`~diegocal.sgp.kernels.Region`, :meth:`~GuardCandidates.
-        _region_scan`; the model gives the estimator its ``region_inputs``), a cut GP scored by
-        the nested cross-validation on every sample outside each block. Off by default (``sgp-fit
-        --region``): on issue #14's arm it beats PRGP on joint 3 at 2,000 and 4,000 samples
-        (0.0017 against 0.0068 and 0.0041), but it costs 10-22 CPU-s per fit (the scale targets:
-        exact 5,000 samples ≤ 30 s) and its every-sample folds tilt the choice toward the cut, which
-        the real robots and the thesis experiments (≤ 1,000 samples) cannot test.
+        _region_scan`; the model gives the estimator its ``region_inputs``). A cut GP and PR are
+        scored on folds of every sample outside each block (:meth:`~GuardCandidates._choose_cut`),
+        screened by the plain scores, confirmed by the nested ones. On in DEFAULT_GUARD (``sgp-fit
+        --no-region`` turns it off): on issue #14's arm it beats PRGP on joint 3 at 2,000 and
+        4,000 samples (0.0017 against 0.0068 and 0.0041) and on the scale bench's run at 1,000 and
+        20,000 (bench_sgp_scale); it costs the scan (a few CPU-s) and, where a cut is kept, the
+        nested refits (about 10 CPU-s). The joint candidates are still scored on the subset's
+        folds, which the final model's data would improve too: the comparison favours the cut
+        against them (not against PR).
     """
 
     max_lengthscale: float | None = None

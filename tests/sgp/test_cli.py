@@ -168,23 +168,24 @@ def test_predict_warns_when_the_torques_fall_outside_the_two_sigma_band_too_ofte
     assert len(warnings) == 1 and "below 0.85 on elbow" in warnings[0] and "shoulder" not in warnings[0], r.output
 
 
-def test_sgp_fit_region_is_recorded_and_the_model_reloads_with_it(logs, arm2_dir, tmp_path):
-    """`--region` (Guard.region, off by default) is written to sgp.yaml's guard options; the
-    reloaded model rebuilds the estimator with the joints' angles as region inputs and predicts
-    exactly as the fitted one."""
+def test_sgp_fit_region_is_the_default_and_no_region_is_recorded(logs, arm2_dir, tmp_path):
+    """Guard.region is on by default: the reloaded model rebuilds the estimator with the joints'
+    angles as region inputs and predicts exactly as the fitted one; `--no-region` is written to
+    sgp.yaml's guard options and reloads without them."""
     from diegocal.robot import load_robot
     from diegocal.sgp import fit_dynamics
     from diegocal.sgp.store import load_model
 
     train, test = logs
     out = tmp_path / "r.sgp"
-    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "--region", "-q", "-o", str(out)])
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-q", "-o", str(out)])
     assert r.exit_code == 0, r.output
-    s = load_yaml(out / "sgp.yaml")
-    assert s["options"]["guard_options"]["region"] is True
     model = load_model(out)
     assert model.gp_.region_inputs == (0, 1)  # q.shoulder, q.elbow
     fitted = fit_dynamics(load_log(train), load_robot(arm2_dir), model.options)
     np.testing.assert_allclose(model.predict(load_log(test)).tau, fitted.predict(load_log(test)).tau, rtol=1e-9)
-    default = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-q", "-o", str(tmp_path / "d.sgp")])
-    assert default.exit_code == 0 and load_model(tmp_path / "d.sgp").gp_.region_inputs is None
+    off = tmp_path / "n.sgp"
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "--no-region", "-q", "-o", str(off)])
+    assert r.exit_code == 0, r.output
+    assert load_yaml(off / "sgp.yaml")["options"]["guard_options"]["region"] is False
+    assert load_model(off).gp_.region_inputs is None
