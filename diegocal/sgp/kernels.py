@@ -313,10 +313,12 @@ class Region(Kernel):
 
     def __call__(self, X1, X2, theta):
         a1, _, a2, _ = self._sides(X1, X2, theta)
-        K0 = self.kernel(X1, X2, theta[3:])
+        K = self.kernel(X1, X2, theta[3:])
         if not (a1.any() or a2.any()):  # off: every input below the onset
-            return K0
-        return self._scale(a1, a2, theta) * K0
+            return K
+        for rows in np.array_split(np.arange(len(K)), max(1, len(K) // 512)):  # K ∘ S in place, S by rows
+            K[rows] *= self._scale(a1[rows], a2, theta)
+        return K
 
     def _scale(self, a1, a2, theta) -> np.ndarray:
         """S = b bᵀ + r² a aᵀ, (N1, N2)."""

@@ -5,8 +5,9 @@ joint 3, 4,000 training samples, the default ``--inference auto`` (sparse above 
 --seed 11`` trains; the test logs are ``--seed 12``'s trajectory twice: as the issue ran it (the
 simulator then also draws another friction: another robot) and of the same robot (seed 11's
 friction, :func:`experiments.sgp.common.same_robot`). The SGP must beat PR on joint 3 (nMSE at
-most 0.8× PR's) on both, never lose to PR by more than one standard error of the paired per-block
-difference (10 contiguous blocks of the test log), and its ±2σ band, PR's and PRGP's must cover
+most 0.8× PR's) on both, never lose to PR or PRGP by more than one standard error of the paired
+per-block difference (10 contiguous blocks of the test log), beat PRGP on joint 3 by more than
+one, and its ±2σ band, PR's and PRGP's must cover
 0.85-0.99 of the same robot's held-out torques on every joint.
 """
 
@@ -56,6 +57,9 @@ def test_sgp_beats_pr_where_the_friction_acts_and_loses_nowhere(case, test):
     assert sgp.mean(0)[2] <= 0.8 * pr.mean(0)[2]  # joint 3: the hidden friction
     diff, se = paired_se(sgp, pr)
     assert np.all(diff <= se), f"SGP − PR nMSE per joint {diff} against SE {se}"
+    diff, se = paired_se(sgp, block_mse(err["prgp"], labels))  # round 6: a GP cut at the onset
+    assert np.all(diff <= se), f"SGP − PRGP nMSE per joint {diff} against SE {se}"
+    assert diff[2] < -se[2]  # better than PRGP where the friction acts
 
 
 def test_coverage_of_the_same_robot_is_calibrated(case):
