@@ -335,12 +335,15 @@ class GuardCandidates(NestedConfirmation):
     def _learn_residual(self, U, res, F, outputs, start=None, inference=None, jobs=None, quiet=False):
         """The hyperparameters of the GPs on PR's residual ``res`` for ``outputs``, learnt by ML-II
         one output at a time (from ``start``, a Hyperparameters of every output, if given; the
-        other outputs' kernel parameters are empty). Without features their likelihoods are
+        other outputs' kernel parameters are empty and their σ_v ``start``'s, or the first
+        output's run's noise-only ones). Without features their likelihoods are
         independent, and one optimiser over all outputs stops when the *sum* no longer improves
         by FTOL, which on issue #14's scale-bench arm at 5,000 samples took 25 CPU-s against 9 for
         the three outputs apart (the same joint-3 optimum to 0.006 in log ℓ)."""
         n = len(self.kernels)
         log_sigma_w, log_sigma_v, theta = 0.0, np.zeros(n), [np.zeros(0)] * n
+        if start is not None:
+            log_sigma_w, log_sigma_v = start.log_sigma_w, np.array(start.log_sigma_v, float)
         for j in outputs:
             kernels = [k if i == j else None for i, k in enumerate(self.kernels)]
             est = self._residual_estimator(kernels, inference, jobs)
@@ -351,7 +354,7 @@ class GuardCandidates(NestedConfirmation):
                 masked = tuple(t if i == j else np.zeros(0) for i, t in enumerate(start.theta))
                 one = Hyperparameters(start.log_sigma_w, start.log_sigma_v, masked)
             hp = est.learn(U, res, F, start=one)
-            if j == outputs[0]:
+            if j == outputs[0] and start is None:
                 log_sigma_w, log_sigma_v = hp.log_sigma_w, hp.log_sigma_v.copy()
             log_sigma_v[j], theta[j] = hp.log_sigma_v[j], hp.theta[j]
         return Hyperparameters(log_sigma_w, log_sigma_v, tuple(theta))
@@ -424,7 +427,8 @@ class GuardCandidates(NestedConfirmation):
         Coarse to fine: REGION_PLACE_MAX midpoints evenly among those left are tried, with the
         likelihood on its spaced samples and at most REGION_SCAN_MAX samples in their range, and
         the range narrows to the best one's neighbours until it holds no more midpoints than are
-        tried (then every sample in it counts, and so every midpoint is told apart). The gain is
+        tried (then every sample in it counts, unless more than REGION_SCAN_MAX share those few
+        angles). The gain is
         the likelihood's on its spaced samples and at most REGION_SCAN_MAX samples in the bracket.
         (Every sample of a bracket, as before, took 1,000 samples per likelihood at 20,000 and
         16 CPU-s per fit.)"""
@@ -542,13 +546,14 @@ class GuardCandidates(NestedConfirmation):
         310; fitted on those the cut GP overshot the last block, 0.099 against PR's 0.020). The
         cut is screened by the plain scores (the all-sample hyperparameters) and, where it wins,
         confirmed by the nested ones (re-learnt per fold: 0.0011 there). Where the cut loses, its
-        output's two stages go back to the uncut GP, scored plain on the subset's folds (and
-        confirmed nested by :meth:`_confirm_two_stage` if they win). ``per_block``,
+        output's two stages go back to the uncut GP, scored plain on the subset's folds, and PR
+        to its subset scores (confirmed nested by :meth:`_confirm_two_stage` if they win). ``per_block``,
         ``confirmed`` and ``_two_stage_hp`` are updated in place."""
         cut = self._cut_outputs() if TWO_STAGE in labels else []
         if not cut:
             return self._choose(per_block, labels)
         t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
+        pr_subset = per_block[p].copy()
         per_block[p][:, cut] = self._parametric_outside(blocks, data)[:, cut]
         per_block[t][:, cut] = self._two_stage_plain(cut, blocks, data, every_sample=True)[:, cut]
         won = [j for j in cut if self._choose(per_block, labels)[j] == t]
@@ -565,6 +570,7 @@ class GuardCandidates(NestedConfirmation):
                 log_sigma_v[j], theta[j] = uncut.log_sigma_v[j], uncut.theta[j]
             self._two_stage_hp = hp_pr, Hyperparameters(hp.log_sigma_w, log_sigma_v, tuple(theta))
             per_block[t][:, lost] = self._two_stage_plain(lost, blocks, data)[:, lost]
+            per_block[p][:, lost] = pr_subset[:, lost]  # every candidate of the output on the subset's folds
             confirmed.difference_update(lost)
             choice = self._choose(per_block, labels)
         return choice
@@ -671,6 +677,9 @@ class _OutputLikelihood:
             z2 = (V.T @ y[mask]) ** 2
             return 0.5 * (np.log(d).sum(1) + (z2 / d).sum(1) + mask.sum() * np.log(2 * np.pi))
 
+        # a sample exactly at an onset is above it here and half on each side in the kernel (a =
+        # 0.5), and the amplitudes scale all of k_0 where the scan scales its first σ_z: equal
+        # for one SE kernel; either way only the scan's start differs, _place_onset uses the kernel
         x = X[:, self.kernel.dim]
         out = np.empty((len(onsets), len(s2), len(s2)))
         for i, c in enumerate(onsets):

@@ -316,7 +316,8 @@ class Region(Kernel):
         K = self.kernel(X1, X2, theta[3:])
         if not (a1.any() or a2.any()):  # off: every input below the onset
             return K
-        for rows in np.array_split(np.arange(len(K)), max(1, len(K) // 512)):  # K ∘ S in place, S by rows
+        for start in range(0, len(K), 512):  # K ∘ S in place, S by rows
+            rows = slice(start, start + 512)
             K[rows] *= self._scale(a1[rows], a2, theta)
         return K
 

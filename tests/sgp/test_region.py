@@ -9,8 +9,8 @@ import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace, nested
 from diegocal.sgp.gp import Hyperparameters, fit_posterior
-from diegocal.sgp.guard import TWO_STAGE
-from diegocal.sgp.kernels import REGION_OFF
+from diegocal.sgp.guard import TWO_STAGE, _OutputLikelihood
+from diegocal.sgp.kernels import REGION_OFF, is_amplitude
 
 ONSET = 0.5  # rad: output 0 has a friction above it
 W_TRUE = np.array([1.0, 0.5])
@@ -74,7 +74,8 @@ def _choose_cut(est, U, Y, F, monkeypatch, plain=None, nested=None):
     monkeypatch.setattr(est, "_raw", (U, F), raising=False)
     labels = list(est.validation_blocks_)
     per_block = np.array([est.validation_blocks_[label].copy() for label in labels])
-    blocks = np.array_split(np.arange(len(U)), 5)
+    blocks = np.array_split(np.arange(0, len(U), 3), 5)  # a subset's blocks, as above hyper_max
+    pr_before = per_block[labels.index("parametric")][:, 0].copy()
     calls = []
     real_plain = type(est)._two_stage_plain
 
@@ -92,6 +93,11 @@ def _choose_cut(est, U, Y, F, monkeypatch, plain=None, nested=None):
     confirmed = set()
     est._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
     assert np.all(np.isfinite(per_block[labels.index(TWO_STAGE)][:, 0]))
+    pr = per_block[labels.index("parametric")][:, 0]
+    if 0 in confirmed:  # the cut kept: PR on the cut's folds
+        np.testing.assert_array_equal(pr, est._parametric_outside(blocks, (Us, Y, Fs))[:, 0])
+    else:  # the cut lost: every candidate of the output back on the subset's folds
+        np.testing.assert_array_equal(pr, pr_before)
     return confirmed, calls
 
 
@@ -117,6 +123,39 @@ def test_a_cut_whose_plain_scores_lose_is_not_confirmed_nested(fits, monkeypatch
     assert calls == []
     assert est._two_stage_hp[1].theta[0][0] == REGION_OFF
     assert 0 not in confirmed
+
+
+def test_a_cut_that_wins_is_confirmed_nested_against_pr_on_its_folds(fits, monkeypatch):
+    """Plain and nested scores both winning, the cut is kept, confirmed, and PR's scores for its
+    output are those of the same every-sample folds (checked in _choose_cut above)."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    confirmed, calls = _choose_cut(est, U, Y, F, monkeypatch, plain=np.zeros((5, 2)), nested=np.zeros((5, 2)))
+    assert calls == [[0]] and 0 in confirmed
+    assert est._two_stage_hp[1].theta[0][0] < REGION_OFF
+
+
+def test_the_scan_of_hard_cuts_is_the_kernels_likelihood_with_a_hard_step(fits):
+    """_OutputLikelihood.hard_cuts (each side diagonalised once) against the Region kernel's own
+    likelihood with a step far sharper than the samples' spacing, every onset and amplitude pair."""
+    out, (U, Y, F) = fits
+    est = out["cut"]
+    res_est = est._residual_estimator()
+    kernel = res_est.kernels[0]
+    Us = (U - est.u_mean_) / est.u_std_
+    base = est._uncut_residual.theta[0]
+    likelihood = _OutputLikelihood(kernel, Us, Y[:, 0] - Y[:, 0].mean(), -3.0, np.arange(0, len(U), 3))
+    onsets = np.quantile(Us[:, 0], [0.1, 0.5, 0.83])
+    amplitudes = (0.1, 1.0, 3.0)
+    scores = likelihood.hard_cuts(base[3:], onsets, amplitudes)
+    amp = 3 + [i for i, name in enumerate(kernel.kernel.names) if is_amplitude(name)][0]
+    for i, c in enumerate(onsets):
+        for b, below in enumerate(amplitudes):
+            for a, above in enumerate(amplitudes):
+                theta = base.copy()
+                theta[:3] = c, np.log(1e-12), np.log(above / below)
+                theta[amp] = base[amp] + np.log(below)
+                assert abs(likelihood(theta) - scores[i, b, a]) < 1e-6
 
 
 def test_a_cut_output_is_judged_against_pr_on_the_same_folds(fits, monkeypatch):
