@@ -51,7 +51,7 @@ def simulate(robot, seed: int, friction=None, duration: float = 40.0):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=40.0, help="training run, s (100 Hz)")
-    parser.add_argument("--no-region", action="store_true", help="add 'SGP no region': SGP auto with sgp-fit --no-region")
+    parser.add_argument("--no-region", action="store_true", help="add 'SGP no region': SGP with sgp-fit --no-region")
     args = parser.parse_args()
     fits = dict(FITS)
     if args.no_region:
