@@ -4,9 +4,10 @@ confined to the elbow's angle in [2.0, 2.5] rad (the simulator's ``position_fric
 
 With the defaults, the guard must cut the elbow's two-stage GP at the friction's onset (read from
 ``/truth`` here to check; the fit never reads it), predict the elbow at most 0.6× PR's nMSE, and
-lose to PR on no joint by more than one standard error of the paired per-block difference (or
-0.1 % of PR's nMSE: the joints that fall back differ from PR by rounding only; measured at 2026-11-27: elbow 0.0057 against PR's 0.0131 and PRGP's 0.0201; without the cut the
-guard falls back to PR there).
+lose to PR on no joint by more than one standard error of the paired per-block difference, or
+0.1 % of PR's nMSE (the joints that fall back differ from PR by rounding only). Measured on
+2026-11-27: elbow 0.0057 against PR's 0.0131 and PRGP's 0.0201; without the cut the guard falls
+back to PR there.
 """
 
 import sys
@@ -51,7 +52,9 @@ def test_the_cut_beats_pr_on_the_elbow_and_loses_nowhere(ur5_case):
     robot, _, test, models = ur5_case
     measured = test.stream("tau").data
     labels = split_blocks(test.n_samples, 10).labels()
-    err = {k: block_mse((m.predict(test).tau - measured) ** 2 / measured.var(axis=0), labels) for k, m in models.items()}
+    err = {
+        k: block_mse((m.predict(test).tau - measured) ** 2 / measured.var(axis=0), labels) for k, m in models.items()
+    }
     elbow = robot.joint_names.index("elbow_joint")
     assert err["sgp"].mean(0)[elbow] <= 0.6 * err["pr"].mean(0)[elbow]
     diff, se = paired_se(err["sgp"], err["pr"])
