@@ -556,7 +556,8 @@ class GuardCandidates(NestedConfirmation):
         pr_subset = per_block[p].copy()
         per_block[p][:, cut] = self._parametric_outside(blocks, data)[:, cut]
         per_block[t][:, cut] = self._two_stage_plain(cut, blocks, data, every_sample=True)[:, cut]
-        won = [j for j in cut if self._choose(per_block, labels)[j] == t]
+        screened = self._choose(per_block, labels)
+        won = [j for j in cut if screened[j] == t]
         if won:
             per_block[t][:, won] = self._two_stage_nested(won, blocks, data, every_sample=True)[:, won]
             confirmed.update(won)
