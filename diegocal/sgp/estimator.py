@@ -23,6 +23,7 @@ from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelih
 from diegocal.sgp.guard import FTOL, PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
+from diegocal.sgp.subnormals import flush_subnormals
 
 __all__ = ["Guard", "SemiParametricGP", "Stages"]
 
@@ -131,6 +132,7 @@ class SemiParametricGP(GuardCandidates):
         return (U, Y, F, *self._scale(U, F))
 
     @single_threaded
+    @flush_subnormals
     def learn(self, U, Y, F, start: Hyperparameters | None = None) -> Hyperparameters:
         """The hyperparameters :meth:`fit` would learn, without the posterior (arrays as in fit);
         ``start``: one ML-II start from these instead of §3.3.4's heuristics and the restarts."""
@@ -139,6 +141,7 @@ class SemiParametricGP(GuardCandidates):
         return self._learn(Us, Y, Fs, np.random.default_rng(self.seed), start)
 
     @single_threaded
+    @flush_subnormals
     def fit(
         self,
         U,
