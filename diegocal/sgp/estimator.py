@@ -65,6 +65,11 @@ class SemiParametricGP(GuardCandidates):
     region_inputs : tuple of (int or None) per output, or None: the input column along which the
         two-stage candidate's GP of that output may be cut in two (its joint's angle:
         :class:`~diegocal.sgp.kernels.Region`, :meth:`~GuardCandidates._region_scan`)
+    screen_starts : bool, screen the ML-II starts on a few samples and refine the best
+        (:meth:`_screen`). The model sets it where the guard's cross-validation judges the result
+        (SGP with the guard): a screened start can land in a worse basin, and nothing else would
+        catch it (PRGP on the scale bench's arm fell back to PR's figure at 2,000 and 5,000
+        samples, 0.0083 against 0.0049 and 0.0046 with every start run in full).
     """
 
     def __init__(
@@ -85,10 +90,12 @@ class SemiParametricGP(GuardCandidates):
         jobs: int = 1,
         progress=None,
         region_inputs=None,
+        screen_starts: bool = False,
     ):
         if inference not in ("exact", "sparse"):
             raise ValueError(f"inference must be 'exact' or 'sparse', got {inference!r}")
         self.kernels = list(kernels)
+        self.screen_starts = bool(screen_starts)
         self.use_features = use_features
         self.fit_sigma_w = fit_sigma_w
         self.restarts = int(restarts)
@@ -136,7 +143,7 @@ class SemiParametricGP(GuardCandidates):
         self._raw = (U, F)  # the two-stage candidate's GP scales them as this estimator does
         return (U, Y, F, *self._scale(U, F))
 
-    @single_threaded
+    @single_threaded  # outermost: BLAS threads made when its limit is lifted start unflushed
     @flush_subnormals
     def learn(self, U, Y, F, start: Hyperparameters | None = None) -> Hyperparameters:
         """The hyperparameters :meth:`fit` would learn, without the posterior (arrays as in fit);
@@ -231,6 +238,7 @@ class SemiParametricGP(GuardCandidates):
             jobs=self.jobs if jobs is None else jobs,
             progress=None if say is None else (lambda stage, d, t: say(f"{stage}, GP on PR's residual", d, t)),
             guard=Guard(max_lengthscale=self.guard.max_lengthscale),
+            screen_starts=self.screen_starts,
         )
 
     def _inducing(self, Us, hp: Hyperparameters, rng, kernels=None) -> list:
@@ -415,30 +423,46 @@ class SemiParametricGP(GuardCandidates):
         ok = np.isfinite(res.fun) and res.fun < 1e24
         return (float(res.fun), res.x) if ok else None
 
-    def _screen(self, starts, bounds, sizes, resid, data) -> np.ndarray:
-        """The start to refine: the optimum of the best of ``starts`` by ML-II on SCREEN_SAMPLES of
-        ``data``'s samples evenly spaced in time (the first start where every run fails).
-
-        Why: a likelihood on 1,000 samples costs some 40× one on 250, and the starts mostly pick
-        the basin, not the point in it. On the scale bench's arm (20,000 samples) the three
-        starts of the joint GPs ended within 0.4 nats of each other, and those of each GP on PR's
-        residual within 0.2, each run 25-40 likelihoods of 1,000 samples: 3 full runs per fit
-        and 9 on the residual, about 20 of the 45 CPU-s."""
-        few = evenly(np.arange(len(data[0])), SCREEN_SAMPLES)
-        small = tuple(a[few] for a in data)
+    def _run_starts(self, starts, bounds, sizes, resid, data, stage: str) -> list:
+        """``_optimise`` from each of ``starts`` on ``data``, in ``jobs`` threads (LAPACK drops the
+        GIL), in order; ``stage`` names them on the progress bar."""
         done = []
 
         def run(s):
-            out = self._optimise(s, bounds, sizes, resid, *small, self.maxiter)
-            done.append(1)
-            self._say(f"hyperparameter starts screened on {len(few)} samples", len(done), len(starts))
+            out = self._optimise(s, bounds, sizes, resid, *data, self.maxiter)
+            done.append(1)  # list.append is atomic: a count across threads
+            self._say(stage, len(done), len(starts))
             return out
 
-        found = [r for r in thread_map(run, starts, self.jobs) if r]
-        return min(found, key=lambda r: r[0])[1] if found else starts[0]
+        self._say(stage, 0, len(starts))
+        return thread_map(run, starts, self.jobs)
+
+    def _screen(self, starts, bounds, sizes, resid, data) -> list:
+        """``starts`` in the order to refine them: the optima of their ML-II on SCREEN_SAMPLES of
+        ``data``'s samples evenly spaced in time, best first, then the starts whose screening
+        failed (:meth:`_learn` refines the first, and the next only where a refinement fails).
+
+        Why: a likelihood on 1,000 samples costs some 40× one on 250, and the starts mostly pick
+        the basin, not the point in it. On the scale bench's arm (20,000 samples) the three
+        starts of the joint GPs ended within 3.5 nats of each other, and those of each GP on PR's
+        residual within 0.2, each run 25-40 likelihoods of 1,000 samples: 3 full runs per fit
+        and 9 on the residual. Not always the same basin: on issue #14's case PRGP's screened
+        start refined to a likelihood 7 nats below the best full start's (joint 3 0.0046 against
+        0.0041), and on the reaction wheel PRGP's screened starts did better than the full ones."""
+        few = evenly(np.arange(len(data[0])), SCREEN_SAMPLES)
+        small = tuple(a[few] for a in data)
+        stage = f"hyperparameter starts screened on {len(few)} samples"
+        results = self._run_starts(starts, bounds, sizes, resid, small, stage)
+        found = sorted((r[0], i) for i, r in enumerate(results) if r)  # ties: the earlier start
+        failed = [s for s, r in zip(starts, results, strict=True) if not r]
+        return [results[i][1] for _, i in found] + failed
 
     def _learn(self, Us, Y, Fs, rng, start: Hyperparameters | None = None) -> Hyperparameters:
         """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.
+        With ``screen_starts``, where the hyperparameter subset holds more than 2·SCREEN_SAMPLES
+        samples, the starts are screened on SCREEN_SAMPLES of them and only the best is refined
+        (:meth:`_screen`; the next where its refinement fails). ``n_starts_`` counts the starts,
+        screened or not.
 
         With ``guard.validation_fraction`` the GP then has to earn its place, output by output,
         in a blocked cross-validation (:meth:`_validate`) against a parametric-only fallback
@@ -463,19 +487,15 @@ class SemiParametricGP(GuardCandidates):
             starts = [np.clip(start.pack(), lo, hi)]
         self.n_starts_ = len(starts)
         data = Us[idx], Y[idx], Fs[idx]
-        if len(starts) > 1 and len(idx) > 2 * SCREEN_SAMPLES:
-            starts = [self._screen(starts, bounds, sizes, resid, data)]
-
-        finished = []
-
-        def run(s):
-            out = self._optimise(s, bounds, sizes, resid, *data, self.maxiter)
-            finished.append(1)  # list.append is atomic: a count across threads
-            self._say("hyperparameter starts (ML-II)", len(finished), len(starts))
-            return out
-
-        self._say("hyperparameter starts (ML-II)", 0, len(starts))
-        results = thread_map(run, starts, self.jobs)  # independent starts (LAPACK drops the GIL)
+        stage = "hyperparameter starts (ML-II)"
+        if self.screen_starts and len(starts) > 1 and len(idx) > 2 * SCREEN_SAMPLES:
+            results = []
+            for s in self._screen(starts, bounds, sizes, resid, data):
+                results = self._run_starts([s], bounds, sizes, resid, data, stage)
+                if results[0]:
+                    break
+        else:
+            results = self._run_starts(starts, bounds, sizes, resid, data, stage)
         candidates = [c for c in results if c]
         if not candidates:
             raise NumericalError(
@@ -510,6 +530,7 @@ class SemiParametricGP(GuardCandidates):
 
     # ------------------------------------------------------------------ predict
     @single_threaded
+    @flush_subnormals
     def predict(self, U, F, variance: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """Posterior mean (Nq, n), latent variance (Nq, n) and parametric part f ŵ (Nq, n).
 

@@ -107,7 +107,10 @@ class SGPOptions:
         σ_z and σ_v at the parametric residual; then random): the same starts for every kind
         with a GP, so that GP and PRGP are optimised as hard as the SGP (with one extra start,
         PRGP's GP stopped in the white-noise optimum, ℓ at its floor, on the 3-link arm at
-        4,000 samples: PRGP equal to PR, 0.0107 on joint 3 against 0.0041 with it)
+        4,000 samples: PRGP equal to PR, 0.0107 on joint 3 against 0.0041 with it); with the
+        guard's cross-validation, where the hyperparameter subset (min(N, hyper_max) samples)
+        holds more than 500, the starts are screened on 250 of them and the best is refined
+        (estimator._screen)
     seed : int
     jobs : int, hyperparameter starts optimised in parallel threads
     guard : bool, turn the SGP guard on (``guard_options``, GP on ``gp_inputs``); SGP only
@@ -410,6 +413,7 @@ class DynamicsModel:
             min_noise=o.min_noise,
             progress=None if self.progress is None else functools.partial(self.progress, kind),
             region_inputs=self._region_inputs() if guard and g.region else None,
+            screen_starts=guard and g.validation_fraction > 0,
         )
 
     def _region_inputs(self):

@@ -13,15 +13,15 @@ The modes are bits of the SSE control register (MXCSR), per thread, inherited by
 thread starts (the ``jobs`` workers of :func:`diegocal.parallel.thread_map`). They are set and
 restored through glibc's ``fegetenv``/``fesetenv``, whose x86-64 ``fenv_t`` holds MXCSR at
 byte 28; the first use checks that the bits act (a tiny product is 0) and otherwise turns this
-off. numpy's ``finfo`` is computed here first: computed under FTZ it would warn that the
-smallest subnormal is zero.
+off for the process. numpy's ``finfo`` is computed here first: numpy 1.26 (the oldest we allow)
+computes it on first use and, under FTZ, warns that the smallest subnormal is zero (numpy 2 takes
+it from C).
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
-import ctypes.util
 import functools
 import platform
 import sys
@@ -39,10 +39,10 @@ np.finfo(np.float64), np.finfo(np.float32)  # before any FTZ: finfo caches its s
 
 def _libm():
     """glibc's libm on x86-64 Linux, else None (then :func:`flushed` does nothing)."""
-    if sys.platform != "linux" or platform.machine() != "x86_64":
+    if sys.platform != "linux" or platform.machine() != "x86_64" or ctypes.sizeof(ctypes.c_void_p) != 8:
         return None
     try:
-        return ctypes.CDLL(ctypes.util.find_library("m") or "libm.so.6")
+        return ctypes.CDLL("libm.so.6")  # glibc's stable soname (musl has none: then no flush)
     except OSError:
         return None
 
@@ -67,14 +67,21 @@ def _set(bits: int):
     return saved if _LIBM.fesetenv(env) == 0 else None
 
 
+def _tiny_product_is_zero() -> bool:
+    with np.errstate(under="ignore"):  # whatever the caller's np.seterr
+        return float(np.float64(1e-300) * np.float64(1e-10)) == 0.0
+
+
 def _works() -> bool:
     """Whether setting the bits flushes a subnormal product to zero (and restoring undoes it)."""
     saved = _set(FTZ_DAZ)
     if saved is None:
         return False
-    flushed = float(np.float64(1e-300) * np.float64(1e-10)) == 0.0
-    _LIBM.fesetenv(saved)
-    return flushed and float(np.float64(1e-300) * np.float64(1e-10)) != 0.0
+    try:
+        flushed = _tiny_product_is_zero()
+    finally:
+        _LIBM.fesetenv(saved)
+    return flushed and not _tiny_product_is_zero()
 
 
 @contextlib.contextmanager
@@ -105,4 +112,4 @@ def flush_subnormals(fn: Callable) -> Callable:
 
 def active() -> bool:
     """Whether subnormals are flushed in this thread now (a tiny product is 0)."""
-    return float(np.float64(1e-300) * np.float64(1e-10)) == 0.0
+    return _tiny_product_is_zero()
