@@ -24,7 +24,7 @@ from diegocal.sgp.guard import FTOL, PARAMETRIC, TWO_STAGE, Guard, GuardCandidat
 from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
 from diegocal.sgp.nested import evenly
-from diegocal.sgp.subnormals import flush_subnormals
+from diegocal.sgp.subnormals import flushed
 
 __all__ = ["Guard", "SemiParametricGP", "Stages"]
 
@@ -144,7 +144,7 @@ class SemiParametricGP(GuardCandidates):
         return (U, Y, F, *self._scale(U, F))
 
     @single_threaded  # outermost: BLAS threads made when its limit is lifted start unflushed
-    @flush_subnormals
+    @flushed()
     def learn(self, U, Y, F, start: Hyperparameters | None = None) -> Hyperparameters:
         """The hyperparameters :meth:`fit` would learn, without the posterior (arrays as in fit);
         ``start``: one ML-II start from these instead of §3.3.4's heuristics and the restarts."""
@@ -153,7 +153,7 @@ class SemiParametricGP(GuardCandidates):
         return self._learn(Us, Y, Fs, np.random.default_rng(self.seed), start)
 
     @single_threaded
-    @flush_subnormals
+    @flushed()
     def fit(
         self,
         U,
@@ -530,7 +530,7 @@ class SemiParametricGP(GuardCandidates):
 
     # ------------------------------------------------------------------ predict
     @single_threaded
-    @flush_subnormals
+    @flushed()
     def predict(self, U, F, variance: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """Posterior mean (Nq, n), latent variance (Nq, n) and parametric part f ŵ (Nq, n).
 

@@ -1,4 +1,4 @@
-"""Subnormal floats flushed to zero while the SGP learns and fits (x86-64 Linux; elsewhere a no-op).
+"""Subnormal floats flushed to zero while the SGP learns, fits and predicts (x86-64 Linux; elsewhere a no-op).
 
 Why: a squared-exponential kernel with short length-scales has entries exp(-d²/2ℓ²) below the
 smallest normal double (2.2e-308), and its Cholesky factor and inverse fill in with more.
@@ -22,10 +22,8 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import functools
 import platform
 import sys
-from collections.abc import Callable
 
 import numpy as np
 
@@ -78,16 +76,17 @@ def _works() -> bool:
     if saved is None:
         return False
     try:
-        flushed = _tiny_product_is_zero()
+        zero = _tiny_product_is_zero()
     finally:
         _LIBM.fesetenv(saved)
-    return flushed and not _tiny_product_is_zero()
+    return zero and not _tiny_product_is_zero()
 
 
 @contextlib.contextmanager
 def flushed():
-    """Context manager: subnormal results and inputs read as 0 in this thread (and the threads
-    it starts) inside it; the previous mode comes back on exit. Nested uses are fine."""
+    """Context manager (or, called, a decorator: ``@flushed()``): subnormal results and inputs
+    read as 0 in this thread (and the threads it starts) inside it; the previous mode comes back
+    on exit. Nested uses are fine."""
     global _WORKS
     if _LIBM is not None and _WORKS is None:
         _WORKS = _works()
@@ -97,17 +96,6 @@ def flushed():
     finally:
         if saved is not None:
             _LIBM.fesetenv(saved)
-
-
-def flush_subnormals(fn: Callable) -> Callable:
-    """Decorator: run ``fn`` under :func:`flushed`."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        with flushed():
-            return fn(*args, **kwargs)
-
-    return wrapper
 
 
 def active() -> bool:
