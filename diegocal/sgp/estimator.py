@@ -14,16 +14,15 @@ for inverse dynamics.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import minimize
 
 from diegocal.errors import FitError, NumericalError
 from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.parallel import single_threaded, thread_map
-from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood, per_output
-from diegocal.sgp.guard import FTOL, PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
+from diegocal.sgp.gp import Hyperparameters, fit_posterior, per_output
+from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
-from diegocal.sgp.nested import evenly
+from diegocal.sgp.starts import MLStarts
 from diegocal.sgp.subnormals import flushed
 
 __all__ = ["Guard", "SemiParametricGP", "Stages"]
@@ -31,14 +30,10 @@ __all__ = ["Guard", "SemiParametricGP", "Stages"]
 LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
 # A Region kernel's ratio r (the amplitude above its onset over the one below) lies in these.
 REGION_RATIO_BOUND = (1e-3, 1e3)
-# ML-II's starts are screened where the hyperparameter subset holds more than 2·SCREEN_SAMPLES
-# samples (SemiParametricGP._screen): each start runs on SCREEN_SAMPLES of them evenly spaced in
-# time, and only the best one's optimum is refined on all of them.
-SCREEN_SAMPLES = 250
 
 
 
-class SemiParametricGP(GuardCandidates):
+class SemiParametricGP(GuardCandidates, MLStarts):
     """SGP regression with shared parameters W and one GP per output (thesis eq. 3.1-3.20).
 
     Parameters
@@ -371,92 +366,6 @@ class SemiParametricGP(GuardCandidates):
                     grad[k + i] += (x - mu) / sd**2
         return val, grad
 
-    def _starts(self, x0, bounds, resid, rng, n_extra):
-        """Starts: §3.3.4's; a short-length-scale one (ℓ = 0.3 input std); a parametric-first
-        one (σ_z and σ_v at the parametric fit's residual: the basin where W carries the
-        physics); then random perturbations of §3.3.4's."""
-        lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
-
-        def variant(ell=None, amp=None):
-            x = x0.copy()
-            for j, k, names in self._slots():
-                if names and amp is not None:
-                    x[1 + j] = np.log(amp[j] / 3.0)
-                for i, name in enumerate(names):
-                    if is_lengthscale(name) and ell is not None:
-                        x[k + i] = np.log(ell)
-                    elif is_amplitude(name) and amp is not None:
-                        x[k + i] = np.log(amp[j])
-            return x
-
-        starts = [x0, variant(ell=0.3), variant(amp=resid)][: 1 + n_extra]
-        starts += [x0 + rng.normal(0.0, 1.0, x0.size) for _ in range(n_extra - 2)]
-        return [np.clip(s, lo, hi) for s in starts]
-
-    def _pin_fixed(self, bounds, vec) -> list:
-        """``bounds`` with the fixed parameters (:func:`is_fixed`, a Region's onset and width) at
-        ``vec``'s values."""
-        out = list(bounds)
-        for _, k, names in self._slots():
-            for i, name in enumerate(names):
-                if is_fixed(name):
-                    out[k + i] = (vec[k + i], vec[k + i])
-        return out
-
-    def _optimise(self, start, bounds, sizes, resid, U, Y, F, maxiter):
-        def objective(vec):
-            try:
-                f, gr = negative_log_likelihood(vec, self.kernels, U, Y, F, sizes)
-            except NumericalError:
-                return 1e25, np.zeros_like(vec)
-            pv, pg = self._prior(vec, resid)
-            return f + pv, gr + pg
-
-        res = minimize(
-            objective,
-            start,
-            jac=True,
-            method="L-BFGS-B",
-            bounds=bounds,
-            options={"maxiter": maxiter, "ftol": FTOL},
-        )
-        ok = np.isfinite(res.fun) and res.fun < 1e24
-        return (float(res.fun), res.x) if ok else None
-
-    def _run_starts(self, starts, bounds, sizes, resid, data, stage: str) -> list:
-        """``_optimise`` from each of ``starts`` on ``data``, in ``jobs`` threads (LAPACK drops the
-        GIL), in order; ``stage`` names them on the progress bar."""
-        done = []
-
-        def run(s):
-            out = self._optimise(s, bounds, sizes, resid, *data, self.maxiter)
-            done.append(1)  # list.append is atomic: a count across threads
-            self._say(stage, len(done), len(starts))
-            return out
-
-        self._say(stage, 0, len(starts))
-        return thread_map(run, starts, self.jobs)
-
-    def _screen(self, starts, bounds, sizes, resid, data) -> list:
-        """``starts`` in the order to refine them: the optima of their ML-II on SCREEN_SAMPLES of
-        ``data``'s samples evenly spaced in time, best first, then the starts whose screening
-        failed (:meth:`_learn` refines the first, and the next only where a refinement fails).
-
-        Why: a likelihood on 1,000 samples costs some 40× one on 250, and the starts mostly pick
-        the basin, not the point in it. On the scale bench's arm (20,000 samples) the three
-        starts of the joint GPs ended within 3.5 nats of each other, and those of each GP on PR's
-        residual within 0.2, each run 25-40 likelihoods of 1,000 samples: 3 full runs per fit
-        and 9 on the residual. Not always the same basin: on issue #14's case PRGP's screened
-        start refined to a likelihood 7 nats below the best full start's (joint 3 0.0046 against
-        0.0041), and on the reaction wheel PRGP's screened starts did better than the full ones."""
-        few = evenly(np.arange(len(data[0])), SCREEN_SAMPLES)
-        small = tuple(a[few] for a in data)
-        stage = f"hyperparameter starts screened on {len(few)} samples"
-        results = self._run_starts(starts, bounds, sizes, resid, small, stage)
-        found = sorted((r[0], i) for i, r in enumerate(results) if r)  # ties: the earlier start
-        failed = [s for s, r in zip(starts, results, strict=True) if not r]
-        return [results[i][1] for _, i in found] + failed
-
     def _learn(self, Us, Y, Fs, rng, start: Hyperparameters | None = None) -> Hyperparameters:
         """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.
         With ``screen_starts``, where the hyperparameter subset holds more than 2·SCREEN_SAMPLES
@@ -488,7 +397,7 @@ class SemiParametricGP(GuardCandidates):
         self.n_starts_ = len(starts)
         data = Us[idx], Y[idx], Fs[idx]
         stage = "hyperparameter starts (ML-II)"
-        if self.screen_starts and len(starts) > 1 and len(idx) > 2 * SCREEN_SAMPLES:
+        if self._screens(len(starts), len(idx)):
             results = []
             for s in self._screen(starts, bounds, sizes, resid, data):
                 results = self._run_starts([s], bounds, sizes, resid, data, stage)

@@ -110,7 +110,7 @@ class SGPOptions:
         4,000 samples: PRGP equal to PR, 0.0107 on joint 3 against 0.0041 with it); with the
         guard's cross-validation, where the hyperparameter subset (min(N, hyper_max) samples)
         holds more than 500, the starts are screened on 250 of them and the best is refined
-        (estimator._screen)
+        (SemiParametricGP._screen)
     seed : int
     jobs : int, hyperparameter starts optimised in parallel threads
     guard : bool, turn the SGP guard on (``guard_options``, GP on ``gp_inputs``); SGP only

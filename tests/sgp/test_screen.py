@@ -1,4 +1,4 @@
-"""ML-II's starts screened on a few samples, the best refined on all (estimator._screen): the
+"""ML-II's starts screened on a few samples, the best refined on all (SemiParametricGP._screen): the
 refined optimum is as good as the best of the starts run on every sample, held out too, and
 the parameters W are the truth's."""
 
@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import diegocal.sgp.estimator as estimator
+import diegocal.sgp.starts as starts
 from diegocal.sgp.kernels import SquaredExponential
 
 
@@ -40,7 +41,7 @@ def test_screened_starts_reach_the_full_starts_optimum(monkeypatch):
 
     monkeypatch.setattr(estimator.SemiParametricGP, "_optimise", recorded)
     screened, runs = _fit((U, Y, F), True, sizes)
-    assert runs == [estimator.SCREEN_SAMPLES] * 3 + [700], "three starts screened, one refined"
+    assert runs == [starts.SCREEN_SAMPLES] * 3 + [700], "three starts screened, one refined"
     full, runs = _fit((U, Y, F), False, sizes)
     assert runs == [700] * 3
     # the same likelihood (−log p on the same 700 samples) to a nat
@@ -69,7 +70,7 @@ def test_screen_orders_the_screened_optima_best_first_then_the_failed_starts(mon
     data = (np.zeros((600, 1)), np.zeros((600, 1)), np.zeros((600, 1, 0)))
     order = gp._screen([np.array([float(i)]) for i in range(5)], None, None, None, data)
     assert [float(x[0]) for x in order] == [102.0, 103.0, 104.0, 100.0, 1.0]
-    assert sizes == [estimator.SCREEN_SAMPLES] * 5
+    assert sizes == [starts.SCREEN_SAMPLES] * 5
 
 
 def test_a_failed_refinement_falls_back_to_the_next_screened_start(monkeypatch):
@@ -79,11 +80,11 @@ def test_a_failed_refinement_falls_back_to_the_next_screened_start(monkeypatch):
 
     def first_refinement_fails(self, start, bounds, sizes, resid, U, *rest):
         runs.append(len(U))
-        if len(U) > estimator.SCREEN_SAMPLES and runs.count(len(U)) == 1:
+        if len(U) > starts.SCREEN_SAMPLES and runs.count(len(U)) == 1:
             return None
         return optimise(self, start, bounds, sizes, resid, U, *rest)
 
     monkeypatch.setattr(estimator.SemiParametricGP, "_optimise", first_refinement_fails)
     gp, _ = _fit((U, Y, F), True, [])
-    assert runs == [estimator.SCREEN_SAMPLES] * 3 + [520, 520]
+    assert runs == [starts.SCREEN_SAMPLES] * 3 + [520, 520]
     assert np.isfinite(gp.objective_)

@@ -4,7 +4,7 @@ on any thread count"), and the library runs BLAS on one thread whatever the call
 import numpy as np
 from threadpoolctl import threadpool_info, threadpool_limits
 
-import diegocal.sgp.estimator as estimator
+import diegocal.sgp.starts as starts
 from diegocal.parallel import one_blas_thread, thread_map
 from diegocal.sgp import SGPOptions, fit_dynamics
 
@@ -31,7 +31,7 @@ def test_thread_map_keeps_order_and_raises():
 
 
 def test_fit_is_identical_for_any_jobs_and_blas_threads(arm2, simulate, monkeypatch):
-    monkeypatch.setattr(estimator, "SCREEN_SAMPLES", 40)  # the starts screened too (150 > 2 × 40)
+    monkeypatch.setattr(starts, "SCREEN_SAMPLES", 40)  # the starts screened too (150 > 2 × 40)
     log, _ = simulate(arm2, T=150, seed=3, bump=(1, 0.0, 1.0, 1.0))
     opts = SGPOptions(kind="sgp", maxiter=30, inference="sparse", n_inducing=40)
     base = fit_dynamics(log, arm2, opts)
