@@ -53,14 +53,14 @@ def _mxcsr(env) -> int:
     return int.from_bytes(env.raw[MXCSR_OFFSET : MXCSR_OFFSET + 4], "little")
 
 
-def _set(bits: int):
-    """Set MXCSR's FTZ and DAZ bits to ``bits``; returns the saved environment, or None where
-    the environment cannot be read or does not look like x86-64 glibc's."""
+def _flush():
+    """Set MXCSR's FTZ and DAZ bits; returns the saved environment, or None where the
+    environment cannot be read or does not look like x86-64 glibc's."""
     env = ctypes.create_string_buffer(FENV_BYTES)
     if _LIBM.fegetenv(env) != 0 or _mxcsr(env) & MXCSR_MASKS != MXCSR_MASKS:
         return None
     saved = ctypes.create_string_buffer(env.raw, FENV_BYTES)
-    mxcsr = (_mxcsr(env) & ~FTZ_DAZ) | bits
+    mxcsr = _mxcsr(env) | FTZ_DAZ
     env[MXCSR_OFFSET : MXCSR_OFFSET + 4] = mxcsr.to_bytes(4, "little")
     return saved if _LIBM.fesetenv(env) == 0 else None
 
@@ -72,7 +72,7 @@ def _tiny_product_is_zero() -> bool:
 
 def _works() -> bool:
     """Whether setting the bits flushes a subnormal product to zero (and restoring undoes it)."""
-    saved = _set(FTZ_DAZ)
+    saved = _flush()
     if saved is None:
         return False
     try:
@@ -90,7 +90,7 @@ def flushed():
     global _WORKS
     if _LIBM is not None and _WORKS is None:
         _WORKS = _works()
-    saved = _set(FTZ_DAZ) if _LIBM is not None and _WORKS else None
+    saved = _flush() if _LIBM is not None and _WORKS else None
     try:
         yield
     finally:
