@@ -316,14 +316,25 @@ class Region(Kernel):
         K = self.kernel(X1, X2, theta[3:])
         if not (a1.any() or a2.any()):  # off: every input below the onset
             return K
-        for start in range(0, len(K), 512):  # K ∘ S in place, S by rows
-            rows = slice(start, start + 512)
-            K[rows] *= self._scale(a1[rows], a2, theta)
-        return K
+        return self._times_scale(K, a1, a2, theta)
 
     def _scale(self, a1, a2, theta) -> np.ndarray:
         """S = b bᵀ + r² a aᵀ, (N1, N2)."""
         return np.outer(1.0 - a1, 1.0 - a2) + np.exp(2.0 * theta[2]) * np.outer(a1, a2)
+
+    def _times_scale(self, M, a1, a2, theta) -> np.ndarray:
+        """``M ∘ S`` in place, the same numbers as ``M * _scale(a1, a2, theta)``: a row wholly
+        below the onset (a = 0, most of them at a sharp step) is S's row b', one wholly above
+        (a = 1) r² a', and only the rows on the step need the outer products (a fifth of the
+        time of forming S: its N² products and sums dominated a cut GP's likelihood)."""
+        r2 = np.exp(2.0 * theta[2])
+        below, above = a1 == 0.0, a1 == 1.0
+        np.multiply(M, 1.0 - a2, out=M, where=below[:, None])
+        np.multiply(M, r2 * a2, out=M, where=above[:, None])
+        on_step = np.flatnonzero(~(below | above))
+        if len(on_step):
+            M[on_step] *= self._scale(a1[on_step], a2, theta)
+        return M
 
     def diag(self, X, theta):
         a, _ = self._above(X, theta)
@@ -362,7 +373,7 @@ class Region(Kernel):
         if not (a1.any() or a2.any()):  # off: k = k_0, zero gradient in c, w, r
             return np.concatenate([np.zeros(3), self.kernel.weighted_gradient(X1, X2, theta[3:], W, K0)])
         head = self._head(X1, X2, theta, W * K0)
-        inner = self.kernel.weighted_gradient(X1, X2, theta[3:], W * self._scale(a1, a2, theta), K0)
+        inner = self.kernel.weighted_gradient(X1, X2, theta[3:], self._times_scale(W.copy(), a1, a2, theta), K0)
         return np.concatenate([head, inner])
 
     def weighted_diag_gradient(self, X, theta, w):

@@ -10,7 +10,7 @@ import pytest
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace, nested
 from diegocal.sgp.gp import Hyperparameters, fit_posterior
 from diegocal.sgp.guard import TWO_STAGE, _OutputLikelihood
-from diegocal.sgp.kernels import REGION_OFF, is_amplitude
+from diegocal.sgp.kernels import REGION_OFF, Region, is_amplitude
 
 ONSET = 0.5  # rad: output 0 has a friction above it
 W_TRUE = np.array([1.0, 0.5])
@@ -191,9 +191,11 @@ def test_a_model_saved_before_region_kernels_loads_uncut(fits):
     np.testing.assert_array_equal(means[0], means[1])
 
 
-def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkeypatch):
-    """Each fold's estimator standardises its inputs by the fold's own mean and std; the onset
-    it holds must still be the same angle (rad)."""
+@pytest.mark.parametrize("learn_on", ["fit", "other samples"])
+def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkeypatch, learn_on):
+    """Each fold's estimator standardises its inputs by the fold's own mean and std (those it
+    learns on and those it is fitted on may differ); the onset it holds must still be the same
+    angle (rad)."""
     out, (U, Y, F) = fits
     est = out["cut"]
     hp_res = est._two_stage_hp[1]
@@ -209,21 +211,59 @@ def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkey
     monkeypatch.setattr(est, "_raw", (U, F), raising=False)
     Us, Fs = est._scale(U, F)
     fit_idx, val_idx = np.arange(len(U) // 2), np.arange(len(U) // 2, len(U))  # a fold's scaling differs
-    est._two_stage_fold([0], fit_idx, val_idx, (Us, Y, Fs))
+    learn_idx = None if learn_on == "fit" else np.arange(len(U) // 8, len(U) // 3)
+    est._two_stage_fold([0], fit_idx, val_idx, (Us, Y, Fs), learn_idx)
     fold = next(e for e in made if hasattr(e, "hyper_"))  # the one that fitted (others learnt)
     assert not np.isclose(fold.u_mean_[0], est.u_mean_[0])
     np.testing.assert_allclose(fold.hyper_.theta[0][0] * fold.u_std_[0] + fold.u_mean_[0], onset, rtol=1e-12)
 
 
+def test_rescaled_parameters_give_the_same_kernel_of_the_raw_inputs():
+    """nested.rescaled: a cut SE kernel's parameters moved from one input standardisation to
+    another give the same covariance of the raw inputs (length-scales, onset and width)."""
+    rng = np.random.default_rng(3)
+    U = rng.normal([1.0, -2.0], [0.5, 2.0], size=(60, 2))
+    kernels = [Region(1, Subspace([0, 1], SquaredExponential(2))), None]
+    theta = (np.array([0.3, np.log(0.2), np.log(2.0), np.log(0.7), np.log(0.4), np.log(1.3)]), np.zeros(0))
+    source = (U.mean(0), U.std(0))
+    target = (U[:20].mean(0), U[:20].std(0))
+    moved = nested.rescaled(kernels, theta, source, target)
+    K0 = kernels[0]((U - source[0]) / source[1], (U - source[0]) / source[1], theta[0])
+    K1 = kernels[0]((U - target[0]) / target[1], (U - target[0]) / target[1], moved[0])
+    np.testing.assert_allclose(K1, K0, rtol=1e-10, atol=1e-14)
+    assert not np.allclose(moved[0], theta[0])
+    assert moved[1].size == 0
+
+
+@pytest.mark.parametrize("log_width", [np.log(1e-4), np.log(0.3)])
+def test_the_cut_kernel_and_its_gradient_are_the_products_with_the_scale(log_width):
+    """Region scales k_0 in place by rows (a row on either side of a sharp step is one vector):
+    the same numbers, bit for bit, as the elementwise product with S = b bᵀ + r² a aᵀ, for a
+    sharp step (most rows on one side) and a smooth one (every row on the step)."""
+    rng = np.random.default_rng(4)
+    X1, X2 = rng.normal(size=(70, 2)), rng.normal(size=(50, 2))
+    kernel = Region(0, Subspace([0, 1], SquaredExponential(2)))
+    theta = np.array([0.2, log_width, np.log(3.0), np.log(0.8), np.log(0.6), np.log(1.1)])
+    a1, _, a2, _ = kernel._sides(X1, X2, theta)
+    assert (np.mean((a1 == 0) | (a1 == 1)) > 0.9) == (log_width < -5)
+    K0 = kernel.kernel(X1, X2, theta[3:])
+    S = kernel._scale(a1, a2, theta)
+    np.testing.assert_array_equal(kernel(X1, X2, theta), K0 * S)
+    W = rng.normal(size=(70, 50))
+    expected = kernel.kernel.weighted_gradient(X1, X2, theta[3:], W * S, K0)
+    np.testing.assert_array_equal(kernel.weighted_gradient(X1, X2, theta, W)[3:], expected)
+
+
 def test_a_cut_gp_is_scored_on_every_sample_outside_the_block(fits, monkeypatch):
     """With every_sample (the cut outputs' nested scores) each fold is fitted on every training
-    sample outside the block's time span, not only on the other blocks' (subset) samples."""
+    sample outside the block's time span, not only on the other blocks' (subset) samples; its
+    hyperparameters are learnt on those other blocks in both cases."""
     out, (U, Y, F) = fits
     est = out["cut"]
     seen = []
 
-    def fold(self, outputs, fit_idx, val_idx, data):
-        seen.append((fit_idx, val_idx))
+    def fold(self, outputs, fit_idx, val_idx, data, learn_idx=None):
+        seen.append((fit_idx, val_idx, fit_idx if learn_idx is None else learn_idx))
         return np.zeros((len(val_idx), 2))
 
     monkeypatch.setattr(type(est), "_two_stage_fold", fold)
@@ -233,10 +273,11 @@ def test_a_cut_gp_is_scored_on_every_sample_outside_the_block(fits, monkeypatch)
     for every in (False, True):
         seen.clear()
         est._two_stage_nested([0], blocks, (Us, Y, Fs), every_sample=every)
-        for fit_idx, val_idx in seen:
+        for fit_idx, val_idx, learn_idx in seen:
             outside = np.flatnonzero((np.arange(len(U)) < val_idx.min()) | (np.arange(len(U)) > val_idx.max()))
-            expected = outside if every else np.setdiff1d(np.concatenate(blocks), val_idx)
-            np.testing.assert_array_equal(np.sort(fit_idx), expected)
+            others = np.setdiff1d(np.concatenate(blocks), val_idx)
+            np.testing.assert_array_equal(np.sort(fit_idx), outside if every else others)
+            np.testing.assert_array_equal(np.sort(learn_idx), others)
 
 
 def test_a_cut_gps_folds_are_capped_at_outside_max_samples_evenly_in_time(fits, monkeypatch):
