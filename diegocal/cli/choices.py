@@ -18,7 +18,7 @@ SGP_INPUT_STREAMS = ("q", "qd", "qdd")
 FRICTION_KINDS = ("viscous", "coulomb")
 #: SGPOptions' defaults the options show
 SGP_EXACT_MAX = 3000
-SGP_N_INDUCING = 2000
+SGP_N_INDUCING = 1000
 SGP_RESTARTS = 2
 SGP_MIN_NOISE = 1e-4
 

@@ -20,7 +20,7 @@ from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: t
 from diegocal.parallel import single_threaded, thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, per_output
 from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
-from diegocal.sgp.inducing import SPARSE_TOLERANCE, greedy_inducing
+from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
 from diegocal.sgp.starts import MLStarts
 from diegocal.sgp.subnormals import flushed
@@ -77,7 +77,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         seed: int = 0,
         guard: Guard = Guard(),  # noqa: B008 (frozen dataclass)
         inference: str = "exact",
-        n_inducing: int = 2000,
+        n_inducing: int = MAX_POINTS,
         sparse_tolerance: float = SPARSE_TOLERANCE,
         hyper_max: int = 1000,
         maxiter: int = 200,

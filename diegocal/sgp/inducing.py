@@ -33,6 +33,15 @@ import numpy as np
 
 #: Stop when the mean missed prior variance per sample is at most this fraction of σ_v².
 SPARSE_TOLERANCE = 0.01
+#: At most this many inducing inputs per output (SGPOptions.n_inducing). The selection costs
+#: O(pool · M²) and the posterior O(N M²). A smooth GP reaches the tolerance well below it (the
+#: issue #14 arm's friction GP: 406 points at 4,000 samples, 577 at 20,000). A GP of length-scales
+#: near the samples' spacing never does: on the scale bench's 20,000 samples joint 2's GP (ℓ
+#: 0.01-0.04 input stds) took 1,519 points, or all 2,000 on a log 5 samples longer (missed
+#: variance 0.15 σ_v² there), and predicted the test run as PR does with 1,000 points or 2,000
+#: (nMSE 4.191e-5 and 4.198e-5 against PR's 4.189e-5; on the longer log 4.190e-5 and 4.189e-5),
+#: while 2,000 cost 28.3 and 31.9 CPU-s a fit against 24.1 and 25.3.
+MAX_POINTS = 1000
 #: At most this many training inputs are candidates (a random subset beyond): the selection costs
 #: O(pool · M²), and the mean missed variance of a random pool estimates that of all samples.
 POOL = 8000
@@ -59,7 +68,7 @@ def greedy_inducing(
     noise_var: float,
     *,
     tolerance: float = SPARSE_TOLERANCE,
-    max_points: int = 2000,
+    max_points: int = MAX_POINTS,
     pool: int = POOL,
     rng: np.random.Generator | None = None,
 ) -> Inducing:

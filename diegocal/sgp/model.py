@@ -23,7 +23,7 @@ from diegocal.errors import FitError, MissingStreamError, UnknownNameError
 from diegocal.evaluate import nmse  # the one nMSE (thesis §3.4.2), re-exported by diegocal.sgp
 from diegocal.parallel import single_threaded
 from diegocal.sgp.estimator import Guard, SemiParametricGP
-from diegocal.sgp.inducing import SPARSE_TOLERANCE
+from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE
 from diegocal.sgp.kernels import REGION_OFF, Region, SquaredExponential, Subspace
 from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor, true_parameters
 from diegocal.sgp.terms import apply_lags, as_dynamics_term, term_columns
@@ -101,7 +101,7 @@ class SGPOptions:
     exact_max : int, the auto threshold in samples per joint
     n_inducing : int, the most inducing inputs per joint for sparse inference (greedy conditional
         variance until they miss at most ``sparse_tolerance`` σ_v² of prior variance per sample,
-        :mod:`diegocal.sgp.inducing`)
+        :mod:`diegocal.sgp.inducing`; why 1,000: ``inducing.MAX_POINTS``)
     sparse_tolerance : float, see ``n_inducing``
     restarts : int, extra hyperparameter starts (the first: short length-scales; the second:
         σ_z and σ_v at the parametric residual; then random): the same starts for every kind
@@ -129,7 +129,7 @@ class SGPOptions:
     friction: tuple = ("viscous", "coulomb")
     inference: str = "auto"
     exact_max: int = 3000
-    n_inducing: int = 2000
+    n_inducing: int = MAX_POINTS
     sparse_tolerance: float = SPARSE_TOLERANCE
     restarts: int = 2
     seed: int = 0
