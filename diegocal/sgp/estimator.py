@@ -18,7 +18,7 @@ import numpy as np
 from diegocal.errors import FitError, NumericalError
 from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.parallel import single_threaded, thread_map
-from diegocal.sgp.gp import Hyperparameters, fit_posterior, per_output
+from diegocal.sgp.gp import Hyperparameters, fit_posterior, input_scaling, per_output
 from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
@@ -130,8 +130,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         U, Y, F = self._check(U, Y, F)
         if len(Y) < 3:
             raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
-        self.u_mean_ = U.mean(0)
-        self.u_std_ = np.where(U.std(0) > 0, U.std(0), 1.0)
+        self.u_mean_, self.u_std_ = input_scaling(U)
         rms = np.sqrt(np.mean(F**2, axis=(0, 1))) if F.shape[2] else np.zeros(0)
         self.f_scale_ = np.where(rms > 0, rms, 1.0)
         self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)

@@ -49,6 +49,13 @@ JITTERS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)  # relative to the mean diagonal
 QUERY_CHUNK = 2000  # queries predicted at once (memory O(QUERY_CHUNK · N) per output)
 
 
+def input_scaling(U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, std) per input column by which an estimator fitted on ``U`` standardises its
+    inputs (a constant column keeps std 1)."""
+    std = U.std(0)
+    return U.mean(0), np.where(std > 0, std, 1.0)
+
+
 def factor(A: np.ndarray, what: str = "covariance") -> tuple[np.ndarray, float]:
     """Cholesky factor of a symmetric positive-definite matrix, computed in A's own memory.
 

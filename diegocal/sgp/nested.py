@@ -12,7 +12,7 @@ import numpy as np
 
 from diegocal.errors import FitError, NumericalError
 from diegocal.parallel import thread_map
-from diegocal.sgp.gp import Hyperparameters, fit_posterior
+from diegocal.sgp.gp import Hyperparameters, fit_posterior, input_scaling
 from diegocal.sgp.kernels import REGION_OFF, RELEASED_LENGTHSCALE, Region, is_lengthscale
 
 # The folds of a cut GP (NestedConfirmation._outside) are fitted exactly on at most this many
@@ -42,8 +42,8 @@ class NestedConfirmation:
         cross-validation (0.0283 against 0.0321) and lost by 31 % on the first half (0.049
         against 0.038); with the hyperparameters re-learnt per fold they score 0.0299 and the
         joint keeps PR (TX40 first-half and TIAGo gains kept: bench_real_identification).
-        Each fold's ML-II runs on the fold's training samples from one start, the all-sample
-        optimum: the start has seen the block and picks which local optimum of the fold's own
+        Each fold's ML-II runs on the subset's other blocks from one start, the all-sample
+        optimum (in the fold's input scaling, :func:`rescaled`): the start has seen the block and picks which local optimum of the fold's own
         likelihood the fold lands in (a disturbance of the block moves the fold's prediction
         3e-5 against the plain cross-validation's 0.1: tests/sgp/test_two_stage.py). Three starts
         per fold cost the issue #14 case 69 CPU-s against 29 and chose the same.
@@ -71,8 +71,9 @@ class NestedConfirmation:
 
     def _outside(self, fit_idx, val_idx) -> np.ndarray:
         """Every training sample outside the time span of the block ``val_idx``, at most
-        OUTSIDE_MAX of them evenly spaced in time (``fit_idx``, the other blocks of the
-        hyperparameter subset, is not used): the folds of a cut GP, fitted exactly."""
+        OUTSIDE_MAX of them evenly spaced in time, whether or not they are in ``fit_idx`` (the
+        other blocks of the hyperparameter subset, on which the fold learns): the samples a cut
+        GP's fold is fitted on, exactly."""
         out = np.r_[0 : val_idx.min(), val_idx.max() + 1 : len(self._raw[0])]
         return evenly(out, OUTSIDE_MAX)
 
@@ -169,20 +170,16 @@ class NestedConfirmation:
         res_learn = Y[learn_idx] - post.predict(Us[learn_idx], Fs[learn_idx], variance=False)[0]
         est = self._residual_estimator(kernels, inference="exact", jobs=1)
         est.progress = None  # a fold's own bar would interleave with the others'
-        learn_scale = _scaling(U[learn_idx])
+        learn_scale = input_scaling(U[learn_idx])
         theta = rescaled(est.kernels, theta, (self.u_mean_, self.u_std_), learn_scale)
         start = Hyperparameters(hp_res.log_sigma_w, hp_res.log_sigma_v, theta)
         hp = self._learn_residual(U[learn_idx], res_learn, F[learn_idx], outputs, start, "exact", 1, quiet=True)
-        theta = rescaled(est.kernels, hp.theta, learn_scale, _scaling(U[fit_idx]))
-        est.fit(U[fit_idx], res, F[fit_idx], hyperparameters=Hyperparameters(hp.log_sigma_w, hp.log_sigma_v, theta))
+        if learn_idx is not fit_idx:
+            theta = rescaled(est.kernels, hp.theta, learn_scale, input_scaling(U[fit_idx]))
+            hp = Hyperparameters(hp.log_sigma_w, hp.log_sigma_v, theta)
+        est.fit(U[fit_idx], res, F[fit_idx], hyperparameters=hp)
         mean = post.predict(Us[val_idx], Fs[val_idx], variance=False)[0]
         return mean + est.predict(U[val_idx], F[val_idx], variance=False)[0]
-
-
-def _scaling(U) -> tuple[np.ndarray, np.ndarray]:
-    """The (mean, std) by which an estimator fitted on ``U`` standardises its inputs."""
-    std = U.std(0)
-    return U.mean(0), np.where(std > 0, std, 1.0)
 
 
 def rescaled(kernels, theta, source, target) -> tuple:
@@ -190,7 +187,9 @@ def rescaled(kernels, theta, source, target) -> tuple:
     std)) re-expressed for inputs standardised by ``target``: the same function of the raw
     inputs. Length-scales scale by the std ratio of their input; a cut Region's onset and width
     are moved to the same angle (ML-II holds them, so a fold must cut where the all-sample fit
-    does: not doing so moved a test's onset by up to 0.035 rad)."""
+    does: not doing so moved a test's onset by up to 0.035 rad). Only a Region at the top of a
+    kernel is moved (as ``SemiParametricGP._residual_estimator`` builds them). A length-scale at its lower
+    bound in one scaling may fall below it in the other: as an ML-II start it is then clipped."""
     (mean0, std0), (mean1, std1) = source, target
     out = []
     for k, t in zip(kernels, theta, strict=True):

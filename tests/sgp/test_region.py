@@ -207,15 +207,30 @@ def test_a_nested_fold_cuts_at_the_same_angle_as_the_all_sample_fit(fits, monkey
         made.append(build(self, *args, **kwargs))
         return made[-1]
 
+    learnt = []
+    learn = type(est)._learn_residual
+
+    def keep(self, *args, **kwargs):
+        learnt.append(learn(self, *args, **kwargs))
+        return learnt[-1]
+
     monkeypatch.setattr(type(est), "_residual_estimator", spy)
+    monkeypatch.setattr(type(est), "_learn_residual", keep)
     monkeypatch.setattr(est, "_raw", (U, F), raising=False)
     Us, Fs = est._scale(U, F)
     fit_idx, val_idx = np.arange(len(U) // 2), np.arange(len(U) // 2, len(U))  # a fold's scaling differs
     learn_idx = None if learn_on == "fit" else np.arange(len(U) // 8, len(U) // 3)
     est._two_stage_fold([0], fit_idx, val_idx, (Us, Y, Fs), learn_idx)
     fold = next(e for e in made if hasattr(e, "hyper_"))  # the one that fitted (others learnt)
+    learner = next(e for e in made if hasattr(e, "u_mean_") and not hasattr(e, "hyper_"))
+    on = fit_idx if learn_idx is None else learn_idx
+    np.testing.assert_array_equal(learner.u_mean_, U[on].mean(0))  # it learnt on learn_idx
+    np.testing.assert_array_equal(fold.u_mean_, U[fit_idx].mean(0))  # and was fitted on fit_idx
     assert not np.isclose(fold.u_mean_[0], est.u_mean_[0])
     np.testing.assert_allclose(fold.hyper_.theta[0][0] * fold.u_std_[0] + fold.u_mean_[0], onset, rtol=1e-12)
+    # the learnt length-scales, in rad and rad/s, are the fitted ones (theta: c, w, r, σ_z, ℓ_q, ℓ_qd)
+    raw = np.exp(learnt[-1].theta[0][4:]) * learner.u_std_[:2]
+    np.testing.assert_allclose(np.exp(fold.hyper_.theta[0][4:]) * fold.u_std_[:2], raw, rtol=1e-12)
 
 
 def test_rescaled_parameters_give_the_same_kernel_of_the_raw_inputs():

@@ -17,6 +17,7 @@ import pytest
 from diegocal.evaluate import block_mse, paired_se, score, split_blocks
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
+from diegocal.sgp.inducing import MAX_POINTS
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 from diegocal.sim.effects import parse_effects
 from experiments.sgp.common import same_robot
@@ -43,7 +44,7 @@ def test_auto_chooses_sparse_and_its_inducing_inputs_miss_little(case):
     sgp = models["sgp"]
     assert train.n_samples == 4000 and sgp.gp_.inference == "sparse"
     assert np.all(sgp.gp_.sparse_gap_ <= 0.02)  # the greedy selection's stopping rule, on all N
-    assert np.all(sgp.gp_.n_inducing_ <= 2000)
+    assert np.all(sgp.gp_.n_inducing_ <= MAX_POINTS)
 
 
 @pytest.mark.parametrize("test", ["seed 12", "same robot"])
