@@ -43,10 +43,11 @@ class NestedConfirmation:
         against 0.038); with the hyperparameters re-learnt per fold they score 0.0299 and the
         joint keeps PR (TX40 first-half and TIAGo gains kept: bench_real_identification).
         Each fold's ML-II runs on the subset's other blocks from one start, the all-sample
-        optimum (in the fold's input scaling, :func:`rescaled`): the start has seen the block and picks which local optimum of the fold's own
-        likelihood the fold lands in (a disturbance of the block moves the fold's prediction
-        3e-5 against the plain cross-validation's 0.1: tests/sgp/test_two_stage.py). Three starts
-        per fold cost the issue #14 case 69 CPU-s against 29 and chose the same.
+        optimum (in the fold's input scaling, :func:`rescaled`): the start has seen the block and
+        picks which local optimum of the fold's own likelihood the fold lands in (a disturbance
+        of the block moves the fold's prediction 3e-5 against the plain cross-validation's 0.1:
+        tests/sgp/test_two_stage.py). Three starts per fold cost the issue #14 case 69 CPU-s
+        against 29 and chose the same.
 
         ``every_sample``: each fold is fitted on every training sample outside the block's time
         span, not only the other blocks (which hold the hyperparameter subset's samples, at most
