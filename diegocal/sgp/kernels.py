@@ -324,10 +324,10 @@ class Region(Kernel):
 
     def _times_scale(self, M, a1, a2, theta) -> np.ndarray:
         """``M ∘ S`` in place, the same numbers as ``M * _scale(a1, a2, theta)`` (r² finite, as
-        ML-II's bounds keep it): a row wholly
-        below the onset (a = 0, most of them at a sharp step) is S's row b', one wholly above
-        (a = 1) r² a', and only the rows on the step need the outer products (a fifth of the
-        time of forming S: its N² products and sums dominated a cut GP's likelihood)."""
+        ML-II's bounds keep it): a row wholly below the onset (a = 0, most of them at a sharp
+        step) is S's row b', one wholly above (a = 1) r² a', and only the rows on the step need
+        the outer products (a fifth of the time of forming S: its N² products and sums dominated
+        a cut GP's likelihood)."""
         r2 = np.exp(2.0 * theta[2])
         below, above = a1 == 0.0, a1 == 1.0
         np.multiply(M, 1.0 - a2, out=M, where=below[:, None])
