@@ -52,11 +52,11 @@ class NestedConfirmation:
         ``every_sample``: each fold is fitted on every training sample outside the block's time
         span, not only the other blocks (which hold the hyperparameter subset's samples, at most
         ``hyper_max``; the hyperparameters are still learnt on those, :meth:`_two_stage_fold`).
-        For a GP cut at an onset (Guard.region): its side above the onset sees rare states, and on issue #14's
-        arm a fold of the 1,000-sample subset held 37 samples there (the final model some 310);
-        fitted on those, the cut GP overshot the last block (0.099 against PR's 0.020), and on
-        every sample it scores 0.0011. This favours the cut against the candidates scored on the
-        subset, which the final model's own data would improve too."""
+        For a GP cut at an onset (Guard.region): its side above the onset sees rare states, and
+        on issue #14's arm a fold of the 1,000-sample subset held 37 samples there (the final
+        model some 310); fitted on those, the cut GP overshot the last block (0.099 against PR's
+        0.020), and on every sample it scores 0.0011. This favours the cut against the
+        candidates scored on the subset, which the final model's own data would improve too."""
 
         def fold(fit_idx, val_idx):
             if every_sample:
