@@ -40,6 +40,7 @@ from diegocal.cli.common import (
     robot_for_log,
     split_words,
     summary,
+    usage_error,
     warn,
 )
 from diegocal.cli.predict_cmd import PredictOptions, register_predictor
@@ -117,6 +118,14 @@ def sgp_fit(
             "confined to part of the range); the guard's nested cross-validation decides.",
         ),
     ] = True,
+    joint_region: Annotated[
+        bool,
+        typer.Option(
+            "--joint-region/--no-joint-region",
+            help="SGP guard, with --region: where a two-stage GP is cut, also offer the joint GP cut at the same "
+            "onset (W and the GP learnt together; for short runs, where PR's friction is biased).",
+        ),
+    ] = False,
     gp_inputs: Annotated[
         str | None,
         typer.Option(
@@ -179,8 +188,11 @@ def sgp_fit(
         gp_inputs=split_words(gp_inputs) if gp_inputs is not None else None,
         min_noise=min_noise,
     )
-    if not region:
-        opts = replace(opts, guard_options=replace(default_guard(opts.friction), region=False))
+    if joint_region and not region:
+        raise usage_error("sgp-fit", "--joint-region needs --region (the joint GP is cut where the two-stage GP is)")
+    if not region or joint_region:
+        g = default_guard(opts.friction)
+        opts = replace(opts, guard_options=replace(g, region=region, joint_region=joint_region))
     data = load_log(log)
     rob = robot_for_log(robot, data)
     with fit_progress(quiet) as progress:

@@ -31,6 +31,7 @@ GUARD_WORDS = {
     "learnt": "GP kept as learnt",
     "released": "GP, caps released",
     "extended": "GP, stretched",
+    "cut": "GP cut at an onset",
     "two-stage": "two stages",
     "parametric": "parametric only",
 }
@@ -38,7 +39,9 @@ GUARD_NOTE = (
     "Guard: which of its candidates predicted contiguous blocks of the training log best (blocked "
     "cross-validation). 'GP kept as learnt': the GP with its maximum-likelihood hyperparameters; 'GP, caps "
     "released': length-scales stuck at their upper bound released; 'GP, stretched': the GP stretched towards its "
-    "linear limit, so that it extrapolates a trend instead of reverting to zero; 'two stages': the parametric "
+    "linear limit, so that it extrapolates a trend instead of reverting to zero; 'GP cut at an onset' (sgp-fit "
+    "--joint-region): the GP in two sides at the onset the two stages' scan found in the joint's angle, learnt "
+    "with the parametric part; 'two stages': the parametric "
     "fit, then a GP on its residual (PRGP's stages), kept where it beat the other choice by one standard error; "
     "'parametric only': the GP did not beat the parametric part by one standard error and was switched off for "
     "that joint. A winner is confirmed with its hyperparameters re-learnt without the block it predicts."

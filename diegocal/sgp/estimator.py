@@ -217,7 +217,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         kernels = self.kernels if kernels is None else kernels
         if self.region_inputs is not None:
             pairs = zip(kernels, self.region_inputs, strict=True)
-            kernels = [k if k is None or d is None else Region(d, k) for k, d in pairs]
+            kernels = [k if k is None or d is None or isinstance(k, Region) else Region(d, k) for k, d in pairs]
         return SemiParametricGP(
             kernels,
             use_features=False,
@@ -415,10 +415,12 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         folds = int(round(1.0 / f)) if f > 0 else 0
         if has_gp and folds >= 2 and len(idx) >= 3 * folds:
             options = {"learnt": x}
+
+            def refit(start, bounds):  # ML-II from one start (a candidate derived from x)
+                return self._optimise(start, bounds, sizes, resid, *data, self.maxiter)
+
             if self.guard.max_lengthscale and self.guard.release_capped:
-                released = self._release(
-                    x, bounds, lambda s, b: self._optimise(s, b, sizes, resid, *data, self.maxiter)
-                )
+                released = self._release(x, bounds, refit)
                 if released is not None:
                     options["released"] = released
             if self.guard.max_lengthscale and self.guard.extend_capped:
@@ -428,7 +430,12 @@ class SemiParametricGP(GuardCandidates, MLStarts):
             options[PARAMETRIC] = self._parametric_only(x0, resid, bounds, data)
             if self.guard.two_stage:  # judged against the others' choice (GuardCandidates._choose)
                 self._two_stage_hp = self._two_stage(options[PARAMETRIC], Us, Y, Fs)
-                options = {**{k: v for k, v in options.items() if k != PARAMETRIC}, TWO_STAGE: options[PARAMETRIC]}
+                joint = {k: v for k, v in options.items() if k != PARAMETRIC}
+                if self.guard.joint_region:
+                    cut = self._joint_cut(x, bounds, refit)
+                    if cut is not None:
+                        joint["cut"] = cut
+                options = {**joint, TWO_STAGE: options[PARAMETRIC]}
                 options[PARAMETRIC] = options[TWO_STAGE]  # in the joint posterior both are PR rows
             blocks = np.array_split(idx, folds)  # contiguous in time order
             x = self._validate(options, blocks, Us, Y, Fs, sizes, bounds, resid)

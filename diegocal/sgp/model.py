@@ -397,6 +397,9 @@ class DynamicsModel:
         o = self.options
         g = (o.guard_options or default_guard(o.friction)) if guard else Guard()
         kernels = [None] * len(self.joint_names) if kind == "pr" else self._kernels()
+        if guard and g.region and g.joint_region:  # the joint GPs may be cut too (off until then)
+            pairs = zip(kernels, self._region_inputs(), strict=True)
+            kernels = [k if k is None or d is None else Region(d, k) for k, d in pairs]
         return SemiParametricGP(
             kernels,
             use_features=kind != "gp",
@@ -518,7 +521,7 @@ class DynamicsModel:
                     entry["guard_choice"] = est.selection_[j]
                     scores = getattr(est, "validation_scores_", None)  # a fit's, not a restored model's
                     if scores is not None:  # the blocked cross-validation's nMSE the choice was made on
-                        entry["guard_validation"] = {k: float(v[j]) for k, v in scores.items()}
+                        entry["guard_validation"] = {k: float(v[j]) for k, v in scores.items() if np.isfinite(v[j])}
                 if gp.inference == "sparse":  # inducing inputs, and the prior variance they miss
                     entry["n_inducing"] = int(gp.n_inducing_[j])
                     entry["sparse_gap"] = float(gp.sparse_gap_[j])

@@ -186,7 +186,8 @@ def load_model(directory, robot=None):
         weighed = [(hp.get(j) or {}).get("guard_validation") for j in model.joint_names]
         if all(isinstance(w, dict) and w for w in weighed):  # an edited file's odd entry is left out
             try:
-                scores = {k: np.array([float(w.get(k, np.nan)) for w in weighed]) for k in weighed[0]}
+                labels = dict.fromkeys(k for w in weighed for k in w)  # "cut" only where it cut
+                scores = {k: np.array([float(w.get(k, np.nan)) for w in weighed]) for k in labels}
             except (TypeError, ValueError):
                 scores = None
             if scores is not None:

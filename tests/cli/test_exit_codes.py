@@ -57,6 +57,7 @@ USAGE = [  # exit 2
     ("sgp-fit {tmp}/r.h5 --min-noise -1", "--min-noise"),
     ("sgp-fit {tmp}/r.h5 --jobs 0", "--jobs"),
     ("sgp-fit {tmp}/r.h5 --seed 1.5", "--seed"),
+    ("sgp-fit {tmp}/r.h5 --joint-region --no-region", "--joint-region needs --region"),
     # predict
     ("predict {tmp}/m.yaml {tmp}/r.h5 --from wrist", "'wrist': expected a comma-separated list"),
     ("predict {tmp}/m.yaml {tmp}/r.h5 --to pots,elbows", "'pots,elbows': expected"),

@@ -307,3 +307,27 @@ def test_a_cut_gps_folds_are_capped_at_outside_max_samples_evenly_in_time(fits, 
     assert len(fit) == 100 and fit[0] == 0 and fit[-1] == len(U) - 1
     assert not np.any((fit >= 300) & (fit < 480))
     assert np.ptp(np.diff(fit[fit < 300])) <= 1  # evenly: steps differ by rounding only
+
+
+def test_the_joint_cut_candidate_cuts_where_the_two_stages_do_and_competes_only_there(fits):
+    """Guard.joint_region: the "cut" candidate is the joint GP cut at the two stages' onset (the
+    same standardised value: both estimators scale the same inputs), scored only for the outputs
+    it cuts. Here it wins output 0: cut between the right two training angles, it predicts a new
+    run as the cut two stages do, 3 times better than the uncut GP."""
+    U, Y, F, _ = _run(0)
+    guard = replace(DEFAULT_GUARD, max_lengthscale=3.0, joint_region=True)
+    kernels = [Region(0, Subspace([0, 1], SquaredExponential(2))) for _ in range(2)]
+    est = SemiParametricGP(kernels, guard=guard, seed=0, region_inputs=(0, 0)).fit(U, Y, F)
+    scores = est.validation_scores_["cut"]
+    assert np.isfinite(scores[0]) and np.isinf(scores[1])  # output 1 has no step: not cut
+    assert est.selection_ == ("cut", "parametric")
+    theta = est.hyper_.theta
+    onset = theta[0][0] * est.u_std_[0] + est.u_mean_[0]
+    below, above = U[U[:, 0] < ONSET, 0].max(), U[U[:, 0] >= ONSET, 0].min()
+    assert below < onset <= above
+    assert theta[1][0] == REGION_OFF
+    Uq, _, Fq, clean = _run(1)
+    out, _ = fits
+    err = {label: np.mean((m.predict(Uq, Fq)[0][:, 0] - clean[:, 0]) ** 2) for label, m in out.items()}
+    err["joint cut"] = np.mean((est.predict(Uq, Fq)[0][:, 0] - clean[:, 0]) ** 2)
+    assert err["joint cut"] < err["uncut"] / 3 and err["joint cut"] < 1.2 * err["cut"], err
