@@ -348,10 +348,11 @@ def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], 
         notes.append(GUARD_NOTE)
     if any(region_text(h) for h in entries):
         notes.append(
-            "'cut at q ≥ c': the second stage is two Gaussian processes, one below that angle of the joint and one "
-            "above it, with nothing shared across (a friction confined to part of the range); its cross-validated "
-            "nMSE, and 'parametric only' for that joint, come from every training sample outside each block. "
-            "sgp-fit --no-region never cuts."
+            "'cut at q ≥ c': the Gaussian process (the second stage's; with 'GP cut at an onset', the one learnt with "
+            "the parametric part) is two, one below that angle of the joint and one above it, with nothing shared "
+            "across (a friction confined to part of the range); the two stages' cross-validated nMSE, and "
+            "'parametric only' for that joint, come from every training sample outside each block. sgp-fit "
+            "--no-region never cuts."
         )
     return columns, rows, notes
 
