@@ -149,9 +149,10 @@ class Guard:
         joint SE GP carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 %
         above the onset): the cut two stages scored 0.047 in the cross-validation against the
         joint GP's 0.023, which on a test run of the same robot erred 0.19 N·m RMS just below the
-        onset against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); a joint GP cut
-        at the scan's onset predicts it at 0.0005 (scratch run). Off by default: not yet measured
-        on every bench.
+        onset against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); with the cut
+        candidate, 0.00054 and 0.97, and at 2,000 and 4,000 samples the same as without it
+        (bench_sgp_case --joint-region). Off by default: it adds a joint ML-II run, and the
+        scale bench's 20,000-sample fit took 32.0 CPU-s with it against 24.1 (target 30).
     """
 
     max_lengthscale: float | None = None
