@@ -31,7 +31,7 @@ GUARD_WORDS = {
     "learnt": "GP kept as learnt",
     "released": "GP, caps released",
     "extended": "GP, stretched",
-    "cut": "GP cut at an onset",
+    "cut": "GP with an onset",
     "two-stage": "two stages",
     "parametric": "parametric only",
 }
@@ -39,9 +39,9 @@ GUARD_NOTE = (
     "Guard: which of its candidates predicted contiguous blocks of the training log best (blocked "
     "cross-validation). 'GP kept as learnt': the GP with its maximum-likelihood hyperparameters; 'GP, caps "
     "released': length-scales stuck at their upper bound released; 'GP, stretched': the GP stretched towards its "
-    "linear limit, so that it extrapolates a trend instead of reverting to zero; 'GP cut at an onset' (sgp-fit "
-    "--joint-region): the GP in two sides at the onset the two stages' scan found in the joint's angle, learnt "
-    "with the parametric part; 'two stages': the parametric "
+    "linear limit, so that it extrapolates a trend instead of reverting to zero; "
+    "'GP with an onset' (sgp-fit --joint-region): the GP in two sides at the onset the two stages' scan found in "
+    "the joint's angle, learnt with the parametric part; 'two stages': the parametric "
     "fit, then a GP on its residual (PRGP's stages), kept where it beat the other choice by one standard error; "
     "'parametric only': the GP did not beat the parametric part by one standard error and was switched off for "
     "that joint. A winner is confirmed with its hyperparameters re-learnt without the block it predicts."
@@ -348,11 +348,11 @@ def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], 
         notes.append(GUARD_NOTE)
     if any(region_text(h) for h in entries):
         notes.append(
-            "'cut at q ≥ c': the Gaussian process (the second stage's; with 'GP cut at an onset', the one learnt with "
+            "'cut at q ≥ c': the Gaussian process (the second stage's; with 'GP with an onset', the one learnt with "
             "the parametric part) is two, one below that angle of the joint and one above it, with nothing shared "
-            "across (a friction confined to part of the range); the two stages' cross-validated nMSE, and "
-            "'parametric only' for that joint, come from every training sample outside each block. sgp-fit "
-            "--no-region never cuts."
+            "across (a friction confined to part of the range). Where the two stages are cut, their cross-validated "
+            "nMSE, and 'parametric only' for that joint, come from every training sample outside each block. "
+            "sgp-fit --no-region never cuts."
         )
     return columns, rows, notes
 

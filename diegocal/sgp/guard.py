@@ -3,7 +3,7 @@ and the candidates a blocked cross-validation chooses between (thesis §3.3; iss
 
 :class:`Guard` holds the options; :class:`GuardCandidates` (a mixin of
 :class:`~diegocal.sgp.estimator.SemiParametricGP`) builds the candidate hyperparameters
-(released, extended, parametric-only) and chooses among them per output (:meth:`_validate`),
+(released, extended, joint cut, parametric-only) and chooses among them per output (:meth:`_validate`),
 a winner confirmed by the nested cross-validation of :mod:`diegocal.sgp.nested`.
 """
 
@@ -139,11 +139,13 @@ class Guard:
         0.0084, bench_sgp_scale); it costs the scan (a few CPU-s) and, where a cut survives the
         plain scores, the nested refits (10-14 CPU-s). The joint candidates are still scored on
         the subset's folds, which the final model's data would improve too: the comparison
-        favours the cut against them (not against PR).
+        favours the cut two stages against them (not against PR), the joint cut of
+        ``joint_region`` included.
     joint_region : bool
         With ``region``: where the two-stage GP of an output is cut, a further joint candidate,
-        "cut": the joint GP cut at the same onset (the estimator's kernels are then Region
-        kernels, off unless cut), W and the GPs re-learnt from "learnt" with the onset held
+        "cut": the joint GP cut at the same onset (DynamicsModel then gives the estimator Region
+        kernels, off unless cut; an estimator built with plain kernels has no such candidate), W
+        and the GPs re-learnt from "learnt" with the onset held
         (:meth:`~GuardCandidates._joint_cut`). Why: on a short run PR's friction parameters are
         biased by the samples above the onset, and no GP on PR's residual mends that, while the
         joint SE GP carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 %
@@ -508,7 +510,7 @@ class GuardCandidates(NestedConfirmation):
 
     def _validate(self, options: dict, blocks, Us, Y, Fs, sizes, bounds, resid) -> np.ndarray:
         """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [released,
-        extended,] parametric) that predict held-out samples best: blocked cross-validation, each
+        extended, cut, two-stage,] parametric) that predict held-out samples best: blocked cross-validation, each
         contiguous block of ``blocks`` predicted by the posterior of the others, nMSE averaged
         over the blocks (one held-out block could be unrepresentative, e.g. a robot at rest at
         the end of a run). Ties go to the earlier option; σ_w is the earliest chosen option's.
@@ -559,7 +561,7 @@ class GuardCandidates(NestedConfirmation):
         for (c, b), err in zip(cells, thread_map(score, cells, self.jobs), strict=True):
             per_block[c, b] = err
         uncut = self._uncut_in_cut_candidate(labels, options)
-        per_block[uncut] = np.inf  # "cut" competes only where it cuts (elsewhere it is "learnt" re-run)
+        per_block[uncut] = np.inf  # "cut" competes only for the outputs it cuts
         confirmed = set()  # outputs whose two-stage scores are the nested ones
         choice = self._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
         choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
@@ -593,10 +595,26 @@ class GuardCandidates(NestedConfirmation):
         confirmed by the nested ones (re-learnt per fold: 0.0011 there). Where the cut loses, its
         output's two stages go back to the uncut GP, scored plain on the subset's folds, and PR
         to its subset scores (confirmed nested by :meth:`_confirm_two_stage` if they win).
-        ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place."""
+        ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place.
+
+        The joint "cut" candidate (Guard.joint_region) stays out of this decision, as without it,
+        and competes with its outcome afterwards: its plain scores on the subset's folds would
+        otherwise reset a cut two stages' GP before their nested scores were taken."""
         cut = self._cut_outputs() if TWO_STAGE in labels else []
         if not cut:
             return self._choose(per_block, labels)
+        if "cut" not in labels:
+            return self._settle_cut(cut, per_block, labels, confirmed, blocks, data)
+        c = labels.index("cut")
+        joint_cut = per_block[c].copy()
+        per_block[c] = np.inf
+        self._settle_cut(cut, per_block, labels, confirmed, blocks, data)
+        per_block[c] = joint_cut
+        return self._choose(per_block, labels)
+
+    def _settle_cut(self, cut, per_block, labels, confirmed: set, blocks, data) -> np.ndarray:
+        """:meth:`_choose_cut` for the cut outputs ``cut``: the cut two stages screened, confirmed
+        or given back to the uncut GP; returns the choice."""
         t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
         pr_subset = per_block[p].copy()
         per_block[p][:, cut] = self._parametric_outside(blocks, data)[:, cut]

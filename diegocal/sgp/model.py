@@ -521,7 +521,8 @@ class DynamicsModel:
                     entry["guard_choice"] = est.selection_[j]
                     scores = getattr(est, "validation_scores_", None)  # a fit's, not a restored model's
                     if scores is not None:  # the blocked cross-validation's nMSE the choice was made on
-                        entry["guard_validation"] = {k: float(v[j]) for k, v in scores.items() if np.isfinite(v[j])}
+                        weighed = {k: v[j] for k, v in scores.items() if k != "cut" or np.isfinite(v[j])}
+                        entry["guard_validation"] = {k: float(v) for k, v in weighed.items()}  # "cut": where it cuts
                 if gp.inference == "sparse":  # inducing inputs, and the prior variance they miss
                     entry["n_inducing"] = int(gp.n_inducing_[j])
                     entry["sparse_gap"] = float(gp.sparse_gap_[j])

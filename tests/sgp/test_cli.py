@@ -191,9 +191,11 @@ def test_sgp_fit_region_is_the_default_and_no_region_is_recorded(logs, arm2_dir,
     assert load_model(off).gp_.region_inputs is None
 
 
-def test_sgp_fit_joint_region_is_recorded_and_reloads_with_cut_kernels(logs, arm2_dir, tmp_path):
+def test_sgp_fit_joint_region_is_recorded_and_reloads_with_region_kernels(logs, arm2_dir, tmp_path):
     """`--joint-region` is written to sgp.yaml's guard options; the reloaded model's joint GPs
-    are Region kernels on the joints' angles and it predicts as the fitted one."""
+    are Region kernels on the joints' angles and it predicts as the fitted one. (Nothing is cut
+    on this short log; a model that chose the joint cut is saved and reloaded in
+    tests/sgp/test_joint_region_slow.py.)"""
     from diegocal.robot import load_robot
     from diegocal.sgp import fit_dynamics
     from diegocal.sgp.kernels import Region
