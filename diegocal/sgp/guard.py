@@ -154,7 +154,7 @@ class Guard:
         onset against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); with the cut
         candidate, 0.00054 and 0.97, and at 2,000 and 4,000 samples the same as without it
         (bench_sgp_case --joint-region). Off by default: it adds a joint ML-II run, and the
-        scale bench's 20,000-sample fit took 31.5 CPU-s with it against 24.5 (target 30).
+        scale bench's 20,000-sample fit took 32.8 CPU-s with it against 24.5 (target 30).
     """
 
     max_lengthscale: float | None = None
