@@ -1,7 +1,7 @@
 """Real robots: PR vs SGP inverse-dynamics identification judged on held-out torques (thesis ch. 3).
 
     .venv/bin/python bench/bench_real_identification.py [--data DIR] [--tx40-stride 2]
-                                                        [--tiago-stride 8] [--no-floor] [--no-region]
+                                                        [--tiago-stride 8] [--no-floor] [--no-region] [--joint-region]
 
 The real-robot logs of ``sample_data/real`` (Stäubli TX40, PAL TIAGo; README there: imported by
 ``diegocal import`` with zero-phase low-pass, derivatives, documented unit conversions), split
@@ -152,10 +152,13 @@ class Result:
     std: np.ndarray | None = None
 
 
-def fit_predict(split: Split, method: str, seed: int, no_region: bool = False) -> Result:
+def fit_predict(split: Split, method: str, seed: int, no_region: bool = False, joint_region: bool = False) -> Result:
     """Fit ``method`` ("pr", "sgp", "sgp floor") on the split's training part, predict held-out;
-    ``no_region``: the SGPs without Guard.region (``sgp-fit --no-region``)."""
-    guard = replace(default_guard(SGPOptions().friction), region=False) if no_region else None
+    ``no_region``: the SGPs without Guard.region (``sgp-fit --no-region``); ``joint_region``: with
+    Guard.joint_region (``sgp-fit --joint-region``)."""
+    guard = None
+    if no_region or joint_region:
+        guard = replace(default_guard(SGPOptions().friction), region=not no_region, joint_region=joint_region)
     if method == "sgp floor":
         options = SGPOptions(kind="sgp", seed=seed, min_noise=NOISE_FLOOR, guard_options=guard)
     else:
@@ -240,7 +243,12 @@ def main(argv=None) -> int:
     parser.add_argument("--no-floor", action="store_true", help="skip the 'SGP floor' row")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-region", action="store_true", help="SGP without Guard.region (sgp-fit --no-region)")
+    parser.add_argument(
+        "--joint-region", action="store_true", help="SGP with Guard.joint_region (sgp-fit --joint-region)"
+    )
     args = parser.parse_args(argv)
+    if args.joint_region and args.no_region:
+        parser.error("--joint-region needs the region scan: drop --no-region")
     if not (args.data / "tx40.h5").exists() or not (args.data / "tiago.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
         return 0
@@ -255,7 +263,8 @@ def main(argv=None) -> int:
                                                                      args.tiago_stride)]
     print("TIAGo: arm_5..7 efforts unusable (README): not fitted, not scored; torso in N.")
     for split in splits:
-        results = baselines(split) + [fit_predict(split, m, args.seed, args.no_region) for m in methods]
+        fits = [fit_predict(split, m, args.seed, args.no_region, args.joint_region) for m in methods]
+        results = baselines(split) + fits
         report(split, results)
     if not args.no_floor:
         print(f"\nSGP floor = the SGP with σ_v ≥ {NOISE_FLOOR}·std(τ_j), SGPOptions(min_noise=...); "
