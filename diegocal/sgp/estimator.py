@@ -59,7 +59,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         start, the cross-validation and the posterior finish (the CLI's progress bar)
     region_inputs : tuple of (int or None) per output, or None: the input column along which the
         two-stage candidate's GP of that output may be cut in two (its joint's angle:
-        :class:`~diegocal.sgp.kernels.Region`, :meth:`~GuardCandidates._region_scan`)
+        :class:`~diegocal.sgp.kernels.Region`, :meth:`~diegocal.sgp.region.RegionScan._region_scan`)
     screen_starts : bool, screen the ML-II starts on a few samples and refine the best
         (:meth:`_screen`). The model sets it where the guard's cross-validation judges the result
         (SGP with the guard): a screened start can land in a worse basin, and nothing else would

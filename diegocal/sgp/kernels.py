@@ -285,7 +285,7 @@ class Region(Kernel):
     ``c = REGION_OFF`` puts every input below it: the kernel is then ``k_0``. ML-II holds c and w
     (:func:`is_fixed`): the likelihood is flat in c between two samples and the step must sit
     between the right two (3-link arm, issue #14: an onset 0.01 rad below the friction's doubled
-    the held-out error), so :meth:`~diegocal.sgp.guard.GuardCandidates._region_scan` places it by
+    the held-out error), so :meth:`~diegocal.sgp.region.RegionScan._region_scan` places it by
     a search over the samples; their gradients serve tests and other uses.
     """
 

@@ -9,8 +9,9 @@ import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace, nested
 from diegocal.sgp.gp import Hyperparameters, fit_posterior
-from diegocal.sgp.guard import TWO_STAGE, _OutputLikelihood
+from diegocal.sgp.guard import TWO_STAGE
 from diegocal.sgp.kernels import REGION_OFF, Region, is_amplitude
+from diegocal.sgp.region import _OutputLikelihood
 
 ONSET = 0.5  # rad: output 0 has a friction above it
 W_TRUE = np.array([1.0, 0.5])
