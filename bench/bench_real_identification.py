@@ -55,7 +55,7 @@ from diegocal.evaluate import block_mse, paired_se, score, split_blocks
 from diegocal.io import Log, load_log, make_stream
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics, nmse
-from diegocal.sgp.model import default_guard, log_arrays
+from diegocal.sgp.model import Guard, default_guard, log_arrays
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO / "sample_data" / "real"
@@ -152,13 +152,9 @@ class Result:
     std: np.ndarray | None = None
 
 
-def fit_predict(split: Split, method: str, seed: int, no_region: bool = False, joint_region: bool = False) -> Result:
+def fit_predict(split: Split, method: str, seed: int, guard: Guard | None = None) -> Result:
     """Fit ``method`` ("pr", "sgp", "sgp floor") on the split's training part, predict held-out;
-    ``no_region``: the SGPs without Guard.region (``sgp-fit --no-region``); ``joint_region``: with
-    Guard.joint_region (``sgp-fit --joint-region``)."""
-    guard = None
-    if no_region or joint_region:
-        guard = replace(default_guard(SGPOptions().friction), region=not no_region, joint_region=joint_region)
+    ``guard``: the SGPs' guard options (None: the default's; ``--no-region``, ``--joint-region``)."""
     if method == "sgp floor":
         options = SGPOptions(kind="sgp", seed=seed, min_noise=NOISE_FLOOR, guard_options=guard)
     else:
@@ -249,6 +245,9 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.joint_region and args.no_region:
         parser.error("--joint-region needs the region scan: drop --no-region")
+    guard = None
+    if args.no_region or args.joint_region:
+        guard = replace(default_guard(SGPOptions().friction), region=not args.no_region, joint_region=args.joint_region)
     if not (args.data / "tx40.h5").exists() or not (args.data / "tiago.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
         return 0
@@ -263,8 +262,7 @@ def main(argv=None) -> int:
                                                                      args.tiago_stride)]
     print("TIAGo: arm_5..7 efforts unusable (README): not fitted, not scored; torso in N.")
     for split in splits:
-        fits = [fit_predict(split, m, args.seed, args.no_region, args.joint_region) for m in methods]
-        results = baselines(split) + fits
+        results = baselines(split) + [fit_predict(split, m, args.seed, guard) for m in methods]
         report(split, results)
     if not args.no_floor:
         print(f"\nSGP floor = the SGP with σ_v ≥ {NOISE_FLOOR}·std(τ_j), SGPOptions(min_noise=...); "

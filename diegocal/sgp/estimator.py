@@ -21,7 +21,7 @@ from diegocal.parallel import single_threaded, thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, input_scaling, per_output
 from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE, greedy_inducing
-from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude, is_fixed, is_lengthscale
+from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, cut_along, is_amplitude, is_fixed, is_lengthscale
 from diegocal.sgp.starts import MLStarts
 from diegocal.sgp.subnormals import flushed
 
@@ -216,8 +216,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         say = self.progress
         kernels = self.kernels if kernels is None else kernels
         if self.region_inputs is not None:
-            pairs = zip(kernels, self.region_inputs, strict=True)
-            kernels = [k if k is None or d is None or isinstance(k, Region) else Region(d, k) for k, d in pairs]
+            kernels = cut_along(kernels, self.region_inputs)
         return SemiParametricGP(
             kernels,
             use_features=False,

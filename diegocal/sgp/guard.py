@@ -19,7 +19,7 @@ from diegocal.errors import NumericalError
 from diegocal.evaluate import choose_by_validation
 from diegocal.parallel import thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood
-from diegocal.sgp.kernels import REGION_OFF, RELEASED_LENGTHSCALE, Region, is_amplitude, is_lengthscale
+from diegocal.sgp.kernels import RELEASED_LENGTHSCALE, cut_outputs, is_amplitude, is_lengthscale
 from diegocal.sgp.nested import NestedConfirmation
 from diegocal.sgp.region import RegionScan
 
@@ -122,8 +122,9 @@ class Guard:
     region : bool
         With ``two_stage``: each output's GP on PR's residual may be cut at an onset in its
         joint's angle (:class:`~diegocal.sgp.kernels.Region`, :meth:`~diegocal.sgp.region.
-        RegionScan._region_scan`; the model gives the estimator its ``region_inputs``). A cut GP and PR are
-        scored on folds of every sample outside each block (:meth:`~GuardCandidates._choose_cut`),
+        RegionScan._region_scan`; the model gives the estimator its ``region_inputs``). A cut GP
+        and PR are scored on folds of every sample outside each block (:meth:`~GuardCandidates.
+        _choose_cut`),
         screened by the plain scores, confirmed by the nested ones. On in DEFAULT_GUARD (``sgp-fit
         --no-region`` turns it off): on issue #14's arm it beats PRGP on joint 3 at 2,000 and
         4,000 samples (0.0017 against 0.0068 and 0.0018 against 0.0041, bench_sgp_case) and on
@@ -138,9 +139,9 @@ class Guard:
         "cut": the joint GP cut at the same onset (DynamicsModel then gives the estimator Region
         kernels, off unless cut; an estimator built with plain kernels has no such candidate), W
         and the GPs re-learnt from "learnt" with the onset held
-        (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`). Why: on a short run PR's friction parameters are
-        biased by the samples above the onset, and no GP on PR's residual mends that, while the
-        joint SE GP carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 %
+        (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`). Why: on a short run PR's friction
+        parameters are biased by the samples above the onset, and no GP on PR's residual mends
+        that, while the joint SE GP carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 %
         above the onset): the cut two stages scored 0.047 in the cross-validation against the
         joint GP's 0.023, which on a test run of the same robot erred 0.19 N·m RMS just below the
         onset against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); with the cut
@@ -229,16 +230,6 @@ class GuardCandidates(RegionScan, NestedConfirmation):
                     any_capped = True
         result = optimise(start, new_bounds) if any_capped else None
         return None if result is None else result[1]
-
-    def _uncut_in_cut_candidate(self, labels: list, options: list) -> tuple:
-        """Index of per_block's (candidate, :, output) cells where the "cut" candidate does not
-        cut its output's joint GP (empty without that candidate)."""
-        if "cut" not in labels:
-            return (np.zeros(0, int), slice(None), np.zeros(0, int))
-        vec = options[labels.index("cut")]
-        cut = {j for j, k, _ in self._slots() if isinstance(self.kernels[j], Region) and vec[k] < REGION_OFF}
-        outputs = np.array([j for j in range(len(self.kernels)) if j not in cut], int)
-        return (np.full(len(outputs), labels.index("cut")), slice(None), outputs)
 
     def _extend(self, x, sizes, data) -> np.ndarray | None:
         """Guard.extend_capped: where ML-II presses a length-scale against the cap, take the limit
@@ -390,8 +381,9 @@ class GuardCandidates(RegionScan, NestedConfirmation):
 
     def _validate(self, options: dict, blocks, Us, Y, Fs, sizes, bounds, resid) -> np.ndarray:
         """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [released,
-        extended, cut, two-stage,] parametric) that predict held-out samples best: blocked cross-validation, each
-        contiguous block of ``blocks`` predicted by the posterior of the others, nMSE averaged
+        extended, cut, two-stage,] parametric) that predict held-out samples best: blocked
+        cross-validation, each contiguous block of ``blocks`` predicted by the posterior of the
+        others, nMSE averaged
         over the blocks (one held-out block could be unrepresentative, e.g. a robot at rest at
         the end of a run). Ties go to the earlier option; σ_w is the earliest chosen option's.
         Where two stages win, their scores are replaced by the nested ones
@@ -440,8 +432,11 @@ class GuardCandidates(RegionScan, NestedConfirmation):
 
         for (c, b), err in zip(cells, thread_map(score, cells, self.jobs), strict=True):
             per_block[c, b] = err
-        uncut = self._uncut_in_cut_candidate(labels, options)
-        per_block[uncut] = np.inf  # "cut" competes only for the outputs it cuts
+        not_cut = []  # "cut" competes only for the outputs it cuts
+        if "cut" in labels:
+            cut = cut_outputs(self.kernels, Hyperparameters.unpack(options[labels.index("cut")], sizes).theta)
+            not_cut = [j for j in range(Y.shape[1]) if j not in cut]
+            per_block[labels.index("cut")][:, not_cut] = np.inf
         confirmed = set()  # outputs whose two-stage scores are the nested ones
         choice = self._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
         choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
@@ -453,7 +448,8 @@ class GuardCandidates(RegionScan, NestedConfirmation):
                     held = self._pin_fixed(bounds, start)  # a cut candidate keeps its onsets
                     nested = self._joint_nested(start, blocks, (Us, Y, Fs), sizes, held, resid, label == "extended")
                     per_block[c][:, contended] = nested[:, contended]
-            per_block[uncut] = np.inf
+            if not_cut:
+                per_block[labels.index("cut")][:, not_cut] = np.inf
             choice = self._choose(per_block, labels)
             choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
         self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))

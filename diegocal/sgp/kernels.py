@@ -388,6 +388,19 @@ class Region(Kernel):
         return np.concatenate([head, inner])
 
 
+def cut_along(kernels, inputs) -> list:
+    """Each kernel wrapped in a :class:`Region` along its input column of ``inputs`` (None: not
+    wrapped; a kernel that is already a Region is kept as it is)."""
+    pairs = zip(kernels, inputs, strict=True)
+    return [k if k is None or d is None or isinstance(k, Region) else Region(d, k) for k, d in pairs]
+
+
+def cut_outputs(kernels, theta) -> list:
+    """The outputs whose kernel is a :class:`Region` cut at an onset under ``theta`` (one parameter
+    vector per kernel): not off (REGION_OFF)."""
+    return [j for j, k in enumerate(kernels) if isinstance(k, Region) and theta[j][0] < REGION_OFF]
+
+
 #: The onset of a Region kernel that is off: above every standardised input, so k = k_0.
 REGION_OFF = 1e3
 #: A Region kernel's width, in stds of its input: a step sharper than the samples' spacing along

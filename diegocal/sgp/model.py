@@ -24,7 +24,7 @@ from diegocal.evaluate import nmse  # the one nMSE (thesis §3.4.2), re-exported
 from diegocal.parallel import single_threaded
 from diegocal.sgp.estimator import Guard, SemiParametricGP
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE
-from diegocal.sgp.kernels import REGION_OFF, Region, SquaredExponential, Subspace
+from diegocal.sgp.kernels import REGION_OFF, Region, SquaredExponential, Subspace, cut_along
 from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor, true_parameters
 from diegocal.sgp.terms import apply_lags, as_dynamics_term, term_columns
 
@@ -398,8 +398,7 @@ class DynamicsModel:
         g = (o.guard_options or default_guard(o.friction)) if guard else Guard()
         kernels = [None] * len(self.joint_names) if kind == "pr" else self._kernels()
         if guard and g.region and g.joint_region:  # the joint GPs may be cut too (off until then)
-            pairs = zip(kernels, self._region_inputs(), strict=True)
-            kernels = [k if k is None or d is None else Region(d, k) for k, d in pairs]
+            kernels = cut_along(kernels, self._region_inputs())
         return SemiParametricGP(
             kernels,
             use_features=kind != "gp",
@@ -521,8 +520,8 @@ class DynamicsModel:
                     entry["guard_choice"] = est.selection_[j]
                     scores = getattr(est, "validation_scores_", None)  # a fit's, not a restored model's
                     if scores is not None:  # the blocked cross-validation's nMSE the choice was made on
-                        weighed = {k: v[j] for k, v in scores.items() if k != "cut" or np.isfinite(v[j])}
-                        entry["guard_validation"] = {k: float(v) for k, v in weighed.items()}  # "cut": where it cuts
+                        weighed = [(k, v[j]) for k, v in scores.items() if k != "cut" or np.isfinite(v[j])]
+                        entry["guard_validation"] = {k: float(v) for k, v in weighed}  # "cut" where it cuts
                 if gp.inference == "sparse":  # inducing inputs, and the prior variance they miss
                     entry["n_inducing"] = int(gp.n_inducing_[j])
                     entry["sparse_gap"] = float(gp.sparse_gap_[j])

@@ -13,7 +13,7 @@ import numpy as np
 
 from diegocal.errors import FitError, NumericalError
 from diegocal.sgp.gp import Hyperparameters, negative_log_likelihood
-from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, is_amplitude
+from diegocal.sgp.kernels import REGION_WIDTH, Region, cut_outputs, is_amplitude
 from diegocal.sgp.nested import evenly
 
 # The region scan of the two-stage GPs (RegionScan._region_scan): onsets at these quantiles
@@ -87,9 +87,7 @@ class RegionScan:
 
     def _cut_outputs(self) -> list:
         """The outputs whose two-stage GP is cut at an onset (:meth:`_region_scan`)."""
-        kernels = self._residual_estimator().kernels
-        theta = self._two_stage_hp[1].theta
-        return [j for j, k in enumerate(kernels) if isinstance(k, Region) and theta[j][0] < REGION_OFF]
+        return cut_outputs(self._residual_estimator().kernels, self._two_stage_hp[1].theta)
 
     @staticmethod
     def _place_onset(likelihood, theta, uncut, bracket) -> tuple[np.ndarray, float]:
