@@ -1,7 +1,8 @@
 """Real robots: PR vs SGP inverse-dynamics identification judged on held-out torques (thesis ch. 3).
 
     .venv/bin/python bench/bench_real_identification.py [--data DIR] [--tx40-stride 2]
-                                                        [--tiago-stride 8] [--no-floor] [--no-region] [--joint-region]
+                                                        [--tiago-stride 8] [--no-floor] [--no-region]
+                                                        [--no-joint-region]
 
 The real-robot logs of ``sample_data/real`` (Stäubli TX40, PAL TIAGo; README there: imported by
 ``diegocal import`` with zero-phase low-pass, derivatives, documented unit conversions), split
@@ -154,7 +155,7 @@ class Result:
 
 def fit_predict(split: Split, method: str, seed: int, guard: Guard | None = None) -> Result:
     """Fit ``method`` ("pr", "sgp", "sgp floor") on the split's training part, predict held-out;
-    ``guard``: the SGPs' guard options (None: the default's; ``--no-region``, ``--joint-region``)."""
+    ``guard``: the SGPs' guard options (None: the default's; ``--no-region``, ``--no-joint-region``)."""
     if method == "sgp floor":
         options = SGPOptions(kind="sgp", seed=seed, min_noise=NOISE_FLOOR, guard_options=guard)
     else:
@@ -240,14 +241,14 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-region", action="store_true", help="SGP without Guard.region (sgp-fit --no-region)")
     parser.add_argument(
-        "--joint-region", action="store_true", help="SGP with Guard.joint_region (sgp-fit --joint-region)"
+        "--no-joint-region", action="store_true", help="SGP without Guard.joint_region (sgp-fit --no-joint-region)"
     )
     args = parser.parse_args(argv)
-    if args.joint_region and args.no_region:
-        parser.error("--joint-region needs the region scan: drop --no-region")
     guard = None
-    if args.no_region or args.joint_region:
-        guard = replace(default_guard(SGPOptions().friction), region=not args.no_region, joint_region=args.joint_region)
+    if args.no_region or args.no_joint_region:
+        region = not args.no_region
+        joint_region = region and not args.no_joint_region
+        guard = replace(default_guard(SGPOptions().friction), region=region, joint_region=joint_region)
     if not (args.data / "tx40.h5").exists() or not (args.data / "tiago.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
         return 0

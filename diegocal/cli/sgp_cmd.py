@@ -119,13 +119,15 @@ def sgp_fit(
         ),
     ] = True,
     joint_region: Annotated[
-        bool,
+        bool | None,
         typer.Option(
             "--joint-region/--no-joint-region",
-            help="SGP guard, with --region: where a two-stage GP is cut, also offer the joint GP cut at the same "
-            "onset (W and the GP learnt together; for short runs, where PR's friction is biased).",
+            help="SGP guard, with --region: where a cut two-stage GP loses, also offer the joint GP cut at the same "
+            "onset (W and the GP learnt together; for short runs, where PR's friction is biased). Default: on "
+            "with --region.",
+            show_default=False,
         ),
-    ] = False,
+    ] = None,
     gp_inputs: Annotated[
         str | None,
         typer.Option(
@@ -190,7 +192,8 @@ def sgp_fit(
     )
     if joint_region and not region:
         raise usage_error("sgp-fit", "--joint-region needs --region (the joint GP is cut where the two-stage GP is)")
-    if not region or joint_region:
+    joint_region = region if joint_region is None else joint_region
+    if not (region and joint_region):
         g = default_guard(opts.friction)
         opts = replace(opts, guard_options=replace(g, region=region, joint_region=joint_region))
     data = load_log(log)

@@ -13,6 +13,8 @@ for inverse dynamics.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from diegocal.errors import FitError, NumericalError
@@ -427,17 +429,16 @@ class SemiParametricGP(GuardCandidates, MLStarts):
                 if extended is not None:
                     options["extended"] = extended
             options[PARAMETRIC] = self._parametric_only(x0, resid, bounds, data)
+            joint_cut = None
             if self.guard.two_stage:  # judged against the others' choice (GuardCandidates._choose)
                 self._two_stage_hp = self._two_stage(options[PARAMETRIC], Us, Y, Fs)
                 joint = {k: v for k, v in options.items() if k != PARAMETRIC}
-                if self.guard.joint_region:
-                    cut = self._joint_cut(x, bounds, refit)
-                    if cut is not None:
-                        joint["cut"] = cut
                 options = {**joint, TWO_STAGE: options[PARAMETRIC]}
                 options[PARAMETRIC] = options[TWO_STAGE]  # in the joint posterior both are PR rows
+                if self.guard.joint_region:  # learnt only where the cut two stages lose
+                    joint_cut = functools.partial(self._joint_cut, x, bounds, refit)
             blocks = np.array_split(idx, folds)  # contiguous in time order
-            x = self._validate(options, blocks, Us, Y, Fs, sizes, bounds, resid)
+            x = self._validate(options, blocks, Us, Y, Fs, sizes, bounds, resid, joint_cut)
             if self.guard.two_stage:
                 self.stages_ = Stages(self.selection_, *self._two_stage_hp)
         return Hyperparameters.unpack(x, sizes)

@@ -124,9 +124,8 @@ class Guard:
         joint's angle (:class:`~diegocal.sgp.kernels.Region`, :meth:`~diegocal.sgp.region.
         RegionScan._region_scan`; the model gives the estimator its ``region_inputs``). A cut GP
         and PR are scored on folds of every sample outside each block (:meth:`~GuardCandidates.
-        _choose_cut`),
-        screened by the plain scores, confirmed by the nested ones. On in DEFAULT_GUARD (``sgp-fit
-        --no-region`` turns it off): on issue #14's arm it beats PRGP on joint 3 at 2,000 and
+        _choose_cut`), screened by the plain scores, confirmed by the nested ones. On in
+        DEFAULT_GUARD (``sgp-fit --no-region`` turns it off): on issue #14's arm it beats PRGP on joint 3 at 2,000 and
         4,000 samples (0.0017 against 0.0068 and 0.0018 against 0.0041, bench_sgp_case) and on
         the scale bench's run at 20,000 (0.00092 against 0.0012), and PR at 1,000 (0.0055 against
         0.0084, bench_sgp_scale); it costs the scan (a few CPU-s) and, where a cut survives the
@@ -135,19 +134,22 @@ class Guard:
         favours the cut two stages against them (not against PR), the joint cut of
         ``joint_region`` included.
     joint_region : bool
-        With ``region``: where the two-stage GP of an output is cut, a further joint candidate,
-        "cut": the joint GP cut at the same onset (DynamicsModel then gives the estimator Region
-        kernels, off unless cut; an estimator built with plain kernels has no such candidate), W
-        and the GPs re-learnt from "learnt" with the onset held
-        (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`). Why: on a short run PR's friction
-        parameters are biased by the samples above the onset, and no GP on PR's residual mends
-        that, while the joint SE GP carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 %
-        above the onset): the cut two stages scored 0.047 in the cross-validation against the
-        joint GP's 0.023, which on a test run of the same robot erred 0.19 N·m RMS just below the
-        onset against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); with the cut
-        candidate, 0.00054 and 0.97, and at 2,000 and 4,000 samples the same as without it
-        (bench_sgp_case --joint-region). Off by default: it adds a joint ML-II run, and the
-        scale bench's 20,000-sample fit took 32.8 CPU-s with it against 24.5 (target 30).
+        With ``region``: where the cut two-stage GP of an output loses the guard's choice
+        (:meth:`~GuardCandidates._choose_cut`), a further joint candidate, "cut": the joint GP
+        cut at the same onset (DynamicsModel then gives the estimator Region kernels, off unless
+        cut; an estimator built with plain kernels has no such candidate), W and the GPs re-learnt
+        from "learnt" with the onset held (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`),
+        scored for the outputs it cuts. Why: on a short run PR's friction parameters are biased by
+        the samples above the onset, and no GP on PR's residual mends that, while the joint SE GP
+        carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 % above the
+        onset): the cut two stages scored 0.047 in the cross-validation against the joint GP's
+        0.023, which on a test run of the same robot erred 0.19 N·m RMS just below the onset
+        against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); with the cut
+        candidate, 0.00054 and 0.97 (bench_sgp_case --duration 6 --no-joint-region). Learnt only
+        where the cut two stages lose: offered wherever the scan cut (round 8's opt-in), its joint
+        ML-II run cost the scale bench's 20,000-sample fit 8 CPU-s (32.8 against 24.5, target
+        30), where the cut two stages win. On in DEFAULT_GUARD (``sgp-fit --no-joint-region``
+        turns it off).
     """
 
     max_lengthscale: float | None = None
@@ -379,7 +381,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         gp = fit_posterior(kernels, Us, res, Fs[:, :, :0], hp_res)
         return post.predict(Uq, Fq, variance=False)[0] + gp.predict(Uq, Fq[:, :, :0], variance=False)[0]
 
-    def _validate(self, options: dict, blocks, Us, Y, Fs, sizes, bounds, resid) -> np.ndarray:
+    def _validate(self, options: dict, blocks, Us, Y, Fs, sizes, bounds, resid, joint_cut=None) -> np.ndarray:
         """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [released,
         extended, cut, two-stage,] parametric) that predict held-out samples best: blocked
         cross-validation, each contiguous block of ``blocks`` predicted by the posterior of the
@@ -405,8 +407,64 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         11, joint 3 0.0052 against 0.0066, but the thesis arm's vertical joint 3 went from 0.47 to
         0.87 over 5 seeds.)
         Sets ``selection_`` (label per output), ``validation_scores_`` (label -> (n,)) and
-        ``validation_blocks_`` (label -> (blocks, n), the per-block nMSE they average)."""
+        ``validation_blocks_`` (label -> (blocks, n), the per-block nMSE they average).
+
+        ``joint_cut`` (Guard.joint_region): called with {output: its cut two-stage GP's
+        parameters} for the outputs whose cut two stages lost (:meth:`_choose_cut`), it returns
+        the "cut" candidate (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`) or None; the
+        candidate is scored on the subset's folds for those outputs only and the choice made
+        again. Learnt only there: where the cut two stages win (the scale bench's 20,000-sample
+        run), its joint ML-II run would be spent on a candidate that cannot win the output."""
         labels, options = list(options), list(options.values())
+        data = Us, Y, Fs
+        per_block = self._plain_scores(options, labels, blocks, data, sizes)
+        scanned = self._two_stage_hp[1].theta if TWO_STAGE in labels else ()
+        confirmed = set()  # outputs whose two-stage scores are the nested ones
+        choice = self._choose_cut(per_block, labels, confirmed, blocks, data)
+        not_cut = []  # "cut" competes only for the outputs it cuts
+        if joint_cut is not None:
+            lost = [j for j in self._scanned_cuts(scanned) if labels[choice[j]] != TWO_STAGE]
+            cut = joint_cut({j: scanned[j] for j in lost}) if lost else None
+            if cut is not None:
+                labels.append("cut")
+                options.append(cut)
+                row = self._plain_scores([cut], ["cut"], blocks, data, sizes)
+                cuts = cut_outputs(self.kernels, Hyperparameters.unpack(cut, sizes).theta)
+                not_cut = [j for j in range(Y.shape[1]) if j not in cuts]
+                row[0][:, not_cut] = np.inf
+                per_block = np.concatenate([per_block, row])
+                choice = self._choose(per_block, labels)
+        choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
+        contended = [j for j, c in enumerate(choice) if labels[c] in JOINT]
+        if contended and len(np.concatenate(blocks)) <= NESTED_JOINT_MAX:  # confirm the joint GPs
+            for c, label in enumerate(labels):
+                if label in JOINT:  # "extended": the learnt refit per fold, then stretched
+                    start = options[labels.index("learnt")] if label == "extended" else options[c]
+                    held = self._pin_fixed(bounds, start)  # a cut candidate keeps its onsets
+                    nested = self._joint_nested(start, blocks, data, sizes, held, resid, label == "extended")
+                    per_block[c][:, contended] = nested[:, contended]
+            if not_cut:
+                per_block[labels.index("cut")][:, not_cut] = np.inf
+            choice = self._choose(per_block, labels)
+            choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
+        self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
+        self.validation_blocks_ = dict(zip(labels, per_block, strict=True))  # (blocks, n) each
+        self.selection_ = tuple(labels[c] for c in choice)
+        out = options[int(choice.min())].copy()
+        for j, k, names in self._slots():
+            out[1 + j] = options[choice[j]][1 + j]
+            out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
+        return out
+
+    def _scanned_cuts(self, scanned) -> list:
+        """The outputs the region scan cut, from its two-stage parameters ``scanned``."""
+        return cut_outputs(self._residual_estimator().kernels, scanned) if len(scanned) else []
+
+    def _plain_scores(self, options, labels, blocks, data, sizes) -> np.ndarray:
+        """(options, blocks, n) nMSE of each candidate in the plain blocked cross-validation: each
+        contiguous block predicted by the posterior of the others with the candidate's
+        hyperparameters (the two stages': ``_two_stage_hp``)."""
+        Us, Y, Fs = data
         per_block = np.zeros((len(options), len(blocks), Y.shape[1]))
         cells = [(c, b) for c in range(len(options)) for b in range(len(blocks))]
         done = []
@@ -432,34 +490,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
 
         for (c, b), err in zip(cells, thread_map(score, cells, self.jobs), strict=True):
             per_block[c, b] = err
-        not_cut = []  # "cut" competes only for the outputs it cuts
-        if "cut" in labels:
-            cut = cut_outputs(self.kernels, Hyperparameters.unpack(options[labels.index("cut")], sizes).theta)
-            not_cut = [j for j in range(Y.shape[1]) if j not in cut]
-            per_block[labels.index("cut")][:, not_cut] = np.inf
-        confirmed = set()  # outputs whose two-stage scores are the nested ones
-        choice = self._choose_cut(per_block, labels, confirmed, blocks, (Us, Y, Fs))
-        choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
-        contended = [j for j, c in enumerate(choice) if labels[c] in JOINT]
-        if contended and len(np.concatenate(blocks)) <= NESTED_JOINT_MAX:  # confirm the joint GPs
-            for c, label in enumerate(labels):
-                if label in JOINT:  # "extended": the learnt refit per fold, then stretched
-                    start = options[labels.index("learnt")] if label == "extended" else options[c]
-                    held = self._pin_fixed(bounds, start)  # a cut candidate keeps its onsets
-                    nested = self._joint_nested(start, blocks, (Us, Y, Fs), sizes, held, resid, label == "extended")
-                    per_block[c][:, contended] = nested[:, contended]
-            if not_cut:
-                per_block[labels.index("cut")][:, not_cut] = np.inf
-            choice = self._choose(per_block, labels)
-            choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, (Us, Y, Fs))
-        self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
-        self.validation_blocks_ = dict(zip(labels, per_block, strict=True))  # (blocks, n) each
-        self.selection_ = tuple(labels[c] for c in choice)
-        out = options[int(choice.min())].copy()
-        for j, k, names in self._slots():
-            out[1 + j] = options[choice[j]][1 + j]
-            out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
-        return out
+        return per_block
 
     def _choose_cut(self, per_block, labels, confirmed: set, blocks, data) -> np.ndarray:
         """The first choice, with the outputs whose two-stage GP is cut (:meth:`_region_scan`)
@@ -471,26 +502,10 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         confirmed by the nested ones (re-learnt per fold: 0.0011 there). Where the cut loses, its
         output's two stages go back to the uncut GP, scored plain on the subset's folds, and PR
         to its subset scores (confirmed nested by :meth:`_confirm_two_stage` if they win).
-        ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place.
-
-        The joint "cut" candidate (Guard.joint_region) stays out of this decision, as without it,
-        and competes with its outcome afterwards: its plain scores on the subset's folds would
-        otherwise reset a cut two stages' GP before their nested scores were taken."""
+        ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place."""
         cut = self._cut_outputs() if TWO_STAGE in labels else []
         if not cut:
             return self._choose(per_block, labels)
-        if "cut" not in labels:
-            return self._settle_cut(cut, per_block, labels, confirmed, blocks, data)
-        c = labels.index("cut")
-        joint_cut = per_block[c].copy()
-        per_block[c] = np.inf
-        self._settle_cut(cut, per_block, labels, confirmed, blocks, data)
-        per_block[c] = joint_cut
-        return self._choose(per_block, labels)
-
-    def _settle_cut(self, cut, per_block, labels, confirmed: set, blocks, data) -> np.ndarray:
-        """:meth:`_choose_cut` for the cut outputs ``cut``: the cut two stages screened, confirmed
-        or given back to the uncut GP; returns the choice."""
         t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
         pr_subset = per_block[p].copy()
         per_block[p][:, cut] = self._parametric_outside(blocks, data)[:, cut]

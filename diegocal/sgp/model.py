@@ -61,7 +61,9 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #: - Guard.region: the two stages' GP may be cut at an onset in its joint's angle (a friction
 #:   confined to part of the range), a cut judged on folds of every sample outside each block
 #:   against PR on the same folds (issue #14's arm: joint 3 0.0053 -> 0.0018 at 4,000 samples;
-#:   see Guard.region; `sgp-fit --no-region` turns it off);
+#:   see Guard.region; `sgp-fit --no-region` turns it off); where such a cut loses to the
+#:   joint GP, Guard.joint_region offers the joint GP cut at the same onset (issue #14's arm at
+#:   600 samples: joint 3 0.030 -> 0.00054, ±2σ coverage 0.81 -> 0.97; `--no-joint-region`);
 #: - a candidate that wins is confirmed by a nested cross-validation, each fold's hyperparameters
 #:   re-learnt without the block it predicts (two stages always; the joint GPs where the
 #:   cross-validation has at most 500 samples): learnt on all samples, the GP had seen the block
@@ -78,6 +80,7 @@ DEFAULT_GUARD = Guard(
     release_capped=True,
     two_stage=True,
     region=True,
+    joint_region=True,
 )
 GUARD_GP_INPUTS = ("q", "qd")
 

@@ -124,18 +124,17 @@ class RegionScan:
         judge = near(lo, hi)
         return at(tried[k]), judge(uncut) - judge(at(tried[k]))
 
-    def _joint_cut(self, x, bounds, optimise) -> np.ndarray | None:
-        """Guard.joint_region: ``x`` with the joint GP of each output whose two-stage GP is cut
-        (:meth:`_region_scan`) cut at the same onset, width and side ratio, and every other
-        hyperparameter re-optimised from there by ``optimise(start, bounds)``, the onsets held;
-        None when no output is cut or the optimisation fails. Both estimators standardise the
-        same inputs, so the onset carries over as it is."""
-        cut = self._cut_outputs()
-        residual = self._two_stage_hp[1].theta
+    def _joint_cut(self, x, bounds, optimise, onsets: dict) -> np.ndarray | None:
+        """Guard.joint_region: ``x`` with the joint GP of each output in ``onsets`` (output ->
+        its two-stage GP's parameters as the region scan cut them) cut at the same onset, width
+        and side ratio, and every other hyperparameter re-optimised from there by
+        ``optimise(start, bounds)``, the onsets held; None when no output is cut or the
+        optimisation fails. Both estimators standardise the same inputs, so the onset carries
+        over as it is."""
         start = x.copy()
         for j, k, _ in self._slots():
-            if j in cut and isinstance(self.kernels[j], Region):
-                start[k : k + 3] = residual[j][:3]
+            if j in onsets and isinstance(self.kernels[j], Region):
+                start[k : k + 3] = onsets[j][:3]
         if np.array_equal(start, x):
             return None
         result = optimise(start, self._pin_fixed(bounds, start))

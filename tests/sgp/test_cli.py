@@ -191,11 +191,11 @@ def test_sgp_fit_region_is_the_default_and_no_region_is_recorded(logs, arm2_dir,
     assert load_model(off).gp_.region_inputs is None
 
 
-def test_sgp_fit_joint_region_is_recorded_and_reloads_with_region_kernels(logs, arm2_dir, tmp_path):
-    """`--joint-region` is written to sgp.yaml's guard options; the reloaded model's joint GPs
-    are Region kernels on the joints' angles and it predicts as the fitted one. (Nothing is cut
-    on this short log; a model that chose the joint cut is saved and reloaded in
-    tests/sgp/test_joint_region_slow.py.)"""
+def test_sgp_fit_joint_region_is_the_default_and_no_joint_region_is_recorded(logs, arm2_dir, tmp_path):
+    """The joint cut is on by default: the reloaded model's joint GPs are Region kernels on the
+    joints' angles and it predicts as the fitted one; `--no-joint-region` is written to sgp.yaml's
+    guard options and reloads with plain kernels. (Nothing is cut on this short log; a model that
+    chose the joint cut is saved and reloaded in tests/sgp/test_joint_region_slow.py.)"""
     from diegocal.robot import load_robot
     from diegocal.sgp import fit_dynamics
     from diegocal.sgp.kernels import Region
@@ -203,12 +203,16 @@ def test_sgp_fit_joint_region_is_recorded_and_reloads_with_region_kernels(logs, 
 
     train, test = logs
     out = tmp_path / "j.sgp"
-    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "--joint-region", "-q", "-o", str(out)])
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-q", "-o", str(out)])
     assert r.exit_code == 0, r.output
-    assert load_yaml(out / "sgp.yaml")["options"]["guard_options"]["joint_region"] is True
     model = load_model(out)
     assert [k.dim for k in model.gp_.kernels if isinstance(k, Region)] == [0, 1]
     fitted = fit_dynamics(load_log(train), load_robot(arm2_dir), model.options)
     np.testing.assert_allclose(model.predict(load_log(test)).tau, fitted.predict(load_log(test)).tau, rtol=1e-9)
+    off = tmp_path / "n.sgp"
+    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "--no-joint-region", "-q", "-o", str(off)])
+    assert r.exit_code == 0, r.output
+    assert load_yaml(off / "sgp.yaml")["options"]["guard_options"]["joint_region"] is False
+    assert not any(isinstance(k, Region) for k in load_model(off).gp_.kernels)
     r = runner.invoke(app, ["predict", str(out), str(test), "-q", "-o", str(tmp_path / "p.h5")])
     assert r.exit_code == 0, r.output

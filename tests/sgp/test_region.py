@@ -310,15 +310,35 @@ def test_a_cut_gps_folds_are_capped_at_outside_max_samples_evenly_in_time(fits, 
     assert np.ptp(np.diff(fit[fit < 300])) <= 1  # evenly: steps differ by rounding only
 
 
-def test_the_joint_cut_candidate_cuts_where_the_two_stages_do_and_competes_only_there(fits):
-    """Guard.joint_region: the "cut" candidate is the joint GP cut at the two stages' onset (the
-    same standardised value: both estimators scale the same inputs), scored only for the outputs
-    it cuts. Here it wins output 0: cut between the right two training angles, it predicts a new
-    run as the cut two stages do, 3 times better than the uncut GP."""
-    U, Y, F, _ = _run(0)
+def _joint_cut_fit(U, Y, F):
     guard = replace(DEFAULT_GUARD, max_lengthscale=3.0, joint_region=True)
     kernels = [Region(0, Subspace([0, 1], SquaredExponential(2))) for _ in range(2)]
-    est = SemiParametricGP(kernels, guard=guard, seed=0, region_inputs=(0, 0)).fit(U, Y, F)
+    return SemiParametricGP(kernels, guard=guard, seed=0, region_inputs=(0, 0)).fit(U, Y, F)
+
+
+def test_the_joint_cut_is_not_learnt_where_the_cut_two_stages_win():
+    """Guard.joint_region: the "cut" candidate is learnt only for the outputs whose cut two
+    stages lose; here they win output 0 (their nested score 0.0011 against the joint GP's 0.0054)
+    and no "cut" candidate is scored."""
+    U, Y, F, _ = _run(0)
+    est = _joint_cut_fit(U, Y, F)
+    assert est.selection_ == ("two-stage", "parametric")
+    assert "cut" not in est.validation_scores_
+
+
+def test_the_joint_cut_candidate_cuts_where_the_two_stages_lost_and_competes_only_there(fits, monkeypatch):
+    """Guard.joint_region: where the cut two stages lose (here made to: every nested score of two
+    stages is inf), the "cut" candidate is the joint GP cut at the two stages' onset (the same
+    standardised value: both estimators scale the same inputs), scored only for the outputs it
+    cuts. It then wins output 0: cut between the right two training angles, it predicts a new run
+    as the cut two stages do, 3 times better than the uncut GP."""
+    U, Y, F, _ = _run(0)
+
+    def lose(self, outputs, blocks, data, every_sample=False):
+        return np.full((len(blocks), data[1].shape[1]), np.inf)
+
+    monkeypatch.setattr(SemiParametricGP, "_two_stage_nested", lose)
+    est = _joint_cut_fit(U, Y, F)
     scores = est.validation_scores_["cut"]
     assert np.isfinite(scores[0]) and np.isinf(scores[1])  # output 1 has no step: not cut
     assert est.selection_ == ("cut", "parametric")
