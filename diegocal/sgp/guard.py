@@ -125,13 +125,13 @@ class Guard:
         RegionScan._region_scan`; the model gives the estimator its ``region_inputs``). A cut GP
         and PR are scored on folds of every sample outside each block (:meth:`~GuardCandidates.
         _choose_cut`), screened by the plain scores, confirmed by the nested ones. On in
-        DEFAULT_GUARD (``sgp-fit --no-region`` turns it off): on issue #14's arm it beats PRGP on joint 3 at 2,000 and
-        4,000 samples (0.0017 against 0.0068 and 0.0018 against 0.0041, bench_sgp_case) and on
-        the scale bench's run at 20,000 (0.00092 against 0.0012), and PR at 1,000 (0.0055 against
-        0.0084, bench_sgp_scale); it costs the scan (a few CPU-s) and, where a cut survives the
-        plain scores, the nested refits (10-14 CPU-s). The joint candidates are still scored on
-        the subset's folds, which the final model's data would improve too: the comparison
-        favours the cut two stages against them (not against PR), the joint cut of
+        DEFAULT_GUARD (``sgp-fit --no-region`` turns it off): on issue #14's arm it beats PRGP on
+        joint 3 at 2,000 and 4,000 samples (0.0017 against 0.0068 and 0.0018 against 0.0041,
+        bench_sgp_case) and on the scale bench's run at 20,000 (0.00092 against 0.0012), and PR at
+        1,000 (0.0055 against 0.0084, bench_sgp_scale); it costs the scan (a few CPU-s) and, where a
+        cut survives the plain scores, the nested refits (10-14 CPU-s). The joint candidates are
+        still scored on the subset's folds, which the final model's data would improve too: the
+        comparison favours the cut two stages against them (not against PR), the joint cut of
         ``joint_region`` included.
     joint_region : bool
         With ``region``: where the cut two-stage GP of an output loses the guard's choice

@@ -168,51 +168,37 @@ def test_predict_warns_when_the_torques_fall_outside_the_two_sigma_band_too_ofte
     assert len(warnings) == 1 and "below 0.85 on elbow" in warnings[0] and "shoulder" not in warnings[0], r.output
 
 
-def test_sgp_fit_region_is_the_default_and_no_region_is_recorded(logs, arm2_dir, tmp_path):
-    """Guard.region is on by default: the reloaded model rebuilds the estimator with the joints'
-    angles as region inputs and predicts exactly as the fitted one; `--no-region` is written to
-    sgp.yaml's guard options and reloads without them."""
-    from diegocal.robot import load_robot
-    from diegocal.sgp import fit_dynamics
-    from diegocal.sgp.store import load_model
-
-    train, test = logs
-    out = tmp_path / "r.sgp"
-    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-q", "-o", str(out)])
-    assert r.exit_code == 0, r.output
-    model = load_model(out)
-    assert model.gp_.region_inputs == (0, 1)  # q.shoulder, q.elbow
-    fitted = fit_dynamics(load_log(train), load_robot(arm2_dir), model.options)
-    np.testing.assert_allclose(model.predict(load_log(test)).tau, fitted.predict(load_log(test)).tau, rtol=1e-9)
-    off = tmp_path / "n.sgp"
-    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "--no-region", "-q", "-o", str(off)])
-    assert r.exit_code == 0, r.output
-    assert load_yaml(off / "sgp.yaml")["options"]["guard_options"]["region"] is False
-    assert load_model(off).gp_.region_inputs is None
-
-
-def test_sgp_fit_joint_region_is_the_default_and_no_joint_region_is_recorded(logs, arm2_dir, tmp_path):
-    """The joint cut is on by default: the reloaded model's joint GPs are Region kernels on the
-    joints' angles and it predicts as the fitted one; `--no-joint-region` is written to sgp.yaml's
-    guard options and reloads with plain kernels. (Nothing is cut on this short log; a model that
-    chose the joint cut is saved and reloaded in tests/sgp/test_joint_region_slow.py.)"""
+def test_sgp_fit_region_and_joint_cut_are_the_default_and_their_off_switches_are_recorded(logs, arm2_dir, tmp_path):
+    """Guard.region and Guard.joint_region are on by default: the reloaded model rebuilds the
+    estimator with the joints' angles as region inputs and its joint GPs as Region kernels on
+    them, and predicts exactly as the fitted one; `--no-region` and `--no-joint-region` are
+    written to sgp.yaml's guard options and reload without them. (Nothing is cut on this short
+    log; a model that chose the joint cut is saved and reloaded in
+    tests/sgp/test_joint_region_slow.py.)"""
     from diegocal.robot import load_robot
     from diegocal.sgp import fit_dynamics
     from diegocal.sgp.kernels import Region
     from diegocal.sgp.store import load_model
 
+    def fit(name, *flags):
+        out = tmp_path / name
+        r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), *flags, "-q", "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        return out, load_model(out), load_yaml(out / "sgp.yaml")["options"]["guard_options"]
+
+    def region_dims(model):
+        return [k.dim for k in model.gp_.kernels if isinstance(k, Region)]
+
     train, test = logs
-    out = tmp_path / "j.sgp"
-    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "-q", "-o", str(out)])
-    assert r.exit_code == 0, r.output
-    model = load_model(out)
-    assert [k.dim for k in model.gp_.kernels if isinstance(k, Region)] == [0, 1]
+    out, model, _ = fit("r.sgp")
+    assert model.gp_.region_inputs == (0, 1)  # q.shoulder, q.elbow
+    assert region_dims(model) == [0, 1]
     fitted = fit_dynamics(load_log(train), load_robot(arm2_dir), model.options)
     np.testing.assert_allclose(model.predict(load_log(test)).tau, fitted.predict(load_log(test)).tau, rtol=1e-9)
-    off = tmp_path / "n.sgp"
-    r = runner.invoke(app, ["sgp-fit", str(train), "--robot", str(arm2_dir), "--no-joint-region", "-q", "-o", str(off)])
-    assert r.exit_code == 0, r.output
-    assert load_yaml(off / "sgp.yaml")["options"]["guard_options"]["joint_region"] is False
-    assert not any(isinstance(k, Region) for k in load_model(off).gp_.kernels)
+    _, off, guard = fit("n.sgp", "--no-region")
+    assert guard["region"] is False and off.gp_.region_inputs is None and region_dims(off) == []
+    _, joint_off, guard = fit("j.sgp", "--no-joint-region")
+    assert guard["region"] is True and guard["joint_region"] is False
+    assert joint_off.gp_.region_inputs == (0, 1) and region_dims(joint_off) == []
     r = runner.invoke(app, ["predict", str(out), str(test), "-q", "-o", str(tmp_path / "p.h5")])
     assert r.exit_code == 0, r.output
