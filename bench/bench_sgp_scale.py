@@ -170,7 +170,8 @@ def rows_at(N: int, gpytorch: bool, no_region: bool = False, references: bool = 
     if N >= 2000 and (other == "sparse" or N <= EXACT_MAX):
         rows.append((f"sgp {other}", SGPOptions(inference=other)))
     if no_region:
-        rows.append(("sgp no region", SGPOptions(guard_options=replace(DEFAULT_GUARD, region=False))))
+        no_cut = replace(DEFAULT_GUARD, region=False, joint_region=False)  # as sgp-fit --no-region
+        rows.append(("sgp no region", SGPOptions(guard_options=no_cut)))
     if references and N <= SKLEARN_MAX:
         rows.append(("sklearn", "sklearn"))
     if references and gpytorch and N <= GPYTORCH_MAX:

@@ -173,6 +173,8 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         self.stages_ = stages
         if hyperparameters is None:
             hyperparameters = self._learn(Us, Y, Fs, rng)  # sets stages_ (Guard.two_stage)
+        else:  # a model saved before its kernels were Region kernels: the onset off
+            hyperparameters = with_region_off(hyperparameters, self.kernels)
         self.hyper_ = hyperparameters
         kernels = self._joint_kernels()
         if inducing is None and self.inference == "sparse" and any(k is not None for k in kernels):
@@ -208,9 +210,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         if TWO_STAGE in modes:
             kernels = [k if m == TWO_STAGE else None for k, m in zip(self.kernels, modes, strict=True)]
             est = self._residual_estimator(kernels)
-            hp = self.stages_.residual
-            hp = hp if hp is None else with_region_off(hp, est.kernels)
-            self.residual_ = est.fit(U, res, F, hp, residual_inducing)
+            self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
 
     def _residual_estimator(self, kernels=None, inference=None, jobs=None) -> SemiParametricGP:
         """The two-stage candidate's GPs on PR's residual: PRGP's second stage with this
@@ -487,7 +487,8 @@ class SemiParametricGP(GuardCandidates, MLStarts):
 
 def with_region_off(hp: Hyperparameters, kernels) -> Hyperparameters:
     """``hp`` for ``kernels``: an output whose kernel is a :class:`Region` but whose parameters are
-    the inner kernel's only (a model saved before Region kernels existed) gets the onset off."""
+    the inner kernel's only (a model saved before Region kernels existed, or, for the joint GPs,
+    with the default guard before the joint cut was on by default) gets the onset off."""
     theta = []
     for t, k in zip(hp.theta, kernels, strict=True):
         if isinstance(k, Region) and t.size == k.n_params - 3:

@@ -383,7 +383,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
 
     def _validate(self, options: dict, blocks, Us, Y, Fs, sizes, bounds, resid, joint_cut=None) -> np.ndarray:
         """Per output, the hyperparameters of ``options`` (label -> vector: learnt, [released,
-        extended, cut, two-stage,] parametric) that predict held-out samples best: blocked
+        extended, two-stage,] parametric; and "cut", below) that predict held-out samples best: blocked
         cross-validation, each contiguous block of ``blocks`` predicted by the posterior of the
         others, nMSE averaged
         over the blocks (one held-out block could be unrepresentative, e.g. a robot at rest at
@@ -410,31 +410,35 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         ``validation_blocks_`` (label -> (blocks, n), the per-block nMSE they average).
 
         ``joint_cut`` (Guard.joint_region): called with {output: its cut two-stage GP's
-        parameters} for the outputs whose cut two stages lost (:meth:`_choose_cut`), it returns
-        the "cut" candidate (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`) or None; the
-        candidate is scored on the subset's folds for those outputs only and the choice made
-        again. Learnt only there: where the cut two stages win (the scale bench's 20,000-sample
-        run), its joint ML-II run would be spent on a candidate that cannot win the output."""
+        parameters} for the outputs the region scan cut that two stages, cut or not, do not win
+        (:meth:`_choose_cut`, then :meth:`_confirm_two_stage`), it returns the "cut" candidate
+        (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`) or None; the candidate joins the
+        joint ones (before TWO_STAGE and PARAMETRIC: σ_w is the earliest chosen option's), is
+        scored on the subset's folds for the outputs it cuts only, and the choice is made again.
+        Learnt only there: where two stages win (the scale bench's 20,000-sample run), its joint
+        ML-II run would be spent on a candidate the output does not take."""
         labels, options = list(options), list(options.values())
         data = Us, Y, Fs
         per_block = self._plain_scores(options, labels, blocks, data, sizes)
         scanned = self._two_stage_hp[1].theta if TWO_STAGE in labels else ()
         confirmed = set()  # outputs whose two-stage scores are the nested ones
         choice = self._choose_cut(per_block, labels, confirmed, blocks, data)
+        choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
         not_cut = []  # "cut" competes only for the outputs it cuts
         if joint_cut is not None:
             lost = [j for j in self._scanned_cuts(scanned) if labels[choice[j]] != TWO_STAGE]
             cut = joint_cut({j: scanned[j] for j in lost}) if lost else None
-            if cut is not None:
-                labels.append("cut")
-                options.append(cut)
-                row = self._plain_scores([cut], ["cut"], blocks, data, sizes)
+            if cut is not None:  # among the joint candidates: before TWO_STAGE and PARAMETRIC
+                i = labels.index(TWO_STAGE)
+                labels.insert(i, "cut")
+                options.insert(i, cut)
+                row = self._plain_scores([cut], ["cut"], blocks, data, sizes)[0]
                 cuts = cut_outputs(self.kernels, Hyperparameters.unpack(cut, sizes).theta)
                 not_cut = [j for j in range(Y.shape[1]) if j not in cuts]
-                row[0][:, not_cut] = np.inf
-                per_block = np.concatenate([per_block, row])
+                row[:, not_cut] = np.inf
+                per_block = np.insert(per_block, i, row, axis=0)
                 choice = self._choose(per_block, labels)
-        choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
+                choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
         contended = [j for j, c in enumerate(choice) if labels[c] in JOINT]
         if contended and len(np.concatenate(blocks)) <= NESTED_JOINT_MAX:  # confirm the joint GPs
             for c, label in enumerate(labels):

@@ -316,14 +316,30 @@ def _joint_cut_fit(U, Y, F):
     return SemiParametricGP(kernels, guard=guard, seed=0, region_inputs=(0, 0)).fit(U, Y, F)
 
 
-def test_the_joint_cut_is_not_learnt_where_the_cut_two_stages_win():
+def test_the_joint_cut_is_not_learnt_where_the_cut_two_stages_win(monkeypatch):
     """Guard.joint_region: the "cut" candidate is learnt only for the outputs whose cut two
     stages lose; here they win output 0 (their nested score 0.0011 against the joint GP's 0.0054)
-    and no "cut" candidate is scored."""
+    and the candidate is neither learnt nor scored."""
     U, Y, F, _ = _run(0)
+    calls = []
+    learn = SemiParametricGP._joint_cut
+    monkeypatch.setattr(SemiParametricGP, "_joint_cut", lambda self, *a: calls.append(a) or learn(self, *a))
     est = _joint_cut_fit(U, Y, F)
     assert est.selection_ == ("two-stage", "parametric")
-    assert "cut" not in est.validation_scores_
+    assert calls == [] and "cut" not in est.validation_scores_
+
+
+def test_joint_hyperparameters_saved_without_region_parameters_load_into_region_kernels():
+    """A model saved with plain joint kernels (the default guard before the joint cut was on by
+    default) reloads into Region kernels with the onset off and predicts as it did."""
+    U, Y, F, _ = _run(0)
+    plain = [Subspace([0, 1], SquaredExponential(2)) for _ in range(2)]
+    saved = SemiParametricGP(plain, seed=0).fit(U, Y, F)
+    region = [Region(0, k) for k in plain]
+    back = SemiParametricGP(region, seed=0).fit(U, Y, F, saved.hyper_)
+    assert all(t[0] == REGION_OFF for t in back.hyper_.theta)
+    Uq, _, Fq, _ = _run(1)
+    np.testing.assert_allclose(back.predict(Uq, Fq)[0], saved.predict(Uq, Fq)[0], rtol=1e-10, atol=1e-12)
 
 
 def test_the_joint_cut_candidate_cuts_where_the_two_stages_lost_and_competes_only_there(fits, monkeypatch):
