@@ -420,14 +420,16 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         labels, options = list(options), list(options.values())
         data = Us, Y, Fs
         per_block = self._plain_scores(options, labels, blocks, data, sizes)
-        scanned = self._two_stage_hp[1].theta if TWO_STAGE in labels else ()
+        scanned = {}  # output -> its two-stage GP's parameters as the region scan cut them
+        if TWO_STAGE in labels:
+            scanned = {j: self._two_stage_hp[1].theta[j] for j in self._cut_outputs()}
         confirmed = set()  # outputs whose two-stage scores are the nested ones
         choice = self._choose_cut(per_block, labels, confirmed, blocks, data)
         choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
         not_cut = []  # "cut" competes only for the outputs it cuts
         if joint_cut is not None:
-            lost = [j for j in self._scanned_cuts(scanned) if labels[choice[j]] != TWO_STAGE]
-            cut = joint_cut({j: scanned[j] for j in lost}) if lost else None
+            lost = {j: t for j, t in scanned.items() if labels[choice[j]] != TWO_STAGE}
+            cut = joint_cut(lost) if lost else None
             if cut is not None:  # among the joint candidates: before TWO_STAGE and PARAMETRIC
                 i = labels.index(TWO_STAGE)
                 labels.insert(i, "cut")
@@ -459,10 +461,6 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             out[1 + j] = options[choice[j]][1 + j]
             out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
         return out
-
-    def _scanned_cuts(self, scanned) -> list:
-        """The outputs the region scan cut, from its two-stage parameters ``scanned``."""
-        return cut_outputs(self._residual_estimator().kernels, scanned) if len(scanned) else []
 
     def _plain_scores(self, options, labels, blocks, data, sizes) -> np.ndarray:
         """(options, blocks, n) nMSE of each candidate in the plain blocked cross-validation: each

@@ -168,7 +168,9 @@ class NestedConfirmation:
         kernels = [k if j in outputs else None for j, k in enumerate(self.kernels)]
         theta = tuple(t if j in outputs else np.zeros(0) for j, t in enumerate(hp_res.theta))
         post, res = self._pr_residual(hp_pr, Us[fit_idx], Y[fit_idx], Fs[fit_idx])
-        res_learn = Y[learn_idx] - post.predict(Us[learn_idx], Fs[learn_idx], variance=False)[0]
+        res_learn = res
+        if learn_idx is not fit_idx:
+            res_learn = Y[learn_idx] - post.predict(Us[learn_idx], Fs[learn_idx], variance=False)[0]
         est = self._residual_estimator(kernels, inference="exact", jobs=1)
         est.progress = None  # a fold's own bar would interleave with the others'
         learn_scale = input_scaling(U[learn_idx])

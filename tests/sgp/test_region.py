@@ -311,7 +311,7 @@ def test_a_cut_gps_folds_are_capped_at_outside_max_samples_evenly_in_time(fits, 
 
 
 def _joint_cut_fit(U, Y, F):
-    guard = replace(DEFAULT_GUARD, max_lengthscale=3.0, joint_region=True)
+    guard = replace(DEFAULT_GUARD, max_lengthscale=3.0)  # joint_region: on by default
     kernels = [Region(0, Subspace([0, 1], SquaredExponential(2))) for _ in range(2)]
     return SemiParametricGP(kernels, guard=guard, seed=0, region_inputs=(0, 0)).fit(U, Y, F)
 
