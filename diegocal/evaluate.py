@@ -227,17 +227,19 @@ def paired_se(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return d.mean(axis=0), d.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.full(d.shape[1:], np.inf)
 
 
-def choose_by_validation(per_block: np.ndarray, fallback: int) -> np.ndarray:
+def choose_by_validation(per_block: np.ndarray, fallback: int, min_gain: float = 0.0) -> np.ndarray:
     """Per output, the option of lowest mean held-out error, unless it beats the ``fallback``
-    option by at most one standard error of their paired per-block difference: then the
-    fallback (the one-standard-error rule, Hastie et al., *Elements of Statistical Learning*
-    §7.10, with the simplest model as the fallback). ``per_block`` (options, blocks, outputs);
-    returns option indices (outputs,). Ties of the mean go to the earlier option."""
+    option by at most one standard error of their paired per-block difference, or by at most
+    ``min_gain`` times the fallback's mean error: then the fallback (the one-standard-error rule,
+    Hastie et al., *Elements of Statistical Learning* §7.10, with the simplest model as the
+    fallback). ``per_block`` (options, blocks, outputs); returns option indices (outputs,). Ties
+    of the mean go to the earlier option."""
     choice = np.argmin(per_block.mean(axis=1), axis=0)
     for j, c in enumerate(choice):
         gain = per_block[fallback, :, j] - per_block[c, :, j]
         if c != fallback and np.all(np.isfinite(gain)):
-            if gain.mean() <= gain.std(ddof=1) / np.sqrt(len(gain)):
+            floor = max(gain.std(ddof=1) / np.sqrt(len(gain)), min_gain * per_block[fallback, :, j].mean())
+            if gain.mean() <= floor:
                 choice[j] = fallback
     return choice
 

@@ -72,3 +72,12 @@ def test_one_standard_error_rule():
     per_block[0, :, 1] += [0.05, -0.05, 0.05, -0.05, 0.0]  # output 1: a gain of 0.01 ± 0.02 (one SE)
     assert choose_by_validation(per_block, fallback=2).tolist()[0] == 0
     assert choose_by_validation(per_block, fallback=2).tolist()[1:] == [2, 2]
+
+
+def test_minimum_gain_keeps_the_fallback():
+    """A consistent gain (every block, so far beyond one SE) smaller than ``min_gain`` of the
+    fallback's error keeps the fallback; the same gain above it wins."""
+    fallback = np.full((5, 2), 1.0)
+    per_block = np.stack([fallback - [0.01, 0.05] + np.linspace(-1e-4, 1e-4, 5)[:, None], fallback])
+    assert choose_by_validation(per_block, fallback=1).tolist() == [0, 0]
+    assert choose_by_validation(per_block, fallback=1, min_gain=0.02).tolist() == [1, 0]

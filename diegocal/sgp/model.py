@@ -52,8 +52,10 @@ INPUT_STREAMS = ("q", "qd", "qdd")
 #:   low-pass filtered torques ML-II otherwise shrinks σ_v until the GP interpolates the run and
 #:   extrapolates badly (TX40, reverse split: SGP 20 N·m RMSE against PR's 3.7 before the
 #:   validation). A GP is kept only if it beats PR by more than one standard error of the
-#:   blocked CV (the one-standard-error rule): a GP that buys nothing lets W drift (3-link arm at
-#:   1000 samples, vertical joint 1: one seed of five at 6.8 against PR's 0.15 without the rule);
+#:   blocked CV (the one-standard-error rule) and by 2 % of PR's CV error (guard.MIN_GP_GAIN): a
+#:   GP that buys nothing lets W drift (3-link arm at 1000 samples, vertical joint 1: one seed of
+#:   five at 6.8 against PR's 0.15 without the rule; issue #14's arm at 20,000 samples, joint 2:
+#:   0.25 % worse than PR over 5 seeds with the first rule alone, bench/bench_sgp_sizes.py);
 #: - two stages (Guard.two_stage: PR, then a capped GP on its residual) replace that choice where
 #:   they beat it by more than one standard error: the issue #14 arm's joint 3, 0.0085 -> 0.0065
 #:   (bench/bench_sgp_case.py); given the ties instead, they lost the reaction wheel's pole-up

@@ -10,7 +10,7 @@ import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages
 from diegocal.sgp.gp import fit_posterior
-from diegocal.sgp.guard import JOINT, PARAMETRIC, TWO_STAGE
+from diegocal.sgp.guard import JOINT, MIN_GP_GAIN, MIN_TWO_STAGE_GAIN, PARAMETRIC, TWO_STAGE
 
 from .test_guard import W_TRUE, _data
 
@@ -73,6 +73,19 @@ def test_two_stages_must_beat_the_guards_other_choice_by_one_standard_error():
     # 4: learnt does not beat PR by one SE, two stages do; 5: two stages beat PR consistently but
     # by 0.05 % of its nMSE (under MIN_TWO_STAGE_GAIN): PR
     assert SemiParametricGP._choose(per_block, ["learnt", TWO_STAGE, PARAMETRIC]).tolist() == [0, 0, 2, 1, 1, 2]
+
+
+def test_a_gp_must_beat_pr_by_the_minimum_gain():
+    """Gains consistent over every block (far beyond one SE): under MIN_GP_GAIN of PR's nMSE a
+    GP, joint or two stages, gives way to PR; two stages need only MIN_TWO_STAGE_GAIN over a
+    joint GP. Outputs: 0 learnt 1 % better than PR; 1 learnt 3 % better; 2 two stages 1 % better
+    than PR, learnt no better; 3 learnt 10 % better, two stages 1 % better than learnt."""
+    pr = np.array([1.0, 1.2, 0.9, 1.1, 1.0])
+    learnt = np.column_stack([0.99 * pr, 0.97 * pr, pr, 0.90 * pr])
+    two_stage = np.column_stack([1.1 * pr, 1.1 * pr, 0.99 * pr, 0.891 * pr])
+    per_block = np.stack([learnt, two_stage, np.column_stack([pr] * 4)])
+    assert MIN_TWO_STAGE_GAIN < 0.01 < MIN_GP_GAIN < 0.03
+    assert SemiParametricGP._choose(per_block, ["learnt", TWO_STAGE, PARAMETRIC]).tolist() == [2, 0, 2, 1]
 
 
 def test_two_stages_are_confirmed_with_each_folds_gp_learnt_without_its_block(data):
