@@ -268,8 +268,8 @@ def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
 
 def _guard_text(entry: dict) -> str:
     """The guard's choice for one joint and the cross-validated nMSE of every candidate it
-    weighed, lowest first (the choice may not be the lowest: a GP must beat PR, two stages the
-    other choice, by one standard error)."""
+    weighed, lowest first (the choice may not be the lowest: a GP must beat PR by one standard
+    error and 2 % of PR's nMSE, two stages the other choice by one standard error)."""
     from diegocal.sgp.store import region_text
 
     scores = sorted((entry.get("guard_validation") or {}).items(), key=lambda kv: kv[1])

@@ -44,8 +44,9 @@ GUARD_NOTE = (
     "learnt with the parametric part, offered where the cut two stages lost (off: sgp-fit --no-joint-region); "
     "'two stages': the parametric "
     "fit, then a GP on its residual (PRGP's stages), kept where it beat the other choice by one standard error; "
-    "'parametric only': the GP did not beat the parametric part by one standard error and was switched off for "
-    "that joint. A winner is confirmed with its hyperparameters re-learnt without the block it predicts."
+    "'parametric only': the GP did not beat the parametric part by one standard error and 2 % of its error and "
+    "was switched off for that joint. A winner is confirmed with its hyperparameters re-learnt without the block "
+    "it predicts."
 )
 #: Description and unit (revolute joint, prismatic joint) of each full parameter (thesis eq. 3.30).
 PARAMETER_WORDS = {
@@ -435,8 +436,9 @@ def guard_table(summary: dict) -> tuple[list[Column], list[list], list[str]] | N
     note = (
         "Cross-validated nMSE of each of the guard's candidates on contiguous blocks of the training log, each "
         "block predicted by the candidate fitted without it (* the guard's choice). The choice is not always the "
-        "lowest: a GP must beat 'parametric only', and two stages the other choice, by one standard error of the "
-        "per-block difference; numbers on the training log's own blocks, not on new trajectories."
+        "lowest: a GP must beat 'parametric only' by one standard error of the per-block difference and 2 % of "
+        "its nMSE, two stages the other choice by one standard error; numbers on the training log's own blocks, not "
+        "on new trajectories."
     )
     return columns, rows, [note]
 
