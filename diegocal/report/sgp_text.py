@@ -230,7 +230,7 @@ def model_paragraphs(model: Path, context) -> list[str]:
         if dropped:
             words += (" and " if kept else "") + (
                 f"switched it off on {', '.join(dropped)}, where it did not predict unseen blocks better than the "
-                "parametric part alone"
+                "parametric part alone (by one standard error and 2 % of its error)"
             )
         more.append(words + ".")
     gaps = {j: h["sparse_gap"] for j, h in hyper.items() if isinstance(h, dict) and "sparse_gap" in h}
