@@ -77,7 +77,8 @@ class Guard:
         cross-validation that chooses, per output, between the learnt hyperparameters, the
         released ones (``release_capped``) and a parametric-only fallback (PR's σ_w and σ_v, σ_z
         at its floor): an output whose cross-validated nMSE no GP lowers by more than one
-        standard error and MIN_GP_GAIN of PR's falls back to PR (:meth:`~SemiParametricGP._validate`). The
+        standard error and MIN_GP_GAIN of PR's falls back to PR
+        (:meth:`~SemiParametricGP._validate`). The
         hyperparameters are learnt on all samples; each block is predicted by the posterior of
         the others; a winner is then confirmed with each fold's hyperparameters re-learnt
         without its block (nested; the joint GPs only on small cross-validations).
@@ -406,7 +407,8 @@ class GuardCandidates(RegionScan, NestedConfirmation):
 
         A GP must earn its place: an output keeps one only if it beats the parametric fallback
         by more than one standard error of their paired per-block difference and by MIN_GP_GAIN
-        of the fallback's nMSE (:func:`choose_by_validation`). Why: W is shared, and a GP on an output that PR already
+        of the fallback's nMSE (:func:`choose_by_validation`). Why: W is shared, and a GP on an
+        output that PR already
         fits to the noise lets W drift in directions the training run barely excites, at no
         cost in-sample or in the cross-validation (3-link arm at 1000 samples, seed 0: joint 1's
         GP beat PR by 0.4 % of its CV error, and the vertical figure-eight's joint 1 was
