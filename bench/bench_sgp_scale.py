@@ -30,7 +30,9 @@ the load average is printed before and after; compare CPU seconds.
 
 Table 2, the verdicts: per N and joint, SGP (auto) against PR and PRGP, paired over 10
 contiguous blocks of the test log: "better"/"worse" when the nMSE difference exceeds one standard
-error of the paired per-block difference and 0.1 % of the reference's nMSE, else "tied".
+error of the paired per-block difference and 0.1 % of the reference's nMSE, else "tied". These
+judge one trajectory per size (the first N samples of one run); ``bench_sgp_sizes.py`` judges the
+estimator at each size over independent runs.
 """
 
 from __future__ import annotations
