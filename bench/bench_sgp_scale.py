@@ -79,6 +79,13 @@ def arrays(log, robot, n=None):
     return tuple(log.stream(s).select(robot.joint_names).data[:n] for s in ("q", "qd", "qdd", "tau"))
 
 
+def verdict(diff: float, se: float, ref: float) -> str:
+    """"better"/"worse" when a difference of nMSE exceeds one standard error and 0.1 % of the
+    reference's nMSE ``ref`` (equal to rounding is tied), else "tied"."""
+    se = max(se, 1e-3 * ref)
+    return "better" if diff < -se else "worse" if diff > se else "tied"
+
+
 def measure(call):
     """(wall s, CPU s, peak MiB, result) of one call."""
     tracemalloc.start()
@@ -236,10 +243,9 @@ def main(argv=None) -> int:
             cells = []
             for ref in ("pr", "prgp"):
                 diff, se = paired_se(blocks[(N, sgp)], blocks[(N, ref)])
-                se = np.maximum(se, 1e-3 * blocks[(N, ref)].mean(axis=0))  # equal to rounding is tied
+                se = np.maximum(se, 1e-3 * blocks[(N, ref)].mean(axis=0))  # as verdict() floors it
                 for j, (d, s) in enumerate(zip(diff, se, strict=True)):
-                    word = "better" if d < -s else "worse" if d > s else "tied"
-                    cells.append(f"vs {ref} j{j + 1} {word} ({d:+.2g} ± {s:.2g})")
+                    cells.append(f"vs {ref} j{j + 1} {verdict(d, s, 0.0)} ({d:+.2g} ± {s:.2g})")
             print(f"{N:6d}  " + "; ".join(cells))
     return 0
 

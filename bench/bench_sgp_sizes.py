@@ -38,18 +38,19 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/ is not installed
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_sgp_scale import N_TEST, arrays, simulate  # noqa: E402
+from bench_sgp_scale import N_TEST, arrays, simulate, verdict  # noqa: E402
 
 from diegocal.evaluate import block_mse, paired_se, split_blocks  # noqa: E402
 from diegocal.parallel import one_blas_thread  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
+from diegocal.sim.dynamics import default_region  # noqa: E402
 from experiments.sgp.common import same_robot  # noqa: E402
 
 SIZES = (200, 500, 1000, 2000, 5000, 10000, 20000)
 SEEDS = (1, 2, 3, 4, 5)
 KINDS = ("pr", "prgp", "sgp")
-BLOCKS, ONSET = 10, 1.78  # test blocks; the effect's onset on joint 3 (rad, default_region)
+BLOCKS = 10  # contiguous blocks of the test log
 
 
 def run_cell(cell: tuple) -> dict:
@@ -61,7 +62,8 @@ def run_cell(cell: tuple) -> dict:
         test = simulate(robot, N_TEST, seed=1000 + seed, friction=same_robot(train, robot))
         q, qd, qdd, tau = arrays(test, robot, N_TEST)
         labels = split_blocks(N_TEST, BLOCKS).labels()
-        out = {"above": int(np.sum(arrays(train, robot)[0][:, 2] >= ONSET))}
+        onset = default_region(robot, 2)[0]  # where the simulator's friction on joint 3 starts
+        out = {"above": int(np.sum(arrays(train, robot)[0][:, 2] >= onset))}
         for kind in KINDS:
             model = fit_dynamics(train, robot, SGPOptions(kind=kind))
             pred = model.predict_arrays(q, qd, qdd)
@@ -70,11 +72,6 @@ def run_cell(cell: tuple) -> dict:
             if kind == "sgp":
                 out["choice"] = [model.hyperparameters_[j].get("guard_choice", "-") for j in model.joint_names]
         return out
-
-
-def verdict(diff: float, se: float, ref: float) -> str:
-    se = max(se, 1e-3 * ref)  # equal to rounding is tied
-    return "better" if diff < -se else "worse" if diff > se else "tied"
 
 
 def parse_seeds(text: str) -> tuple:
@@ -99,7 +96,8 @@ def main(argv=None) -> int:
     sys.stdout.reconfigure(line_buffering=True)
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     print(f"diegocal commit {head or 'unknown'}; python bench/bench_sgp_sizes.py {' '.join(argv or sys.argv[1:])}")
-    what = f"arm3, hidden friction on joint3 above {ONSET} rad; {len(seeds)} seeds"
+    onset = default_region(load_robot(BUNDLED_ROBOTS / "arm3"), 2)[0]
+    what = f"arm3, hidden friction on joint3 above {onset:.2f} rad; {len(seeds)} seeds"
     print(f"{what}; load average {os.getloadavg()[0]:.2f}\n")
     cells = sorted(((N, s) for N in sizes for s in seeds), key=lambda c: -c[0])  # the long fits first
     results = {}
@@ -124,7 +122,7 @@ def main(argv=None) -> int:
     for N in sizes:
         rows = [results[(N, s)] for s in seeds]
         mean = {k: np.array([r[k].mean(0) for r in rows]) for k in KINDS}  # (seeds, n)
-        cells = []
+        words = []
         for ref in ("pr", "prgp"):
             for j in range(n):
                 d = mean["sgp"][:, j] - mean[ref][:, j]
@@ -132,12 +130,12 @@ def main(argv=None) -> int:
                 per_seed = [verdict(*(x[j] for x in paired_se(r["sgp"], r[ref])), r[ref][:, j].mean()) for r in rows]
                 counts = "/".join(str(per_seed.count(w)) for w in ("better", "tied", "worse"))
                 word = verdict(d.mean(), se, mean[ref][:, j].mean())
-                cells.append(f"vs {ref} j{j + 1} {word} ({d.mean():+.2g} ± {se:.2g}) [{counts}]")
+                words.append(f"vs {ref} j{j + 1} {word} ({d.mean():+.2g} ± {se:.2g}) [{counts}]")
         cover = " ".join(
             f"{k} " + ",".join(f"{c.mean():.2f}({c.min():.2f})" for c in np.array([r[k + " coverage"] for r in rows]).T)
             for k in KINDS
         )
-        print(f"{N:6d}  " + "; ".join(cells) + f"\n        coverage {cover}")
+        print(f"{N:6d}  " + "; ".join(words) + f"\n        coverage {cover}")
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
     return 0
 
