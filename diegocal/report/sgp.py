@@ -302,8 +302,9 @@ def more(sheets: list[Sheet], title: str, columns, rows, notes, room: float = 0.
 def band_caption(kind: str, where: str) -> str:
     text = (
         f"Measured torque (dark grey) and the model's mean prediction (blue) on the {where}; blue band: ±2σ of a "
-        "measured torque (the model's uncertainty plus the sensor noise σ_v, thesis eq. 3.20), which should hold "
-        "95 % of the measured torques."
+        "measured torque (the model's uncertainty plus the sensor noise σ_v, thesis eq. 3.20; the parameters' share "
+        "is the larger of eq. 3.20's and a cluster-robust one over 10 time blocks, which also holds the bias an effect "
+        "the model lacks puts in them), which should hold 95 % of the measured torques."
     )
     if kind in ("sgp", "prgp"):
         text += (
