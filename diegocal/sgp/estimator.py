@@ -20,7 +20,7 @@ import numpy as np
 from diegocal.errors import FitError, NumericalError
 from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.parallel import single_threaded, thread_map
-from diegocal.sgp.gp import Hyperparameters, fit_posterior, input_scaling, per_output
+from diegocal.sgp.gp import Hyperparameters, fit_posterior, input_scaling, parametric_robust_w_cov, per_output
 from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, cut_along, is_amplitude, is_fixed, is_lengthscale
@@ -211,6 +211,8 @@ class SemiParametricGP(GuardCandidates, MLStarts):
             kernels = [k if m == TWO_STAGE else None for k, m in zip(self.kernels, modes, strict=True)]
             est = self._residual_estimator(kernels)
             self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
+            left = res - self.residual_.predict(U, F, variance=False)[0]
+            self.pr_posterior_.w_cov_robust = parametric_robust_w_cov(self.pr_posterior_, Fs, left)
 
     def _residual_estimator(self, kernels=None, inference=None, jobs=None) -> SemiParametricGP:
         """The two-stage candidate's GPs on PR's residual: PRGP's second stage with this

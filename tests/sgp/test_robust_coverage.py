@@ -11,6 +11,7 @@ import pytest
 from diegocal.evaluate import score
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
+from diegocal.sgp.gp import parametric_robust_w_cov
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 from diegocal.sim.effects import parse_effects
 from experiments.sgp.common import same_robot
@@ -57,3 +58,21 @@ def test_a_bias_the_friction_puts_in_w_is_inside_the_two_sigma_band(arm3, kind, 
     assert np.all((cov[:2] >= 0.85) & (cov[:2] <= 0.99)), f"{kind} run {seed}: ±2σ coverage {cov}"  # joints 1-2
     plain = _coverage(_without_robust(model), test)  # eq. (3.20) alone: the check can fail
     assert plain[1] < 0.85, plain
+
+
+def test_two_stages_take_w_s_robust_variance_from_what_both_leave(arm3):
+    """Run 8 at 500 samples: the guard gives joint 3 two stages, whose GP takes up the friction
+    PR leaves; W's robust variance from PR's own residual would count that bias again (the band
+    then held 1.00 of joint 3's held-out torque), from what both stages leave it holds 0.97."""
+    train = simulate(arm3, 500, 8)
+    test = simulate(arm3, 2000, 1008, same_robot(train, arm3))
+    model = fit_dynamics(train, arm3, SGPOptions())
+    assert model.hyperparameters_["joint3"]["guard_choice"] == "two-stage"
+    cov = _coverage(model, test)
+    assert np.all((cov >= 0.85) & (cov <= 0.99)), cov
+    est = model.gp_  # the alternative: PR's own residual (the check can fail)
+    q, qd, qdd = (train.stream(s).select(arm3.joint_names).data for s in ("q", "qd", "qdd"))
+    Us, Fs = est._scale(np.hstack([q, qd, qdd]), model.features(q, qd, qdd))
+    own = train.stream("tau").select(arm3.joint_names).data - est.pr_posterior_.predict(Us, Fs, variance=False)[0]
+    est.pr_posterior_.w_cov_robust = parametric_robust_w_cov(est.pr_posterior_, Fs, own)
+    assert _coverage(model, test)[2] > 0.99

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages
-from diegocal.sgp.gp import fit_posterior
+from diegocal.sgp.gp import fit_posterior, parametric_robust_w_cov
 from diegocal.sgp.guard import JOINT, MIN_GP_GAIN, MIN_TWO_STAGE_GAIN, PARAMETRIC, TWO_STAGE
 
 from .test_guard import W_TRUE, _data
@@ -26,7 +26,8 @@ def _kernels():
 
 def test_two_stages_predict_as_pr_and_prgp(data):
     """Restore a fit whose guard chose two stages for output 0 and PR for output 1: output 0 is
-    PR's mean plus the residual GP's (variances added), output 1 is PR's, to rounding."""
+    PR's mean plus the residual GP's (variances added), output 1 is PR's, to rounding; W's
+    robust variance comes from what both stages leave of the training outputs."""
     U, Y, F, _ = data
     pr = SemiParametricGP([None, None], seed=0).fit(U, Y, F)
     res_gp = SemiParametricGP(_kernels(), use_features=False, seed=0).fit(U, Y - pr.predict(U, F)[0], F)
@@ -35,6 +36,9 @@ def test_two_stages_predict_as_pr_and_prgp(data):
     est = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0).fit(U, Y, F, guarded.hyper_, stages=stages)
     Uq, _, Fq, _ = _data(np.random.default_rng(6), 50, (-1.5, 1.5), (0.0, 2.0))
     mean, var, par = est.predict(Uq, Fq)
+    left = Y - pr.predict(U, F, variance=False)[0]  # W's robust variance: what both stages leave
+    left[:, 0] -= res_gp.predict(U, F, variance=False)[0][:, 0]
+    pr.posterior_.w_cov_robust = parametric_robust_w_cov(pr.posterior_, pr._scale(U, F)[1], left)
     m_pr, v_pr, p_pr = pr.predict(Uq, Fq)
     m_gp, v_gp, _ = res_gp.predict(Uq, Fq)
     np.testing.assert_allclose(mean[:, 0], m_pr[:, 0] + m_gp[:, 0], rtol=1e-9, atol=1e-12)
