@@ -54,25 +54,15 @@ from diegocal.parallel import one_blas_thread  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
 from diegocal.sgp.model import DEFAULT_GUARD  # noqa: E402
-from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics  # noqa: E402
-from diegocal.sim.effects import parse_effects  # noqa: E402
-from experiments.sgp.common import same_robot  # noqa: E402
+from experiments.sgp.common import SCALE_RATE, friction_case, same_robot  # noqa: E402
 
 SIZES = (1000, 2000, 5000, 10000, 20000)
 QUICK = (500, 1000, 4000)
 EXACT_MAX, SKLEARN_MAX, GPYTORCH_MAX = 10000, 2000, 2000
-RATE, N_TEST, BLOCKS = 50.0, 2000, 10
+RATE, N_TEST, BLOCKS = SCALE_RATE, 2000, 10
 
 
-def simulate(robot, n: int, seed: int, friction=None):
-    opts = DynamicsOptions(
-        duration=n / RATE + 0.1,
-        rate_hz=RATE,
-        effects=parse_effects(["position_friction:joint3"]),
-        noise=0.01,
-        **(friction or {}),
-    )
-    return simulate_dynamics(robot, opts, np.random.default_rng(seed))
+simulate = friction_case  # the benches' log (experiments.sgp.common)
 
 
 def arrays(log, robot, n=None):

@@ -19,6 +19,8 @@ import numpy as np
 
 from diegocal.io import Log, make_stream
 from diegocal.sgp import SGPOptions, fit_dynamics
+from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.sim.effects import parse_effects
 
 #: Method label -> (SGPOptions.kind, guard). "SGP" is the guarded SGP; the unguarded one is the
 #: plain ML-II SGP the guard is measured against.
@@ -45,6 +47,23 @@ class Score:
     coverage: float
     n: int
     fit_s: float = 0.0
+
+
+SCALE_RATE = 50.0  # Hz, the scale and sizes benches' arm3 logs
+
+
+def friction_case(robot, n: int, seed: int, friction=None) -> Log:
+    """The scale and sizes benches' log (issue #14): arm3 at SCALE_RATE with the hidden
+    cable-like friction on joint 3, sensor noise 0.01 N·m, at least ``n`` samples; ``friction``
+    (:func:`same_robot`) keeps another run's robot."""
+    opts = DynamicsOptions(
+        duration=n / SCALE_RATE + 0.1,
+        rate_hz=SCALE_RATE,
+        effects=parse_effects(["position_friction:joint3"]),
+        noise=0.01,
+        **(friction or {}),
+    )
+    return simulate_dynamics(robot, opts, np.random.default_rng(seed))
 
 
 def select(log: Log, mask: np.ndarray) -> Log:

@@ -12,22 +12,11 @@ from diegocal.evaluate import score
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
 from diegocal.sgp.gp import parametric_robust_w_cov
-from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
-from diegocal.sim.effects import parse_effects
-from experiments.sgp.common import same_robot
-
-RATE = 50.0
+from experiments.sgp.common import friction_case, same_robot
 
 
 def simulate(robot, n: int, seed: int, friction=None):
-    opts = DynamicsOptions(
-        duration=n / RATE + 0.1,
-        rate_hz=RATE,
-        effects=parse_effects(["position_friction:joint3"]),
-        noise=0.01,
-        **(friction or {}),
-    )
-    return simulate_dynamics(robot, opts, np.random.default_rng(seed)).slice(0, n)
+    return friction_case(robot, n, seed, friction).slice(0, n)
 
 
 @pytest.fixture(scope="module")
