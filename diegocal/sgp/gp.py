@@ -485,12 +485,11 @@ def fit_posterior(
         blk.finalize(alpha[:, j], F[:, j])
     ll = _log_likelihood(blocks, Y, F.shape[2], sw2, LM, alpha)
     parametric = np.array([k is None for k in kernels])
+    w_cov_robust = None
     if robust and F.shape[2] and parametric.any():
         B_gp = sum((F[:, j].T @ G[j] for j in np.flatnonzero(~parametric)), np.zeros((F.shape[2],) * 2))
-        robust = robust_w_cov(F, alpha, LM, parametric, B_gp)
-    else:
-        robust = None
-    return Posterior(blocks, w, LM, noise, float(ll), robust)
+        w_cov_robust = robust_w_cov(F, alpha, LM, parametric, B_gp)
+    return Posterior(blocks, w, LM, noise, float(ll), w_cov_robust)
 
 
 def negative_log_likelihood(vec: np.ndarray, kernels, U, Y, F, sizes, grad: bool = True, inducing=None):
