@@ -326,7 +326,8 @@ class Posterior:
     M_chol: np.ndarray | None  # (m, m) Cholesky of M = cov(W | y)⁻¹
     noise_var: np.ndarray  # (n,)
     log_likelihood: float
-    w_cov_robust: np.ndarray | None = None  # (m, m) :func:`robust_w_cov`; None: eq. (3.20) alone
+    # (m, m) :func:`robust_w_cov`, or (n, m, m) one per output; None: eq. (3.20) alone
+    w_cov_robust: np.ndarray | None = None
 
     @property
     def w_cov(self) -> np.ndarray:
@@ -360,7 +361,8 @@ class Posterior:
                     s = solve_triangular(self.M_chol, r.T, lower=True, check_finite=False)
                     w_var = np.sum(s * s, axis=0)
                     if self.w_cov_robust is not None:  # the larger of the two accounts of W's error
-                        w_var = np.maximum(w_var, np.einsum("qm,mk,qk->q", r, self.w_cov_robust, r))
+                        cov = self.w_cov_robust if self.w_cov_robust.ndim == 2 else self.w_cov_robust[j]
+                        w_var = np.maximum(w_var, np.einsum("qm,mk,qk->q", r, cov, r))
                     var[rows, j] += w_var
         return mean, var, par
 

@@ -77,8 +77,9 @@ class Guard:
         cross-validation that chooses, per output, between the learnt hyperparameters, the
         released ones (``release_capped``) and a parametric-only fallback (PR's σ_w and σ_v, σ_z
         at its floor): an output whose cross-validated nMSE no GP lowers by more than one
-        standard error and MIN_GP_GAIN of PR's falls back to PR
-        (:meth:`~SemiParametricGP._validate`). The
+        standard error and MIN_GP_GAIN of PR's falls back to PR, and on a small
+        cross-validation so does one whose joint GP wins where two stages (with ``two_stage``)
+        do not beat PR: no structure in PR's residual (:meth:`~SemiParametricGP._validate`). The
         hyperparameters are learnt on all samples; each block is predicted by the posterior of
         the others; a winner is then confirmed with each fold's hyperparameters re-learnt
         without its block (nested; the joint GPs only on small cross-validations).
@@ -407,7 +408,9 @@ class GuardCandidates(RegionScan, NestedConfirmation):
 
         A GP must earn its place: an output keeps one only if it beats the parametric fallback
         by more than one standard error of their paired per-block difference and by MIN_GP_GAIN
-        of the fallback's nMSE (:func:`choose_by_validation`). Why: W is shared, and a GP on an
+        of the fallback's nMSE (:func:`choose_by_validation`), and on a small cross-validation
+        a joint GP only where two stages beat PR by the same rule
+        (:meth:`_require_residual_evidence`). Why: W is shared, and a GP on an
         output that PR already
         fits to the noise lets W drift in directions the training run barely excites, at no
         cost in-sample or in the cross-validation (3-link arm at 1000 samples, seed 0: joint 1's
@@ -463,6 +466,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
                 per_block[labels.index("cut")][:, not_cut] = np.inf
             choice = self._choose(per_block, labels)
             choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
+        choice = self._require_residual_evidence(per_block, labels, choice, confirmed, blocks, data)
         self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
         self.validation_blocks_ = dict(zip(labels, per_block, strict=True))  # (blocks, n) each
         self.selection_ = tuple(labels[c] for c in choice)
@@ -471,6 +475,46 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             out[1 + j] = options[choice[j]][1 + j]
             out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
         return out
+
+    def _require_residual_evidence(self, per_block, labels, choice, confirmed: set, blocks, data) -> np.ndarray:
+        """On a small cross-validation (at most NESTED_JOINT_MAX samples, where the joint
+        candidates are nested too): where a joint candidate won an output, keep it only if two
+        stages beat PR there by the rule that keeps a GP (more than one standard error and
+        MIN_GP_GAIN of PR's nMSE, :func:`choose_by_validation`); else the output falls back to
+        PR. The two-stage scores are the nested ones, and for an output the region scan cut,
+        those of the cut two stages on every sample outside each block (:meth:`_choose_cut`).
+        ``per_block`` and ``confirmed`` are updated in place.
+
+        Why: an unmodelled effect leaves structure in PR's residual that a GP on that residual
+        predicts (thesis §3.4.1); a joint GP that wins the cross-validation while two stages do
+        not is mending W's estimation error where the training run went, by moving the shared W,
+        and that W predicts alone where a test run leaves the training range. Issue #14's arm,
+        20 training runs of 200 and of 500 samples, held-out runs of the same robot
+        (bench_sgp_sizes, seeds 1-20): the 24 joint GPs kept on joints 1-2, where nothing is
+        unmodelled, won the cross-validation by 2-90 % of PR's nMSE while two stages won by at
+        most 2.6 % (plain scores); on the test 11 were worse than PR by 1-49 %, 11 within 1 %
+        and 2 better (5 % and 86 %: one run whose PR extrapolated badly). On joint 3, where the
+        hidden friction acts, two stages won by 2.8-62 % wherever a joint candidate did.
+
+        Not on larger cross-validations: there W is determined well enough that the 2 % floor
+        alone keeps joints 1-2 PR (MIN_GP_GAIN), and two stages are no witness: on 5,000 samples
+        (seed 2) the cut two stages' GP on joint 3 came out flat, PR's scores to the digit,
+        where the joint cut GP scored 0.0016 against PR's 0.0093 and predicted the held-out run
+        at 0.00088 against PR's 0.0115; the rule cost joint 3 at 5,000-20,000 samples
+        (bench_sgp_sizes: SGP against PRGP +0.0029 ± 0.0021 at 5,000, was +0.0007 ± 0.0008)."""
+        if TWO_STAGE not in labels or len(np.concatenate(blocks)) > NESTED_JOINT_MAX:
+            return choice
+        t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
+        joint = [j for j, c in enumerate(choice) if labels[c] in JOINT]
+        fresh = [j for j in joint if j not in confirmed and j not in self._cut_evidence]
+        if fresh:
+            per_block[t][:, fresh] = self._two_stage_nested(fresh, blocks, data)[:, fresh]
+            confirmed.update(fresh)
+        for j in joint:
+            pair = self._cut_evidence.get(j, per_block[[p, t], :, j])
+            if choose_by_validation(pair[:, :, None], 0, MIN_GP_GAIN)[0] == 0:
+                choice[j] = p
+        return choice
 
     def _plain_scores(self, options, labels, blocks, data, sizes) -> np.ndarray:
         """(options, blocks, n) nMSE of each candidate in the plain blocked cross-validation: each
@@ -516,6 +560,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         to its subset scores (confirmed nested by :meth:`_confirm_two_stage` if they win).
         ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place."""
         cut = self._cut_outputs() if TWO_STAGE in labels else []
+        self._cut_evidence = {}
         if not cut:
             return self._choose(per_block, labels)
         t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
@@ -528,6 +573,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             per_block[t][:, won] = self._two_stage_nested(won, blocks, data, every_sample=True)[:, won]
             confirmed.update(won)
         choice = self._choose(per_block, labels)
+        self._cut_evidence = {j: per_block[[p, t], :, j].copy() for j in cut}  # PR, cut two stages
         lost = [j for j in cut if choice[j] != t]
         if lost:
             hp_pr, hp = self._two_stage_hp

@@ -27,7 +27,8 @@ def _kernels():
 def test_two_stages_predict_as_pr_and_prgp(data):
     """Restore a fit whose guard chose two stages for output 0 and PR for output 1: output 0 is
     PR's mean plus the residual GP's (variances added), output 1 is PR's, to rounding; W's
-    robust variance comes from what both stages leave of the training outputs."""
+    robust variance comes, for output 0, from what both stages leave of the training outputs,
+    for output 1 from PR's own residual (PR's band)."""
     U, Y, F, _ = data
     pr = SemiParametricGP([None, None], seed=0).fit(U, Y, F)
     res_gp = SemiParametricGP(_kernels(), use_features=False, seed=0).fit(U, Y - pr.predict(U, F)[0], F)
@@ -36,6 +37,7 @@ def test_two_stages_predict_as_pr_and_prgp(data):
     est = SemiParametricGP(_kernels(), guard=DEFAULT_GUARD, seed=0).fit(U, Y, F, guarded.hyper_, stages=stages)
     Uq, _, Fq, _ = _data(np.random.default_rng(6), 50, (-1.5, 1.5), (0.0, 2.0))
     mean, var, par = est.predict(Uq, Fq)
+    _, v_own, _ = pr.predict(Uq, Fq)  # PR's band, W's robust variance from its own residual
     left = Y - pr.predict(U, F, variance=False)[0]  # W's robust variance: what both stages leave
     left[:, 0] -= res_gp.predict(U, F, variance=False)[0][:, 0]
     pr.posterior_.w_cov_robust = parametric_robust_w_cov(pr.posterior_, pr._scale(U, F)[1], left)
@@ -44,7 +46,8 @@ def test_two_stages_predict_as_pr_and_prgp(data):
     np.testing.assert_allclose(mean[:, 0], m_pr[:, 0] + m_gp[:, 0], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(var[:, 0], v_pr[:, 0] + v_gp[:, 0], rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(mean[:, 1], m_pr[:, 1], rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(var[:, 1], v_pr[:, 1], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(var[:, 1], v_own[:, 1], rtol=1e-9, atol=1e-15)
+    assert not np.allclose(v_own[:, 1], v_pr[:, 1], rtol=1e-4)  # the two robust variances differ
     np.testing.assert_allclose(par, p_pr, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(est.noise_var_, [res_gp.noise_var_[0], pr.noise_var_[1]])
     np.testing.assert_allclose(est.w_, pr.w_)  # no output is joint: the W that predicts is PR's
