@@ -219,8 +219,8 @@ class SemiParametricGP(GuardCandidates, MLStarts):
             self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
             left = res - self.residual_.predict(U, F, variance=False)[0]
             own = self.pr_posterior_.w_cov_robust
-            both = parametric_robust_w_cov(self.pr_posterior_, Fs, left)
             if own is not None:
+                both = parametric_robust_w_cov(self.pr_posterior_, Fs, left)
                 self.pr_posterior_.w_cov_robust = np.stack([both if m == TWO_STAGE else own for m in modes])
 
     def _residual_estimator(self, kernels=None, inference=None, jobs=None) -> SemiParametricGP:
