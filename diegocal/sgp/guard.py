@@ -19,7 +19,7 @@ from diegocal.errors import NumericalError
 from diegocal.evaluate import choose_by_validation
 from diegocal.parallel import thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood
-from diegocal.sgp.kernels import RELEASED_LENGTHSCALE, cut_outputs, is_amplitude, is_lengthscale
+from diegocal.sgp.kernels import REGION_OFF, RELEASED_LENGTHSCALE, cut_outputs, is_amplitude, is_lengthscale
 from diegocal.sgp.nested import NestedConfirmation
 from diegocal.sgp.region import RegionScan
 
@@ -47,6 +47,35 @@ MIN_GP_GAIN = 0.02
 # The joint candidates' cross-validation is repeated with each fold's hyperparameters re-learnt
 # (GuardCandidates._joint_nested) when it has at most this many samples.
 NESTED_JOINT_MAX = 500
+# The two-stage GP's amplitude above a cut kernel's onset, at most this many times the residual's
+# std there (capped_above).
+MAX_AMPLITUDE_ABOVE = 4.0
+
+
+def capped_above(kernel, theta: np.ndarray, est, U: np.ndarray, res: np.ndarray) -> np.ndarray:
+    """``theta`` of a GP on PR's residual ``res`` (N,) with the amplitude of a cut kernel's side
+    above its onset, r·σ_z (:class:`~diegocal.sgp.kernels.Region`), held to at most
+    MAX_AMPLITUDE_ABOVE times the residual's std over the training samples above the onset
+    (``est``'s input scaling; U (N, p) raw). Unchanged for a kernel that is not cut.
+
+    Why: the joint GP's σ_z is capped at twice the parametric residual (Guard.max_amplitude);
+    the two-stage GP's side above the onset had no cap. Issue #14's arm, a 200-sample run (seed
+    38; bench_sgp_sizes --seeds 21-40): ML-II put it at 2.15 N·m, 28 times the residual's 0.076
+    N·m above the onset (36 samples), and where the test's qd3 left the training range it added
+    up to 4.4 N·m (joint 3 nMSE 0.209 against PR's 0.024). In 16 healthy cut fits (200-5,000
+    samples) it was 0.6-1.0 times that std (3.9 on a run with 14 samples above)."""
+    names = getattr(kernel, "names", ())
+    if len(theta) == 0 or "region_onset" not in names or theta[0] >= REGION_OFF:
+        return theta
+    dim = kernel.dim
+    above = (U[:, dim] - est.u_mean_[dim]) / est.u_std_[dim] >= theta[0]
+    if above.sum() < 2:
+        return theta
+    amp = [i for i, n in enumerate(names) if is_amplitude(n)][0]
+    ratio = names.index("log_region_ratio")
+    out = np.array(theta, float, copy=True)
+    out[ratio] = min(out[ratio], np.log(MAX_AMPLITUDE_ABOVE * res[above].std()) - out[amp])
+    return out
 
 
 @dataclass(frozen=True)
@@ -378,7 +407,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             hp = est.learn(U, res, F, start=one)
             if j == outputs[0] and start is None:
                 log_sigma_w, log_sigma_v = hp.log_sigma_w, hp.log_sigma_v.copy()
-            log_sigma_v[j], theta[j] = hp.log_sigma_v[j], hp.theta[j]
+            log_sigma_v[j], theta[j] = hp.log_sigma_v[j], capped_above(est.kernels[j], hp.theta[j], est, U, res[:, j])
         return Hyperparameters(log_sigma_w, log_sigma_v, tuple(theta))
 
     def _two_stage_mean(self, hp_pr, hp_res, Us, Y, Fs, Uq, Fq, outputs=None) -> np.ndarray:
