@@ -371,3 +371,32 @@ def test_the_joint_cut_candidate_cuts_where_the_two_stages_lost_and_competes_onl
     err = {label: np.mean((m.predict(Uq, Fq)[0][:, 0] - clean[:, 0]) ** 2) for label, m in out.items()}
     err["joint cut"] = np.mean((est.predict(Uq, Fq)[0][:, 0] - clean[:, 0]) ** 2)
     assert err["joint cut"] < err["uncut"] / 3 and err["joint cut"] < 1.2 * err["cut"], err
+
+
+def test_the_two_stage_gp_s_amplitude_above_the_onset_is_capped_by_the_residual_there():
+    """guard.capped_above: r·σ_z of a cut kernel at most MAX_AMPLITUDE_ABOVE times the residual's
+    std over the samples above the onset; a kernel not cut, or one within the cap, unchanged."""
+    from types import SimpleNamespace
+
+    from diegocal.sgp.guard import MAX_AMPLITUDE_ABOVE, capped_above
+
+    rng = np.random.default_rng(0)
+    U = np.column_stack([rng.uniform(-1, 1, 400), rng.normal(size=400)])
+    res = np.where(U[:, 0] >= 0.5, 0.3, 0.01) * rng.standard_normal(400)
+    est = SimpleNamespace(u_mean_=np.zeros(2), u_std_=np.ones(2))  # U taken as standardised
+    kernel = Region(0, Subspace([0, 1], SquaredExponential(2)))
+    names = kernel.names
+    amp = [i for i, n in enumerate(names) if is_amplitude(n)][0]
+    ratio = names.index("log_region_ratio")
+    theta = np.zeros(len(names))
+    theta[0], theta[1], theta[amp] = 0.5, np.log(1e-3), np.log(0.05)
+    theta[ratio] = np.log(100.0)  # 5 N·m above: 17× the residual there
+    out = capped_above(kernel, theta, est, U, res)
+    std_above = res[U[:, 0] >= 0.5].std()
+    np.testing.assert_allclose(np.exp(out[ratio] + out[amp]), MAX_AMPLITUDE_ABOVE * std_above, rtol=1e-12)
+    np.testing.assert_array_equal(np.delete(out, ratio), np.delete(theta, ratio))
+    theta[ratio] = np.log(2.0)  # 0.1 N·m: within the cap
+    np.testing.assert_array_equal(capped_above(kernel, theta, est, U, res), theta)
+    theta[0] = REGION_OFF  # not cut
+    theta[ratio] = np.log(100.0)
+    np.testing.assert_array_equal(capped_above(kernel, theta, est, U, res), theta)
