@@ -14,10 +14,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
 from diegocal.sgp.guard import NESTED_JOINT_MAX, PARAMETRIC, TWO_STAGE, GuardCandidates
-from experiments.sgp.common import friction_case, same_robot
+
+from .friction_runs import held_out_run
 
 
 def _choose(per_block, choice, cut_evidence=None, samples=500):
@@ -50,17 +50,9 @@ def test_a_joint_gp_falls_back_to_pr_where_two_stages_do_not_beat_pr():
 
 @pytest.fixture(scope="module")
 def run13():
-    arm3 = load_robot(BUNDLED_ROBOTS / "arm3")
-    train = friction_case(arm3, 200, 13).slice(0, 200)
-    test = friction_case(arm3, 2000, 1013, same_robot(train, arm3)).slice(0, 2000)
-    tau = test.stream("tau").select(arm3.joint_names).data
-
-    def nmse(model):
-        return np.mean((model.predict(test).tau - tau) ** 2, axis=0) / tau.var(axis=0)
-
-    pr = fit_dynamics(train, arm3, SGPOptions(kind="pr"))
-    sgp = fit_dynamics(train, arm3, SGPOptions())
-    return SimpleNamespace(train=train, arm3=arm3, nmse=nmse, pr=nmse(pr), sgp=sgp)
+    run = held_out_run(13)
+    run.sgp = fit_dynamics(run.train, run.arm3, SGPOptions())
+    return run
 
 
 def test_joints_without_an_effect_are_pr_and_the_friction_joint_keeps_its_gp(run13):

@@ -9,35 +9,24 @@ import numpy as np
 import pytest
 
 import diegocal.sgp.guard as guard
-from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
-from experiments.sgp.common import friction_case, same_robot
+
+from .friction_runs import held_out_run
 
 
 @pytest.fixture(scope="module")
 def run38():
-    arm3 = load_robot(BUNDLED_ROBOTS / "arm3")
-    train = friction_case(arm3, 200, 38).slice(0, 200)
-    test = friction_case(arm3, 2000, 1038, same_robot(train, arm3)).slice(0, 2000)
-    tau = test.stream("tau").select(arm3.joint_names).data
-    pr = fit_dynamics(train, arm3, SGPOptions(kind="pr"))
-
-    def nmse(model):
-        return np.mean((model.predict(test).tau - tau) ** 2, axis=0) / tau.var(axis=0)
-
-    return arm3, train, nmse, nmse(pr)
+    return held_out_run(38)
 
 
 def test_capped_the_two_stages_are_no_worse_than_pr(run38):
-    arm3, train, nmse, pr = run38
-    sgp = fit_dynamics(train, arm3, SGPOptions())
+    sgp = fit_dynamics(run38.train, run38.arm3, SGPOptions())
     assert sgp.hyperparameters_["joint3"]["guard_choice"] == "two-stage"
-    assert nmse(sgp)[2] <= 1.05 * pr[2], (nmse(sgp), pr)
+    assert run38.nmse(sgp)[2] <= 1.05 * run38.pr[2], (run38.nmse(sgp), run38.pr)
 
 
 def test_uncapped_they_err_several_times_pr(run38, monkeypatch):
     """The check above can fail: without the cap the same fit errs > 5× PR's on joint 3."""
-    arm3, train, nmse, pr = run38
     monkeypatch.setattr(guard, "MAX_AMPLITUDE_ABOVE", np.inf)
-    sgp = fit_dynamics(train, arm3, SGPOptions())
-    assert nmse(sgp)[2] > 5.0 * pr[2], (nmse(sgp), pr)
+    sgp = fit_dynamics(run38.train, run38.arm3, SGPOptions())
+    assert run38.nmse(sgp)[2] > 5.0 * run38.pr[2], (run38.nmse(sgp), run38.pr)
