@@ -217,9 +217,9 @@ class SemiParametricGP(GuardCandidates, MLStarts):
             kernels = [k if m == TWO_STAGE else None for k, m in zip(self.kernels, modes, strict=True)]
             est = self._residual_estimator(kernels)
             self.residual_ = est.fit(U, res, F, self.stages_.residual, residual_inducing)
-            left = res - self.residual_.predict(U, F, variance=False)[0]
             own = self.pr_posterior_.w_cov_robust
             if own is not None:
+                left = res - self.residual_.predict(U, F, variance=False)[0]
                 both = parametric_robust_w_cov(self.pr_posterior_, Fs, left)
                 self.pr_posterior_.w_cov_robust = np.stack([both if m == TWO_STAGE else own for m in modes])
 

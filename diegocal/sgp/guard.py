@@ -466,7 +466,8 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         if TWO_STAGE in labels:
             scanned = {j: self._two_stage_hp[1].theta[j] for j in self._cut_outputs()}
         confirmed = set()  # outputs whose two-stage scores are the nested ones
-        choice = self._choose_cut(per_block, labels, confirmed, blocks, data)
+        cut_evidence = {}  # output -> (PR, cut two stages) per-block scores, where the scan cut
+        choice = self._choose_cut(per_block, labels, confirmed, blocks, data, cut_evidence)
         choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
         not_cut = []  # "cut" competes only for the outputs it cuts
         if joint_cut is not None:
@@ -495,7 +496,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
                 per_block[labels.index("cut")][:, not_cut] = np.inf
             choice = self._choose(per_block, labels)
             choice = self._confirm_two_stage(per_block, labels, choice, confirmed, blocks, data)
-        choice = self._require_residual_evidence(per_block, labels, choice, confirmed, blocks, data)
+        choice = self._require_residual_evidence(per_block, labels, choice, confirmed, blocks, data, cut_evidence)
         self.validation_scores_ = dict(zip(labels, per_block.mean(axis=1), strict=True))
         self.validation_blocks_ = dict(zip(labels, per_block, strict=True))  # (blocks, n) each
         self.selection_ = tuple(labels[c] for c in choice)
@@ -505,14 +506,16 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             out[k : k + len(names)] = options[choice[j]][k : k + len(names)]
         return out
 
-    def _require_residual_evidence(self, per_block, labels, choice, confirmed: set, blocks, data) -> np.ndarray:
+    def _require_residual_evidence(
+        self, per_block, labels, choice, confirmed: set, blocks, data, cut_evidence: dict
+    ) -> np.ndarray:
         """On a small cross-validation (at most NESTED_JOINT_MAX samples, where the joint
         candidates are nested too): where a joint candidate won an output, keep it only if two
         stages beat PR there by the rule that keeps a GP (more than one standard error and
         MIN_GP_GAIN of PR's nMSE, :func:`choose_by_validation`); else the output falls back to
         PR. The two-stage scores are the nested ones, and for an output the region scan cut,
-        those of the cut two stages on every sample outside each block (:meth:`_choose_cut`).
-        ``per_block`` and ``confirmed`` are updated in place.
+        those of the cut two stages on every sample outside each block (``cut_evidence``, filled
+        by :meth:`_choose_cut`). ``per_block`` and ``confirmed`` are updated in place.
 
         Why: an unmodelled effect leaves structure in PR's residual that a GP on that residual
         predicts (thesis §3.4.1); a joint GP that wins the cross-validation while two stages do
@@ -535,12 +538,12 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             return choice
         t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
         joint = [j for j, c in enumerate(choice) if labels[c] in JOINT]
-        fresh = [j for j in joint if j not in confirmed and j not in self._cut_evidence]
+        fresh = [j for j in joint if j not in confirmed and j not in cut_evidence]
         if fresh:
             per_block[t][:, fresh] = self._two_stage_nested(fresh, blocks, data)[:, fresh]
             confirmed.update(fresh)
         for j in joint:
-            pair = self._cut_evidence.get(j, per_block[[p, t], :, j])
+            pair = cut_evidence.get(j, per_block[[p, t], :, j])
             if choose_by_validation(pair[:, :, None], 0, MIN_GP_GAIN)[0] == 0:
                 choice[j] = p
         return choice
@@ -577,7 +580,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             per_block[c, b] = err
         return per_block
 
-    def _choose_cut(self, per_block, labels, confirmed: set, blocks, data) -> np.ndarray:
+    def _choose_cut(self, per_block, labels, confirmed: set, blocks, data, cut_evidence=None) -> np.ndarray:
         """The first choice, with the outputs whose two-stage GP is cut (:meth:`_region_scan`)
         scored on folds of every sample outside each block (:meth:`_outside`), they and PR both:
         a cut GP's side above its onset sees rare states, and the ≤ 1,000-sample subset's folds
@@ -587,9 +590,10 @@ class GuardCandidates(RegionScan, NestedConfirmation):
         confirmed by the nested ones (re-learnt per fold: 0.0011 there). Where the cut loses, its
         output's two stages go back to the uncut GP, scored plain on the subset's folds, and PR
         to its subset scores (confirmed nested by :meth:`_confirm_two_stage` if they win).
-        ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place."""
+        ``per_block``, ``confirmed`` and ``_two_stage_hp`` are updated in place; ``cut_evidence``
+        (a dict) gets, per cut output, PR's and the cut two stages' per-block scores (2, blocks)
+        as they stand at the choice, before a lost cut goes back to the uncut GP."""
         cut = self._cut_outputs() if TWO_STAGE in labels else []
-        self._cut_evidence = {}
         if not cut:
             return self._choose(per_block, labels)
         t, p = labels.index(TWO_STAGE), labels.index(PARAMETRIC)
@@ -602,7 +606,8 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             per_block[t][:, won] = self._two_stage_nested(won, blocks, data, every_sample=True)[:, won]
             confirmed.update(won)
         choice = self._choose(per_block, labels)
-        self._cut_evidence = {j: per_block[[p, t], :, j].copy() for j in cut}  # PR, cut two stages
+        if cut_evidence is not None:
+            cut_evidence.update({j: per_block[[p, t], :, j].copy() for j in cut})  # PR, cut two stages
         lost = [j for j in cut if choice[j] != t]
         if lost:
             hp_pr, hp = self._two_stage_hp

@@ -12,7 +12,7 @@ from experiments.sgp.common import friction_case, same_robot
 
 
 def held_out_run(seed: int, n: int = 200) -> SimpleNamespace:
-    """arm3, train (Log), nmse(model) -> (3,) held-out nMSE per joint, pr: PR's."""
+    """arm3, train and test (Logs), nmse(model) -> (3,) held-out nMSE per joint, pr: PR's."""
     arm3 = load_robot(BUNDLED_ROBOTS / "arm3")
     train = friction_case(arm3, n, seed).slice(0, n)
     test = friction_case(arm3, 2000, 1000 + seed, same_robot(train, arm3)).slice(0, 2000)
@@ -21,4 +21,5 @@ def held_out_run(seed: int, n: int = 200) -> SimpleNamespace:
     def nmse(model):
         return np.mean((model.predict(test).tau - tau) ** 2, axis=0) / tau.var(axis=0)
 
-    return SimpleNamespace(arm3=arm3, train=train, nmse=nmse, pr=nmse(fit_dynamics(train, arm3, SGPOptions(kind="pr"))))
+    pr = nmse(fit_dynamics(train, arm3, SGPOptions(kind="pr")))
+    return SimpleNamespace(arm3=arm3, train=train, test=test, nmse=nmse, pr=pr)

@@ -23,9 +23,10 @@ from .friction_runs import held_out_run
 def _choose(per_block, choice, cut_evidence=None, samples=500):
     """The rule on given per-block scores, taken as the nested ones (both outputs confirmed)."""
     labels = ["released", TWO_STAGE, PARAMETRIC]
-    guard = SimpleNamespace(_cut_evidence=cut_evidence or {})
     blocks = np.array_split(np.arange(samples), 5)
-    return GuardCandidates._require_residual_evidence(guard, per_block, labels, np.array(choice), {0, 1}, blocks, None)
+    return GuardCandidates._require_residual_evidence(
+        SimpleNamespace(), per_block, labels, np.array(choice), {0, 1}, blocks, None, cut_evidence or {}
+    )
 
 
 def test_a_joint_gp_falls_back_to_pr_where_two_stages_do_not_beat_pr():

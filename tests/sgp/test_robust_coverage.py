@@ -9,19 +9,10 @@ import numpy as np
 import pytest
 
 from diegocal.evaluate import score
-from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
 from diegocal.sgp.gp import parametric_robust_w_cov
-from experiments.sgp.common import friction_case, same_robot
 
-
-def simulate(robot, n: int, seed: int, friction=None):
-    return friction_case(robot, n, seed, friction).slice(0, n)
-
-
-@pytest.fixture(scope="module")
-def arm3():
-    return load_robot(BUNDLED_ROBOTS / "arm3")
+from .friction_runs import held_out_run
 
 
 def _coverage(model, log):
@@ -39,22 +30,22 @@ def _without_robust(model):
 
 
 @pytest.mark.parametrize("kind, seed", [("pr", 4), ("pr", 5), ("sgp", 5)])
-def test_a_bias_the_friction_puts_in_w_is_inside_the_two_sigma_band(arm3, kind, seed):
-    train = simulate(arm3, 200, seed)
-    test = simulate(arm3, 2000, 1000 + seed, same_robot(train, arm3))
-    model = fit_dynamics(train, arm3, SGPOptions(kind=kind))
+def test_a_bias_the_friction_puts_in_w_is_inside_the_two_sigma_band(kind, seed):
+    run = held_out_run(seed)
+    test = run.test
+    model = fit_dynamics(run.train, run.arm3, SGPOptions(kind=kind))
     cov = _coverage(model, test)
     assert np.all((cov[:2] >= 0.85) & (cov[:2] <= 0.99)), f"{kind} run {seed}: ±2σ coverage {cov}"  # joints 1-2
     plain = _coverage(_without_robust(model), test)  # eq. (3.20) alone: the check can fail
     assert plain[1] < 0.85, plain
 
 
-def test_two_stages_take_w_s_robust_variance_from_what_both_leave(arm3):
+def test_two_stages_take_w_s_robust_variance_from_what_both_leave():
     """Run 8 at 500 samples: the guard gives joint 3 two stages, whose GP takes up the friction
     PR leaves; W's robust variance from PR's own residual would count that bias again (the band
     then held 1.00 of joint 3's held-out torque), from what both stages leave it holds 0.97."""
-    train = simulate(arm3, 500, 8)
-    test = simulate(arm3, 2000, 1008, same_robot(train, arm3))
+    run = held_out_run(8, n=500)
+    arm3, train, test = run.arm3, run.train, run.test
     model = fit_dynamics(train, arm3, SGPOptions())
     assert model.hyperparameters_["joint3"]["guard_choice"] == "two-stage"
     cov = _coverage(model, test)
