@@ -356,15 +356,22 @@ class Posterior:
                 if not variance:
                     continue
                 var[rows, j] = gp_var
-                if self.w_mean.size:
-                    r = Fq[rows, j] - FtAk  # R&W eq. (2.42): W's uncertainty seen through f - Fᵀ A⁻¹ k
-                    s = solve_triangular(self.M_chol, r.T, lower=True, check_finite=False)
-                    w_var = np.sum(s * s, axis=0)
-                    if self.w_cov_robust is not None:  # the larger of the two accounts of W's error
-                        cov = self.w_cov_robust if self.w_cov_robust.ndim == 2 else self.w_cov_robust[j]
-                        w_var = np.maximum(w_var, np.einsum("qm,mk,qk->q", r, cov, r))
-                    var[rows, j] += w_var
+                if self.w_mean.size:  # R&W eq. (2.42): W's uncertainty seen through f - Fᵀ A⁻¹ k
+                    robust = self.w_cov_robust
+                    cov = robust if robust is None or robust.ndim == 2 else robust[j]
+                    var[rows, j] += w_variance(self.M_chol, cov, Fq[rows, j] - FtAk)
         return mean, var, par
+
+
+def w_variance(M_chol: np.ndarray, robust: np.ndarray | None, r: np.ndarray) -> np.ndarray:
+    """(Nq,) W's variance seen through ``r`` (Nq, m): eq. (3.20)'s rᵀ M⁻¹ r, or rᵀ Σ r with W's
+    robust covariance Σ (m, m; :func:`robust_w_cov`) where larger: the larger of the two accounts
+    of W's error."""
+    s = solve_triangular(M_chol, r.T, lower=True, check_finite=False)
+    w_var = np.sum(s * s, axis=0)
+    if robust is not None:
+        w_var = np.maximum(w_var, np.einsum("qm,mk,qk->q", r, robust, r))
+    return w_var
 
 
 def robust_w_cov(F, alpha, M_chol, parametric, B_gp=None, blocks: int = ROBUST_BLOCKS) -> np.ndarray:

@@ -26,9 +26,10 @@ def _kernels():
 
 def test_two_stages_predict_as_pr_and_prgp(data):
     """Restore a fit whose guard chose two stages for output 0 and PR for output 1: output 0 is
-    PR's mean plus the residual GP's (variances added), output 1 is PR's, to rounding; W's
-    robust variance comes, for output 0, from what both stages leave of the training outputs,
-    for output 1 from PR's own residual (PR's band)."""
+    PR's mean plus the residual GP's, output 1 is PR's, to rounding. Output 1's band is PR's;
+    output 0's is the residual GP's variance plus W's, from what both stages leave of the
+    training outputs on the GP's data, from PR's own residual beyond it, weighted by the GP's
+    posterior over prior variance."""
     U, Y, F, _ = data
     pr = SemiParametricGP([None, None], seed=0).fit(U, Y, F)
     res_gp = SemiParametricGP(_kernels(), use_features=False, seed=0).fit(U, Y - pr.predict(U, F)[0], F)
@@ -43,8 +44,12 @@ def test_two_stages_predict_as_pr_and_prgp(data):
     pr.posterior_.w_cov_robust = parametric_robust_w_cov(pr.posterior_, pr._scale(U, F)[1], left)
     m_pr, v_pr, p_pr = pr.predict(Uq, Fq)
     m_gp, v_gp, _ = res_gp.predict(Uq, Fq)
+    blk = res_gp.posterior_.blocks[0]
+    far = v_gp[:, 0] / blk.kernel.diag(res_gp._scale(Uq, Fq[:, :, :0])[0], blk.theta)
     np.testing.assert_allclose(mean[:, 0], m_pr[:, 0] + m_gp[:, 0], rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(var[:, 0], v_pr[:, 0] + v_gp[:, 0], rtol=1e-9, atol=1e-15)
+    w_var = (1 - far) * v_pr[:, 0] + far * v_own[:, 0]
+    np.testing.assert_allclose(var[:, 0], v_gp[:, 0] + w_var, rtol=1e-9, atol=1e-15)
+    assert far.min() < 0.01 and far.max() > 0.3  # from one account of W's error towards the other
     np.testing.assert_allclose(mean[:, 1], m_pr[:, 1], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(var[:, 1], v_own[:, 1], rtol=1e-9, atol=1e-15)
     assert not np.allclose(v_own[:, 1], v_pr[:, 1], rtol=1e-4)  # the two robust variances differ
