@@ -210,11 +210,12 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         residual, a :class:`SemiParametricGP` without features) when one is TWO_STAGE.
 
         W's robust covariance per output: a TWO_STAGE output's from what both stages leave
-        (:func:`~diegocal.sgp.gp.parametric_robust_w_cov`; on its GP's data, PR's own
-        ``pr_w_cov_robust_`` beyond them: :meth:`_two_stage_w_variance`), a PARAMETRIC one's PR's
-        own, as PR has it: an output that falls back is PR, its band too. (From what both stages leave, the
-        joint-3 GP on PR's residual took the friction's share out of the W variance that joint 2
-        needs: issue #14's arm, 200 samples, run 5, joint 2's ±2σ coverage 0.66 against PR's 0.95.)"""
+        (:func:`~diegocal.sgp.gp.parametric_robust_w_cov`) on its GP's data, PR's own
+        (``pr_w_cov_robust_``) beyond them (:meth:`_two_stage_w_variance`); a PARAMETRIC one's
+        PR's own, as PR has it: an output that falls back is PR, its band too. (From what both
+        stages leave, the joint-3 GP on PR's residual took the friction's share out of the W
+        variance that joint 2 needs: issue #14's arm, 200 samples, run 5, joint 2's ±2σ coverage
+        0.66 against PR's 0.95.)"""
         modes = self._modes()
         self.pr_posterior_ = self.residual_ = self.pr_w_cov_robust_ = None
         if all(m == "joint" for m in modes):
