@@ -284,8 +284,8 @@ def _warn_coverage(names, coverage) -> None:
     from diegocal.evaluate import COVERAGE_BAND
 
     lo, hi = COVERAGE_BAND
-    low = [f"{j} {c:.2f}" for j, c in zip(names, coverage, strict=True) if c < lo]
-    high = [f"{j} {c:.2f}" for j, c in zip(names, coverage, strict=True) if c > hi]
+    low = [f"{j} {c:.3f}" for j, c in zip(names, coverage, strict=True) if c < lo]
+    high = [f"{j} {c:.3f}" for j, c in zip(names, coverage, strict=True) if c > hi]
     parts = []
     if low:
         why = "states the training log did not constrain, a drifted robot, or noise that is not white"

@@ -202,3 +202,15 @@ def test_sgp_fit_region_and_joint_cut_are_the_default_and_their_off_switches_are
     assert joint_off.gp_.region_inputs == (0, 1) and region_dims(joint_off) == []
     r = runner.invoke(app, ["predict", str(out), str(test), "-q", "-o", str(tmp_path / "p.h5")])
     assert r.exit_code == 0, r.output
+
+
+def test_the_coverage_warning_names_the_joints_out_of_range_to_three_digits(capsys):
+    """0.9931 is above 0.99: printed as 0.99 the warning would contradict itself."""
+    from diegocal.cli.sgp_cmd import _warn_coverage
+
+    _warn_coverage(["joint1", "joint2", "joint3"], [0.9931, 0.95, 0.8])
+    err = " ".join(capsys.readouterr().err.split())
+    assert "above 0.99 on joint1 0.993" in err and "below 0.85 on joint3 0.800" in err, err
+    assert "joint2" not in err
+    _warn_coverage(["joint1"], [0.95])
+    assert capsys.readouterr().err == ""
