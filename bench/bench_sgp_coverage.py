@@ -29,17 +29,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/ is not installed
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_sgp_sizes import N_TEST  # noqa: E402
 
+from diegocal.evaluate import COVERAGE_BAND  # noqa: E402
 from diegocal.parallel import one_blas_thread  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
 from diegocal.sgp.model import log_arrays  # noqa: E402
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics  # noqa: E402
-from experiments.sgp.common import SCALE_RATE, friction_case, same_robot  # noqa: E402
-
-N_TEST = 2000
-NOISE = 0.01  # N·m, friction_case's
-COVERED = (0.85, 0.99)
+from experiments.sgp.common import CASE_NOISE, SCALE_RATE, friction_case, same_robot  # noqa: E402
 
 
 def one_run(robot, N: int, seed: int, hidden: bool) -> dict:
@@ -65,7 +64,7 @@ def coverages(runs: list) -> tuple[np.ndarray, np.ndarray]:
     own, oracle = [], []
     for i, r in enumerate(runs):
         rest = np.delete(D, i, axis=0)
-        var = np.einsum("tjm,mk,tjk->tj", r["F"], rest.T @ rest / len(rest), r["F"]) + NOISE**2
+        var = np.einsum("tjm,mk,tjk->tj", r["F"], rest.T @ rest / len(rest), r["F"]) + CASE_NOISE**2
         err = np.abs(r["mean"] - r["tau"])
         own.append(np.mean(err <= 2 * r["std"], axis=0))
         oracle.append(np.mean(err <= 2 * np.sqrt(var), axis=0))
@@ -73,7 +72,7 @@ def coverages(runs: list) -> tuple[np.ndarray, np.ndarray]:
 
 
 def row(label: str, cov: np.ndarray) -> str:
-    lo, hi = COVERED
+    lo, hi = COVERAGE_BAND
     cells = [f"{c.mean():.3f} {np.sum(c < lo):3d}/{np.sum(c > hi):<3d}" for c in cov.T]
     return f"{label:28s} " + "   ".join(cells)
 
@@ -89,7 +88,7 @@ def main(argv=None) -> int:
     robot = load_robot(BUNDLED_ROBOTS / "arm3")
     print(f"python bench/bench_sgp_coverage.py {' '.join(argv or sys.argv[1:])}; load {os.getloadavg()[0]:.2f}")
     print(f"arm3, {args.runs} training runs of {args.size} samples, each tested on {N_TEST} samples of another run")
-    print(f"per joint: mean ±2σ coverage over runs, runs below {COVERED[0]} / above {COVERED[1]}\n")
+    print(f"per joint: mean ±2σ coverage over runs, runs below {COVERAGE_BAND[0]} / above {COVERAGE_BAND[1]}\n")
     with one_blas_thread():
         for hidden in (False, True):
             runs = [one_run(robot, args.size, s, hidden) for s in range(1, args.runs + 1)]

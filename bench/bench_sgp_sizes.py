@@ -47,7 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/ is 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_sgp_scale import N_TEST, arrays, simulate, verdict  # noqa: E402
 
-from diegocal.evaluate import block_mse, paired_se, split_blocks  # noqa: E402
+from diegocal.evaluate import COVERAGE_BAND, block_mse, paired_se, split_blocks  # noqa: E402
 from diegocal.parallel import one_blas_thread  # noqa: E402
 from diegocal.robot import BUNDLED_ROBOTS, load_robot  # noqa: E402
 from diegocal.sgp import SGPOptions, fit_dynamics  # noqa: E402
@@ -58,7 +58,6 @@ SIZES = (200, 500, 1000, 2000, 5000, 10000, 20000)
 SEEDS = (1, 2, 3, 4, 5)
 KINDS = ("pr", "prgp", "sgp")
 BLOCKS = 10  # contiguous blocks of the test log
-COVERED = (0.85, 0.99)  # issue #14's range of held-out ±2σ coverage
 EXACT = "pr, no friction"  # the reference: PR where it is the true model
 
 
@@ -77,7 +76,7 @@ def run_cell(cell: tuple) -> dict:
             model = fit_dynamics(train, robot, SGPOptions(kind=kind))
             pred = model.predict_arrays(q, qd, qdd)
             out[kind] = block_mse((pred.tau - tau) ** 2 / tau.var(axis=0), labels)
-            out[kind + " coverage"] = np.mean(np.abs(pred.tau - tau) <= 2.0 * pred.tau_std, axis=0)
+            out[kind + " coverage"] = coverage(pred, tau)
             if kind == "sgp":
                 out["choice"] = [model.hyperparameters_[j].get("guard_choice", "-") for j in model.joint_names]
         out[EXACT + " coverage"] = true_model_coverage(robot, N, seed)
@@ -91,13 +90,18 @@ def true_model_coverage(robot, N: int, seed: int) -> np.ndarray:
     train = simulate(robot, N, seed=seed, hidden=False).slice(0, N)
     test = simulate(robot, N_TEST, seed=1000 + seed, friction=same_robot(train, robot), hidden=False)
     q, qd, qdd, tau = arrays(test, robot, N_TEST)
-    pred = fit_dynamics(train, robot, SGPOptions(kind="pr")).predict_arrays(q, qd, qdd)
+    return coverage(fit_dynamics(train, robot, SGPOptions(kind="pr")).predict_arrays(q, qd, qdd), tau)
+
+
+def coverage(pred, tau: np.ndarray) -> np.ndarray:
+    """(n,) fraction of the measured torques ``tau`` (T, n) within ±2σ of ``pred``."""
     return np.mean(np.abs(pred.tau - tau) <= 2.0 * pred.tau_std, axis=0)
 
 
 def outside(cov: np.ndarray) -> str:
-    """Runs (rows of ``cov`` (seeds, n)) below COVERED[0] / above COVERED[1], per joint."""
-    return ",".join(f"{np.sum(c < COVERED[0])}/{np.sum(c > COVERED[1])}" for c in cov.T)
+    """Runs (rows of ``cov`` (seeds, n)) below / above COVERAGE_BAND, per joint."""
+    lo, hi = COVERAGE_BAND
+    return ",".join(f"{np.sum(c < lo)}/{np.sum(c > hi)}" for c in cov.T)
 
 
 def parse_seeds(text: str) -> tuple:

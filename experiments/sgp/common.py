@@ -50,11 +50,12 @@ class Score:
 
 
 SCALE_RATE = 50.0  # Hz, the scale and sizes benches' arm3 logs
+CASE_NOISE = 0.01  # N·m, their torque sensor noise (white)
 
 
 def friction_case(robot, n: int, seed: int, friction=None, hidden: bool = True) -> Log:
     """The scale and sizes benches' log (issue #14): arm3 at SCALE_RATE with the hidden
-    cable-like friction on joint 3, sensor noise 0.01 N·m, at least ``n`` samples; ``friction``
+    cable-like friction on joint 3, sensor noise CASE_NOISE, at least ``n`` samples; ``friction``
     (:func:`same_robot`) keeps another run's robot. ``hidden=False``: the same run (trajectory,
     robot and noise: the simulator's streams are independent) without the hidden friction, where
     the rigid body with viscous and Coulomb friction, PR's model, is the true one."""
@@ -62,7 +63,7 @@ def friction_case(robot, n: int, seed: int, friction=None, hidden: bool = True) 
         duration=n / SCALE_RATE + 0.1,
         rate_hz=SCALE_RATE,
         effects=parse_effects(["position_friction:joint3"] if hidden else []),
-        noise=0.01,
+        noise=CASE_NOISE,
         **(friction or {}),
     )
     return simulate_dynamics(robot, opts, np.random.default_rng(seed))

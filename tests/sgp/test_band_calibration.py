@@ -15,10 +15,9 @@ import numpy as np
 from diegocal.io import make_stream
 from diegocal.robot import BUNDLED_ROBOTS, load_robot
 from diegocal.sgp import SGPOptions, fit_dynamics
-from experiments.sgp.common import friction_case, same_robot
+from experiments.sgp.common import CASE_NOISE, friction_case, same_robot
 
 REDRAWS = 100
-NOISE = 0.01  # N·m, friction_case's sensor noise
 
 
 def test_pr_s_band_is_calibrated_over_noise_redraws_where_pr_is_the_true_model():
@@ -30,7 +29,7 @@ def test_pr_s_band_is_calibrated_over_noise_redraws_where_pr_is_the_true_model()
     rng = np.random.default_rng(0)
     cover, noise_only = [], []
     for _ in range(REDRAWS):
-        noisy = make_stream(names, clean + NOISE * rng.standard_normal(clean.shape))
+        noisy = make_stream(names, clean + CASE_NOISE * rng.standard_normal(clean.shape))
         model = fit_dynamics(replace(train, streams={**train.streams, "tau": noisy}), arm3, SGPOptions(kind="pr"))
         pred = model.predict(test)
         err = np.abs(pred.tau - tau)
