@@ -82,3 +82,19 @@ def test_a_broken_c3d_is_one_line(tmp_path):
     with pytest.raises(LogFormatError, match="broken.c3d: not a readable C3D file") as err:
         import_log([tmp_path / "broken.c3d"])
     assert "\n" not in str(err.value)
+
+
+def test_a_truncated_c3d_is_refused_unless_allowed(tmp_path, caplog):
+    # the case: the header says 2000 frames, the file is cut and ezc3d returns 577 silently
+    full = write_c3d(tmp_path / "t.c3d", ["m1", "m2"], np.ones((2000, 2, 3)), rate=100.0)
+    (tmp_path / "cut.c3d").write_bytes(full.read_bytes()[:20000])
+    with pytest.raises(LogFormatError, match=r"cut.c3d: truncated: the header announces 2000 frames \(20 s\), "
+                                             r"the file holds 577 .*allow_truncated") as err:
+        import_log([tmp_path / "cut.c3d"])
+    assert "\n" not in str(err.value)
+    with caplog.at_level("WARNING", logger="diegocal"):
+        log = import_log([tmp_path / "cut.c3d"], parse_map({"sources": {"cut": {"allow_truncated": True}}})).log
+    assert log.n_samples == 577
+    assert any("announces 2000 frames" in r.getMessage() and "577 frames read" in r.getMessage()
+               for r in caplog.records)
+    assert import_log([full]).log.n_samples == 2000  # a whole file says nothing

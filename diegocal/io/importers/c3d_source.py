@@ -6,10 +6,18 @@ the marker was not seen (ezc3d returns NaN for a negative residual, the C3D conv
 invalid point). Time: (first frame + k) / ``POINT:RATE`` s. Table ``analogs`` (when the file
 has any): one column per ``ANALOG:LABELS`` entry at ``ANALOG:RATE``, units from ``ANALOG:UNITS``;
 ezc3d returns them already scaled (``SCALE``, ``GEN_SCALE``, ``OFFSET``).
+
+A file cut short (a capture PC that crashed, a copy that stopped) is read by ezc3d without a word:
+it quietly shrinks the frame count to what it found. The header's own first and last frame
+(C3D header words 4 and 5, C3D.org "The C3D File Format User Guide", ch. 3) say how many frames
+were written; fewer frames read is an error unless the source says ``allow_truncated: true``,
+when the frames read are kept with a warning naming both counts.
 """
 
 from __future__ import annotations
 
+import logging
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +25,8 @@ import numpy as np
 from diegocal.errors import LogFormatError
 from diegocal.io.importers.mapping import SourceSpec
 from diegocal.io.importers.tables import GENERIC, POINTS, Source, Table, finish_time
+
+log = logging.getLogger(__name__)
 
 
 def open_c3d(path: Path, spec: SourceSpec) -> Source:
@@ -43,6 +53,7 @@ def read_c3d(path: Path, spec: SourceSpec) -> dict[str, Table]:
         raise LogFormatError(f"{path}: C3D has no POINT:RATE")
     first = int(c3d["header"]["points"]["first_frame"])
     points = np.asarray(c3d["data"]["points"], dtype=np.float64)  # (4, n, T)
+    _check_complete(path, spec, points.shape[2], rate)
     labels = _labels(point, "LABELS", points.shape[1], "point")
     xyz = np.ascontiguousarray(points[:3].transpose(2, 1, 0))  # (T, n, 3)
     residuals = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=np.float64)
@@ -68,6 +79,35 @@ def read_c3d(path: Path, spec: SourceSpec) -> dict[str, Table]:
             name="analogs", time=atime, columns={lab: analogs[0, k] for k, lab in enumerate(alabels)},
             kind=GENERIC, units={lab: u for lab, u in zip(alabels, aunits, strict=False) if u}, rate_hz=arate)
     return tables
+
+
+def _check_complete(path: Path, spec: SourceSpec, frames: int, rate: float) -> None:
+    """Refuse (or, with ``allow_truncated``, warn about) fewer frames than the header announces."""
+    announced = header_frames(path)
+    if announced is None or frames >= announced:
+        return
+    what = (f"{path.name}: truncated: the header announces {announced} frames ({announced / rate:.4g} s), "
+            f"the file holds {frames} ({frames / rate:.4g} s)")
+    if not spec.allow_truncated:
+        raise LogFormatError(f"{what}; export it again, or set `allow_truncated: true` for this source in the "
+                             f"map to import the {frames} frames read")
+    log.warning("%s; importing the %d frames read (allow_truncated)", what, frames)
+
+
+def header_frames(path: Path) -> int | None:
+    """Frames the C3D header announces (last - first + 1), or None when it cannot say (the 16-bit
+    last frame overflows past 65535 frames; the parameter section then holds the count)."""
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+        if len(head) < 12:
+            return None
+        fh.seek(max(head[0] - 1, 0) * 512 + 3)
+        processor = fh.read(1)
+    order = ">" if processor == bytes([86]) else "<"  # 84 Intel, 85 DEC: little-endian; 86 MIPS: big
+    first, last = struct.unpack(order + "HH", head[6:10])
+    if last == 0xFFFF or last < first:
+        return None
+    return last - first + 1
 
 
 def _labels(group: dict, key: str, n: int, prefix: str) -> list[str]:

@@ -14,6 +14,7 @@ its ``<stream>.<name>`` columns)::
         # zero_time: false            # subtract the file's first time stamp first
         # stamp: header               # bags: header stamps (receive time where a header is 0) | receive
         # max_gap_s: 0.05             # no interpolation across longer gaps [10 sample periods]
+        # allow_truncated: false      # C3D cut short: keep the frames read, with a warning
     streams:                          # only these streams are imported when given
       q:
         source: pos                   # [the only source]
@@ -71,6 +72,7 @@ class SourceSpec:
     zero_time: bool = False
     stamp: str = "header"
     max_gap_s: float | None = None
+    allow_truncated: bool = False
 
 
 @dataclass(frozen=True)
@@ -151,7 +153,8 @@ class ImportMap:
 
 # ----------------------------------------------------------------------------- parsing
 _TOP = ("robot", "sources", "streams", "transmission", "clock", "interpolation", "filter", "derive", "window")
-_SOURCE = ("file", "kind", "time", "time_unit", "rate_hz", "time_offset", "zero_time", "stamp", "max_gap_s")
+_SOURCE = ("file", "kind", "time", "time_unit", "rate_hz", "time_offset", "zero_time", "stamp", "max_gap_s",
+           "allow_truncated")
 _STREAM = ("source", "table", "columns", "unit", "side", "scale", "offset", "torque_constant")
 
 
@@ -225,6 +228,7 @@ def _source(name, spec, pre) -> SourceSpec:
         zero_time=bool(spec.get("zero_time", False)),
         stamp=stamp,
         max_gap_s=_positive(spec.get("max_gap_s"), f"{pre}source {name!r}: max_gap_s"),
+        allow_truncated=_flag(spec.get("allow_truncated", False), f"{pre}source {name!r}: allow_truncated"),
     )
 
 
@@ -371,6 +375,12 @@ def number(value, what: str) -> float:
     if not np.isfinite(x):
         raise MapError(f"{what}: expected a finite number, got {value!r}")
     return x
+
+
+def _flag(value, what: str) -> bool:
+    if not isinstance(value, bool):
+        raise MapError(f"{what}: expected true or false, got {value!r}")
+    return value
 
 
 def _positive(value, what: str) -> float | None:
