@@ -54,8 +54,7 @@ def import_cmd(
     rows = [(f"source {name}", f"{Path(path).name} ({kind})") for name, path, kind in result.sources]
     rows += [(f"stream {stream}", f"{n} channels {origin}; {conversion}")
              for stream, origin, n, conversion in result.streams]
-    rows += [("clock", result.clock), ("samples", log.n_samples),
-             ("time (s)", f"{log.time[0]:.6g} .. {log.time[-1]:.6g}")]
+    rows += [("clock", result.clock), ("samples", log.n_samples), ("time", time_span(log.time))]
     if log.has("markers"):
         import numpy as np
 
@@ -63,3 +62,19 @@ def import_cmd(
     rows += [("note", n) for n in result.notes]
     rows += [("robot", log.robot or "none: give --robot, or robot: in the map"), ("written", str(output))]
     summary("import", rows, quiet=quiet)
+
+
+#: Time stamps past this (s) are taken as Unix time (ROS, PTP clocks): about 1 year after 1970.
+EPOCH_AFTER_S = 3.15e7
+
+
+def time_span(time) -> str:
+    """The log's time span in words: its duration, and its start as a UTC date for Unix time stamps
+    (``1.7e+09 .. 1.7e+09`` says nothing)."""
+    t0, t1 = float(time[0]), float(time[-1])
+    if abs(t0) < EPOCH_AFTER_S:
+        return f"{t0:.6g} .. {t1:.6g} s ({t1 - t0:.6g} s)"
+    from datetime import UTC, datetime
+
+    start = datetime.fromtimestamp(t0, UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
+    return f"{t1 - t0:.6g} s from {start} UTC (Unix time {t0:.3f} s)"

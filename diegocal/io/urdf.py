@@ -1,12 +1,20 @@
-"""URDF editing for robot directories: freeze every joint but the ones a log moves.
+"""URDF files: reading one (a plain ``.urdf`` or a xacro description), its joints, and editing.
 
-Used by ``scripts/convert_real.py`` to build ``robots/tiago`` from the full TIAGo URDF
-(68 joints: casters, wheels, head, fingers) with only the torso lift and the arm moving.
+:func:`urdf_text` expands a ``.xacro`` / ``.urdf.xacro`` description with the ``xacro`` package
+(ROS's macro language for XML, usable without ROS); :func:`urdf_joints` lists each joint's type and
+mimic relation (URDF ``<mimic joint= multiplier= offset=>``: q = multiplier · q_leader + offset).
+:func:`reduce_urdf` freezes every joint but the ones a log moves: used by ``scripts/convert_real.py``
+to build ``robots/tiago`` from the full TIAGo URDF (68 joints: casters, wheels, head, fingers)
+with only the torso lift and the arm moving.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +22,73 @@ from scipy.spatial.transform import Rotation
 
 from diegocal.errors import InputFileError
 from diegocal.io.files import atomic_path
+
+log = logging.getLogger(__name__)
+XACRO_SUFFIXES = (".xacro",)  # robot.xacro, robot.urdf.xacro
+
+
+def is_xacro(path) -> bool:
+    return Path(path).suffix.lower() in XACRO_SUFFIXES
+
+
+def urdf_text(path) -> str:
+    """The URDF XML of ``path``: the file itself, or a xacro description expanded (its default args).
+
+    Raises InputFileError (one line) for a missing file or a xacro that cannot be expanded, e.g. one
+    that includes ROS packages with ``$(find pkg)`` (expand it in a ROS environment instead).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such file")
+    if not is_xacro(path):
+        return path.read_text()
+    try:
+        import xacro
+    except ImportError:  # pragma: no cover - a runtime dependency
+        raise InputFileError(f"{path}: reading xacro needs the xacro package (pip install xacro)") from None
+    chatter = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(chatter):  # xacro prints its warnings on stderr
+            text = xacro.process_file(str(path)).toxml()
+    except Exception as exc:  # noqa: BLE001 - xacro raises XacroException, expat and name errors
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0].strip()
+        hint = ("; $(find ...) needs ROS: run `xacro` where the packages are installed and give the .urdf"
+                if "substitution args" in first or "$(find" in first else "")
+        raise InputFileError(f"{path}: xacro cannot expand it ({first}){hint}") from None
+    for line in chatter.getvalue().splitlines():
+        if line.strip():
+            log.debug("xacro: %s", line.strip())
+    return text
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One ``<joint>`` of a URDF: its type and, for a mimic joint, q = multiplier · q_leader + offset."""
+
+    name: str
+    kind: str
+    leader: str | None = None
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+
+def urdf_joints(path) -> dict[str, UrdfJoint]:
+    """Every joint of the URDF (or xacro) at ``path`` by name, in file order."""
+    try:
+        root = ET.fromstring(urdf_text(path))
+    except ET.ParseError as exc:
+        raise InputFileError(f"{path}: not valid XML ({exc})") from None
+    out = {}
+    for joint in root.iter("joint"):
+        if joint.get("name") is None or joint.get("type") is None:
+            continue  # a <transmission>'s <joint> reference
+        mimic = joint.find("mimic")
+        out[joint.get("name")] = UrdfJoint(
+            joint.get("name"), joint.get("type"),
+            leader=None if mimic is None else mimic.get("joint"),
+            multiplier=1.0 if mimic is None else float(mimic.get("multiplier", 1.0)),
+            offset=0.0 if mimic is None else float(mimic.get("offset", 0.0)))
+    return out
 
 
 def reduce_urdf(src, dst, keep, name: str | None = None) -> dict:

@@ -6,6 +6,7 @@ the same size). A real URDF has more: continuous wheels and casters (Pinocchio's
 two position coordinates cos/sin per angle), mimic joints, a floating or planar base. Two steps
 turn it into a model diegocal can use:
 
+0. **A xacro description** (``.xacro``, ``.urdf.xacro``) is expanded first (:func:`diegocal.io.urdf.urdf_text`).
 1. **Continuous joints become revolute** with limits ±π (:data:`CONTINUOUS_LIMIT`): the URDF's
    XML is edited (``type="continuous"`` → ``"revolute"``, a ``<limit>`` with lower/upper ±π, its
    effort and velocity kept) before Pinocchio parses it, so the joint keeps its axis, origin,
@@ -30,13 +31,14 @@ is an error: it names the joint and how to lock it.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from diegocal.errors import RobotConfigError
+from diegocal.errors import InputFileError, RobotConfigError
+from diegocal.io.urdf import is_xacro, urdf_text
 
 #: Limits (rad) given to a continuous joint turned revolute: one full turn around zero.
 CONTINUOUS_LIMIT = np.pi
@@ -48,20 +50,26 @@ class LoadedUrdf:
 
     model : pinocchio.Model (every joint of the URDF)
     continuous : names of the joints that were continuous in the URDF
+    mimic : {mimic joint: (leader, multiplier, offset)}, q = multiplier · q_leader + offset
     """
 
     model: pin.Model
     continuous: tuple[str, ...]
+    mimic: dict = field(default_factory=dict)
 
 
 def load_urdf(path) -> LoadedUrdf:
-    """Parse a URDF with Pinocchio after turning continuous joints into revolute ones (±π).
+    """Parse a URDF (or a xacro description) with Pinocchio after turning continuous joints into
+    revolute ones (±π).
 
-    Raises RobotConfigError (one line) when the file is not XML or Pinocchio refuses it.
+    Raises RobotConfigError (one line) when the file is not XML, xacro cannot expand it or
+    Pinocchio refuses it.
     """
     path = Path(path)
     try:
-        root = ET.fromstring(path.read_bytes())
+        root = ET.fromstring(urdf_text(path))
+    except InputFileError as exc:
+        raise RobotConfigError(str(exc)) from None
     except ET.ParseError as exc:
         raise RobotConfigError(f"{path}: Pinocchio cannot load it (not valid XML: {exc})") from None
     continuous = []
@@ -76,12 +84,15 @@ def load_urdf(path) -> LoadedUrdf:
             limit.attrib.setdefault("effort", "0")
             limit.attrib.setdefault("velocity", "0")
             continuous.append(joint.get("name"))
+    mimic = {j.get("name"): (m.get("joint"), float(m.get("multiplier", 1.0)), float(m.get("offset", 0.0)))
+             for j in root.iter("joint") if (m := j.find("mimic")) is not None}
     text = ET.tostring(root, encoding="unicode")
     try:
-        model = pin.buildModelFromXML(text) if continuous else pin.buildModelFromUrdf(str(path))
+        model = (pin.buildModelFromXML(text) if continuous or is_xacro(path)
+                 else pin.buildModelFromUrdf(str(path)))
     except (RuntimeError, ValueError) as exc:
         raise RobotConfigError(f"{path}: Pinocchio cannot load it ({str(exc).splitlines()[0]})") from None
-    return LoadedUrdf(model, tuple(continuous))
+    return LoadedUrdf(model, tuple(continuous), mimic)
 
 
 def is_one_dof(model: pin.Model, j: int) -> bool:

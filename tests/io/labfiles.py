@@ -39,12 +39,14 @@ def write_c3d(path, labels, xyz, rate, unit="mm", first_frame=0, analogs=None) -
 EPOCH_NS = 1_700_000_000_000_000_000  # ROS time of the test recordings' t = 0, ns
 
 
-def write_bag(path, kind, names, time, position, velocity=None, effort=None, extra=None, stamp_offset=0.0) -> Path:
+def write_bag(path, kind, names, time, position, velocity=None, effort=None, extra=None, stamp_offset=0.0,
+              publishers=()) -> Path:
     """A bag with a ``/joint_states`` topic (``sensor_msgs/JointState``) and optional
     ``/wrench`` (``geometry_msgs/WrenchStamped``, extra: (T, 6) force xyz, torque xyz).
 
     kind: ros1 (``path`` a .bag file), db3 or mcap (``path`` a ROS 2 bag folder). Header stamps
     are EPOCH_NS + ``time`` (s); the bag's receive time is ``stamp_offset`` s later.
+    ``publishers``: more drivers on ``/joint_states``, each (names, time, position, effort or None).
     """
     from rosbags.typesys import Stores, get_typestore
 
@@ -63,12 +65,18 @@ def write_bag(path, kind, names, time, position, velocity=None, effort=None, ext
     def empty():
         return np.zeros(0)
 
-    def messages():
+    def joint_states(names, time, position, velocity, effort):
         for i, t in enumerate(time):
             js = T[js_type](header=header(t), name=list(names), position=np.asarray(position[i], float),
                             velocity=empty() if velocity is None else np.asarray(velocity[i], float),
                             effort=empty() if effort is None else np.asarray(effort[i], float))
             yield "js", EPOCH_NS + int(round((t + stamp_offset) * 1e9)), js
+
+    def messages():
+        yield from joint_states(names, time, position, velocity, effort)
+        for more_names, more_time, more_position, more_effort in publishers:
+            yield from joint_states(more_names, more_time, more_position, None, more_effort)
+        for i, t in enumerate(time):
             if extra is not None:
                 v = T["geometry_msgs/msg/Vector3"]
                 w = T[w_type](header=header(t), wrench=T["geometry_msgs/msg/Wrench"](
@@ -91,7 +99,7 @@ def write_bag(path, kind, names, time, position, velocity=None, effort=None, ext
         conns = {"js": writer.add_connection("/joint_states", js_type, typestore=store)}
         if extra is not None:
             conns["w"] = writer.add_connection("/wrench", w_type, typestore=store)
-        for key, ns, msg in messages():
+        for key, ns, msg in sorted(messages(), key=lambda m: m[1]):  # in time order, as recorded
             writer.write(conns[key], ns, serialize(msg, js_type if key == "js" else w_type))
     return path
 

@@ -105,3 +105,49 @@ def test_jittered_stamps_filtered_and_derived_on_the_bag_own_clock(tmp_path):
         [np.cos(t), -2 * np.sin(2 * t), np.ones_like(t)])[: log.n_samples][inner], atol=5e-3)
     # filtered on a uniform grid at the median rate (1 / 9.9 ms here: 101 Hz), then read at the stamps
     assert any("uniform 101 Hz grid" in n for n in result.notes), result.notes
+
+
+@pytest.mark.parametrize("kind", ["ros1", "mcap"])
+def test_zero_time_starts_the_log_at_its_first_header_stamp(tmp_path, kind, signals):
+    # the case: received 2.3 ms after their header stamps, zeroed on the first receive time,
+    # the messages started the log at -2.3 ms
+    t = signals[0]
+    path = _bag(tmp_path, kind, signals, stamp_offset=0.0023)
+    log = import_log([path], parse_map({"sources": {"run": {"zero_time": True}}})).log
+    assert log.time[0] == 0.0
+    np.testing.assert_allclose(log.time, t, atol=1e-12)
+
+
+def test_a_truncated_ros1_bag_says_to_reindex_it(tmp_path, signals):
+    full = _bag(tmp_path, "ros1", signals).read_bytes()
+    for n in (len(full) // 2, len(full) - 100):
+        (tmp_path / "cut.bag").write_bytes(full[:n])
+        with pytest.raises(LogFormatError, match=r"cut.bag: not a readable ROS bag .*truncated or never closed: "
+                                                 r"rebuild its index with `rosbag reindex cut.bag`") as err:
+            import_log([tmp_path / "cut.bag"])
+        assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("kind", ["ros1", "db3"])
+def test_arm_and_gripper_publishers_merge_by_joint_name(tmp_path, kind):
+    # an arm driver at 100 Hz and a gripper driver at 20 Hz, 3 ms later, both on /joint_states
+    t = np.arange(300) * 0.01
+    arm = np.column_stack([np.sin(t), np.cos(t), t])
+    tg = 0.003 + np.arange(58) * 0.05
+    grip = np.column_stack([0.01 * tg, -0.02 * tg])  # straight lines: read exactly between samples
+    path = write_bag(tmp_path / ("run.bag" if kind == "ros1" else "run"), kind, NAMES, t, arm, None, 2 * arm,
+                     publishers=[(["finger_l", "finger_r"], tg, grip, 3 * grip)])
+    result = import_log([path], parse_map({"sources": {"run": {"zero_time": True}}}))
+    log = result.log
+    assert log.streams["q"].names == (*NAMES, "finger_l", "finger_r")
+    inside = (t >= tg[0]) & (t <= tg[-1])  # the span both publishers cover, on the arm's stamps
+    np.testing.assert_allclose(log.time, t[inside], atol=1e-12)
+    np.testing.assert_array_equal(log.streams["q"].data[:, :3], arm[inside])
+    np.testing.assert_allclose(log.streams["q"].data[:, 3:], np.column_stack([0.01 * t, -0.02 * t])[inside],
+                               atol=1e-12)
+    np.testing.assert_allclose(log.streams["tau"].data[:, 3:], 3 * log.streams["q"].data[:, 3:], atol=1e-12)
+    assert any("2 publishers (joint1, joint2, joint3; finger_l, finger_r) merged by joint name" in n
+               for n in result.notes), result.notes
+    both = write_bag(tmp_path / "both.bag", "ros1", NAMES, t, arm, publishers=[(["joint3", "x"], tg, grip, None)])
+    with pytest.raises(LogFormatError, match="two publishers name joint 'joint3'"):
+        import_log([both])

@@ -42,12 +42,14 @@ def test_marker_names_mapped_and_analogs_read_at_mocap_frames(trial):
     mapping = parse_map({"streams": {
         "markers": {"columns": {"LASI": "pelvis_l", "HAND": "hand"}},
         "pots": {"table": "analogs", "columns": {"pot_elbow": "elbow", "pot_knee": "knee"}}}})
-    log = import_log([path], mapping).log
+    result = import_log([path], mapping)
+    log = result.log
     assert log.streams["markers"].names == ("pelvis_l", "hand")
     np.testing.assert_allclose(log.streams["markers"].data[:, 1], xyz[:, 2] / 1000.0, rtol=1e-6)
-    # analog sample 4k is mocap frame k; pots keep their sensor unit (mV stays mV)
+    # analog sample 4k is mocap frame k; a pot in mV is brought to V beside the pot in V (issue #32)
     np.testing.assert_allclose(log.streams["pots"].data[:, 0], np.arange(40) * 1.0)
-    np.testing.assert_allclose(log.streams["pots"].data[:, 1], 2.5)
+    np.testing.assert_allclose(log.streams["pots"].data[:, 1], 2.5e-3)
+    assert ("pots", "from trial.c3d", 2, "V/mV -> V") in result.streams
 
 
 def test_a_misspelt_label_gets_a_close_match(trial):

@@ -187,3 +187,33 @@ def test_output_must_be_a_log_and_not_a_source(tmp_path, csv_file):
                                                                             str(tmp_path / "a.csv")]))
     result = _ok(["import", csv_file, "-o", tmp_path / "o.csv"])  # a diegocal CSV is fine
     assert "robot" in result.output and load_log(tmp_path / "o.csv").streams["tau"].names == ("j1",)
+
+
+def test_epoch_stamps_print_a_span_and_a_date(tmp_path):
+    # the case: header stamps in Unix time printed "1.7e+09 .. 1.7e+09"
+    t = np.arange(100) * 0.01
+    bag = write_bag(tmp_path / "run.bag", "ros1", ["j1"], t, t[:, None])
+    result = _ok(["import", bag, "-o", tmp_path / "run.h5"])
+    assert "1.7e+09" not in result.output
+    assert "0.99 s from 2023-11-14 22:13:20.000 UTC" in result.output
+    zeroed = _ok(["import", bag, "--map", _write(tmp_path / "m.yaml", "sources: {run: {zero_time: true}}\n"),
+                  "-o", tmp_path / "zeroed.h5"])
+    assert "0 .. 0.99 s (0.99 s)" in zeroed.output
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+def test_a_truncated_c3d_exits_1_and_writes_nothing_or_warns_when_allowed(tmp_path):
+    full = write_c3d(tmp_path / "t.c3d", ["m1", "m2"], np.ones((2000, 2, 3)), rate=100.0)
+    (tmp_path / "cut.c3d").write_bytes(full.read_bytes()[:20000])
+    result = runner.invoke(app, ["import", str(tmp_path / "cut.c3d"), "-o", str(tmp_path / "cut.h5")])
+    assert result.exit_code == 1
+    assert "header announces 2000 frames (20 s), the file holds 577" in one_line_error(result)
+    assert not (tmp_path / "cut.h5").exists()
+    mapping = _write(tmp_path / "m.yaml", "sources: {cut: {allow_truncated: true}}\n")
+    kept = _ok(["import", tmp_path / "cut.c3d", "--map", mapping, "-o", tmp_path / "cut.h5", "-q"])
+    assert "warning:" in kept.output and "importing the 577 frames read" in kept.output
+    assert load_log(tmp_path / "cut.h5").n_samples == 577

@@ -197,3 +197,14 @@ def test_a_misspelt_stream_column_gets_a_close_match(tmp_path):
     (tmp_path / "x.csv").write_text("time,q.joint1,q.joint2,tau.joint1,tua.joint2\n0,1,2,3,4\n1,2,3,4,5\n")
     with pytest.raises(MapError, match=r"column 'tua.joint2' names no stream \('tua'\) — did you mean 'tau'\?"):
         import_log([tmp_path / "x.csv"])
+
+
+def test_pots_in_millivolts_are_brought_to_volts(tmp_path):
+    # the case: `unit: mV` in a map left one pot in mV beside the others in V
+    path = _csv(tmp_path / "amp.csv", ["time", "elbow", "knee", "count"], [[k * 0.01, 1.5, 1500.0, 7.0]
+                                                                           for k in range(5)])
+    mapping = parse_map({"streams": {"pots": {"columns": ["elbow", "knee", "count"],
+                                              "unit": {"knee": "mV", "count": "counts", "*": "V"}}}})
+    result = import_log([path], mapping)
+    np.testing.assert_allclose(result.log.streams["pots"].data, [[1.5, 1.5, 7.0]] * 5)  # counts stay counts
+    assert result.streams[0][3] == "V/mV/counts -> V/counts"

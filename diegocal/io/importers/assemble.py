@@ -22,6 +22,7 @@ import numpy as np
 
 from diegocal.errors import LogFormatError
 from diegocal.io.importers.mapping import STREAMS, Clock, ImportMap, MapError, StreamSpec, number, per_channel
+from diegocal.io.importers.robot_info import RobotInfo, check_marker_names, fold_mimic, robot_info, unit_text
 from diegocal.io.importers.signals import (
     default_max_gap,
     derivatives,
@@ -34,7 +35,7 @@ from diegocal.io.importers.signals import (
 )
 from diegocal.io.importers.sources import open_sources
 from diegocal.io.importers.tables import DIEGOCAL, JOINT_STATE, POINTS, Source, Table, preview
-from diegocal.io.importers.units import LOG_UNIT, close_match, factor, is_current
+from diegocal.io.importers.units import check_joint_unit, close_match, factor, is_current, target_unit
 from diegocal.io.log import JOINT_STREAMS, NAN_ALLOWED, VECTOR_STREAMS, Log, make_stream
 
 #: Which JointState field gives which stream.
@@ -74,18 +75,20 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
     """Read ``paths`` (CSV, C3D, ROS bags) into one log as ``mapping`` says.
 
     ``rate_hz`` (the CLI's ``--rate``) replaces the map's clock by a stated rate; ``robot``
-    replaces its ``robot``. Raises one-line :class:`MapError` / :class:`LogFormatError` /
+    replaces its ``robot`` (when it can be found, joint units, mimic joints and marker names are
+    checked against it: :mod:`.robot_info`). Raises one-line :class:`MapError` / :class:`LogFormatError` /
     :class:`InputFileError` for anything that does not fit.
     """
     mapping = mapping or ImportMap()
     if rate_hz is not None:
         mapping = replace(mapping, clock=Clock(rate_hz=rate_hz))
     sources = {s.name: s for s in open_sources(paths, mapping)}
+    info = robot_info(robot or mapping.robot)
     notes: list[str] = []
     specs = mapping.streams or _default_specs(sources, notes)
     series, rows = [], []
     for spec in specs:
-        s, conversion = _extract(spec, sources, mapping)
+        s, conversion = _extract(spec, sources, mapping, info)
         series.append(s)
         if _filtered(mapping, s.stream):
             conversion += f", low-passed {mapping.filter.cutoff_hz:g} Hz"
@@ -101,6 +104,9 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
         if s.stream not in NAN_ALLOWED:
             _check_finite(s, data, time)
         streams[s.stream] = make_stream(s.names, data)
+    streams = fold_mimic(streams, info, notes)
+    if "markers" in streams:
+        check_marker_names(streams["markers"].names, info)
     time, streams = _window(time, streams, clock_rate, mapping, notes)
     ordered = {k: streams[k] for k in STREAMS if k in streams}
     log = Log(time=np.ascontiguousarray(time), streams=ordered, robot=robot or mapping.robot,
@@ -109,7 +115,8 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
         log=log,
         sources=tuple((s.name, str(s.path), s.kind) for s in sources.values()),
         streams=tuple(sorted(rows, key=lambda r: STREAMS.index(r[0]))) + tuple(
-            (d, "derived from q", len(streams["q"].names), _filter_text(mapping, d)) for d in mapping.derive
+            (d, "derived from q", len(streams["q"].names), _filter_text(mapping, d, streams["q"].names, info))
+            for d in mapping.derive
             if d in ordered),
         clock=clock_text,
         notes=tuple(notes),
@@ -166,7 +173,8 @@ def _misspelt_stream(src: Source, table: Table) -> None:
                            f"(streams: {', '.join(STREAMS)})")
 
 
-def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap) -> tuple[Series, str]:
+def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap,
+             info: RobotInfo | None) -> tuple[Series, str]:
     """The stream's channels from one table, converted to the log's units on the joint side."""
     if spec.source is None:
         if len(sources) != 1:
@@ -188,7 +196,7 @@ def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap) -
             raise MapError(f"{where}: column {col!r} is " + ("a marker (x, y, z); only markers take it" if c.ndim == 2
                                                                else "a single number, a marker needs x, y, z"))
     data = np.stack(cols, axis=1).astype(np.float64)
-    data, conversion = _convert(spec, data, names, [c for c, _ in pairs], table, mapping, where)
+    data, conversion = _convert(spec, data, names, [c for c, _ in pairs], table, mapping, where, info)
     max_gap = src.spec.max_gap_s if src.spec.max_gap_s is not None else default_max_gap(table.time)
     return Series(spec.stream, names, table.time, data, origin, src.name, table.name, max_gap,
                   table.rate_hz), conversion
@@ -234,11 +242,12 @@ def _column(stream: str, table: Table, col: str, where: str) -> np.ndarray:
     return table.column(col, where)  # raises with a close match
 
 
-def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportMap, where: str):
+def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportMap, where: str,
+             info: RobotInfo | None):
     """Units, torque constant, transmission, scale, offset (in this order); returns data, words."""
     stream = spec.stream
     units = per_channel(spec.unit, names, None, f"{where}: unit")
-    words, converted = [], False
+    words, targets, converted = [], [], False
     for k, unit in enumerate(units):
         if unit is None:
             unit = table.units.get(cols[k])
@@ -247,6 +256,8 @@ def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportM
                     raise MapError(f"{where}: the file states no unit for marker {names[k]!r}; "
                                    "give `unit:` (m, cm or mm) in the map")
                 continue  # the log's unit already (ROS: SI)
+        if info is not None and spec.side == "joint":
+            check_joint_unit(stream, unit, names[k], info.kind(names[k]))
         f = factor(stream, unit)
         if is_current(stream, unit):
             kt = per_channel(spec.torque_constant, names, None, f"{where}: torque_constant")[k]
@@ -257,9 +268,11 @@ def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportM
             data[:, k] = data[:, k] * f
             converted = True
         words.append(unit)
-    text = "/".join(dict.fromkeys(words)) or LOG_UNIT[stream]
-    if converted:
-        text += f" -> {LOG_UNIT[stream]}"
+        targets.append(target_unit(stream, unit))
+    log_unit = unit_text(stream, names, info) if stream != "pots" else "/".join(dict.fromkeys(targets))
+    text = "/".join(dict.fromkeys(words)) or log_unit
+    if words and (converted or info is not None and stream in JOINT_STREAMS):  # say what the units became
+        text += f" -> {log_unit}"
     if spec.side == "motor":
         ratio = mapping.ratio
         if ratio is None:
@@ -339,9 +352,9 @@ def _uniform(s: Series, notes: list[str]) -> Series:
     return replace(s, time=grid, data=data, rate_hz=rate)
 
 
-def _filter_text(mapping: ImportMap, stream: str) -> str:
+def _filter_text(mapping: ImportMap, stream: str, names, info: RobotInfo | None) -> str:
     filt = mapping.filter
-    base = f"central differences, {LOG_UNIT[stream]}"
+    base = f"central differences, {unit_text(stream, names, info)}"
     if filt is None:
         return base + ", unfiltered"
     return base + f", low-passed {filt.cutoff_hz:g} Hz"

@@ -3,7 +3,8 @@
 Every stream of a diegocal log has one unit: q in rad (m for a prismatic joint), qd in rad/s,
 qdd in rad/s², tau in N·m (N), markers in m, valve in V. ``pots`` and ``pressure`` are in sensor
 units (sensors.yaml's gains and the chambers' supply pressure are stated in them), so any unit
-name is accepted there and nothing is converted. Current (A, mA) becomes torque only through a
+name is accepted there; only a pot's voltage is brought to V (mV beside V would make one pot's
+gain a thousand times another's). Current (A, mA) becomes torque only through a
 torque constant (N·m/A) that the map states.
 """
 
@@ -16,26 +17,30 @@ from diegocal.errors import DiegocalError
 
 DEG = math.pi / 180.0
 
-#: Unit families: name -> factor to the SI unit of the family.
-_POSITION = {"rad": 1.0, "mrad": 1e-3, "deg": DEG, "degree": DEG, "degrees": DEG, "°": DEG,
-             "m": 1.0, "cm": 1e-2, "mm": 1e-3}
-_VELOCITY = {"rad/s": 1.0, "deg/s": DEG, "rpm": 2.0 * math.pi / 60.0,
-             "m/s": 1.0, "mm/s": 1e-3}
-_ACCELERATION = {f"{u}{sq}": f for u, f in (("rad/s", 1.0), ("deg/s", DEG), ("m/s", 1.0), ("mm/s", 1e-3))
-                 for sq in ("^2", "2", "²")}
-_EFFORT = {"N·m": 1.0, "N.m": 1.0, "Nm": 1.0, "N*m": 1.0, "mN·m": 1e-3, "mNm": 1e-3,
-           "N": 1.0, "kN": 1e3}
+#: Unit families: name -> factor to the SI unit of the family; angular and linear kept apart so a
+#: revolute joint cannot be given a length, nor a prismatic joint an angle.
+_ANGLE = {"rad": 1.0, "mrad": 1e-3, "deg": DEG, "degree": DEG, "degrees": DEG, "°": DEG}
+_LENGTH = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+_ANGULAR_VELOCITY = {"rad/s": 1.0, "deg/s": DEG, "rpm": 2.0 * math.pi / 60.0}
+_LINEAR_VELOCITY = {"m/s": 1.0, "mm/s": 1e-3}
+_ANGULAR_ACCELERATION = {f"{u}{sq}": f for u, f in (("rad/s", 1.0), ("deg/s", DEG)) for sq in ("^2", "2", "²")}
+_LINEAR_ACCELERATION = {f"{u}{sq}": f for u, f in (("m/s", 1.0), ("mm/s", 1e-3)) for sq in ("^2", "2", "²")}
+_TORQUE = {"N·m": 1.0, "N.m": 1.0, "Nm": 1.0, "N*m": 1.0, "mN·m": 1e-3, "mNm": 1e-3}
+_FORCE = {"N": 1.0, "kN": 1e3}
 #: Current units: converted with a torque constant (N·m/A) stated in the map.
 CURRENT = {"A": 1.0, "mA": 1e-3}
-_LENGTH = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
-_VOLTAGE = {"V": 1.0, "mV": 1e-3}
+#: Voltages: pots are "sensor units (V)" (DESIGN.md), so a pot read in mV is brought to V; a pot in
+#: any other unit (counts, bits) is kept as it is.
+_VOLTAGE = {"V": 1.0, "mV": 1e-3, "uV": 1e-6, "µV": 1e-6}
+#: Units of a prismatic joint's streams (m, m/s, m/s², N).
+LINEAR = frozenset({*_LENGTH, *_LINEAR_VELOCITY, *_LINEAR_ACCELERATION, *_FORCE})
 
 #: Units accepted per stream; None: sensor units, any name, no conversion.
 STREAM_UNITS: dict[str, dict[str, float] | None] = {
-    "q": _POSITION,
-    "qd": _VELOCITY,
-    "qdd": _ACCELERATION,
-    "tau": {**_EFFORT, **CURRENT},
+    "q": {**_ANGLE, **_LENGTH},
+    "qd": {**_ANGULAR_VELOCITY, **_LINEAR_VELOCITY},
+    "qdd": {**_ANGULAR_ACCELERATION, **_LINEAR_ACCELERATION},
+    "tau": {**_TORQUE, **_FORCE, **CURRENT},
     "markers": _LENGTH,
     "pots": None,
     "pressure": None,
@@ -44,7 +49,9 @@ STREAM_UNITS: dict[str, dict[str, float] | None] = {
 
 #: The log's unit per stream, as DESIGN.md states it (for messages and summaries).
 LOG_UNIT = {"q": "rad (m)", "qd": "rad/s (m/s)", "qdd": "rad/s² (m/s²)", "tau": "N·m (N)",
-            "markers": "m", "pots": "sensor units", "pressure": "sensor units", "valve": "V"}
+            "markers": "m", "pots": "sensor units (V)", "pressure": "sensor units", "valve": "V"}
+#: The log's unit of a joint stream for a revolute and a prismatic joint.
+JOINT_UNIT = {"q": ("rad", "m"), "qd": ("rad/s", "m/s"), "qdd": ("rad/s²", "m/s²"), "tau": ("N·m", "N")}
 
 #: Time-column units -> seconds.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
@@ -67,13 +74,30 @@ def factor(stream: str, unit: str) -> float:
     Current units return their factor to A; the caller multiplies by the torque constant.
     """
     known = STREAM_UNITS[stream]
-    if known is None:
-        return 1.0
     unit = str(unit).strip()
+    if known is None:
+        return _VOLTAGE.get(unit, 1.0) if stream == "pots" else 1.0
     if unit in known:
         return known[unit]
     raise UnitError(f"unknown unit {unit!r} for stream '{stream}' (known: {', '.join(known)})"
                     + close_match(unit, known))
+
+
+def target_unit(stream: str, unit: str) -> str:
+    """The unit ``unit`` becomes in the log, for summaries: V for a pot in mV, else the stream's."""
+    if stream == "pots":
+        return "V" if str(unit).strip() in _VOLTAGE else str(unit)
+    return LOG_UNIT[stream]
+
+
+def check_joint_unit(stream: str, unit: str, joint: str, kind: str) -> None:
+    """A revolute joint takes angular units, a prismatic one linear units (m, m/s, N): else UnitError."""
+    unit = str(unit).strip()
+    if stream not in JOINT_UNIT or kind not in ("revolute", "prismatic") or unit in CURRENT:
+        return
+    if (unit in LINEAR) != (kind == "prismatic"):
+        want = JOINT_UNIT[stream][kind == "prismatic"]
+        raise UnitError(f"{stream} of {joint!r}, a {kind} joint, is in {want}, not {unit}")
 
 
 def time_factor(unit: str) -> float:
