@@ -1,19 +1,23 @@
-"""Terms: the parts every model family is built from, and what ``diagnose`` adds to a model.
+"""Terms: the parts every model is built from, and what ``diagnose`` adds to a model.
 
 A model of any domain is its *baseline terms* plus any *extra terms*. A term is
 
-- a **cause** from the diagnosis vocabulary (DESIGN.md, "Diagnosis output"; ``viscous_friction``,
-  ``sensor_nonlinearity``, ``chamber_leak``, ...) or a baseline part's own name,
-- the **channel** it acts on (a joint, pot, marker, chamber, or ``markers`` for the mocap clock),
+- a **cause** of the registry (:mod:`diegocal.causes`: ``pot_transfer``, ``coulomb_friction``,
+  ``valve_delay``, ...),
+- the **channel** it acts on (a joint, pot, marker, chamber, link, or ``markers`` for the mocap clock),
 - an optional **region** where it applies (``q.joint3`` in [1.9, 2.3] rad; ``time`` from 31 s),
 - named, bounded **parameters** with units and standard errors (lmfit's ``Parameter``), packed
-  into a vector only at the optimiser's door.
+  into a vector only at the optimiser's door,
+- ``extra``: non-numeric facts (a partner channel, a ratio, the frames of a fault).
 
-How a term contributes to a model's output (regressor columns, a Jacobian, a transform of the
-readings) is the domain's business: :mod:`diegocal.sgp.terms`, :mod:`diegocal.pneumatic.terms`
-and :mod:`diegocal.stac.terms` subclass :class:`Term`. This module only fixes the vocabulary of
-the data and its YAML form, ``{cause, channel, region, parameters: {name: {value, std, unit}}}``,
-which diagnosis.yaml and every fitted-model bundle use.
+How a term changes its domain's model is the domain's behaviour (:mod:`diegocal.stac.terms`,
+:mod:`diegocal.sgp.terms`, :mod:`diegocal.pneumatic.terms`), looked up by cause. This module
+fixes the data and its one YAML form, used by every file diegocal writes::
+
+    {cause, channel, region: {variable, low, high} | null,
+     parameters: {name: {value, stderr, unit}}, extra: {...}}
+
+Files of layout 1 spelt the standard error ``std``; :func:`term_from_dict` reads both.
 """
 
 from __future__ import annotations
@@ -23,7 +27,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from diegocal.errors import InputFileError
+from diegocal.causes import cause as registry_entry
+from diegocal.errors import InputFileError, UnknownNameError
+from diegocal.io.files import to_plain
+
+#: The one spelling of a standard error in every file (layout 1 also wrote ``std`` and ``_se``).
+STDERR = "stderr"
 
 
 @dataclass(frozen=True)
@@ -38,10 +47,27 @@ class Parameter:
     stderr: float = math.nan
 
     def to_dict(self) -> dict:
-        out = {"value": float(self.value), "std": _plain(self.stderr)}
-        if self.unit:
-            out["unit"] = self.unit
-        return out
+        return {"value": float(self.value), STDERR: _plain(self.stderr), "unit": self.unit}
+
+
+def parameter_dict(name: str, value, stderr=math.nan, unit: str = "") -> dict:
+    """``{name: {value, stderr, unit}}``'s inner mapping for a value that is not a term's."""
+    return Parameter(name, float(value), unit, stderr=float(stderr)).to_dict()
+
+
+def read_parameter(name: str, d, where: str = "parameter") -> Parameter:
+    """A :class:`Parameter` from its YAML form: ``{value, stderr, unit}`` (layout 1: ``std``) or a bare number."""
+    if isinstance(d, dict):
+        se = d.get(STDERR, d.get("std"))
+        try:
+            return Parameter(str(name), float(d.get("value", 0.0)), str(d.get("unit") or ""),
+                             stderr=math.nan if se is None else float(se))
+        except (TypeError, ValueError):
+            raise InputFileError(f"{where} {name!r}: value and stderr must be numbers, got {d!r}") from None
+    try:
+        return Parameter(str(name), float(d))
+    except (TypeError, ValueError):
+        raise InputFileError(f"{where} {name!r}: expected a number or {{value, stderr, unit}}, got {d!r}") from None
 
 
 @dataclass(frozen=True)
@@ -71,17 +97,13 @@ class Region:
 
 @dataclass(frozen=True)
 class Term:
-    """A cause on a channel, with its named parameters (see the module docstring).
-
-    Subclasses add how the term enters their domain's model; this base class carries the data
-    and the YAML form shared by every domain.
-    """
+    """A cause on a channel, with its named parameters (see the module docstring)."""
 
     cause: str
     channel: str
     parameters: tuple[Parameter, ...] = ()
     region: Region | None = None
-    extra: dict = field(default_factory=dict)  # non-numeric facts (a swapped partner, frames)
+    extra: dict = field(default_factory=dict)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -91,6 +113,10 @@ class Term:
     def values(self) -> np.ndarray:
         """Parameter values packed in order (the optimiser's door)."""
         return np.array([p.value for p in self.parameters], dtype=float)
+
+    @property
+    def stderrs(self) -> np.ndarray:
+        return np.array([p.stderr for p in self.parameters], dtype=float)
 
     def value(self, name: str) -> float:
         for p in self.parameters:
@@ -125,48 +151,84 @@ class Term:
             "parameters": {p.name: p.to_dict() for p in self.parameters},
         }
         if self.extra:
-            out["extra"] = _plain_tree(self.extra)
+            out["extra"] = to_plain(self.extra)
         return out
 
-    @staticmethod
-    def fields_from_dict(d: dict, where: str = "term") -> dict:
-        """The keyword arguments of a Term (any subclass) from its YAML mapping."""
-        if not isinstance(d, dict) or "cause" not in d or "channel" not in d:
-            raise InputFileError(f"{where}: a term needs 'cause' and 'channel', got {d!r}")
-        params = []
-        for name, p in (d.get("parameters") or {}).items():
-            if isinstance(p, dict):
-                params.append(
-                    Parameter(
-                        str(name),
-                        float(p.get("value", 0.0)),
-                        str(p.get("unit", "")),
-                        stderr=math.nan if p.get("std") is None else float(p["std"]),
-                    )
-                )
-            else:
-                params.append(Parameter(str(name), float(p)))
-        return {
-            "cause": str(d["cause"]),
-            "channel": str(d["channel"]),
-            "parameters": tuple(params),
-            "region": Region.from_dict(d.get("region")),
-            "extra": dict(d.get("extra") or {}),
-        }
+
+def make_term(cause: str, channel: str, values=None, region: Region | None = None, extra: dict | None = None,
+              stderr=None) -> Term:
+    """A term of ``cause`` on ``channel`` with the registry's parameters (:mod:`diegocal.causes`).
+
+    ``values`` and ``stderr``: a sequence in the registry's order, or a mapping by name (missing
+    names take the registry's start value and a NaN standard error); None: start values. A cause
+    whose parameters the model names (``rigid_body``) takes them from a mapping. A region or extra
+    fact the cause requires must be given."""
+    entry = registry_entry(cause)
+    if entry.region == "required" and region is None:
+        raise InputFileError(f"{cause}:{channel} needs a region")
+    if entry.region == "none" and region is not None:
+        raise InputFileError(f"{cause}:{channel} takes no region, got {region}")
+    missing = [k for k in entry.extra if k not in (extra or {})]
+    if missing and entry.role != "fault":  # a fault's facts are filled in once it is found
+        raise InputFileError(f"{cause}:{channel} needs extra {{{', '.join(missing)}}}")
+    if entry.named_by_model:
+        vals = dict(values or {})
+        ses = dict(stderr or {})
+        params = tuple(Parameter(str(n), float(v), stderr=float(ses.get(n, math.nan))) for n, v in vals.items())
+    else:
+        specs = entry.parameters
+        vals = _by_position(values, specs, "values", cause)
+        ses = _by_position(stderr, specs, "stderr", cause, math.nan)
+        params = tuple(
+            Parameter(s.name, v, s.unit, s.lower, s.upper, e) for s, v, e in zip(specs, vals, ses, strict=True)
+        )
+    return Term(cause, str(channel), params, region, dict(extra or {}))
+
+
+def _by_position(given, specs, what: str, cause: str, default=None) -> list[float]:
+    """Values for ``specs`` from a sequence in order or a mapping by name (``default``: the start)."""
+    if given is None:
+        return [s.start if default is None else default for s in specs]
+    if isinstance(given, dict):
+        unknown = [k for k in given if k not in {s.name for s in specs}]
+        if unknown:
+            raise InputFileError(f"{cause} has no parameter {unknown[0]!r} (has {', '.join(s.name for s in specs)})")
+        return [float(given.get(s.name, s.start if default is None else default)) for s in specs]
+    arr = np.asarray(given, float).ravel()
+    if arr.size != len(specs):
+        raise InputFileError(f"{cause}: expected {len(specs)} {what}, got {arr.size}")
+    return [float(v) for v in arr]
+
+
+def term_from_dict(d: dict, where: str = "term", domain: str | None = None) -> Term:
+    """A term from its YAML mapping (:meth:`Term.to_dict`, or layout 1's ``std``), checked against
+    the registry: a known cause (of ``domain`` when given) with exactly its parameters."""
+    if not isinstance(d, dict) or "cause" not in d or "channel" not in d:
+        raise InputFileError(f"{where}: a term needs 'cause' and 'channel', got {d!r}")
+    try:
+        entry = registry_entry(str(d["cause"]))
+    except UnknownNameError as exc:
+        raise InputFileError(f"{where}: {exc}") from None
+    if domain is not None and entry.domain not in (domain, "any"):
+        raise InputFileError(f"{where}: {entry.id} is a {entry.domain} cause, not a {domain} one")
+    raw = d.get("parameters") or {}
+    if not isinstance(raw, dict):
+        raise InputFileError(f"{where}: 'parameters' must be a mapping of name -> {{value, stderr, unit}}")
+    given = [read_parameter(n, p, f"{where}: parameter") for n, p in raw.items()]
+    if not entry.named_by_model:
+        names, got = entry.parameter_names, tuple(p.name for p in given)
+        if got != names:
+            raise InputFileError(f"{where}: {entry.id} has parameters {list(names)}, got {list(got)}")
+    values = {p.name: p.value for p in given}
+    stderr = {p.name: p.stderr for p in given}
+    term = make_term(entry.id, d["channel"], values, Region.from_dict(d.get("region")), dict(d.get("extra") or {}),
+                     stderr)
+    if entry.named_by_model:  # their units are the model's, as written
+        units = {p.name: p.unit for p in given}
+        term = replace(term, parameters=tuple(replace(p, unit=units[p.name]) for p in term.parameters))
+    return term
 
 
 def _plain(v) -> float | None:
     v = float(v)
     return None if not math.isfinite(v) else v
-
-
-def _plain_tree(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain_tree(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain_tree(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain_tree(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj

@@ -32,6 +32,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from diegocal.domains import DOMAINS
+from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError, InputFileError
 
 #: File name endings of logs; anything else in a folder is not looked at.
@@ -55,14 +57,13 @@ class CommandSpec:
 
 
 COMMANDS = {
-    "stac": CommandSpec("stac", ".calib.yaml", ("pots", "markers")),
-    "sgp-fit": CommandSpec("sgp-fit", ".sgp", ("q", "tau"), directory=True),
-    "pneumatic-fit": CommandSpec("pneumatic-fit", ".pneumatic.yaml", ("pressure", "valve", "pots")),
+    **{
+        d.fit_command: CommandSpec(d.fit_command, d.model_suffix, d.fit_needs, directory=d.model_is_directory)
+        for d in DOMAINS.values()
+    },
     "diagnose": CommandSpec("diagnose", ".{domain}.diagnosis.yaml"),
     "predict": CommandSpec("predict", ".prediction.h5"),
 }
-#: Streams a log needs for `predict` with a model of each bundle kind.
-PREDICT_NEEDS = {"calibration": ("pots", "markers"), "dynamics": ("q",), "pneumatic": ("pressure", "valve", "pots")}
 
 
 @dataclass(frozen=True)
@@ -189,17 +190,15 @@ def _needs(command: str, options: BatchOptions) -> tuple[str, ...]:
 
     bundle = load_bundle(options.model)
     if bundle.kind == "diagnosis":
-        return PREDICT_NEEDS["dynamics"] if bundle.data.get("domain") == "dynamics" else ()
-    return PREDICT_NEEDS.get(bundle.kind, ())
+        return domain_record(bundle.data.get("domain")).predict_needs if bundle.data.get("domain") else ()
+    return domain_record(bundle.kind).predict_needs
 
 
 def _units(command: str, streams, needs, options: BatchOptions):
     """The domains to run for one log ([None] for commands without domains), or why none applies."""
     if command == "diagnose":
-        from diegocal.diagnose import DOMAIN_STREAMS
-
-        wanted = _option_values(options.extra, "--domain") or list(DOMAIN_STREAMS)
-        domains = [d for d in wanted if d in DOMAIN_STREAMS and all(s in streams for s in DOMAIN_STREAMS[d])]
+        wanted = _option_values(options.extra, "--domain") or list(DOMAINS)
+        domains = [d for d in wanted if d in DOMAINS and all(s in streams for s in DOMAINS[d].streams)]
         if not domains:
             return f"no domain to diagnose (streams: {', '.join(streams) or 'none'})"
         return domains

@@ -2,14 +2,14 @@
 
 `--help` must not import numpy, scipy or the fitting code (STYLE.md), yet the option help and
 the parse-time checks need the library's vocabularies. Those of model-error causes come from
-the light `diegocal.vocabulary`, which the library reads too; the others are copied here, plain
+the light `diegocal.causes`, which the library reads too; the others are copied here, plain
 tuples and numbers, and tests/cli/test_choices.py checks each against the library's own, so a
 copy that drifts fails the suite.
 """
 
 # effect -> domain, diagnose's domains, what SIZE means for a kinematic effect: the library's own
-from diegocal.vocabulary import DOMAINS, KINEMATIC_SIZE_UNITS  # noqa: F401
-from diegocal.vocabulary import VOCABULARY as EFFECTS  # noqa: F401
+from diegocal.causes import DOMAINS, KINEMATIC_SIZE_UNITS  # noqa: F401
+from diegocal.causes import VOCABULARY as EFFECTS  # noqa: F401
 
 # sgp-fit (diegocal.sgp.model, diegocal.sgp.regressor)
 SGP_KINDS = ("sgp", "pr", "gp", "prgp")

@@ -15,10 +15,9 @@ import typer
 
 from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, default_output, errors, output_path, summary
+from diegocal.domains import DOMAIN_NAMES
+from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError, MissingStreamError
-
-#: The bundle kind of each domain's extended model.
-EXTENDED_KIND = {"kinematics": "calibration", "dynamics": "dynamics", "pneumatics": "pneumatic"}
 
 
 def _command() -> str:
@@ -37,9 +36,8 @@ def _friction(text: str) -> str:
 
 def _domain(text: str | None) -> str | None:
     """Parse-time check of --domain."""
-    domains = ("kinematics", "dynamics", "pneumatics")
-    if text is not None and text not in domains:
-        raise typer.BadParameter(f"{text!r} is not one of {', '.join(domains)}")
+    if text is not None and text not in DOMAIN_NAMES:
+        raise typer.BadParameter(f"{text!r} is not one of {', '.join(DOMAIN_NAMES)}")
     return text
 
 
@@ -52,7 +50,6 @@ def _choice(text: str, option: str, allowed: tuple[str, ...]) -> str:
 def output_paths(log: Path, output: Path | None, domain: str, several: bool) -> tuple[Path, Path]:
     """diagnosis.yaml and the extended model's path for one domain (DESIGN.md: beside the log by
     default, ``<log>.diagnosis.yaml``; with several domains the domain is in the name)."""
-    from diegocal.diagnose import EXTENDED_SUFFIX
 
     if output is None:
         out = default_output(log, f".{domain}.diagnosis.yaml" if several else ".diagnosis.yaml")
@@ -61,7 +58,7 @@ def output_paths(log: Path, output: Path | None, domain: str, several: bool) -> 
     else:
         out = output
     stem = out.name.removesuffix(".yaml").removesuffix(".diagnosis")
-    return out, out.with_name(stem + EXTENDED_SUFFIX[domain])
+    return out, out.with_name(stem + domain_record(domain).extended_suffix)
 
 
 @app.command("diagnose")
@@ -161,7 +158,7 @@ def diagnose_cmd(
         out, extended = output_paths(log, output, d, len(todo) > 1)
         command = _command()
         try:
-            result.save_extended(extended, header(EXTENDED_KIND[d], rob, log, command))
+            result.save_extended(extended, header(domain_record(d).kind, rob, log, command))
         except OSError as exc:
             raise DiegocalError(f"{extended}: cannot write the extended model ({exc.strerror or exc})") from None
         mapping = {**header("diagnosis", rob, log, command), **result.to_dict(extended_model=extended.name)}

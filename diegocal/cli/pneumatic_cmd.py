@@ -253,4 +253,4 @@ def predict_pneumatic(model_path: Path, log_path: Path, opts: PredictOptions) ->
     )
 
 
-register_predictor("pneumatic", predict_pneumatic)
+register_predictor("pneumatics", predict_pneumatic)

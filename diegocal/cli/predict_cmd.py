@@ -17,6 +17,7 @@ import typer
 from diegocal.cli.app import app
 from diegocal.cli.choices import SENSOR_TYPES
 from diegocal.cli.common import cli_errors, comma_list, command_line, log_output, split_words
+from diegocal.domains import domain
 from diegocal.errors import InputFileError
 
 
@@ -41,13 +42,9 @@ def register_predictor(kind: str, fn: Callable[[Path, Path, PredictOptions], Non
     PREDICTORS[kind] = fn
 
 
-#: Bundle kind -> the predictor registered for it.
-PREDICTOR_OF_KIND = {"calibration": "calib", "pneumatic": "pneumatic", "dynamics": "sgp"}
-
-
 def resolve_model(path: Path) -> tuple[str, Path]:
-    """(predictor name, model path) of a fitted output; a diagnosis.yaml resolves to the extended
-    model it names (beside it)."""
+    """(domain, model path) of a fitted output; a diagnosis.yaml resolves to the extended model it
+    names (beside it)."""
     from diegocal.io.bundle import load_bundle
 
     bundle = load_bundle(path)
@@ -56,11 +53,11 @@ def resolve_model(path: Path) -> tuple[str, Path]:
         if not name:
             raise InputFileError(f"{path}: this diagnosis names no extended model")
         return resolve_model(path.parent / str(name))
-    return PREDICTOR_OF_KIND[bundle.kind], path
+    return domain(bundle.kind).name, path
 
 
-def model_kind(path: Path) -> str:
-    """'sgp', 'calib' or 'pneumatic': the predictor for the model at ``path`` (its bundle kind)."""
+def model_domain(path: Path) -> str:
+    """The domain of the model at ``path`` (its bundle kind), whose predictor reads it."""
     return resolve_model(path)[0]
 
 

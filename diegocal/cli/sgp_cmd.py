@@ -297,4 +297,4 @@ def _warn_coverage(names, coverage) -> None:
         warn("fraction of measured torques within ±2σ (0.95 if calibrated) " + "; ".join(parts) + hint)
 
 
-register_predictor("sgp", predict_sgp)
+register_predictor("dynamics", predict_sgp)

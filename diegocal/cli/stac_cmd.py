@@ -337,4 +337,4 @@ def sources_text(asked: tuple[str, ...], used: tuple[str, ...]) -> str:
     return text if set(asked) == set(used) else f"{text} ({'+'.join(used)})"
 
 
-register_predictor("calib", predict_calib)
+register_predictor("kinematics", predict_calib)

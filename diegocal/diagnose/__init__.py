@@ -33,22 +33,10 @@ from diegocal.diagnose.engine import (
     UnitDiagnosis,
     run_unit,
 )
+from diegocal.domains import DOMAIN_NAMES as DOMAINS
+from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError, MissingStreamError
 from diegocal.evaluate import Blocks, split_blocks
-from diegocal.vocabulary import DOMAINS
-
-#: The streams that make a domain diagnosable (DESIGN.md: ``diagnose --domain`` defaults).
-DOMAIN_STREAMS = {
-    "kinematics": ("pots", "markers"),
-    "dynamics": ("q", "tau"),
-    "pneumatics": ("pressure", "valve"),
-}
-#: The file name of each domain's extended model beside diagnosis.yaml.
-EXTENDED_SUFFIX = {
-    "kinematics": ".extended.calib.yaml",
-    "dynamics": ".extended.sgp",
-    "pneumatics": ".extended.pneumatic.yaml",
-}
 
 
 @dataclass(frozen=True)
@@ -133,13 +121,13 @@ class Diagnosis:
 
 def domains_of(log) -> tuple[str, ...]:
     """The domains a log's streams allow (DESIGN.md: markers + pots, q + tau, pressure + valve)."""
-    return tuple(d for d in DOMAINS if all(log.has(s) for s in DOMAIN_STREAMS[d]))
+    return tuple(d for d in DOMAINS if all(log.has(s) for s in domain_record(d).streams))
 
 
 def check_domain(log, domain: str) -> None:
     if domain not in DOMAINS:
         raise DiegocalError(f"unknown domain {domain!r}; expected one of {', '.join(DOMAINS)}")
-    missing = [s for s in DOMAIN_STREAMS[domain] if not log.has(s)]
+    missing = [s for s in domain_record(domain).streams if not log.has(s)]
     if missing:
         have = ", ".join(sorted(log.streams)) or "none"
         raise MissingStreamError(

@@ -73,13 +73,14 @@ from diegocal.sgp.model import INERTIA, INPUT_STREAMS, nominal_base, nominal_tor
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
 from diegocal.sgp.terms import (
     FRICTION_CAUSE,
-    DynamicsTerm,
-    as_dynamics_term,
+    columns,
+    dynamics_terms,
+    is_filter,
+    joints_of,
     lag_filter,
-    make_term,
     term_columns,
 )
-from diegocal.terms import Region
+from diegocal.terms import Region, Term, make_term
 
 UNIT = "N·m"
 #: position_friction: the joint's training range (0.5 %..99.5 % quantiles) is cut into this many
@@ -191,10 +192,10 @@ class DynamicsAdapter:
         samples: least squares, then again with each joint's rows weighted by 1 / its residual
         std; a ``torque_lag``'s time constant by :meth:`_fit_lags` in between."""
         train = np.asarray(train, bool)
-        terms = tuple(as_dynamics_term(t) for t in terms)
+        terms = dynamics_terms(terms)
         C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
         A = np.concatenate([self.F, C], axis=2)
-        lags = {self.row_of[t.channel]: t.value("lag") for t in terms if t.is_filter and t.channel in self.row_of}
+        lags = {self.row_of[t.channel]: t.value("lag") for t in terms if is_filter(t) and t.channel in self.row_of}
         w, cov = self._solve(A, train, np.ones(len(self.joints)))
         e = self.tau[train] - (A @ w + self.tau0)[train]
         s = np.sqrt(np.nanmean(e * e, axis=0))  # second pass: each joint weighted by its residual std
@@ -209,7 +210,7 @@ class DynamicsAdapter:
         se[self._unidentified(Aeff, train, terms)] = np.nan
         out, at = [], self.base.n_base
         for t in terms:
-            if t.is_filter:
+            if is_filter(t):
                 r = self.row_of.get(t.channel)
                 lag = lags.get(r, t.value("lag"))
                 out.append(t.with_values([lag], [self._lag_se(A, w, r, lag, pred, train)] if r is not None else None))
@@ -228,7 +229,7 @@ class DynamicsAdapter:
         X = A[train].reshape(-1, A.shape[2])
         X = X[np.isfinite(X).all(axis=1)]
         for t in terms:
-            if t.is_filter:
+            if is_filter(t):
                 continue
             k = len(t.parameters)
             if t.cause == "payload":
@@ -331,9 +332,9 @@ class DynamicsAdapter:
 
         return project
 
-    def _cols(self, term: DynamicsTerm) -> dict:
-        X = term.columns(self.robot, self.q, self.qd, self.qdd)
-        joints = self.joints if term.cause == "payload" else term.joints  # a payload loads every joint
+    def _cols(self, term: Term) -> dict:
+        X = columns(term, self.robot, self.q, self.qd, self.qdd)
+        joints = self.joints if term.cause == "payload" else joints_of(term)  # a payload loads every joint
         return {j: X[:, self.robot.joint_index(j)] for j in joints if j in self.row_of}
 
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
@@ -342,7 +343,7 @@ class DynamicsAdapter:
         model's span is not offered."""
         train = np.asarray(train, bool)
         have = {(t.cause, t.channel) for t in fitted.terms}
-        coupled = {j for t in fitted.terms if t.cause == "coupled_friction" for j in t.joints}
+        coupled = {j for t in fitted.terms if t.cause == "coupled_friction" for j in joints_of(t)}
         out = []
 
         def offer(term, cols, project, family=""):
@@ -395,7 +396,7 @@ class DynamicsAdapter:
                 offer(term, self._cols(term), project)
         return out
 
-    def _regions(self, j: str, train, residual: np.ndarray) -> list[DynamicsTerm]:
+    def _regions(self, j: str, train, residual: np.ndarray) -> list[Term]:
         """position_friction variants: the REGION_KEEP windows of q_j's training range (REGION_BINS
         equal bins between its 0.5 % and 99.5 % quantiles, 1 bin up to REGION_MAX_FRACTION of the
         range, at least REGION_MIN_FRACTION of the samples) whose two columns explain the most of
@@ -432,7 +433,7 @@ class DynamicsAdapter:
             # the end windows reach the whole range's extremes (the quantiles cut no sample off)
             low = lowest if a == 0 else float(edges[a])
             high = highest if e == REGION_BINS else float(edges[e])
-            out.append(make_term("position_friction", j, Region(f"q.{j}", low, high)))
+            out.append(make_term("position_friction", j, region=Region(f"q.{j}", low, high)))
         return out
 
     # ------------------------------------------------------------------ scores and output

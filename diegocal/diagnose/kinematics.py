@@ -48,12 +48,11 @@ from diegocal.stac.terms import (
     SLIP,
     Applied,
     apply_terms,
-    make_term,
     pot_columns,
     pot_extra,
     shift_clock,
 )
-from diegocal.terms import Region, Term
+from diegocal.terms import Region, Term, make_term
 
 #: Half width (samples) of the running median a marker outlier is measured against.
 OUTLIER_WINDOW = 8

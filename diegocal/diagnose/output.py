@@ -9,7 +9,7 @@
       - cause: position_friction
         channel: joint3
         region: {variable: q.joint3, low: 1.9, high: 2.3}
-        parameters: {coulomb: {value: 0.31, std: 0.01, unit: N·m}, ...}
+        parameters: {coulomb: {value: 0.31, stderr: 0.01, unit: N·m}, ...}
         gain: {rmse_before: 0.41, rmse_after: 0.12, reduction: 0.71}     # held-out blocks
         kind: term             # term | fault | unexplained
         unit: N·m
@@ -29,24 +29,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from diegocal.io.files import to_plain
 from diegocal.terms import Term
 
 
 def _clean(v):
-    if isinstance(v, dict):
-        return {str(k): _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _clean(v.tolist())
-    if isinstance(v, (np.floating, float)):
-        f = float(v)
-        return None if not np.isfinite(f) else f
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    return v
+    return to_plain(v, nan_as_none=True)
 
 
 def _rmse_map(scores) -> dict:

@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from diegocal.causes import MAX_DELAY_S, MAX_SENSOR_LAG_S, causes_of
 from diegocal.diagnose.engine import Candidate, Residuals
 from diegocal.errors import DiegocalError
 from diegocal.evaluate import Score, score
@@ -57,12 +58,13 @@ from diegocal.pneumatic.data import ChamberData, chamber_data
 from diegocal.pneumatic.fit import ChamberFit, FitOptions, fit_chamber, step_rows
 from diegocal.pneumatic.model import ChamberModel
 from diegocal.pneumatic.predict import next_step, predict_with_resets
-from diegocal.pneumatic.terms import CAUSES, MAX_DELAY_S, MAX_SENSOR_LAG_S, as_chamber_term, make_term
+from diegocal.pneumatic.terms import CAUSES, chamber_terms
+from diegocal.terms import make_term
 
 #: The unit the pressure stream is read in (DESIGN.md: kPa for the bundled robots).
 UNIT = "kPa"
 #: Terms fitted with the baseline, never findings: the sensors' tick lag, the ports' flow saturation.
-BASELINE_EXTRA = ("sensor_lag", "flow_saturation")
+BASELINE_EXTRA = causes_of("pneumatics", "companion")
 #: Whether the baseline has the ports' flow saturation (module doc).
 SATURATION = True
 
@@ -103,7 +105,7 @@ class PneumaticAdapter:
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train) -> PneumaticFit:
         train = np.asarray(train, bool)
-        terms = [replace(as_chamber_term(t), channel=self.unit_name) for t in terms]
+        terms = [replace(t, channel=self.unit_name) for t in chamber_terms(terms)]
         terms = [t for t in terms if t.cause not in BASELINE_EXTRA]
         base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
         key = frozenset(t.cause for t in terms)

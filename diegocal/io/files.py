@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import logging
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -53,16 +54,19 @@ def write_text(path, text: str) -> None:
 
 
 # ----------------------------------------------------------------------------- YAML
-def to_plain(obj):
-    """numpy scalars/arrays -> plain Python, recursively, so YAML stays readable."""
+def to_plain(obj, nan_as_none: bool = False):
+    """numpy scalars/arrays -> plain Python, recursively, so YAML stays readable; with
+    ``nan_as_none`` a non-finite float becomes None (YAML's null: "not known")."""
     if isinstance(obj, dict):
-        return {str(k): to_plain(v) for k, v in obj.items()}
+        return {str(k): to_plain(v, nan_as_none) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [to_plain(v) for v in obj]
+        return [to_plain(v, nan_as_none) for v in obj]
     if isinstance(obj, np.ndarray):
-        return to_plain(obj.tolist())
+        return to_plain(obj.tolist(), nan_as_none)
     if isinstance(obj, np.generic):
-        return obj.item()
+        obj = obj.item()
+    if nan_as_none and isinstance(obj, float) and not math.isfinite(obj):
+        return None
     return obj
 
 

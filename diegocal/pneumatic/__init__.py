@@ -13,7 +13,7 @@ from diegocal.pneumatic.fit import BatchFit, ChamberFit, FitOptions, fit_chamber
 from diegocal.pneumatic.model import ChamberModel, steady_state, step
 from diegocal.pneumatic.params import C_GAMMA, NAMES, SPECS, ChamberParams
 from diegocal.pneumatic.predict import Drift, drift, integrate_from, next_step, predict_with_resets
-from diegocal.pneumatic.terms import CAUSES, ChamberTerm, make_term
+from diegocal.pneumatic.terms import CAUSES
 
 __all__ = [
     "CAUSES",
@@ -25,7 +25,6 @@ __all__ = [
     "ChamberFit",
     "ChamberModel",
     "ChamberParams",
-    "ChamberTerm",
     "Drift",
     "FitOptions",
     "chamber_data",
@@ -33,7 +32,6 @@ __all__ = [
     "fit_chamber",
     "fit_chambers",
     "integrate_from",
-    "make_term",
     "next_step",
     "predict_with_resets",
     "steady_state",

@@ -65,23 +65,23 @@ class ChamberModel:
     """
 
     def __init__(self, extra=()):
-        extra = tuple(T.as_chamber_term(t) for t in extra)
+        extra = T.chamber_terms(extra)
         causes = [t.cause for t in extra]
         dup = {c for c in causes if causes.count(c) > 1}
         if dup:
             raise ValueError(f"a chamber model takes one term per cause; {sorted(dup)} given twice")
-        if sum(isinstance(t, T.ValveDelay) for t in extra) > 1:
+        if sum(T.part(t).delay for t in extra) > 1:
             raise ValueError("valve_delay and sensor_lag exclude each other (a delay includes the lag)")
         base = T.baseline_terms()
         self.extra = extra
-        self.terms = tuple(sorted(base + extra, key=lambda t: t.stage))
-        self.specs = T.BASELINE_SPECS + tuple(s for t in extra for s in t.specs)
+        self.terms = tuple(sorted(base + extra, key=lambda t: T.part(t).stage))
+        self.specs = T.BASELINE_SPECS + tuple(s for t in extra for s in T.specs_of(t))
         self.names = tuple(s.name for s in self.specs)
         self.index = {n: i for i, n in enumerate(self.names)}
-        self.has_flow = any(t.stage == 5 for t in extra)
+        self.has_flow = any(T.part(t).stage == 5 for t in extra)
         self.offset_at = self.index.get("offset")
-        self.has_delay = any(isinstance(t, T.ValveDelay) for t in extra)
-        self.delay_at = next((self.index[t.specs[0].name] for t in extra if isinstance(t, T.ValveDelay)), None)
+        self.has_delay = any(T.part(t).delay for t in extra)
+        self.delay_at = next((self.index[t.parameters[0].name] for t in extra if T.part(t).delay), None)
 
     def n_lags(self, h: float) -> int:
         """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay."""
@@ -113,7 +113,7 @@ class ChamberModel:
         shape = np.broadcast(u, v, vd).shape
         ev = T.Evaluation(x, self.index, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=shape)
         for term in self.terms:
-            term.add(ev)
+            T.part(term).add(term, ev)
         r = ev.num / ev.den  # (4.10e)
         dr = None
         if jacobian:
@@ -161,7 +161,7 @@ class ChamberModel:
 
         ``p`` is the pressure reading at the step's start; ``u_lags`` (T, L+1) the commands u_t,
         u_{t-1}, ... (read only by a model with a valve delay, whose step is two exact steps, one
-        per command the valve holds; :class:`~diegocal.pneumatic.terms.ValveDelay`). Returns
+        per command the valve holds; ``valve_delay`` in :mod:`~diegocal.pneumatic.terms`). Returns
         (p_next, J) with p_next of the samples' shape and J = d p_next / d x, shape (T, P) (None
         unless ``jacobian``).
 

@@ -13,8 +13,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from diegocal.causes import ParamSpec
 from diegocal.errors import InputFileError
-from diegocal.pneumatic.terms import BASELINE_SPECS, ParamSpec, as_chamber_term, term_from_dict
+from diegocal.pneumatic.terms import BASELINE_SPECS, chamber_terms
+from diegocal.terms import term_from_dict
 
 #: c_gamma, the voltage range of the leaky regime, fixed globally by the thesis (§4.4), V.
 C_GAMMA = 0.1
@@ -118,8 +120,8 @@ class ChamberParams:
         return replace(self, values=vals, stderr=se, terms=terms)
 
     def with_terms(self, terms) -> ChamberParams:
-        """The same chamber with these extra terms (generic Terms become chamber terms)."""
-        return replace(self, terms=tuple(as_chamber_term(t) for t in terms))
+        """The same chamber with these extra terms (checked to be chamber terms)."""
+        return replace(self, terms=chamber_terms(terms))
 
     def to_dict(self) -> dict:
         out = {n: float(self.values[n]) for n in NAMES}
@@ -149,7 +151,7 @@ class ChamberParams:
             extra = raw.get("terms") or []
             if not isinstance(extra, list):
                 raise InputFileError(f"{where}: 'terms' must be a list of terms")
-            terms = tuple(term_from_dict(t, f"{where}: term {i + 1}") for i, t in enumerate(extra))
+            terms = tuple(term_from_dict(t, f"{where}: term {i + 1}", "pneumatics") for i, t in enumerate(extra))
             return cls(
                 vals,
                 float(raw["c_b"]),

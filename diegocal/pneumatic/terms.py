@@ -1,4 +1,4 @@
-"""The terms of the valve-chamber model: thesis eq. (4.10) as baseline terms, plus extra terms.
+"""The pneumatic behaviour of the causes (:mod:`diegocal.causes`): what each term adds to eq. (4.10).
 
 The chamber model is ``pdot = (s - p) r`` (thesis eq. 4.6) with
 
@@ -21,8 +21,8 @@ term (``cause``)            parameters   part of eq. (4.10)
 ``chamber_volume``          c6           d += c6 v (4.10e)
 ==========================  ===========  ==============================================
 
-Extra terms (``diagnose``'s vocabulary, DESIGN.md; channel = the chamber) keep the form (4.6), so
-that the exact step (4.7) still applies:
+Their parameters, units and bounds are the registry's. Extra terms (``diagnose``'s vocabulary;
+channel = the chamber) keep the form (4.6), so that the exact step (4.7) still applies:
 
 - ``valve_delay`` (delay_s, s): the valve answers the command ``delay_s`` late: within a step the
   valve holds first the older command, then the newer one, and the model takes one exact step
@@ -45,36 +45,17 @@ s' = (s r + α) / r'.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import ClassVar
 
 import numpy as np
 
+from diegocal.causes import C1, C2, C3, C4, C5, C6, C7, C8, C9, MAX_DELAY_S, MAX_SENSOR_LAG_S, causes_of
+from diegocal.causes import cause as registry_entry
 from diegocal.errors import InputFileError
-from diegocal.terms import Parameter, Term
+from diegocal.terms import Term, make_term
 
-#: The longest valve delay the model (and diagnose's grid) considers, s.
-MAX_DELAY_S = 0.1
-#: The longest lag of the tick-averaged sensors (one 10 ms tick, thesis §4.5), s.
-MAX_SENSOR_LAG_S = 0.01
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One free parameter: name, unit, bounds (Table 4.1 or ours, see ``note``), start value."""
-
-    name: str
-    unit: str
-    lower: float
-    upper: float
-    start: float
-    meaning: str
-    note: str = ""
-
-    def parameter(self, value: float | None = None, stderr: float = np.nan) -> Parameter:
-        v = self.start if value is None else float(value)
-        return Parameter(self.name, v, self.unit, self.lower, self.upper, stderr)
-
+__all__ = ["MAX_DELAY_S", "MAX_SENSOR_LAG_S"]  # the registry's limits, re-exported for the model
 
 @dataclass
 class Evaluation:
@@ -145,214 +126,104 @@ class Evaluation:
             self.dbeta = dbeta if self.dbeta is None else self.dbeta + dbeta
 
 
-class ChamberTerm(Term):
-    """A term of the chamber model: its parameters (``specs``) and what it adds (:meth:`add`).
+@dataclass(frozen=True)
+class Part:
+    """How a cause enters the chamber model: ``add(term, ev)`` adds its parts to an
+    :class:`Evaluation`; ``stage`` orders the terms in an evaluation: inputs (0), steady state (1),
+    rate numerator (2), volume (3), terms that read the baseline's parts (4), flows (5), the sensor
+    reading (6); ``delay``: the model splits each step at the command's delay
+    (:meth:`~diegocal.pneumatic.model.ChamberModel.step`) instead."""
 
-    ``stage`` orders the terms in an evaluation: inputs (0), steady state (1), rate numerator (2),
-    volume (3), terms that read the baseline's parts (4), flows (5), the sensor reading (6).
-    """
-
-    CAUSE: ClassVar[str] = ""
-    specs: ClassVar[tuple[ParamSpec, ...]] = ()
-    stage: ClassVar[float] = 1
-    baseline: ClassVar[bool] = False
-
-    def add(self, ev: Evaluation) -> None:  # pragma: no cover - every term overrides it
-        raise NotImplementedError
+    stage: float
+    add: Callable[[Term, Evaluation], None]
+    delay: bool = False
 
 
 # ----------------------------------------------------------------------------- baseline (Table 4.1)
-#: Bounds from Table 4.1; c2 > 0 and c7 > 0 are ours: they fix the sign conventions (s increases
-#: with u, the rate r is positive) that the thesis states in words ("r() > 0", §4.3) but does not
-#: list in the table.
-C1 = ParamSpec("c1", "V", 2.0, 8.0, 5.0, "valve-voltage origin (U_c + U_r)/2", "Table 4.1")
-C2 = ParamSpec("c2", "1/V", 1e-3, np.inf, 1.0, "valve-voltage scale B", "ours: > 0")
-C3 = ParamSpec("c3", "1/V^3", -1.0, np.inf, 0.0, "kink factor", "Table 4.1")
-C4 = ParamSpec("c4", "pu s", -np.inf, np.inf, 0.0, "ds/dvdot", "")
-C5 = ParamSpec("c5", "1", -np.inf, np.inf, 0.0, "dr/dvdot", "")
-C6 = ParamSpec(
-    "c6",
-    "1",
-    -0.98,
-    0.98,
-    0.0,
-    "volume-sensor scale",
-    "|c6| < 1 keeps 1 + c6 v' > 0 on the normalised travel v' in [-1, 1]",
-)
-C7 = ParamSpec("c7", "1/(s V)", 1e-6, np.inf, 10.0, "B of eq. (4.3): rate per volt", "ours: > 0")
-C8 = ParamSpec("c8", "1", -1.0, 1.0, 0.0, "rate asymmetry", "Table 4.1")
-C9 = ParamSpec("c9", "V", 1e-6, np.inf, 0.05, "leakage (L_c + L_r)/2", "Table 4.1: > 0")
-
-
-class ValveSteadyState(ChamberTerm):
+def _valve_steady_state(term: Term, ev: Evaluation) -> None:
     """s += c_s g(c2 û + c3 û³), û = u - c1: the valve's steady state, thesis eq. (4.10a-c)."""
-
-    CAUSE = "valve_steady_state"
-    specs = (C1, C2, C3)
-    stage = 1
-    baseline = True
-
-    def add(self, ev: Evaluation) -> None:
-        c1, c2, c3 = (ev.value(n) for n in ("c1", "c2", "c3"))
-        uh = ev.u - c1  # (4.10a)
-        a = c2 * uh + c3 * uh**3
-        root = np.sqrt(a * a + 1.0)
-        ev.uh, ev.g = uh, a / root  # (4.10b)
-        ev.s = ev.c_b + ev.c_s * ev.g  # (4.10c)
-        if ev.jacobian:
-            i1, i2, i3 = (ev.index[n] for n in ("c1", "c2", "c3"))
-            dg = 1.0 / root**3  # dg/da
-            ev.dg = ev.zeros()
-            ev.dg[..., i1] = -dg * (c2 + 3.0 * c3 * uh**2)
-            ev.dg[..., i2] = dg * uh
-            ev.dg[..., i3] = dg * uh**3
-            dgs = ev.c_s / root**3  # c_s dg/da: ds, written as (4.10) is differentiated
-            ev.ds = ev.zeros()
-            ev.ds[..., i1] = -dgs * (c2 + 3.0 * c3 * uh**2)
-            ev.ds[..., i2] = dgs * uh
-            ev.ds[..., i3] = dgs * uh**3
+    c1, c2, c3 = (ev.value(n) for n in ("c1", "c2", "c3"))
+    uh = ev.u - c1  # (4.10a)
+    a = c2 * uh + c3 * uh**3
+    root = np.sqrt(a * a + 1.0)
+    ev.uh, ev.g = uh, a / root  # (4.10b)
+    ev.s = ev.c_b + ev.c_s * ev.g  # (4.10c)
+    if ev.jacobian:
+        i1, i2, i3 = (ev.index[n] for n in ("c1", "c2", "c3"))
+        dg = 1.0 / root**3  # dg/da
+        ev.dg = ev.zeros()
+        ev.dg[..., i1] = -dg * (c2 + 3.0 * c3 * uh**2)
+        ev.dg[..., i2] = dg * uh
+        ev.dg[..., i3] = dg * uh**3
+        dgs = ev.c_s / root**3  # c_s dg/da: ds, written as (4.10) is differentiated
+        ev.ds = ev.zeros()
+        ev.ds[..., i1] = -dgs * (c2 + 3.0 * c3 * uh**2)
+        ev.ds[..., i2] = dgs * uh
+        ev.ds[..., i3] = dgs * uh**3
 
 
-class VolumeRateSteady(ChamberTerm):
+def _volume_rate_steady(term: Term, ev: Evaluation) -> None:
     """s += c4 v̇: the volume rate drives the steady state, thesis eq. (4.10c)."""
-
-    CAUSE = "volume_rate_steady"
-    specs = (C4,)
-    stage = 1
-    baseline = True
-
-    def add(self, ev: Evaluation) -> None:
-        ev.s = ev.s + ev.value("c4") * ev.vd
-        if ev.jacobian:
-            ev.ds[..., ev.index["c4"]] = ev.vd
+    ev.s = ev.s + ev.value("c4") * ev.vd
+    if ev.jacobian:
+        ev.ds[..., ev.index["c4"]] = ev.vd
 
 
-class ValveRate(ChamberTerm):
-    """n += c7 k(û; c_γ, c9, c8): the rate's dependence on the valve, thesis eq. (4.9), (4.10d-e).
-
-    Reads c1 (through û) from :class:`ValveSteadyState`.
-    """
-
-    CAUSE = "valve_rate"
-    specs = (C7, C8, C9)
-    stage = 2
-    baseline = True
-
-    def add(self, ev: Evaluation) -> None:
-        c1, c7, c8, c9 = (ev.value(n) for n in ("c1", "c7", "c8", "c9"))
-        uh, cg = ev.uh, ev.c_gamma
-        ru = np.sqrt(uh * uh + cg * cg)
-        k = ru - cg + c9 + c8 * uh  # (4.10d), k(û; c_γ, c9, c8)
-        ev.num = c7 * k
-        if ev.jacobian:
-            ev.dnum = ev.zeros()
-            ev.dnum[..., ev.index["c1"]] = -c7 * (uh / ru + c8)
-            ev.dnum[..., ev.index["c7"]] = k
-            ev.dnum[..., ev.index["c8"]] = c7 * uh
-            ev.dnum[..., ev.index["c9"]] = c7
+def _valve_rate(term: Term, ev: Evaluation) -> None:
+    """n += c7 k(û; c_γ, c9, c8): the rate's dependence on the valve, thesis eq. (4.9), (4.10d-e);
+    reads c1 (through û) from the valve's steady state."""
+    c7, c8 = ev.value("c7"), ev.value("c8")
+    uh, cg = ev.uh, ev.c_gamma
+    ru = np.sqrt(uh * uh + cg * cg)
+    k = ru - cg + ev.value("c9") + c8 * uh  # (4.10d), k(û; c_γ, c9, c8)
+    ev.num = c7 * k
+    if ev.jacobian:
+        ev.dnum = ev.zeros()
+        ev.dnum[..., ev.index["c1"]] = -c7 * (uh / ru + c8)
+        ev.dnum[..., ev.index["c7"]] = k
+        ev.dnum[..., ev.index["c8"]] = c7 * uh
+        ev.dnum[..., ev.index["c9"]] = c7
 
 
-class VolumeRateRate(ChamberTerm):
+def _volume_rate_rate(term: Term, ev: Evaluation) -> None:
     """n += c5 v̇: the volume rate in the rate, thesis eq. (4.10e)."""
-
-    CAUSE = "volume_rate_rate"
-    specs = (C5,)
-    stage = 2
-    baseline = True
-
-    def add(self, ev: Evaluation) -> None:
-        ev.num = ev.num + ev.value("c5") * ev.vd
-        if ev.jacobian:
-            ev.dnum[..., ev.index["c5"]] = ev.vd
+    ev.num = ev.num + ev.value("c5") * ev.vd
+    if ev.jacobian:
+        ev.dnum[..., ev.index["c5"]] = ev.vd
 
 
-class ChamberVolume(ChamberTerm):
+def _chamber_volume(term: Term, ev: Evaluation) -> None:
     """d += c6 v: the chamber's volume 1 + c6 v in the rate's denominator, thesis eq. (4.10e)."""
-
-    CAUSE = "chamber_volume"
-    specs = (C6,)
-    stage = 3
-    baseline = True
-
-    def add(self, ev: Evaluation) -> None:
-        ev.den = 1.0 + ev.value("c6") * ev.v
-        if ev.jacobian:
-            ev.dden = ev.zeros()
-            ev.dden[..., ev.index["c6"]] = ev.v
-
-
-#: The baseline terms in the order of eq. (4.10), and their parameters in Table 4.1's order.
-BASELINE: tuple[type[ChamberTerm], ...] = (
-    ValveSteadyState,
-    VolumeRateSteady,
-    ValveRate,
-    VolumeRateRate,
-    ChamberVolume,
-)
-BASELINE_SPECS: tuple[ParamSpec, ...] = (C1, C2, C3, C4, C5, C6, C7, C8, C9)
-
-
-def baseline_terms(channel: str = "", values: dict | None = None) -> tuple[ChamberTerm, ...]:
-    """The five baseline terms of eq. (4.10) with ``values`` by name (default: Table 4.1's starts)."""
-    values = values or {}
-    return tuple(
-        cls(cls.CAUSE, channel, tuple(s.parameter(values.get(s.name)) for s in cls.specs))
-        for cls in BASELINE
-    )
+    ev.den = 1.0 + ev.value("c6") * ev.v
+    if ev.jacobian:
+        ev.dden = ev.zeros()
+        ev.dden[..., ev.index["c6"]] = ev.v
 
 
 # ----------------------------------------------------------------------------- extra terms
-class ValveDelay(ChamberTerm):
-    """The valve answers the command ``delay_s`` late.
-
-    With D = delay_s / h = n + f (n whole samples, 0 <= f < 1), the valve holds u_{t-n-1} for the
-    first f h of the step t -> t+1 and u_{t-n} for the rest: the model takes two exact steps (4.7),
-    over f h and (1 - f) h (the exact solution of (4.6) for that piecewise-constant command).
-    :meth:`~diegocal.pneumatic.model.ChamberModel.step` applies it; the term adds no part.
-    """
-
-    CAUSE = "valve_delay"
-    specs = (ParamSpec("delay_s", "s", 0.0, MAX_DELAY_S, 0.0, "valve delay"),)
-    stage = 0
-
-    def add(self, ev: Evaluation) -> None:  # the model splits the step (see the docstring)
-        return None
+def _split_step(term: Term, ev: Evaluation) -> None:
+    """``valve_delay`` (the valve answers the command ``delay_s`` late) and ``sensor_lag`` (the
+    tick-averaged pressure answers a fraction of a tick late, thesis §4.5: not a fault, fitted with
+    the baseline so that only a delay beyond the sampling's own is a ``valve_delay``; the two
+    exclude each other). With D = delay / h = n + f, the valve holds u_{t-n-1} for the first f h
+    of the step t -> t+1 and u_{t-n} for the rest: the model takes two exact steps (4.7), the exact
+    solution of (4.6) for that piecewise-constant command. The model applies it; no part is added."""
+    return None
 
 
-class SensorLag(ValveDelay):
-    """The measured pressure lags the command by a fraction of a sample, û = u(t - lag_s) - c1.
-
-    Not a fault: thesis §4.5 averages every sensor over each 10 ms tick (200 samples at 20 kHz),
-    so the pressure read at t is the mean over the last tick and answers a command change about
-    half a tick late. The 9-parameter model's next step cannot express that; ``diagnose`` fits it
-    with the baseline (at most :data:`MAX_SENSOR_LAG_S`), so that only a delay beyond the
-    sampling's own is a ``valve_delay``. Same form as :class:`ValveDelay` (the two exclude each
-    other: a valve delay's value includes the sensor's lag).
-    """
-
-    CAUSE = "sensor_lag"
-    specs = (ParamSpec("lag_s", "s", 0.0, MAX_SENSOR_LAG_S, 0.0, "lag of the tick-averaged sensors"),)
-
-
-class ChamberLeak(ChamberTerm):
+def _chamber_leak(term: Term, ev: Evaluation) -> None:
     """Air escapes to the room: pdot += -leak (p - P_r) / (1 + c6 v)."""
-
-    CAUSE = "chamber_leak"
-    specs = (ParamSpec("leak", "1/s", 0.0, np.inf, 0.0, "leak rate to the room"),)
-    stage = 5
-
-    def add(self, ev: Evaluation) -> None:
-        c = ev.value("leak")
-        beta = c / ev.den
-        dbeta = dalpha = None
-        if ev.jacobian:
-            dbeta = -beta[..., None] * ev.dden / ev.den[..., None]
-            dbeta[..., ev.index["leak"]] += 1.0 / ev.den
-            dalpha = ev.room * dbeta
-        ev.add_flow(ev.room * beta, beta, dalpha, dbeta)
+    c = ev.value("leak")
+    beta = c / ev.den
+    dbeta = dalpha = None
+    if ev.jacobian:
+        dbeta = -beta[..., None] * ev.dden / ev.den[..., None]
+        dbeta[..., ev.index["leak"]] += 1.0 / ev.den
+        dalpha = ev.room * dbeta
+    ev.add_flow(ev.room * beta, beta, dalpha, dbeta)
 
 
-class SupplyDroop(ChamberTerm):
+def _supply_droop(term: Term, ev: Evaluation) -> None:
     """The supply sags while the valve draws from it: the valve sees P_c - droop, so
     s = f (P_c - droop) + (1 - f) P_r loses ``droop f``, f = (1 + g)/2 the supply's share of the
     port flow (the part of s between P_r and P_c). Reads g (c1..c3) of the baseline.
@@ -364,32 +235,21 @@ class SupplyDroop(ChamberTerm):
     choked flow sags the supply by tens of kPa while a chamber fills, it fitted worse than a
     pressure offset, which this shape does not.)
     """
-
-    CAUSE = "supply_droop"
-    specs = (ParamSpec("droop", "pu", 0.0, np.inf, 0.0, "supply sag while the valve draws from it"),)
-    stage = 4
-
-    def add(self, ev: Evaluation) -> None:
-        c = ev.value("droop")
-        f = 0.5 * (1.0 + ev.g)
-        ev.s = ev.s - c * f
-        if ev.jacobian:
-            ev.ds = ev.ds - 0.5 * c * ev.dg
-            ev.ds[..., ev.index["droop"]] -= f
+    c = ev.value("droop")
+    f = 0.5 * (1.0 + ev.g)
+    ev.s = ev.s - c * f
+    if ev.jacobian:
+        ev.ds = ev.ds - 0.5 * c * ev.dg
+        ev.ds[..., ev.index["droop"]] -= f
 
 
-class PressureOffset(ChamberTerm):
-    """The pressure sensor reads p + offset (its zero drifted). Applied by the model to the reading."""
-
-    CAUSE = "pressure_offset"
-    specs = (ParamSpec("offset", "pu", -np.inf, np.inf, 0.0, "pressure-sensor offset"),)
-    stage = 6
-
-    def add(self, ev: Evaluation) -> None:  # the model shifts the reading (see ChamberModel.step)
-        return None
+def _pressure_offset(term: Term, ev: Evaluation) -> None:
+    """The pressure sensor reads p + offset (its zero drifted): the model shifts the reading
+    (:meth:`~diegocal.pneumatic.model.ChamberModel.step`); no part is added."""
+    return None
 
 
-class FlowSaturation(ChamberTerm):
+def _flow_saturation(term: Term, ev: Evaluation) -> None:
     """The ports' flow saturates with the pressure difference: r' = r / (1 + sat |s - p| / c_s).
 
     Not a fault: the thin-plate flow of thesis eq. (4.1) is choked (independent of the downstream
@@ -399,63 +259,66 @@ class FlowSaturation(ChamberTerm):
     limit of the 9-parameter model is not taken for structure that no term explains. It shapes the
     valve's rate only (an added flow such as a leak keeps its own), after the whole s is known.
     """
-
-    CAUSE = "flow_saturation"
-    specs = (ParamSpec("sat", "1", 0.0, 20.0, 0.0, "flow saturation per half-span c_s"),)
-    stage = 4.5
-
-    def add(self, ev: Evaluation) -> None:
-        k = ev.value("sat")
-        gap = ev.s - ev.p
-        a = np.abs(gap) / ev.c_s
-        f = 1.0 / (1.0 + k * a)
-        ev.factor = f
-        sgn = np.sign(gap) / ev.c_s
-        s_p = 0.0 if ev.s_p is None else ev.s_p
-        ev.factor_p = -(f * f) * k * sgn * (s_p - 1.0)  # d f / d p
-        if ev.jacobian:
-            ev.dfactor = -((f * f) * k * sgn)[..., None] * ev.ds
-            ev.dfactor[..., ev.index["sat"]] -= f * f * a
+    k = ev.value("sat")
+    gap = ev.s - ev.p
+    a = np.abs(gap) / ev.c_s
+    f = 1.0 / (1.0 + k * a)
+    ev.factor = f
+    sgn = np.sign(gap) / ev.c_s
+    s_p = 0.0 if ev.s_p is None else ev.s_p
+    ev.factor_p = -(f * f) * k * sgn * (s_p - 1.0)  # d f / d p
+    if ev.jacobian:
+        ev.dfactor = -((f * f) * k * sgn)[..., None] * ev.ds
+        ev.dfactor[..., ev.index["sat"]] -= f * f * a
 
 
-#: Extra terms by cause: diagnose's vocabulary (DESIGN.md), :data:`CAUSES`; ``sensor_lag``, ``flow_saturation``.
-EXTRA: dict[str, type[ChamberTerm]] = {
-    "valve_delay": ValveDelay,
-    "chamber_leak": ChamberLeak,
-    "supply_droop": SupplyDroop,
-    "pressure_offset": PressureOffset,
-    "sensor_lag": SensorLag,
-    "flow_saturation": FlowSaturation,
+#: cause -> its part of the chamber model (every pneumatic cause of the registry).
+PARTS: dict[str, Part] = {
+    "valve_steady_state": Part(1, _valve_steady_state),
+    "volume_rate_steady": Part(1, _volume_rate_steady),
+    "valve_rate": Part(2, _valve_rate),
+    "volume_rate_rate": Part(2, _volume_rate_rate),
+    "chamber_volume": Part(3, _chamber_volume),
+    "valve_delay": Part(0, _split_step, delay=True),
+    "sensor_lag": Part(0, _split_step, delay=True),
+    "supply_droop": Part(4, _supply_droop),
+    "flow_saturation": Part(4.5, _flow_saturation),
+    "chamber_leak": Part(5, _chamber_leak),
+    "pressure_offset": Part(6, _pressure_offset),
 }
-CAUSES: tuple[str, ...] = ("valve_delay", "chamber_leak", "supply_droop", "pressure_offset")
+#: The baseline terms in the order of eq. (4.10), and their parameters in Table 4.1's order.
+BASELINE: tuple[str, ...] = causes_of("pneumatics", "baseline")
+BASELINE_SPECS = (C1, C2, C3, C4, C5, C6, C7, C8, C9)
+#: The causes a diagnosis may name (the registry's pneumatic terms).
+CAUSES: tuple[str, ...] = causes_of("pneumatics", "term")
 
 
-def make_term(cause: str, chamber: str, values: dict | None = None, stderr: dict | None = None,
-              extra: dict | None = None) -> ChamberTerm:
-    """An extra term of ``cause`` on ``chamber`` with parameter ``values`` by name (default: start)."""
-    if cause not in EXTRA:
-        raise InputFileError(f"unknown pneumatic term {cause!r}; known: {', '.join(CAUSES)}")
-    cls = EXTRA[cause]
-    values, stderr = values or {}, stderr or {}
-    params = tuple(
-        s.parameter(values.get(s.name), float(stderr.get(s.name, np.nan))) for s in cls.specs
-    )
-    return cls(cls.CAUSE, chamber, params, None, dict(extra or {}))
+def part(term: Term) -> Part:
+    """The chamber-model part of ``term``'s cause (one clear error for a cause of another domain)."""
+    try:
+        return PARTS[term.cause]
+    except KeyError:
+        raise InputFileError(f"{term.cause} is not a term of a valve-chamber model") from None
 
 
-def as_chamber_term(term: Term) -> ChamberTerm:
-    """A generic :class:`~diegocal.terms.Term` (from YAML or diagnose) as the chamber term of its
-    cause, keeping its values and standard errors by name (bounds and units from the specs)."""
-    if isinstance(term, ChamberTerm):
-        return term
-    vals = {p.name: p.value for p in term.parameters}
-    se = {p.name: p.stderr for p in term.parameters}
-    return make_term(term.cause, term.channel, vals, se, term.extra)
+def specs_of(term: Term):
+    """The registry's parameter specs (unit, bounds, start) of ``term``'s cause."""
+    return registry_entry(term.cause).parameters
 
 
-def term_from_dict(d: dict, where: str = "term") -> ChamberTerm:
-    """An extra term from its YAML mapping (``Term.to_dict``)."""
-    fields = Term.fields_from_dict(d, where)
-    if fields["cause"] not in EXTRA:
-        raise InputFileError(f"{where}: unknown pneumatic term {fields['cause']!r}; known: {', '.join(CAUSES)}")
-    return as_chamber_term(Term(**fields))
+def baseline_terms(channel: str = "", values: dict | None = None) -> tuple[Term, ...]:
+    """The five baseline terms of eq. (4.10) with ``values`` by name (default: Table 4.1's starts)."""
+    values = values or {}
+    out = []
+    for cause in BASELINE:
+        names = registry_entry(cause).parameter_names
+        out.append(make_term(cause, channel, {n: values[n] for n in names if n in values}))
+    return tuple(out)
+
+
+def chamber_terms(terms) -> tuple[Term, ...]:
+    """``terms`` as a tuple, each checked to be a valve-chamber term (:func:`part`)."""
+    terms = tuple(terms)
+    for t in terms:
+        part(t)
+    return terms

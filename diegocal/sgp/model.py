@@ -26,7 +26,7 @@ from diegocal.sgp.estimator import Guard, SemiParametricGP
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE
 from diegocal.sgp.kernels import REGION_OFF, Region, SquaredExponential, Subspace, cut_along
 from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor, true_parameters
-from diegocal.sgp.terms import apply_lags, as_dynamics_term, term_columns
+from diegocal.sgp.terms import apply_lags, dynamics_terms, is_filter, parameter_labels, term_columns
 
 LOG = logging.getLogger(__name__)
 KINDS = ("sgp", "pr", "gp", "prgp")
@@ -323,7 +323,7 @@ class DynamicsModel:
         self.robot = robot
         self.options = options
         self.progress = progress  # callable(stage, done, total) or None (SemiParametricGP)
-        self.terms = tuple(as_dynamics_term(t) for t in terms)
+        self.terms = dynamics_terms(terms)
         self.joint_names = tuple(robot.joint_names if tau_joints is None else tau_joints)
         unknown = [j for j in self.joint_names if j not in robot.joint_names]
         if unknown or not self.joint_names:
@@ -351,7 +351,7 @@ class DynamicsModel:
             return F
         extra = term_columns(self.terms, self.robot, q, qd, qdd)[:, self.rows]
         F = np.concatenate([F, extra], axis=2)
-        if any(t.is_filter for t in self.terms):
+        if any(is_filter(t) for t in self.terms):
             if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
                 time = self.time_  # the training samples
             if time is not None:
@@ -364,7 +364,7 @@ class DynamicsModel:
         if self.options.inertia != "nominal":
             return np.zeros((np.shape(q)[0], len(self.joint_names)))
         tau0 = nominal_torque(self.robot, q, qd, qdd)[:, self.rows][:, :, None]
-        if any(t.is_filter for t in self.terms):
+        if any(is_filter(t) for t in self.terms):
             if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
                 time = self.time_
             if time is not None:
@@ -374,14 +374,14 @@ class DynamicsModel:
     @property
     def parameter_names(self) -> tuple[str, ...]:
         """The columns of :meth:`features`: base parameters, then the extra terms' parameters."""
-        return tuple(self.base_.names) + tuple(n for t in self.terms if not t.is_filter for n in t.parameter_labels)
+        return tuple(self.base_.names) + tuple(n for t in self.terms if not is_filter(t) for n in parameter_labels(t))
 
     def fitted_terms(self) -> tuple:
         """The extra terms with their fitted values and standard errors (a lag as given)."""
         par = self.parametric_
         out, at = [], self.base_.n_base
         for t in self.terms:
-            if t.is_filter or par is None:
+            if is_filter(t) or par is None:
                 out.append(t)
                 continue
             k = len(t.parameters)
@@ -437,7 +437,7 @@ class DynamicsModel:
         (:meth:`state`) restores a saved fit, no optimising; ``time`` (T,) s for a torque_lag term."""
         q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
         self.time_ = None if time is None else np.asarray(time, float)
-        if self.time_ is None and any(t.is_filter for t in self.terms):
+        if self.time_ is None and any(is_filter(t) for t in self.terms):
             raise MissingStreamError("fitting a model with a torque_lag term needs the samples' time")
         o = self.options
         T = len(q)

@@ -156,10 +156,10 @@ def load_model(directory, robot=None):
         raise InputFileError(f"{npz}: cannot read ({exc})") from None
     if robot is None:
         robot = load_robot(directory / "robot")
-    from diegocal.sgp.terms import term_from_dict
+    from diegocal.terms import term_from_dict
 
     options = SGPOptions.from_dict(summary["options"])
-    terms = [term_from_dict(t, f"{directory}/sgp.yaml terms") for t in summary.get("terms") or ()]
+    terms = [term_from_dict(t, f"{directory}/sgp.yaml terms", "dynamics") for t in summary.get("terms") or ()]
     model = DynamicsModel(robot, options, tau_joints=summary.get("joints"), terms=terms)
     n = robot.n_joints
     u = arrays["u"]

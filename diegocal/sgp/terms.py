@@ -1,4 +1,4 @@
-"""Terms of a dynamics model: friction and the causes ``diagnose`` adds (thesis eq. 3.29-3.30).
+"""The dynamics behaviour of the causes (:mod:`diegocal.causes`): the torque each one adds (thesis eq. 3.29-3.30).
 
 The inverse dynamics are linear in the rigid-body parameters, ``tau = f(q, qd, qdd) w`` (eq. 3.30);
 every term here keeps that form: it adds regressor columns ``tau_extra = columns(q, qd, qdd) @ θ``
@@ -8,7 +8,7 @@ friction of eq. (3.29) is two such terms per joint, ``viscous_friction`` (qd_j �
 ``coulomb_friction`` (sign(qd_j) η_c,j); :func:`diegocal.sgp.regressor.full_regressor` builds its
 friction columns from them.
 
-Causes (DESIGN.md vocabulary, domain ``dynamics``):
+Causes (the registry's domain ``dynamics``; their parameters and units are the registry's):
 
 - ``viscous_friction`` / ``coulomb_friction``: η_v qd_j, η_c sign(qd_j) on joint j;
 - ``position_friction``: the same, only while q_j is in the term's region (cables, a tube
@@ -34,37 +34,13 @@ Causes (DESIGN.md vocabulary, domain ``dynamics``):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
 
 import numpy as np
 
 from diegocal.errors import InputFileError
-from diegocal.terms import Parameter, Region, Term
+from diegocal.terms import Term, make_term
 
-#: cause -> ((parameter name, unit), ...) in column order.
-PARAMETERS: dict[str, tuple[tuple[str, str], ...]] = {
-    "viscous_friction": (("viscous", "N·m·s/rad"),),
-    "coulomb_friction": (("coulomb", "N·m"),),
-    "position_friction": (("coulomb", "N·m"), ("viscous", "N·m·s/rad")),
-    "spring": (("stiffness", "N·m/rad"),),
-    "torque_offset": (("offset", "N·m"),),
-    "armature": (("inertia", "kg·m²"),),
-    "coupled_friction": (("coulomb", "N·m"), ("viscous", "N·m·s/rad")),
-    "payload": (
-        ("mass", "kg"),
-        ("mc_x", "kg·m"),
-        ("mc_y", "kg·m"),
-        ("mc_z", "kg·m"),
-        ("I_xx", "kg·m²"),
-        ("I_xy", "kg·m²"),
-        ("I_yy", "kg·m²"),
-        ("I_xz", "kg·m²"),
-        ("I_yz", "kg·m²"),
-        ("I_zz", "kg·m²"),
-    ),
-    "torque_lag": (("lag", "s"),),
-}
-CAUSES = tuple(PARAMETERS)
 #: The baseline's friction kinds (``SGPOptions.friction``) and the term each one is.
 FRICTION_CAUSE = {"viscous": "viscous_friction", "coulomb": "coulomb_friction"}
 
@@ -74,136 +50,127 @@ def friction_column(kind: str, qd: np.ndarray) -> np.ndarray:
     return qd if kind == "viscous" else np.sign(qd)
 
 
-@dataclass(frozen=True)
-class DynamicsTerm(Term):
-    """A term of a dynamics model (see the module docstring): ``columns`` give its torques."""
-
-    @property
-    def is_filter(self) -> bool:
-        """True for ``torque_lag``: it filters the model's columns instead of adding its own."""
-        return self.cause == "torque_lag"
-
-    @property
-    def joints(self) -> tuple[str, ...]:
-        """The joints whose torque it changes (a payload: none named here, see ``columns``)."""
-        if self.cause == "coupled_friction":
-            return (self.channel, str(self.extra["partner"]))
-        return () if self.cause == "payload" else (self.channel,)
-
-    @property
-    def parameter_labels(self) -> tuple[str, ...]:
-        """``<cause>:<channel>[<region>].<parameter>``: the names of its columns in a model."""
-        where = ""
-        if self.region is not None:
-            where = f"[{self.region.low:.3g},{self.region.high:.3g}]"
-        if self.cause == "coupled_friction":
-            where = f"+{self.extra['partner']}*{float(self.extra['ratio']):g}"
-        return tuple(f"{self.cause}:{self.channel}{where}.{p.name}" for p in self.parameters)
-
-    def columns(self, robot, q, qd, qdd) -> np.ndarray:
-        """(T, n, k): the torque on each joint per unit of each parameter (N·m per unit)."""
-        q, qd, qdd = (np.asarray(x, float) for x in (q, qd, qdd))
-        T, n = q.shape
-        out = np.zeros((T, n, len(self.parameters)))
-        if self.cause == "payload":
-            return _payload_columns(robot, self.channel, q, qd, qdd)
-        if self.is_filter:
-            raise ValueError("torque_lag filters the model's columns; it has none of its own")
-        j = robot.joint_index(self.channel)
-        qj, vj, aj = q[:, j], qd[:, j], qdd[:, j]
-        c = self.cause
-        if c == "viscous_friction":
-            out[:, j, 0] = friction_column("viscous", vj)
-        elif c == "coulomb_friction":
-            out[:, j, 0] = friction_column("coulomb", vj)
-        elif c == "position_friction":
-            inside = self.region.contains(qj).astype(float)
-            out[:, j, 0] = inside * np.sign(vj)
-            out[:, j, 1] = inside * vj
-        elif c == "spring":
-            out[:, j, 0] = qj - float(self.extra.get("reference", 0.0))
-        elif c == "torque_offset":
-            out[:, j, 0] = 1.0
-        elif c == "armature":
-            out[:, j, 0] = aj
-        elif c == "coupled_friction":
-            a = robot.joint_index(str(self.extra["partner"]))
-            ratio = float(self.extra["ratio"])
-            v = vj + ratio * qd[:, a]
-            cols = np.stack([np.sign(v), v], axis=1)
-            out[:, j, :] = cols
-            out[:, a, :] += ratio * cols
-        else:  # pragma: no cover - make_term refuses unknown causes
-            raise ValueError(f"unknown dynamics cause {c!r}")
-        return out
+def is_filter(term: Term) -> bool:
+    """True for ``torque_lag``: it filters the model's columns instead of adding its own."""
+    return term.cause == "torque_lag"
 
 
-def _payload_columns(robot, link: str, q, qd, qdd) -> np.ndarray:
+def joints_of(term: Term) -> tuple[str, ...]:
+    """The joints whose torque a term changes (a payload: none named here, see :func:`columns`)."""
+    if term.cause == "coupled_friction":
+        return (term.channel, str(term.extra["partner"]))
+    return () if term.cause == "payload" else (term.channel,)
+
+
+def parameter_labels(term: Term) -> tuple[str, ...]:
+    """``<cause>:<channel>[<region>].<parameter>``: the names of a term's columns in a model."""
+    where = ""
+    if term.region is not None:
+        where = f"[{term.region.low:.3g},{term.region.high:.3g}]"
+    if term.cause == "coupled_friction":
+        where = f"+{term.extra['partner']}*{float(term.extra['ratio']):g}"
+    return tuple(f"{term.cause}:{term.channel}{where}.{p.name}" for p in term.parameters)
+
+
+# ----------------------------------------------------------------------------- behaviours
+# Each fills ``out`` (T, n, k): the torque on each joint per unit of each parameter, joint ``j``
+# the term's channel (None for a payload, whose channel is a link).
+def _viscous(term, robot, j, q, qd, qdd, out):
+    out[:, j, 0] = friction_column("viscous", qd[:, j])
+
+
+def _coulomb(term, robot, j, q, qd, qdd, out):
+    out[:, j, 0] = friction_column("coulomb", qd[:, j])
+
+
+def _position_friction(term, robot, j, q, qd, qdd, out):
+    inside = term.region.contains(q[:, j]).astype(float)
+    out[:, j, 0] = inside * np.sign(qd[:, j])
+    out[:, j, 1] = inside * qd[:, j]
+
+
+def _spring(term, robot, j, q, qd, qdd, out):
+    out[:, j, 0] = q[:, j] - float(term.extra.get("reference", 0.0))
+
+
+def _torque_offset(term, robot, j, q, qd, qdd, out):
+    out[:, j, 0] = 1.0
+
+
+def _armature(term, robot, j, q, qd, qdd, out):
+    out[:, j, 0] = qdd[:, j]
+
+
+def _coupled_friction(term, robot, j, q, qd, qdd, out):
+    a = robot.joint_index(str(term.extra["partner"]))
+    ratio = float(term.extra["ratio"])
+    v = qd[:, j] + ratio * qd[:, a]
+    cols = np.stack([np.sign(v), v], axis=1)
+    out[:, j, :] = cols
+    out[:, a, :] += ratio * cols
+
+
+def _payload(term, robot, j, q, qd, qdd, out):
     """The joint-torque regressor's ten columns (m, m·c, second moments; Pinocchio's order) of the
-    body that carries ``link`` (a point mass anywhere on it: moments in the parent joint's frame)."""
+    body that carries the link (a point mass anywhere on it: moments in the parent joint's frame)."""
     import pinocchio as pin
 
     model = robot.model
-    frame = next((f for f in model.frames if f.name == link), None)
+    frame = next((f for f in model.frames if f.name == term.channel), None)
     if frame is None or frame.parentJoint == 0:
-        raise InputFileError(f"payload: {link!r} is not a moving link of robot {robot.name!r}")
+        raise InputFileError(f"payload: {term.channel!r} is not a moving link of robot {robot.name!r}")
     i = frame.parentJoint - 1  # the body's block of ten columns
     data = model.createData()
-    out = np.zeros((q.shape[0], robot.n_joints, 10))
     for t in range(q.shape[0]):
         Y = pin.computeJointTorqueRegressor(model, data, q[t], qd[t], qdd[t])
         out[t] = Y[:, 10 * i : 10 * i + 10]
+
+
+#: cause -> the function that fills its columns (the registry's dynamics terms; ``torque_lag`` is
+#: a filter, :func:`apply_lags`).
+COLUMNS: dict[str, Callable] = {
+    "viscous_friction": _viscous,
+    "coulomb_friction": _coulomb,
+    "position_friction": _position_friction,
+    "spring": _spring,
+    "torque_offset": _torque_offset,
+    "armature": _armature,
+    "coupled_friction": _coupled_friction,
+    "payload": _payload,
+}
+
+
+def columns(term: Term, robot, q, qd, qdd) -> np.ndarray:
+    """(T, n, k): the torque on each joint per unit of each of ``term``'s parameters (N·m per unit)."""
+    q, qd, qdd = (np.asarray(x, float) for x in (q, qd, qdd))
+    if is_filter(term):
+        raise ValueError("torque_lag filters the model's columns; it has none of its own")
+    fill = COLUMNS.get(term.cause)
+    if fill is None:
+        raise InputFileError(f"{term.cause} is not a dynamics term")
+    out = np.zeros((q.shape[0], q.shape[1], len(term.parameters)))
+    j = None if term.cause == "payload" else robot.joint_index(term.channel)
+    fill(term, robot, j, q, qd, qdd, out)
     return out
 
 
-def make_term(
-    cause: str,
-    channel: str,
-    region: Region | None = None,
-    extra: dict | None = None,
-    values: dict | None = None,
-) -> DynamicsTerm:
-    """A dynamics term of ``cause`` on ``channel`` with its named parameters (values default 0)."""
-    if cause not in PARAMETERS:
-        raise InputFileError(f"unknown dynamics term cause {cause!r}; known: {', '.join(CAUSES)}")
-    if cause == "position_friction" and region is None:
-        raise InputFileError(f"position_friction:{channel} needs a region")
-    if cause == "coupled_friction" and not {"partner", "ratio"} <= set(extra or {}):
-        raise InputFileError(f"coupled_friction:{channel} needs extra {{partner, ratio}}")
-    values = values or {}
-    params = tuple(Parameter(name, float(values.get(name, 0.0)), unit) for name, unit in PARAMETERS[cause])
-    return DynamicsTerm(cause, channel, params, region, dict(extra or {}))
+def dynamics_terms(terms) -> tuple[Term, ...]:
+    """``terms`` as a tuple, each checked to be a dynamics term (a cause with columns or a filter)."""
+    terms = tuple(terms)
+    bad = [t.label for t in terms if t.cause not in COLUMNS and not is_filter(t)]
+    if bad:
+        raise InputFileError(f"not dynamics terms: {', '.join(bad)}")
+    return terms
 
 
-def term_from_dict(d: dict, where: str = "term") -> DynamicsTerm:
-    """A dynamics term from its YAML mapping (``Term.to_dict``), parameters checked by name."""
-    f = Term.fields_from_dict(d, where)
-    if f["cause"] not in PARAMETERS:
-        raise InputFileError(f"{where}: unknown dynamics term cause {f['cause']!r}; known: {', '.join(CAUSES)}")
-    names = tuple(n for n, _ in PARAMETERS[f["cause"]])
-    got = tuple(p.name for p in f["parameters"])
-    if got != names:
-        raise InputFileError(f"{where}: {f['cause']} has parameters {list(names)}, got {list(got)}")
-    units = dict(PARAMETERS[f["cause"]])
-    params = tuple(Parameter(p.name, p.value, units[p.name], stderr=p.stderr) for p in f["parameters"])
-    return DynamicsTerm(f["cause"], f["channel"], params, f["region"], f["extra"])
-
-
-def as_dynamics_term(term: Term) -> DynamicsTerm:
-    """Any Term with a dynamics cause as a :class:`DynamicsTerm` (values and errors kept)."""
-    if isinstance(term, DynamicsTerm):
-        return term
-    return term_from_dict(term.to_dict())
-
-
-def friction_terms(joint_names, friction) -> tuple[DynamicsTerm, ...]:
+def friction_terms(joint_names, friction) -> tuple[Term, ...]:
     """The baseline's friction terms: for each kind of ``friction`` (canonical order), one per joint."""
     return tuple(make_term(FRICTION_CAUSE[kind], j) for kind in friction for j in joint_names)
 
 
 def term_columns(terms, robot, q, qd, qdd) -> np.ndarray:
     """(T, n, K): the columns of every non-filter term, in order (K = their parameters)."""
-    cols = [t.columns(robot, q, qd, qdd) for t in terms if not t.is_filter]
+    cols = [columns(t, robot, q, qd, qdd) for t in terms if not is_filter(t)]
     if not cols:
         return np.zeros((np.shape(q)[0], robot.n_joints, 0))
     return np.concatenate(cols, axis=2)
@@ -237,7 +204,7 @@ def apply_lags(terms, F: np.ndarray, time: np.ndarray, joint_rows: dict) -> np.n
     """The columns F (T, k, P) with every ``torque_lag`` term applied: row r of joint j through
     :func:`lag_filter` with the term's lag (the sensor's filter, linear in the parameters).
     ``joint_rows``: joint -> row."""
-    lags = [t for t in terms if t.is_filter and t.channel in joint_rows]
+    lags = [t for t in terms if is_filter(t) and t.channel in joint_rows]
     if not lags:
         return F
     out = np.array(F, float, copy=True)

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from diegocal.causes import DOMAINS, VOCABULARY  # noqa: F401  (the simulators' names for them)
 from diegocal.errors import OptionError, UnknownNameError
 from diegocal.io.files import to_plain
-from diegocal.vocabulary import DOMAINS, VOCABULARY  # noqa: F401  (the simulators' names for them)
 
 
 class EffectError(OptionError):

@@ -35,6 +35,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
+from diegocal.causes import KINEMATIC_SIZE_UNITS
 from diegocal.errors import RobotConfigError
 from diegocal.io import Log, Truth, make_stream
 from diegocal.robot import PointSet, Robot, pot_transmission
@@ -49,14 +50,13 @@ from diegocal.sim.effects import (
     effect_record,
 )
 from diegocal.stac.calibration import Calibration
-from diegocal.vocabulary import KINEMATIC_SIZE_UNITS
 
 #: Extra samples simulated on each side so a mocap clock offset has data to shift into (a
 #: requested shift longer than this simulates a longer run, so the joints then move differently
 #: from a run of the same seed without it).
 PAD = 16
 
-#: What ``--effect CAUSE:CHANNEL=SIZE`` sizes, per cause (:data:`diegocal.vocabulary.KINEMATIC_SIZE_UNITS`).
+#: What ``--effect CAUSE:CHANNEL=SIZE`` sizes, per cause (:data:`diegocal.causes.KINEMATIC_SIZE_UNITS`).
 SIZE_UNITS = KINEMATIC_SIZE_UNITS
 
 

@@ -241,9 +241,9 @@ class Calibration:
 def _terms(items) -> tuple:
     if not items:
         return ()
-    from diegocal.stac.terms import term_from_dict
+    from diegocal.terms import term_from_dict
 
-    return tuple(term_from_dict(d) for d in items)
+    return tuple(term_from_dict(d, "calib.yaml terms", "kinematics") for d in items)
 
 
 def _f(v) -> float | None:

@@ -1,4 +1,5 @@
-"""Extra terms of the kinematic observation model (thesis eq. 2.11-2.20 plus what ``diagnose`` adds).
+"""The kinematic behaviour of the causes (:mod:`diegocal.causes`): how each extra term changes the
+observation model of thesis eq. (2.11-2.20).
 
 The baseline STAC model (thesis §2.3) predicts a pot reading ``p = gain · s(q) + bias`` and a
 marker ``x = R (base_T_link(q) d) + T0``. Each extra term changes one part of it; this module is
@@ -33,54 +34,22 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from diegocal.errors import InputFileError
+from diegocal.causes import CAUSES as CAUSE_REGISTRY
+from diegocal.causes import causes_of
 from diegocal.io import Log, make_stream
 from diegocal.robot import MarkerSpec, Robot
 from diegocal.robot.model import shift_joint_origins
-from diegocal.terms import Parameter, Region, Term
+from diegocal.terms import Term
 
-#: The kinematic causes this module implements (DESIGN.md vocabulary).
-CAUSES = (
-    "sensor_nonlinearity",
-    "backlash",
-    "link_offset",
-    "time_offset",
-    "marker_slip",
-    "marker_outliers",
-    "swapped_labels",
-)
-POT_CAUSES = ("sensor_nonlinearity", "backlash")
+#: The kinematic causes this module implements (the registry's kinematic terms and faults).
+CAUSES = causes_of("kinematics", "term", "fault")
+#: Pot causes: they change a pot's reading (the others the markers).
+POT_CAUSES = tuple(c for c in CAUSES if CAUSE_REGISTRY[c].channel == "pot")
 #: Suffix of the second marker a slipped marker is split into.
 SLIP = "~slip"
 #: Width of the dead band (in pot noise σ) that tells a pot's direction of motion: the noise
 #: rarely drags it, a real motion does.
 BAND_SIGMAS = 6.0
-
-
-def make_term(cause: str, channel: str, values=None, region: Region | None = None, extra=None) -> Term:
-    """A kinematic term with its named parameters (module docstring), values default 0."""
-    names = {
-        "sensor_nonlinearity": (("c2", "V"), ("c3", "V")),
-        "backlash": (("half_width", "V"),),
-        "link_offset": (("dx", "m"), ("dy", "m"), ("dz", "m")),
-        "time_offset": (("seconds", "s"),),
-        "marker_slip": (("dx", "m"), ("dy", "m"), ("dz", "m")),
-        "marker_outliers": (),
-        "swapped_labels": (),
-    }
-    if cause not in names:
-        raise InputFileError(f"unknown kinematic term {cause!r} (expected one of {', '.join(CAUSES)})")
-    vals = np.zeros(len(names[cause])) if values is None else np.asarray(values, float).ravel()
-    params = tuple(Parameter(n, float(v), u) for (n, u), v in zip(names[cause], vals, strict=True))
-    return Term(cause, channel, params, region, dict(extra or {}))
-
-
-def term_from_dict(d: dict) -> Term:
-    """A kinematic term from its YAML mapping (:meth:`diegocal.terms.Term.to_dict`)."""
-    fields = Term.fields_from_dict(d, "calib.yaml terms")
-    if fields["cause"] not in CAUSES:
-        raise InputFileError(f"calib.yaml terms: unknown kinematic cause {fields['cause']!r}")
-    return Term(**fields)
 
 
 # ----------------------------------------------------------------------------- pot terms

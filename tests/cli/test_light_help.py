@@ -20,7 +20,7 @@ from diegocal.cli import app
 HEAVY = ("numpy", "scipy", "h5py", "pandas", "pinocchio", "matplotlib", "dask", "distributed", "sklearn", "torch")
 #: the diegocal modules a help may load: the package, its errors, its vocabularies (plain data) and
 #: the command line itself
-LIGHT_DIEGOCAL = ("diegocal", "diegocal.errors", "diegocal.vocabulary", "diegocal.cli")
+LIGHT_DIEGOCAL = ("diegocal", "diegocal.errors", "diegocal.causes", "diegocal.domains", "diegocal.cli")
 
 #: Command modules that still import heavy modules at module level: being edited on other
 #: branches (issue #16); their commands' help is an expected failure (strict: it fails once they

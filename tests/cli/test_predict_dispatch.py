@@ -22,9 +22,9 @@ def _write(path: Path, mapping: dict) -> Path:
 @pytest.mark.parametrize(
     "mapping, predictor",
     [
-        ({"kind": "calibration", "pots": {}}, "calib"),
-        ({"kind": "pneumatic", "chambers": {}}, "pneumatic"),
-        ({"pots": {}, "markers": {}}, "calib"),  # a calib.yaml written before the header existed
+        ({"kind": "calibration", "pots": {}}, "kinematics"),
+        ({"kind": "pneumatic", "chambers": {}}, "pneumatics"),
+        ({"pots": {}, "markers": {}}, "kinematics"),  # a calib.yaml written before the header existed
     ],
 )
 def test_the_predictor_follows_the_bundle_kind(tmp_path, mapping, predictor):
@@ -38,7 +38,7 @@ def test_a_diagnosis_resolves_to_its_extended_model(tmp_path):
         tmp_path / "run.diagnosis.yaml",
         {"kind": "diagnosis", "domain": "pneumatics", "findings": [], "extended_model": extended.name},
     )
-    assert resolve_model(diagnosis) == ("pneumatic", extended)
+    assert resolve_model(diagnosis) == ("pneumatics", extended)
 
 
 def test_a_diagnosis_without_an_extended_model_is_an_error(tmp_path):

@@ -24,8 +24,8 @@ from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
 from diegocal.sim.kinematics import KinematicsOptions, backlash, simulate_kinematics
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.terms import apply_terms, direction, make_term, shift_clock, to_log_markers
-from diegocal.terms import Region
+from diegocal.stac.terms import apply_terms, direction, shift_clock, to_log_markers
+from diegocal.terms import Region, make_term
 
 
 @pytest.fixture(scope="module")

@@ -5,15 +5,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from diegocal.causes import causes_of
 from diegocal.errors import InputFileError
-from diegocal.pneumatic import FitOptions, chamber_data, fit_chamber, make_term
+from diegocal.pneumatic import FitOptions, chamber_data, fit_chamber
 from diegocal.pneumatic.fit import volume_normalisation
 from diegocal.pneumatic.model import BASELINE, ChamberModel, steady_state, step_vector
 from diegocal.pneumatic.params import NAMES, ChamberParams
 from diegocal.pneumatic.predict import next_step, predict_with_resets
 from diegocal.pneumatic.synthetic import simulate_model
-from diegocal.pneumatic.terms import CAUSES, baseline_terms
-from diegocal.terms import Term
+from diegocal.pneumatic.terms import CAUSES, PARTS, baseline_terms
+from diegocal.terms import make_term, term_from_dict
 
 X = np.array([4.9, 1.5, 0.3, -20.0, 0.5, 0.3, 30.0, 0.1, 0.1])
 CONSTS = (360.0, 260.0, 0.1)
@@ -95,10 +96,12 @@ def test_params_with_terms_round_trip_through_yaml_mapping():
     back = ChamberParams.from_dict(raw)
     np.testing.assert_array_equal(back.full_vector(), c.full_vector())
     assert back.terms[1].channel == "elbow.ext" and back.terms[1].parameters[0].unit == "1/s"
-    # a generic Term (as diagnose hands it over) becomes the chamber term of its cause
-    generic = Term(**Term.fields_from_dict(raw["terms"][2]))
+    # a term read back from YAML is the chamber term of its cause: one Term type for every domain
+    generic = term_from_dict(raw["terms"][2])
     assert ChamberModel((generic,)).names[-1] == "droop"
-    with pytest.raises(InputFileError, match="unknown pneumatic term"):
+    # every pneumatic cause of the registry has its part of the model here
+    assert set(PARTS) == set(causes_of("pneumatics"))
+    with pytest.raises(InputFileError, match="unknown cause"):
         ChamberParams.from_dict({**raw, "terms": [{"cause": "valve_stiction", "channel": "x"}]})
     with pytest.raises(ValueError, match="one term per cause"):
         ChamberModel(_extra(("chamber_leak", "chamber_leak")))
@@ -123,7 +126,7 @@ def test_fit_recovers_extra_terms_on_data_made_by_the_model(robot, train_log):
     truth = base.with_terms(_extra(chamber=name))
     log = simulate_model(train_log, robot.sensors, {name: truth}, noise=1.0, seed=4)
     data = chamber_data(log.without_truth(), robot.sensors, name)
-    start = tuple(make_term(c, name, {"delay_s": 0.02}) for c in CAUSES)  # delay starts a sample off
+    start = tuple(make_term(c, name, {"delay_s": 0.02} if c == "valve_delay" else None) for c in CAUSES)  # a sample off
     fit = fit_chamber(data, FitOptions(drift_starts=0), terms=start)
     est = fit.params.full_vector()
     se_extra = [p.stderr for t in fit.params.terms for p in t.parameters]

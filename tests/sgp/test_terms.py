@@ -7,21 +7,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from diegocal.causes import causes_of
 from diegocal.errors import InputFileError
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions, load_model
 from diegocal.sgp.model import DynamicsModel
 from diegocal.sgp.regressor import full_regressor
-from diegocal.sgp.terms import (
-    CAUSES,
-    friction_terms,
-    lag_filter,
-    make_term,
-    term_columns,
-    term_from_dict,
-)
-from diegocal.terms import Region
+from diegocal.sgp.terms import COLUMNS, columns, friction_terms, lag_filter, term_columns
+from diegocal.terms import Region, make_term, term_from_dict
 
 
 @pytest.fixture(scope="module")
@@ -51,28 +45,31 @@ def test_term_columns_are_the_torque_each_parameter_adds(arm3):
     _, q, qd, qdd = states(arm3)
     j = 1
     region = Region("q.joint2", 0.2, 0.9)
-    pf = make_term("position_friction", "joint2", region).columns(arm3, q, qd, qdd)
+    pf = columns(make_term("position_friction", "joint2", region=region), arm3, q, qd, qdd)
     inside = (q[:, j] >= 0.2) & (q[:, j] <= 0.9)
     np.testing.assert_array_equal(pf[:, j, 0], inside * np.sign(qd[:, j]))
     np.testing.assert_array_equal(pf[:, j, 1], inside * qd[:, j])
     assert not pf[:, [0, 2]].any()  # only its joint
-    spring = make_term("spring", "joint2", extra={"reference": 0.3}).columns(arm3, q, qd, qdd)
+    spring = columns(make_term("spring", "joint2", extra={"reference": 0.3}), arm3, q, qd, qdd)
     np.testing.assert_allclose(spring[:, j, 0], q[:, j] - 0.3)
-    arm = make_term("armature", "joint3").columns(arm3, q, qd, qdd)
+    arm = columns(make_term("armature", "joint3"), arm3, q, qd, qdd)
     np.testing.assert_array_equal(arm[:, 2, 0], qdd[:, 2])
-    cf = make_term("coupled_friction", "joint3", extra={"partner": "joint2", "ratio": 2.0}).columns(arm3, q, qd, qdd)
+    cf = columns(make_term("coupled_friction", "joint3", extra={"partner": "joint2", "ratio": 2.0}), arm3, q, qd, qdd)
     v = qd[:, 2] + 2.0 * qd[:, 1]
     np.testing.assert_allclose(cf[:, 2, 0], np.sign(v))
     np.testing.assert_allclose(cf[:, 1, 1], 2.0 * v)  # the partner feels ratio × the motor's friction
 
 
 def test_terms_round_trip_through_yaml_and_refuse_bad_input():
-    t = make_term("position_friction", "joint2", Region("q.joint2", 0.2, 0.9), values={"coulomb": 0.3})
+    t = make_term("position_friction", "joint2", {"coulomb": 0.3}, region=Region("q.joint2", 0.2, 0.9))
     back = term_from_dict(t.to_dict())
     assert back == t and back.value("coulomb") == 0.3
-    assert set(CAUSES) >= {"torque_offset", "spring", "armature", "coupled_friction", "torque_lag", "payload"}
-    with pytest.raises(InputFileError, match="unknown dynamics term cause"):
-        make_term("backlash", "joint1")
+    # every dynamics term of the registry has a behaviour here (torque_lag is a filter)
+    assert set(COLUMNS) | {"torque_lag"} == set(causes_of("dynamics", "term"))
+    with pytest.raises(InputFileError, match="not a dynamics term"):
+        columns(make_term("backlash", "joint1"), None, np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(InputFileError, match="is a kinematics cause"):
+        term_from_dict(make_term("backlash", "joint1").to_dict(), domain="dynamics")
     with pytest.raises(InputFileError, match="needs a region"):
         make_term("position_friction", "joint1")
     with pytest.raises(InputFileError, match="has parameters"):
@@ -137,7 +134,7 @@ def test_payload_columns_are_the_link_bodys_ten_inertial_columns(arm3):
     _, q, qd, qdd = states(arm3, T=50)
     term = make_term("payload", "link3")
     assert [p.name for p in term.parameters][:4] == ["mass", "mc_x", "mc_y", "mc_z"]
-    X = term.columns(arm3, q, qd, qdd)
+    X = columns(term, arm3, q, qd, qdd)
     assert X.shape == (50, 3, 10)
     n = arm3.n_joints
     np.testing.assert_array_equal(X, full_regressor(arm3, q, qd, qdd, ())[:, :, 10 * (n - 1) : 10 * n])
@@ -149,7 +146,7 @@ def test_payload_columns_are_the_link_bodys_ten_inertial_columns(arm3):
     diff = np.array([pin.rnea(heavy, d1, *x) - pin.rnea(arm3.model, d0, *x) for x in zip(q, qd, qdd, strict=True)])
     np.testing.assert_allclose(X @ theta, diff, atol=1e-10)
     with pytest.raises(InputFileError, match="moving link"):
-        make_term("payload", "no_such_link").columns(arm3, q, qd, qdd)
+        columns(make_term("payload", "no_such_link"), arm3, q, qd, qdd)
 
 
 def test_a_nominal_inertia_model_fits_friction_and_a_payload_and_survives_its_bundle(arm3, tmp_path):
@@ -166,7 +163,7 @@ def test_a_nominal_inertia_model_fits_friction_and_a_payload_and_survives_its_bu
     np.testing.assert_allclose(nominal_torque(arm3, q, qd, qdd), rnea, atol=1e-9)
     payload = make_term("payload", "link3")
     theta = pin.Inertia(0.4, np.array([0.1, 0.0, 0.02]), np.zeros((3, 3))).toDynamicParameters()
-    tau = rnea + payload.columns(arm3, q, qd, qdd) @ theta + 0.3 * qd + 0.1 * np.sign(qd)
+    tau = rnea + columns(payload, arm3, q, qd, qdd) @ theta + 0.3 * qd + 0.1 * np.sign(qd)
     tau += 1e-3 * np.random.default_rng(5).standard_normal(tau.shape)
     opts = SGPOptions(kind="pr", inertia="nominal")
     model = DynamicsModel(arm3, opts, terms=(payload,)).fit_arrays(q, qd, qdd, tau, time=time)
