@@ -121,3 +121,74 @@ def write_rostopic_csv(path, names, time, position, velocity, effort, receive_of
         lines.append(",".join(row))
     Path(path).write_text("\n".join(lines) + "\n")
     return Path(path)
+
+
+def _cell(v) -> str:
+    """A number as the vendors write it; NaN (an occluded marker) as an empty cell."""
+    return "" if not np.isfinite(v) else f"{float(v):.6f}"
+
+
+def write_trc(path, labels, xyz, rate, unit="mm", first_frame=1) -> Path:
+    """An OpenSim / Cortex TRC file: markers ``xyz`` (T, K, 3) in ``unit``, NaN written as empty cells."""
+    T, K = xyz.shape[:2]
+    lines = [f"PathFileType\t4\t(X/Y/Z)\t{Path(path).name}",
+             "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+             f"{rate:.2f}\t{rate:.2f}\t{T}\t{K}\t{unit}\t{rate:.2f}\t{first_frame}\t{T}",
+             "Frame#\tTime\t" + "\t".join(f"{n}\t\t" for n in labels),
+             "\t\t" + "\t".join(f"X{k + 1}\tY{k + 1}\tZ{k + 1}" for k in range(K)), ""]
+    for i in range(T):
+        t = (first_frame - 1 + i) / rate
+        lines.append(f"{first_frame + i}\t{t:.5f}\t" + "\t".join(_cell(v) for v in xyz[i].ravel()))
+    Path(path).write_text("\n".join(lines) + "\n")
+    return Path(path)
+
+
+def write_vicon_csv(path, labels, xyz, rate, devices=None, unit="mm") -> Path:
+    """A Vicon Nexus CSV export: a Devices section (``devices``: (name, channels, data (T * r, m), rate
+    r × ``rate``, unit)) then the Trajectories section, markers (T, K, 3) with NaN as empty cells."""
+    lines = []
+    if devices is not None:
+        name, channels, data, dev_unit = devices
+        r = data.shape[0] // xyz.shape[0]
+        lines += ["Devices", f"{rate * r:g}", ",," + name + "," * len(channels),
+                  "Frame,Sub Frame," + ",".join(channels), ",," + ",".join([dev_unit] * len(channels))]
+        lines += [f"{i // r + 1},{i % r}," + ",".join(_cell(v) for v in row) for i, row in enumerate(data)]
+        lines.append("")
+    K = len(labels)
+    lines += ["Trajectories", f"{rate:g}", ",," + ",".join(f"{n},," for n in labels),
+              "Frame,Sub Frame," + ",".join(["X,Y,Z"] * K), ",," + ",".join([unit] * 3 * K)]
+    lines += [f"{i + 1},0," + ",".join(_cell(v) for v in frame.ravel()) for i, frame in enumerate(xyz)]
+    Path(path).write_text("\n".join(lines) + "\n")
+    return Path(path)
+
+
+def write_motive_csv(path, labels, xyz, rate, unit="Millimeters", body=None) -> Path:
+    """An OptiTrack Motive CSV (format 1.23): a rigid body ``body`` (its name, positions (T, 3)) with
+    its solved markers, the labelled markers (T, K, 3), one unlabelled marker; NaN as empty cells."""
+    T = xyz.shape[0]
+    head, columns = [], []  # head: (type, name, id, quantity, component) per column
+
+    def add(kind, name, ident, quantity, axes, values):
+        head.extend((kind, name, ident, quantity, a) for a in axes)
+        columns.append(values)
+
+    if body is not None:
+        bname, pos = body
+        add("Rigid Body", bname, "1", "Rotation", "XYZW", np.tile([0.0, 0.0, 0.0, 1.0], (T, 1)))
+        add("Rigid Body", bname, "1", "Position", "XYZ", pos)
+        add("Rigid Body", bname, "1", "Mean Marker Error", [""], np.full((T, 1), 0.0002))
+        add("Rigid Body Marker", f"{bname}:Marker1", "1", "Position", "XYZ", pos + 5.0)
+    for k, label in enumerate(labels):
+        add("Marker", label, str(100 + k), "Position", "XYZ", xyz[:, k])
+    add("Marker", "Unlabeled 1042", "1042", "Position", "XYZ", np.full((T, 3), 123.0))
+    meta = ("Format Version,1.23,Take Name,Take 2024-03-05 10.15.02 AM,Take Notes,,Capture Frame Rate,"
+            f"{rate:.6f},Export Frame Rate,{rate:.6f},Capture Start Time,2024-03-05 10.15.02.118 AM,"
+            f"Capture Start Frame,0,Total Frames in Take,{T},Total Exported Frames,{T},Rotation Type,Quaternion,"
+            f"Length Units,{unit},Coordinate Space,Global")
+    rows = list(zip(*head, strict=True))
+    lines = [meta, "", ",Type," + ",".join(rows[0]), ",Name," + ",".join(rows[1]), ",ID," + ",".join(rows[2]),
+             ",," + ",".join(rows[3]), "Frame,Time (Seconds)," + ",".join(rows[4])]
+    table = np.column_stack(columns)
+    lines += [f"{i},{i / rate:.6f}," + ",".join(_cell(v) for v in row) for i, row in enumerate(table)]
+    Path(path).write_text("\n".join(lines) + "\n")
+    return Path(path)

@@ -34,7 +34,7 @@ def test_markers_come_in_metres_with_gaps_as_nan_on_the_mocap_clock(trial):
     np.testing.assert_allclose(log.time, (20 + np.arange(40)) / 100.0)
     assert log.rate_hz == 100.0
     assert "trial.c3d's time stamps (100 Hz)" in result.clock
-    assert any("analog channels not imported" in n for n in result.notes)
+    assert any("analogs not imported" in n for n in result.notes)
 
 
 def test_marker_names_mapped_and_analogs_read_at_mocap_frames(trial):

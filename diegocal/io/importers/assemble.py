@@ -21,7 +21,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from diegocal.errors import LogFormatError
-from diegocal.io.importers.mapping import STREAMS, Clock, ImportMap, MapError, StreamSpec, number, per_channel
+from diegocal.io.importers.labels import strip_subject, unprefixed
+from diegocal.io.importers.mapping import (
+    MOCAP_KINDS,
+    STREAMS,
+    Clock,
+    ImportMap,
+    MapError,
+    StreamSpec,
+    number,
+    per_channel,
+)
 from diegocal.io.importers.robot_info import RobotInfo, check_marker_names, fold_mimic, robot_info, unit_text
 from diegocal.io.importers.signals import (
     default_max_gap,
@@ -129,10 +139,11 @@ def _default_specs(sources: dict[str, Source], notes: list[str]) -> tuple[Stream
     specs, origin = [], {}
     for src in sources.values():
         found = []
-        if src.kind == "c3d":
-            found.append(StreamSpec("markers", source=src.name, table="points"))
-            if "analogs" in src.table_names:
-                notes.append(f"{src.path.name}: analog channels not imported (map them to a stream)")
+        if src.kind in MOCAP_KINDS:
+            found.append(StreamSpec("markers", source=src.name, table=src.default_table))
+            others = [t for t in src.table_names if t != src.default_table]
+            if others:
+                notes.append(f"{src.path.name}: {', '.join(others)} not imported (map them to a stream)")
         else:
             if src.kind == "bag":
                 js = [t for t in src.table_names if t == src.default_table]
@@ -188,6 +199,11 @@ def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap,
     origin = _label(src, table)
     where = f"stream '{spec.stream}' ({origin})"
     pairs = spec.columns if spec.columns is not None else _natural(spec.stream, table, where)
+    subject = ""
+    if spec.stream == "markers":  # `ua1` in the map for Vicon's `PR2:ua1`; one subject's prefix off the names
+        pairs = tuple((c if c in table.columns else unprefixed(c, table.columns) or c, ch) for c, ch in pairs)
+        if spec.subject is not None or spec.columns is None:
+            pairs, subject = strip_subject(pairs, spec.subject, where)
     names = tuple(ch for _, ch in pairs)
     cols = [_column(spec.stream, table, col, where) for col, _ in pairs]
     vector = spec.stream in VECTOR_STREAMS
@@ -197,8 +213,13 @@ def _extract(spec: StreamSpec, sources: dict[str, Source], mapping: ImportMap,
                                                                else "a single number, a marker needs x, y, z"))
     data = np.stack(cols, axis=1).astype(np.float64)
     data, conversion = _convert(spec, data, names, [c for c, _ in pairs], table, mapping, where, info)
+    if subject:
+        conversion += f", {subject}"
     max_gap = src.spec.max_gap_s if src.spec.max_gap_s is not None else default_max_gap(table.time)
-    return Series(spec.stream, names, table.time, data, origin, src.name, table.name, max_gap,
+    time = table.time + spec.time_offset if spec.time_offset else table.time
+    if spec.time_offset:
+        conversion += f", time {spec.time_offset:+g} s"
+    return Series(spec.stream, names, time, data, origin, src.name, table.name, max_gap,
                   table.rate_hz), conversion
 
 
@@ -400,7 +421,7 @@ def _clock_table(series: list[Series], sources: dict[str, Source], clock: Clock 
         src = sources[clock.source]
         t = src.table(clock.table)
         return _ClockTable(t.time, t.rate_hz, _label(src, t))
-    mocap = {(s.source, s.table) for s in series if sources[s.source].kind == "c3d" and s.stream == "markers"}
+    mocap = {(s.source, s.table) for s in series if sources[s.source].kind in MOCAP_KINDS and s.stream == "markers"}
     if len(mocap) == 1:
         s = next(x for x in series if (x.source, x.table) in mocap)
         return _ClockTable(s.time, s.rate_hz, sources[s.source].path.name)

@@ -25,6 +25,8 @@ its ``<stream>.<name>`` columns)::
         offset: [0, -1.5708]          # value = scale * x + offset, last; number, list or mapping
         # scale: 1.0
         # torque_constant: 0.1        # N·m/A, for tau in A or mA
+        # time_offset: 0.0            # s, added to this stream's time stamps (after its source's)
+      # markers: {subject: PR2}       # Vicon/Motive Subject:Marker labels: keep this subject's
     transmission:                     # motor = ratio · joint (rows: motors, columns: joints)
       ratio: [[32, 0], [0, 45]]       # or a list: the diagonal
     clock: {rate_hz: 200}             # or {source: mocap} [the C3D's, else the only file's]
@@ -51,7 +53,10 @@ from diegocal.io.importers.units import STREAM_UNITS, close_match
 STREAMS = tuple(STREAM_UNITS)
 DERIVABLE = ("qd", "qdd")
 INTERPOLATIONS = ("linear", "nearest", "previous")
-SOURCE_KINDS = ("csv", "c3d", "bag")
+SOURCE_KINDS = ("csv", "c3d", "bag", "trc", "vicon", "motive")
+#: Source kinds that are motion capture: their marker table is a natural stream and their clock is
+#: the one a log takes by default.
+MOCAP_KINDS = ("c3d", "trc", "vicon", "motive")
 
 
 class MapError(DiegocalError, ValueError):
@@ -93,6 +98,8 @@ class StreamSpec:
     scale: object = 1.0
     offset: object = 0.0
     torque_constant: object = None
+    subject: str | None = None
+    time_offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -155,7 +162,8 @@ class ImportMap:
 _TOP = ("robot", "sources", "streams", "transmission", "clock", "interpolation", "filter", "derive", "window")
 _SOURCE = ("file", "kind", "time", "time_unit", "rate_hz", "time_offset", "zero_time", "stamp", "max_gap_s",
            "allow_truncated")
-_STREAM = ("source", "table", "columns", "unit", "side", "scale", "offset", "torque_constant")
+_STREAM = ("source", "table", "columns", "unit", "side", "scale", "offset", "torque_constant", "subject",
+           "time_offset")
 
 
 def load_map(path) -> ImportMap:
@@ -268,6 +276,8 @@ def _stream(name, spec, pre) -> StreamSpec:
         scale=spec.get("scale", 1.0),
         offset=spec.get("offset", 0.0),
         torque_constant=spec.get("torque_constant"),
+        subject=None if spec.get("subject") is None else str(spec["subject"]),
+        time_offset=number(spec.get("time_offset", 0.0), f"{where}: time_offset"),
     )
 
 

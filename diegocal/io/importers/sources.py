@@ -1,4 +1,4 @@
-"""Which SRC file is which map source, and the reader for each (CSV, C3D, bag)."""
+"""Which SRC file is which map source, and the reader for each (CSV, C3D, TRC, Vicon/Motive CSV, bag)."""
 
 from __future__ import annotations
 
@@ -68,6 +68,18 @@ def _open(path: Path, spec: SourceSpec) -> Source:
     kind = kind_of(path, spec)
     if path.is_dir() and kind != "bag":
         raise InputFileError(f"{path}: is a directory (a ROS 2 bag folder needs its metadata.yaml)")
+    if kind == "csv":
+        from diegocal.io.importers.mocap_csv import sniff
+
+        kind = sniff(path) or "csv"
+    if kind in ("vicon", "motive"):
+        from diegocal.io.importers.mocap_csv import open_mocap_csv
+
+        return open_mocap_csv(path, spec, kind)
+    if kind == "trc":
+        from diegocal.io.importers.trc_source import open_trc
+
+        return open_trc(path, spec)
     if kind == "csv":
         from diegocal.io.importers.csv_source import open_csv
 

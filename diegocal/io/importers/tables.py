@@ -102,11 +102,13 @@ def kind_of(path: Path, spec: SourceSpec) -> str:
     suffix = path.suffix.lower()
     if suffix == ".c3d":
         return "c3d"
+    if suffix == ".trc":
+        return "trc"
     if suffix in (".bag", ".db3", ".mcap") or (path.is_dir() and (path / "metadata.yaml").exists()):
         return "bag"
     if suffix in (".csv", ".txt", ".tsv"):
         return "csv"
-    raise InputFileError(f"{path}: unknown source format (expected .c3d, .bag, .db3, .mcap, "
+    raise InputFileError(f"{path}: unknown source format (expected .c3d, .trc, .bag, .db3, .mcap, "
                          "a ROS 2 bag folder or .csv; or state `kind:` in the map)")
 
 
@@ -157,3 +159,28 @@ def preview(names, n: int = 8) -> str:
     """The first ``n`` names, comma-separated, for messages."""
     names = list(names)
     return ", ".join(names[:n]) + (", ..." if len(names) > n else "") if names else "none"
+
+
+def numeric_block(rows: list[str], ncols: int, path: Path, sep: str = "\t") -> np.ndarray:
+    """Text rows of numbers -> (len(rows), ncols) float64; an empty cell (an occluded marker) or a
+    short row gives NaN, cells past ``ncols`` are left out, a cell holding text is an error."""
+    import io
+
+    import pandas as pd
+
+    if not rows:
+        raise LogFormatError(f"{path}: no data rows")
+    whitespace = sep == "\t" and "\t" not in rows[0]
+    width = max(ncols, max((len(r.split()) if whitespace else r.count(sep) + 1) for r in rows))
+    try:
+        frame = pd.read_csv(io.StringIO("\n".join(rows)), sep=r"\s+" if whitespace else sep, header=None,
+                            names=range(width), skipinitialspace=True)
+    except (pd.errors.ParserError, ValueError) as exc:
+        raise LogFormatError(f"{path}: cannot parse the data rows ({str(exc).splitlines()[0]})") from None
+    frame = frame.iloc[:, :ncols]
+    values = frame.apply(pd.to_numeric, errors="coerce")
+    bad = values.isna() & frame.notna() & (frame.astype(str).apply(lambda c: c.str.strip()) != "")
+    if bad.to_numpy().any():
+        i, k = (int(v[0]) for v in np.nonzero(bad.to_numpy()))
+        raise LogFormatError(f"{path}: data row {i + 1}, column {k + 1} holds {frame.iat[i, k]!r}, not a number")
+    return values.to_numpy(dtype=np.float64)
