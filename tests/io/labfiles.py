@@ -1,4 +1,5 @@
-"""Writers of small lab files for the import tests: C3D (ezc3d), ROS bags (rosbags), rostopic CSVs."""
+"""Writers of small lab files for the import tests: C3D (ezc3d), ROS bags (rosbags), rostopic CSVs,
+TRC, Vicon Nexus and Motive CSVs (by hand); and the numbers of a fitted output, to compare two fits."""
 
 from __future__ import annotations
 
@@ -192,3 +193,23 @@ def write_motive_csv(path, labels, xyz, rate, unit="Millimeters", body=None) -> 
     lines += [f"{i},{i / rate:.6f}," + ",".join(_cell(v) for v in row) for i, row in enumerate(table)]
     Path(path).write_text("\n".join(lines) + "\n")
     return Path(path)
+
+
+def fitted_values(path) -> dict:
+    """Every number a fitted output (calib.yaml, ...) holds, by its place in the file, less the
+    provenance (log, command, created) and the optimiser's record (``fit``: its iterations and
+    timings): two fits compare without knowing the file's layout."""
+    import yaml
+
+    def walk(node, key):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                if key or k not in ("log", "command", "created", "robot", "version", "fit"):
+                    yield from walk(v, f"{key}/{k}")
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                yield from walk(v, f"{key}/{i}")
+        elif isinstance(node, int | float) and not isinstance(node, bool):
+            yield key, float(node)
+
+    return dict(walk(yaml.safe_load(Path(path).read_text()), ""))

@@ -10,7 +10,8 @@ its ``<stream>.<name>`` columns)::
         file: pos_read_data.csv       # matched against the SRC file names (shell pattern)
         rate_hz: 5000                 # a CSV without a time column: sample k at k / rate_hz s
         # time: t, time_unit: s       # a CSV's time column and its unit (s, ms, us, ns)
-        # time_offset: 0.0            # s, added to this file's time stamps (align two clocks)
+        # time_offset: 0.0            # s, added to this file's time stamps (align two clocks);
+        #                             # auto: estimated from the motion both files record
         # zero_time: false            # subtract the file's first time stamp first
         # stamp: header               # bags: header stamps (receive time where a header is 0) | receive
         # max_gap_s: 0.05             # no interpolation across longer gaps [10 sample periods]
@@ -78,6 +79,7 @@ class SourceSpec:
     stamp: str = "header"
     max_gap_s: float | None = None
     allow_truncated: bool = False
+    auto_offset: bool = False  # `time_offset: auto`: estimated from the motion (see .clocks)
 
 
 @dataclass(frozen=True)
@@ -225,6 +227,7 @@ def _source(name, spec, pre) -> SourceSpec:
         raise MapError(f"{pre}source {name!r}: stamp must be header or receive, got {stamp!r}")
     if spec.get("time") is not None and spec.get("rate_hz") is not None:
         raise MapError(f"{pre}source {name!r}: give either a time column or rate_hz, not both")
+    auto = spec.get("time_offset") == "auto"
     return SourceSpec(
         name=str(name),
         file=None if spec.get("file") is None else str(spec["file"]),
@@ -232,7 +235,8 @@ def _source(name, spec, pre) -> SourceSpec:
         time=None if spec.get("time") is None else str(spec["time"]),
         time_unit=None if spec.get("time_unit") is None else str(spec["time_unit"]),
         rate_hz=_positive(spec.get("rate_hz"), f"{pre}source {name!r}: rate_hz"),
-        time_offset=number(spec.get("time_offset", 0.0), f"{pre}source {name!r}: time_offset"),
+        time_offset=0.0 if auto else number(spec.get("time_offset", 0.0), f"{pre}source {name!r}: time_offset"),
+        auto_offset=auto,
         zero_time=bool(spec.get("zero_time", False)),
         stamp=stamp,
         max_gap_s=_positive(spec.get("max_gap_s"), f"{pre}source {name!r}: max_gap_s"),
