@@ -1,4 +1,4 @@
-"""`diegocal import SRC... [--map MAP.yaml] -o LOG`: lab files (C3D, ROS bags, CSV exports) -> one log."""
+"""`diegocal import SRC... [--map MAP.yaml] -o LOG`: lab files (C3D, TRC, ROS bags, CSV exports) -> one log."""
 
 from __future__ import annotations
 
@@ -11,12 +11,13 @@ from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, log_output, positive, summary
 
 HELP = (
-    "Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock.\n\n"
-    "The map (YAML) has the keys robot; sources (file pattern, time column or rate_hz, time_offset, "
-    "zero_time, stamp, max_gap_s); streams (source, table or topic, columns: file column -> channel, unit, "
-    "side: motor, scale, offset, torque_constant); transmission (ratio); clock (rate_hz or source); "
-    "interpolation (linear, nearest, previous); filter (cutoff_hz, order); derive (qd, qdd); window (auto, "
-    "or start and stop in s). diegocal/io/importers/mapping.py describes every key; "
+    "Turn motion capture (C3D, TRC, Vicon Nexus and OptiTrack Motive CSV), ROS bags and lab CSVs into one "
+    "diegocal log on one clock.\n\n"
+    "The map (YAML) has the keys robot; sources (file pattern, time column or rate_hz, time_offset in s or auto, "
+    "zero_time, stamp, max_gap_s, allow_truncated); streams (source, table or topic, columns: file column -> "
+    "channel, unit, side: motor, scale, offset, torque_constant, time_offset, subject); transmission (ratio); "
+    "clock (rate_hz or source); interpolation (linear, nearest, previous); filter (cutoff_hz, order); derive "
+    "(qd, qdd); window (auto, or start and stop in s). docs/import.md describes the formats and every key; "
     "sample_data/real/*.map.yaml are worked examples."
 )
 
@@ -26,8 +27,8 @@ HELP = (
 def import_cmd(
     sources: Annotated[list[Path], typer.Argument(
         metavar="SRC",
-        help="C3D (.c3d), ROS bags (.bag, .db3, .mcap or a ROS 2 bag folder), CSV exports "
-        "(rostopic echo -p, lab tables, diegocal CSV).")],
+        help="C3D (.c3d), TRC (.trc), ROS bags (.bag, .db3, .mcap or a ROS 2 bag folder), CSV exports "
+        "(Vicon Nexus, OptiTrack Motive, rostopic echo -p, lab tables, diegocal CSV).")],
     output: Annotated[
         Path, typer.Option("--output", "-o", callback=log_output, help="Log to write (.h5 or .csv).")
     ],
@@ -37,7 +38,9 @@ def import_cmd(
     rate: Annotated[float | None, typer.Option(
         callback=positive, help="Clock of the log in Hz, replacing the map's clock; by default the map's clock, "
         "else the C3D's time stamps, else those the files share.")] = None,
-    robot: Annotated[str | None, typer.Option(help="Robot the log names; by default the map's robot.")] = None,
+    robot: Annotated[str | None, typer.Option(
+        help="Robot the log names (a bundled name, a robot directory, a URDF or xacro file); by default the map's "
+        "robot. Joint units, mimic joints and marker names are checked against it.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock."""
