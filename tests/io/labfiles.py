@@ -213,3 +213,14 @@ def fitted_values(path) -> dict:
             yield key, float(node)
 
     return dict(walk(yaml.safe_load(Path(path).read_text()), ""))
+
+
+def run_ok(args):
+    """``diegocal ARGS`` through Typer's CliRunner; it must exit 0 (its output is the message)."""
+    from typer.testing import CliRunner
+
+    from diegocal.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert result.exit_code == 0, result.output
+    return result

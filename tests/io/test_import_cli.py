@@ -13,30 +13,24 @@ from diegocal.cli import app
 from diegocal.cli.testing import one_line_error
 from diegocal.io import Log, load_log, make_stream, save_log
 from diegocal.io.importers import lowpass
-from tests.io.labfiles import fitted_values, write_bag, write_c3d, write_rostopic_csv
+from tests.io.labfiles import fitted_values, run_ok, write_bag, write_c3d, write_rostopic_csv
 
 runner = CliRunner()
 REAL_MAPS = Path(__file__).resolve().parents[2] / "sample_data" / "real"
-
-
-def _ok(args):
-    result = runner.invoke(app, [str(a) for a in args])
-    assert result.exit_code == 0, result.output
-    return result
 
 
 @pytest.fixture(scope="module")
 def arm3(tmp_path_factory):
     """10 s of the 3-link arm at 100 Hz (simulated: q, qd, qdd, tau with truth)."""
     path = tmp_path_factory.mktemp("arm3") / "arm3.h5"
-    _ok(["simulate", "dynamics", "--robot", "arm3", "--duration", "10", "--seed", "4", "-o", path, "-q"])
+    run_ok(["simulate", "dynamics", "--robot", "arm3", "--duration", "10", "--seed", "4", "-o", path, "-q"])
     return load_log(path)
 
 
 def _fit_and_predict(log_path, tmp_path) -> np.ndarray:
     """sgp-fit --model pr on the imported log, predict it back: nMSE per joint."""
-    _ok(["sgp-fit", log_path, "--model", "pr", "-o", tmp_path / "fit.sgp", "-q"])
-    _ok(["predict", tmp_path / "fit.sgp", log_path, "-o", tmp_path / "pred.h5", "-q"])
+    run_ok(["sgp-fit", log_path, "--model", "pr", "-o", tmp_path / "fit.sgp", "-q"])
+    run_ok(["predict", tmp_path / "fit.sgp", log_path, "-o", tmp_path / "pred.h5", "-q"])
     pred = load_log(tmp_path / "pred.h5")
     tau, measured = pred.streams["tau"].data, pred.streams["tau_measured"].data
     return ((tau - measured) ** 2).mean(axis=0) / measured.var(axis=0)
@@ -46,7 +40,7 @@ def _fit_and_predict(log_path, tmp_path) -> np.ndarray:
 def test_c3d_and_a_pot_table_give_a_log_stac_calibrates(tmp_path):
     """Markers in a 50 Hz C3D (mm, occlusions), pots in a 100 Hz lab CSV: on the mocap clock the
     import equals the simulated session, and STAC calibrates both the same."""
-    _ok(["simulate", "kinematics", "--robot", "finger", "--duration", "10", "--seed", "1", "-o",
+    run_ok(["simulate", "kinematics", "--robot", "finger", "--duration", "10", "--seed", "1", "-o",
          tmp_path / "sim.h5", "-q"])
     sim = load_log(tmp_path / "sim.h5")
     markers, pots = sim.streams["markers"], sim.streams["pots"]
@@ -59,7 +53,7 @@ def test_c3d_and_a_pot_table_give_a_log_stac_calibrates(tmp_path):
         "sources": {"mocap": "mocap.c3d", "amp": {"file": "pots.csv", "time": "t"}},
         "streams": {"markers": {"source": "mocap"},
                     "pots": {"source": "amp", "columns": {f"{n} [V]": n for n in pots.names}, "unit": "V"}}}))
-    _ok(["import", tmp_path / "mocap.c3d", tmp_path / "pots.csv", "--map", tmp_path / "map.yaml",
+    run_ok(["import", tmp_path / "mocap.c3d", tmp_path / "pots.csv", "--map", tmp_path / "map.yaml",
          "-o", tmp_path / "imported.h5"])
     imported = load_log(tmp_path / "imported.h5")
     np.testing.assert_array_equal(imported.time, sim.time[::2])
@@ -70,8 +64,8 @@ def test_c3d_and_a_pot_table_give_a_log_stac_calibrates(tmp_path):
     direct = Log(sim.time[::2], {k: make_stream(s.names, s.data[::2]) for k, s in sim.streams.items()},
                  robot="finger", rate_hz=50.0)
     save_log(direct, tmp_path / "direct.h5")
-    _ok(["stac", tmp_path / "imported.h5", "-o", tmp_path / "imported.calib.yaml", "-q"])
-    _ok(["stac", tmp_path / "direct.h5", "-o", tmp_path / "direct.calib.yaml", "-q"])
+    run_ok(["stac", tmp_path / "imported.h5", "-o", tmp_path / "imported.calib.yaml", "-q"])
+    run_ok(["stac", tmp_path / "direct.h5", "-o", tmp_path / "direct.calib.yaml", "-q"])
     got, want = fitted_values(tmp_path / "imported.calib.yaml"), fitted_values(tmp_path / "direct.calib.yaml")
     assert got.keys() == want.keys()
     for key, value in want.items():
@@ -84,7 +78,7 @@ def test_a_bag_gives_a_log_sgp_fit_identifies(tmp_path, arm3, kind):
     names = arm3.streams["q"].names
     bag = write_bag(tmp_path / ("run.bag" if kind == "ros1" else "run"), kind, names, arm3.time, q, qd, tau)
     (tmp_path / "map.yaml").write_text("robot: arm3\nsources: {run: {zero_time: true}}\nderive: [qdd]\n")
-    result = _ok(["import", bag, "--map", tmp_path / "map.yaml", "-o", tmp_path / "arm.h5"])
+    result = run_ok(["import", bag, "--map", tmp_path / "map.yaml", "-o", tmp_path / "arm.h5"])
     assert "derived from q" in result.output
     log = load_log(tmp_path / "arm.h5")
     np.testing.assert_allclose(log.time, arm3.time, atol=1e-9)
@@ -100,7 +94,7 @@ def test_a_rostopic_csv_gives_a_log_sgp_fit_identifies(tmp_path, arm3):
     q, qd, tau = (arm3.streams[k].data for k in ("q", "qd", "tau"))
     path = write_rostopic_csv(tmp_path / "js.csv", arm3.streams["q"].names, arm3.time, q, qd, tau)
     (tmp_path / "map.yaml").write_text("sources: {js: {zero_time: true}}\nderive: [qdd]\n")
-    _ok(["import", path, "--map", tmp_path / "map.yaml", "--robot", "arm3", "-o", tmp_path / "arm.h5", "-q"])
+    run_ok(["import", path, "--map", tmp_path / "map.yaml", "--robot", "arm3", "-o", tmp_path / "arm.h5", "-q"])
     assert load_log(tmp_path / "arm.h5").robot == "arm3"
     assert (_fit_and_predict(tmp_path / "arm.h5", tmp_path) < 0.01).all()
 
@@ -108,7 +102,7 @@ def test_a_rostopic_csv_gives_a_log_sgp_fit_identifies(tmp_path, arm3):
 def test_figaroh_tx40_tables_through_the_committed_map(tmp_path):
     """Motor-side TX40 tables at 5 kHz, made from a simulated run through motor = R (q − zero) and
     c = R⁻ᵀ τ: the committed map gives the joint side back, and sgp-fit accepts the log."""
-    _ok(["simulate", "dynamics", "--robot", "tx40", "--rate", "5000", "--duration", "2", "--seed", "2",
+    run_ok(["simulate", "dynamics", "--robot", "tx40", "--rate", "5000", "--duration", "2", "--seed", "2",
          "-o", tmp_path / "sim.h5", "-q"])
     sim = load_log(tmp_path / "sim.h5")
     R = np.diag([32.0, 32, 45, -48, 45, 32])
@@ -122,7 +116,7 @@ def test_figaroh_tx40_tables_through_the_committed_map(tmp_path):
     mapping = yaml.safe_load((REAL_MAPS / "tx40.map.yaml").read_text())
     mapping["filter"]["cutoff_hz"] = 40
     (tmp_path / "tx40.map.yaml").write_text(yaml.safe_dump(mapping))
-    _ok(["import", tmp_path / "pos_read_data.csv", tmp_path / "curr_data.csv", "--map",
+    run_ok(["import", tmp_path / "pos_read_data.csv", tmp_path / "curr_data.csv", "--map",
          tmp_path / "tx40.map.yaml", "-o", tmp_path / "tx40.h5", "-q"])
     log = load_log(tmp_path / "tx40.h5")
     assert log.robot == "tx40" and log.rate_hz == 200.0
@@ -132,12 +126,12 @@ def test_figaroh_tx40_tables_through_the_committed_map(tmp_path):
     for key in ("q", "tau"):
         want = lowpass(sim.streams[key].data, 5000.0, 40.0)[idx]
         np.testing.assert_allclose(log.streams[key].data, want, atol=1e-9 * np.abs(want).max())
-    _ok(["sgp-fit", tmp_path / "tx40.h5", "--model", "pr", "-o", tmp_path / "fit.sgp", "-q"])
+    run_ok(["sgp-fit", tmp_path / "tx40.h5", "--model", "pr", "-o", tmp_path / "fit.sgp", "-q"])
 
 
 def test_the_shipped_real_logs_are_accepted_by_sgp_fit(tmp_path):
     for name in ("tx40", "tiago"):
-        _ok(["sgp-fit", REAL_MAPS / f"{name}.h5", "--model", "pr", "-o", tmp_path / f"{name}.sgp", "-q"])
+        run_ok(["sgp-fit", REAL_MAPS / f"{name}.h5", "--model", "pr", "-o", tmp_path / f"{name}.sgp", "-q"])
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -186,7 +180,7 @@ def test_output_must_be_a_log_and_not_a_source(tmp_path, csv_file):
                                                                                        "-o", str(tmp_path / "o.txt")]))
     assert "would overwrite a source" in one_line_error(runner.invoke(app, ["import", str(csv_file), "-o",
                                                                             str(tmp_path / "a.csv")]))
-    result = _ok(["import", csv_file, "-o", tmp_path / "o.csv"])  # a diegocal CSV is fine
+    result = run_ok(["import", csv_file, "-o", tmp_path / "o.csv"])  # a diegocal CSV is fine
     assert "robot" in result.output and load_log(tmp_path / "o.csv").streams["tau"].names == ("j1",)
 
 
@@ -194,10 +188,10 @@ def test_epoch_stamps_print_a_span_and_a_date(tmp_path):
     # the issue's case: header stamps in Unix time printed "1.7e+09 .. 1.7e+09"
     t = np.arange(100) * 0.01
     bag = write_bag(tmp_path / "run.bag", "ros1", ["j1"], t, t[:, None])
-    result = _ok(["import", bag, "-o", tmp_path / "run.h5"])
+    result = run_ok(["import", bag, "-o", tmp_path / "run.h5"])
     assert "1.7e+09" not in result.output
     assert "0.99 s from 2023-11-14 22:13:20.000 UTC" in result.output
-    zeroed = _ok(["import", bag, "--map", _write(tmp_path / "m.yaml", "sources: {run: {zero_time: true}}\n"),
+    zeroed = run_ok(["import", bag, "--map", _write(tmp_path / "m.yaml", "sources: {run: {zero_time: true}}\n"),
                   "-o", tmp_path / "zeroed.h5"])
     assert "0 .. 0.99 s (0.99 s)" in zeroed.output
 
@@ -215,6 +209,6 @@ def test_a_truncated_c3d_exits_1_and_writes_nothing_or_warns_when_allowed(tmp_pa
     assert "header announces 2000 frames (20 s), the file holds 577" in one_line_error(result)
     assert not (tmp_path / "cut.h5").exists()
     mapping = _write(tmp_path / "m.yaml", "sources: {cut: {allow_truncated: true}}\n")
-    kept = _ok(["import", tmp_path / "cut.c3d", "--map", mapping, "-o", tmp_path / "cut.h5", "-q"])
+    kept = run_ok(["import", tmp_path / "cut.c3d", "--map", mapping, "-o", tmp_path / "cut.h5", "-q"])
     assert "warning:" in kept.output and "importing the 577 frames read" in kept.output
     assert load_log(tmp_path / "cut.h5").n_samples == 577

@@ -7,7 +7,7 @@ import pytest
 from diegocal.io import load_log
 from diegocal.io.importers import MapError, import_log, parse_map
 from diegocal.io.importers.clocks import estimate_offset, motion_speed
-from tests.io.labfiles import write_c3d
+from tests.io.labfiles import run_ok, write_c3d
 
 #: The pot logger started this long after the mocap (s): not a whole number of samples of either.
 OFFSET = 3.517
@@ -17,14 +17,9 @@ OFFSET = 3.517
 def two_clocks(tmp_path_factory):
     """The issue's case: 20 s of the finger; the mocap (100 Hz) records 0..16.5 s on its clock, the pot
     logger (100 Hz) 3.5..20 s on its own clock, which reads 0 at 3.517 s."""
-    from typer.testing import CliRunner
-
-    from diegocal.cli import app
-
     folder = tmp_path_factory.mktemp("clocks")
-    result = CliRunner().invoke(app, ["simulate", "kinematics", "--robot", "finger", "--duration", "20", "--seed", "3",
-                                      "-o", str(folder / "sim.h5"), "-q"])
-    assert result.exit_code == 0, result.output
+    run_ok(["simulate", "kinematics", "--robot", "finger", "--duration", "20", "--seed", "3", "-o", folder / "sim.h5",
+            "-q"])
     sim = load_log(folder / "sim.h5")
     markers, pots = sim.streams["markers"], sim.streams["pots"]
     seen = sim.time <= 16.5 + 1e-9

@@ -12,28 +12,22 @@ from diegocal.cli.testing import one_line_error
 from diegocal.errors import LogFormatError
 from diegocal.io import Log, load_log, make_stream, save_log
 from diegocal.io.importers import MapError, import_log, parse_map
-from tests.io.labfiles import fitted_values, write_motive_csv, write_trc, write_vicon_csv
+from tests.io.labfiles import fitted_values, run_ok, write_motive_csv, write_trc, write_vicon_csv
 
 runner = CliRunner()
-
-
-def _ok(args):
-    result = runner.invoke(app, [str(a) for a in args])
-    assert result.exit_code == 0, result.output
-    return result
 
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
     """10 s of the finger (markers at 50 Hz, pots at 100 Hz) and STAC's pot gains on it as simulated."""
     folder = tmp_path_factory.mktemp("finger")
-    _ok(["simulate", "kinematics", "--robot", "finger", "--duration", "10", "--seed", "1", "-o",
+    run_ok(["simulate", "kinematics", "--robot", "finger", "--duration", "10", "--seed", "1", "-o",
          folder / "sim.h5", "-q"])
     sim = load_log(folder / "sim.h5")
     direct = Log(sim.time[::2], {k: make_stream(s.names, s.data[::2]) for k, s in sim.streams.items()},
                  robot="finger", rate_hz=50.0)
     save_log(direct, folder / "direct.h5")
-    _ok(["stac", folder / "direct.h5", "-o", folder / "direct.calib.yaml", "-q"])
+    run_ok(["stac", folder / "direct.h5", "-o", folder / "direct.calib.yaml", "-q"])
     return sim, fitted_values(folder / "direct.calib.yaml")
 
 
@@ -47,14 +41,14 @@ def _pots_csv(path, sim):
 def _calibrates_like_the_simulation(tmp_path, session, files, mapping):
     sim, want = session
     (tmp_path / "map.yaml").write_text(yaml.safe_dump({"robot": "finger", **mapping}, sort_keys=False))
-    _ok(["import", *files, "--map", tmp_path / "map.yaml", "-o", tmp_path / "imported.h5", "-q"])
+    run_ok(["import", *files, "--map", tmp_path / "map.yaml", "-o", tmp_path / "imported.h5", "-q"])
     log = load_log(tmp_path / "imported.h5")
     markers = sim.streams["markers"]
     assert log.streams["markers"].names == markers.names
     np.testing.assert_allclose(log.time, sim.time[::2], atol=1e-9)
     np.testing.assert_allclose(log.streams["markers"].data, markers.data[::2], atol=2e-6)
     assert np.array_equal(np.isnan(log.streams["markers"].data), np.isnan(markers.data[::2]))
-    _ok(["stac", tmp_path / "imported.h5", "-o", tmp_path / "imported.calib.yaml", "-q"])
+    run_ok(["stac", tmp_path / "imported.h5", "-o", tmp_path / "imported.calib.yaml", "-q"])
     got = fitted_values(tmp_path / "imported.calib.yaml")
     assert got.keys() == want.keys()
     for key, value in want.items():
