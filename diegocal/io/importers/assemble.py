@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from diegocal.errors import LogFormatError
+from diegocal.io.importers.clocks import align_sources
 from diegocal.io.importers.labels import strip_subject, unprefixed
 from diegocal.io.importers.mapping import (
     MOCAP_KINDS,
@@ -78,6 +79,7 @@ class ImportResult:
     streams: tuple[tuple[str, str, int, str], ...]  # (stream, "from <file>", channels, conversion)
     clock: str
     notes: tuple[str, ...]
+    offsets: tuple = ()  # OffsetEstimate per file against the reference file (.clocks)
 
 
 def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = None,
@@ -106,6 +108,7 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
     for src in sources.values():
         for table in src.loaded():
             notes.extend(table.notes)
+    series, offsets = align_sources(series, sources, mapping.clock.source if mapping.clock else None, notes)
     series = _process(series, mapping, notes)
     time, clock_rate, clock_text = _clock(series, sources, mapping)
     streams = {}
@@ -130,6 +133,7 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
             if d in ordered),
         clock=clock_text,
         notes=tuple(notes),
+        offsets=tuple(offsets),
     )
 
 
