@@ -84,3 +84,14 @@ def test_files_without_a_shared_motion_give_no_estimate(tmp_path):
     with pytest.raises(MapError, match="source 'b': time_offset: auto finds no motion shared with a.csv"):
         import_log([tmp_path / "a.csv", tmp_path / "b.csv"],
                    parse_map({"sources": {"a": "a.csv", "b": {"file": "b.csv", "time_offset": "auto"}}}))
+
+
+def test_the_cli_warns_and_shows_the_offset(two_clocks, tmp_path):
+    folder, sim = two_clocks
+    columns = ", ".join(sim.streams["pots"].names)
+    (tmp_path / "map.yaml").write_text("sources: {mocap: mocap.c3d, amp: pots.csv}\nstreams:\n"
+                                       f"  markers: {{source: mocap}}\n  pots: {{source: amp, columns: [{columns}]}}\n")
+    out = run_ok(["import", folder / "mocap.c3d", folder / "pots.csv", "--map", tmp_path / "map.yaml",
+                  "-o", tmp_path / "two.h5"]).output
+    assert "warning: pots.csv and mocap.c3d: their clocks disagree by +3.5" in out
+    assert "clock offset amp" in out

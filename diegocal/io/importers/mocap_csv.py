@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +83,10 @@ def read_vicon(path: Path, spec: SourceSpec) -> dict[str, Table]:
         raise LogFormatError(f"{path}: no Trajectories section (sections: {', '.join(sections) or 'none'})")
     rate = _vicon_rate(sections["Trajectories"], path)
     tables = {"trajectories": _vicon_section(sections["Trajectories"], path, spec, rate, markers=True)}
+    skipped = [t for t in sections if t not in ("Trajectories", "Devices")]
+    if skipped:
+        tables["trajectories"] = replace(tables["trajectories"], notes=(
+            f"{path.name}: sections not read: {', '.join(skipped)}",))
     if "Devices" in sections:
         tables["devices"] = _vicon_section(sections["Devices"], path, spec, rate, markers=False)
     return tables
