@@ -223,10 +223,8 @@ def term_from_dict(d: dict, where: str = "term", domain: str | None = None) -> T
     stderr = {p.name: p.stderr for p in given}
     term = make_term(entry.id, d["channel"], values, Region.from_dict(d.get("region")), dict(d.get("extra") or {}),
                      stderr)
-    if entry.named_by_model:  # their units are the model's, as written
-        units = {p.name: p.unit for p in given}
-        term = replace(term, parameters=tuple(replace(p, unit=units[p.name]) for p in term.parameters))
-    return term
+    units = {p.name: p.unit for p in given if p.unit}  # a channel's own unit (a linear pot's V/m) wins
+    return replace(term, parameters=tuple(replace(p, unit=units.get(p.name, p.unit)) for p in term.parameters))
 
 
 def _plain(v) -> float | None:

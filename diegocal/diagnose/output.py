@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from diegocal.io.bundle import LAYOUT
 from diegocal.io.files import to_plain
 from diegocal.terms import Term
 
@@ -91,6 +92,7 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
     ext = [u.extended_score for u in units]
     o = diag.options
     return {
+        "layout": LAYOUT,
         "domain": diag.domain,
         "baseline": {
             "model": units[0].baseline_model if len(units) == 1 else _common_model(u.baseline_model for u in units),

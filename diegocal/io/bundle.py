@@ -32,6 +32,9 @@ from diegocal.io.files import load_yaml
 KINDS = ("calibration", "pneumatic", "dynamics", "diagnosis")
 #: The file inside a dynamics bundle's directory that holds its header and summary.
 DYNAMICS_SUMMARY = "sgp.yaml"
+#: The file layout diegocal writes: 2 writes every fitted parameter as ``{value, stderr, unit}``
+#: under a term's ``parameters`` (:mod:`diegocal.terms`); files without ``layout`` are layout 1.
+LAYOUT = 2
 #: Header keys, in the order they are written.
 HEADER_KEYS = ("kind", "robot", "log", "command", "version", "created")
 

@@ -50,7 +50,7 @@ def atomic_path(path: str | os.PathLike):
 
 def write_text(path, text: str) -> None:
     with atomic_path(path) as tmp:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding="utf-8")
 
 
 # ----------------------------------------------------------------------------- YAML
@@ -71,7 +71,7 @@ def to_plain(obj, nan_as_none: bool = False):
 
 
 def dump_yaml(data) -> str:
-    return yaml.safe_dump(to_plain(data), sort_keys=False, default_flow_style=None, width=100)
+    return yaml.safe_dump(to_plain(data), sort_keys=False, default_flow_style=None, width=100, allow_unicode=True)
 
 
 def save_yaml(data, path) -> None:
@@ -81,7 +81,7 @@ def save_yaml(data, path) -> None:
 def load_yaml(path) -> dict:
     path = _existing(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""

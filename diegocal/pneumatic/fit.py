@@ -73,7 +73,7 @@ class ChamberFit:
     start_params: np.ndarray | None = None
 
     def to_dict(self) -> dict:
-        out = self.params.to_dict()
+        out = self.params.to_dict(self.name)
         out.update(
             cost=self.cost,
             rmse=self.rmse,

@@ -15,7 +15,7 @@ import numpy as np
 
 from diegocal.causes import ParamSpec
 from diegocal.errors import InputFileError
-from diegocal.pneumatic.terms import BASELINE_SPECS, chamber_terms
+from diegocal.pneumatic.terms import BASELINE_SPECS, baseline_terms, chamber_terms
 from diegocal.terms import term_from_dict
 
 #: c_gamma, the voltage range of the leaky regime, fixed globally by the thesis (§4.4), V.
@@ -123,31 +123,38 @@ class ChamberParams:
         """The same chamber with these extra terms (checked to be chamber terms)."""
         return replace(self, terms=chamber_terms(terms))
 
-    def to_dict(self) -> dict:
-        out = {n: float(self.values[n]) for n in NAMES}
-        out.update(
-            c_b=float(self.c_b),
-            c_s=float(self.c_s),
-            c_gamma=float(self.c_gamma),
-            v_ref=float(self.v_ref),
-            v_scale=float(self.v_scale),
-        )
-        if self.stderr:
-            out["stderr"] = {n: float(self.stderr.get(n, np.nan)) for n in NAMES}
+    def baseline_terms(self, channel: str = "") -> tuple:
+        """c1..c9 as the five baseline terms of eq. (4.10), with values and standard errors."""
+        se = {n: float(self.stderr.get(n, np.nan)) for n in NAMES}
+        terms = baseline_terms(channel, self.values)
+        return tuple(t.with_values(t.values, [se[n] for n in t.names]) for t in terms)
+
+    def to_dict(self, channel: str = "") -> dict:
+        """pneumatic.yaml's chamber entry (layout 2): the baseline terms, the extra terms, and the
+        fixed constants c_b, c_s (pressure unit), c_gamma (V), v_ref, v_scale (volume sensor unit)."""
+        out = {
+            "baseline": [t.to_dict() for t in self.baseline_terms(channel)],
+            "c_b": float(self.c_b),
+            "c_s": float(self.c_s),
+            "c_gamma": float(self.c_gamma),
+            "v_ref": float(self.v_ref),
+            "v_scale": float(self.v_scale),
+        }
         if self.terms:
             out["terms"] = [t.to_dict() for t in self.terms]
         return out
 
     @classmethod
     def from_dict(cls, raw: dict, where: str = "chamber") -> ChamberParams:
+        """A chamber from its pneumatic.yaml entry: layout 2 (``baseline`` terms) or layout 1
+        (``c1``..``c9`` as numbers and ``stderr: {c1..c9}``)."""
         if not isinstance(raw, dict):
-            raise InputFileError(f"{where}: expected a mapping of c1..c9, c_b, c_s")
-        missing = [k for k in (*NAMES, "c_b", "c_s") if k not in raw]
+            raise InputFileError(f"{where}: expected a mapping with the baseline terms and c_b, c_s")
+        missing = [k for k in ("c_b", "c_s") if k not in raw]
         if missing:
             raise InputFileError(f"{where}: missing {', '.join(missing)}")
         try:
-            vals = {n: float(raw[n]) for n in NAMES}
-            se = {n: float(v) for n, v in (raw.get("stderr") or {}).items()}
+            vals, se = _baseline_values(raw, where)
             extra = raw.get("terms") or []
             if not isinstance(extra, list):
                 raise InputFileError(f"{where}: 'terms' must be a list of terms")
@@ -164,3 +171,21 @@ class ChamberParams:
             )
         except (TypeError, ValueError):
             raise InputFileError(f"{where}: parameters must be numbers") from None
+
+
+def _baseline_values(raw: dict, where: str) -> tuple[dict, dict]:
+    """(values, standard errors) of c1..c9 from a chamber entry of layout 2 or 1."""
+    if "baseline" in raw:
+        items = raw["baseline"]
+        if not isinstance(items, list):
+            raise InputFileError(f"{where}: 'baseline' must be a list of terms")
+        params = [p for d in items for p in term_from_dict(d, f"{where}: baseline", "pneumatics").parameters]
+        got = {p.name: p for p in params}
+        missing = [n for n in NAMES if n not in got]
+        if missing:
+            raise InputFileError(f"{where}: the baseline lacks {', '.join(missing)}")
+        return {n: got[n].value for n in NAMES}, {n: got[n].stderr for n in NAMES}
+    missing = [k for k in NAMES if k not in raw]
+    if missing:
+        raise InputFileError(f"{where}: missing {', '.join(missing)}")
+    return {n: float(raw[n]) for n in NAMES}, {n: float(v) for n, v in (raw.get("stderr") or {}).items()}

@@ -39,7 +39,7 @@ def simulate_model(log: Log, sensors, params: dict, noise: float, seed: int) -> 
         for t in range(d.n_samples - 1):  # p_{t+1} = step(p_t, ...) + noise (eq. 4.7)
             p[t + 1] = model.step(x, p[t], d.u[t], v[t], vd[t], h[t], *consts, lags[t], False)[0] + eps[t]
     truth = Truth(
-        params={"model": "parametric", "chambers": {n: params[n].to_dict() for n in names}},
+        params={"model": "parametric", "chambers": {n: params[n].to_dict(n) for n in names}},
         effects=[],
         signals=dict(log.truth.signals) if log.truth else {},
     )

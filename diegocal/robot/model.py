@@ -32,6 +32,10 @@ class PointSet:
     xyz: np.ndarray
 
 
+#: Pinocchio's short names of the one-DoF prismatic joint models.
+PRISMATIC_KINDS = ("PX", "PY", "PZ", "PrismaticUnaligned")
+
+
 class Robot:
     """A kinematic tree (Pinocchio model) with its sensors.
 
@@ -101,6 +105,12 @@ class Robot:
     @property
     def n_joints(self) -> int:
         return len(self.joint_names)
+
+    @property
+    def prismatic_joints(self) -> frozenset:
+        """Names of the prismatic joints (their coordinate is in m, their effort a force in N)."""
+        kinds = {n: self.model.joints[self.model.getJointId(n)].shortname() for n in self.joint_names}
+        return frozenset(n for n, k in kinds.items() if k.replace("JointModel", "") in PRISMATIC_KINDS)
 
     def joint_index(self, name: str) -> int:
         try:

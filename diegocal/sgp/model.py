@@ -234,17 +234,15 @@ class TorquePrediction:
 
 @dataclass(frozen=True)
 class ParametricEstimate:
-    """Identified base parameters (posterior mean) with standard errors, physical units."""
+    """Identified base parameters (posterior mean) with standard errors, physical units.
+
+    names : the columns' names (:attr:`DynamicsModel.parameter_names`); values, stderr (P,); cov (P, P)
+    """
 
     names: tuple
     values: np.ndarray
-    std: np.ndarray
+    stderr: np.ndarray
     cov: np.ndarray = field(repr=False)
-
-    def as_dict(self) -> dict:
-        return {
-            n: {"value": float(v), "std": float(s)} for n, v, s in zip(self.names, self.values, self.std, strict=True)
-        }
 
 
 def nominal_torque(robot, q, qd, qdd) -> np.ndarray:
@@ -385,7 +383,7 @@ class DynamicsModel:
                 out.append(t)
                 continue
             k = len(t.parameters)
-            out.append(t.with_values(par.values[at : at + k], par.std[at : at + k]))
+            out.append(t.with_values(par.values[at : at + k], par.stderr[at : at + k]))
             at += k
         return tuple(out)
 

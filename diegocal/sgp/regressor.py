@@ -22,7 +22,7 @@ import pinocchio as pin
 from scipy.linalg import qr
 
 from diegocal.errors import FitError
-from diegocal.sgp.terms import friction_column
+from diegocal.sgp.terms import friction_column, friction_terms, parameter_labels
 
 FRICTION_KINDS = ("viscous", "coulomb")
 INERTIAL_NAMES = ("m", "mc_x", "mc_y", "mc_z", "I_xx", "I_xy", "I_yy", "I_xz", "I_yz", "I_zz")
@@ -38,12 +38,12 @@ def check_friction(friction) -> tuple[str, ...]:
 
 
 def parameter_names(robot, friction=FRICTION_KINDS) -> tuple[str, ...]:
-    """Names of the full regressor's columns: ``<joint>.<inertial>`` then ``<joint>.fv``/``.fc``."""
+    """Names of the full regressor's columns: ``<joint>.<inertial>`` (the rigid body's), then the
+    friction terms' labels, ``viscous_friction:<joint>.viscous`` and ``coulomb_friction:<joint>.coulomb``
+    (:func:`diegocal.sgp.terms.parameter_labels`)."""
     names = [f"{j}.{p}" for j in robot.joint_names for p in INERTIAL_NAMES]
-    friction = check_friction(friction)
-    for kind in friction:
-        tag = "fv" if kind == "viscous" else "fc"
-        names += [f"{j}.{tag}" for j in robot.joint_names]
+    for kind in check_friction(friction):
+        names += [label for t in friction_terms(robot.joint_names, (kind,)) for label in parameter_labels(t)]
     return tuple(names)
 
 

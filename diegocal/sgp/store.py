@@ -2,8 +2,12 @@
 
 Layout::
 
-    sgp.yaml        summary: kind, joints, options, hyperparameters, base parameters with std
-                    errors, in-sample nMSE per joint, meta {log, robot, command, created}
+    sgp.yaml        summary: kind, joints, options, hyperparameters, the fitted parameters as the
+                    terms of the dynamics baseline (``baseline``: the rigid body's base parameters,
+                    a viscous and a Coulomb friction term per joint, each ``{value, stderr, unit}``)
+                    and the added terms (``terms``), in-sample nMSE per joint, meta {log, robot,
+                    command, created}. Layout 1 (no ``layout`` key) wrote the base parameters as
+                    ``parameters: {name: {value, std}}``; :func:`parameters_of` reads both.
     model.npz       training set (u, tau; time with a torque_lag term), base-parameter map, packed
                     hyperparameters, inducing inputs: enough to rebuild the posterior exactly
                     without optimising
@@ -22,15 +26,19 @@ array-bundle helper yet.)
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from diegocal.errors import InputFileError
 from diegocal.io import atomic_path, load_yaml, save_yaml
+from diegocal.io.bundle import LAYOUT
 from diegocal.robot import load_robot
 from diegocal.sgp.gp import Hyperparameters, per_output
 from diegocal.sgp.guard import Stages
+from diegocal.sgp.terms import FRICTION_CAUSE
+from diegocal.terms import make_term, read_parameter, term_from_dict
 
 FORMAT = "diegocal-sgp"
 VERSION = 1
@@ -79,13 +87,88 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "log_likelihood": float(est.log_likelihood_),
         "nmse_in_sample": {j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)},
         "hyperparameters": model.hyperparameters_,
-        "parameters": None if par is None else par.as_dict(),
+        "layout": LAYOUT,
+        "baseline": None if par is None else [t.to_dict() for t in baseline_terms(model)],
         "options": model.options.to_dict(),
         "meta": dict(meta or {}),
     }
     terms = getattr(model, "terms", ())
     if terms:
         out["terms"] = [t.to_dict() for t in model.fitted_terms()]
+    return out
+
+
+#: The unit of a rigid-body parameter by its leaf name (Pinocchio's order; base parameters carry
+#: the unit of the parameter they are named after).
+INERTIAL_UNITS = {"m": "kg", "mc": "kg·m", "I": "kg·m²"}
+#: Friction units on a prismatic joint (a force): viscous, Coulomb.
+PRISMATIC_FRICTION_UNITS = {"viscous": "N·s/m", "coulomb": "N"}
+#: Layout 1's friction column tags.
+_LEGACY_FRICTION = {"fv": "viscous", "fc": "coulomb"}
+
+
+def baseline_terms(model) -> list:
+    """The fitted baseline as terms: one ``rigid_body`` term with the base parameters (named after
+    the parameter each is led by, ``joint2.I_zz``, in its unit) and a ``viscous_friction`` and
+    ``coulomb_friction`` term per joint (:mod:`diegocal.causes`), values and standard errors of the
+    posterior (thesis eq. 3.25)."""
+    par = model.parametric_
+    prismatic = model.robot.prismatic_joints
+    rigid, friction = {}, {}
+    n_base = model.base_.n_base
+    for name, v, se in zip(par.names[:n_base], par.values[:n_base], par.stderr[:n_base], strict=True):
+        kind, joint = _friction_of(name)
+        if kind is None:
+            leaf = name.rpartition(".")[2]
+            rigid[name] = (float(v), float(se), INERTIAL_UNITS[leaf.split("_")[0]])
+        else:
+            friction[(kind, joint)] = (float(v), float(se))
+    out = []
+    if rigid:
+        t = make_term("rigid_body", model.robot.name, {k: v[0] for k, v in rigid.items()},
+                      stderr={k: v[1] for k, v in rigid.items()})
+        out.append(replace(t, parameters=tuple(replace(p, unit=rigid[p.name][2]) for p in t.parameters)))
+    for kind in ("viscous", "coulomb"):
+        for joint in model.robot.joint_names:
+            if (kind, joint) not in friction:
+                continue
+            v, se = friction[(kind, joint)]
+            t = make_term(FRICTION_CAUSE[kind], joint, [v], stderr=[se])
+            if joint in prismatic:
+                t = replace(t, parameters=(replace(t.parameters[0], unit=PRISMATIC_FRICTION_UNITS[kind]),))
+            out.append(t)
+    return out
+
+
+def _friction_of(name: str) -> tuple[str | None, str | None]:
+    """(kind, joint) of a friction column's name (``coulomb_friction:j.coulomb``, layout 1's ``j.fc``)."""
+    if ":" in name:
+        cause, _, rest = name.partition(":")
+        kind = next((k for k, c in FRICTION_CAUSE.items() if c == cause), None)
+        return (kind, rest.rpartition(".")[0]) if kind else (None, None)
+    joint, _, leaf = name.rpartition(".")
+    kind = _LEGACY_FRICTION.get(leaf)
+    return (kind, joint) if kind else (None, None)
+
+
+def parameters_of(summary: dict) -> dict:
+    """Every fitted parameter of an sgp.yaml, ``label -> {value, stderr, unit}``: the baseline's
+    (layout 2: ``rigid_body`` parameters by name, friction as ``viscous_friction:joint1.viscous``;
+    layout 1: ``parameters`` as written, ``std`` read as the standard error), then the added terms'."""
+    out = {}
+    if "baseline" in summary:
+        for d in summary.get("baseline") or ():
+            t = term_from_dict(d, "sgp.yaml baseline", "dynamics")
+            for p in t.parameters:
+                label = p.name if t.cause == "rigid_body" else f"{t.cause}:{t.channel}.{p.name}"
+                out[label] = p.to_dict()
+    else:
+        for name, d in (summary.get("parameters") or {}).items():
+            out[name] = read_parameter(name, d).to_dict()
+    for d in summary.get("terms") or ():
+        t = term_from_dict(d, "sgp.yaml terms", "dynamics")
+        for p in t.parameters:
+            out[f"{t.cause}:{t.channel}.{p.name}"] = p.to_dict()
     return out
 
 

@@ -35,13 +35,15 @@ constant in s for ``torque_lag``, the mass in kg for ``payload``. Without it: sc
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
 
 from diegocal.errors import NumericalError, RobotConfigError
 from diegocal.io import Log, Truth, make_stream
+from diegocal.io.bundle import LAYOUT
+from diegocal.sgp.regressor import INERTIAL_NAMES
 from diegocal.sim.effects import SimOptionError, check_channel, check_effects, effect_record
 from diegocal.sim.trajectories import (
     excitation,
@@ -53,6 +55,7 @@ from diegocal.sim.trajectories import (
     time_base,
     whirl,
 )
+from diegocal.terms import make_term
 
 TRAJECTORIES = (
     "excitation",
@@ -414,14 +417,56 @@ def _pole(robot, dyn: TrueDynamics, options, time, rng, up: bool):
     return traj
 
 
+def _true_baseline(robot, dyn) -> list:
+    """The true rigid body (every link's ten inertial parameters, named ``<joint>.<inertial>``) and
+    friction as terms of the dynamics baseline (:mod:`diegocal.causes`), in sgp.yaml's form."""
+    names = robot.joint_names
+    inertial = {
+        f"{names[i - 1]}.{p}": float(x)
+        for i in range(1, dyn.model.njoints)
+        for p, x in zip(INERTIAL_NAMES, dyn.model.inertias[i].toDynamicParameters(), strict=True)
+    }
+    units = {"m": "kg", "mc": "kg·m", "I": "kg·m²"}
+    rigid = make_term("rigid_body", robot.name, inertial)
+    rigid = replace(rigid, parameters=tuple(replace(p, unit=units[p.name.rpartition(".")[2].split("_")[0]])
+                                            for p in rigid.parameters))
+    friction = [make_term("viscous_friction", j, [v]) for j, v in zip(names, dyn.viscous, strict=True)]
+    friction += [make_term("coulomb_friction", j, [c]) for j, c in zip(names, dyn.coulomb, strict=True)]
+    return [rigid, *friction]
+
+
+def true_friction(params: dict) -> dict:
+    """``{"viscous": {joint: value}, "coulomb": {joint: value}}`` from a simulated log's truth
+    params (layout 2's friction terms; layout 1 wrote these two mappings as they are). For tests
+    and benches that build a second session of the same robot: fitting code never reads /truth."""
+    if "baseline" not in params:
+        return {k: dict(params[k]) for k in ("viscous", "coulomb")}
+    out = {"viscous": {}, "coulomb": {}}
+    for d in params["baseline"]:
+        kind = {"viscous_friction": "viscous", "coulomb_friction": "coulomb"}.get(d["cause"])
+        if kind:
+            out[kind][d["channel"]] = float(d["parameters"][kind]["value"])
+    return out
+
+
+def true_inertial(params: dict) -> dict:
+    """``{joint: [m, mc_x, ..., I_zz]}`` (Pinocchio's order) of a simulated log's truth params."""
+    if "baseline" not in params:
+        return {j: list(v) for j, v in params["inertial"].items()}
+    rigid = next(d for d in params["baseline"] if d["cause"] == "rigid_body")["parameters"]
+    return {j: [float(rigid[f"{j}.{p}"]["value"]) for p in INERTIAL_NAMES] for j in params["joints"]}
+
+
 def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator) -> Log:
     """Simulate a torque log of ``robot`` (streams q, qd, qdd, tau) with ground truth in /truth.
 
     Returns
     -------
     Log with q (T, n) rad, qd (T, n) rad/s, qdd (T, n) rad/s², tau (T, n) N·m (measured: with
-    sensor offset and noise); truth params {model, joints, viscous, coulomb, inertial, noise},
-    truth effects, truth signal ``tau`` (noise-free measured torque).
+    sensor offset and noise); truth params in sgp.yaml's layout 2, {layout, model, joints,
+    baseline: [rigid_body (every link's ten inertial parameters, ``joint.m`` ...), a viscous and a
+    Coulomb friction term per joint], noise, trajectory} (:func:`true_friction` reads it), truth
+    effects, truth signal ``tau`` (noise-free measured torque).
     """
     if options.trajectory not in TRAJECTORIES:
         raise SimOptionError(f"unknown trajectory {options.trajectory!r}; known: {', '.join(TRAJECTORIES)}")
@@ -448,14 +493,10 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
     names = robot.joint_names
     streams = {k: make_stream(names, v) for k, v in (("q", traj.q), ("qd", traj.qd), ("qdd", traj.qdd), ("tau", tau))}
     params = {
+        "layout": LAYOUT,
         "model": "rigid_body+viscous+coulomb",
         "joints": list(names),
-        "viscous": dict(zip(names, map(float, dyn.viscous), strict=True)),
-        "coulomb": dict(zip(names, map(float, dyn.coulomb), strict=True)),
-        "inertial": {
-            names[i - 1]: [float(x) for x in dyn.model.inertias[i].toDynamicParameters()]
-            for i in range(1, dyn.model.njoints)
-        },
+        "baseline": [t.to_dict() for t in _true_baseline(robot, dyn)],
         "noise": {"tau": float(options.noise)},
         "trajectory": kind,
     }

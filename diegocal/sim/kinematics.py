@@ -290,6 +290,7 @@ def draw_truth(
         sigma_pots=options.pot_noise,
         sigma_markers=options.marker_noise,
         method="truth",
+        pot_units=nominal.pot_units,
     )
 
 

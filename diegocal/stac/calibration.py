@@ -1,17 +1,23 @@
 """The calibration result: pot gains and biases, marker positions, mocap frame, noise levels.
 
-Its YAML form is the calib.yaml contract (issue #3; extend, never break)::
+Its YAML form, calib.yaml (file layout 2), writes every fitted parameter as a term of the
+kinematic baseline (:mod:`diegocal.causes`), ``{name: {value, stderr, unit}}`` like every other
+file of diegocal::
 
-    pots:    {NAME: {gain, bias, gain_se, bias_se}}
-    markers: {NAME: {link, xyz, xyz_se}}
-    mocap:   {R: 3x3, T: [x, y, z]}
-    sigma:   {pots, markers}
-    fit:     {cost, iterations, converged, seconds}
+    kind: calibration             # + the bundle header (robot, log, command, version, created)
+    layout: 2
+    method: stac
+    baseline:
+      - {cause: pot_transfer, channel: r_elbow, parameters: {gain: {value, stderr, unit: V/rad}, bias: {...}}}
+      - {cause: marker_position, channel: m01, parameters: {x, y, z}, extra: {link: r_upper_arm}}
+      - {cause: mocap_frame, channel: markers, parameters: {x, y, z (m), rx, ry, rz (rad, rotation vector)}}
+    sigma:   {pots, markers, by_group}
+    fit:     {cost, iterations, converged, seconds, history}
 
-Extensions written by STAC (optional on read): the bundle header at the top (``kind: calibration``,
-``robot: {name, dir, hash}``, ``log``, ``command``, ``version``, ``created``; :mod:`diegocal.io.bundle`),
-``sigma.by_group`` (noise level per sensor type, §2.3.5), ``fit.history`` (per-iteration cost and
-noise levels), and what the data could not determine::
+Layout 1 (files without ``layout``) wrote ``pots: {NAME: {gain, bias, gain_se, bias_se}}``,
+``markers: {NAME: {link, xyz, xyz_se}}`` and ``mocap: {R, T}``; :meth:`Calibration.from_dict`
+reads both. ``sigma.by_group`` is the noise level per sensor type (§2.3.5), ``fit.history`` the
+per-iteration cost and noise levels; what the data could not determine::
 
     unobservable:   # pots whose gain and bias keep their nominal values
       - {pot: neck_yaw, joints: [neck_yaw], reason: no marker moves with joint neck_yaw}
@@ -31,13 +37,19 @@ Simulated logs store the true values in ``/truth`` attribute ``params`` in this 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from diegocal.errors import InputFileError
-from diegocal.io.bundle import HEADER_KEYS
+from diegocal.io.bundle import HEADER_KEYS, LAYOUT
 from diegocal.robot import Robot
+from diegocal.terms import Term, make_term, read_parameter, term_from_dict
+
+#: The units of a pot's (gain, bias) by its kind (an encoder's gain is fixed at 1; its reading is
+#: the joint's own coordinate, rad, or m on a prismatic joint).
+POT_UNITS = {"rotary": ("V/rad", "V"), "linear": ("V/m", "V"), "tendon": ("V/m", "V"), "encoder": ("1", "rad")}
 
 #: Why calib.yaml's ``rejected`` frames were written off (robust losses; stac/robust.py).
 REJECTED_REASON = (
@@ -91,6 +103,7 @@ class Calibration:
         at its detection limit, :func:`diegocal.stac.qphase.floor_factor`)
         (:func:`diegocal.stac.robust.gross_frames`)
     header : the bundle header (:func:`diegocal.io.bundle.header`), written first
+    pot_units : ((gain unit, bias unit), ...) per pot (:data:`POT_UNITS`); () when not known
     """
 
     pot_names: tuple[str, ...]
@@ -117,6 +130,7 @@ class Calibration:
     rejected: tuple = ()
     sigma_unresolved: tuple = ()
     header: dict = field(default_factory=dict)
+    pot_units: tuple = ()
 
     @classmethod
     def nominal(cls, robot: Robot) -> Calibration:
@@ -130,38 +144,37 @@ class Calibration:
             marker_links=tuple(m.link for m in markers),
             marker_xyz=np.array([m.xyz for m in markers], dtype=float).reshape(-1, 3),
             method="nominal",
+            pot_units=tuple(POT_UNITS.get(p.kind, ("", "")) for p in pots),
         )
 
-    def to_dict(self) -> dict:
-        """The calib.yaml mapping."""
+    def baseline_terms(self) -> tuple[Term, ...]:
+        """The kinematic baseline as terms: a ``pot_transfer`` per pot, a ``marker_position`` per
+        marker, the ``mocap_frame`` (:mod:`diegocal.causes`), with values, standard errors, units."""
         P, M = len(self.pot_names), len(self.marker_names)
         gse = self.gain_se if self.gain_se is not None else np.full(P, np.nan)
         bse = self.bias_se if self.bias_se is not None else np.full(P, np.nan)
         xse = self.marker_xyz_se if self.marker_xyz_se is not None else np.full((M, 3), np.nan)
+        out = []
+        for i, n in enumerate(self.pot_names):
+            t = make_term("pot_transfer", n, [self.gain[i], self.bias[i]], stderr=[gse[i], bse[i]])
+            if self.pot_units:
+                units = self.pot_units[i]
+                t = replace(t, parameters=tuple(replace(p, unit=u) for p, u in zip(t.parameters, units, strict=True)))
+            out.append(t)
+        for i, n in enumerate(self.marker_names):
+            out.append(make_term("marker_position", n, self.marker_xyz[i], extra={"link": self.marker_links[i]},
+                                 stderr=xse[i]))
+        rotvec = Rotation.from_matrix(np.asarray(self.mocap_R, float)).as_rotvec()
+        out.append(make_term("mocap_frame", "markers", np.concatenate([np.asarray(self.mocap_T, float), rotvec])))
+        return tuple(out)
+
+    def to_dict(self) -> dict:
+        """The calib.yaml mapping (layout 2, module docstring)."""
         out = {
             **{k: v for k, v in self.header.items()},
+            "layout": LAYOUT,
             "method": self.method,
-            "pots": {
-                n: {
-                    "gain": float(self.gain[i]),
-                    "bias": float(self.bias[i]),
-                    "gain_se": _f(gse[i]),
-                    "bias_se": _f(bse[i]),
-                }
-                for i, n in enumerate(self.pot_names)
-            },
-            "markers": {
-                n: {
-                    "link": self.marker_links[i],
-                    "xyz": [float(v) for v in self.marker_xyz[i]],
-                    "xyz_se": [_f(v) for v in xse[i]],
-                }
-                for i, n in enumerate(self.marker_names)
-            },
-            "mocap": {
-                "R": np.asarray(self.mocap_R, float).tolist(),
-                "T": np.asarray(self.mocap_T, float).tolist(),
-            },
+            "baseline": [t.to_dict() for t in self.baseline_terms()],
             "sigma": {"pots": _f(self.sigma_pots), "markers": _f(self.sigma_markers)},
             "fit": {
                 "cost": _f(self.fit.cost),
@@ -192,29 +205,13 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "calib.yaml") -> Calibration:
+        """A calibration from its calib.yaml mapping, layout 2 or 1 (module docstring)."""
         try:
-            pots = data.get("pots") or {}
-            markers = data.get("markers") or {}
-            mocap = data.get("mocap") or {}
+            parts = _baseline_v2(data, source) if "baseline" in data else _baseline_v1(data)
             sigma = data.get("sigma") or {}
             fit = data.get("fit") or {}
-            names = tuple(pots)
-            mnames = tuple(markers)
             return cls(
-                pot_names=names,
-                gain=np.array([float(pots[n]["gain"]) for n in names]),
-                bias=np.array([float(pots[n]["bias"]) for n in names]),
-                gain_se=np.array([_nan(pots[n].get("gain_se")) for n in names]),
-                bias_se=np.array([_nan(pots[n].get("bias_se")) for n in names]),
-                marker_names=mnames,
-                marker_links=tuple(str(markers[n]["link"]) for n in mnames),
-                marker_xyz=np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(-1, 3),
-                marker_xyz_se=np.array(
-                    [[_nan(v) for v in (markers[n].get("xyz_se") or [None] * 3)] for n in mnames],
-                    dtype=float,
-                ).reshape(-1, 3),
-                mocap_R=np.array(mocap.get("R", np.eye(3)), dtype=float).reshape(3, 3),
-                mocap_T=np.array(mocap.get("T", [0.0, 0.0, 0.0]), dtype=float).reshape(3),
+                **parts,
                 sigma_pots=_nan(sigma.get("pots")),
                 sigma_markers=_nan(sigma.get("markers")),
                 fit=FitInfo(
@@ -238,11 +235,58 @@ class Calibration:
             raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None
 
 
+def _baseline_v2(data: dict, source: str) -> dict:
+    """Calibration fields from layout 2's ``baseline`` terms."""
+    items = data.get("baseline")
+    if not isinstance(items, list):
+        raise InputFileError(f"{source}: 'baseline' must be a list of terms")
+    terms = [term_from_dict(d, f"{source}: baseline", "kinematics") for d in items]
+    pots = [t for t in terms if t.cause == "pot_transfer"]
+    markers = [t for t in terms if t.cause == "marker_position"]
+    frame = next((t for t in terms if t.cause == "mocap_frame"), None)
+    x = frame.values if frame is not None else np.zeros(6)
+    return {
+        "pot_names": tuple(t.channel for t in pots),
+        "gain": np.array([t.value("gain") for t in pots]),
+        "bias": np.array([t.value("bias") for t in pots]),
+        "gain_se": np.array([t.parameters[0].stderr for t in pots]),
+        "bias_se": np.array([t.parameters[1].stderr for t in pots]),
+        "pot_units": tuple((t.parameters[0].unit, t.parameters[1].unit) for t in pots),
+        "marker_names": tuple(t.channel for t in markers),
+        "marker_links": tuple(str(t.extra["link"]) for t in markers),
+        "marker_xyz": np.array([t.values for t in markers], float).reshape(-1, 3),
+        "marker_xyz_se": np.array([t.stderrs for t in markers], float).reshape(-1, 3),
+        "mocap_R": Rotation.from_rotvec(x[3:]).as_matrix(),
+        "mocap_T": x[:3].copy(),
+    }
+
+
+def _baseline_v1(data: dict) -> dict:
+    """Calibration fields from layout 1's ``pots``, ``markers`` and ``mocap`` mappings."""
+    pots = data.get("pots") or {}
+    markers = data.get("markers") or {}
+    mocap = data.get("mocap") or {}
+    names, mnames = tuple(pots), tuple(markers)
+    return {
+        "pot_names": names,
+        "gain": np.array([float(pots[n]["gain"]) for n in names]),
+        "bias": np.array([float(pots[n]["bias"]) for n in names]),
+        "gain_se": np.array([_nan(pots[n].get("gain_se")) for n in names]),
+        "bias_se": np.array([_nan(pots[n].get("bias_se")) for n in names]),
+        "marker_names": mnames,
+        "marker_links": tuple(str(markers[n]["link"]) for n in mnames),
+        "marker_xyz": np.array([markers[n]["xyz"] for n in mnames], dtype=float).reshape(-1, 3),
+        "marker_xyz_se": np.array(
+            [[_nan(v) for v in (markers[n].get("xyz_se") or [None] * 3)] for n in mnames], dtype=float
+        ).reshape(-1, 3),
+        "mocap_R": np.array(mocap.get("R", np.eye(3)), dtype=float).reshape(3, 3),
+        "mocap_T": np.array(mocap.get("T", [0.0, 0.0, 0.0]), dtype=float).reshape(3),
+    }
+
+
 def _terms(items) -> tuple:
     if not items:
         return ()
-    from diegocal.terms import term_from_dict
-
     return tuple(term_from_dict(d, "calib.yaml terms", "kinematics") for d in items)
 
 

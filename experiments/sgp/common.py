@@ -19,7 +19,7 @@ import numpy as np
 
 from diegocal.io import Log, make_stream
 from diegocal.sgp import SGPOptions, fit_dynamics
-from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics, true_friction
 from diegocal.sim.effects import parse_effects
 
 #: Method label -> (SGPOptions.kind, guard). "SGP" is the guarded SGP; the unguarded one is the
@@ -83,8 +83,8 @@ def same_robot(log: Log, robot) -> dict:
     """The true friction of a simulated training log as ``DynamicsOptions`` fields (``viscous``,
     ``coulomb`` per joint), so that a test log is of the *same* robot: the simulator draws them
     from each call's seed otherwise. Reads ``/truth`` to build test data only (fits never do)."""
-    params = log.truth.params
-    return {k: tuple(float(params[k][j]) for j in robot.joint_names) for k in ("viscous", "coulomb")}
+    friction = true_friction(log.truth.params)
+    return {k: tuple(float(friction[k][j]) for j in robot.joint_names) for k in ("viscous", "coulomb")}
 
 
 def score_arrays(

@@ -64,9 +64,9 @@ def test_simulate_fit_merge_predict_report_end_to_end(tmp_path, robot_dir):
     merged = load_yaml(tmp_path / "all.yaml")
     assert list(merged["chambers"]) == ["shoulder.flex", "elbow.ext"]
     entry = merged["chambers"]["elbow.ext"]
-    assert {"c1", "c9", "c_b", "c_s", "c_gamma", "stderr", "cost", "n_samples", "drift_2s"} <= set(
-        entry
-    )
+    assert {"baseline", "c_b", "c_s", "c_gamma", "cost", "n_samples", "drift_2s"} <= set(entry)
+    c7 = next(t for t in entry["baseline"] if t["cause"] == "valve_rate")["parameters"]["c7"]
+    assert set(c7) == {"value", "stderr", "unit"} and c7["unit"] == "1/(s V)"
     assert merged["meta"]["log"].endswith("sim.h5")
     r = invoke("predict", tmp_path / "all.yaml", log, "-o", tmp_path / "pred.h5")
     assert r.exit_code == 0, r.output

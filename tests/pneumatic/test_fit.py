@@ -25,7 +25,7 @@ def test_parametric_data_recovers_the_parameters_within_their_standard_errors(ro
         TRUE_X
     )
     log = simulate_model(train_log, robot.sensors, {name: truth}, noise=1.0, seed=3)
-    assert log.truth.params["chambers"][name]["c7"] == 30.0
+    assert ChamberParams.from_dict(log.truth.params["chambers"][name]).values["c7"] == 30.0
     fit = fit_chamber(chamber_data(log.without_truth(), robot.sensors, name))
     est, se = fit.params.vector(), np.array([fit.params.stderr[n] for n in NAMES])
     assert np.isfinite(se).all() and (se > 0).all()

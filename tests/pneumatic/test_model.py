@@ -71,5 +71,8 @@ def test_params_round_trip_and_bounds():
     assert back.stderr["c5"] == 0.1
     bounds = {s.name: (s.lower, s.upper) for s in SPECS}
     assert bounds["c1"] == (2.0, 8.0) and bounds["c3"][0] == -1.0 and bounds["c8"] == (-1.0, 1.0)
-    with pytest.raises(InputFileError, match="missing c7"):
-        ChamberParams.from_dict({k: v for k, v in c.to_dict().items() if k != "c7"})
+    d = c.to_dict("c")
+    with pytest.raises(InputFileError, match="lacks c7"):  # the valve's rate term left out
+        ChamberParams.from_dict({**d, "baseline": [t for t in d["baseline"] if t["cause"] != "valve_rate"]})
+    with pytest.raises(InputFileError, match="missing c7"):  # a layout 1 entry without c7
+        ChamberParams.from_dict({**{n: 1.0 for n in NAMES if n != "c7"}, "c_b": 360.0, "c_s": 260.0})

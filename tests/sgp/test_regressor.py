@@ -56,7 +56,7 @@ def test_pr_recovers_true_base_parameters(arm2, simulate, friction, noise):
     if noise == 0.0:
         np.testing.assert_allclose(est.values, truth, rtol=1e-4, atol=1e-5)
     else:
-        z = (est.values - truth) / est.std
+        z = (est.values - truth) / est.stderr
         assert np.all(np.abs(z) < 4.0), z  # within standard errors
         assert np.sqrt(np.mean(z**2)) < 2.0
-        assert np.all(est.std > 0)
+        assert np.all(est.stderr > 0)

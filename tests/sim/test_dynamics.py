@@ -14,7 +14,7 @@ from diegocal.cli import app
 from diegocal.io import load_log
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
-from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics, true_friction, true_inertial
 
 runner = CliRunner()
 
@@ -47,7 +47,7 @@ def _rnea(robot, q, qd, qdd):
 def test_tau_is_rnea_plus_friction_exactly(arm3):
     log = _sim(arm3, trajectory="excitation")
     q, qd, qdd, tau = _signals(log)
-    p = log.truth.params
+    p = true_friction(log.truth.params)
     visc = np.array([p["viscous"][j] for j in arm3.joint_names])
     coul = np.array([p["coulomb"][j] for j in arm3.joint_names])
     assert (visc > 0).all() and (coul > 0).all()
@@ -123,14 +123,14 @@ def test_payload_changes_rigid_body_torque_like_a_point_mass(arm3):
     diff = tau - base.streams["tau"].data
     np.testing.assert_allclose(diff, rb_new - _rnea(arm3, q, qd, qdd), atol=1e-10)
     assert np.abs(diff[:, 1]).max() > 0.05
-    assert log.truth.params["inertial"]["joint3"][0] == pytest.approx(0.8 + v["mass"])
+    assert true_inertial(log.truth.params)["joint3"][0] == pytest.approx(0.8 + v["mass"])
 
 
 @pytest.mark.parametrize("trajectory", ["pole-down", "pole-up"])
 def test_rollouts_are_consistent_with_inverse_dynamics(wheel, trajectory):
     log = _sim(wheel, trajectory=trajectory, duration=5.0)
     q, qd, qdd, tau = _signals(log)
-    p = log.truth.params
+    p = true_friction(log.truth.params)
     visc = np.array([p["viscous"][j] for j in wheel.joint_names])
     coul = np.array([p["coulomb"][j] for j in wheel.joint_names])
     np.testing.assert_allclose(tau, _rnea(wheel, q, qd, qdd) + visc * qd + coul * np.sign(qd), atol=1e-9)
@@ -217,9 +217,10 @@ def test_robot_seed_records_another_sessions_robot(tmp_path):
         res = runner.invoke(app, base + ["-o", str(tmp_path / name)] + extra)
         assert res.exit_code == 0, res.output
     a, b, c = (load_log(tmp_path / n) for n in ("a.h5", "b.h5", "c.h5"))
+    fa, fb, fc = (true_friction(x.truth.params) for x in (a, b, c))
     for key in ("viscous", "coulomb"):
-        assert b.truth.params[key] == a.truth.params[key]
-        assert c.truth.params[key] != a.truth.params[key]  # a seed of its own draws another robot
+        assert fb[key] == fa[key]
+        assert fc[key] != fa[key]  # a seed of its own draws another robot
     assert b.truth.effects == a.truth.effects
     assert not np.allclose(b.streams["q"].data, a.streams["q"].data)  # its own trajectory
     np.testing.assert_array_equal(b.streams["q"].data, c.streams["q"].data)

@@ -197,6 +197,7 @@ def true_calibration(robot, rng, gain_err=0.2, bias_err=0.3) -> Calibration:
         sigma_pots=0.005,
         sigma_markers=0.001,
         method="truth",
+        pot_units=nom.pot_units,
     )
 
 

@@ -41,7 +41,7 @@ def fitted(logs, tree_dir):
 def test_stac_writes_calib_and_q(fitted, logs, tree_robot):
     d, log = logs
     data = load_yaml(fitted)
-    assert {"pots", "markers", "mocap", "sigma", "fit", "kind", "robot", "log", "command", "version"} <= set(data)
+    assert {"layout", "baseline", "sigma", "fit", "kind", "robot", "log", "command", "version"} <= set(data)
     assert len(data["fit"]["history"]) == data["fit"]["iterations"]
     assert data["kind"] == "calibration" and data["log"].endswith("train.h5")
     assert data["robot"]["name"] == tree_robot.name and data["robot"]["hash"].startswith("sha256:")
@@ -130,7 +130,7 @@ def test_unknown_pot_and_marker_names_are_ignored_with_one_line(logs, tree_dir, 
     warnings = [line for line in res.output.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1, res.output
     assert "1 log pots (bogus)" in warnings[0] and f"did you mean '{m.names[0]}'" in warnings[0]
-    assert "bogus" not in load_yaml(tmp_path / "extra.calib.yaml")["pots"]
+    assert "bogus" not in Calibration.from_dict(load_yaml(tmp_path / "extra.calib.yaml")).pot_names
 
 
 def test_markers_all_on_base_are_unobservable(tmp_path):
