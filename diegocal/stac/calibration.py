@@ -45,7 +45,7 @@ from scipy.spatial.transform import Rotation
 from diegocal.errors import InputFileError
 from diegocal.io.bundle import HEADER_KEYS, LAYOUT
 from diegocal.robot import Robot
-from diegocal.terms import Term, make_term, read_parameter, term_from_dict
+from diegocal.terms import Term, make_term, term_from_dict
 
 #: The units of a pot's (gain, bias) by its kind (an encoder's gain is fixed at 1; its reading is
 #: the joint's own coordinate, rad, or m on a prismatic joint).
