@@ -46,6 +46,8 @@ def report(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary on the terminal.")] = False,
 ) -> None:
     """Write one PDF document: contents and summary, then one section per result; print the summary."""
+    # Imported here, not at the top: the report loads matplotlib and every model family, which the
+    # CLI's start-up (`diegocal --help`) must not wait for.
     from diegocal.errors import InputFileError
     from diegocal.report import ReportContext, write_report
     from diegocal.report.pdf import headlines, plan_report

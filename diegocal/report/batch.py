@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from diegocal.batch.table import headline as headline_columns
+from diegocal.batch.table import is_table, read_table
 from diegocal.report.layout import Column, table_sheets
 from diegocal.report.registry import Section, register_section
 from diegocal.report.style import save_page
@@ -17,14 +19,10 @@ MAX_REASON = 70  # characters of a failure's reason shown in the table (the CSV 
 
 
 def recognise(path: Path) -> bool:
-    from diegocal.batch.table import is_table
-
     return Path(path).is_file() and is_table(path)
 
 
 def _read(path: Path):
-    from diegocal.batch.table import read_table
-
     return read_table(path)
 
 
@@ -46,11 +44,9 @@ def abstract(path: Path, context=None) -> list[str]:
 
 
 def pages(path: Path, pdf, context) -> None:
-    from diegocal.batch.table import headline
-
     fields, columns, rows = _read(path)
     command = fields.get("command", "")
-    shown = headline(command, columns)
+    shown = headline_columns(command, columns)
     pairs = _rmse_pairs(shown)
     if pairs:  # diagnose: one column "baseline → extended" whatever the units, not two per unit
         shown = [c for c in shown if c not in {x for pair in pairs for x in pair[1:]}]

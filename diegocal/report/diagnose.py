@@ -9,10 +9,13 @@ that no term explains, shown where it is.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 
+from diegocal.io import load_yaml
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new, save_page
@@ -48,8 +51,6 @@ def recognise(path: Path) -> bool:
 
 
 def describe(path: Path) -> dict:
-    from diegocal.io import load_yaml
-
     d = load_yaml(path)
     robot = d.get("robot") or {}
     return {
@@ -83,21 +84,26 @@ def sentence(f: dict) -> str:
     return f"{f['channel']}: {what}{gain}.{params}"
 
 
+def _stderr(v: dict):
+    """A parameter's standard error: ``stderr`` (file layout 2) or ``std`` (layout 1)."""
+    return v.get("stderr", v.get("std"))
+
+
 def _parameters_text(f: dict) -> str:
     p = f.get("parameters") or {}
     if not p or f["cause"] == "unexplained":
         return ""
     hidden = 0
     if len(p) > 4:  # a payload's ten inertial parameters: the identified ones (with a standard error)
-        hidden = sum(v.get("std") is None for v in p.values())
-        p = dict(list({k: v for k, v in p.items() if v.get("std") is not None}.items())[:4])
+        hidden = sum(_stderr(v) is None for v in p.values())
+        p = dict(list({k: v for k, v in p.items() if _stderr(v) is not None}.items())[:4])
     parts = []
     for name, v in p.items():
         if v.get("value") is None:
             continue
         s = f"{name} = {v['value']:.3g}"
-        if v.get("std") is not None:
-            s += f" ± {v['std']:.2g}"
+        if _stderr(v) is not None:
+            s += f" ± {_stderr(v):.2g}"
         parts.append(s + (f" {v['unit']}" if v.get("unit") else ""))
     if hidden:
         parts.append(f"{hidden} parameter(s) not identified by these data")
@@ -153,14 +159,25 @@ def summary_lines(d: dict) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- plots
+#: The evidence plot's legend labels, and what each says in its caption (:func:`evidence_caption`).
+BEFORE, AFTER = "before (±2 block SE)", "after (±2 block SE)"
+REGION, ZERO = "region found", "zero: nothing left to explain"
+DRAWN_WORDS = {
+    BEFORE: "orange, the residual of the baseline model",
+    AFTER: "blue, that of the extended model",
+    REGION: "green, the region the finding is confined to",
+    ZERO: "grey line, zero",
+}
+
+
 def plot_evidence(f: dict, ax=None):
     """The residual's mean per bin of the localising variable, before (and after) the finding,
-    with ±2 block standard errors; the region shaded."""
+    with ±2 block standard errors; the region shaded when it is a range of that variable."""
     ax = axes_or_new(ax)
     ev = f.get("evidence") or {}
     curves = ev.get("curves") or {}
     unit = curves.get("unit") or f.get("unit") or ""
-    for key, color, label in (("before", COLORS["baseline"], "before"), ("after", COLORS["model"], "after")):
+    for key, color, label in (("before", COLORS["baseline"], BEFORE), ("after", COLORS["model"], AFTER)):
         c = curves.get(key)
         if not c:
             continue
@@ -168,11 +185,11 @@ def plot_evidence(f: dict, ax=None):
         m = np.array([np.nan if v is None else v for v in c["mean"]], float)
         s = np.array([np.nan if v is None else v for v in c["se"]], float)
         ax.fill_between(x, m - 2 * s, m + 2 * s, color=color, alpha=0.2, lw=0)
-        ax.plot(x, m, "o-", color=color, ms=3, lw=1, label=f"{label} (±2 block SE)")
+        ax.plot(x, m, "o-", color=color, ms=3, lw=1, label=label)
     r = f.get("region")
     if r and r.get("variable") == ev.get("variable"):
-        ax.axvspan(r["low"], r["high"], color=COLORS["truth"], alpha=0.12, label="region found")
-    ax.axhline(0.0, color="0.5", lw=0.6, label="zero: nothing left to explain")
+        ax.axvspan(r["low"], r["high"], color=COLORS["truth"], alpha=0.12, label=REGION)
+    ax.axhline(0.0, color="0.5", lw=0.6, label=ZERO)
     counts = (curves.get("before") or {}).get("count") or []
     variable = str(ev.get("variable", ""))
     ax.set_xlabel(
@@ -256,12 +273,29 @@ CHANNEL_NOTE = (
 )
 
 
-CAPTION = (
-    "Residual of the baseline model (orange) and of the extended model (blue) on the validation and held-out "
-    "blocks, averaged in bins of the variable that localises the finding (points at the bin medians); bands: ±2 "
-    "standard errors over contiguous sub-blocks (correlated samples are not counted as independent); green: the "
-    "region the finding is confined to. A curve that follows zero within its band has nothing left to explain."
-)
+def evidence_caption(ax, f: dict) -> str:
+    """What finding ``f``'s evidence plot ``ax`` shows, said from what was drawn on it (its legend's
+    labels): no colour or region is described that the plot does not hold."""
+    labels = ax.get_legend_handles_labels()[1]
+    drawn = [DRAWN_WORDS[label] for label in DRAWN_WORDS if label in labels]
+    text = (
+        "Mean residual on the validation and held-out blocks in bins of the variable that localises the finding "
+        "(points at the bin medians): " + "; ".join(drawn) + "."
+    )
+    if BEFORE in labels or AFTER in labels:
+        text += (
+            " Bands: ±2 standard errors over contiguous sub-blocks (correlated samples are not counted as "
+            "independent). A curve that follows zero within its band has nothing left to explain."
+        )
+    r = f.get("region")
+    if r and REGION not in labels:
+        text += (
+            f" The finding's region ({r.get('variable')} from {r['low']:.3g} to {r['high']:.3g}) is not a range of "
+            "this variable, so it is not drawn."
+        )
+    return text
+
+
 RUNNERS_NOTE = (
     "The other candidate terms of the round, fitted on the training blocks and scored on the validation blocks "
     "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
@@ -270,15 +304,11 @@ RUNNERS_NOTE = (
 
 
 def abstract(path: Path, context=None) -> list[str]:
-    from diegocal.io import load_yaml
-
     return summary_lines(load_yaml(path))
 
 
 def headline(path: Path, context=None) -> str:
     """One line: the findings (what was found wrong) and what fixing them gained on held-out data."""
-    from diegocal.io import load_yaml
-
     d = load_yaml(path)
     findings = d.get("findings") or []
     log = Path(str(d.get("log") or "")).name
@@ -301,45 +331,65 @@ def headline(path: Path, context=None) -> str:
 PLOT_HEIGHT, PLOT_MIN = 0.26, 0.17
 
 
-def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool, after: int | None) -> list[Sheet]:
+#: Said of a finding whose file does not hold the round's other candidates (``runners_up`` absent).
+NOT_STORED = (
+    "Runners-up: not stored in this file (the diagnosis that wrote it did not keep the round's other candidates)."
+)
+
+
+@dataclass(frozen=True)
+class Drawn:
+    """A finding as drawn: the sheets it ends on (more than one only for a runners-up table longer
+    than a page), its number, its figure's caption and whether it has a runners-up table."""
+
+    sheets: list
+    number: int
+    caption: str
+    table: bool
+
+
+def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool, after: Drawn | None) -> Drawn:
     """Finding ``k`` (from 0) on ``sheet``: heading, its sentence (unless ``repeat`` is False: the
-    summary just above says it), the evidence plot and its caption, the runners-up; ``after``: the
-    number of a finding drawn above on the same sheet, whose caption and notes this one refers to.
-    Returns the sheets it ends on (more than one only for a runners-up table longer than a page)."""
+    summary just above says it), the evidence plot and its caption, the runners-up (or why there are
+    none); ``after``: a finding drawn above on the same sheet, whose caption and table notes this one
+    refers to where they would say the same."""
     sheet.heading(f"Finding {k + 1}: {f['cause']} on {f['channel']}")
     if repeat:
         sheet.paragraph(sentence(f))
-    plot_evidence(f, sheet.axes(plot_height))
-    sheet.caption(CAPTION if after is None else f"Lines, bands and shading as in Finding {after}'s figure above.")
+    caption = evidence_caption(plot_evidence(f, sheet.axes(plot_height)), f)
+    same = after is not None and after.caption == caption
+    sheet.caption(f"Lines, bands and shading as in Finding {after.number}'s figure above." if same else caption)
     columns, rows = runners_table(f)
-    if not rows:
+    if "runners_up" not in f:
+        sheet.paragraph(NOT_STORED, size=8)
+    elif not rows:
         sheet.paragraph("No other candidate was tested in this round.", size=8)
-        return [sheet]
-    note = RUNNERS_NOTE if after is None else f"Columns as in Finding {after}'s table above."
-    return table_sheets("Runners-up of this round", columns, rows, sheet=sheet, notes=(note,))
+    if not rows:
+        return Drawn([sheet], k + 1, caption, False)
+    note = f"Columns as in Finding {after.number}'s table above." if after is not None and after.table else RUNNERS_NOTE
+    sheets = table_sheets("Runners-up of this round", columns, rows, sheet=sheet, notes=(note,))
+    return Drawn(sheets, k + 1, caption, True)
 
 
-def finding_height(f: dict, k: int, plot_height: float, repeat: bool, after: int | None) -> float:
+def finding_height(f: dict, k: int, plot_height: float, repeat: bool, after: Drawn | None) -> float:
     """The height a finding takes on a page (drawn on a scratch sheet and measured); above 1 when it
     does not fit on one page."""
-    import matplotlib.pyplot as plt
-
     scratch = Sheet()
     top = scratch.y
-    drawn = draw_finding(scratch, f, k, plot_height, repeat, after)
+    drawn = draw_finding(scratch, f, k, plot_height, repeat, after).sheets
     height = top - drawn[-1].y + (len(drawn) - 1)
     for s in drawn:
         plt.close(s.fig)
     return height
 
 
-def place_finding(sheets: list[Sheet], f: dict, k: int, title: str, last_on: dict) -> None:
+def place_finding(sheets: list[Sheet], f: dict, k: int, title: str, after: Drawn | None) -> Drawn:
     """Finding ``k`` below what the last sheet holds when it fits whole there (its plot shrunk down to
     PLOT_MIN if need be), else from the top of a new sheet: several findings share a page, none is
-    split (unless it is longer than a page)."""
+    split (unless it is longer than a page). ``after``: the finding placed before, if any."""
     sheet = sheets[-1]
     first_sheet = len(sheets) == 1  # the summary above already says the finding in words
-    after = last_on.get(id(sheet))
+    after = after if after is not None and after.sheets[-1] is sheet else None
     for h in (PLOT_HEIGHT, PLOT_MIN):
         if finding_height(f, k, h, not first_sheet, after) <= sheet.room():
             break
@@ -347,22 +397,21 @@ def place_finding(sheets: list[Sheet], f: dict, k: int, title: str, last_on: dic
         sheets.append(Sheet(f"{title}: evidence"))
         sheet, h, after = sheets[-1], PLOT_HEIGHT, None
     repeat = not (first_sheet and sheet is sheets[0])
-    sheets[-1:] = draw_finding(sheet, f, k, h, repeat, after)
-    last_on[id(sheets[-1])] = k + 1
+    drawn = draw_finding(sheet, f, k, h, repeat, after)
+    sheets[-1:] = drawn.sheets
+    return drawn
 
 
 def pages(path: Path, pdf, context) -> None:
-    from diegocal.io import load_yaml
-
     d = load_yaml(path)
     title = f"Diagnosis, {d['domain']}: {Path(path).name}"
     notes = (
         (CHANNEL_NOTE,) if any(_g(v) == "0 (exact)" for v in (d["baseline"].get("heldout_rmse") or {}).values()) else ()
     )
     sheets = table_sheets(title, *channel_table(d), intro=summary_lines(d), notes=notes)
-    last_on: dict = {}  # id(sheet) -> number of the last finding drawn on it
+    drawn = None
     for k, f in enumerate(d.get("findings") or []):
-        place_finding(sheets, {**f, "domain": d["domain"]}, k, title, last_on)
+        drawn = place_finding(sheets, {**f, "domain": d["domain"]}, k, title, drawn)
     for sheet in sheets:
         save_page(pdf, sheet.fig)
 

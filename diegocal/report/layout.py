@@ -2,7 +2,10 @@
 
 A :class:`Sheet` is a matplotlib figure with a cursor: each block is placed below the previous
 one, measured after drawing (so wrapped text never runs off the page or into the next block).
-:func:`table_sheets` flows a long table over as many sheets as it needs, repeating the header.
+:func:`table_sheets` flows a long table over as many sheets as it needs, repeating the header;
+:func:`table_below` puts one below what a page holds; :func:`flow` places a run of figure panels,
+as many per sheet as fit, each sheet's panels captioned. A column of names too wide for the page
+is shortened in the middle so that different names stay different (:func:`shorten_distinct`).
 Sheets keep their layout as drawn (``save_page`` does not re-run tight_layout on them).
 """
 
@@ -14,6 +17,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import matplotlib.pyplot as plt
+from matplotlib.backends.backend_agg import RendererAgg
+from matplotlib.font_manager import FontProperties
+from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
 from diegocal.report.style import COLORS, PAGE_SIZE, keep_layout
@@ -204,24 +210,76 @@ def _column_widths(columns, texts, size: float) -> list[float]:
 
 def _clip_to_page(columns, texts, widths, size: float):
     """When a table is still wider than the text column, shorten the cells of its widest
-    left-aligned column (text, not numbers) with an ellipsis until it fits."""
+    left-aligned column (text, not numbers) until it fits, keeping different cells different."""
     excess = sum(widths) - (RIGHT - LEFT)
     left = [k for k, c in enumerate(columns) if c.align == "left"]
     if excess <= 0 or not left:
         return texts, widths
     k = max(left, key=lambda i: widths[i])
     target = max(widths[k] - excess, 0.08)
-    texts = [list(row) for row in texts]
-    for row in texts:
-        while len(row[k]) > 4 and text_width(row[k], size) + 0.016 > target:
-            row[k] = row[k][: max(3, int(len(row[k]) * 0.9)) - 1].rstrip() + "…"
+    short = shorten_distinct([row[k] for row in texts], lambda t: text_width(t, size) + 0.016 <= target)
+    texts = [[*row[:k], cell, *row[k + 1 :]] for row, cell in zip(texts, short, strict=True)]
     return texts, _column_widths(columns, texts, size)
+
+
+ELLIPSIS = "…"
+SEPARATORS = "_./- "
+#: Shares of the kept characters given to the end of a shortened text, tried in turn (the first
+#: that keeps every text distinct wins): names that share a prefix differ at their ends.
+TAIL_SHARES = (0.5, 0.6, 0.7, 0.4, 0.8, 0.3)
+
+
+def shorten_distinct(texts: Sequence[str], fits: Callable[[str], bool]) -> list[str]:
+    """``texts`` with those that do not ``fit`` shortened by an ellipsis in the middle, so that
+    different texts stay different: ``r_shoulder_pitch.flex`` and ``r_shoulder_pitch.ext`` become
+    ``r_shoul…pitch.flex`` and ``r_shoul…pitch.ext``, not twice ``r_shoulder_pitch.…``.
+
+    The head and tail are shared as :data:`TAIL_SHARES` says, the first share that keeps every
+    text distinct; failing that, each text keeps the shortest tail no other text ends with. A text
+    that cannot be shortened to fit and stay distinct is left whole."""
+    unique = list(dict.fromkeys(texts))
+    long = [t for t in unique if not fits(t)]
+    if not long:
+        return list(texts)
+    for share in TAIL_SHARES:
+        short = {t: _middle(t, fits, share) for t in long}
+        if len({short.get(t, t) for t in unique}) == len(unique):
+            return [short.get(t, t) for t in texts]
+    short = {t: _distinct_tail(t, unique, fits) for t in long}
+    if len({short.get(t, t) for t in unique}) < len(unique):
+        short = {}
+    return [short.get(t, t) for t in texts]
+
+
+def _middle(text: str, fits: Callable[[str], bool], tail_share: float) -> str:
+    """The longest ``head…tail`` of ``text`` that fits, about ``tail_share`` of the kept characters at
+    the end; the tail starts after a separator (``_``, ``.``, ``/``, ``-``, space) when one is near."""
+    after = [i + 1 for i, c in enumerate(text) if c in SEPARATORS]
+    for keep in range(len(text) - 1, 1, -1):
+        want = max(1, round(keep * tail_share))
+        near = [len(text) - i for i in after if abs(len(text) - i - want) <= max(2, want // 3)]
+        tail = min(near, key=lambda n: abs(n - want)) if near else want
+        if tail >= keep:
+            continue
+        candidate = text[: keep - tail] + ELLIPSIS + text[len(text) - tail :]
+        if fits(candidate):
+            return candidate
+    return text[:1] + ELLIPSIS
+
+
+def _distinct_tail(text: str, others: Sequence[str], fits: Callable[[str], bool]) -> str:
+    """``head…tail`` with the shortest tail no other text ends with and as much head as fits; the
+    whole text when that does not fit."""
+    rest = [o for o in others if o != text]
+    n = next((n for n in range(1, len(text)) if not any(o.endswith(text[-n:]) for o in rest)), len(text))
+    for head in range(len(text) - n - 1, 0, -1):
+        if fits(text[:head] + ELLIPSIS + text[-n:]):
+            return text[:head] + ELLIPSIS + text[-n:]
+    return text
 
 
 def text_width(text: str, size: float, bold: bool = False) -> float:
     """Width of one line of text at ``size`` points, fraction of the page width."""
-    from matplotlib.font_manager import FontProperties
-
     prop = FontProperties(size=size, weight="bold" if bold else "normal")
     w, _, _ = _renderer().get_text_width_height_descent(text or " ", prop, ismath=False)
     return w / (MEASURE_DPI * PAGE_SIZE[0])  # pixels at MEASURE_DPI -> fraction of the page width
@@ -234,14 +292,10 @@ MEASURE_DPI = 288
 
 @functools.cache
 def _renderer():
-    from matplotlib.backends.backend_agg import RendererAgg
-
     return RendererAgg(10, 10, MEASURE_DPI)
 
 
 def _rule(x: float, y: float, w: float, lw: float = 0.6):
-    from matplotlib.lines import Line2D
-
     return Line2D([x, x + w], [y, y], lw=lw, color=COLORS["measured"])
 
 
@@ -287,3 +341,76 @@ def table_sheets(
             sheets.append(Sheet(f"{title} (continued)"))
             sheets[-1].paragraph(p, size=8, color="0.25")
     return sheets
+
+
+def table_below(
+    sheets: list[Sheet], title: str, columns, rows, notes, room: float = 0.25, balance: bool = True
+) -> None:
+    """A table below the last sheet's content when ``room`` is left there, else from a new page.
+    ``balance`` as in :func:`table_sheets` (False for a table that figures follow: fill its pages)."""
+    if sheets[-1].room() > room:
+        sheets[-1:] = table_sheets(title, columns, rows, notes=notes, sheet=sheets[-1], balance=balance)
+    else:
+        sheets += table_sheets(title, columns, rows, notes=notes, balance=balance)
+
+
+#: Figure panels placed by :func:`flow` may shrink to this share of their height to fill a page.
+SHRINK = 0.75
+
+
+def flow(
+    sheets: list[Sheet],
+    title: str,
+    heading: str,
+    caption: str | Callable[[range], str],
+    n: int,
+    height: float,
+    draw: Callable[[int, Sheet, float], object],
+    last: bool = False,
+) -> None:
+    """``n`` panels (``draw(k, sheet, height)`` places panel k), as many per sheet as fit, under
+    ``heading``, the caption below each sheet's panels; new sheets are titled ``title (continued)``.
+    ``caption``: the words, or a function of the panels a sheet holds (a ``range``) that says what
+    those panels show. Panels are ``height`` high, or down to ``SHRINK`` of it when that fits one
+    more on the sheet. ``last``: nothing follows in the section, so no sheet is left holding a lone
+    panel."""
+    words = caption if callable(caption) else lambda panels: caption
+    k = 0
+    while k < n:
+        sheet = sheets[-1]
+        longest = max((words(range(k, k + m)) for m in range(1, n - k + 1)), key=len)
+        room = sheet.room() - 0.035 - sheet.paragraph_height(longest, size=8)
+        extra = 0.025 + GAP  # title room and gap of each panel
+        fit = int(room // (height + extra))
+        tight = int(room // (SHRINK * height + extra))
+        h = height
+        if tight > fit and fit < n - k:  # smaller panels take one more (or the rest)
+            fit = min(tight, n - k)
+            h = min(height, room / fit - extra)
+        if fit < 1:
+            sheets.append(Sheet(f"{title} (continued)"))
+            continue
+        take = min(fit, n - k)
+        lone = last and n - k - take == 1 and take >= 2  # the next sheet would hold a lone panel
+        take -= lone
+        sheet.heading(heading + (" (continued)" if k else ""))
+        for i in range(k, k + take):
+            draw(i, sheet, h)
+        sheet.caption(words(range(k, k + take)))
+        k += take
+        if lone:  # the two last panels share the next sheet
+            sheets.append(Sheet(f"{title} (continued)"))
+
+
+def split_axes(ax, share: float = 0.62, gap: float = 0.012):
+    """Split an Axes' area in two stacked Axes sharing its x axis: the top ``share`` of the height
+    (its x tick labels hidden) and the rest below, ``gap`` (fraction of the page) between them.
+    Returns (top, bottom); the top's x label stays hidden (the bottom's says it)."""
+    box = ax.get_position()
+    top_h = (box.height - gap) * share
+    bottom_h = box.height - gap - top_h
+    ax.set_position((box.x0, box.y1 - top_h, box.width, top_h))
+    below = ax.figure.add_axes((box.x0, box.y0, box.width, bottom_h), sharex=ax)
+    ax.tick_params(labelbottom=False)
+    ax.xaxis.label.set_visible(False)
+    return ax, below

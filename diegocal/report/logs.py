@@ -11,7 +11,7 @@ from diegocal.io.describe import LogSummary, describe_log
 from diegocal.io.files import log_robot
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, register_section
-from diegocal.report.style import STREAM_UNITS, axes_or_new, save_page
+from diegocal.report.style import STREAM_UNITS, axes_or_new, save_page, trace_style
 
 LOG_SUFFIXES = (".h5", ".hdf5", ".csv")
 MAX_CHANNELS = 12  # traces per plot
@@ -62,13 +62,14 @@ def stream_table(s: LogSummary) -> tuple[list[Column], list[list]]:
 
 
 def plot_stream(log, name: str, ax=None, max_channels: int = MAX_CHANNELS):
-    """Traces of the first channels of one stream against time, with the stream's unit."""
+    """Traces of the first channels of one stream against time, with the stream's unit; each trace its
+    own colour and line style (:func:`~diegocal.report.style.trace_style`)."""
     ax = axes_or_new(ax)
     s = log.streams[name]
     data = s.data if s.data.ndim == 2 else np.linalg.norm(s.data, axis=2)
     shown = min(max_channels, len(s.names))
     for k in range(shown):
-        ax.plot(log.time, data[:, k], lw=0.6, label=s.names[k])
+        ax.plot(log.time, data[:, k], lw=0.6, label=s.names[k], **trace_style(k))
     unit = STREAM_UNITS.get(name, "sensor unit")
     ax.set_xlabel(f"time [s]  ({log.n_samples} samples)")
     ax.set_ylabel(f"distance from mocap origin [{unit}]" if s.data.ndim == 3 else f"{name} [{unit}]")

@@ -1,9 +1,11 @@
 """`diegocal report`: one PDF document from result files.
 
 The document opens with a front page (what was run, the contents with page numbers, and a summary
-in plain words: each section's first paragraph), then one section per result in the order given.
-Every page carries a footer with its section and page number. Sections are drawn first into a
-:class:`Document` (which collects the pages), so that the contents know where each section starts.
+in plain words: each section's first paragraph), then one section per result in the order given;
+a report of one result opens the same way. Every page carries a footer with its section and page
+number. Sections are drawn first into a :class:`Document` (which collects the pages), so that the
+contents know where each section starts. Held-out logs (``--heldout``) are checked before anything
+is drawn: each must be one that some fitted model given can be scored on.
 """
 
 from __future__ import annotations
@@ -12,11 +14,19 @@ import datetime as _dt
 import platform
 from pathlib import Path
 
+import matplotlib.pyplot as plt
+from matplotlib.backends.backend_pdf import PdfPages
+
 from diegocal import __version__
 from diegocal.errors import DiegocalError, InputFileError
 from diegocal.io import atomic_path
+from diegocal.io.files import log_robot, log_streams
 from diegocal.report.layout import Column, Sheet, table_sheets
-from diegocal.report.registry import ReportContext, Section, section_for
+from diegocal.report.registry import ReportContext, Section, robot_matches, robot_words, section_for
+from diegocal.report.style import save_page
+
+#: What a section may fail with while it summarises a result: the summary says so and goes on.
+SUMMARY_ERRORS = (DiegocalError, OSError, KeyError, TypeError, ValueError)
 
 
 class Document:
@@ -56,45 +66,73 @@ def plan_report(results) -> list[tuple[Path, Section]]:
     return plan
 
 
-def abstracts(plan, context: ReportContext) -> list[tuple[str, list[str]]]:
-    """(section title, plain-words paragraphs) of every result that has an abstract."""
+def check_heldout(plan, context: ReportContext) -> None:
+    """Every held-out log must be one that some fitted model of ``plan`` is scored on: of the same
+    robot, with the streams the model needs. Raises :class:`InputFileError` with the reason (not a
+    log, no fitted model given, another robot's log, a stream missing) for the first that is not."""
+    uses = [
+        (r, robot, needs)
+        for r, section in plan
+        if section.heldout_needs is not None
+        for robot, needs in section.heldout_needs(r)
+    ]
+    for h in context.heldout:
+        try:
+            name, streams = log_robot(h), set(log_streams(h))
+        except DiegocalError as exc:
+            raise InputFileError(f"held-out log {exc}") from None
+        if not uses:
+            raise InputFileError(
+                f"{h}: no result given is scored on a held-out log (calib.yaml, pneumatic.yaml and sgp/ models are)"
+            )
+        mine = [(r, robot, needs) for r, robot, needs in uses if robot_matches(robot, name)]
+        if not mine:
+            robots = ", ".join(dict.fromkeys(f"{robot_words(robot)} ({Path(r).name})" for r, robot, _ in uses))
+            raise InputFileError(f"{h}: a log of robot {name}, but the models given are of robot {robots}")
+        if not any(set(needs) <= streams for _, _, needs in mine):
+            r, _, needs = mine[0]
+            missing = ", ".join(s for s in needs if s not in streams)
+            raise InputFileError(
+                f"{h}: no {missing} stream, which {Path(r).name} needs to be scored on it (it has "
+                f"{', '.join(sorted(streams)) or 'no stream'})"
+            )
+
+
+def _each(plan, context: ReportContext, attr: str, failed):
+    """(section title, ``section.<attr>(result, context)``) of every result whose section has one;
+    ``failed(exc)`` stands in for what a section could not say."""
     out = []
     for r, section in plan:
-        if section.abstract is None:
+        say = getattr(section, attr)
+        if say is None:
             continue
         try:
-            out.append((section.title(r), section.abstract(r, context)))
-        except (DiegocalError, OSError, KeyError, TypeError, ValueError) as exc:
-            out.append((section.title(r), [f"(no summary: {exc})"]))
+            out.append((section.title(r), say(r, context)))
+        except SUMMARY_ERRORS as exc:
+            out.append((section.title(r), failed(exc)))
     return out
+
+
+def abstracts(plan, context: ReportContext) -> list[tuple[str, list[str]]]:
+    """(section title, plain-words paragraphs) of every result that has an abstract."""
+    return _each(plan, context, "abstract", lambda exc: [f"(no summary: {exc})"])
 
 
 def headlines(plan, context: ReportContext) -> list[tuple[str, str]]:
     """(section title, one line) of every result whose section has a headline: the terminal's summary."""
-    out = []
-    for r, section in plan:
-        if section.headline is None:
-            continue
-        try:
-            out.append((section.title(r), section.headline(r, context)))
-        except (DiegocalError, OSError, KeyError, TypeError, ValueError) as exc:
-            out.append((section.title(r), f"(no summary: {exc})"))
-    return out
+    return _each(plan, context, "headline", lambda exc: f"(no summary: {exc})")
 
 
 def write_report(results, out, context: ReportContext | None = None, command: str = "diegocal report") -> list[str]:
     """Write the report; returns the section name used for each result, in order.
 
-    Every result is recognised before anything is written, so an unknown file fails cleanly
-    and no half-written PDF is left behind (the write is atomic too).
+    Every result is recognised and every held-out log checked before anything is written, so an
+    unknown file or a held-out log no model can be scored on fails cleanly and no half-written PDF
+    is left behind (the write is atomic too).
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.backends.backend_pdf import PdfPages
-
-    from diegocal.report.style import save_page
-
     context = context or ReportContext()
     plan = plan_report(results)
+    check_heldout(plan, context)
     doc = Document()
     for r, section in plan:
         doc.start(section.title(r))
@@ -102,13 +140,11 @@ def write_report(results, out, context: ReportContext | None = None, command: st
             for sheet in opening_sheets(section, r, context):
                 save_page(doc, sheet.fig)
         section.pages(r, doc, context)
-    front = []
-    if len(plan) > 1:  # one result needs no contents: its section opens with its summary
-        summary = abstracts(plan, context)
-        counting = front_sheets(plan, doc, context, command, summary, offset=0)
-        for sheet in counting:  # the first pass only counts the front pages
-            plt.close(sheet.fig)
-        front = front_sheets(plan, doc, context, command, summary, offset=len(counting))
+    summary = abstracts(plan, context)
+    counting = front_sheets(plan, doc, context, command, summary, offset=0)
+    for sheet in counting:  # the first pass only counts the front pages
+        plt.close(sheet.fig)
+    front = front_sheets(plan, doc, context, command, summary, offset=len(counting))
     n_front = len(front)
     pages = [s.fig for s in front] + doc.pages
     stamp = f"diegocal {__version__}, {_dt.datetime.now(_dt.UTC):%Y-%m-%d}"
@@ -170,7 +206,7 @@ def _source(section: Section, path: Path) -> str:
     """The log a result was made from (its provenance), by name; "–" when it does not say."""
     try:
         log = (section.describe(path) or {}).get("log")
-    except (DiegocalError, OSError, KeyError, TypeError, ValueError):
+    except SUMMARY_ERRORS:
         log = None
     return Path(str(log)).name if log else "–"
 

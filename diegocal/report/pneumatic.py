@@ -1,13 +1,13 @@
-"""Report section for pneumatic.yaml (thesis ch. 4 figures; registers itself on import).
+"""Report section for pneumatic.yaml (thesis ch. 4; registers itself on import).
 
 Pages: an opening in plain words with the key numbers and Table 4.1 (what c1..c9 mean, their
 units and bounds); the fitted parameters of every chamber with the next-step error and the 2-s
 drift, split across pages; Fig. 4.13 (drift of open-loop prediction against horizon, all chambers,
-on the fit log and on held-out logs given with ``--heldout``); Fig. 4.10 (steady-state curves:
-fitted s(u) and, when the fit recorded a locked-cylinder sweep log, the measured sweep); Fig. 4.11
-(next-step Δp overlay) and Fig. 4.12 (pressure integrated from grid points) for a typical
-chamber, rebuilt from the fit log. Pressures are in the pressure stream's unit, kPa for the
-bundled robots.
+on the fit log and on held-out logs given with ``--heldout``, both at the logs' full rate when the
+fit log is at hand); Fig. 4.10 (steady-state curves: fitted s(u) and, when the fit recorded a
+locked-cylinder sweep log, the measured sweep); Fig. 4.11 (next-step Δp overlay) and Fig. 4.12
+(pressure integrated from grid points) for a typical chamber, rebuilt from the fit log. The plots
+are in :mod:`diegocal.report.pneumatic_plots`.
 """
 
 from __future__ import annotations
@@ -21,161 +21,57 @@ from diegocal.errors import DiegocalError
 from diegocal.io import load_log, load_yaml
 from diegocal.pneumatic.data import ChamberData, extract
 from diegocal.pneumatic.files import PneumaticModel, load_model
-from diegocal.pneumatic.model import steady_state
 from diegocal.pneumatic.params import SPECS
-from diegocal.pneumatic.predict import drift, next_step, predict_with_resets
+from diegocal.pneumatic.predict import HORIZON_S, Drift, drift, predict_with_resets
 from diegocal.report.layout import Column, Sheet, table_sheets
-from diegocal.report.registry import Section, is_bundle, register_section
-from diegocal.report.style import COLORS, axes_or_new, save_page
+from diegocal.report.pneumatic_plots import (
+    UNIT,
+    plot_delta_p,
+    plot_drift_curves,
+    plot_drift_histogram,
+    plot_integrated,
+    plot_steady_state,
+    step_words,
+    stored_drift,
+)
+from diegocal.report.registry import ReportContext, Section, is_bundle, register_section
+from diegocal.report.style import save_page
 
-U_GRID = np.linspace(3.0, 7.0, 161)  # §4.5: commands 3-7 V
-UNIT = "kPa"  # the pressure stream's unit in the bundled robots ("pu" in diegocal.pneumatic)
-#: The thesis's drift levels (§4.5.4): "less than 10 % of Pc - Pr, and usually less than 4 %".
-LEVELS = ((4.0, "4 %: the thesis's usual drift", ":"), (10.0, "10 %: the thesis's bound", "--"))
-
-
-def _levels(ax, vertical: bool = False) -> None:
-    for x, label, ls in LEVELS:
-        (ax.axvline if vertical else ax.axhline)(x, ls=ls, color=COLORS["residual"], lw=0.9, label=label)
-
-
-def plot_drift_curves(model: PneumaticModel, ax=None, heldout=None):
-    """Fig. 4.13: RMS prediction error vs horizon per chamber, in % of (Pc - Pr).
-
-    heldout : {chamber: Drift} on a held-out log, drawn as the pooled curve only (or None)
-    """
-    ax = axes_or_new(ax)
-    step_s = float(model.meta.get("drift", {}).get("curve_step_s", 0.1))
-    starts = model.meta.get("drift", {}).get("starts", "?")
-    curves = [np.asarray(c.raw.get("drift_curve", []), float) for c in model.chambers.values()]
-    curves = [c for c in curves if c.size]
-    for k, c in enumerate(curves):
-        label = "one chamber (fit log)" if k == 0 else None
-        ax.plot(np.arange(c.size) * step_s, 100 * c, lw=0.5, color=COLORS["model"], alpha=0.4, label=label)
-    if curves:
-        n = min(c.size for c in curves)
-        pooled = np.sqrt(np.mean([c[:n] ** 2 for c in curves], axis=0))
-        ax.plot(np.arange(n) * step_s, 100 * pooled, lw=2, color="k", label="all chambers pooled (fit log)")
-    if heldout:
-        n = min(d.rms.size for d in heldout.values())
-        pooled = np.sqrt(np.mean([(d.rms[:n] / d.span) ** 2 for d in heldout.values()], axis=0))
-        t = next(iter(heldout.values())).horizon[:n]
-        ax.plot(t, 100 * pooled, lw=2, color=COLORS["baseline"], label="all chambers pooled (held-out log)")
-    _levels(ax)
-    ax.set_xlabel(f"time since the last measured pressure [s]  ({starts} starts per chamber)")
-    ax.set_ylabel("RMS error [% of Pc − Pr]")
-    ax.set_title(f"Drift of open-loop pressure prediction, {len(curves)} chambers (Fig. 4.13)")
-    ax.legend(fontsize=6, loc="upper left")
-    return ax
+#: The streams a held-out log needs: the chambers' pressure and valve command, their volume sensor.
+HELDOUT_STREAMS = ("pressure", "valve", "pots")
 
 
-def plot_drift_histogram(model: PneumaticModel, ax=None, heldout=None):
-    """Distribution of the 2-s drift over chambers, % of (Pc - Pr); held-out drifts beside."""
-    ax = axes_or_new(ax)
-    d = np.array([c.raw.get("drift_2s", np.nan) for c in model.chambers.values()], float) * 100
-    d = d[np.isfinite(d)]
-    top = max([12.0, *d] + ([100 * x.final for x in heldout.values()] if heldout else []))
-    bins = np.linspace(0, top, 25)
-    ax.hist(d, bins=bins, color=COLORS["model"], alpha=0.8, label=f"fit log ({d.size} chambers)")
-    if heldout:
-        h = np.array([x.final for x in heldout.values()]) * 100
-        ax.hist(h, bins=bins, histtype="step", lw=1.5, color=COLORS["baseline"], label=f"held-out log ({h.size})")
-    _levels(ax, vertical=True)
-    ax.set_xlabel("RMS error 2 s after the last measured pressure [% of Pc − Pr]")
-    ax.set_ylabel("chambers")
-    ax.set_title(f"2-s drift on the fit log: median {np.median(d):.1f} %, worst {d.max():.1f} %")
-    ax.legend(fontsize=6)
-    return ax
+# ----------------------------------------------------------------------------- drift, words, tables
+def _drift_on(model: PneumaticModel, log) -> dict[str, Drift]:
+    """{chamber: Drift} of every chamber whose data the log holds, at the log's full rate."""
+    out = {}
+    for name in model.chambers:
+        try:
+            out[name] = drift(model.chambers[name].params, _chamber_data(model, log, name))
+        except DiegocalError:
+            continue
+    return out
 
 
-def plot_steady_state(model: PneumaticModel, sweep=None, names=None, ax=None):
-    """Fig. 4.10: fitted s(u) at rest (vdot = 0, mid travel) and, if given, the measured sweep.
-
-    sweep : dict name -> (u (T,), p (T,)) from a locked-cylinder log, or None
-    """
-    ax = axes_or_new(ax)
-    names = list(names or model.chambers)
-    for i, name in enumerate(names):
-        c = model.chambers[name].params
-        color = f"C{i % 10}" if len(names) <= 10 else COLORS["model"]
-        if sweep and name in sweep:
-            u, p = sweep[name]
-            ax.plot(u, p, ".", ms=1, color=color, alpha=0.3)
-        s = steady_state(c, U_GRID, c.v_ref, 0.0)
-        ax.plot(
-            U_GRID,
-            s,
-            lw=1 if len(names) <= 10 else 0.4,
-            color=color,
-            label=name if len(names) <= 10 else None,
-        )
-    ax.set_xlabel(f"valve command u [V]  ({U_GRID.size} points, 3-7 V as in §4.5)")
-    ax.set_ylabel(f"steady-state pressure s(u) [{UNIT}]")
-    src = "fitted s(u) (lines) and measured sweep (dots)" if sweep else "fitted s(u)"
-    ax.set_title(f"{len(names)} chamber(s): {src} (Fig. 4.10)")
-    if len(names) <= 10:
-        ax.legend(fontsize=6)
-    return ax
-
-
-def _legend_above_data(ax) -> None:
-    """One row of legend in a band added above the data, so that it covers none of it."""
-    low, high = ax.get_ylim()
-    ax.set_ylim(low, high + 0.3 * (high - low))
-    ax.legend(fontsize=6, loc="upper center", ncol=3, frameon=False)
-
-
-def plot_delta_p(data: ChamberData, params, ax=None, window=(0.0, 10.0)):
-    """Fig. 4.11: measured p_{t+h} - p_t (light) and the model's one-step change (dark)."""
-    ax = axes_or_new(ax)
-    sel = np.flatnonzero((data.time[:-1] >= window[0]) & (data.time[:-1] < window[1]) & data.steps)
-    pred = next_step(params, data)[sel]
-    ax.plot(data.time[sel], data.p[sel + 1] - data.p[sel], color="0.7", lw=1.5, label="measured")
-    ax.plot(data.time[sel], pred - data.p[sel], color=COLORS["model"], lw=0.7, label="model, from the measured p_t")
-    h_ms = 1000 * float(np.median(np.diff(data.time)))
-    ax.set_xlabel(f"time [s]  ({sel.size} steps)")
-    ax.set_ylabel(f"Δp per {h_ms:.0f} ms step [{UNIT}]")
-    ax.set_title(f"{data.name}: pressure change, measured vs model (Fig. 4.11)")
-    _legend_above_data(ax)
-    return ax
-
-
-def plot_integrated(data: ChamberData, params, predicted=None, ax=None, window=(0.0, 10.0)):
-    """Fig. 4.12: measured pressure (light) and the model integrated from the grid points (dark)."""
-    ax = axes_or_new(ax)
-    pred = predict_with_resets(params, data) if predicted is None else predicted
-    sel = (data.time >= window[0]) & (data.time < window[1])
-    ax.plot(data.time[sel], data.p[sel], color="0.7", lw=1.5, label="measured")
-    ax.plot(data.time[sel], pred[sel], color=COLORS["model"], lw=0.7, label="model integrated open loop")
-    for k, t in enumerate(data.time[sel][::200]):
-        label = "re-initialised with the measured pressure" if k == 0 else None
-        ax.axvline(t, ls=":", color="0.5", lw=0.6, label=label)
-    ax.set_xlabel(f"time [s]  ({int(sel.sum())} samples)")
-    ax.set_ylabel(f"pressure [{UNIT}]")
-    ax.set_title(f"{data.name}: open-loop pressure from the dotted grid lines (Fig. 4.12)")
-    _legend_above_data(ax)
-    return ax
-
-
-# ----------------------------------------------------------------------------- held-out, words, tables
 @functools.lru_cache(maxsize=4)
 def heldout_drift(path: str, heldout: tuple[str, ...]) -> tuple[str | None, dict]:
     """(held-out log, {chamber: Drift}) on the first held-out log that has the chambers' data."""
-    from diegocal.report.registry import ReportContext
-
     model = load_model(path)
-    robot = _robot_name(model)
-    for hpath in ReportContext(heldout=tuple(map(Path, heldout))).heldout_for(robot, ("pressure", "valve", "pots")):
-        log = load_log(hpath)
-        out = {}
-        for name in model.chambers:
-            try:
-                out[name] = drift(model.chambers[name].params, _chamber_data(model, log, name))
-            except DiegocalError:
-                continue
+    for hpath in ReportContext(heldout=tuple(map(Path, heldout))).heldout_for(_robot_name(model), HELDOUT_STREAMS):
+        out = _drift_on(model, load_log(hpath))
         if out:
             return str(hpath), out
     return None, {}
+
+
+@functools.lru_cache(maxsize=4)
+def fit_drift(path: str) -> dict[str, Drift]:
+    """{chamber: Drift} on the fit log, recomputed at its full rate (as the held-out one is) when
+    the log is at hand; else the curves pneumatic.yaml stores, a point every ``curve_step_s``."""
+    model = load_model(path)
+    log_path = Path(str(model.meta.get("log", "")))
+    out = _drift_on(model, load_log(log_path)) if log_path.is_file() else {}
+    return out or stored_drift(model)
 
 
 def _robot_name(model: PneumaticModel) -> str | None:
@@ -320,17 +216,13 @@ def pneumatic_pages(path: Path, pdf, context) -> None:
     for sheet in sheets:
         save_page(pdf, sheet.fig)
 
-    sheet = Sheet(f"{title}: multi-step prediction (§4.5.4)")
-    plot_drift_curves(model, sheet.axes(0.36), held)
-    plot_drift_histogram(model, sheet.axes(0.3), held)
-    sheet.caption(
-        "From 48 evenly spaced start points per chamber the pressure is predicted open loop from the measured "
-        "valve command and joint motion and compared with the measured pressure. Top: RMS error against the time "
-        "since the last measured pressure, in % of Pc − Pr (the thesis plots the same in units of (Pc − Pr)/10); "
-        "thin blue lines one chamber each, thick lines all chambers pooled. Bottom: the error at 2 s, one count "
-        "per chamber. Red lines: the thesis's drift levels, 'less than 10 % ... and usually less than 4 %'."
-    )
-    save_page(pdf, sheet.fig)
+    fit = fit_drift(str(Path(path).resolve()))
+    if fit:  # a fit with drift_starts = 0 measured none
+        sheet = Sheet(f"{title}: multi-step prediction (§4.5.4)")
+        plot_drift_curves(fit, sheet.axes(0.36), held)
+        plot_drift_histogram(model, sheet.axes(0.3), held)
+        sheet.caption(drift_caption(fit, held))
+        save_page(pdf, sheet.fig)
 
     sweep = _sweep(model)
     sheet = Sheet(f"{title}: steady-state pressure (§4.3.1, §4.5.2)")
@@ -363,9 +255,27 @@ def pneumatic_pages(path: Path, pdf, context) -> None:
     sheet.caption(
         "Top two: the change of pressure over one step, measured (grey) and predicted by the model from the measured "
         "pressure (blue), the quantity the fit minimises (Fig. 4.11); the second zooms into one second. Bottom two: "
-        "the pressure integrated open loop from the measured one at the dotted lines, every 2 s (Fig. 4.12)."
+        f"the pressure integrated open loop (blue), re-initialised with the measured pressure (grey) at the dotted "
+        f"lines, every {HORIZON_S:g} s (Fig. 4.12)."
     )
     save_page(pdf, sheet.fig)
+
+
+def drift_caption(fit: dict[str, Drift], held: dict) -> str:
+    """What the drift page shows: how many starts, at which step, which logs."""
+    starts = next(iter(fit.values())).n_starts
+    text = (
+        f"From {starts or 'the'} evenly spaced start points per chamber the pressure is predicted open "
+        "loop from the measured valve command and joint motion and compared with the measured pressure. Top: RMS "
+        "error against the time since the last measured pressure, in % of Pc − Pr (the thesis plots the same in "
+        f"units of (Pc − Pr)/10), {step_words(fit)}; thin blue lines one chamber each on the fit log, the black line "
+        "all chambers pooled"
+    )
+    text += ", the orange line all chambers pooled on the held-out log at the same points in time." if held else "."
+    return text + (
+        f" Bottom: the error at {HORIZON_S:g} s, one count per chamber. Red lines: the thesis's drift levels, 'less "
+        "than 10 % ... and usually less than 4 %'."
+    )
 
 
 def _key_rows(model: PneumaticModel, hpath, held: dict) -> list[list]:
@@ -426,5 +336,6 @@ register_section(
         heading="Pneumatic valve-chamber models",
         abstract=abstract,
         headline=headline,
+        heldout_needs=lambda path: [(_robot_name(load_model(path)), HELDOUT_STREAMS)],
     )
 )

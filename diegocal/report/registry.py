@@ -12,6 +12,27 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from diegocal.errors import DiegocalError
+from diegocal.io.bundle import load_bundle
+from diegocal.io.files import log_robot, log_streams
+
+
+def robot_matches(robot: dict | str | None, log_robot_name: str | None) -> bool:
+    """Whether a log whose robot attribute is ``log_robot_name`` is of ``robot`` (a bundle's robot
+    record, :attr:`diegocal.io.bundle.Bundle.robot`, or a name): its name or directory; any log
+    when either is unknown."""
+    rec = robot if isinstance(robot, dict) else {"name": robot, "dir": None}
+    known = {str(v) for v in (rec.get("name"), rec.get("dir")) if v}
+    if not known or log_robot_name is None:
+        return True
+    return log_robot_name in known or Path(log_robot_name).name == rec.get("name")
+
+
+def robot_words(robot: dict | str | None) -> str:
+    """A robot record or name in words (its name)."""
+    rec = robot if isinstance(robot, dict) else {"name": robot}
+    return str(rec.get("name") or rec.get("dir") or "(not named)")
+
 
 @dataclass(frozen=True)
 class ReportContext:
@@ -22,22 +43,14 @@ class ReportContext:
     heldout: tuple[Path, ...] = ()
 
     def heldout_for(self, robot: dict | str | None, needs: tuple[str, ...]) -> list[Path]:
-        """The held-out logs of ``robot`` that have every stream in ``needs``. ``robot`` is a
-        bundle's robot record (:attr:`diegocal.io.bundle.Bundle.robot`) or a name; a log matches
-        when its robot attribute is that name or directory (any log when either is unknown)."""
-        from diegocal.errors import DiegocalError
-        from diegocal.io.files import log_robot, log_streams
-
-        rec = robot if isinstance(robot, dict) else {"name": robot, "dir": None}
-        known = {str(v) for v in (rec.get("name"), rec.get("dir")) if v}
+        """The held-out logs of ``robot`` (:func:`robot_matches`) that have every stream in ``needs``."""
         out = []
         for path in self.heldout:
             try:
                 name, streams = log_robot(path), log_streams(path)
             except DiegocalError:
                 continue
-            mine = not known or name is None or name in known or Path(name).name == rec.get("name")
-            if mine and all(s in streams for s in needs):
+            if robot_matches(robot, name) and all(s in streams for s in needs):
                 out.append(Path(path))
         return out
 
@@ -52,6 +65,10 @@ class Section:
     False) gets an opening page from the report with the paragraphs and ``key_table(path, context)`` ->
     (columns, rows), when given. Abstracts are asked for twice (summary page and section); sections
     cache what is costly.
+
+    ``heldout_needs(path)``: for a fitted model that is scored on ``--heldout`` logs, each model's
+    robot (record or name) and the streams a held-out log needs, [(robot, needs), ...]; the report
+    refuses a held-out log that no result can be scored on.
     """
 
     name: str
@@ -63,6 +80,7 @@ class Section:
     opens_itself: bool = True
     key_table: Callable | None = None
     headline: Callable[[Path, ReportContext], str] | None = None  # one line for the terminal's summary
+    heldout_needs: Callable[[Path], list[tuple[dict | str | None, tuple[str, ...]]]] | None = None
 
     def title(self, path: Path) -> str:
         return f"{self.heading or self.name}: {Path(path).name}"
@@ -83,9 +101,6 @@ def register_section(section: Section, before: str | None = None) -> Section:
 def is_bundle(path, kind: str) -> bool:
     """Whether ``path`` is a fitted-output YAML file of bundle ``kind`` (the one loader,
     :func:`diegocal.io.bundle.load_bundle`, decides; a file it cannot read is no bundle)."""
-    from diegocal.errors import DiegocalError
-    from diegocal.io.bundle import load_bundle
-
     path = Path(path)
     if not path.is_file() or path.suffix.lower() not in (".yaml", ".yml"):
         return False

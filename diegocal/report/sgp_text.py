@@ -1,10 +1,13 @@
-"""The SGP section's words and tables; its figures and pages are in :mod:`diegocal.report.sgp`.
+"""The SGP section's data and words: the models a path holds, their scores on held-out logs, and
+how good they are in plain words; its tables of what was fitted are in
+:mod:`diegocal.report.sgp_tables`, its figures in :mod:`diegocal.report.sgp_plots`, its pages in
+:mod:`diegocal.report.sgp`.
 
 What was fitted on what (model kind, joints, samples, inference), how good it is in-sample and on
 held-out logs given with ``diegocal report --heldout LOG`` (nMSE, RMSE and the share of measured
 torques inside the predicted ±2σ band per joint), what the guard chose and what is still open; the
-per-joint table, the model's facts, the GP length-scales and the identified parameters with units
-and standard errors. A directory of several models gets one comparison table.
+per-joint table (a directory of several models gets one comparison table); a prediction log's
+scores, table and verdict.
 """
 
 from __future__ import annotations
@@ -16,9 +19,17 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.errors import DiegocalError
-from diegocal.evaluate import COVERAGE_BAND
+from diegocal.evaluate import COVERAGE_BAND, score
+from diegocal.io import load_log
+from diegocal.io.bundle import load_bundle, robot_of
 from diegocal.report.layout import Column
+from diegocal.report.registry import ReportContext
+from diegocal.report.sgp_tables import GUARD_NOTE, GUARD_WORDS, model_kind, number
+from diegocal.sgp import is_model_dir, load_model, load_summary
 from diegocal.sgp.store import region_text
+
+#: The streams a held-out log needs: the joint angles (and their rates) and the measured torque.
+HELDOUT_STREAMS = ("q", "tau")
 
 KIND_WORDS = {
     "sgp": "semi-parametric (rigid-body and friction regression plus a Gaussian process on what it leaves)",
@@ -26,62 +37,12 @@ KIND_WORDS = {
     "pr": "parametric (rigid-body and friction regression)",
     "gp": "non-parametric (Gaussian process alone)",
 }
-#: The guard's choice per joint (cross-validation on contiguous blocks of the training log), short.
-GUARD_WORDS = {
-    "learnt": "GP kept as learnt",
-    "released": "GP, caps released",
-    "extended": "GP, stretched",
-    "cut": "GP with an onset",
-    "two-stage": "two stages",
-    "parametric": "parametric only",
-}
-GUARD_NOTE = (
-    "Guard: which of its candidates predicted contiguous blocks of the training log best (blocked "
-    "cross-validation). 'GP kept as learnt': the GP with its maximum-likelihood hyperparameters; 'GP, caps "
-    "released': length-scales stuck at their upper bound released; 'GP, stretched': the GP stretched towards its "
-    "linear limit, so that it extrapolates a trend instead of reverting to zero; "
-    "'GP with an onset': the GP in two sides at the onset the two stages' scan found in the joint's angle, "
-    "learnt with the parametric part, offered where the cut two stages lost (off: sgp-fit --no-joint-region); "
-    "'two stages': the parametric "
-    "fit, then a GP on its residual (PRGP's stages), kept where it beat the other choice by one standard error; "
-    "'parametric only': the GP did not beat the parametric part by one standard error and 2 % of its error and "
-    "was switched off for that joint. A winner is confirmed with its hyperparameters re-learnt without the block "
-    "it predicts."
-)
-#: Description and unit (revolute joint, prismatic joint) of each full parameter (thesis eq. 3.30).
-PARAMETER_WORDS = {
-    "m": ("mass", "kg", "kg"),
-    "mc_x": ("first moment of mass m·c, x", "kg·m", "kg·m"),
-    "mc_y": ("first moment of mass m·c, y", "kg·m", "kg·m"),
-    "mc_z": ("first moment of mass m·c, z", "kg·m", "kg·m"),
-    "I_xx": ("inertia about the joint frame, xx", "kg·m²", "kg·m²"),
-    "I_xy": ("inertia about the joint frame, xy", "kg·m²", "kg·m²"),
-    "I_yy": ("inertia about the joint frame, yy", "kg·m²", "kg·m²"),
-    "I_xz": ("inertia about the joint frame, xz", "kg·m²", "kg·m²"),
-    "I_yz": ("inertia about the joint frame, yz", "kg·m²", "kg·m²"),
-    "I_zz": ("inertia about the joint frame, zz", "kg·m²", "kg·m²"),
-    "fv": ("viscous friction", "N·m·s/rad", "N·s/m"),
-    "fc": ("Coulomb friction", "N·m", "N"),
-}
-PARAMETER_NOTE = (
-    "Base parameters (thesis eq. 3.30 reduced by QR with column pivoting): each is the named parameter of the "
-    "link that a joint moves plus the combination of the parameters the regressor cannot tell apart from it, so a "
-    "base inertia may be negative. ± SE: one posterior standard deviation. Parameters of terms added by "
-    "diagnose (e.g. friction confined to part of a joint's range) follow the base parameters."
-)
 #: nMSE (squared error over the torque's variance) a verdict calls good, fair: above, poor.
 NMSE_GOOD, NMSE_FAIR = 0.01, 0.1
 
 
-def model_kind(summary: dict) -> str:
-    """pr | gp | prgp | sgp (sgp.yaml's ``kind`` is the bundle's, ``dynamics``)."""
-    return summary.get("model_kind") or (summary.get("options") or {}).get("kind") or summary.get("kind", "?")
-
-
 def model_dirs(path: Path) -> list[Path]:
     """The model directories a path stands for: itself, or its model sub-directories."""
-    from diegocal.sgp import is_model_dir
-
     path = Path(path)
     if is_model_dir(path):
         return [path]
@@ -117,14 +78,8 @@ class HeldOut:
 def heldout_prediction(path: str, heldout: tuple[str, ...]) -> HeldOut | None:
     """The model at ``path`` on the first held-out log of its robot with q and tau, or None; a
     prediction log (``diegocal predict``'s output) is scored against its ``tau_measured``."""
-    from diegocal.evaluate import score
-    from diegocal.io import load_log
-    from diegocal.io.bundle import load_bundle
-    from diegocal.report.registry import ReportContext
-    from diegocal.sgp import load_model
-
     context = ReportContext(heldout=tuple(map(Path, heldout)))
-    for hpath in context.heldout_for(load_bundle(Path(path)).robot, ("q", "tau")):
+    for hpath in context.heldout_for(load_bundle(Path(path)).robot, HELDOUT_STREAMS):
         try:
             model = load_model(Path(path))
             log = load_log(hpath)
@@ -141,6 +96,34 @@ def heldout_prediction(path: str, heldout: tuple[str, ...]) -> HeldOut | None:
 
 def heldout(model: Path, context) -> HeldOut | None:
     return heldout_prediction(str(Path(model).resolve()), tuple(str(p) for p in context.heldout))
+
+
+def heldout_needs(path: Path) -> list:
+    """Each model's robot and the streams a held-out log needs to score it."""
+    return [(load_bundle(m).robot, HELDOUT_STREAMS) for m in model_dirs(path)]
+
+
+def heldout_score(log):
+    """:class:`diegocal.evaluate.Score` of a prediction log: nMSE, RMSE, ±2σ coverage per joint."""
+    pred = log.stream("tau")
+    measured = log.stream("tau_measured").select(pred.names).data
+    std = log.stream("tau_std").select(pred.names).data
+    return score(measured, pred.data, pred.names, std=std, unit="N·m")
+
+
+def prismatic_joints(robot) -> frozenset:
+    """Names of the robot's prismatic joints (their torque is a force, N)."""
+    out = set()
+    for name in robot.joint_names:
+        kind = robot.model.joints[robot.model.getJointId(name)].shortname().replace("JointModel", "")
+        if kind in ("PX", "PY", "PZ", "PrismaticUnaligned"):
+            out.add(name)
+    return frozenset(out)
+
+
+def torque_unit(model, joint: str) -> str:
+    """N for a prismatic joint's force, N·m for a revolute joint's torque."""
+    return "N" if joint in prismatic_joints(model.robot) else "N·m"
 
 
 # ----------------------------------------------------------------------------- words
@@ -182,9 +165,6 @@ def uncertainty_words(coverage: dict) -> str:
 
 def model_paragraphs(model: Path, context) -> list[str]:
     """One model in plain words: what was fitted on what and how good it is; what the guard did."""
-    from diegocal.io.bundle import robot_of
-    from diegocal.sgp import load_summary
-
     s = load_summary(model)
     kind = model_kind(s)
     joints = s.get("nmse_in_sample") or {}
@@ -249,8 +229,6 @@ def model_paragraphs(model: Path, context) -> list[str]:
 
 def comparison_paragraph(models: list[Path], context) -> str:
     """A directory of models in plain words: which model predicts each joint best."""
-    from diegocal.sgp import load_summary
-
     summaries = {m.name: load_summary(m) for m in models}
     logs = {Path(str((s.get("meta") or {}).get("log") or s.get("log") or "?")).name for s in summaries.values()}
     kinds = ", ".join(f"{name} ({model_kind(s)})" for name, s in summaries.items())
@@ -279,8 +257,6 @@ def abstract(path: Path, context) -> list[str]:
 
 
 def headline(path: Path, context) -> str:
-    from diegocal.sgp import load_summary
-
     parts = []
     for model in model_dirs(path):
         s = load_summary(model)
@@ -295,15 +271,9 @@ def headline(path: Path, context) -> str:
 
 
 # ----------------------------------------------------------------------------- tables
-def _g(v, fmt: str = ".3g") -> str:
-    return "–" if v is None or not np.isfinite(v) else f"{v:{fmt}}"
-
-
 def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], list[str]]:
     """Per joint (and model, for a comparison): nMSE in-sample and held-out, held-out RMSE and ±2σ
     coverage, the guard's choice, σ_v, σ_z and, for sparse fits, inducing inputs and missed variance."""
-    from diegocal.sgp import load_summary
-
     summaries = {m: load_summary(m) for m in models}
     helds = {m: heldout(m, context) for m in models}
     any_held = any(h is not None for h in helds.values())
@@ -323,16 +293,16 @@ def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], 
         for j, v in (s.get("nmse_in_sample") or {}).items():
             h = hyper.get(j) or {}
             row = [m.name] if len(models) > 1 else []
-            row += [j, _g(v)]
+            row += [j, number(v)]
             if any_held:
                 sc = helds[m].of(j) if helds[m] is not None else None
-                row += ["–", "–", "–"] if sc is None else [_g(sc[0]), _g(sc[1]), f"{100 * sc[2]:.0f}"]
+                row += ["–", "–", "–"] if sc is None else [number(sc[0]), number(sc[1]), f"{100 * sc[2]:.0f}"]
             choice = h.get("guard_choice")
             guard = GUARD_WORDS.get(choice, choice) if choice else ("no GP" if kind == "pr" else "GP (no guard)")
             guard += region_text(h)
-            row += [guard, _g(h.get("sigma_v")), _g(h.get("sigma_z"))]
+            row += [guard, number(h.get("sigma_v")), number(h.get("sigma_z"))]
             if sparse:
-                row += [str(h["n_inducing"]) if "n_inducing" in h else "exact", _g(h.get("sparse_gap"), ".2g")]
+                row += [str(h["n_inducing"]) if "n_inducing" in h else "exact", number(h.get("sparse_gap"), ".2g")]
             rows.append(row)
     notes = [
         "nMSE: mean squared error over the variance of the measured torque (thesis §3.4.2; 0 is perfect, 1 no "
@@ -359,129 +329,6 @@ def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], 
     return columns, rows, notes
 
 
-def facts_rows(summary: dict, model=None) -> list[list]:
-    """(quantity, value, unit) rows: what the model is and how it was fitted."""
-    from diegocal.io.bundle import robot_of
-
-    meta = summary.get("meta") or {}
-    rows = [
-        ["model kind", model_kind(summary), ""],
-        ["robot", robot_of(summary)["name"], ""],
-        ["fit log", Path(str(meta.get("log") or summary.get("log") or "–")).name, ""],
-        ["training samples", summary.get("n_samples"), ""],
-    ]
-    time = getattr(model, "time_", None)
-    if time is not None and len(time) > 1:
-        rows.append(["training duration", f"{time[-1] - time[0]:.3g}", "s"])
-    inference = summary.get("inference", "–")
-    if summary.get("n_inducing"):
-        inference += f", {summary['n_inducing']} inducing inputs in all"
-    rows.append(["inference", inference, ""])
-    if summary.get("gp_inputs"):
-        rows.append(["GP inputs", ", ".join(summary["gp_inputs"]), ""])
-    bound = "VFE bound on the log marginal likelihood" if summary.get("n_inducing") else "log marginal likelihood"
-    rows.append([bound, f"{summary.get('log_likelihood', np.nan):.6g}", ""])
-    sw = (summary.get("hyperparameters") or {}).get("sigma_w")
-    if sw is not None:
-        rows.append(["σ_w, prior std of the parametric weights (unit-RMS columns)", f"{sw:.3g}", "N·m"])
-    friction = (summary.get("options") or {}).get("friction")
-    if friction:
-        rows.append(["friction in the parametric part", ", ".join(friction), ""])
-    rows.append(["created", str(meta.get("created") or summary.get("created") or "–"), ""])
-    return rows
-
-
-def lengthscale_table(summary: dict) -> tuple[list[Column], list[list], list[str]] | None:
-    """GP length-scales: one row per GP input, one column per joint whose GP the guard kept."""
-    hyper = summary.get("hyperparameters") or {}
-    joints = [
-        j
-        for j in summary.get("nmse_in_sample") or {}
-        if (hyper.get(j) or {}).get("lengthscales") and (hyper.get(j) or {}).get("guard_choice") != "parametric"
-    ]
-    if not joints:
-        return None
-    inputs = list(hyper[joints[0]]["lengthscales"])
-    units = {"q": "rad", "qd": "rad/s", "qdd": "rad/s²"}
-    columns = [Column("GP input", align="left"), Column("unit", align="left")] + [Column(j) for j in joints]
-    rows = [
-        [name, units.get(name.split(".", 1)[0], ""), *(_g(hyper[j]["lengthscales"].get(name)) for j in joints)]
-        for name in inputs
-    ]
-    off = [j for j in summary.get("nmse_in_sample") or {} if j not in joints]
-    note = (
-        "Length-scale of each input in the GP of each joint (the input's unit; m and m/s for a prismatic joint): "
-        "how far the input must move for the GP's correction to change; much longer than the input's range in the "
-        "training log: the GP ignores that input."
-    )
-    if off:
-        note += f" Not shown: {', '.join(off)} (GP switched off by the guard)."
-    return columns, rows, [note]
-
-
-def guard_table(summary: dict) -> tuple[list[Column], list[list], list[str]] | None:
-    """The guard's evidence: per joint, the cross-validated nMSE of every candidate it weighed
-    (``guard_validation`` in sgp.yaml), the chosen one starred; None for a model without it."""
-    hyper = summary.get("hyperparameters") or {}
-    joints = [j for j in summary.get("nmse_in_sample") or {} if (hyper.get(j) or {}).get("guard_validation")]
-    if not joints:
-        return None
-    labels = [k for k in GUARD_WORDS if any(k in hyper[j]["guard_validation"] for j in joints)]
-    columns = [Column("joint", align="left")] + [Column(GUARD_WORDS[k].replace(", ", ",\n")) for k in labels]
-    rows = []
-    for j in joints:
-        weighed, chosen = hyper[j]["guard_validation"], hyper[j].get("guard_choice")
-        cells = ["–" if k not in weighed else _g(weighed[k]) + (" *" if k == chosen else "") for k in labels]
-        rows.append([j, *cells])
-    note = (
-        "Cross-validated nMSE of each of the guard's candidates on contiguous blocks of the training log, each "
-        "block predicted by the candidate fitted without it (* the guard's choice). The choice is not always the "
-        "lowest: a GP must beat 'parametric only' by one standard error of the per-block difference and 2 % of "
-        "its nMSE, two stages the other choice by one standard error; numbers on the training log's own blocks, not "
-        "on new trajectories."
-    )
-    return columns, rows, [note]
-
-
-def parameter_table(summary: dict, prismatic: frozenset = frozenset()) -> tuple[list[Column], list[list], list[str]]:
-    """The identified parameters: base parameters, then the parameters of added terms, with units and SE."""
-    par = summary.get("parameters") or {}
-    term_units = {}
-    for t in summary.get("terms") or ():
-        for name, p in (t.get("parameters") or {}).items():
-            term_units[name] = (t.get("cause", "term"), t.get("channel", ""), p.get("unit", ""))
-    columns = [
-        Column("parameter", align="left"),
-        Column("what it is", align="left"),
-        Column("value"),
-        Column("± SE"),
-        Column("unit", align="left"),
-    ]
-    order = {j: i for i, j in enumerate(summary.get("joints") or [])}
-    leaves = list(PARAMETER_WORDS)
-
-    def key(name: str):  # by joint, then mass, first moments, inertia, friction; added terms last
-        joint, _, leaf = name.rpartition(".")
-        if leaf not in leaves:
-            return (1, 0, 0)
-        return (0, order.get(joint, len(order)), leaves.index(leaf))
-
-    rows = []
-    for name in sorted(par, key=key):
-        v = par[name]
-        joint, _, leaf = name.rpartition(".")
-        if leaf in PARAMETER_WORDS:
-            what, rev, pri = PARAMETER_WORDS[leaf]
-            unit = pri if joint in prismatic else rev
-        elif leaf in term_units:
-            cause, channel, unit = term_units[leaf]
-            what = f"{leaf}, {cause.replace('_', ' ')} on {channel}"
-        else:
-            what, unit = leaf, ""
-        rows.append([name, what, f"{v['value']:+.4g}", _g(v.get("std"), ".2g"), unit])
-    return columns, rows, [PARAMETER_NOTE]
-
-
 # ----------------------------------------------------------------------------- predictions
 def prediction_paragraphs(path: Path, log, sc) -> list[str]:
     """A `diegocal predict` log of a torque model in plain words: what it holds, how good, verdict."""
@@ -491,11 +338,15 @@ def prediction_paragraphs(path: Path, log, sc) -> list[str]:
     robot = f" of robot {log.robot}" if log.robot else ""
     source = log.source or {}
     if source.get("model") and source.get("log"):
-        made = (f" by model {Path(source['model']).name} for {log.n_samples} samples ({log.duration:.3g} s) of log "
-                f"{Path(source['log']).name}, beside the torques measured in it.")
+        made = (
+            f" by model {Path(source['model']).name} for {log.n_samples} samples ({log.duration:.3g} s) of log "
+            f"{Path(source['log']).name}, beside the torques measured in it."
+        )
     else:
-        made = (f" for {log.n_samples} samples ({log.duration:.3g} s) of a log, beside the torques measured in it. "
-                "The file does not name the model or the log it was made from.")
+        made = (
+            f" for {log.n_samples} samples ({log.duration:.3g} s) of a log, beside the torques measured in it. "
+            "The file does not name the model or the log it was made from."
+        )
     text = (
         f"{Path(path).name}: the torques of {len(names)} joint(s){robot} predicted by diegocal predict{made}"
         " nMSE (squared error over the measured torque's variance: "
@@ -529,7 +380,7 @@ def prediction_table(sc) -> tuple[list[Column], list[list]]:
         Column("verdict", align="left"),
     ]
     rows = [
-        [j, int(n), _g(e), _g(r), _g(a), f"{100 * c:.0f}", verdict(e, c)]
+        [j, int(n), number(e), number(r), number(a), f"{100 * c:.0f}", verdict(e, c)]
         for j, n, e, r, a, c in zip(sc.channels, sc.n_samples, sc.nmse, sc.rmse, sc.mae, sc.coverage, strict=True)
     ]
     return columns, rows

@@ -1,19 +1,16 @@
-"""Report section for calib.yaml (thesis ch. 2 figures; registers itself on import).
+"""Report section for calib.yaml (thesis ch. 2; registers itself on import).
 
-The plots live here: marker positions before/after on the robot skeleton (Figs. 2.8-2.9),
-convergence of the cost (``fit.history``), noise levels, residual histograms per sensor type. The
-pages, tables and words are assembled in :mod:`diegocal.report.stac_pages`.
+What the section recognises and how it is listed; its pages, tables and words are in
+:mod:`diegocal.report.stac_pages`, its plots in :mod:`diegocal.report.stac_plots`.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
-from diegocal.report.registry import ReportContext, Section, is_bundle, register_section
-from diegocal.report.style import COLORS, axes_or_new
-from diegocal.stac.calibration import Calibration
+from diegocal.io.bundle import load_bundle
+from diegocal.report.registry import Section, is_bundle, register_section
+from diegocal.report.stac_pages import HELDOUT_STREAMS, abstract, headline, pages
 
 
 def recognise(path: Path) -> bool:
@@ -22,8 +19,6 @@ def recognise(path: Path) -> bool:
 
 def describe(path: Path) -> dict:
     """Title-page facts from the bundle header ({log, robot, command, created}; legacy ``meta``)."""
-    from diegocal.io.bundle import load_bundle
-
     bundle = load_bundle(path)
     data = bundle.data
     meta = data.get("meta") or {}
@@ -33,145 +28,20 @@ def describe(path: Path) -> dict:
     return {k: v for k, v in out.items() if v}
 
 
-# ----------------------------------------------------------------------------- plots
-def plot_cost(cal: Calibration, ax=None):
-    """Cost (negative log-likelihood, eq. 2.5) per outer iteration."""
-    ax = axes_or_new(ax)
-    it = [h["iteration"] for h in cal.history]
-    cost = np.array([h["cost"] for h in cal.history], float)
-    ax.plot(it, cost - np.nanmin(cost) + 1.0, "o-", color=COLORS["model"], ms=3)
-    ax.set_yscale("log")
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("cost − min + 1")
-    ax.set_title(f"Convergence ({cal.method}, {cal.fit.iterations} iterations, {cal.fit.seconds:.1f} s)")
-    return ax
-
-
-def plot_sigma(cal: Calibration, ax=None):
-    """Noise levels per sensor type over the iterations (dynamic variance adjustment, §2.3.5)."""
-    ax = axes_or_new(ax)
-    it = [h["iteration"] for h in cal.history]
-    for key, label in (("sigma_pots", "pots (V)"), ("sigma_markers", "markers (m)")):
-        ax.semilogy(it, [h.get(key) or np.nan for h in cal.history], label=label)
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("noise σ [V for pots, m for markers]")
-    ax.legend()
-    ax.set_title("Dynamic variance adjustment (§2.3.5)")
-    return ax
-
-
-def plot_markers_on_robot(skeleton: dict, ax=None, axes=(0, 2)):
-    """Figs. 2.8-2.9: robot skeleton at neutral with nominal (seed) vs fitted marker positions.
-
-    skeleton : {"links": (L, 3) link origins, "parents": (L,) index or -1, "nominal": (M, 3),
-    "fitted": (M, 3)} all in the base frame, m; ``axes`` picks the projection plane.
-    """
-    ax = axes_or_new(ax)
-    a, b = axes
-    pos, par = skeleton["links"], skeleton["parents"]
-    for i, p in enumerate(par):
-        if p >= 0:
-            ax.plot([pos[p, a], pos[i, a]], [pos[p, b], pos[i, b]], color="0.6", lw=1.5)
-    ax.plot(pos[:, a], pos[:, b], ".", color="0.4", ms=4)
-    nom, fit = skeleton["nominal"], skeleton["fitted"]
-    ax.plot(
-        nom[:, a],
-        nom[:, b],
-        "o",
-        mfc="none",
-        color=COLORS["baseline"],
-        label="seed (link origins / nominal)",
-    )
-    ax.plot(fit[:, a], fit[:, b], "o", color=COLORS["model"], ms=4, label="calibrated")
-    for n0, n1 in zip(nom, fit, strict=True):
-        ax.plot([n0[a], n1[a]], [n0[b], n1[b]], color=COLORS["model"], lw=0.5)
-    ax.set_aspect("equal")
-    ax.set_xlabel("xyz"[a] + " [m]")
-    ax.set_ylabel("xyz"[b] + " [m]")
-    ax.legend(loc="best")
-    return ax
-
-
-def plot_residual_hist(residuals: np.ndarray, label: str, unit: str, ax=None):
-    """Histogram of one sensor type's residuals."""
-    ax = axes_or_new(ax)
-    r = residuals[np.isfinite(residuals)]
-    ax.hist(r, bins=60, color=COLORS["residual"], alpha=0.8)
-    ax.set_title(f"{label}: RMS {np.sqrt(np.mean(r * r)):.3g} {unit}, n = {r.size}")
-    ax.set_xlabel(f"residual [{unit}]")
-    return ax
-
-
-# ----------------------------------------------------------------------------- data
-def skeleton(cal: Calibration, robot) -> dict:
-    """Link origins at the neutral pose and nominal/fitted markers in the base frame."""
-    from diegocal.robot.batch import BatchKinematics
-
-    kin = BatchKinematics(robot)
-    poses = kin.joint_poses(robot.neutral()[None])
-    parents = kin.parent.copy()
-    links = np.concatenate([np.zeros((1, 3)), poses.p[0]])  # root + joint origins
-    names = [m.link for m in robot.sensors.markers]
-    Rl, pl = kin.link_poses(poses, names)
-    nominal = np.array([m.xyz for m in robot.sensors.markers], float).reshape(-1, 3)
-    index = {n: i for i, n in enumerate(cal.marker_names)}
-    fitted = np.array([cal.marker_xyz[index[m.name]] if m.name in index else m.xyz for m in robot.sensors.markers])
-    to_base = lambda d: np.einsum("mij,mj->mi", Rl[0], d) + pl[0]  # noqa: E731
-    return {
-        "links": links,
-        "parents": np.concatenate([[-1], parents + 1]),
-        "nominal": to_base(np.zeros_like(nominal)),
-        "fitted": to_base(fitted),
-    }
-
-
-def residuals_by_type(cal: Calibration, robot, log, q) -> dict:
-    """{type: (residuals, unit)} of the log under the calibration at the tracked q."""
-    from diegocal.stac.model import MARKERS, Observation
-
-    obs = Observation(log, robot)
-    params = obs.params_from(cal)
-    st = obs.state(q)
-    out = {}
-    rp = params.gain * st.s + params.bias - obs.pots
-    for g in obs.groups:
-        if g == MARKERS:
-            xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
-            d = np.linalg.norm(xb @ params.R.T + params.T - obs.markers, axis=-1)
-            out[g] = (d[obs.valid], "m (distance)")
-        else:
-            out[g] = (rp[:, obs.kinds == g].ravel(), "V")
-    return out
-
-
-# ----------------------------------------------------------------------------- pages
-def pages(path: Path, pdf, context: ReportContext) -> None:
-    """The section's pages, assembled in :mod:`diegocal.report.stac_pages`."""
-    from diegocal.report.stac_pages import pages as document_pages
-
-    document_pages(Path(path), pdf, context)
-
-
-def _abstract(path: Path, context: ReportContext) -> list[str]:
-    from diegocal.report.stac_pages import abstract
-
-    return abstract(Path(path), context)
-
-
-def _headline(path: Path, context: ReportContext) -> str:
-    from diegocal.report.stac_pages import headline
-
-    return headline(Path(path), context)
+def heldout_needs(path: Path) -> list:
+    """The calibration's robot and the streams a held-out log needs (markers predicted from pots)."""
+    return [(load_bundle(path).robot, HELDOUT_STREAMS)]
 
 
 register_section(
     Section(
         "stac",
         recognise,
-        pages,
+        lambda path, pdf, context: pages(Path(path), pdf, context),
         describe,
         heading="Kinematic calibration (STAC)",
-        abstract=_abstract,
-        headline=_headline,
+        abstract=lambda path, context: abstract(Path(path), context),
+        headline=lambda path, context: headline(Path(path), context),
+        heldout_needs=heldout_needs,
     )
 )

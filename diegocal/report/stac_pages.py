@@ -1,4 +1,4 @@
-"""The STAC section as a document (calib.yaml; the plots live in :mod:`diegocal.report.stac`).
+"""The STAC section as a document (calib.yaml; the plots are in :mod:`diegocal.report.stac_plots`).
 
 Pages: an opening in plain words with the key numbers (fit log, convergence, noise levels,
 residuals at the fitted joint angles, held-out prediction error); the pot and marker tables with
@@ -20,11 +20,28 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.errors import DiegocalError
-from diegocal.report.layout import Column, Sheet, table_sheets
+from diegocal.io import load_log
+from diegocal.io.bundle import load_bundle
+from diegocal.report.layout import Column, Sheet, table_below, table_sheets
+from diegocal.report.registry import ReportContext
+from diegocal.report.stac_plots import (
+    plot_cost,
+    plot_markers_on_robot,
+    plot_residual_hist,
+    plot_sigma,
+    residuals_by_type,
+    skeleton,
+)
 from diegocal.report.style import save_page
+from diegocal.robot import load_robot, resolve_robot_dir
+from diegocal.stac.calibration import Calibration
+from diegocal.stac.predict import predict
+from diegocal.stac.result import StacOptions
 
 GAIN_UNIT = {"rotary": "V/rad", "linear": "V/m", "tendon": "V/m", "encoder": "1"}
 MM = 1000.0
+#: The streams a held-out log needs: markers predicted from the pots alone.
+HELDOUT_STREAMS = ("pots", "markers")
 
 
 @dataclass(frozen=True)
@@ -46,25 +63,17 @@ class Evaluation:
 
 
 def _bundle(path: Path):
-    from diegocal.io.bundle import load_bundle
-
     return load_bundle(path)
 
 
 def _calibration(path: Path):
-    from diegocal.stac.calibration import Calibration
-
     return Calibration.from_dict(_bundle(path).data, source=str(path))
 
 
 def _robot(path: Path, context):
-    from diegocal.robot import load_robot
-
     rec = _bundle(path).robot
     rdir = context.robot or rec["dir"]
     if rdir is None or not Path(rdir).is_dir():
-        from diegocal.robot import resolve_robot_dir
-
         rdir = resolve_robot_dir(rec["name"], None) if rec["name"] else None
     return load_robot(rdir) if rdir is not None else None
 
@@ -73,12 +82,6 @@ def _robot(path: Path, context):
 def evaluate(path: str, robot_dir: str | None, heldout: tuple[str, ...]) -> Evaluation:
     """Residuals and held-out errors of the calibration at ``path`` (cached: the summary page and the
     section both ask)."""
-    from diegocal.io import load_log
-    from diegocal.report.registry import ReportContext
-    from diegocal.report.stac import residuals_by_type
-    from diegocal.stac.predict import predict
-    from diegocal.stac.result import StacOptions
-
     context = ReportContext(robot=Path(robot_dir) if robot_dir else None, heldout=tuple(map(Path, heldout)))
     cal, bundle = _calibration(Path(path)), _bundle(Path(path))
     try:
@@ -102,7 +105,7 @@ def evaluate(path: str, robot_dir: str | None, heldout: tuple[str, ...]) -> Eval
     else:
         note = f"the fit log {bundle.log} is not found: no residuals"
     held, errors = [], None
-    for hpath in context.heldout_for(robot.name, ("pots", "markers")):
+    for hpath in context.heldout_for(bundle.robot, HELDOUT_STREAMS):
         try:
             hlog = load_log(hpath).without_truth()
             pred = predict(hlog, robot, cal, ("pots",), ("markers",), options)
@@ -118,8 +121,6 @@ def evaluate(path: str, robot_dir: str | None, heldout: tuple[str, ...]) -> Eval
 
 def _joint_angles(raw: dict, log):
     """The tracked q stac wrote on request (``--joint-angles``), if it matches the log."""
-    from diegocal.io import load_log
-
     path = (raw.get("meta") or {}).get("joint_angles") or raw.get("joint_angles")
     if not path or not Path(path).is_file():
         return None
@@ -229,20 +230,17 @@ def _heldout_words(ev: Evaluation, recorded: list) -> str:
         )
     fit = ev.residuals.get("markers")
     parts = []
-    for p, frames, mae in rows:
-        s = f"{Path(p).name} ({frames} frames): {MM * mae.get('markers', np.nan):.2f} mm"
-        parts.append(s)
-    text = (
-        "On held-out data, joint angles tracked from the pots alone predict the markers to a mean distance of "
-        + "; ".join(parts)
-        + " (thesis Table 2.1's test)"
-    )
-    if fit is not None and rows:
+    for k, (p, frames, mae) in enumerate(rows):
+        what = "the markers predicted from the pots alone lie " if k == 0 else ""
+        where = " (mean) from where the cameras saw them" if k == 0 else ""
+        parts.append(f"on {Path(p).name} ({frames} frames) {what}{MM * mae.get('markers', np.nan):.2f} mm{where}")
+    text = "Held-out test (thesis Table 2.1; joint angles tracked from the pots, no marker used): " + "; ".join(parts)
+    if fit is not None:
         ratio = rows[0][2].get("markers", np.nan) / max(np.mean(fit[0]), 1e-12)
         text += f", {ratio:.1f} times the mean marker residual of the fit itself" + (
-            ": the calibration carries over to new data." if ratio < 2 else ": part of it does not carry over."
+            ": the calibration carries over to new data" if ratio < 2 else ": part of it does not carry over"
         )
-    return text
+    return text + "."
 
 
 # ----------------------------------------------------------------------------- tables
@@ -333,14 +331,6 @@ def _se(v, digits: int = 2) -> str:
 
 # ----------------------------------------------------------------------------- pages
 def pages(path: Path, pdf, context) -> None:
-    from diegocal.report.stac import (
-        plot_cost,
-        plot_markers_on_robot,
-        plot_residual_hist,
-        plot_sigma,
-        skeleton,
-    )
-
     cal, ev = _calibration(path), _evaluation(path, context)
     try:
         robot = _robot(path, context)
@@ -349,8 +339,8 @@ def pages(path: Path, pdf, context) -> None:
     title = f"Kinematic calibration (STAC): {path.name}"
     key = [Column("quantity", align="left"), Column("value"), Column("unit", align="left")]
     sheets = table_sheets(title, key, key_rows(cal, ev), intro=abstract(path, context))
-    _more(sheets, "Pot gains and biases", *pot_table(cal, robot))
-    _more(sheets, "Marker positions", *marker_table(cal, robot))
+    table_below(sheets, "Pot gains and biases", *pot_table(cal, robot))
+    table_below(sheets, "Marker positions", *marker_table(cal, robot))
     for sheet in sheets:
         save_page(pdf, sheet.fig)
 
@@ -392,17 +382,19 @@ def pages(path: Path, pdf, context) -> None:
             ax = sheet.axes(height)
             plot_residual_hist(r, g, unit, ax)
             ax.set_ylabel("samples")
-        sheet.caption(
-            "Residuals at the fitted joint angles (the fit log): pots, reading minus model, V; markers, distance "
-            "between measured and modelled position, m (occluded samples left out). 'held-out markers': distance "
-            "between measured markers and those predicted from the pots alone on the held-out log."
-        )
+        sheet.caption(residual_caption(ev))
         save_page(pdf, sheet.fig)
 
 
-def _more(sheets: list[Sheet], title: str, columns, rows, notes) -> None:
-    """A table below the last sheet's content when a quarter page is left, else from a new page."""
-    if sheets[-1].room() > 0.25:
-        sheets[-1:] = table_sheets(title, columns, rows, notes=notes, sheet=sheets[-1])
-    else:
-        sheets += table_sheets(title, columns, rows, notes=notes)
+def residual_caption(ev: Evaluation) -> str:
+    """What the residual histograms show: the fit log's, and the held-out markers' when drawn."""
+    text = (
+        "Residuals at the fitted joint angles (the fit log): pots, reading minus model, V; markers, distance "
+        "between measured and modelled position, m (occluded samples left out)."
+    )
+    if ev.heldout_errors is not None:
+        text += (
+            f" 'held-out markers': distance between the markers measured on {Path(ev.heldout[0][0]).name} and "
+            "those predicted from its pots alone."
+        )
+    return text

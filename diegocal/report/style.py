@@ -1,4 +1,8 @@
-"""Shared plot styling: every figure is assembled from `(result, ax=None) -> Axes` functions."""
+"""Shared plot styling: every figure is assembled from `(result, ax=None) -> Axes` functions.
+
+Colours with a meaning (measured, model, baseline, ...), the styles of traces that have none (the
+channels of a stream), the page size and the helpers every section's plots and pages use.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +20,10 @@ COLORS = {
     "residual": "tab:red",
     "band": "tab:blue",
 }
+#: Traces without a meaning of their own (a stream's channels) take the ten colours in turn, then
+#: the ten again with another line style: 40 traces stay distinct, in the plot and in its legend.
+TRACE_COLORS = tuple(f"C{k}" for k in range(10))
+TRACE_LINESTYLES = ("-", "--", ":", "-.")
 
 #: Unit of each log stream (DESIGN.md, "Log format"; pressure: kPa in the bundled robots).
 STREAM_UNITS = {
@@ -43,6 +51,12 @@ plt.rcParams.update(
 )
 
 
+def trace_style(k: int) -> dict:
+    """Colour and line style of the ``k``-th trace (from 0) of a plot of many channels."""
+    n = len(TRACE_COLORS)
+    return {"color": TRACE_COLORS[k % n], "ls": TRACE_LINESTYLES[(k // n) % len(TRACE_LINESTYLES)]}
+
+
 def axes_or_new(ax=None, figsize=(6, 4)):
     """The given axes, or a new figure's."""
     if ax is None:
@@ -50,20 +64,16 @@ def axes_or_new(ax=None, figsize=(6, 4)):
     return ax
 
 
-def page(nrows: int = 1, ncols: int = 1, title: str | None = None, **kw):
-    """A new A4 page with a grid of axes; returns (figure, axes array)."""
-    fig, axes = plt.subplots(nrows, ncols, figsize=PAGE_SIZE, squeeze=False, **kw)
-    if title:
-        fig.suptitle(title, fontsize=12, fontweight="bold")
-    return fig, axes
+def headroom(ax, share: float = 0.25) -> None:
+    """Raise the top of the y axis by ``share`` of its range: a legend at the top then covers no data."""
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi + share * (hi - lo))
 
 
-def text_page(title: str, lines, fontsize: int = 9):
-    """A page of monospaced text (tables, run facts)."""
-    fig = plt.figure(figsize=PAGE_SIZE)
-    fig.text(0.08, 0.95, title, fontsize=14, fontweight="bold", va="top")
-    fig.text(0.08, 0.91, "\n".join(lines), fontsize=fontsize, family="monospace", va="top")
-    return fig
+def legend_above_data(ax, ncol: int = 3) -> None:
+    """One row of legend in a band added above the data, so that it covers none of it."""
+    headroom(ax, 0.3)
+    ax.legend(fontsize=6, loc="upper center", ncol=ncol, frameon=False)
 
 
 def keep_layout(fig) -> None:

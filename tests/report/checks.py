@@ -4,6 +4,7 @@ back with pymupdf): nothing off the page or overlapping, no near-empty page, typ
 from __future__ import annotations
 
 import itertools
+import re
 
 
 def spans(page):
@@ -43,3 +44,8 @@ def check_pages(document, min_words: int = 40) -> None:
 def page_texts(document) -> list[str]:
     """Each page's text with its lines rejoined by spaces."""
     return [" ".join(page.get_text().split()) for page in document]
+
+
+def front_pages(document) -> int:
+    """How many pages the report's front matter (title, contents and summary) takes (their footer says so)."""
+    return sum(bool(re.search(r"contents and summary\s+·\s+page \d+ of", t)) for t in page_texts(document))

@@ -9,70 +9,23 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
 from diegocal.cli.testing import one_line_error
-from diegocal.io import save_log
 from diegocal.report import ReportContext, write_report
 from diegocal.report.layout import Column, table_sheets
-from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
-from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
-from diegocal.sim.pneumatics import PneumaticSimOptions, simulate_pneumatics
-from tests.pneumatic.conftest import SENSORS, URDF
 from tests.report.checks import check_pages
 
 pymupdf = pytest.importorskip("pymupdf")
 runner = CliRunner()
 
 
-def _cli(*args):
-    r = runner.invoke(app, [str(a) for a in args])
-    assert r.exit_code == 0, r.output
-    return r
-
-
-@pytest.fixture(scope="module")
-def results(tmp_path_factory) -> tuple[list[Path], list[Path]]:
-    """Small real results of every kind: a log, a calibration, pneumatic models, a comparison of two
-    torque models (pr and sgp), a torque prediction on a held-out log, a diagnosis, with held-out logs
-    of the same robots."""
-    d = tmp_path_factory.mktemp("results")
-    finger = load_robot(resolve_robot_dir("finger", None))
-    session = simulate_kinematics(finger, KinematicsOptions(duration=6.0), np.random.default_rng(4))
-    split = 400
-    save_log(session.slice(0, split), d / "kin.h5")
-    save_log(session.slice(split, session.n_samples), d / "kin_heldout.h5")
-    pendulum = load_robot(resolve_robot_dir("pendulum", None))
-    for name, seed in (("swing.h5", 1), ("swing_heldout.h5", 2)):
-        save_log(simulate_dynamics(pendulum, DynamicsOptions(duration=4.0), np.random.default_rng(seed)), d / name)
-    _cli("stac", d / "kin.h5", "-o", d / "kin.calib.yaml", "--max-iterations", 10, "-q")
-    (d / "swing_models").mkdir()
-    for kind in ("pr", "sgp"):
-        _cli("sgp-fit", d / "swing.h5", "--model", kind, "-o", d / "swing_models" / f"{kind}.sgp", "-q")
-    _cli("predict", d / "swing_models" / "sgp.sgp", d / "swing_heldout.h5", "-o", d / "swing.prediction.h5", "-q")
-    _cli("diagnose", d / "swing.h5", "-o", d / "swing.diagnosis.yaml", "-q")
-    robot_dir = d / "tiny_pneu"
-    robot_dir.mkdir()
-    (robot_dir / "robot.urdf").write_text(URDF)
-    (robot_dir / "sensors.yaml").write_text(SENSORS)
-    tiny = load_robot(robot_dir)
-    for name, seed in (("air.h5", 1), ("air_heldout.h5", 2)):
-        save_log(simulate_pneumatics(tiny, PneumaticSimOptions(duration=6.0, seed=seed)), d / name)
-    _cli("pneumatic-fit", d / "air.h5", "--robot", robot_dir, "--all", "-o", d / "air.pneumatic.yaml", "-q")
-    found = [d / "kin.h5", d / "kin.calib.yaml", d / "air.pneumatic.yaml", d / "swing_models"]
-    found += [d / "swing.prediction.h5", d / "swing.diagnosis.yaml"]
-    return found, [d / "kin_heldout.h5", d / "swing_heldout.h5", d / "air_heldout.h5"]
-
-
 @pytest.fixture(scope="module")
 def document(results, tmp_path_factory):
-    found, heldout = results
     out = tmp_path_factory.mktemp("doc") / "report.pdf"
-    write_report(found, out, ReportContext(heldout=tuple(heldout)), command="diegocal report (test)")
+    write_report(results.found, out, ReportContext(heldout=tuple(results.heldout)), command="diegocal report (test)")
     return pymupdf.open(out)
 
 
@@ -102,7 +55,12 @@ def test_contents_point_at_the_sections(document):
 def test_sections_open_in_plain_words_with_held_out_numbers(document):
     text = " ".join(" ".join(page.get_text() for page in document).split())  # lines rejoined
     assert "calibrated the gain and bias of 7 pots" in text  # the finger's
-    assert re.search(r"On held-out data, joint angles tracked from the pots alone predict the markers", text)
+    assert re.search(
+        r"on kin_heldout\.h5 \(\d+ frames\) the markers predicted from the pots alone lie [\d.]+ mm \(mean\) from "
+        r"where the cameras saw them",
+        text,
+    )
+    assert "to a mean distance of" not in text
     assert re.search(r"On held-out data \(swing_heldout.h5, \d+ samples\) nMSE", text)
     assert "inside the predicted ±2σ band" in text
     assert "Domain dynamics, log swing.h5" in text
@@ -130,8 +88,8 @@ def test_a_long_table_is_split_with_its_header_and_notes():
 
 
 def test_report_command_prints_what_was_calibrated_and_found(results, tmp_path):
-    found, heldout = results
-    found = [p for p in found if p.name in ("kin.calib.yaml", "swing.diagnosis.yaml")]
+    heldout = results.heldout
+    found = [results["kin.calib.yaml"], results["swing.diagnosis.yaml"]]
     r = runner.invoke(app, ["report", *map(str, found), "--heldout", str(heldout[0]), "-o", str(tmp_path / "r.pdf")])
     assert r.exit_code == 0, r.output
     assert "what was calibrated and what was found wrong" in r.output

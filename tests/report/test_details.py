@@ -1,0 +1,352 @@
+"""Details a reader of the report notices (issue #32): every trace told apart, names shortened so
+that they stay distinct, curves beside each other drawn at the same rate, an uncertainty band that
+can be seen and a caption that says what it does, captions that describe only what is drawn, the
+runners-up of a diagnosis, the front page of a one-result report.
+
+Checked on the figures the sections draw (their axes and artists) and on the PDF's text."""
+
+from __future__ import annotations
+
+import re
+from types import SimpleNamespace
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from matplotlib.patches import Polygon, Rectangle
+
+from diegocal.io import load_yaml, save_yaml
+from diegocal.report import ReportContext
+from diegocal.report.diagnose import plot_evidence
+from diegocal.report.layout import Column, table_sheets, text_width
+from diegocal.report.logs import plot_stream
+from diegocal.report.pdf import Document
+from diegocal.report.registry import section_for
+from tests.report.checks import check_pages, front_pages, page_texts
+from tests.report.conftest import cli
+
+pymupdf = pytest.importorskip("pymupdf")
+
+
+def _pages(path, context: ReportContext | None = None):
+    """The figures a result's section draws."""
+    doc = Document()
+    section_for(path).pages(path, doc, context or ReportContext())
+    return doc.pages
+
+
+def _fig_text(fig) -> str:
+    """A figure's text: its own (headings, paragraphs, captions) and its axes' titles and labels."""
+    texts = [t.get_text() for t in fig.texts]
+    for ax in fig.axes:
+        texts += [ax.get_title(), ax.get_xlabel(), ax.get_ylabel()] + [t.get_text() for t in ax.texts]
+    return " ".join(" ".join(texts).split())
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+# ----------------------------------------------------------------------------- 1. traces
+def test_twelve_traces_are_twelve_styles():
+    """The log page's 12 channels (a 10-colour cycle gave two markers one colour): each trace, and
+    its legend entry, has its own colour and line style."""
+    names = [f"m{k:02d}" for k in range(1, 13)]
+    t = np.linspace(0.0, 1.0, 50)
+    log = SimpleNamespace(
+        time=t, n_samples=t.size, streams={"pots": SimpleNamespace(names=names, data=np.outer(t, np.arange(12)))}
+    )
+    ax = plot_stream(log, "pots")
+    styles = [(str(line.get_color()), line.get_linestyle()) for line in ax.get_lines()]
+    assert len(styles) == 12 and len(set(styles)) == 12, styles
+    handles = ax.get_legend().legend_handles
+    assert len({(str(h.get_color()), h.get_linestyle()) for h in handles}) == 12
+
+
+# ----------------------------------------------------------------------------- 2. names
+CHAMBERS = [f"{side}_shoulder_{axis}.{kind}" for side in "rl" for axis in ("pitch", "roll") for kind in ("flex", "ext")]
+
+
+def test_shortened_names_stay_distinct():
+    """Names that share a long prefix ("r_shoulder_pitch.flex", "r_shoulder_pitch.ext") are cut in
+    the middle: every shortened name is different and keeps the name's head and its end."""
+    from diegocal.report.layout import shorten_distinct  # new: the module imports on the code before it
+
+    for width in range(8, 22):
+        short = shorten_distinct(CHAMBERS, lambda s, w=width: len(s) <= w)
+        assert len(set(short)) == len(CHAMBERS), (width, short)
+        for name, s in zip(CHAMBERS, short, strict=True):
+            if s != name:
+                head, tail = s.split("…")
+                assert name.startswith(head) and name.endswith(tail) and len(s) <= width, (name, s)
+
+
+def test_a_table_too_wide_keeps_its_names_apart():
+    """The pneumatic parameter table's case: a wide table shortens its name column, and two
+    chambers never read alike."""
+    columns = [Column("chamber", align="left")] + [Column(f"c{k}", "kPa·s/V") for k in range(1, 13)]
+    rows = [[name] + [f"{-1234.5678 * k:.6g}" for k in range(1, 13)] for name in CHAMBERS]
+    (sheet,) = table_sheets("Fitted parameters per chamber", columns, rows, size=7)
+    cells = [t.get_text() for t in sheet.fig.texts if re.fullmatch(r"[rl]_.*", t.get_text())]
+    assert len(cells) == len(CHAMBERS)
+    assert any("…" in c for c in cells), "the table was meant to be too wide"
+    assert len(set(cells)) == len(cells), cells
+    assert all(text_width(c, 6.5) < 0.3 for c in cells)
+
+
+# ----------------------------------------------------------------------------- 3. drift rates
+def _drift_axes(results, heldout: bool):
+    context = ReportContext(heldout=(results["air_heldout.h5"],) if heldout else ())
+    for fig in _pages(results["air.pneumatic.yaml"], context):
+        for ax in fig.axes:
+            if ax.get_title().startswith("Drift of open-loop pressure prediction"):
+                return ax
+    raise AssertionError("no drift figure")
+
+
+def test_fit_log_and_held_out_drift_are_drawn_at_the_same_rate(results):
+    """Fig. 4.13: the fit log's curves and the held-out one are drawn at the same points in time
+    (once: the fit log's every 0.1 s beside the held-out log's every 10 ms), and the axis says the step."""
+    ax = _drift_axes(results, heldout=True)
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    fit = lines["all chambers pooled (fit log)"].get_xdata()
+    held = lines["all chambers pooled (held-out log)"].get_xdata()
+    one = lines["one chamber (fit log)"].get_xdata()
+    step = np.median(np.diff(fit))
+    assert np.allclose(np.diff(held), step) and np.allclose(np.diff(one), step)
+    np.testing.assert_allclose(held, fit[: held.size])
+    assert f"a point every {1000 * step:.0f} ms" in ax.get_xlabel()
+
+
+def test_stored_drift_curves_are_said_at_their_step(results, tmp_path):
+    """Without the fit log (moved away) the stored curves are drawn, a point every 0.1 s, and the
+    held-out curve at the same points."""
+    model = load_yaml(results["air.pneumatic.yaml"])
+    model["meta"]["log"] = str(tmp_path / "moved.h5")
+    save_yaml(model, tmp_path / "moved.pneumatic.yaml")
+    context = ReportContext(heldout=(results["air_heldout.h5"],))
+    (ax,) = [
+        ax
+        for fig in _pages(tmp_path / "moved.pneumatic.yaml", context)
+        for ax in fig.axes
+        if ax.get_title().startswith("Drift of open-loop")
+    ]
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    fit = lines["all chambers pooled (fit log)"].get_xdata()
+    held = lines["all chambers pooled (held-out log)"].get_xdata()
+    assert np.allclose(np.diff(fit), 0.1) and np.allclose(np.diff(held), 0.1)
+    assert "a point every 0.1 s" in ax.get_xlabel()
+
+
+# ----------------------------------------------------------------------------- 4. uncertainty band
+def _slice_figures(results, model: str):
+    figs = _pages(results["swing_models"] / model)
+    return [f for f in figs if "uncertainty in state space" in _fig_text(f)]
+
+
+@pytest.mark.parametrize("model", ["pr.sgp", "sgp.sgp"])
+def test_the_band_is_visible_and_its_caption_says_what_it_does(results, model):
+    """Fig. 3.10's band can be a hair's breadth beside the torque: its width is drawn on its own
+    axis from zero, scaled to it; the caption gives, per joint, its width at the training angles and
+    beyond them, and says "grows away from the data" only where it does."""
+    figs = _slice_figures(results, model)
+    assert figs
+    for fig in figs:
+        caption = _fig_text(fig)
+        assert "The uncertainty should grow away from the data" not in caption
+        widths = [ax for ax in fig.axes if any(line.get_label() == "2σ (latent)" for line in ax.get_lines())]
+        assert widths
+        for ax in widths:
+            (line,) = [line for line in ax.get_lines() if line.get_label() == "2σ (latent)"]
+            q, w = line.get_xdata(), line.get_ydata()
+            low, high = ax.get_ylim()
+            assert low == 0 and w.max() <= high <= 1.5 * w.max()  # the axis is the band's
+            (span,) = [p for p in ax.patches if isinstance(p, (Polygon, Rectangle))]
+            x0, x1 = _xrange(span)
+            inside = (q >= x0) & (q <= x1)
+            joint = ax.get_xlabel().split(".", 1)[1].split(" ")[0]
+            words = re.search(rf"{joint}: 2σ is ([\d.e-]+) N·m among the training angles(.*?)(;|\.(?: |$))", caption)
+            assert words, caption
+            assert float(words.group(1)) == pytest.approx(np.median(w[inside]), rel=0.06)
+            if (~inside).any():
+                ratio = w[~inside].max() / np.median(w[inside])
+                assert ("grows away from the data" in words.group(2)) == (ratio >= 1.5), (ratio, words.group(0))
+
+
+def test_the_band_words_follow_the_band():
+    """ "Grows away from the data" is said of a band that does, "stays about flat" of one that does not."""
+    from diegocal.report.sgp_plots import AngleSlice
+
+    q = np.linspace(-3.0, 3.0, 61)
+    seen = np.linspace(-0.5, 0.5, 40)
+    grows = AngleSlice("j", "sgp", "N·m", q, 0 * q, 0.01 + 0.02 * q**2, seen, gp=True)
+    flat = AngleSlice("j", "pr", "N·m", q, 0 * q, 0.01 + 0 * q, seen, gp=False)
+    assert "it grows away from the data" in grows.words() and "flat" not in grows.words()
+    assert "it stays about flat" in flat.words() and "grows" not in flat.words()
+    assert "no Gaussian process on this joint" in flat.words()
+    whole = AngleSlice("j", "sgp", "N·m", q, 0 * q, 0.01 + 0 * q, q, gp=True)
+    assert "span the whole range shown" in whole.words()
+
+
+# ----------------------------------------------------------------------------- 5. captions
+def _finding(region: bool, variable: str = "q.joint3") -> dict:
+    x = np.linspace(0.2, 1.6, 8)
+    curve = {"variable": variable, "centre": list(x), "mean": list(0.05 * np.sin(x)), "se": [0.01] * 8}
+    return {
+        "cause": "position_friction" if region else "torque_offset",
+        "channel": "joint3",
+        "region": {"variable": "q.joint3", "low": 0.9, "high": 1.3} if region else None,
+        "unit": "N·m",
+        "gain": {"rmse_before": 0.11, "rmse_after": 0.02, "reduction": 0.8},
+        "evidence": {"variable": variable, "curves": {"before": curve, "after": curve, "unit": "N·m"}},
+        "domain": "dynamics",
+    }
+
+
+def _xrange(span) -> tuple[float, float]:
+    """The x extent of an axvspan (a Rectangle, or a Polygon in older matplotlib), data units."""
+    if isinstance(span, Rectangle):
+        return span.get_x(), span.get_x() + span.get_width()
+    x = np.asarray(span.get_xy())[:, 0]
+    return float(x.min()), float(x.max())
+
+
+def _has_region(ax) -> bool:
+    return any(isinstance(p, (Polygon, Rectangle)) for p in ax.patches)
+
+
+@pytest.mark.parametrize(
+    ("region", "variable", "green"), [(True, "q.joint3", True), (False, "q.joint3", False), (True, "qd.joint3", False)]
+)
+def test_a_caption_describes_what_is_drawn(region, variable, green):
+    """Green is in the caption exactly when the region is drawn (a region of another variable is
+    said to be not drawn); a finding without a region has no green region in its caption."""
+    from diegocal.report.diagnose import evidence_caption
+
+    f = _finding(region, variable)
+    ax = plot_evidence(f)
+    drawn = any(isinstance(p, (Polygon, Rectangle)) for p in ax.patches)
+    assert drawn == green
+    caption = evidence_caption(ax, f)
+    assert ("green" in caption) == green
+    assert ("is not drawn" in caption) == (region and not green)
+
+
+def test_every_diagnosis_caption_matches_its_figure(results, tmp_path):
+    """In a report of findings with and without regions, no page speaks of a green region it does
+    not draw, and a caption refers to the figure above only when that figure draws the same."""
+    d = load_yaml(results["swing.diagnosis.yaml"])
+    findings = [_finding(False), _finding(True), _finding(True), _finding(False)]
+    for f in findings:
+        f.pop("domain")
+        f["runners_up"] = []
+    save_yaml({**d, "findings": findings}, tmp_path / "mixed.diagnosis.yaml")
+    shown = 0
+    for fig in _pages(tmp_path / "mixed.diagnosis.yaml"):
+        text = _fig_text(fig)
+        evidence = [ax for ax in fig.axes if "residual on the validation" in ax.get_title()]
+        shown += len(evidence)
+        assert text.count("green, the region") <= sum(map(_has_region, evidence))
+        if "as in Finding" in text:  # a reference: the figures on the sheet draw the same
+            assert len({_has_region(ax) for ax in evidence}) == 1
+        captions = text.count("Mean residual on the validation") + text.count("as in Finding")
+        assert captions == len(evidence) == len(re.findall(r"Finding \d+: ", text))
+    assert shown == len(findings)
+
+
+def test_the_comparison_caption_says_hatched_only_beside_held_out(results):
+    """Without a held-out log the nMSE bars are all solid, and the caption does not speak of hatching."""
+    for heldout, hatched in (((), False), ((results["swing_heldout.h5"],), True)):
+        figs = _pages(results["swing_models"], ReportContext(heldout=heldout))
+        (fig,) = [f for f in figs if any(ax.get_title() == "nMSE per joint and model" for ax in f.axes)]
+        (ax,) = [ax for ax in fig.axes if ax.get_title() == "nMSE per joint and model"]
+        assert any(bar.get_hatch() for bar in ax.patches) == hatched
+        assert ("hatched" in _fig_text(fig)) == hatched
+
+
+def test_the_dotted_lines_are_where_the_prediction_restarts(results):
+    """Fig. 4.12's dotted lines stand where the open-loop prediction is re-initialised with the
+    measured pressure (there the two curves meet exactly)."""
+    figs = _pages(results["air.pneumatic.yaml"])
+    axes = [ax for f in figs for ax in f.axes if "open-loop pressure from the dotted grid lines" in ax.get_title()]
+    assert axes
+    for ax in axes:
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        measured, model = lines["measured"], lines["model integrated open loop"]
+        t = measured.get_xdata()
+        dotted = [line.get_xdata()[0] for line in ax.get_lines() if line.get_linestyle() == ":"]
+        assert dotted
+        for x in dotted:
+            k = int(np.argmin(np.abs(t - x)))
+            assert abs(t[k] - x) < 1e-9 and model.get_ydata()[k] == pytest.approx(measured.get_ydata()[k])
+
+
+# ----------------------------------------------------------------------------- 6. runners-up
+def _pneumatic_diagnosis(results, tmp_path, runners) -> str:
+    """A pneumatic diagnosis (a late valve on one chamber) whose finding stores ``runners`` (None:
+    no runners_up key, as the pneumatic diagnosis wrote it), reported; the PDF's text."""
+    d = load_yaml(results["swing.diagnosis.yaml"])
+    x = list(np.linspace(-0.02, 0.03, 8))
+    curve = {"variable": "du.r_elbow.flex", "centre": x, "mean": [1.0] * 8, "se": [0.5] * 8}
+    f = {
+        "cause": "valve_delay",
+        "channel": "r_elbow.flex",
+        "region": None,
+        "parameters": {"delay_s": {"value": 0.0336, "std": 8.8e-05, "unit": "s"}},
+        "gain": {"rmse_before": 63.2, "rmse_after": 15.3, "reduction": 0.76},
+        "kind": "term",
+        "unit": "kPa",
+        "evidence": {"variable": "du.r_elbow.flex", "curves": {"before": curve, "after": curve, "unit": "kPa"}},
+    }
+    if runners is not None:
+        f["runners_up"] = runners
+    path = tmp_path / "pneu.diagnosis.yaml"
+    save_yaml({**d, "domain": "pneumatics", "findings": [f]}, path)
+    cli("report", path, "-o", tmp_path / "pneu.pdf", "-q")
+    document = pymupdf.open(tmp_path / "pneu.pdf")
+    check_pages(document)
+    return " ".join(page_texts(document))
+
+
+RUNNERS = [
+    {"cause": c, "channel": "r_elbow.flex", "region": None, "validation_gain": g, "t": t, "threshold_t": 4.5,
+     "significant": False}
+    for c, g, t in (("chamber_leak", 0.031, 2.1), ("supply_droop", 0.012, 1.2), ("pressure_offset", 0.004, 0.4))
+]  # fmt: skip
+
+
+def test_a_diagnosis_lists_its_runners_up(results, tmp_path):
+    text = _pneumatic_diagnosis(results, tmp_path, RUNNERS)
+    assert "Runners-up of this round" in text
+    for r in RUNNERS:
+        assert f"{r['cause']} r_elbow.flex {100 * r['validation_gain']:.1f}" in text
+    assert "No other candidate was tested" not in text and "not stored" not in text
+
+
+def test_runners_up_not_stored_are_not_said_untested(results, tmp_path):
+    """A file without runners_up does not say what was tested: "not stored", never "none tested"."""
+    text = _pneumatic_diagnosis(results, tmp_path, None)
+    assert "not stored" in text and "No other candidate was tested" not in text
+
+
+def test_no_runners_up_stored_as_none(results, tmp_path):
+    text = _pneumatic_diagnosis(results, tmp_path, [])
+    assert "No other candidate was tested in this round." in text and "not stored" not in text
+
+
+# ----------------------------------------------------------------------------- 7. front page
+def test_a_single_diagnosis_report_has_contents_and_summary(results, tmp_path):
+    """`diegocal report X.diagnosis.yaml` opens as a report of many does: contents, summary in plain words."""
+    cli("report", results["swing.diagnosis.yaml"], "-o", tmp_path / "d.pdf", "-q")
+    document = pymupdf.open(tmp_path / "d.pdf")
+    check_pages(document)
+    pages = page_texts(document)
+    front = front_pages(document)
+    assert front >= 1
+    assert "Contents" in pages[0] and "Summary" in pages[0]
+    entry = re.search(r"Diagnosis \S*swing\.diagnosis\.yaml swing\.h5 (\d+)", pages[0])
+    assert entry and int(entry.group(1)) == front + 1
+    assert "Domain dynamics, log swing.h5" in " ".join(pages[:front])  # the summary in plain words
+    assert pages[front].startswith("Diagnosis, dynamics: swing.diagnosis.yaml")
