@@ -68,9 +68,12 @@ def _stac(path: Path) -> dict:
         "sigma pots [V]": sigma.get("pots"),
         "sigma markers [m]": sigma.get("markers"),
     }
-    for name, p in (d.get("pots") or {}).items():
-        row[f"gain {name}"] = p.get("gain")
-        row[f"bias {name} [V]"] = p.get("bias")
+    from diegocal.stac.calibration import Calibration
+
+    cal = Calibration.from_dict(d, str(path))  # layout 2 or 1
+    for i, name in enumerate(cal.pot_names):
+        row[f"gain {name}"] = float(cal.gain[i])
+        row[f"bias {name} [V]"] = float(cal.bias[i])
     return row
 
 
@@ -80,7 +83,7 @@ def _sgp(path: Path) -> dict:
     d = load_yaml(path / "sgp.yaml")
     nmse = {j: float(v) for j, v in (d.get("nmse_in_sample") or {}).items()}
     row = {
-        "model": d.get("kind"),
+        "model": d.get("model_kind") or d.get("kind"),
         "samples": d.get("n_samples"),
         "nMSE worst joint": max(nmse.values()) if nmse else None,
         "nMSE mean": float(np.mean(list(nmse.values()))) if nmse else None,

@@ -27,6 +27,7 @@ STAC_METHODS = ("stac", "classical", "ekf", "nominal")
 STAC_LOSSES = ("linear", "huber", "tukey")
 STAC_SCHEDULES = ("lm-iter", "lm-batch", "bfgs")
 SENSOR_TYPES = ("markers", "pots", "rotary", "linear", "tendon", "encoder")
+SOURCE_TYPES = (*SENSOR_TYPES, "others")
 
 # simulate (diegocal.sim.*)
 PNEUMATIC_EXPERIMENTS = ("dynamic", "steady-state")

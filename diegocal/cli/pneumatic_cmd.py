@@ -22,7 +22,6 @@ from diegocal.cli.common import (
     summary,
     usage_error,
 )
-from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import DiegocalError, FitError, InputFileError
 
 
@@ -200,57 +199,3 @@ def simulate_pneumatics_cmd(
     rows += [(f"effect {e['cause']}", e["channel"]) for e in log.truth.effects]
     rows.append(("written", str(output)))
     summary("simulate pneumatics", rows, quiet=quiet)
-
-
-def predict_pneumatic(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
-    """`predict pneumatic.yaml LOG`: open-loop pressure from u, v, vdot (§4.5.4), reset every 2 s;
-    prints the 2-s drift per chamber (Fig. 4.13's figure of merit)."""
-    import numpy as np
-
-    from diegocal.io import Log, load_log, make_stream, save_log
-    from diegocal.pneumatic.data import extract
-    from diegocal.pneumatic.files import load_model
-    from diegocal.pneumatic.predict import drift, predict_with_resets
-
-    model = load_model(model_path)
-    log = load_log(log_path)
-    pred, rows, drifts = {}, [], []
-    for name, ch in model.chambers.items():
-        raw = ch.raw
-        data = extract(log, name, ch.volume_sensor, ch.params.supply, ch.params.room, check_span=False)
-        pred[name] = predict_with_resets(ch.params, data)
-        d = drift(ch.params, data)
-        drifts.append(d.final)
-        rows.append((name, f"{raw.get('drift_2s', float('nan')):.1%}", f"{d.final:.1%}"))
-    names = list(pred)
-    out = opts.output or default_output(log_path, ".prediction.h5")
-    result = Log(
-        log.time,
-        {"pressure": make_stream(names, np.column_stack([pred[n] for n in names]))},
-        robot=log.robot,
-        rate_hz=log.rate_hz,
-        source=opts.source,
-    )
-    save_log(result, out)
-    drifts = np.array(drifts)
-    if len(rows) > 12:
-        rows = sorted(rows, key=lambda r: -float(r[2].rstrip("%")))[:10]
-        rows.append(("...", "", ""))
-    rows += [
-        ("median / max", "", f"{np.median(drifts):.1%} / {drifts.max():.1%}"),
-        (
-            "< 4% / < 10% of chambers",
-            "",
-            f"{(drifts < 0.04).sum()} / {(drifts < 0.10).sum()} of {drifts.size}",
-        ),
-        ("written", "", str(out)),
-    ]
-    summary(
-        "predict pneumatic: RMS error 2 s after the last measurement, fraction of Pc - Pr",
-        rows,
-        columns=("chamber", "fit log", "this log"),
-        quiet=opts.quiet,
-    )
-
-
-register_predictor("pneumatics", predict_pneumatic)

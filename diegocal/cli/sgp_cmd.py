@@ -41,9 +41,7 @@ from diegocal.cli.common import (
     split_words,
     summary,
     usage_error,
-    warn,
 )
-from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 
 
 @contextmanager
@@ -228,44 +226,6 @@ def sgp_fit(
     summary(f"sgp-fit → {out}", rows, quiet=quiet)
 
 
-def predict_sgp(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
-    """`diegocal predict sgp/ LOG`: write predicted ``tau`` and ``tau_std`` as a log."""
-    from diegocal.evaluate import score
-    from diegocal.io import Log, load_log, make_stream, save_log
-    from diegocal.robot import load_robot, resolve_robot_dir
-    from diegocal.sgp import load_model
-    from diegocal.sgp.model import log_arrays
-
-    data = load_log(log_path)
-    robot = load_robot(resolve_robot_dir(opts.robot, data.robot)) if opts.robot else None
-    model = load_model(model_path, robot=robot)
-    pred = model.predict(data)
-    names = model.joint_names  # the joints with a fitted torque
-    q, qd, qdd = log_arrays(data, model.robot, need_tau=False)
-    every = model.robot.joint_names
-    streams = {
-        "q": make_stream(every, q),
-        "qd": make_stream(every, qd),
-        "qdd": make_stream(every, qdd),
-        "tau": make_stream(names, pred.tau),
-        "tau_std": make_stream(names, pred.tau_std),
-    }
-    rows = [("model", model.options.kind), ("samples", data.n_samples)]
-    for term in model.fitted_terms():  # extra terms (diagnose's extended model), with their values
-        values = ", ".join(f"{p.name}={p.value:.4g} {p.unit}".rstrip() for p in term.parameters)
-        rows.append((f"term {term.label}", values))
-    if data.has("tau"):
-        measured = data.stream("tau").select(names).data
-        streams["tau_measured"] = make_stream(names, measured)
-        sc = score(measured, pred.tau, names, std=pred.tau_std)
-        rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, sc.nmse, strict=True)]
-        rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, sc.coverage, strict=True)]
-        _warn_coverage(names, sc.coverage)
-    out = opts.output or default_output(log_path, ".prediction.h5")
-    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz, source=opts.source), out)
-    summary(f"predict → {out}", rows, quiet=opts.quiet)
-
-
 def _guard_text(entry: dict) -> str:
     """The guard's choice for one joint and the cross-validated nMSE of every candidate it
     weighed, lowest first (the choice may not be the lowest: a GP must beat PR by one standard
@@ -275,26 +235,3 @@ def _guard_text(entry: dict) -> str:
     scores = sorted((entry.get("guard_validation") or {}).items(), key=lambda kv: kv[1])
     weighed = ", ".join(f"{label} {value:.3g}" for label, value in scores)
     return entry["guard_choice"] + region_text(entry) + (f" (cross-validated nMSE: {weighed})" if weighed else "")
-
-
-def _warn_coverage(names, coverage) -> None:
-    """One warning line naming the joints whose measured torques fall within ±2σ of the
-    prediction less or more often than :data:`diegocal.evaluate.COVERAGE_BAND`: the model's
-    uncertainty is then not to be taken at its word on this log."""
-    from diegocal.evaluate import COVERAGE_BAND
-
-    lo, hi = COVERAGE_BAND
-    low = [f"{j} {c:.3f}" for j, c in zip(names, coverage, strict=True) if c < lo]
-    high = [f"{j} {c:.3f}" for j, c in zip(names, coverage, strict=True) if c > hi]
-    parts = []
-    if low:
-        why = "states the training log did not constrain, a drifted robot, or noise that is not white"
-        parts.append(f"below {lo} on {', '.join(low)}: the predictive std understates the error ({why})")
-    if high:
-        parts.append(f"above {hi} on {', '.join(high)}: the predictive std overstates the error")
-    if parts:
-        hint = "; `diegocal diagnose` on the training log names effects the model lacks" if low else ""
-        warn("fraction of measured torques within ±2σ (0.95 if calibrated) " + "; ".join(parts) + hint)
-
-
-register_predictor("dynamics", predict_sgp)

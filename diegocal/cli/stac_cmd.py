@@ -19,12 +19,10 @@ from diegocal.cli.common import (
     output_path,
     progress_enabled,
     robot_for_log,
-    robot_for_model,
     summary,
     usage_error,
     warn,
 )
-from diegocal.cli.predict_cmd import PredictOptions, register_predictor
 from diegocal.errors import FitError
 
 if TYPE_CHECKING:
@@ -276,65 +274,3 @@ def coverage_rows(cal: Calibration, robot: Robot) -> list:
 
 #: predict warns when a held-out error is this many times the calibration's own noise level: the
 #: log is then most likely not of the session (robot, mocap frame, marker placement) it was fitted on
-IMPLAUSIBLE = 20.0
-
-
-def predict_calib(model_path: Path, log_path: Path, opts: PredictOptions) -> None:
-    """`diegocal predict calib.yaml LOG --from pots --to markers` (thesis §2.7.2). Writes the
-    prediction, never into the model it reads."""
-    import numpy as np
-
-    from diegocal.io import load_log, make_stream, save_log
-    from diegocal.io.bundle import load_bundle
-    from diegocal.io.log import Log
-    from diegocal.stac.calibration import Calibration
-    from diegocal.stac.predict import predict
-    from diegocal.stac.result import StacOptions
-
-    bundle = load_bundle(model_path)
-    cal = Calibration.from_dict(bundle.data, source=str(model_path))
-    data = load_log(log_path)
-    model = robot_for_model(bundle.robot, opts.robot, data, model_path)
-    pred = predict(
-        data.without_truth(),
-        model,
-        cal,
-        opts.sensors_from,
-        opts.sensors_to,
-        StacOptions(jobs=opts.jobs, quiet=opts.quiet, seed=opts.seed),
-    )
-    out = opts.output or default_output(log_path, ".prediction.h5")
-    streams = {"q": make_stream(model.joint_names, pred.q)}
-    if pred.pot_names:
-        streams["pots"] = make_stream(pred.pot_names, pred.pots)
-    if pred.marker_names:
-        streams["markers"] = make_stream(pred.marker_names, pred.markers)
-    save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz, source=opts.source), out)
-    for target, mae in pred.mae.items():
-        sigma = cal.sigma_by_group.get(target, cal.sigma_markers if target == "markers" else cal.sigma_pots)
-        if np.isfinite(sigma) and sigma > 0 and mae > IMPLAUSIBLE * sigma:
-            unit = " m" if target == "markers" else ""
-            warn(
-                f"{target} MAE {mae:.4g}{unit} is {mae / sigma:.0f} times the calibration's own noise "
-                f"({sigma:.3g}{unit}): this log does not look like the session {model_path.name} was fitted on "
-                "(another robot, mocap frame or marker placement?); hold out part of the same session: "
-                "diegocal split LOG --at 0.8 -o TRAIN HELDOUT"
-            )
-    unit = {"markers": "m"}
-    rows = [(f"{t} ({unit.get(t, 'sensor unit')})", pred.mae[t]) for t in pred.targets]
-    summary(
-        f"cross-sensor prediction MAE from {sources_text(opts.sensors_from, pred.sources)} (thesis Tables 2.1-2.2)",
-        rows + [("prediction", str(out))],
-        columns=("target", "MAE"),
-        quiet=opts.quiet,
-    )
-
-
-def sources_text(asked: tuple[str, ...], used: tuple[str, ...]) -> str:
-    """The sensor types as the user named them, and what they stood for when it differs:
-    ``pots (linear+rotary)``."""
-    text = "+".join(asked)
-    return text if set(asked) == set(used) else f"{text} ({'+'.join(used)})"
-
-
-register_predictor("kinematics", predict_calib)

@@ -69,7 +69,15 @@ import numpy as np
 from diegocal.diagnose.engine import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
-from diegocal.sgp.model import INERTIA, INPUT_STREAMS, nominal_base, nominal_torque, torque_array
+from diegocal.sgp.model import (
+    INERTIA,
+    INPUT_STREAMS,
+    DynamicsModel,
+    SGPOptions,
+    nominal_base,
+    nominal_torque,
+    torque_array,
+)
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
 from diegocal.sgp.terms import (
     FRICTION_CAUSE,
@@ -112,8 +120,9 @@ EXTENDED_SGP = {"hyper_max": 500}
 
 @dataclass
 class DynamicsFit:
-    """A fitted torque model: coefficients of [base parameters, extra terms' columns], the terms
-    with their values, the per-joint residual std of the training rows and the prediction."""
+    """A fitted torque model (``model``, the :class:`~diegocal.sgp.model.DynamicsModel` that is
+    saved): coefficients of [base parameters, extra terms' columns], the terms with their values,
+    the per-joint noise std σ_v of the fit, the prediction on every sample and the model's columns."""
 
     w: np.ndarray
     terms: tuple
@@ -121,8 +130,8 @@ class DynamicsFit:
     pred: np.ndarray = field(repr=False)
     A: np.ndarray = field(repr=False)  # (T, k, P): the columns, lags applied
     train: np.ndarray = field(repr=False)
-    model: object = field(repr=False, default=None)  # the fitted SGP, once it absorbed what stays unexplained
-    gp: tuple = ()  # the joints where that SGP kept a GP (its guard's choice)
+    model: object = field(repr=False, default=None)  # the fitted DynamicsModel (PR; the SGP once it absorbed)
+    gp: tuple | None = None  # the joints where an absorbing SGP kept a GP (None: no SGP)
 
 
 class DynamicsAdapter:
@@ -188,37 +197,64 @@ class DynamicsAdapter:
         return w, cov
 
     def fit(self, terms, train) -> DynamicsFit:
-        """The baseline (eq. 3.30 with friction, base parameters) with ``terms`` on the training
-        samples: least squares, then again with each joint's rows weighted by 1 / its residual
-        std; a ``torque_lag``'s time constant by :meth:`_fit_lags` in between."""
+        """The baseline (eq. 3.30 with friction, base parameters) with ``terms``, fitted on the
+        training samples as the model it will be saved as: a PR model (thesis §3.3.3,
+        :class:`~diegocal.sgp.model.DynamicsModel`), whose predictions on every sample are the
+        residuals' and the held-out scores'. A ``torque_lag``'s time constant is searched first
+        (:meth:`_fit_lags`, weighted least squares), then held in the model."""
         train = np.asarray(train, bool)
         terms = dynamics_terms(terms)
         C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
         A = np.concatenate([self.F, C], axis=2)
         lags = {self.row_of[t.channel]: t.value("lag") for t in terms if is_filter(t) and t.channel in self.row_of}
-        w, cov = self._solve(A, train, np.ones(len(self.joints)))
-        e = self.tau[train] - (A @ w + self.tau0)[train]
-        s = np.sqrt(np.nanmean(e * e, axis=0))  # second pass: each joint weighted by its residual std
-        sigma = np.where(np.isfinite(s) & (s > 0), s, 1.0)
         if lags:
-            lags = self._fit_lags(A, lags, train, sigma)
-        Aeff = self._lagged(A, lags)
-        offset = self._offset(lags)
-        w, cov = self._solve(Aeff, train, sigma, offset)
-        pred = Aeff @ w + offset
-        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        se[self._unidentified(Aeff, train, terms)] = np.nan
+            w, _ = self._solve(A, train, np.ones(len(self.joints)))
+            e = self.tau[train] - (A @ w + self.tau0)[train]
+            s = np.sqrt(np.nanmean(e * e, axis=0))  # each joint weighted by its residual std
+            lags = self._fit_lags(A, lags, train, np.where(np.isfinite(s) & (s > 0), s, 1.0))
+            terms = tuple(
+                t.with_values([lags[self.row_of[t.channel]]]) if is_filter(t) and t.channel in self.row_of else t
+                for t in terms
+            )
+        rows = train & np.isfinite(self.tau).all(axis=1)
+        model = DynamicsModel(self.robot, self._options(), self.joints, terms)
+        model.fit_arrays(self.q[rows], self.qd[rows], self.qdd[rows], self.tau[rows], time=self.time[rows])
+        pred = model.predict_arrays(self.q, self.qd, self.qdd, self.time, variance=False).tau
+        Aeff = model.features(self.q, self.qd, self.qdd, self.time)
+        sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
+        w = model.parametric_.values
+        se_nan = self._unidentified(Aeff, rows, terms)
+        out = []
+        for t in model.fitted_terms():
+            if is_filter(t):
+                r = self.row_of.get(t.channel)
+                se = None if r is None else [self._lag_se(A, w, r, t.value("lag"), pred, rows)]
+                out.append(t.with_values([t.value("lag")], se))
+            else:
+                out.append(t)
+        if se_nan.size:  # a payload's parameters the torques cannot tell from the others
+            out = self._with_nan_se(out, se_nan)
+        return DynamicsFit(w, tuple(out), sigma, pred, Aeff, rows, model)
+
+    def _options(self, kind: str = "pr") -> SGPOptions:
+        """The options of the model the diagnosis fits and saves (``kind`` "sgp": the one that
+        absorbs what stays unexplained, :data:`EXTENDED_SGP`)."""
+        options = SGPOptions(kind="pr", friction=self.friction, inertia=self.inertia)
+        return replace(options, kind="sgp", **EXTENDED_SGP) if kind == "sgp" else options
+
+    def _with_nan_se(self, terms, columns: np.ndarray) -> list:
+        """``terms`` with a NaN standard error on the parameters whose model columns are ``columns``."""
         out, at = [], self.base.n_base
         for t in terms:
             if is_filter(t):
-                r = self.row_of.get(t.channel)
-                lag = lags.get(r, t.value("lag"))
-                out.append(t.with_values([lag], [self._lag_se(A, w, r, lag, pred, train)] if r is not None else None))
+                out.append(t)
                 continue
             k = len(t.parameters)
-            out.append(t.with_values(w[at : at + k], se[at : at + k]))
+            se = t.stderrs
+            se[np.isin(np.arange(at, at + k), columns)] = np.nan
+            out.append(t.with_values(t.values, se))
             at += k
-        return DynamicsFit(w, tuple(out), sigma, pred, Aeff, train)
+        return out
 
     def _unidentified(self, A, train, terms) -> np.ndarray:
         """Indices of A's columns that belong to a ``payload`` and lie in the span of the others on
@@ -455,21 +491,9 @@ class DynamicsAdapter:
             f"+{k}" for k in self.friction
         )
         parts = [base, *[t.label for t in fitted.terms]]
-        if fitted.model is not None:  # the SGP's GP, on the joints its guard kept one for
+        if fitted.gp is not None:  # the SGP's GP, on the joints its guard kept one for
             parts.append(f"gp[{','.join(fitted.gp)}]" if fitted.gp else "gp[none kept]")
         return "+".join(parts)
-
-    def extended_model(self, fitted: DynamicsFit, kind: str = "pr"):
-        """The extended model as a :class:`~diegocal.sgp.model.DynamicsModel` of ``kind`` ("pr",
-        or "sgp": :data:`EXTENDED_SGP`) with the found terms, fitted on the training blocks."""
-        from diegocal.sgp.model import DynamicsModel, SGPOptions
-
-        options = SGPOptions(kind="pr", friction=self.friction, inertia=self.inertia)
-        if kind == "sgp":
-            options = replace(options, kind="sgp", **EXTENDED_SGP)
-        model = DynamicsModel(self.robot, options, self.joints, fitted.terms)
-        tr = fitted.train & np.isfinite(self.tau).all(axis=1)
-        return model.fit_arrays(self.q[tr], self.qd[tr], self.qdd[tr], self.tau[tr], time=self.time[tr])
 
     def absorb(self, fitted: DynamicsFit, channels, train) -> DynamicsFit:
         """The non-parametric part for what stays ``unexplained`` (DESIGN.md: "the non-parametric
@@ -480,7 +504,9 @@ class DynamicsAdapter:
         joint gets a GP candidate, not only ``channels``: the saved model is one SGP, and the
         guard already keeps a GP off the joints it does not help. The engine keeps the result
         if it lowers the validation error of ``channels``."""
-        model = self.extended_model(fitted, kind="sgp")
+        tr = fitted.train
+        model = DynamicsModel(self.robot, self._options("sgp"), self.joints, fitted.terms)
+        model.fit_arrays(self.q[tr], self.qd[tr], self.qdd[tr], self.tau[tr], time=self.time[tr])
         pred = model.predict_arrays(self.q, self.qd, self.qdd, self.time).tau
         hyper = model.hyperparameters_
         gp = tuple(j for j in self.joints if hyper[j].get("guard_choice", "parametric") != "parametric")
@@ -489,7 +515,7 @@ class DynamicsAdapter:
     def save(self, fitted: DynamicsFit, path, header: dict) -> Path:
         from diegocal.sgp.store import save_model
 
-        model = fitted.model if fitted.model is not None else self.extended_model(fitted)
+        model = fitted.model
         meta = {
             "log": header.get("log"),
             "command": header.get("command") or "diagnose",

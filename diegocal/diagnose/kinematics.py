@@ -40,7 +40,7 @@ from diegocal.diagnose.kinematics_lin import Linearised
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.predict import predict
+from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import calibrate
 from diegocal.stac.terms import (
@@ -90,7 +90,7 @@ class KinFit:
     pots: np.ndarray
     markers: np.ndarray
     train: np.ndarray = field(repr=False)
-    deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) deleted residuals
+    deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) residuals of --from others
 
 
 class KinematicsAdapter:
@@ -371,15 +371,19 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ scores and output
     def score(self, fitted: KinFit, mask, exclude: dict | None = None) -> Score:
-        """RMSE per channel on ``mask`` of each sensor's deleted residual: its reading against the
-        model's prediction at the q the frame's other sensors give
-        (:meth:`Linearised.deleted_residuals`). A reading's own residual would reward a model
-        for following it: a rotary pot that largely fixes its joint's q has a small residual
-        whatever its transfer curve, and a term that corrects it moves q back onto the other
-        sensors, so its own residual grows while every other sensor's shrinks."""
+        """RMSE per channel on ``mask`` of each reading against its prediction by the frame's other
+        sensors, with the model as saved: ``diegocal predict MODEL LOG --from others`` (q tracked
+        from every sensor, then each reading left out, :mod:`diegocal.stac.loo`). A reading's own
+        residual would reward a model for following it: a rotary pot that largely fixes its
+        joint's q has a small residual whatever its transfer curve, and a term that corrects it
+        moves q back onto the other sensors, so its own residual grows while every other sensor's
+        shrinks."""
         if fitted.deleted is None:
-            fitted.deleted = self._linearise(fitted).deleted_residuals()
-        rp, rm = fitted.deleted[0].copy(), self._merge(fitted.applied, fitted.deleted[1])
+            pred = predict(self.log, self.robot, self.calibration(fitted), (OTHERS,), ("pots", "markers"), self.options)
+            pots = pred.pots[:, [pred.pot_names.index(n) for n in self.pot_names]]
+            markers = pred.markers[:, [pred.marker_names.index(n) for n in self.marker_names]]
+            fitted.deleted = (self.raw_pots - pots, np.asarray(self.log.stream("markers").data, float) - markers)
+        rp, rm = fitted.deleted[0].copy(), fitted.deleted[1].copy()
         for c, ex in (exclude or {}).items():
             ex = np.asarray(ex, bool)
             if c in self.pot_names:

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from diegocal.stac.model import MARKERS, Observation
+from diegocal.stac.loo import FrameProjection, deleted_residuals, frame_projection, sigma_of
+from diegocal.stac.model import Observation
 
 #: A candidate acts on the channels that carry at least this share of its largest channel's
 #: weighted column energy (its projection spreads tiny parts over every sensor of the chain).
@@ -82,33 +83,8 @@ class Linearised:
         a = fitted.applied
         obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
         params = obs.params_from(fitted.cal)
-        sig = dict(fitted.cal.sigma_by_group)
-        sigma_p = np.array([sig.get(k, fitted.cal.sigma_pots) for k in obs.kinds], float)
-        sig_x = float(sig.get(MARKERS, fitted.cal.sigma_markers))
-        # a pot type fitted exactly (one pot per joint, its σ collapsed) pins its joints, but no
-        # weight may swamp the others' in floating point
-        floor = 1e-3 * float(np.max(np.concatenate([sigma_p, [sig_x / 0.1]])))
-        sigma_p = np.maximum(sigma_p, floor)
-        T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, a.robot.n_joints
-        J = np.zeros((T, P + 3 * M, n))
-        s_all = np.zeros((T, P))
-        Rl_all = np.zeros((T, M, 3, 3))
-        for i in range(0, T, 500):
-            sl = slice(i, min(i + 500, T))
-            s, ds, Rl, _, Jx = obs.evaluate(fitted.q[sl], params.xyz)
-            J[sl, :P] = params.gain[None, :, None] * ds
-            J[sl, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(s.shape[0], 3 * M, n)
-            s_all[sl], Rl_all[sl] = s, Rl
-        w = np.zeros((T, P + 3 * M))
-        w[:, :P] = 1.0 / sigma_p**2
-        w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
-        JW = np.swapaxes(J, 1, 2) * w[:, None, :]
-        H = JW @ J
-        diag = np.einsum("bii->bi", H)
-        D = 1e-9 * diag + 1e-12  # keeps unobserved joints' H invertible
-        diag += D
-        K = np.linalg.solve(H, JW)
-        return cls(adapter, fitted, obs, params, J, K, w, s_all, Rl_all, sigma_p, D)
+        f = frame_projection(obs, params, sigma_of(fitted.cal), fitted.q)
+        return cls(adapter, fitted, obs, params, f.J, f.K, f.w, f.s, f.Rl, f.sigma_p, f.D)
 
     def project(self, C: np.ndarray) -> np.ndarray:
         """Columns (T, R, k) minus their part along the frame's q directions (module docstring)."""
@@ -136,30 +112,10 @@ class Linearised:
         return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
 
     def deleted_residuals(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each sensor's residual with q tracked from every other sensor of its frame (leave one
-        sensor out), exact for the linearised frame: pots (T, P) (r − J K r) / (1 − h), h the
-        diagonal of J K; markers (T, M, 3) (I − H_m)⁻¹ (r_m − (J K r)_m), H_m the marker's 3 × 3
-        block of J K. J K r is zero where the fit's q solves this weighting's normal equations
-        (the textbook r / (1 − h)); it is kept because the fit's q need not: a pot whose σ
-        collapsed pinned its joint in the fit, whose own residual is then ~0, while the other
-        sensors' pull on that joint is what its deleted residual is. A reading that alone fixes a
-        direction of q (h = 1) has none: NaN."""
-        r = self.residual_rows()
-        a = np.einsum("trn,tn->tr", self.J, np.einsum("tnr,tr->tn", self.K, np.nan_to_num(r)))
-        r = r - a
-        P, T = self.P, self.T
-        M = (self.R - P) // 3
-        h = np.einsum("tpn,tnp->tp", self.J[:, :P], self.K[:, :, :P])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rp = np.where(1.0 - h > 1e-12, r[:, :P] / (1.0 - h), np.nan)
-        Jm = self.J[:, P:].reshape(T, M, 3, -1)
-        Km = self.K[:, :, P:].reshape(T, -1, M, 3)
-        A = np.eye(3) - np.einsum("tmin,tnmj->tmij", Jm, Km)
-        rm = r[:, P:].reshape(T, M, 3)
-        ok = np.isfinite(rm).all(-1) & (np.abs(np.linalg.det(A)) > 1e-12)
-        out = np.full_like(rm, np.nan)
-        out[ok] = np.linalg.solve(A[ok], rm[ok][..., None])[..., 0]
-        return rp, out
+        """Each sensor's residual with q tracked from every other sensor of its frame:
+        :func:`diegocal.stac.loo.deleted_residuals` at this fit."""
+        proj = FrameProjection(self.J, self.K, self.w, self.s, self.Rl, self.sigma_p, self.D)
+        return deleted_residuals(proj, self.residual_rows(), self.P)
 
     def mapped_index(self, name: str) -> int:
         return self.obs.marker_names.index(name)

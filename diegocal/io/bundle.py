@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from diegocal.domains import domain
 from diegocal.errors import InputFileError
 from diegocal.io.files import load_yaml
 
@@ -118,8 +119,8 @@ def header(kind: str, robot=None, log=None, command: str | None = None) -> dict:
     """
     from diegocal import __version__
 
-    if kind not in KINDS:
-        raise ValueError(f"unknown bundle kind {kind!r}; expected one of {', '.join(KINDS)}")
+    if kind != "diagnosis":  # a domain's word (or an older one) -> the kind its models carry
+        kind = domain(kind).kind
     return {
         "kind": kind,
         "robot": None if robot is None else robot_record(robot),

@@ -4,12 +4,14 @@ The q-phase alone (eq. 2.21) is run on a held-out log using only the *source* se
 the tracked joint angles then predict every sensor (eq. 2.11-2.20) and the mean absolute
 error is reported per *target* type: markers as the mean distance (m), pots in their own unit
 (V, or m for tendons). Predicting a type that was also a source gives the model's fit to the
-data (the thesis prints those in parentheses).
+data (the thesis prints those in parentheses). The source ``others`` predicts each reading from
+every other sensor of its frame (:mod:`diegocal.stac.loo`): the held-out score ``diagnose``
+gives a kinematic model.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -17,13 +19,18 @@ from diegocal.errors import FitError
 from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
+from diegocal.stac.loo import deleted_residuals, frame_projection
 from diegocal.stac.model import MARKERS, Observation
 from diegocal.stac.qphase import Noise, q_step
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import initial_q
+from diegocal.stac.terms import POT_CAUSES, apply_terms, pot_columns, to_log_markers, with_slip_markers
 
-#: accepted sensor-type names: the pot kinds, all pots, and the markers
+#: accepted sensor-type names: the pot kinds, all pots, and the markers; as a source, ``others``:
+#: each reading from all the other sensors of its frame
 SENSOR_TYPES = ("markers", "pots", "rotary", "linear", "tendon", "encoder")
+OTHERS = "others"
+SOURCE_TYPES = (*SENSOR_TYPES, OTHERS)
 
 
 @dataclass(frozen=True)
@@ -41,10 +48,15 @@ class Prediction:
     sources: tuple[str, ...]
     targets: tuple[str, ...]
     mae: dict
+    full_pots: np.ndarray | None = None  # the pots at q from every source (``others``: not left out)
 
 
 def _groups(names, obs: Observation, what: str) -> set[str]:
     out = set()
+    if what == "from" and OTHERS in names:
+        if len(tuple(names)) > 1:
+            raise FitError(f"--from {OTHERS} predicts each reading from all the others; give it alone")
+        return set(obs.groups)
     for n in names:
         if n not in SENSOR_TYPES:
             raise FitError(f"unknown sensor type {n!r} in --{what} (expected one of {', '.join(SENSOR_TYPES)})")
@@ -71,7 +83,8 @@ def predict(
     """Track q from ``sources`` with the calibration fixed; predict ``targets`` (thesis §2.7.2).
 
     ``q_init`` (T, n) rad: joint angles to start the tracking from (a previous fit's), instead of
-    the pots' inversion.
+    the pots' inversion. ``sources`` ``("others",)``: q is tracked from every sensor and each
+    reading is predicted from the others (:mod:`diegocal.stac.loo`), NaN where they cannot.
 
     A calibration with extra terms (``calibration.terms``, found by ``diegocal diagnose``) is
     honoured through :func:`diegocal.stac.terms.apply_terms`: the model runs on the log mapped into
@@ -80,18 +93,17 @@ def predict(
     """
     options = options or StacOptions()
     if calibration.terms:
-        from dataclasses import replace
-
-        from diegocal.stac.terms import apply_terms, to_log_markers, with_slip_markers
-
         applied = apply_terms(calibration.terms, log, robot)
         cal = with_slip_markers(replace(calibration, terms=()), applied, calibration.terms)
         pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, q_init)
-        if any(t.cause in ("backlash", "sensor_nonlinearity") for t in calibration.terms):  # of the model's s
-            applied = apply_terms(calibration.terms, log, robot, pred.pots)
+        model_pots = None
+        if any(t.cause in POT_CAUSES for t in calibration.terms):  # of the model's s
+            model_pots = pred.full_pots
+            applied = apply_terms(calibration.terms, log, robot, model_pots)
             pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, pred.q)
         markers = to_log_markers(applied, pred.marker_names, pred.markers) if pred.marker_names else pred.markers
-        return replace(pred, markers=markers, marker_names=applied.marker_names)
+        pots = pots_with_terms(calibration.terms, log, pred.pot_names, pred.pots, model_pots)
+        return replace(pred, pots=pots, markers=markers, marker_names=applied.marker_names)
     obs = Observation(log, robot, need=(), needed_by="predict")
     src = _groups(sources, obs, "from")
     tgt = _groups(targets, obs, "to")
@@ -125,14 +137,20 @@ def predict(
     pots = params.gain * st.s + params.bias
     xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
     markers = xb @ params.R.T + params.T
+    full_pots = pots
+    if OTHERS in sources:  # each reading from the others: reading − its deleted residual
+        proj = frame_projection(obs, params, sig, q)
+        r = np.concatenate([obs.pots - pots, (obs.markers - markers).reshape(obs.n_frames, -1)], axis=1)
+        rp, rm = deleted_residuals(proj, r, obs.n_pots)
+        pots, markers = obs.pots - rp, obs.markers - rm
     mae = {}
     for g in sorted(tgt):
         if g == MARKERS:
             d = np.linalg.norm(markers - obs.markers, axis=-1)[obs.valid]
-            mae[g] = float(np.mean(d))
+            mae[g] = float(np.nanmean(d))
         else:
             k = obs.kinds == g
-            mae[g] = float(np.mean(np.abs(pots[:, k] - obs.pots[:, k])))
+            mae[g] = float(np.nanmean(np.abs(pots[:, k] - obs.pots[:, k])))
     return Prediction(
         q,
         pots,
@@ -142,4 +160,20 @@ def predict(
         tuple(sorted(src)),
         tuple(sorted(tgt)),
         mae,
+        full_pots,
     )
+
+
+def pots_with_terms(terms, log: Log, names, pots: np.ndarray, model_pots: np.ndarray | None) -> np.ndarray:
+    """Predicted pot readings (T, P) of the model's linear transfer, with each pot term's part of
+    the reading added back (:func:`diegocal.stac.terms.pot_columns`, at the model readings
+    ``model_pots`` the log was mapped with): the readings the sensor itself would give."""
+    if model_pots is None:
+        return pots
+    raw = log.stream("pots")
+    out = np.array(pots, float, copy=True)
+    for t in terms:
+        if t.cause in POT_CAUSES and t.channel in names:
+            j = list(names).index(t.channel)
+            out[:, j] += pot_columns(t, raw.column(t.channel), model_pots[:, j]) @ t.values
+    return out

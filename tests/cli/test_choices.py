@@ -5,7 +5,6 @@ import dataclasses
 
 from diegocal.batch import COMMANDS
 from diegocal.cli import choices
-from diegocal.cli.stac_cmd import sources_text
 from diegocal.diagnose import DOMAINS
 from diegocal.report.logs import LOG_SUFFIXES
 from diegocal.sgp.model import INFERENCE, INPUT_STREAMS, KINDS, SGPOptions
@@ -14,7 +13,7 @@ from diegocal.sim.dynamics import TRAJECTORIES
 from diegocal.sim.effects import VOCABULARY
 from diegocal.sim.kinematics import SIZE_UNITS
 from diegocal.sim.pneumatics import EXPERIMENTS
-from diegocal.stac.predict import SENSOR_TYPES
+from diegocal.stac.predict import SENSOR_TYPES, SOURCE_TYPES
 from diegocal.stac.robust import LOSSES
 from diegocal.stac.stac import SCHEDULES
 
@@ -33,7 +32,7 @@ def test_the_copies_equal_the_library():
     )
     assert choices.STAC_LOSSES == LOSSES
     assert choices.STAC_SCHEDULES == SCHEDULES
-    assert choices.SENSOR_TYPES == SENSOR_TYPES
+    assert choices.SENSOR_TYPES == SENSOR_TYPES and choices.SOURCE_TYPES == SOURCE_TYPES
     assert choices.PNEUMATIC_EXPERIMENTS == EXPERIMENTS
     assert choices.TRAJECTORIES == TRAJECTORIES
     assert choices.EFFECTS == VOCABULARY
@@ -42,8 +41,3 @@ def test_the_copies_equal_the_library():
     assert choices.BATCH_COMMANDS == tuple(COMMANDS)
     assert choices.LOG_SUFFIXES == LOG_SUFFIXES
 
-
-def test_predict_echoes_the_sensor_types_as_asked():
-    assert sources_text(("pots",), ("linear", "rotary")) == "pots (linear+rotary)"
-    assert sources_text(("markers",), ("markers",)) == "markers"
-    assert sources_text(("rotary", "linear"), ("linear", "rotary")) == "rotary+linear"

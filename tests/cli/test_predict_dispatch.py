@@ -8,8 +8,8 @@ import yaml
 from typer.testing import CliRunner
 
 from diegocal.cli import app
-from diegocal.cli.predict_cmd import resolve_model
 from diegocal.errors import InputFileError
+from diegocal.predict import resolve_model
 
 runner = CliRunner()
 

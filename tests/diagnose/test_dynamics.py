@@ -149,7 +149,7 @@ def test_clean_arm3_logs_give_no_findings(arm3, seed):
     assert d.findings == (), [f.term.label for f in d.findings]
     u = d.units[0]
     assert u.extended_model == u.baseline_model
-    assert u.fitted.model is None  # nothing unexplained: no non-parametric part was fitted
+    assert u.fitted.gp is None and u.fitted.model.options.kind == "pr"  # no non-parametric part was fitted
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda"])

@@ -205,13 +205,11 @@ def test_sgp_fit_region_and_joint_cut_are_the_default_and_their_off_switches_are
     assert r.exit_code == 0, r.output
 
 
-def test_the_coverage_warning_names_the_joints_out_of_range_to_three_digits(capsys):
+def test_the_coverage_warning_names_the_joints_out_of_range_to_three_digits():
     """0.9931 is above 0.99: printed as 0.99 the warning would contradict itself."""
-    from diegocal.cli.sgp_cmd import _warn_coverage
+    from diegocal.predict import coverage_warnings
 
-    _warn_coverage(["joint1", "joint2", "joint3"], [0.9931, 0.95, 0.8])
-    err = " ".join(capsys.readouterr().err.split())
-    assert "above 0.99 on joint1 0.993" in err and "below 0.85 on joint3 0.800" in err, err
-    assert "joint2" not in err
-    _warn_coverage(["joint1"], [0.95])
-    assert capsys.readouterr().err == ""
+    (text,) = coverage_warnings(["joint1", "joint2", "joint3"], [0.9931, 0.95, 0.8])
+    assert "above 0.99 on joint1 0.993" in text and "below 0.85 on joint3 0.800" in text, text
+    assert "joint2" not in text
+    assert coverage_warnings(["joint1"], [0.95]) == ()
