@@ -33,10 +33,12 @@ from diegocal.diagnose.engine import (
     UnitDiagnosis,
     run_unit,
 )
+from diegocal.diagnose.output import diagnosis_dict
 from diegocal.domains import DOMAIN_NAMES as DOMAINS
 from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError, MissingStreamError
 from diegocal.evaluate import Blocks, split_blocks
+from diegocal.parallel import one_blas_thread
 
 
 @dataclass(frozen=True)
@@ -114,8 +116,6 @@ class Diagnosis:
         return module.save_units(self.adapters, [u.fitted for u in self.units], path, header)
 
     def to_dict(self, extended_model: str | None = None) -> dict:
-        from diegocal.diagnose.output import diagnosis_dict
-
         return diagnosis_dict(self, extended_model)
 
 
@@ -142,8 +142,6 @@ def diagnose(log, robot, options: DiagnoseOptions | None = None) -> Diagnosis:
     only contend (a 60-s UR5 log: 6.6 s against 17.8 s with the default threads on 2 cores);
     ``options.jobs`` spreads independent units over processes instead.
     """
-    from diegocal.parallel import one_blas_thread
-
     with one_blas_thread():
         return _diagnose(log, robot, options or DiagnoseOptions())
 
@@ -152,6 +150,7 @@ def _diagnose(log, robot, options: DiagnoseOptions) -> Diagnosis:
     check_domain(log, options.domain)
     log = log.without_truth()
     blocks = split_blocks(log.n_samples, options.n_blocks)
+    # the domain's adapter module, imported when its domain is diagnosed (each loads its model family)
     module = importlib.import_module(f"diegocal.diagnose.{options.domain}")
     adapters = tuple(module.adapters(log, robot, options))
     if not adapters:

@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diegocal.diagnose.engine import Candidate, Residuals
+from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
 from diegocal.sgp.model import (

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from diegocal.diagnose.engine import Residuals
+from diegocal.diagnose.stats import binned_means, quantile_edges
+from diegocal.diagnose.types import Residuals
+from diegocal.evaluate import sub_blocks
 from diegocal.terms import Term
 
 
@@ -27,8 +29,6 @@ def evidence_variable(term: Term, res: Residuals) -> str | None:
 def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclude) -> dict:
     """Residual mean per bin of ``variable`` on the shown (validation + held-out) samples, before
     and (when ``res_new`` is given) after, with block standard errors: the evidence plot's data."""
-    from diegocal.diagnose.stats import binned_means, quantile_edges
-    from diegocal.evaluate import sub_blocks
 
     x = np.asarray(res.variables[variable], float)
     edges = quantile_edges(x[train], n_bins)

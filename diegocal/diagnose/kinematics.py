@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from diegocal.diagnose.engine import Candidate, Fault, Residuals
 from diegocal.diagnose.kinematics_lin import Linearised
+from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream
 from diegocal.stac.calibration import Calibration

@@ -68,8 +68,7 @@ def finding_dict(f, units: dict) -> dict:
     }
     if d.get("extra"):
         out["extra"] = d["extra"]
-    if f.runners_up:
-        out["runners_up"] = _clean(list(f.runners_up))
+    out["runners_up"] = _clean(list(f.runners_up))  # [] when no other candidate was tested
     return out
 
 

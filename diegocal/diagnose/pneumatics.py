@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.causes import MAX_DELAY_S, MAX_SENSOR_LAG_S, causes_of
-from diegocal.diagnose.engine import Candidate, Residuals
+from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import DiegocalError
 from diegocal.evaluate import Score, score
 from diegocal.pneumatic.data import ChamberData, chamber_data

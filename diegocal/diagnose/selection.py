@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diegocal.diagnose.engine import Candidate, EngineOptions, Residuals, Tested
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
+from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested
 
 
 # ----------------------------------------------------------------------------- rows

@@ -13,17 +13,21 @@ findings: structure that is significant and large, but that no term of the vocab
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from diegocal.diagnose.selection import evaluate_candidates
 from diegocal.diagnose.stats import autocorrelation_time, bin_index, binned_means, change_point, quantile_edges
-from diegocal.terms import Region, Term
+from diegocal.diagnose.types import Candidate
+from diegocal.evaluate import sub_blocks
+from diegocal.terms import Parameter, Region, Term
 
 
 def binned_candidate(res, channel: str, variable: str, train: np.ndarray, n_bins: int):
     """A Candidate whose columns are the indicators of the quantile bins (from the training
     samples) of ``variable``, one per bin and residual axis; its term is ``unexplained`` on the
     channel (``extra.edges`` holds the bin edges)."""
-    from diegocal.diagnose.engine import Candidate
 
     x = np.asarray(res.variables[variable], float)
     edges = quantile_edges(x[train], n_bins)
@@ -43,7 +47,6 @@ def binned_candidate(res, channel: str, variable: str, train: np.ndarray, n_bins
         for a in range(d):
             cols[:, a, a * B : (a + 1) * B] = onehot
         names = [f"bin{k}.{a}" for a in range(d) for k in range(B)]
-    from diegocal.terms import Parameter
 
     term = Term(
         "unexplained",
@@ -77,10 +80,6 @@ def show(res, weights: dict, train, validation, shown, length: int, options, tim
     ``train``, tested on ``validation``) and the curve (residual mean per bin on the ``shown``
     samples, with block bands over sub-blocks of ``length`` samples), the correlation time and the
     change-point test. Returns a plain mapping (diagnosis.yaml's ``residual_tests``)."""
-    from dataclasses import replace
-
-    from diegocal.diagnose.selection import evaluate_candidates
-    from diegocal.evaluate import sub_blocks
 
     out = {}
     n_tests = sum(len(res.channel_variables.get(c, ())) for c in res.channels) or 1

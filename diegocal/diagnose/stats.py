@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from diegocal.evaluate import sub_blocks
+
 #: Sub-blocks are at least this many samples, and this many correlation times, long.
 MIN_CLUSTER = 10
 CORRELATION_TIMES = 5.0
@@ -119,7 +121,6 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     right, and a correction that explains only part of the structure gets longer sub-blocks, so
     fewer degrees of freedom, which errs on the side of no finding.
     """
-    from diegocal.evaluate import sub_blocks
 
     r, a = np.asarray(r, float), np.asarray(a, float)
     samples = np.asarray(samples, int)
@@ -170,7 +171,6 @@ def _longest_sub_block(mask: np.ndarray) -> int:
 def paired_difference(x: np.ndarray, y: np.ndarray, mask: np.ndarray, length: int) -> tuple[float, float, int]:
     """Mean and standard error over sub-blocks of ``mask`` (of ``length`` samples) of the per-block
     sums of ``x − y`` (per-sample arrays (T,)); and the number of sub-blocks."""
-    from diegocal.evaluate import sub_blocks
 
     cl = sub_blocks(mask, length)
     keep = cl >= 0

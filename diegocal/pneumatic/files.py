@@ -28,6 +28,7 @@ from diegocal.io import load_yaml
 from diegocal.io.bundle import HEADER_KEYS
 from diegocal.pneumatic.fit import BatchFit, FitOptions
 from diegocal.pneumatic.params import ChamberParams
+from diegocal.pneumatic.predict import CURVE_STEP_S
 from diegocal.robot.sensors import SensorConfig
 
 
@@ -71,7 +72,7 @@ def model_dict(
         "drift": {
             "starts": options.drift_starts,
             "horizon_s": options.horizon_s,
-            "curve_step_s": 0.1,
+            "curve_step_s": CURVE_STEP_S,
         },
         "skipped": dict(batch.skipped),
     }

@@ -22,7 +22,7 @@ try:  # BLAS threads only slow down trf's SVD of a tall, 9-column Jacobian (meas
     from threadpoolctl import threadpool_limits
 except ImportError:  # pragma: no cover - optional
     threadpool_limits = None
-from diegocal.pneumatic import params as P
+import diegocal.pneumatic.params as P
 from diegocal.pneumatic.data import ChamberData
 from diegocal.pneumatic.model import ChamberModel
 from diegocal.pneumatic.params import ChamberParams

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diegocal.pneumatic import terms as T
+import diegocal.pneumatic.terms as T
 from diegocal.pneumatic.params import NAMES, ChamberParams
 
 

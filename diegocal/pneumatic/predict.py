@@ -18,6 +18,8 @@ from diegocal.pneumatic.params import ChamberParams
 #: Fig. 4.13: 48 start points per chamber, 2 s horizon.
 N_STARTS = 48
 HORIZON_S = 2.0
+#: The step (s of horizon) of the drift curves written to result files.
+CURVE_STEP_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -43,9 +45,12 @@ class Drift:
         """RMS error at the full horizon as a fraction of P_c - P_r (0.1 is the thesis's 10 %)."""
         return float(self.rms[-1] / self.span)
 
-    def curve(self, every: int = 10) -> list[float]:
-        """The fraction-of-span curve every ``every`` steps of horizon (for result files)."""
-        return [float(x) for x in (self.rms / self.span)[::every]]
+    def curve(self, step_s: float = CURVE_STEP_S) -> list[float]:
+        """The fraction-of-span curve at every ``step_s`` of horizon (s), whatever the sample rate
+        (for result files, whose ``curve_step_s`` says the step)."""
+        at = np.arange(0.0, float(self.horizon[-1]) + 1e-9, step_s)
+        idx = np.unique(np.clip(np.searchsorted(self.horizon, at - 1e-9), 0, self.horizon.size - 1))
+        return [float(x) for x in (self.rms / self.span)[idx]]
 
 
 def integrate_from(params: ChamberParams, data: ChamberData, starts, n_steps: int) -> np.ndarray:
@@ -137,6 +142,15 @@ def _clear_starts(data: ChamberData, n: int) -> np.ndarray:
     return np.flatnonzero(window < 0.5)
 
 
+def reset_starts(data: ChamberData, horizon_s: float = HORIZON_S) -> np.ndarray:
+    """(R,) sample indices where :func:`predict_with_resets` re-initialises the prediction with the
+    measured pressure: every ``horizon_s``, restarted at each gap between sessions."""
+    n, last = horizon_steps(data, horizon_s), data.n_samples - 1
+    seg = np.append(data.segment_starts(), data.n_samples)
+    starts = np.concatenate([np.arange(a, b, n) for a, b in zip(seg[:-1], seg[1:], strict=True)])
+    return starts[starts < last] if (starts < last).any() else starts[:1]
+
+
 def predict_with_resets(
     params: ChamberParams, data: ChamberData, horizon_s: float = HORIZON_S
 ) -> np.ndarray:
@@ -144,10 +158,7 @@ def predict_with_resets(
     (the dotted grid lines of thesis Fig. 4.12); shape (T,)."""
     n = horizon_steps(data, horizon_s)
     T = data.n_samples
-    # grid every n samples, restarted at every gap between sessions
-    seg = np.append(data.segment_starts(), T)
-    starts = np.concatenate([np.arange(a, b, n) for a, b in zip(seg[:-1], seg[1:], strict=True)])
-    starts = starts[starts < T - 1] if (starts < T - 1).any() else starts[:1]
+    starts = reset_starts(data, horizon_s)
     # Segments run n steps; the last one may be shorter: pad the inputs by repeating the end.
     pad = starts[-1] + n - (T - 1)
     padded = data

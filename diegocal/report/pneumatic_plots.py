@@ -13,7 +13,7 @@ import numpy as np
 from diegocal.pneumatic.data import ChamberData
 from diegocal.pneumatic.files import PneumaticModel
 from diegocal.pneumatic.model import steady_state
-from diegocal.pneumatic.predict import HORIZON_S, Drift, horizon_steps, next_step, predict_with_resets
+from diegocal.pneumatic.predict import HORIZON_S, Drift, next_step, predict_with_resets, reset_starts
 from diegocal.report.style import COLORS, axes_or_new, legend_above_data, trace_style
 
 U_GRID = np.linspace(3.0, 7.0, 161)  # §4.5: commands 3-7 V
@@ -141,11 +141,8 @@ def plot_delta_p(data: ChamberData, params, ax=None, window=(0.0, 10.0)):
 
 def reset_times(data: ChamberData, horizon_s: float = HORIZON_S) -> np.ndarray:
     """(R,) s: where :func:`~diegocal.pneumatic.predict.predict_with_resets` re-initialises the
-    prediction with the measured pressure: every ``horizon_s``, restarted at each gap."""
-    n, last = horizon_steps(data, horizon_s), data.n_samples - 1
-    seg = np.append(data.segment_starts(), data.n_samples)
-    starts = np.concatenate([np.arange(a, b, n) for a, b in zip(seg[:-1], seg[1:], strict=True)])
-    return data.time[starts[starts < last] if (starts < last).any() else starts[:1]]
+    prediction with the measured pressure (:func:`~diegocal.pneumatic.predict.reset_starts`)."""
+    return data.time[reset_starts(data, horizon_s)]
 
 
 def plot_integrated(data: ChamberData, params, predicted=None, ax=None, window=(0.0, 10.0)):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diegocal.diagnose.engine import Candidate, Residuals
+from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.evaluate import score
 from diegocal.terms import Parameter, Region, Term
 
