@@ -136,11 +136,14 @@ def theta_step(
     max_frames: int = 100,
     want_red: bool = False,
     jobs: int = 1,
+    damping: float = 0.0,
 ) -> tuple[Params, dict, dict]:
     """θ + Δθ from the reduced (Schur) system, the q-phase redundancy per sensor type (when
     ``want_red``; else empty) and the standard errors of θ with q marginalised:
     ``{"gain", "bias" (P,), "xyz" (M, 3)}`` from the diagonal of the inverse reduced matrix (the
     residuals are standardised, so it is the covariance itself); NaN for the entries held fixed.
+    ``damping`` μ solves (A + μ diag A) Δθ = b instead (Marquardt: a shorter step, turned towards
+    the gradient, after a full one overshot); the standard errors are the undamped ones.
     Batches of frames run in ``jobs`` threads."""
     T, n = q.shape
     P, M = obs.n_pots, obs.n_markers
@@ -163,7 +166,7 @@ def theta_step(
     A = S[np.ix_(free, free)]
     A = A + 1e-9 * max(np.trace(A), 1.0) / max(free.sum(), 1) * np.eye(free.sum())
     d = np.zeros(N)
-    d[free] = np.linalg.solve(A, rhs[free])
+    d[free] = np.linalg.solve(A + damping * np.diag(np.diag(A)), rhs[free])
     var = np.full(N, np.nan)
     var[free] = np.diag(np.linalg.inv(A))
     sd = np.sqrt(np.maximum(var, 0.0))

@@ -9,6 +9,10 @@ import numpy as np
 
 from diegocal.stac.calibration import Calibration
 
+#: Safety cap on STAC's alternations per stage: the fit stops at its tolerance, normally within a
+#: few tens of iterations; one that reaches the cap is returned with ``converged`` False.
+MAX_ITERATIONS = 500
+
 
 @dataclass(frozen=True)
 class IterationRecord:
@@ -43,7 +47,8 @@ class StacResult:
 class StacOptions:
     """Options shared by the calibration methods (each method reads the ones it uses).
 
-    max_iterations : outer alternations (STAC: per stage, coarse and full-data) or passes (EKF)
+    max_iterations : safety cap on the outer alternations (STAC: per stage, coarse and full-data;
+        the fit ends at ``tolerance``, :data:`MAX_ITERATIONS`) or on the classical fit's steps
     tolerance : cost change per reading (x 10, nats) that ends the alternation (STAC: once σ
         has settled too)
     loss : 'linear' (Gaussian, eq. 2.21), or for the markers 'huber' or 'tukey' (Tukey's biweight
@@ -61,7 +66,7 @@ class StacOptions:
     on_iteration : optional callback(iteration, Calibration) after each outer iteration (benchmarks)
     """
 
-    max_iterations: int = 50
+    max_iterations: int = MAX_ITERATIONS
     tolerance: float = 1e-6
     loss: str = "linear"
     huber_scale: float = 3.0

@@ -16,12 +16,15 @@ listed in the calibration's ``sigma_unresolved``) in every iteration after (q, �
 for it (SIGMA_SETTLE); that fixed-point iteration converges linearly, so every third estimate
 is extrapolated by Aitken's Δ² (:func:`_aitken`).
 The alternation has converged when the (q, θ) step moves the cost by less than 10 x
-``tolerance`` per reading and σ by less than SIGMA_TOL.
+``tolerance`` per reading and σ by less than SIGMA_TOL; it runs until then, ``max_iterations``
+(:data:`~diegocal.stac.result.MAX_ITERATIONS` by default) being only a safety cap: a fit that
+reaches it is returned with ``converged`` False.
 
 Schedule (thesis §2.6.1, Fig. 2.6). ``lm-iter`` (one LM step per alternation), ``lm-batch``
 (LM to convergence, then θ) and ``bfgs`` (L-BFGS-B on all q at fixed θ, σ) are available as in
 the thesis, plus, by default, a joint Gauss-Newton step on (q, θ) by the Schur complement
-(:mod:`.joint_step`) tried before each LM-iter step. Evidence (bench/bench_stac.py, bundled
+(:mod:`.joint_step`) tried before each LM-iter step, Marquardt-damped after a step that failed
+to lower the cost (JOINT_DAMPING). Evidence (bench/bench_stac.py, bundled
 finger, 200 well-spread frames, seeds from sensors.yaml, markers at link origins; mean relative
 error of gains and gauge-free marker positions): after 60 iterations plain LM-batch, LM-iter
 and BFGS stood at 0.028, 0.029 and 0.042 (cost -24123, -24119, -23952), still creeping, while
@@ -83,6 +86,12 @@ SIGMA_SETTLE = 1e-3
 #: (relative): σ's own standard error at thesis size is about 0.2 %, and the parameters move by
 #: about 0.01 of their standard errors per 1 % of σ (bench/bench_stac.py, diego).
 SIGMA_TOL = 1e-3
+#: First Marquardt damping (relative to the reduced matrix's diagonal) of the joint step after a
+#: full step failed to lower the cost; x 10 per further failure, ÷ 10 per success (to 0). An
+#: undamped step that overshoots is otherwise rejected in every iteration while the plain
+#: alternation crawls along the valley it would have crossed (seen on the finger: a pot gain far
+#: off for a hundred iterations, settled within a few once a step was accepted).
+JOINT_DAMPING = 1e-2
 #: The coarse stage stops at a looser σ tolerance: the full-data iterations re-estimate σ anyway,
 #: and the subset's σ differs from the full data's by its own sampling error (about 0.5 %).
 COARSE_SIGMA_TOL = 1e-2
@@ -337,12 +346,15 @@ def _alternate(
     bfgs = _BfgsSchedule(obs, options) if options.schedule == "bfgs" else None
     accel = Anderson(options.anderson) if options.anderson and bfgs is None else None
     cost = total_cost(obs, params, st, noise, sigma)
+    mu = 0.0  # Marquardt damping of the joint step (JOINT_DAMPING)
     for _ in range(options.max_iterations):
         noise = _noise(obs, sigma, options)
         red = warm or np.isfinite(prev_fixed)  # the q-phase's degrees of freedom, for σ below
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
-            params_j, _, se_joint = theta_step(obs, params, noise, q, lam, options.batch_size, jobs=options.jobs)
+            params_j, _, se_joint = theta_step(
+                obs, params, noise, q, lam, options.batch_size, jobs=options.jobs, damping=mu
+            )
             q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red)
             try:
                 ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
@@ -351,6 +363,9 @@ def _alternate(
                 cost_j = np.inf
             if cost_j < cost:
                 q, lam, st, ph, cost, stepped = q_j, lam_j, st_j, ph_j, cost_j, True
+                mu = mu / 10 if mu > JOINT_DAMPING / 10 else 0.0
+            else:  # the full step overshot: damp the next one (and alternate plainly this time)
+                mu = max(10 * mu, JOINT_DAMPING)
         if not stepped:
             q_old = q
             if bfgs is not None:
