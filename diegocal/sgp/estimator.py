@@ -20,25 +20,23 @@ import numpy as np
 from diegocal.errors import FitError, NumericalError
 from diegocal.evaluate import choose_by_validation  # noqa: F401 (re-exported: the guard's rule)
 from diegocal.parallel import single_threaded, thread_map
+from diegocal.sgp.blocks import input_scaling
 from diegocal.sgp.gp import (
     Hyperparameters,
     fit_posterior,
-    input_scaling,
     parametric_robust_w_cov,
     per_output,
     w_variance,
 )
-from diegocal.sgp.guard import PARAMETRIC, TWO_STAGE, Guard, GuardCandidates, Stages
+from diegocal.sgp.guard import GuardCandidates
+from diegocal.sgp.guard_options import PARAMETRIC, TWO_STAGE, Guard, Stages
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE, greedy_inducing
-from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, cut_along, is_amplitude, is_fixed, is_lengthscale
+from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, cut_along
 from diegocal.sgp.starts import MLStarts
 from diegocal.sgp.subnormals import flushed
 
 __all__ = ["Guard", "SemiParametricGP", "Stages"]
 
-LOG_BOUND = 12.0  # |log| of any hyperparameter relative to its scale
-# A Region kernel's ratio r (the amplitude above its onset over the one below) lies in these.
-REGION_RATIO_BOUND = (1e-3, 1e3)
 
 
 class SemiParametricGP(GuardCandidates, MLStarts):
@@ -290,100 +288,6 @@ class SemiParametricGP(GuardCandidates, MLStarts):
     def n_inducing_(self) -> np.ndarray:
         """(n,) inducing inputs per output (0 for an exact block)."""
         return np.array([0 if z is None else len(z) for z in (self.inducing_ or [None] * len(self.kernels))])
-
-    def _initial(self, Us, Y, Fs) -> tuple[Hyperparameters, np.ndarray]:
-        """§3.3.4 heuristics: σ_v² = var(y)/100, σ_z² = var(y), ℓ = spread of u, σ_w large."""
-        var = self.y_std_**2
-        resid = self._parametric_residual_std(Y, Fs)
-        thetas = []
-        for j, k in enumerate(self.kernels):
-            if k is None:
-                thetas.append(np.zeros(0))
-                continue
-            t = np.zeros(k.n_params)  # ℓ = 1 input std (the inputs are standardised)
-            for i, name in enumerate(k.names):
-                if is_amplitude(name):
-                    t[i] = 0.5 * np.log(var[j])
-                elif name.endswith("region_onset"):
-                    t[i] = REGION_OFF
-                elif name.endswith("log_region_width"):
-                    t[i] = np.log(REGION_WIDTH)
-            thetas.append(t)
-        # "some large number": 10 × std(y) in unit-RMS feature coordinates; 1000 × when fixed (flat)
-        sigma_w = (1e3 if self.guard.fix_sigma_w else 10.0) * float(np.max(self.y_std_))
-        has_gp = np.array([k is not None for k in self.kernels])
-        # noise: var/100 under a GP; the parametric residual when the GP is absent (PR)
-        sv = np.where(has_gp, 0.1 * self.y_std_, np.maximum(resid, 1e-3 * self.y_std_))
-        return Hyperparameters(np.log(sigma_w), np.log(sv), tuple(thetas)), resid
-
-    def _parametric_residual_std(self, Y, Fs):
-        if Fs.shape[2] == 0:
-            return self.y_std_.copy()
-        A = Fs.reshape(-1, Fs.shape[2])
-        w, *_ = np.linalg.lstsq(A, Y.reshape(-1), rcond=None)
-        r = Y - Fs @ w
-        return np.maximum(r.std(0), 1e-6 * self.y_std_)
-
-    def _bounds(self, hp0: Hyperparameters, resid):
-        n = len(self.kernels)
-        lo, hi = [], []
-        if self.fit_sigma_w and not self.guard.fix_sigma_w and self.use_features:
-            lo.append(hp0.log_sigma_w - LOG_BOUND)
-            hi.append(hp0.log_sigma_w + LOG_BOUND)
-        else:
-            lo.append(hp0.log_sigma_w)
-            hi.append(hp0.log_sigma_w)
-        floor = np.log(self.min_noise * self.y_std_)
-        lo += list(floor)
-        hi += list(np.log(self.y_std_) + 2.0)
-        g = self.guard
-        for j in range(n):
-            k = self.kernels[j]
-            if k is None:
-                continue
-            for i, name in enumerate(k.names):
-                if is_lengthscale(name):
-                    lo.append(np.log(1e-2))
-                    hi.append(np.log(g.max_lengthscale) if g.max_lengthscale else np.log(1e3))
-                elif is_fixed(name):  # held at the start (_learn: at a given start's)
-                    lo.append(hp0.theta[j][i])
-                    hi.append(hp0.theta[j][i])
-                elif name.endswith("log_region_ratio"):
-                    lo.append(np.log(REGION_RATIO_BOUND[0]))
-                    hi.append(np.log(REGION_RATIO_BOUND[1]))
-                else:
-                    lo.append(np.log(1e-6 * self.y_std_[j]))
-                    top = np.log(self.y_std_[j]) + 3.0
-                    if g.max_amplitude is not None and is_amplitude(name) and self.use_features:
-                        top = min(top, np.log(g.max_amplitude * resid[j]))
-                    hi.append(top)
-        return list(zip(lo, hi, strict=True))
-
-    def _slots(self):
-        """Per output: (j, offset of its kernel's log-parameters in the packed vector, their
-        names); the names are empty for an output without GP."""
-        k = 1 + len(self.kernels)
-        for j, kern in enumerate(self.kernels):
-            names = kern.names if kern is not None else ()
-            yield j, k, names
-            k += len(names)
-
-    def _prior(self, vec, resid):
-        """Negative log prior of the guard's priors, and its gradient (0 when no prior is set)."""
-        g = self.guard
-        val, grad = 0.0, np.zeros_like(vec)
-        for j, k, names in self._slots():
-            for i, name in enumerate(names):
-                x = vec[k + i]
-                if is_lengthscale(name) and g.lengthscale_prior is not None:
-                    mu, sd = g.lengthscale_prior
-                    val += 0.5 * ((x - mu) / sd) ** 2
-                    grad[k + i] += (x - mu) / sd**2
-                elif is_amplitude(name) and g.amplitude_prior is not None:
-                    mu, sd = np.log(resid[j]), g.amplitude_prior
-                    val += 0.5 * ((x - mu) / sd) ** 2
-                    grad[k + i] += (x - mu) / sd**2
-        return val, grad
 
     def _learn(self, Us, Y, Fs, rng, start: Hyperparameters | None = None) -> Hyperparameters:
         """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.

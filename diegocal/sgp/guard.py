@@ -1,7 +1,7 @@
 """The SGP guard: the options that keep the GP part off the physics the parametric part explains,
 and the candidates a blocked cross-validation chooses between (thesis §3.3; issues #5 and #14).
 
-:class:`Guard` holds the options; :class:`GuardCandidates` (a mixin of
+:class:`~diegocal.sgp.guard_options.Guard` holds the options; :class:`GuardCandidates` (a mixin of
 :class:`~diegocal.sgp.estimator.SemiParametricGP`) builds the candidate hyperparameters
 (released, extended, joint cut, parametric-only; the onsets: :mod:`diegocal.sgp.region`) and
 chooses among them per output (:meth:`_validate`), a winner confirmed by the nested
@@ -10,8 +10,6 @@ cross-validation of :mod:`diegocal.sgp.nested`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.optimize import minimize
 
@@ -19,216 +17,21 @@ from diegocal.errors import NumericalError
 from diegocal.evaluate import choose_by_validation
 from diegocal.parallel import thread_map
 from diegocal.sgp.gp import Hyperparameters, fit_posterior, negative_log_likelihood
-from diegocal.sgp.kernels import REGION_OFF, RELEASED_LENGTHSCALE, cut_outputs, is_amplitude, is_lengthscale
+from diegocal.sgp.guard_options import (
+    FTOL,
+    JOINT,
+    LINEAR_TOLERANCE,
+    MIN_GP_GAIN,
+    MIN_TWO_STAGE_GAIN,
+    NESTED_JOINT_MAX,
+    PARAMETRIC,
+    STRETCHES,
+    TWO_STAGE,
+    capped_above,
+)
+from diegocal.sgp.kernels import RELEASED_LENGTHSCALE, cut_outputs, is_amplitude, is_lengthscale
 from diegocal.sgp.nested import NestedConfirmation
 from diegocal.sgp.region import RegionScan
-
-# L-BFGS-B stops when an iteration improves the objective by less than FTOL relative to |f|;
-# scipy's default (2.2e-9) spends about half of the evaluations on the last 0.1 nat of a
-# likelihood of several thousand nats (bench/bench_sgp_scale.py; held-out accuracy unchanged).
-FTOL = 1e-6
-# The stretches along the σ_z-ℓ ridge tried by Guard.extend_capped.
-STRETCHES = 2.0 ** np.arange(1, 11)
-# An input is "linear in the parametric part" when its column is in the span of the output's
-# feature columns and a constant to this relative residual (rounding only: an exact column).
-LINEAR_TOLERANCE = 1e-6
-# Two stages must also beat the guard's other choice by this fraction of its cross-validated nMSE:
-# on the issue #14 arm's joint 2 they beat PR by 1.4e-5 of it (2.4 SE of a rounding-level
-# difference), a choice a machine's rounding could flip (the benches call < 0.1 % "tied").
-MIN_TWO_STAGE_GAIN = 1e-3
-# A GP (joint, or two stages where the guard's other choice is PR) must also beat PR by this
-# fraction of PR's cross-validated nMSE. On issue #14's arm over 5 seeds at 1,000-20,000 samples
-# (bench/bench_sgp_sizes.py) the GPs kept on joints 1-2, where nothing is unmodelled, won the
-# cross-validation by 0.06-1.5 % of PR's error and erred on the test by -0.9 to +2.0 % of PR's;
-# the effect joint's won it by 4.9-94 % (test: 59-92 % better). With the one-SE rule alone the
-# SGP was worse than PR beyond noise on joint 2 at 10,000 and 20,000 samples (+0.25 % of PR's
-# nMSE at 20,000, 3 seeds of 5); with this floor it is PR there, and joint 3 is unchanged.
-MIN_GP_GAIN = 0.02
-# The joint candidates' cross-validation is repeated with each fold's hyperparameters re-learnt
-# (GuardCandidates._joint_nested) when it has at most this many samples.
-NESTED_JOINT_MAX = 500
-# The two-stage GP's amplitude above a cut kernel's onset, at most this many times the residual's
-# std there (capped_above).
-MAX_AMPLITUDE_ABOVE = 4.0
-
-
-def capped_above(kernel, theta: np.ndarray, est, U: np.ndarray, res: np.ndarray) -> np.ndarray:
-    """``theta`` of a GP on PR's residual ``res`` (N,) with the amplitude of a cut kernel's side
-    above its onset, r·σ_z (:class:`~diegocal.sgp.kernels.Region`), held to at most
-    MAX_AMPLITUDE_ABOVE times the residual's std over the training samples above the onset
-    (``est``'s input scaling; U (N, p) raw). Unchanged for a kernel that is not cut.
-
-    Why: the joint GP's σ_z is capped at twice the parametric residual (Guard.max_amplitude);
-    the two-stage GP's side above the onset had no cap. Issue #14's arm, a 200-sample run (seed
-    38; bench_sgp_sizes --seeds 21-40): ML-II put it at 2.15 N·m, 28 times the residual's 0.076
-    N·m above the onset (36 samples), and where the test's qd3 left the training range it added
-    up to 4.4 N·m (joint 3 nMSE 0.209 against PR's 0.024). In 16 healthy cut fits (200-5,000
-    samples) it was 0.6-1.0 times that std (3.9 on a run with 14 samples above)."""
-    names = getattr(kernel, "names", ())
-    if len(theta) == 0 or "region_onset" not in names or theta[0] >= REGION_OFF:
-        return theta
-    dim = kernel.dim
-    above = (U[:, dim] - est.u_mean_[dim]) / est.u_std_[dim] >= theta[0]
-    if above.sum() < 2:
-        return theta
-    amp = [i for i, n in enumerate(names) if is_amplitude(n)][0]
-    ratio = names.index("log_region_ratio")
-    out = np.array(theta, float, copy=True)
-    out[ratio] = min(out[ratio], np.log(MAX_AMPLITUDE_ABOVE * res[above].std()) - out[amp])
-    return out
-
-
-@dataclass(frozen=True)
-class Guard:
-    """Guards against the GP part soaking up physics the parametric part explains (all optional).
-
-    Why it is needed: wherever a parametric term is a smooth function of the GP's inputs (gravity
-    in q, friction in qd) the GP can carry part of it at nearly the same marginal likelihood, and
-    along a trajectory every smooth function of time is a function of the state, so a flexible GP
-    can even mimic terms in inputs it does not see (the motor command of the reaction wheel, in
-    which eq. 3.28 is linear). In-sample this costs nothing; far from the data, where the GP
-    reverts to its prior, the W it distorted predicts alone. :data:`diegocal.sgp.DEFAULT_GUARD`
-    documents the default setting and the evidence for it.
-
-    Attributes
-    ----------
-    max_lengthscale : float or None
-        Upper bound on every length-scale, in units of the input's training std. Bounded, the GP
-        reverts to its prior a few stds outside the data instead of extrapolating a trend or
-        half-reverting, and cannot become a global smooth function competing with W.
-    lengthscale_prior : (mean, std) or None
-        Gaussian prior on log ℓ (ℓ in units of the input's std): MAP instead of ML-II.
-    amplitude_prior : float or None
-        Std of a Gaussian prior on log(σ_z / s), s the std of the residual of the parametric-only
-        fit (it keeps σ_z at that size even where the GP is not needed; off by default).
-    validation_fraction : float
-        Size of the contiguous blocks (fraction of the samples, in time order) of a blocked
-        cross-validation that chooses, per output, between the learnt hyperparameters, the
-        released ones (``release_capped``) and a parametric-only fallback (PR's σ_w and σ_v, σ_z
-        at its floor): an output whose cross-validated nMSE no GP lowers by more than one
-        standard error and MIN_GP_GAIN of PR's falls back to PR, and on a small
-        cross-validation so does one whose joint GP wins where two stages (with ``two_stage``)
-        do not beat PR: no structure in PR's residual (:meth:`~SemiParametricGP._validate`). The
-        hyperparameters are learnt on all samples; each block is predicted by the posterior of
-        the others; a winner is then confirmed with each fold's hyperparameters re-learnt
-        without its block (nested; the joint GPs only on small cross-validations).
-    restarts : int
-        Extra starts on top of the estimator's ``restarts``.
-    fix_sigma_w : bool
-        Keep σ_w at a large value (a flat prior on W) instead of learning it by ML-II.
-    max_amplitude : float or None
-        Upper bound on σ_z in units of the parametric-only fit's residual std: Z models the
-        *deviations* from the parametric model (thesis §3.3), so it may not grow to the size of
-        the physics.
-    release_capped : bool
-        With ``max_lengthscale`` and ``validation_fraction``: a third candidate for the blocked
-        cross-validation, in which every input whose length-scale ends at the cap is *released*
-        (ℓ fixed at RELEASED_LENGTHSCALE stds: the GP constant along it, as if it were not an
-        input) and the other hyperparameters re-optimised under the cap. ARD's verdict "no
-        structure at any scale the cap allows" then holds outside the data too: a capped
-        irrelevant input (the reaction wheel's angle, which drifts far from its training range)
-        makes the GP revert to 0 wherever it leaves the training range, dropping the deviation
-        it models (the wheel's friction) although the deviation does not depend on that input.
-        Released, not uncapped: a length-scale of some ten stds half-reverts at a pole-up
-        angle 30 stds away and blew up a short reaction-wheel run (nMSE 0.059 against PR's 0.005).
-    extend_capped : bool
-        With ``max_lengthscale`` and ``validation_fraction``: a further candidate where the
-        likelihood, not the cap, decides the limit of each capped length-scale (:meth:`~Semi
-        ParametricGP._extend`): a capped input is released if that costs no likelihood, and the
-        rest are stretched along the σ_z-ℓ ridge towards an SE kernel's *linear* limit while the
-        likelihood rises. Why: an SE kernel carries a linear trend (viscous friction in a
-        velocity) only on that ridge, where the likelihood is nearly flat and σ_z ≫ the residual,
-        so the σ_z cap stops it at ℓ ≈ 3 stds and the GP reverts to 0 a few stds outside the data.
-        Inputs in which the parametric part is exactly linear are released, not stretched, in the
-        stretched trials. Offer it only when the parametric model has no viscous friction column:
-        the 3-link arm, whose regressor has one, got slightly worse in 5 of 6 cells with it, with
-        or without that release rule (horizontal joint 1: 0.00168 against 0.00138).
-    two_stage : bool
-        With ``validation_fraction``: a further candidate, the two stages of PRGP (thesis
-        §3.4.1: W fixed at PR's posterior, then a GP learnt by ML-II on PR's residual), the GP
-        with the estimator's kernels under ``max_lengthscale``; the outputs that choose it or
-        the parametric fallback are predicted by those stages instead of the joint posterior
-        (:class:`Stages`): an output that falls back *is* PR, whatever the other outputs' GPs do
-        to the shared W; two stages replace the guard's choice among the other candidates only
-        where they beat it by more than one standard error (:meth:`~GuardCandidates._choose`),
-        confirmed by a nested cross-validation in which each fold's GP is learnt without the
-        block it predicts (:meth:`~GuardCandidates._two_stage_nested`). Without the
-        cap (PRGP's own GP: every input, ℓ free) the two stages won the issue #14 arm's joint 3
-        (0.0041 against the capped 0.0053) but lost TX40 joints 2-4 and TIAGo's torso to PR
-        (bench_real_identification: torso nMSE 1.01 against PR's 0.28). With the estimator's
-        ``region_inputs``, each output's GP on PR's residual may be cut at an onset in its joint's
-        angle (:meth:`~diegocal.sgp.region.RegionScan._region_scan`).
-    region : bool
-        With ``two_stage``: each output's GP on PR's residual may be cut at an onset in its
-        joint's angle (:class:`~diegocal.sgp.kernels.Region`, :meth:`~diegocal.sgp.region.
-        RegionScan._region_scan`; the model gives the estimator its ``region_inputs``). A cut GP
-        and PR are scored on folds of every sample outside each block (:meth:`~GuardCandidates.
-        _choose_cut`), screened by the plain scores, confirmed by the nested ones. On in
-        DEFAULT_GUARD (``sgp-fit --no-region`` turns it off): on issue #14's arm it beats PRGP on
-        joint 3 at 2,000 and 4,000 samples (0.0017 against 0.0068 and 0.0018 against 0.0041,
-        bench_sgp_case) and on the scale bench's run at 20,000 (0.00092 against 0.0012), and PR at
-        1,000 (0.0055 against 0.0084, bench_sgp_scale); it costs the scan (a few CPU-s) and, where a
-        cut survives the plain scores, the nested refits (10-14 CPU-s). The joint candidates are
-        still scored on the subset's folds, which the final model's data would improve too: the
-        comparison favours the cut two stages against them (not against PR), the joint cut of
-        ``joint_region`` included.
-    joint_region : bool
-        With ``region``: where the cut two-stage GP of an output loses the guard's choice
-        (:meth:`~GuardCandidates._choose_cut`), a further joint candidate, "cut": the joint GP
-        cut at the same onset (DynamicsModel then gives the estimator Region kernels, off unless
-        cut; an estimator built with plain kernels has no such candidate), W and the GPs re-learnt
-        from "learnt" with the onset held (:meth:`~diegocal.sgp.region.RegionScan._joint_cut`),
-        scored for the outputs it cuts. Why: on a short run PR's friction parameters are biased by
-        the samples above the onset, and no GP on PR's residual mends that, while the joint SE GP
-        carries the step below the onset. Issue #14's arm, 6 s (600 samples, 24 % above the
-        onset): the cut two stages scored 0.047 in the cross-validation against the joint GP's
-        0.023, which on a test run of the same robot erred 0.19 N·m RMS just below the onset
-        against a predicted std of 0.045 (joint 3 nMSE 0.030, coverage 0.81); with the cut
-        candidate, 0.00054 and 0.97 (bench_sgp_case --duration 6 --no-joint-region). Learnt only
-        where the cut two stages lose: offered wherever the scan cut (round 8's opt-in), its joint
-        ML-II run cost the scale bench's 20,000-sample fit 8 CPU-s (32.8 against 24.5, target
-        30), where the cut two stages win. On in DEFAULT_GUARD (``sgp-fit --no-joint-region``
-        turns it off).
-    """
-
-    max_lengthscale: float | None = None
-    lengthscale_prior: tuple[float, float] | None = None
-    amplitude_prior: float | None = None
-    validation_fraction: float = 0.0
-    restarts: int = 0
-    fix_sigma_w: bool = False
-    max_amplitude: float | None = None
-    release_capped: bool = False
-    extend_capped: bool = False
-    two_stage: bool = False
-    region: bool = False
-    joint_region: bool = False
-
-
-#: The candidates whose outputs are predicted by the joint posterior (W shared with the GPs).
-JOINT = ("learnt", "released", "extended", "cut")
-TWO_STAGE, PARAMETRIC = "two-stage", "parametric"
-
-
-@dataclass(frozen=True)
-class Stages:
-    """How the outputs the guard took off the joint posterior are predicted (Guard.two_stage).
-
-    Attributes
-    ----------
-    selection : tuple of str, the guard's choice per output (JOINT, TWO_STAGE or PARAMETRIC)
-    pr : Hyperparameters, PR's (σ_w, σ_v per output; no kernel parameters)
-    residual : Hyperparameters or None, the GPs on PR's residual (the estimator's kernels),
-        learnt for every output; used by the TWO_STAGE ones
-    """
-
-    selection: tuple
-    pr: Hyperparameters
-    residual: Hyperparameters | None = None
-
-    def mode(self, j: int) -> str:
-        """ "joint", TWO_STAGE or PARAMETRIC: what predicts output ``j``."""
-        return "joint" if self.selection[j] in JOINT else self.selection[j]
 
 
 class GuardCandidates(RegionScan, NestedConfirmation):

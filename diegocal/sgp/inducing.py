@@ -1,7 +1,7 @@
 """Inducing inputs for sparse inference: greedy conditional-variance selection, grown until the
 inducing-point approximation misses almost none of the GP's prior variance.
 
-The DTC/VFE approximation (:class:`~diegocal.sgp.gp.SparseBlock`) replaces the GP's covariance
+The DTC/VFE approximation (:class:`~diegocal.sgp.blocks.SparseBlock`) replaces the GP's covariance
 ``K_nn`` by ``Q = K_nm K_mm⁻¹ K_mn``. What it leaves out at sample i is the conditional variance
 ``d_i = k(u_i, u_i) − Q_ii`` of the GP at u_i given its values at the inducing inputs; Titsias's
 bound subtracts ``Σ d_i / (2 σ_v²)`` for it. When the mean of ``d_i`` is small against the noise

@@ -12,7 +12,8 @@ import numpy as np
 
 from diegocal.errors import FitError, NumericalError
 from diegocal.parallel import thread_map
-from diegocal.sgp.gp import Hyperparameters, fit_posterior, input_scaling
+from diegocal.sgp.blocks import input_scaling
+from diegocal.sgp.gp import Hyperparameters, fit_posterior
 from diegocal.sgp.kernels import REGION_OFF, RELEASED_LENGTHSCALE, Region, is_lengthscale
 
 # The folds of a cut GP (NestedConfirmation._outside) are fitted exactly on at most this many

@@ -36,7 +36,7 @@ from diegocal.io import atomic_path, load_yaml, save_yaml
 from diegocal.io.bundle import LAYOUT
 from diegocal.robot import load_robot
 from diegocal.sgp.gp import Hyperparameters, per_output
-from diegocal.sgp.guard import Stages
+from diegocal.sgp.guard_options import Stages
 from diegocal.sgp.terms import FRICTION_CAUSE
 from diegocal.terms import make_term, read_parameter, term_from_dict
 

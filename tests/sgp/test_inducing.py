@@ -4,7 +4,8 @@ variance they miss is small against the noise, and the sparse posterior is then 
 import numpy as np
 
 from diegocal.sgp import SGPOptions, fit_dynamics
-from diegocal.sgp.gp import Hyperparameters, SparseBlock, fit_posterior
+from diegocal.sgp.blocks import SparseBlock
+from diegocal.sgp.gp import Hyperparameters, fit_posterior
 from diegocal.sgp.inducing import greedy_inducing
 from diegocal.sgp.kernels import SquaredExponential, Subspace
 

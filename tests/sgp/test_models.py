@@ -115,7 +115,7 @@ def test_sparse_close_to_exact_on_the_same_data(arm2, case, fitted, tmp_path):
 
 
 def test_guard_switches_gp_inputs_and_bounds(case, fitted):
-    from diegocal.sgp.guard import RELEASED_LENGTHSCALE
+    from diegocal.sgp.kernels import RELEASED_LENGTHSCALE
     from diegocal.sgp.model import MAX_LENGTHSCALE
 
     train = case[0]

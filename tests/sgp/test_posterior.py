@@ -105,7 +105,7 @@ def test_failed_cholesky_raises_numerical_error_with_a_hint():
     import pytest
 
     from diegocal.errors import NumericalError
-    from diegocal.sgp.gp import cholesky
+    from diegocal.sgp.blocks import cholesky
 
     with pytest.raises(NumericalError, match="min_noise"):
         cholesky(-np.eye(3), "test matrix")

@@ -9,7 +9,7 @@ import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages, Subspace, nested
 from diegocal.sgp.gp import Hyperparameters, fit_posterior
-from diegocal.sgp.guard import TWO_STAGE
+from diegocal.sgp.guard_options import TWO_STAGE
 from diegocal.sgp.kernels import REGION_OFF, Region, is_amplitude
 from diegocal.sgp.region import _OutputLikelihood
 
@@ -374,11 +374,11 @@ def test_the_joint_cut_candidate_cuts_where_the_two_stages_lost_and_competes_onl
 
 
 def test_the_two_stage_gp_s_amplitude_above_the_onset_is_capped_by_the_residual_there():
-    """guard.capped_above: r·σ_z of a cut kernel at most MAX_AMPLITUDE_ABOVE times the residual's
+    """guard_options.capped_above: r·σ_z of a cut kernel at most MAX_AMPLITUDE_ABOVE times the residual's
     std over the samples above the onset; a kernel not cut, or one within the cap, unchanged."""
     from types import SimpleNamespace
 
-    from diegocal.sgp.guard import MAX_AMPLITUDE_ABOVE, capped_above
+    from diegocal.sgp.guard_options import MAX_AMPLITUDE_ABOVE, capped_above
 
     rng = np.random.default_rng(0)
     U = np.column_stack([rng.uniform(-1, 1, 400), rng.normal(size=400)])

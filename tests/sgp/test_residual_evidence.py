@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from diegocal.sgp import SGPOptions, fit_dynamics
-from diegocal.sgp.guard import NESTED_JOINT_MAX, PARAMETRIC, TWO_STAGE, GuardCandidates
+from diegocal.sgp.guard import GuardCandidates
+from diegocal.sgp.guard_options import NESTED_JOINT_MAX, PARAMETRIC, TWO_STAGE
 
 from .friction_runs import held_out_run
 

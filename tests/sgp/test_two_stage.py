@@ -10,7 +10,7 @@ import pytest
 
 from diegocal.sgp import DEFAULT_GUARD, SemiParametricGP, SquaredExponential, Stages
 from diegocal.sgp.gp import fit_posterior, parametric_robust_w_cov
-from diegocal.sgp.guard import JOINT, MIN_GP_GAIN, MIN_TWO_STAGE_GAIN, PARAMETRIC, TWO_STAGE
+from diegocal.sgp.guard_options import JOINT, MIN_GP_GAIN, MIN_TWO_STAGE_GAIN, PARAMETRIC, TWO_STAGE
 
 from .test_guard import W_TRUE, _data
 

@@ -1,5 +1,5 @@
 """The two-stage GP's amplitude above a cut kernel's onset is capped by the residual there
-(:func:`diegocal.sgp.guard.capped_above`). Issue #14's arm at 200 samples (4 s at 50 Hz), the
+(:func:`diegocal.sgp.guard_options.capped_above`). Issue #14's arm at 200 samples (4 s at 50 Hz), the
 hidden friction on joint 3 above 1.78 rad, training run 38 (``bench/bench_sgp_sizes.py --sizes 200
 --seeds 21-40``), tested on 2,000 samples of another trajectory of the same robot whose joint-3
 velocity leaves the training range: uncapped, ML-II put the side above the onset at 2.15 N·m,
@@ -8,7 +8,7 @@ velocity leaves the training range: uncapped, ML-II put the side above the onset
 import numpy as np
 import pytest
 
-import diegocal.sgp.guard as guard
+import diegocal.sgp.guard_options as guard
 from diegocal.sgp import SGPOptions, fit_dynamics
 
 from .friction_runs import held_out_run
