@@ -21,6 +21,7 @@ per-iteration cost and noise levels; what the data could not determine::
 
     unobservable:   # pots whose gain and bias keep their nominal values
       - {pot: neck_yaw, joints: [neck_yaw], reason: no marker moves with joint neck_yaw}
+      - {pot: r_elbow, joints: [r_elbow], reason: no channel in the log}
     gauges:         # joint zeros the markers cannot fix
       - {joint: r_wrist, pot: r_wrist, kind: leaf, reason: "every marker joint r_wrist moves is ..."}
 
@@ -146,6 +147,18 @@ class Calibration:
             method="nominal",
             pot_units=tuple(POT_UNITS.get(p.kind, ("", "")) for p in pots),
         )
+
+    @property
+    def calibrated_pots(self) -> tuple[str, ...]:
+        """Names of the pots whose gain or bias the fit estimated (a finite standard error), in
+        ``pot_names`` order: not those listed as unobservable (no marker moves with their joints,
+        or no channel in the log), nor any of a nominal calibration."""
+        P = len(self.pot_names)
+        gse = self.gain_se if self.gain_se is not None else np.full(P, np.nan)
+        bse = self.bias_se if self.bias_se is not None else np.full(P, np.nan)
+        held = {u.get("pot") for u in self.unobservable}
+        fitted = np.isfinite(gse) | np.isfinite(bse)
+        return tuple(n for n, ok in zip(self.pot_names, fitted, strict=True) if ok and n not in held)
 
     def baseline_terms(self) -> tuple[Term, ...]:
         """The kinematic baseline as terms: a ``pot_transfer`` per pot, a ``marker_position`` per

@@ -33,6 +33,8 @@ LOG = logging.getLogger(__name__)
 
 #: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
 MARKERS = "markers"
+#: Why a pot of sensors.yaml that the log does not have is listed under ``unobservable``.
+NO_CHANNEL = "no channel in the log"
 
 
 @dataclass(frozen=True)
@@ -205,7 +207,9 @@ class Observation:
 
         A pot whose joint(s) move none of the log's markers relative to the base link has an
         unobservable gain and bias: both keep their nominal values (``fixed_gain``) and the pot is
-        listed in ``unobservable``; it still tracks its joint. Gauge joints (:meth:`_gauge_biases`)
+        listed in ``unobservable``; it still tracks its joint. A pot of sensors.yaml that has no
+        channel in the log is listed there too (reason :data:`NO_CHANNEL`): the calibration
+        writes it at its nominal values, and it must not pass for calibrated. Gauge joints (:meth:`_gauge_biases`)
         keep one reading pot's bias at nominal and are listed in ``gauges``. Raises FitError only
         when nothing can be calibrated: no markers, every marker on the base link, a marker never
         seen, fewer than 10 frames.
@@ -238,6 +242,10 @@ class Observation:
                 what = "joint" if len(blind) == 1 else "joints"
                 reason = f"no marker moves with {what} {', '.join(blind)}"
                 unobservable.append({"pot": p.name, "joints": blind, "reason": reason})
+        logged = set(self.pot_names)
+        for p in self.robot.sensors.pots:  # a pot of sensors.yaml the log lacks (a misspelt channel?)
+            if p.name not in logged:
+                unobservable.append({"pot": p.name, "joints": list(p.joints), "reason": NO_CHANNEL})
         self.unobservable = tuple(unobservable)
         self.fixed_bias = self._gauge_biases(joints)
         self.gauges = self._gauge_records(joints)
