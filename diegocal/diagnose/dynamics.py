@@ -27,7 +27,7 @@ so an unmodelled payload is no model error there. "nominal": the rigid body is t
 its nominal inertias, a fixed part of the prediction (:func:`diegocal.sgp.model.nominal_torque`,
 Pinocchio's regressor times the URDF's inertial parameters = RNEA), and only the friction is fitted
 (:func:`diegocal.sgp.model.nominal_base`); the candidates add a ``payload`` per moving link (one
-body frame per joint, :func:`payload_links`; channel = that link; columns: the regressor's ten
+body frame per joint, :func:`diegocal.sgp.terms.payload_links`; channel = that link; columns: the regressor's ten
 inertial columns of its body on every measured joint, mass first: a point mass at a lever has
 second moments too). A payload parameter whose column lies in the span of the others (the mass
 of a link whose origin lies on every earlier joint's axis, a moment along those axes) is reported
@@ -66,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
+from diegocal.causes import MAX_LAG_S
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
@@ -80,41 +81,25 @@ from diegocal.sgp.model import (
 )
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
 from diegocal.sgp.terms import (
-    FRICTION_CAUSE,
+    Context,
     columns,
     dynamics_terms,
     is_filter,
     joints_of,
     lag_filter,
+    proposals,
     term_columns,
 )
-from diegocal.terms import Region, Term, make_term
+from diegocal.terms import Term
 
 UNIT = "N·m"
-#: position_friction: the joint's training range (0.5 %..99.5 % quantiles) is cut into this many
-#: equal bins; a region is consecutive bins, at most REGION_MAX_FRACTION of the range, with at
-#: least REGION_MIN_FRACTION of the training samples; the REGION_KEEP best on the training
-#: residual are offered (the engine keeps the best of a family on the training rows anyway)
-REGION_BINS = 64
-REGION_MAX_FRACTION = 0.6
-REGION_MIN_FRACTION = 0.03
-REGION_KEEP = 5
-#: coupled_friction: motor velocity qd_j + ratio · qd_partner
-COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
 #: a candidate column whose residual after projection on its joint's model columns is below this
 #: fraction of its norm (training rows) lies in the model's span and is not offered
 SPAN_TOL = 1e-6
-#: the longest torque-sensor time constant a torque_lag may take, s
-MAX_LAG_S = 0.5
-#: torque_lag variants: the column of lag L is (filter_L(τ̂) − τ̂) / L (its coefficient ≈ the lag;
-#: → −dτ̂/dt as L → 0); the engine keeps the best on the training rows
-LAG_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
 #: The SGP that absorbs what stays ``unexplained`` (:meth:`DynamicsAdapter.absorb`): the library's
 #: defaults (guard on) except that its hyperparameters and the guard's cross-validation use at
-#: most 500 training samples (a random subset) instead of 1000: the cost is cubic in it. Measured
-#: (UR5 60-s log, a smooth bump in q of wrist_1 at 6 × noise, 3,600 training samples): 6.9 s of
-#: CPU against 42 s, the same held-out RMSE on the joint (0.0118 N·m, PR + terms 0.047);
-#: fewer starts (restarts=0) were cheaper still but missed it (0.047).
+#: most 500 training samples (a random subset) instead of 1000: the cost is cubic in it, and on a
+#: UR5 log it cost a sixth of the CPU for the same held-out error (fewer starts missed the effect).
 EXTENDED_SGP = {"hyper_max": 500}
 
 
@@ -374,102 +359,30 @@ class DynamicsAdapter:
         return {j: X[:, self.robot.joint_index(j)] for j in joints if j in self.row_of}
 
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
-        """Every cause the model lacks on every joint (module docstring), its columns with their
-        fit by the current model subtracted (:meth:`_projector`); one whose columns lie in the
-        model's span is not offered."""
+        """Every cause the model lacks, as its behaviour proposes it (:func:`diegocal.sgp.terms.
+        proposals`: the registry's dynamics terms), its columns with their fit by the current
+        model subtracted (:meth:`_projector`); one whose columns lie in the model's span is not
+        offered."""
         train = np.asarray(train, bool)
-        have = {(t.cause, t.channel) for t in fitted.terms}
-        coupled = {j for t in fitted.terms if t.cause == "coupled_friction" for j in joints_of(t)}
-        out = []
-
-        def offer(term, cols, project, family=""):
-            cols, left = project(cols)
-            if left > SPAN_TOL:
-                out.append(Candidate(term, cols, family=family))
-
+        ctx = Context(
+            self.robot,
+            self.joints,
+            self.q,
+            self.qd,
+            self.time,
+            train,
+            {j: residuals.channels[j] for j in self.joints},
+            {j: fitted.pred[:, r] for r, j in enumerate(self.joints)},
+            tuple(fitted.terms),
+            self.friction,
+            self.inertia,
+        )
         project = self._projector(fitted, train)
-        # springs about the joint's zero and about its mean training angle: the rest angle is not
-        # a linear parameter, and a spring at rest elsewhere is one of these + a torque_offset
-        reference = {j: float(np.mean(self.q[train, self.robot.joint_index(j)])) for j in self.joints}
-        for j in self.joints:
-            plain = ["torque_offset", "spring", "armature"]
-            plain += [FRICTION_CAUSE[k] for k in FRICTION_KINDS if k not in self.friction]
-            for cause in plain:
-                if (cause, j) in have:
-                    continue
-                if cause == "spring":  # at rest at the joint's zero, or about its mean angle
-                    for ref in (0.0, reference[j]):
-                        term = make_term(cause, j, extra={"reference": ref})
-                        offer(term, self._cols(term), project, f"spring:{j}")
-                    continue
-                term = make_term(cause, j)
-                offer(term, self._cols(term), project)
-            if ("torque_lag", j) not in have:
-                pred = fitted.pred[:, self.row_of[j]]
-                for lag in LAG_GRID:  # the exact change a sensor lag makes, per second of lag
-                    col = (lag_filter(pred, self.time, lag) - pred) / lag
-                    offer(
-                        make_term("torque_lag", j, values={"lag": lag}), {j: col[:, None]}, project, f"torque_lag:{j}"
-                    )
-            if ("position_friction", j) not in have:
-                for t in self._regions(j, train, residuals.channels[j]):
-                    offer(t, self._cols(t), project, f"position_friction:{j}")
-            if j in coupled:
-                continue
-            i = self.robot.joint_index(j)
-            # the joint before only: (j, partner, ratio) and (partner, j, 1/ratio) are one motor
-            if i == 0 or self.robot.joint_names[i - 1] in coupled:
-                continue
-            partner = self.robot.joint_names[i - 1]
-            for ratio in COUPLING_RATIOS:
-                term = make_term("coupled_friction", j, extra={"partner": partner, "ratio": ratio})
-                offer(term, self._cols(term), project, f"coupled_friction:{j}+{partner}")
-        if self.inertia == "nominal":  # a point mass on each moving link (nominal inertias only)
-            for link in payload_links(self.robot):
-                if ("payload", link) in have:
-                    continue
-                term = make_term("payload", link)
-                offer(term, self._cols(term), project)
-        return out
-
-    def _regions(self, j: str, train, residual: np.ndarray) -> list[Term]:
-        """position_friction variants: the REGION_KEEP windows of q_j's training range (REGION_BINS
-        equal bins between its 0.5 % and 99.5 % quantiles, 1 bin up to REGION_MAX_FRACTION of the
-        range, at least REGION_MIN_FRACTION of the samples) whose two columns explain the most of
-        the joint's training residual (exact least squares per window, from cumulative sums)."""
-        col = self.robot.joint_index(j)
-        ok = train & np.isfinite(residual)
-        x, v, r = self.q[ok, col], self.qd[ok, col], residual[ok]
-        lo, hi = np.quantile(x, [0.005, 0.995])
-        if not hi > lo or x.size < 20:
-            return []
-        edges = np.linspace(lo, hi, REGION_BINS + 1)
-        b = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, REGION_BINS - 1)
-        s = np.sign(v)
-        # per bin: Σ s r, Σ v r, Σ s², Σ s v, Σ v², count
-        sums = np.stack([np.bincount(b, w, minlength=REGION_BINS) for w in (s * r, v * r, s * s, s * v, v * v)])
-        cum = np.concatenate([np.zeros((5, 1)), np.cumsum(sums, axis=1)], axis=1)
-        counts = np.concatenate([[0], np.cumsum(np.bincount(b, minlength=REGION_BINS))])
-        widest = max(1, int(REGION_MAX_FRACTION * REGION_BINS))
-        scored = []
-        for a in range(REGION_BINS):
-            for e in range(a + 1, min(a + widest, REGION_BINS) + 1):
-                if counts[e] - counts[a] < REGION_MIN_FRACTION * x.size:
-                    continue
-                sr, vr, ss, sv, vv = cum[:, e] - cum[:, a]
-                det = ss * vv - sv * sv
-                if det <= 1e-12 * max(ss * vv, 1e-300):
-                    continue
-                gain = (vv * sr * sr - 2 * sv * sr * vr + ss * vr * vr) / det
-                scored.append((gain, a, e))
-        scored.sort(reverse=True)
-        lowest, highest = float(self.q[:, col].min()), float(self.q[:, col].max())
         out = []
-        for _, a, e in scored[:REGION_KEEP]:
-            # the end windows reach the whole range's extremes (the quantiles cut no sample off)
-            low = lowest if a == 0 else float(edges[a])
-            high = highest if e == REGION_BINS else float(edges[e])
-            out.append(make_term("position_friction", j, region=Region(f"q.{j}", low, high)))
+        for p in proposals(ctx):
+            cols, left = project(p.columns if p.columns is not None else self._cols(p.term))
+            if left > SPAN_TOL:
+                out.append(Candidate(p.term, cols, family=p.family))
         return out
 
     # ------------------------------------------------------------------ scores and output
@@ -540,16 +453,3 @@ def adapters(log, robot, options) -> list[DynamicsAdapter]:
     friction = getattr(options, "friction", FRICTION_KINDS)
     inertia = getattr(options, "inertia", "identified")
     return [DynamicsAdapter(robot, log.time, q, qd, qdd, tau, joints, friction, inertia)]
-
-
-def payload_links(robot) -> tuple[str, ...]:
-    """The moving links a payload may sit on: per joint, the first body frame it carries (the
-    frames of one joint share its inertial columns, so one of them stands for all)."""
-    import pinocchio as pin
-
-    out, seen = [], set()
-    for f in robot.model.frames:
-        if f.type == pin.FrameType.BODY and f.parentJoint > 0 and f.parentJoint not in seen:
-            seen.add(f.parentJoint)
-            out.append(f.name)
-    return tuple(out)

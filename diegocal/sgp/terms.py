@@ -35,11 +35,13 @@ Causes (the registry's domain ``dynamics``; their parameters and units are the r
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from diegocal.causes import causes_of
 from diegocal.errors import InputFileError
-from diegocal.terms import Term, make_term
+from diegocal.terms import Region, Term, make_term
 
 #: The baseline's friction kinds (``SGPOptions.friction``) and the term each one is.
 FRICTION_CAUSE = {"viscous": "viscous_friction", "coulomb": "coulomb_friction"}
@@ -174,6 +176,211 @@ def term_columns(terms, robot, q, qd, qdd) -> np.ndarray:
     if not cols:
         return np.zeros((np.shape(q)[0], robot.n_joints, 0))
     return np.concatenate(cols, axis=2)
+
+
+# ----------------------------------------------------------------------------- proposals
+# How ``diagnose`` proposes each cause on a robot (diegocal.diagnose.dynamics): the terms, or
+# variants of one term (a family: the engine keeps the one that fits the training rows best).
+
+#: position_friction: the joint's training range (0.5 %..99.5 % quantiles) is cut into this many
+#: equal bins; a region is consecutive bins, at most REGION_MAX_FRACTION of the range, with at
+#: least REGION_MIN_FRACTION of the training samples; the REGION_KEEP best on the training
+#: residual are offered
+REGION_BINS = 64
+REGION_MAX_FRACTION = 0.6
+REGION_MIN_FRACTION = 0.03
+REGION_KEEP = 5
+#: coupled_friction: motor velocity qd_j + ratio · qd_partner, the partner the joint before
+COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
+#: torque_lag variants: the column of lag L is (filter_L(τ̂) − τ̂) / L (its coefficient ≈ the lag;
+#: → −dτ̂/dt as L → 0)
+LAG_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+
+
+@dataclass(frozen=True)
+class Context:
+    """What the proposals see of a robot and its current fit.
+
+    robot; joints : the joints with a torque (the model's rows); q, qd (T, n) every joint;
+    time (T,) s; train (T,) bool, the training rows; residual, prediction : joint -> (T,) N·m
+    of the current fit; terms : the model's terms; baseline_friction : the baseline's friction
+    kinds; inertia : "identified" | "nominal"
+    """
+
+    robot: object
+    joints: tuple
+    q: np.ndarray
+    qd: np.ndarray
+    time: np.ndarray
+    train: np.ndarray
+    residual: dict
+    prediction: dict
+    terms: tuple
+    baseline_friction: tuple
+    inertia: str
+
+    @property
+    def have(self) -> set:
+        """{(cause, channel)} of the model's terms."""
+        return {(t.cause, t.channel) for t in self.terms}
+
+    def column(self, array: np.ndarray, joint: str, rows=None) -> np.ndarray:
+        x = array[:, self.robot.joint_index(joint)]
+        return x if rows is None else x[rows]
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """A term ``diagnose`` may add; ``columns`` (joint -> (T, k)) when they are not the term's own
+    (a lag's exact change per second of lag); ``family`` groups the variants of one term."""
+
+    term: Term
+    family: str = ""
+    columns: dict | None = None
+
+
+def proposals(ctx: Context) -> list[Proposal]:
+    """Every dynamics term of the registry the model lacks, as :data:`PROPOSE` offers it (default:
+    one term per joint with a torque)."""
+    out = []
+    for cause in causes_of("dynamics", "term"):
+        out += PROPOSE.get(cause, _per_joint)(cause, ctx)
+    return out
+
+
+def _per_joint(cause: str, ctx: Context) -> list[Proposal]:
+    return [Proposal(make_term(cause, j)) for j in ctx.joints if (cause, j) not in ctx.have]
+
+
+def _friction(cause: str, ctx: Context) -> list[Proposal]:
+    """Viscous or Coulomb friction, where the baseline lacks that kind."""
+    kind = next(k for k, c in FRICTION_CAUSE.items() if c == cause)
+    return [] if kind in ctx.baseline_friction else _per_joint(cause, ctx)
+
+
+def _springs(cause: str, ctx: Context) -> list[Proposal]:
+    """Springs about the joint's zero and about its mean training angle: the rest angle is not a
+    linear parameter, and a spring at rest elsewhere is one of these + a torque_offset."""
+    out = []
+    for j in ctx.joints:
+        if (cause, j) not in ctx.have:
+            for ref in (0.0, float(np.mean(ctx.column(ctx.q, j, ctx.train)))):
+                out.append(Proposal(make_term(cause, j, extra={"reference": ref}), f"spring:{j}"))
+    return out
+
+
+def _lags(cause: str, ctx: Context) -> list[Proposal]:
+    """A torque sensor's lag: per grid lag, the exact change it makes to the prediction per second."""
+    out = []
+    for j in ctx.joints:
+        if (cause, j) in ctx.have:
+            continue
+        pred = ctx.prediction[j]
+        for lag in LAG_GRID:
+            col = (lag_filter(pred, ctx.time, lag) - pred) / lag
+            out.append(Proposal(make_term(cause, j, {"lag": lag}), f"torque_lag:{j}", {j: col[:, None]}))
+    return out
+
+
+def _regions(cause: str, ctx: Context) -> list[Proposal]:
+    """position_friction variants: the REGION_KEEP windows of q_j's training range whose two
+    columns explain the most of the joint's training residual (exact least squares per window,
+    from cumulative sums). A window that reaches an end of the training range is open to the
+    joint's limit there: friction that starts inside the data goes on beyond it."""
+    out = []
+    for j in ctx.joints:
+        if (cause, j) in ctx.have:
+            continue
+        ok = ctx.train & np.isfinite(ctx.residual[j])
+        x, v, r = ctx.column(ctx.q, j, ok), ctx.column(ctx.qd, j, ok), ctx.residual[j][ok]
+        for low, high in _best_windows(x, v, r):
+            i = ctx.robot.joint_index(j)
+            low = min(low, float(ctx.robot.lower[i])) if low <= x.min() else low
+            high = max(high, float(ctx.robot.upper[i])) if high >= x.max() else high
+            out.append(Proposal(make_term(cause, j, region=Region(f"q.{j}", low, high)), f"position_friction:{j}"))
+    return out
+
+
+def _best_windows(x, v, r) -> list[tuple[float, float]]:
+    """(low, high) of the REGION_KEEP best windows of x (module constants), ends at the data's."""
+    if x.size < 20:
+        return []
+    lo, hi = np.quantile(x, [0.005, 0.995])
+    if not hi > lo:
+        return []
+    edges = np.linspace(lo, hi, REGION_BINS + 1)
+    b = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, REGION_BINS - 1)
+    s = np.sign(v)
+    # per bin: Σ s r, Σ v r, Σ s², Σ s v, Σ v²
+    sums = np.stack([np.bincount(b, w, minlength=REGION_BINS) for w in (s * r, v * r, s * s, s * v, v * v)])
+    cum = np.concatenate([np.zeros((5, 1)), np.cumsum(sums, axis=1)], axis=1)
+    counts = np.concatenate([[0], np.cumsum(np.bincount(b, minlength=REGION_BINS))])
+    widest = max(1, int(REGION_MAX_FRACTION * REGION_BINS))
+    scored = []
+    for a in range(REGION_BINS):
+        for e in range(a + 1, min(a + widest, REGION_BINS) + 1):
+            if counts[e] - counts[a] < REGION_MIN_FRACTION * x.size:
+                continue
+            sr, vr, ss, sv, vv = cum[:, e] - cum[:, a]
+            det = ss * vv - sv * sv
+            if det <= 1e-12 * max(ss * vv, 1e-300):
+                continue
+            scored.append(((vv * sr * sr - 2 * sv * sr * vr + ss * vr * vr) / det, a, e))
+    scored.sort(reverse=True)
+    # the end windows reach the data's extremes (the quantiles cut no sample off)
+    return [
+        (float(x.min()) if a == 0 else float(edges[a]), float(x.max()) if e == REGION_BINS else float(edges[e]))
+        for _, a, e in scored[:REGION_KEEP]
+    ]
+
+
+def _coupled(cause: str, ctx: Context) -> list[Proposal]:
+    """A motor driving a joint and the joint before it, over the ratios of COUPLING_RATIOS ((j,
+    partner, ratio) and (partner, j, 1/ratio) are one motor: the joint before only)."""
+    coupled = {j for t in ctx.terms if t.cause == cause for j in joints_of(t)}
+    out = []
+    for j in ctx.joints:
+        i = ctx.robot.joint_index(j)
+        if j in coupled or i == 0 or ctx.robot.joint_names[i - 1] in coupled:
+            continue
+        partner = ctx.robot.joint_names[i - 1]
+        for ratio in COUPLING_RATIOS:
+            term = make_term(cause, j, extra={"partner": partner, "ratio": ratio})
+            out.append(Proposal(term, f"coupled_friction:{j}+{partner}"))
+    return out
+
+
+def _payloads(cause: str, ctx: Context) -> list[Proposal]:
+    """A point mass on each moving link, where the rigid body is the URDF's (nominal inertias):
+    an identified rigid body already fits a link's inertial parameters."""
+    if ctx.inertia != "nominal":
+        return []
+    return [Proposal(make_term(cause, link)) for link in payload_links(ctx.robot) if (cause, link) not in ctx.have]
+
+
+def payload_links(robot) -> tuple[str, ...]:
+    """The moving links a payload may sit on: per joint, the first body frame it carries (the
+    frames of one joint share its inertial columns, so one of them stands for all)."""
+    import pinocchio as pin
+
+    out, seen = [], set()
+    for f in robot.model.frames:
+        if f.type == pin.FrameType.BODY and f.parentJoint > 0 and f.parentJoint not in seen:
+            seen.add(f.parentJoint)
+            out.append(f.name)
+    return tuple(out)
+
+
+#: cause -> how diagnose proposes it (the rest: one term per joint, :func:`_per_joint`).
+PROPOSE: dict[str, Callable] = {
+    "viscous_friction": _friction,
+    "coulomb_friction": _friction,
+    "spring": _springs,
+    "torque_lag": _lags,
+    "position_friction": _regions,
+    "coupled_friction": _coupled,
+    "payload": _payloads,
+}
 
 
 def lag_filter(X: np.ndarray, time: np.ndarray, lag: float) -> np.ndarray:
