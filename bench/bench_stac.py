@@ -1,7 +1,7 @@
 """STAC benchmarks: q-phase schedules (thesis §2.6.1, Fig. 2.6) and the thesis-size run.
 
 Part 1 compares, on the tendon finger (200 frames as in §2.6.1, seeds from sensors.yaml,
-markers at link origins), the schedules of :func:`diegocal.stac.stac.calibrate`:
+markers at link origins), the schedules of STAC (:func:`diegocal.api.calibrate`, method stac):
 LM-batch, LM-iter and BFGS (plain alternation, as in the thesis) and LM-iter with the joint
 Schur step (the default). Per iteration: cost, wall time and mean relative parameter error
 against the simulator truth (gains and marker positions, gauge-free entries).
@@ -32,12 +32,12 @@ from dataclasses import replace
 
 import numpy as np
 
+from diegocal.api import calibrate
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.model import Observation
 from diegocal.stac.result import StacOptions
-from diegocal.stac.stac import calibrate
 
 
 def rel_error(cal: Calibration, truth: Calibration, gauge_free_markers: np.ndarray) -> float:
@@ -79,7 +79,7 @@ def schedules(seed: int = 0) -> None:
         def cb(it, cal, rows=rows, t0=t0):
             rows.append((it, time.perf_counter() - t0, rel_error(cal, truth, free)))
 
-        res = calibrate(data, robot, replace(o, max_iterations=60, on_iteration=cb))
+        res = calibrate(data, robot, options=replace(o, max_iterations=60, on_iteration=cb))
         for (it, t, err), h in zip(rows, res.history, strict=True):
             if it <= 5 or it % 10 == 0 or it == len(rows):
                 print(f"{name:<28}{it:>5}{t:>9.2f}{h.cost:>14.1f}{err:>10.4f}")
@@ -137,12 +137,7 @@ def full(frames: int, seed: int = 0, jobs: tuple = (1, 2), classical: bool = Tru
         runs.append(("classical", StacOptions()))
     for name, options in runs:
         t0, c0 = time.perf_counter(), time.process_time()
-        if name.startswith("stac"):
-            res = calibrate(data, robot, options)
-        else:
-            from diegocal.stac.classical import calibrate_classical
-
-            res = calibrate_classical(data, robot, options, nonlinear="constrain")
+        res = calibrate(data, robot, name.split()[0], options)  # method stac or classical, as `stac --method`
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # the process's peak so far
         cal = res.calibration
@@ -176,7 +171,7 @@ def _where_the_time_goes(data, robot, res, frames: int) -> None:
     )
     prof = cProfile.Profile(time.process_time)
     prof.enable()
-    calibrate(data, robot, StacOptions(max_iterations=30))
+    calibrate(data, robot, options=StacOptions(max_iterations=30))
     prof.disable()
     buf = io.StringIO()
     stats = pstats.Stats(prof, stream=buf).sort_stats("cumulative")
@@ -193,7 +188,7 @@ def verify(frames: int, seed: int = 0) -> None:
     out = {}
     for name, cf in (("coarse to fine", StacOptions().coarse_frames), ("all frames", 0)):
         t0 = time.perf_counter()
-        out[name] = calibrate(data, robot, StacOptions(max_iterations=60, coarse_frames=cf))
+        out[name] = calibrate(data, robot, options=StacOptions(max_iterations=60, coarse_frames=cf))
         print(f"{name:<16}{time.perf_counter() - t0:>8.1f} s, {len(out[name].history)} iterations")
     a, b = out["all frames"].calibration, out["coarse to fine"].calibration
     for what, x, y, se in (

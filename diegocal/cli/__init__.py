@@ -1,26 +1,15 @@
-"""Command line: a thin shell over the library (parse → load → one library call → save → summary)."""
+"""Command line: a thin shell over the library (parse → load → one library call → save → summary).
+
+Each command's module is imported when that command runs (:data:`diegocal.cli.app.COMMANDS`), so
+``from diegocal.cli import app`` and ``diegocal --help`` load none of them.
+"""
 
 import os
 import sys
 
-# Importing a command module registers its commands on the app.
-from diegocal.cli import (  # noqa: F401
-    batch_cmd,
-    diagnose_cmd,
-    import_cmd,
-    inspect_cmd,
-    pneumatic_cmd,
-    predict_cmd,
-    report_cmd,
-    sgp_cmd,
-    simulate_cmd,
-    simulate_dynamics_cmd,
-    split_cmd,
-    stac_cmd,
-)
-from diegocal.cli.app import app
+from diegocal.cli.app import COMMANDS, app
 
-__all__ = ["app", "main"]
+__all__ = ["COMMANDS", "app", "main"]
 
 
 def main() -> None:

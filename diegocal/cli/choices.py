@@ -26,6 +26,8 @@ SGP_MIN_NOISE = 1e-4
 STAC_METHODS = ("stac", "classical", "ekf", "nominal")
 STAC_LOSSES = ("linear", "huber", "tukey")
 STAC_SCHEDULES = ("lm-iter", "lm-batch", "bfgs")
+#: StacOptions' safety cap on the alternations (diegocal.stac.result.MAX_ITERATIONS)
+STAC_MAX_ITERATIONS = 500
 SENSOR_TYPES = ("markers", "pots", "rotary", "linear", "tendon", "encoder")
 SOURCE_TYPES = (*SENSOR_TYPES, "others")
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
 import shlex
 import sys
+import threading
 from pathlib import Path
 from typing import Annotated
 
@@ -15,7 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from diegocal.cli.choices import LOG_SUFFIXES
-from diegocal.errors import DiegocalError, OptionError
+from diegocal.errors import DiegocalError, InputFileError, OptionError
 
 console = Console(stderr=False)
 errors = Console(stderr=True)
@@ -26,11 +28,31 @@ def warn(message: str) -> None:
     errors.print(f"[yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
 
 
+#: Where this thread's library warnings go while :func:`collected_warnings` is active.
+_sink = threading.local()
+
+
 class _WarningLines(logging.Handler):
-    """The library's log warnings (``logging.getLogger("diegocal...")``) as ``warning:`` lines."""
+    """The library's log warnings (``logging.getLogger("diegocal...")``) as ``warning:`` lines, or
+    into the list of :func:`collected_warnings`."""
 
     def emit(self, record: logging.LogRecord) -> None:
-        warn(record.getMessage())
+        lines = getattr(_sink, "lines", None)
+        if lines is not None:
+            lines.append(record.getMessage())
+        else:
+            warn(record.getMessage())
+
+
+@contextlib.contextmanager
+def collected_warnings():
+    """Within the block, the library's warnings in this thread are appended to the list it yields
+    instead of printed (a batch job's warnings go with its outcome)."""
+    _sink.lines = lines = []
+    try:
+        yield lines
+    finally:
+        del _sink.lines
 
 
 def _install_warning_handler() -> None:
@@ -72,14 +94,14 @@ def usage_error(command: str, message: str) -> typer.Exit:
 def output_path(value):
     """Callback of every option naming an output (a file, or a directory a command creates): its
     folder must exist (a command never creates folders: a mistyped path would scatter results);
-    exit 1 with one line otherwise, before any work. Takes one path or a tuple of them."""
+    InputFileError otherwise (one line, exit 1), before any work. Takes one path or a tuple of them."""
     for path in value if isinstance(value, (tuple, list)) else (value,):
         if path is None:
             continue
         folder = Path(path).parent
         if not folder.is_dir():
             what = "is not a folder" if folder.exists() else "does not exist"
-            raise fail(f"{path}: the folder {folder} {what}; create it first")
+            raise InputFileError(f"{path}: the folder {folder} {what}; create it first")
     return value
 
 
@@ -150,20 +172,6 @@ def cli_errors(fn):
             raise fail(f"internal error: {type(exc).__name__}: {exc} (set DIEGOCAL_DEBUG=1 for a traceback)") from None
 
     return wrapper
-
-
-def robot_for_log(robot, data):
-    """:func:`diegocal.robot.resolve.robot_for_log` (imported when a command runs: help stays light)."""
-    from diegocal.robot.resolve import robot_for_log as resolve
-
-    return resolve(robot, data)
-
-
-def robot_for_model(record: dict, robot, data, model_path):
-    """:func:`diegocal.robot.resolve.robot_for_model` (imported when a command runs)."""
-    from diegocal.robot.resolve import robot_for_model as resolve
-
-    return resolve(record, robot, data, model_path)
 
 
 def default_output(log_path: Path, suffix: str) -> Path:

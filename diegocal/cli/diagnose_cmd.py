@@ -1,28 +1,25 @@
 """`diegocal diagnose LOG`: what the model gets wrong, the named cause, the extended model, the gain.
 
-parse → load the log and robot → :func:`diegocal.diagnose.diagnose` per domain → write the
-extended model (a bundle `predict` accepts) and diagnosis.yaml → summary table.
+parse → :func:`run_diagnose` (load the log and robot → :func:`diegocal.api.diagnose` per domain →
+write the extended model, a bundle `predict` accepts, and diagnosis.yaml) → summary table.
 """
 
 from __future__ import annotations
 
-import shlex
-import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, errors, output_path, summary
+from diegocal.cli.common import cli_errors, command_line, default_output, errors, output_path, split_words, summary
 from diegocal.domains import DOMAIN_NAMES
 from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError, MissingStreamError
 
-
-def _command() -> str:
-    args = sys.argv[1:]
-    return "diegocal " + " ".join(shlex.quote(a) for a in args) if args else "diegocal diagnose"
+if TYPE_CHECKING:
+    from diegocal.diagnose import DiagnoseOptions
 
 
 def _friction(text: str) -> str:
@@ -61,9 +58,87 @@ def output_paths(log: Path, output: Path | None, domain: str, several: bool) -> 
     return out, out.with_name(stem + domain_record(domain).extended_suffix)
 
 
+@dataclass(frozen=True)
+class DiagnoseArgs:
+    """`diegocal diagnose`'s options, parsed once: the command's parameters by name (``ctx.params``)."""
+
+    log: Path
+    robot: str | None
+    domain: str | None
+    output: Path | None
+    friction: str
+    inertia: str
+    chamber: list[str] | None
+    alpha: float
+    min_gain: float
+    blocks: int
+    jobs: int
+    quiet: bool
+
+    def options(self, progress=None) -> DiagnoseOptions:
+        """The library's options (its ``domain`` is set per domain by :func:`diegocal.api.diagnose`)."""
+        from diegocal.diagnose import DiagnoseOptions
+
+        return DiagnoseOptions(
+            alpha=self.alpha,
+            min_gain=self.min_gain,
+            n_blocks=self.blocks,
+            friction=tuple(w for w in split_words(self.friction) if w != "none"),
+            inertia=self.inertia,
+            chambers=tuple(dict.fromkeys(self.chamber or ())),
+            jobs=self.jobs,
+            progress=progress,
+        )
+
+
+@dataclass(frozen=True)
+class Diagnosed:
+    """One domain's diagnosis as written: diagnosis.yaml's mapping, its path and the extended model's."""
+
+    domain: str
+    mapping: dict
+    output: Path
+    extended: Path
+
+
+def run_diagnose(args: DiagnoseArgs, command: str = "diegocal diagnose", progress=None) -> list[Diagnosed]:
+    """Load the log and its robot, diagnose each domain (:func:`diegocal.api.diagnose`), write each
+    extended model and diagnosis.yaml. Raises DiegocalError; prints nothing. ``progress(text)`` is
+    called with each step."""
+    # the library is imported when the command runs, so that `--help` answers at once
+    from diegocal.api import diagnose
+    from diegocal.diagnose import domains_of
+    from diegocal.io import load_log, save_yaml
+    from diegocal.io.bundle import header
+    from diegocal.robot.resolve import robot_for_log
+
+    data = load_log(args.log)
+    todo = (args.domain,) if args.domain else domains_of(data)
+    if not todo:
+        have = ", ".join(sorted(data.streams)) or "none"
+        raise MissingStreamError(
+            "nothing to diagnose: the log needs markers + pots (kinematics), q + tau (dynamics) or "
+            f"pressure + valve (pneumatics); it has: {have}"
+        )
+    robot = robot_for_log(args.robot, data)
+    done = []
+    for domain in todo:
+        result = diagnose(data, robot, domain, args.options(progress))[domain]
+        out, extended = output_paths(args.log, args.output, domain, len(todo) > 1)
+        try:
+            result.save_extended(extended, header(domain_record(domain).kind, robot, args.log, command))
+        except OSError as exc:
+            raise DiegocalError(f"{extended}: cannot write the extended model ({exc.strerror or exc})") from None
+        mapping = {**header("diagnosis", robot, args.log, command), **result.to_dict(extended_model=extended.name)}
+        save_yaml(mapping, out)
+        done.append(Diagnosed(domain, mapping, out, extended))
+    return done
+
+
 @app.command("diagnose")
 @cli_errors
 def diagnose_cmd(
+    ctx: typer.Context,
     log: Annotated[Path, typer.Argument(help="Log to diagnose (.h5 or .csv).")],
     robot: Annotated[str | None, typer.Option("--robot", help="Robot directory; by default the log's robot.")] = None,
     domain: Annotated[
@@ -122,67 +197,28 @@ def diagnose_cmd(
 ) -> None:
     """Show what the model gets wrong, name the cause, extend the model and measure the gain on
     held-out blocks of the log."""
-    from diegocal.cli.common import robot_for_log
-    from diegocal.diagnose import DiagnoseOptions, diagnose, domains_of
-    from diegocal.io import load_log, save_yaml
-    from diegocal.io.bundle import header
-
-    fric = tuple(t.strip() for t in friction.split(",") if t.strip() and t.strip() != "none")
-    data = load_log(log)
-    todo = (domain,) if domain else domains_of(data)
-    if not todo:
-        have = ", ".join(sorted(data.streams)) or "none"
-        raise MissingStreamError(
-            "nothing to diagnose: the log needs markers + pots (kinematics), q + tau (dynamics) or "
-            f"pressure + valve (pneumatics); it has: {have}"
-        )
-    rob = robot_for_log(robot, data)
+    args = DiagnoseArgs(**ctx.params)
 
     def progress(text: str) -> None:
         errors.print(f"[dim]diagnose:[/] {text}", highlight=False)
 
-    rows = []
-    for d in todo:
-        options = DiagnoseOptions(
-            domain=d,
-            alpha=alpha,
-            min_gain=min_gain,
-            n_blocks=blocks,
-            friction=fric,
-            inertia=inertia,
-            chambers=tuple(dict.fromkeys(chamber or ())),
-            jobs=jobs,
-            progress=None if quiet else progress,
-        )
-        result = diagnose(data, rob, options)
-        out, extended = output_paths(log, output, d, len(todo) > 1)
-        command = _command()
-        try:
-            result.save_extended(extended, header(domain_record(d).kind, rob, log, command))
-        except OSError as exc:
-            raise DiegocalError(f"{extended}: cannot write the extended model ({exc.strerror or exc})") from None
-        mapping = {**header("diagnosis", rob, log, command), **result.to_dict(extended_model=extended.name)}
-        save_yaml(mapping, out)
-        rows += _summary_rows(d, mapping, out, extended)
-    summary(f"diagnose {Path(log).name}", rows, quiet=quiet)
+    done = run_diagnose(args, command_line("diegocal diagnose"), None if args.quiet else progress)
+    rows = [row for d in done for row in _summary_rows(d)]
+    summary(f"diagnose {Path(args.log).name}", rows, quiet=args.quiet)
 
 
-def _summary_rows(domain: str, mapping: dict, out: Path, extended: Path) -> list:
-    import numpy as np
+def _summary_rows(done: Diagnosed) -> list:
+    from diegocal.api import pooled_heldout_rmse
 
-    base, ext = mapping["baseline"], mapping["extended"]
-    units = base.get("units") or {}
-
-    def pooled(d: dict, unit: str) -> float:
-        v = np.array([x for c, x in (d or {}).items() if x is not None and units.get(c, unit) == unit], float)
-        return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
-
+    domain, mapping, out, extended = done.domain, done.mapping, done.output, done.extended
+    base = mapping["baseline"]
+    pooled = pooled_heldout_rmse(mapping)
     held = [
         (
-            f"held-out RMSE baseline → extended{' (' + u + ')' if len(set(units.values())) > 1 else ''}",
-            f"{pooled(base['heldout_rmse'], u):.4g} → {pooled(ext['heldout_rmse'], u):.4g} {u}",
+            f"held-out RMSE baseline → extended{' (' + u + ')' if len(pooled) > 1 else ''}",
+            f"{before:.4g} → {after:.4g} {u}",
         )
-        for u in dict.fromkeys(units.values() or [base.get("unit", "")])
+        for u, (before, after) in pooled.items()
     ]
     rows = [
         (f"{domain}: baseline", base["model"]),

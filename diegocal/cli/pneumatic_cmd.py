@@ -1,8 +1,9 @@
-"""CLI of the pneumatic domain (thesis ch. 4): `pneumatic-fit`, `pneumatic-merge`,
-`simulate pneumatics` and the ``pneumatic`` predictor of `predict`."""
+"""CLI of the pneumatic domain (thesis ch. 4): `pneumatic-fit` (parse → :func:`run_pneumatic`: load →
+:class:`diegocal.api.Pneumatic` fit → save → summary), `pneumatic-merge` and `simulate pneumatics`."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -14,20 +15,80 @@ from diegocal.cli.common import (
     cli_errors,
     command_line,
     default_output,
-    errors,
     log_output,
     output_path,
     positive,
-    robot_for_log,
     summary,
-    usage_error,
+    warn,
 )
-from diegocal.errors import DiegocalError, FitError, InputFileError
+from diegocal.errors import InputFileError, OptionError
+
+
+@dataclass(frozen=True)
+class PneumaticArgs:
+    """`diegocal pneumatic-fit`'s options, parsed once: the command's parameters by name (``ctx.params``)."""
+
+    log: Path
+    chamber: list[str] | None
+    all_chambers: bool
+    robot: Path | None
+    output: Path | None
+    jobs: int
+    starts: int
+    seed: int
+    fd_jacobian: bool
+    steady_state: Path | None
+    quiet: bool
+
+    def __post_init__(self):
+        if self.all_chambers == bool(self.chamber):
+            raise OptionError("name the chambers to fit: --chamber NAME (repeatable) or --all")
+
+    @property
+    def out(self) -> Path:
+        """pneumatic.yaml: ``-o``, by default LOG.pneumatic.yaml beside the log."""
+        return self.output or default_output(self.log, ".pneumatic.yaml")
+
+
+@dataclass(frozen=True)
+class PneumaticRun:
+    """What :func:`run_pneumatic` did: ``fits`` chamber -> its fit (rmse, drift_2s), ``skipped``
+    chamber -> why it was not fitted, the file written."""
+
+    fits: dict
+    skipped: dict
+    output: Path
+
+
+def run_pneumatic(args: PneumaticArgs, command: str = "diegocal pneumatic-fit") -> PneumaticRun:
+    """Load the log and its robot, fit each chamber (:class:`diegocal.api.Pneumatic`), write
+    pneumatic.yaml. Raises DiegocalError (FitError when no chamber could be fitted); prints nothing."""
+    if args.steady_state is not None and not args.steady_state.exists():
+        raise InputFileError(f"{args.steady_state}: no such file")
+    # the library is imported when the command runs, so that `--help` answers at once
+    from diegocal.api import Pneumatic
+    from diegocal.io import load_log
+    from diegocal.pneumatic.fit import FitOptions
+    from diegocal.robot.resolve import robot_for_log
+
+    data = load_log(args.log)
+    for stream in ("pressure", "valve", "pots"):  # log-level problems fail the whole command
+        data.stream(stream, needed_by="pneumatic-fit")
+    robot = robot_for_log(args.robot, data)
+    if not robot.sensors.chamber_names:
+        raise InputFileError(f"robot {robot.name!r} has no chambers in sensors.yaml")
+    options = FitOptions(jacobian="2-point" if args.fd_jacobian else "analytic", starts=args.starts, seed=args.seed)
+    chambers = () if args.all_chambers else tuple(dict.fromkeys(args.chamber))
+    model = Pneumatic(chambers, options, jobs=args.jobs).fit(data, robot)
+    meta = {} if args.steady_state is None else {"steady_state_log": str(args.steady_state.resolve())}
+    model.save(args.out, log=args.log, command=command, meta=meta)
+    return PneumaticRun(model.fits_, model.skipped_, args.out)
 
 
 @app.command("pneumatic-fit")
 @cli_errors
 def pneumatic_fit(
+    ctx: typer.Context,
     log: Annotated[Path, typer.Argument(help="Log with pressure, valve and pots streams (.h5 or .csv).")],
     chamber: Annotated[
         list[str] | None,
@@ -66,57 +127,22 @@ def pneumatic_fit(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Fit the 9-parameter valve-chamber model (thesis §4.5.3) by next-step least squares."""
-    if all_chambers == bool(chamber):
-        raise usage_error("pneumatic-fit", "name the chambers to fit: --chamber NAME (repeatable) or --all")
-    if steady_state is not None and not steady_state.exists():
-        raise InputFileError(f"{steady_state}: no such file")
-    import numpy as np
+    args = PneumaticArgs(**ctx.params)
+    done = run_pneumatic(args, command_line("diegocal pneumatic-fit"))
+    for name, reason in done.skipped.items():
+        warn(f"chamber {name} not fitted: {reason}")
+    rows = [("chambers fitted", len(done.fits)), ("skipped", len(done.skipped))]
+    if len(done.fits) <= 8:
+        rows += [(f"{n}: rmse / drift 2 s", f"{f.rmse:.3g} / {f.drift_2s:.1%}") for n, f in done.fits.items()]
+    from diegocal.api import drift_summary
 
-    from diegocal.io import load_log, save_yaml
-    from diegocal.io.bundle import header
-    from diegocal.pneumatic.data import chamber_data
-    from diegocal.pneumatic.files import model_dict
-    from diegocal.pneumatic.fit import FitOptions, fit_chambers
-
-    data = load_log(log)
-    for stream in ("pressure", "valve", "pots"):  # log-level problems fail the whole command
-        data.stream(stream, needed_by="pneumatic-fit")
-    rob = robot_for_log(robot, data)
-    names = list(rob.sensors.chamber_names) if all_chambers else list(dict.fromkeys(chamber))
-    if not names:
-        raise InputFileError(f"robot {rob.name!r} has no chambers in sensors.yaml")
-    datasets, skipped = [], {}
-    for name in names:
-        try:
-            datasets.append(chamber_data(data, rob.sensors, name))
-        except DiegocalError as exc:
-            if not all_chambers:
-                raise
-            skipped[name] = str(exc)
-    options = FitOptions(jacobian="2-point" if fd_jacobian else "analytic", starts=starts, seed=seed)
-    batch = fit_chambers(datasets, options, jobs=jobs)
-    batch.skipped.update(skipped)
-    for name, reason in batch.skipped.items():
-        errors.print(f"[yellow]warning:[/] chamber {name} not fitted: {reason}", highlight=False)
-    if not batch.fits:
-        first = next(iter(batch.skipped.values()), "no chamber")
-        raise FitError(f"no chamber could be fitted ({first})")
-    meta = {"log": str(Path(log).resolve()), "robot": str(rob.directory or rob.name)}
-    if steady_state is not None:
-        meta["steady_state_log"] = str(steady_state.resolve())
-    out = output or default_output(log, ".pneumatic.yaml")
-    head = header("pneumatic", rob, log, command_line("diegocal pneumatic-fit"))
-    save_yaml(model_dict(batch, rob.sensors, options, meta, head), out)
-    drifts = np.array([f.drift_2s for f in batch.fits.values()])
-    rows = [("chambers fitted", len(batch.fits)), ("skipped", len(batch.skipped))]
-    if len(batch.fits) <= 8:
-        rows += [(f"{n}: rmse / drift 2 s", f"{f.rmse:.3g} / {f.drift_2s:.1%}") for n, f in batch.fits.items()]
+    drift = drift_summary(f.drift_2s for f in done.fits.values())
     rows += [
-        ("2-s drift median / max (of Pc-Pr)", f"{np.median(drifts):.1%} / {drifts.max():.1%}"),
-        ("chambers with drift < 4% / < 10%", f"{(drifts < 0.04).sum()} / {(drifts < 0.10).sum()}"),
-        ("written", str(out)),
+        ("2-s drift median / max (of Pc-Pr)", f"{drift['median']:.1%} / {drift['max']:.1%}"),
+        ("chambers with drift < 4% / < 10%", f"{drift['below 4 %']} / {drift['below 10 %']}"),
+        ("written", str(done.output)),
     ]
-    summary("pneumatic-fit", rows, quiet=quiet)
+    summary("pneumatic-fit", rows, quiet=args.quiet)
 
 
 @app.command("pneumatic-merge")

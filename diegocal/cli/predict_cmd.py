@@ -3,8 +3,9 @@ which dispatches on the model's bundle kind; a diagnosis.yaml stands for its ext
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -21,10 +22,57 @@ from diegocal.cli.common import (
     warn,
 )
 
+if TYPE_CHECKING:
+    from diegocal.predict import Prediction
+
+
+@dataclass(frozen=True)
+class PredictArgs:
+    """`diegocal predict`'s options, parsed once: the command's parameters by name (``ctx.params``)."""
+
+    model: Path
+    log: Path
+    output: Path | None
+    sensors_from: str
+    sensors_to: str
+    robot: Path | None
+    jobs: int
+    quiet: bool
+    seed: int
+
+    @property
+    def out(self) -> Path:
+        """The prediction log: ``-o``, by default LOG.prediction.h5 beside the log."""
+        return self.output or default_output(self.log, ".prediction.h5")
+
+
+def run_predict(args: PredictArgs, command: str = "diegocal predict") -> Prediction:
+    """Predict the log with the model (:func:`diegocal.predict.predict`) and write the prediction
+    log. Raises DiegocalError; prints nothing."""
+    # the library is imported when the command runs, so that `--help` answers at once
+    from datetime import UTC, datetime
+
+    from diegocal.io import save_log
+    from diegocal.predict import PredictOptions, predict
+
+    source = {
+        "command": command,
+        "model": str(args.model.resolve()),
+        "log": str(args.log.resolve()),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    options = PredictOptions(
+        split_words(args.sensors_from), split_words(args.sensors_to), args.robot, args.jobs, args.seed, source
+    )
+    result = predict(args.model, args.log, options)
+    save_log(result.log, args.out)
+    return result
+
 
 @app.command("predict")
 @cli_errors
 def predict(
+    ctx: typer.Context,
     model: Annotated[
         Path,
         typer.Argument(help="Any fitted model: calib.yaml, pneumatic.yaml, an sgp/ directory, or a diagnosis.yaml."),
@@ -71,23 +119,9 @@ def predict(
     seed: Annotated[int, typer.Option("--seed", help="Random seed (the predictions are deterministic).")] = 0,
 ) -> None:
     """Predict a held-out log with a fitted model and report the error (the model file is only read)."""
-    from datetime import UTC, datetime
-
-    from diegocal.io import save_log
-    from diegocal.predict import PredictOptions
-    from diegocal.predict import predict as predict_log
-
-    source = {
-        "command": command_line("diegocal predict"),
-        "model": str(model.resolve()),
-        "log": str(log.resolve()),
-        "created": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
-    opts = PredictOptions(split_words(sensors_from), split_words(sensors_to), robot, jobs, seed, source)
-    result = predict_log(model, log, opts)
-    out = output or default_output(log, ".prediction.h5")
-    save_log(result.log, out)
+    args = PredictArgs(**ctx.params)
+    result = run_predict(args, command_line("diegocal predict"))
     for text in result.warnings:
         warn(text)
-    written = ("prediction", *([""] * (len(result.columns) - 2)), str(out))
-    summary(result.title, [*result.rows, written], columns=result.columns, quiet=quiet)
+    written = ("prediction", *([""] * (len(result.columns) - 2)), str(args.out))
+    summary(result.title, [*result.rows, written], columns=result.columns, quiet=args.quiet)

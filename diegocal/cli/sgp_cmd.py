@@ -1,20 +1,15 @@
-"""`diegocal sgp-fit LOG` and the `predict` handler for sgp/ model directories (thesis ch. 3).
-
-sgp-fit: parse → load the log and robot → :func:`diegocal.sgp.fit_dynamics` → save ``sgp/`` →
-summary table (in-sample nMSE per joint). predict: load the model → predict the log's torques →
-write a log with ``tau`` (predicted) and ``tau_std`` → nMSE per joint when the log has ``tau``. A
-model with extra terms (``diagnose``'s extended model) predicts with them and lists them.
+"""`diegocal sgp-fit LOG` (thesis ch. 3): parse → :func:`run_sgp` (load → :class:`diegocal.api.SGP`
+fit → save the ``LOG.sgp/`` directory) → summary table (in-sample nMSE per joint, the guard's
+choices).
 """
 
 from __future__ import annotations
 
-import shlex
-import sys
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
@@ -33,15 +28,19 @@ from diegocal.cli.common import (
     RobotOfLog,
     cli_errors,
     comma_list,
+    command_line,
     default_output,
     errors,
     output_path,
     progress_enabled,
-    robot_for_log,
     split_words,
     summary,
-    usage_error,
 )
+from diegocal.errors import OptionError
+
+if TYPE_CHECKING:
+    from diegocal.sgp import SGPOptions
+    from diegocal.sgp.model import DynamicsModel
 
 
 @contextmanager
@@ -66,14 +65,80 @@ def fit_progress(quiet: bool):
         yield update
 
 
-def _command() -> str:
-    args = sys.argv[1:]
-    return "diegocal " + " ".join(shlex.quote(a) for a in args) if args else "diegocal sgp-fit"
+@dataclass(frozen=True)
+class SgpArgs:
+    """`diegocal sgp-fit`'s options, parsed once: the command's parameters by name (``ctx.params``)."""
+
+    log: Path
+    robot: str | None
+    model: str
+    friction: str
+    inference: str
+    n_inducing: int
+    guard: bool
+    region: bool
+    joint_region: bool | None
+    gp_inputs: str | None
+    restarts: int
+    min_noise: float
+    seed: int
+    jobs: int
+    output: Path | None
+    quiet: bool
+
+    def __post_init__(self):
+        if self.joint_region and not self.region:
+            raise OptionError("--joint-region needs --region (the joint GP is cut where the two-stage GP is)")
+
+    @property
+    def out(self) -> Path:
+        """The model directory: ``-o``, by default LOG.sgp/ beside the log."""
+        return self.output or default_output(self.log, ".sgp")
+
+    def options(self) -> SGPOptions:
+        from diegocal.sgp import SGPOptions
+        from diegocal.sgp.model import default_guard
+
+        words = split_words(self.friction)
+        opts = SGPOptions(
+            kind=self.model,
+            friction=() if words == ("none",) else words,
+            inference=self.inference,
+            n_inducing=self.n_inducing,
+            restarts=self.restarts,
+            seed=self.seed,
+            jobs=self.jobs,
+            guard=self.guard,
+            gp_inputs=split_words(self.gp_inputs) if self.gp_inputs is not None else None,
+            min_noise=self.min_noise,
+        )
+        joint_region = self.region if self.joint_region is None else self.joint_region
+        if not (self.region and joint_region):
+            g = default_guard(opts.friction)
+            opts = replace(opts, guard_options=replace(g, region=self.region, joint_region=joint_region))
+        return opts
+
+
+def run_sgp(args: SgpArgs, command: str = "diegocal sgp-fit", progress=None) -> DynamicsModel:
+    """Load the log and its robot, fit (:class:`diegocal.api.SGP`), write the model directory; the
+    fitted model. Raises DiegocalError; prints nothing. ``progress``: see :func:`fit_progress`."""
+    # the library is imported when the command runs, so that `--help` answers at once
+    from diegocal.api import SGP
+    from diegocal.io import load_log
+    from diegocal.robot.resolve import robot_for_log
+
+    data = load_log(args.log)
+    robot = robot_for_log(args.robot, data)
+    fitted = SGP(args.options()).fit(data, robot, progress=progress)
+    meta = {"robot": str(robot.directory or robot.name), "created": datetime.now(UTC).isoformat(timespec="seconds")}
+    fitted.save(args.out, log=args.log, command=command, meta=meta)
+    return fitted.model_
 
 
 @app.command("sgp-fit")
 @cli_errors
 def sgp_fit(
+    ctx: typer.Context,
     log: Annotated[Path, typer.Argument(help="Log with q, qd, qdd and tau streams (.h5 or .csv).")],
     robot: RobotOfLog = None,
     model: Annotated[
@@ -169,47 +234,14 @@ def sgp_fit(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
 ) -> None:
     """Fit a torque model: parametric (rigid body + friction) part, GP part and hyperparameters."""
-    from diegocal.io import load_log
-    from diegocal.io.bundle import header
-    from diegocal.sgp import SGPOptions, fit_dynamics
-    from diegocal.sgp.model import default_guard
-    from diegocal.sgp.store import save_model
-
-    words = split_words(friction)
-    opts = SGPOptions(
-        kind=model,
-        friction=() if words == ("none",) else words,
-        inference=inference,
-        n_inducing=n_inducing,
-        restarts=restarts,
-        seed=seed,
-        jobs=jobs,
-        guard=guard,
-        gp_inputs=split_words(gp_inputs) if gp_inputs is not None else None,
-        min_noise=min_noise,
-    )
-    if joint_region and not region:
-        raise usage_error("sgp-fit", "--joint-region needs --region (the joint GP is cut where the two-stage GP is)")
-    joint_region = region if joint_region is None else joint_region
-    if not (region and joint_region):
-        g = default_guard(opts.friction)
-        opts = replace(opts, guard_options=replace(g, region=region, joint_region=joint_region))
-    data = load_log(log)
-    rob = robot_for_log(robot, data)
-    with fit_progress(quiet) as progress:
-        fitted = fit_dynamics(data, rob, opts, progress=progress)
-    out = output or default_output(log, ".sgp")
-    meta = {
-        "log": str(log),
-        "robot": str(rob.directory or rob.name),
-        "command": _command(),
-        "created": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
-    save_model(fitted, out, meta, header=header("dynamics", rob, log, meta["command"]))
+    args = SgpArgs(**ctx.params)
+    with fit_progress(args.quiet) as progress:
+        fitted = run_sgp(args, command_line("diegocal sgp-fit"), progress)
+    out = args.out
     rows = [(f"nMSE in-sample {j}", float(v)) for j, v in zip(fitted.joint_names, fitted.nmse_in_sample_, strict=True)]
     par = fitted.parametric_
     rows = [
-        ("model", model),
+        ("model", args.model),
         ("samples", len(fitted.U_)),
         ("inference", fitted.gp_.inference),
         ("base parameters", 0 if par is None else len(par.names)),
@@ -223,7 +255,7 @@ def sgp_fit(
     ]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
-    summary(f"sgp-fit → {out}", rows, quiet=quiet)
+    summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
 
 
 def _guard_text(entry: dict) -> str:

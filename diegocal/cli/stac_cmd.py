@@ -1,14 +1,21 @@
-"""`diegocal stac LOG` (thesis ch. 2) and the calib.yaml predictor of `diegocal predict`."""
+"""`diegocal stac LOG` (thesis ch. 2): parse → :func:`run_stac` (load → :func:`diegocal.api.calibrate`
+→ save calib.yaml) → summary.
+
+A fit that stopped before it converged is written (``fit: converged: false``), said in words, and
+exits 1 unless ``--allow-unconverged``; :func:`unconverged` is the one judgement, which ``batch``
+applies to the calib.yaml a job wrote.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.choices import STAC_LOSSES, STAC_METHODS, STAC_SCHEDULES
+from diegocal.cli.choices import STAC_LOSSES, STAC_MAX_ITERATIONS, STAC_METHODS, STAC_SCHEDULES
 from diegocal.cli.common import (
     RobotOfLog,
     cli_errors,
@@ -18,68 +25,158 @@ from diegocal.cli.common import (
     log_output,
     output_path,
     progress_enabled,
-    robot_for_log,
     summary,
-    usage_error,
     warn,
 )
-from diegocal.errors import FitError
+from diegocal.errors import OptionError
 
 if TYPE_CHECKING:
-    from diegocal.io.log import Log
     from diegocal.robot import Robot
     from diegocal.stac.calibration import Calibration
-    from diegocal.stac.result import StacOptions, StacResult
+    from diegocal.stac.result import StacOptions
+    from diegocal.stac.static import PoseCV
 
-METHODS = STAC_METHODS
+
+@dataclass(frozen=True)
+class StacArgs:
+    """`diegocal stac`'s options, parsed once: the command's parameters by name (``ctx.params``)."""
+
+    log: Path
+    robot: str | None
+    output: Path | None
+    method: str
+    loss: str
+    max_iterations: int
+    schedule: str
+    jobs: int
+    seed: int
+    joint_angles: Path | None
+    cv: bool
+    allow_unconverged: bool
+    quiet: bool
+
+    def __post_init__(self):
+        if self.cv and self.method != "stac":
+            raise OptionError("--cv is for --method stac")
+
+    @property
+    def out(self) -> Path:
+        """calib.yaml: ``-o``, by default LOG.calib.yaml beside the log."""
+        return self.output or default_output(self.log, ".calib.yaml")
+
+    def options(self) -> StacOptions:
+        from diegocal.stac.result import StacOptions
+
+        return StacOptions(
+            max_iterations=self.max_iterations,
+            loss=self.loss,
+            jobs=self.jobs,
+            seed=self.seed,
+            quiet=self.quiet,
+            schedule=self.schedule,
+        )
 
 
-def run_method(method: str, log: Log, robot: Robot, options: StacOptions) -> StacResult:
-    """Dispatch to the calibration method; each is imported when it runs."""
+@dataclass(frozen=True)
+class StacRun:
+    """What :func:`run_stac` did: the calibration as written, and what the summary says of it.
+
+    robot : the robot it was fitted with; time : (T,) s the log's sample times; pose_cv : the
+    leave-one-pose-out evaluation (``--cv``) or None; warnings : lines for the user."""
+
+    calibration: Calibration
+    robot: Robot
+    time: object
+    output: Path
+    joint_angles: Path | None
+    pose_cv: PoseCV | None
+    warnings: tuple[str, ...]
+
+
+def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> StacRun:
+    """Load the log and its robot, calibrate (:func:`diegocal.api.calibrate`), write calib.yaml (and
+    the joint angles with ``--joint-angles``). Raises DiegocalError; prints nothing.
+
+    ``command`` is recorded in calib.yaml's header; ``progress(k, K)`` is called by ``--cv``."""
+    # the library is imported when the command runs, so that `--help` answers at once
+    from dataclasses import replace
+
+    from diegocal.api import calibrate
+    from diegocal.io import Log, load_log, make_stream, save_log, save_yaml
+    from diegocal.io.bundle import header
+    from diegocal.robot.resolve import robot_for_log
+
+    data = load_log(args.log)
+    robot = robot_for_log(args.robot, data)
+    options = args.options()
+    result = calibrate(data.without_truth(), robot, args.method, options)
+    cal = replace(result.calibration, header=header("calibration", robot, args.log, command))
+    mapping = cal.to_dict()
+    pose_cv = None
+    if args.cv:
+        from diegocal.stac.static import leave_one_pose_out
+
+        pose_cv = leave_one_pose_out(data.without_truth(), robot, options, progress=progress)
+        mapping["cv"] = pose_cv.to_dict()
+    if args.joint_angles is not None:
+        mapping["meta"] = {"joint_angles": str(args.joint_angles.resolve())}
+    save_yaml(mapping, args.out)
+    if args.joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
+        streams = {"q": make_stream(robot.joint_names, result.q)}
+        save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), args.joint_angles)
+    return StacRun(cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out))
+
+
+def _warnings(cal: Calibration, time, out: Path) -> tuple[str, ...]:
+    lines = []
+    if cal.rejected:
+        times = ", ".join(f"{time[f]:.4g}" for f in cal.rejected[:8]) + (", ..." if len(cal.rejected) > 8 else "")
+        lines.append(
+            f"the markers of {len(cal.rejected)} frame(s) disagree with their pots (t = {times} s): written off "
+            f"as another pose's (listed under 'rejected' in {out})"
+        )
+    if cal.unobservable:
+        names = ", ".join(u["pot"] for u in cal.unobservable)
+        lines.append(
+            f"{len(cal.unobservable)} pot(s) unobservable (no marker moves with their joints): {names}; "
+            f"their gain and bias keep their nominal values (listed under 'unobservable' in {out})"
+        )
+    if cal.sigma_unresolved:
+        names = ", ".join(u["group"] for u in cal.sigma_unresolved)
+        lines.append(
+            f"σ {names}: not resolved by this log (the other sensors cannot tell its noise apart from zero), "
+            f"held at its detection limit (listed under sigma: unresolved in {out})"
+        )
+    return tuple(lines)
+
+
+def unconverged(cal: Calibration) -> str | None:
+    """Why ``cal`` is not a converged fit, in words; None when it converged (or its method does not
+    iterate: nominal)."""
+    if cal.fit.converged or cal.method == "nominal":
+        return None
+    return f"the {cal.method} fit did not converge: it stopped after {cal.fit.iterations} iteration(s)"
+
+
+#: What to do about an unconverged fit (said with :func:`unconverged` when it fails the command).
+UNCONVERGED_HINT = "raise --max-iterations or check the log, or pass --allow-unconverged to accept it"
+
+
+def written_verdict(args: StacArgs) -> str | None:
+    """:func:`unconverged` of the calib.yaml a run wrote (batch's check of a job's output)."""
+    if args.allow_unconverged:
+        return None
+    from diegocal.io import load_yaml
     from diegocal.stac.calibration import Calibration
-    from diegocal.stac.result import StacResult
 
-    if method == "stac":
-        from diegocal.stac.stac import calibrate
-
-        return calibrate(log, robot, options)
-    if method == "nominal":
-        from diegocal.stac.model import Observation
-        from diegocal.stac.stac import initial_q
-
-        obs = Observation(log, robot)
-        cal = Calibration.nominal(robot)
-        return StacResult(cal, initial_q(obs, obs.params_from(cal), options))
-    try:
-        if method == "classical":
-            from diegocal.stac.classical import calibrate_classical
-
-            return calibrate_classical(log, robot, options, nonlinear="constrain")
-        if method == "ekf":
-            from diegocal.stac.ekf import calibrate_ekf
-
-            return calibrate_ekf(log, robot, options)
-    except ImportError:
-        raise FitError(f"method {method!r} is not available in this build") from None
-    raise FitError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
-
-
-def cost_label(method: str, loss: str) -> str | None:
-    """What each method's ``fit.cost`` is, for the summary (None: the method has none)."""
-    if method == "stac":
-        robust = "" if loss == "linear" else f", markers under the {loss} loss"
-        return f"−log-likelihood, eq. 2.5 (nats{robust}; without constants, so it may be < 0)"
-    if method == "classical":
-        loss_text = "squared marker residuals" if loss == "linear" else f"{loss} ρ of the marker residuals"
-        return f"½ Σ {loss_text}, eq. 2.4 (m²)"
-    if method == "ekf":
-        return "½ Σ νᵀS⁻¹ν, the EKF innovations' normalised squared error"
-    return None
+    why = unconverged(Calibration.from_dict(load_yaml(args.out), str(args.out)))
+    return None if why is None else f"{why} (converged: false in {args.out}); {UNCONVERGED_HINT}"
 
 
 @app.command("stac")
 @cli_errors
 def stac(
+    ctx: typer.Context,
     log: Annotated[Path, typer.Argument(help="Log with pots and markers streams (.h5 or .csv).")],
     robot: RobotOfLog = None,
     output: Annotated[
@@ -107,8 +204,13 @@ def stac(
         ),
     ] = "linear",
     max_iterations: Annotated[
-        int, typer.Option("--max-iterations", min=1, help="Most alternations of the q- and p-phases.")
-    ] = 50,
+        int,
+        typer.Option(
+            "--max-iterations",
+            min=1,
+            help="Safety cap on the alternations of the q- and p-phases (the fit ends when it converges).",
+        ),
+    ] = STAC_MAX_ITERATIONS,
     schedule: Annotated[
         Literal[STAC_SCHEDULES],
         typer.Option(help="q-phase schedule (§2.6.1): one LM step per alternation, LM to the end, or BFGS."),
@@ -131,101 +233,69 @@ def stac(
             "from its pots (leave-one-pose-out; a pose starts where a pot moves by 1 % of its range).",
         ),
     ] = False,
+    allow_unconverged: Annotated[
+        bool,
+        typer.Option(
+            "--allow-unconverged",
+            help="Exit 0 when the fit stops before it converges (it is written with converged: false and "
+            "a warning either way; without this flag the exit status is 1).",
+        ),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
 ) -> None:
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
-    if cv and method != "stac":
-        raise usage_error("stac", "--cv is for --method stac")
-    from dataclasses import replace
+    args = StacArgs(**ctx.params)
+    done = run_stac(args, command_line("diegocal stac"), progress=_progress("leave-one-pose-out", args.quiet))
+    for line in done.warnings:
+        warn(line)
+    _summary(done, args)
+    why = unconverged(done.calibration)
+    if why is not None:
+        hint = "" if args.allow_unconverged else f"; {UNCONVERGED_HINT}"
+        warn(f"{why}; it is written with converged: false{hint}")
+        if not args.allow_unconverged:
+            raise typer.Exit(1)
 
-    from diegocal.io import load_log, make_stream, save_log, save_yaml
-    from diegocal.io.bundle import header
-    from diegocal.io.log import Log
-    from diegocal.stac.result import StacOptions
 
-    data = load_log(log)
-    model = robot_for_log(robot, data)
-    options = StacOptions(
-        max_iterations=max_iterations,
-        loss=loss,
-        jobs=jobs,
-        seed=seed,
-        quiet=quiet,
-        schedule=schedule,
-    )
-    result = run_method(method, data.without_truth(), model, options)
-    out = output or default_output(log, ".calib.yaml")
-    cal = replace(result.calibration, header=header("calibration", model, log, command_line("diegocal stac")))
-    mapping = cal.to_dict()
-    pose_cv = None
-    if cv:
-        from diegocal.stac.static import leave_one_pose_out
-
-        pose_cv = leave_one_pose_out(data, model, options, progress=_progress("leave-one-pose-out", quiet))
-        mapping["cv"] = pose_cv.to_dict()
-    if joint_angles is not None:
-        mapping["meta"] = {"joint_angles": str(joint_angles.resolve())}
-    save_yaml(mapping, out)
-    if joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
-        q_log = Log(data.time, {"q": make_stream(model.joint_names, result.q)}, robot=data.robot, rate_hz=data.rate_hz)
-        save_log(q_log, joint_angles)
-    if cal.rejected:
-        times = ", ".join(f"{data.time[f]:.4g}" for f in cal.rejected[:8]) + (", ..." if len(cal.rejected) > 8 else "")
-        warn(
-            f"the markers of {len(cal.rejected)} frame(s) disagree with their pots (t = {times} s): written off "
-            f"as another pose's (listed under 'rejected' in {out})"
-        )
-    if cal.unobservable:
-        names = ", ".join(u["pot"] for u in cal.unobservable)
-        warn(
-            f"{len(cal.unobservable)} pot(s) unobservable (no marker moves with their joints): {names}; "
-            f"their gain and bias keep their nominal values (listed under 'unobservable' in {out})"
-        )
-    if cal.sigma_unresolved:
-        names = ", ".join(u["group"] for u in cal.sigma_unresolved)
-        warn(
-            f"σ {names}: not resolved by this log (the other sensors cannot tell its noise apart from zero), "
-            f"held at its detection limit (listed under sigma: unresolved in {out})"
-        )
+def _summary(done: StacRun, args: StacArgs) -> None:
+    cal = done.calibration
     rows = [
         ("method", cal.method),
-        ("frames", data.n_samples),
+        ("frames", len(done.time)),
         ("pots", len(cal.pot_names)),
         ("markers", len(cal.marker_names)),
         ("iterations", cal.fit.iterations),
         ("converged", str(cal.fit.converged)),
     ]
-    label = cost_label(method, loss)
+    label = cost_label(args.method, args.loss)
     if label is not None:
         rows.append((label, cal.fit.cost))
     rows.append(("seconds", cal.fit.seconds))
     rows += [(f"σ {g} ({'m' if g == 'markers' else 'sensor unit'})", v) for g, v in cal.sigma_by_group.items()]
-    rows += coverage_rows(cal, model)
+    rows += coverage_rows(cal, done.robot)
     if cal.rejected:
         rows.append(("frames written off (markers)", len(cal.rejected)))
-    if pose_cv is not None:
-        rows += cv_rows(pose_cv)
-    rows += [("calibration", str(out))] + ([("joint angles", str(joint_angles))] if joint_angles else [])
-    summary(f"stac {Path(log).name}", rows, quiet=quiet)
-    if pose_cv is not None:
-        import numpy as np
+    if done.pose_cv is not None:
+        rows += cv_rows(done.pose_cv)
+    rows.append(("calibration", str(done.output)))
+    if done.joint_angles is not None:
+        rows.append(("joint angles", str(done.joint_angles)))
+    summary(f"stac {Path(args.log).name}", rows, quiet=args.quiet)
+    if done.pose_cv is not None:
+        _pose_table(done.pose_cv, args.quiet)
 
-        show = np.argsort(-np.nan_to_num(pose_cv.error, nan=-1.0))[:10]
-        flagged = set(pose_cv.outliers().tolist())
-        summary(
-            "leave-one-pose-out marker error (worst first; * above 5 x the median)",
-            [
-                (
-                    int(pose_cv.pose[i]),
-                    f"{pose_cv.start[i]:.4g}",
-                    int(pose_cv.samples[i]),
-                    f"{1000 * pose_cv.error[i]:.2f}" + (" *" if pose_cv.pose[i] in flagged else ""),
-                )
-                for i in show
-            ],
-            columns=("pose", "start (s)", "samples", "error (mm)"),
-            quiet=quiet,
-        )
+
+def cost_label(method: str, loss: str) -> str | None:
+    """What each method's ``fit.cost`` is, for the summary (None: the method has none)."""
+    if method == "stac":
+        robust = "" if loss == "linear" else f", markers under the {loss} loss"
+        return f"−log-likelihood, eq. 2.5 (nats{robust}; without constants, so it may be < 0)"
+    if method == "classical":
+        loss_text = "squared marker residuals" if loss == "linear" else f"{loss} ρ of the marker residuals"
+        return f"½ Σ {loss_text}, eq. 2.4 (m²)"
+    if method == "ekf":
+        return "½ Σ νᵀS⁻¹ν, the EKF innovations' normalised squared error"
+    return None
 
 
 def _progress(label: str, quiet: bool):
@@ -247,7 +317,7 @@ def _progress(label: str, quiet: bool):
     return step
 
 
-def cv_rows(pose_cv) -> list:
+def cv_rows(pose_cv: PoseCV) -> list:
     """Summary rows of a leave-one-pose-out evaluation."""
     flagged = pose_cv.outliers()
     rows = [
@@ -257,6 +327,28 @@ def cv_rows(pose_cv) -> list:
     if len(flagged):
         rows.append(("poses > 5 x median error", ", ".join(str(int(k)) for k in flagged)))
     return rows
+
+
+def _pose_table(pose_cv: PoseCV, quiet: bool) -> None:
+    """The ten poses with the largest leave-one-out error, worst first."""
+    import numpy as np
+
+    show = np.argsort(-np.nan_to_num(pose_cv.error, nan=-1.0))[:10]
+    flagged = set(pose_cv.outliers().tolist())
+    summary(
+        "leave-one-pose-out marker error (worst first; * above 5 x the median)",
+        [
+            (
+                int(pose_cv.pose[i]),
+                f"{pose_cv.start[i]:.4g}",
+                int(pose_cv.samples[i]),
+                f"{1000 * pose_cv.error[i]:.2f}" + (" *" if pose_cv.pose[i] in flagged else ""),
+            )
+            for i in show
+        ],
+        columns=("pose", "start (s)", "samples", "error (mm)"),
+        quiet=quiet,
+    )
 
 
 def coverage_rows(cal: Calibration, robot: Robot) -> list:
@@ -270,7 +362,3 @@ def coverage_rows(cal: Calibration, robot: Robot) -> list:
         shown = ", ".join(list(robot.locked)[:4]) + (", ..." if len(robot.locked) > 4 else "")
         rows.append((f"locked joints ({len(robot.locked)})", f"{shown} (at 0 or sensors.yaml's locked)"))
     return rows
-
-
-#: predict warns when a held-out error is this many times the calibration's own noise level: the
-#: log is then most likely not of the session (robot, mocap frame, marker placement) it was fitted on

@@ -14,6 +14,7 @@ from diegocal.sim.effects import VOCABULARY
 from diegocal.sim.kinematics import SIZE_UNITS
 from diegocal.sim.pneumatics import EXPERIMENTS
 from diegocal.stac.predict import SENSOR_TYPES, SOURCE_TYPES
+from diegocal.stac.result import MAX_ITERATIONS, StacOptions
 from diegocal.stac.robust import LOSSES
 from diegocal.stac.stac import SCHEDULES
 
@@ -32,6 +33,7 @@ def test_the_copies_equal_the_library():
     )
     assert choices.STAC_LOSSES == LOSSES
     assert choices.STAC_SCHEDULES == SCHEDULES
+    assert choices.STAC_MAX_ITERATIONS == MAX_ITERATIONS == StacOptions().max_iterations
     assert choices.SENSOR_TYPES == SENSOR_TYPES and choices.SOURCE_TYPES == SOURCE_TYPES
     assert choices.PNEUMATIC_EXPERIMENTS == EXPERIMENTS
     assert choices.TRAJECTORIES == TRAJECTORIES

@@ -5,6 +5,7 @@ ending in a period), a flag shows no value type, and nothing in the text is eate
 import re
 
 import pytest
+import typer.core
 import typer.main
 from typer.testing import CliRunner
 
@@ -13,10 +14,12 @@ from diegocal.cli import app
 runner = CliRunner()
 
 
-def _walk(command, path=()):
+def _walk(command, path=(), ctx=None):
     yield path, command
-    for name, sub in getattr(command, "commands", {}).items():
-        yield from _walk(sub, (*path, name))
+    if isinstance(command, typer.core.TyperGroup):
+        ctx = typer.Context(command, parent=ctx, info_name=path[-1] if path else "diegocal")
+        for name in command.list_commands(ctx):
+            yield from _walk(command.get_command(ctx, name), (*path, name), ctx)
 
 
 COMMANDS = [(p, c) for p, c in _walk(typer.main.get_command(app)) if p]

@@ -13,6 +13,7 @@ import subprocess
 import sys
 
 import pytest
+import typer.core
 import typer.main
 
 from diegocal.cli import app
@@ -46,15 +47,17 @@ print("\\n" + json.dumps(loaded))
 
 
 def _commands():
-    """(command path, module) of the app, its groups and every command."""
+    """(command path, module) of the app, its groups and every command (each imported here)."""
 
-    def walk(command, path):
+    def walk(command, path, ctx):
         callback = getattr(command, "callback", None)
         yield path, getattr(callback, "__module__", None)
-        for name, sub in getattr(command, "commands", {}).items():
-            yield from walk(sub, (*path, name))
+        if isinstance(command, typer.core.TyperGroup):
+            ctx = typer.Context(command, parent=ctx, info_name=path[-1] if path else "diegocal")
+            for name in command.list_commands(ctx):
+                yield from walk(command.get_command(ctx, name), (*path, name), ctx)
 
-    return list(walk(typer.main.get_command(app), ()))
+    return list(walk(typer.main.get_command(app), (), None))
 
 
 COMMANDS = _commands()
@@ -106,6 +109,29 @@ def test_the_whole_app_help_loads_nothing_heavy():
     helps = [("--help",)] + [(*path, "--help") for path, module in COMMANDS if module in PENDING]
     for modules in run_helps(helps).values():
         assert heavy(modules) == []
+
+
+def test_a_help_imports_only_its_own_command_module():
+    """`diegocal --help` lists the commands from diegocal.cli.app.COMMANDS without importing any
+    command module; `diegocal stac --help` imports stac's alone (pip's lazy command table)."""
+    loaded = run_helps([("--help",), ("stac", "--help")])
+    modules = {k: {m for m in v if m.startswith("diegocal.cli.") and m.endswith("_cmd")} for k, v in loaded.items()}
+    assert modules["--help"] == set()
+    assert modules["stac --help"] == {"diegocal.cli.stac_cmd"}
+
+
+def test_the_command_table_is_the_commands_own():
+    """COMMANDS names every command, the module that defines it and its help's first paragraph."""
+    from diegocal.cli.app import COMMANDS as TABLE
+
+    found = {path: module for path, module in COMMANDS if path and path != ("simulate",)}
+    assert found == {path: module for path, (module, _) in TABLE.items()}
+    for path, (_, line) in TABLE.items():
+        command = typer.main.get_command(app)
+        ctx = typer.Context(command, info_name="diegocal")
+        for name in path:
+            command = command.get_command(ctx, name)
+        assert line == " ".join(command.help.strip().split("\n\n", 1)[0].split()), path
 
 
 def test_the_count_sees_heavy_modules():
