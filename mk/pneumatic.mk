@@ -14,8 +14,13 @@ PNEU_LOG ?= $(PNEU_OUT)/flail.h5
 PNEU_HELDOUT ?= $(PNEU_OUT)/heldout.h5
 PNEU_SWEEP ?= $(PNEU_OUT)/sweep.h5
 PNEU_SIM ?= --duration 100 --sessions 2
-# Chamber names, read from sensors.yaml only when a target needs them (recursive `=`).
-PNEU_CHAMBERS = $(shell $(BIN)/python -c "import yaml; print(' '.join(c['name'] for c in yaml.safe_load(open('$(PNEU_ROBOT)/sensors.yaml'))['chambers']))")
+# Chamber names, read from sensors.yaml (with the .venv's Python) only when a goal below needs them:
+# reading the Makefile for any other goal runs no Python (a fresh clone has no .venv yet, and
+# `make demo` would open with ".venv/bin/python: not found").
+PNEU_GOALS := pneumatic-fit-batch pneumatic-predict pneumatic-report $(PNEU_OUT)/pneumatic.yaml
+ifneq ($(filter $(PNEU_GOALS),$(MAKECMDGOALS)),)
+PNEU_CHAMBERS := $(shell $(BIN)/python -c "import yaml; print(' '.join(c['name'] for c in yaml.safe_load(open('$(PNEU_ROBOT)/sensors.yaml'))['chambers']))")
+endif
 PNEU_FILES = $(addprefix $(PNEU_OUT)/chambers/,$(addsuffix .yaml,$(PNEU_CHAMBERS)))
 
 .PHONY: pneumatic-data pneumatic-fit-batch pneumatic-predict pneumatic-report pneumatic-bench

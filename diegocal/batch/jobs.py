@@ -1,32 +1,37 @@
-"""Run one command over every log of a folder (or glob): locally in processes, or on a Dask cluster.
+"""Run one command over every log of a folder (or glob): locally in a process pool, or on a Dask cluster.
 
 ``diegocal batch stac logs/`` plans one job per log (per log and domain for ``diagnose``), skips the
-jobs whose outputs are newer than their inputs (as make does), runs the rest, each as its own
-``diegocal`` process, and writes a merged table of the results::
+jobs whose outputs are newer than their inputs (as make does), runs the rest and writes a merged
+table of the results::
 
     plan = plan_batch("stac", "logs/", BatchOptions(output_dir=Path("out")))
-    outcomes = run_batch(plan.jobs, jobs=2)                       # or scheduler="tcp://host:8786"
+    outcomes = run_batch(plan.jobs, jobs_n=2)                     # or scheduler="tcp://host:8786"
     save_table(plan, outcomes, Path("out/stac.batch.csv"))
 
-A job runs the ordinary command line (``python -m diegocal stac LOG -o OUT --quiet``), so a job on a
-cluster needs diegocal installed on the workers and the logs on a file system they share. One
-failed log never stops the others: its outcome carries the one-line error the command printed.
+A job is the command without its shell: its arguments are parsed by the command's own parser (as
+``diegocal stac LOG -o OUT --quiet ...`` typed by hand would be) into the command's options
+dataclass, and its job function (load → library call → save, e.g.
+:func:`diegocal.cli.stac_cmd.run_stac`) runs in a worker process, or as a plain function submitted
+to a Dask cluster (which needs diegocal installed on the workers and the logs on a file system they
+share). One failed log never stops the others: its outcome carries the message of the exception
+that failed it. A job fails when its function raises, when its process dies, or when what it wrote
+says it must not be used (a calibration that did not converge, unless the job's arguments allow it).
 
 Which files are logs. A folder contributes its ``*.h5``, ``*.hdf5`` and ``*.csv`` files that are
-diegocal logs (HDF5 ``format`` attribute ``diegocal-log``; CSV with the ``# diegocal-log`` header or a
-``time`` column) and are not outputs of diegocal itself (``*.prediction.h5``, a batch table,
-joint-angle files ``*.q.h5`` of older versions); logs without the streams the command needs are
-listed as not applicable, not failed. Outputs never match these rules, so running a batch twice,
-even with its outputs beside the logs, finds the same logs.
+not outputs of diegocal itself (``*.prediction.h5``, a batch table, joint-angle files ``*.q.h5`` of
+older versions). Another program's file (an HDF5 file without the diegocal ``format`` attribute, a
+CSV without the ``# diegocal-log`` header or a ``time`` column) and a log without the streams the
+command needs are listed as not applicable; a file that cannot be read (a truncated HDF5 file, a
+``.h5`` that is no HDF5 file) is a failed job. Outputs never match these rules, so running a batch
+twice, even with its outputs beside the logs, finds the same logs.
 """
 
 from __future__ import annotations
 
 import glob
+import importlib
 import os
 import shlex
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -34,7 +39,7 @@ from pathlib import Path
 
 from diegocal.domains import DOMAINS
 from diegocal.domains import domain as domain_record
-from diegocal.errors import DiegocalError, InputFileError
+from diegocal.errors import DiegocalError, InputFileError, LogFormatError, OptionError
 
 #: File name endings of logs; anything else in a folder is not looked at.
 LOG_SUFFIXES = (".h5", ".hdf5", ".csv")
@@ -44,25 +49,42 @@ DERIVED_SUFFIXES = (".prediction.h5", ".prediction.csv", ".q.h5", ".batch.csv")
 TABLE_HEADER = "# diegocal-batch"
 #: Threads per process when several jobs share the machine (BLAS would otherwise oversubscribe it).
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+#: The failure of a job whose process died under it.
+DIED = "its process died (killed by the system: out of memory?)"
 
 
 @dataclass(frozen=True)
 class CommandSpec:
-    """How batch runs one diegocal command: its output's suffix and the streams a log needs."""
+    """How batch runs one diegocal command: its output's suffix, the streams a log needs, and where
+    its options dataclass, its job function and the check of what it wrote are (in ``module``)."""
 
     name: str
     suffix: str  # output name = log stem + suffix; "{domain}" is filled in for diagnose
+    module: str
+    args: str  # the options dataclass, built from the parsed parameters
+    run: str  # run(args, command) -> result: load -> library call -> save; raises DiegocalError
     needs: tuple[str, ...] = ()
     directory: bool = False  # the output is a directory (the sgp bundle); its summary file dates it
+    verdict: str | None = None  # verdict(args) -> why the output it wrote is a failure, or None
 
 
+_JOBS = {
+    "stac": ("diegocal.cli.stac_cmd", "StacArgs", "run_stac", "written_verdict"),
+    "sgp-fit": ("diegocal.cli.sgp_cmd", "SgpArgs", "run_sgp", None),
+    "pneumatic-fit": ("diegocal.cli.pneumatic_cmd", "PneumaticArgs", "run_pneumatic", None),
+    "diagnose": ("diegocal.cli.diagnose_cmd", "DiagnoseArgs", "run_diagnose", None),
+    "predict": ("diegocal.cli.predict_cmd", "PredictArgs", "run_predict", None),
+}
 COMMANDS = {
     **{
-        d.fit_command: CommandSpec(d.fit_command, d.model_suffix, d.fit_needs, directory=d.model_is_directory)
+        d.fit_command: CommandSpec(
+            d.fit_command, d.model_suffix, *_JOBS[d.fit_command][:3], d.fit_needs, d.model_is_directory,
+            _JOBS[d.fit_command][3],
+        )
         for d in DOMAINS.values()
     },
-    "diagnose": CommandSpec("diagnose", ".{domain}.diagnosis.yaml"),
-    "predict": CommandSpec("predict", ".prediction.h5"),
+    "diagnose": CommandSpec("diagnose", ".{domain}.diagnosis.yaml", *_JOBS["diagnose"][:3]),
+    "predict": CommandSpec("predict", ".prediction.h5", *_JOBS["predict"][:3]),
 }
 
 
@@ -84,7 +106,9 @@ class BatchOptions:
 
 @dataclass(frozen=True)
 class Job:
-    """One run of a command on one log (and one domain, for diagnose)."""
+    """One run of a command on one log (and one domain, for diagnose).
+
+    problem : why the log cannot be read (the job fails without running), or ""."""
 
     command: str
     log: Path
@@ -93,6 +117,7 @@ class Job:
     inputs: tuple[Path, ...]  # the files the output depends on (the log, the model)
     domain: str | None = None
     up_to_date: bool = False
+    problem: str = ""
 
     @property
     def label(self) -> str:
@@ -111,12 +136,16 @@ class Plan:
 
 @dataclass(frozen=True)
 class Outcome:
-    """How one job ended: status "done", "up to date" or "failed"; ``message`` is the failure's one line."""
+    """How one job ended: status "done", "up to date" or "failed"; ``message`` is the failure's one
+    line (the message of the exception that failed it); ``judged``: failed by what its output says
+    (the output is the job's own, its numbers go in the table); ``warnings``: what the job warned of."""
 
     job: Job
     status: str
     seconds: float = 0.0
     message: str = ""
+    judged: bool = False
+    warnings: tuple[str, ...] = ()
 
     @property
     def failed(self) -> bool:
@@ -143,38 +172,58 @@ def find_logs(source) -> list[Path]:
     return files
 
 
-def _streams(path: Path) -> tuple[str, ...] | str:
-    """The log's stream names, or the reason it is not a log."""
+def _streams(path: Path) -> tuple[str, tuple[str, ...] | str]:
+    """("log", its stream names), ("other", why it is another program's file) or ("unreadable",
+    why the log cannot be read)."""
     from diegocal.io.files import log_streams
 
     try:
-        return log_streams(path)
+        return "log", log_streams(path)
     except DiegocalError as exc:
-        return str(exc).removeprefix(f"{path}: ")
+        reason = str(exc).removeprefix(f"{path}: ")
+        return ("other" if isinstance(exc, LogFormatError) and _readable(path) else "unreadable"), reason
+
+
+def _readable(path: Path) -> bool:
+    """Whether a file that is no diegocal log reads as another kind of file: a CSV, or an HDF5 file
+    that opens (a truncated one does not; nor does a ``.h5`` that is no HDF5 file)."""
+    if path.suffix.lower() == ".csv":
+        return True
+    import h5py
+
+    try:
+        with h5py.File(path, "r"):
+            return True
+    except OSError:
+        return False
 
 
 # ----------------------------------------------------------------------------- planning
 def plan_batch(command: str, source, options: BatchOptions = BatchOptions()) -> Plan:
     """The jobs of ``command`` over the logs of ``source`` (a folder, a glob or one file).
 
-    Raises DiegocalError for an unknown command, a missing model (predict) or when no log applies.
+    Raises DiegocalError for an unknown command, a missing model (predict) or when no log applies;
+    OptionError when ``options.extra`` are not arguments the command takes.
     """
     if command not in COMMANDS:
         raise DiegocalError(f"batch cannot run {command!r}; it runs {', '.join(COMMANDS)}")
     spec = COMMANDS[command]
     needs = _needs(command, options)
+    extra = _extra_params(command, options.extra)
     jobs, skipped = [], {}
     for log in find_logs(source):
-        streams = _streams(log)
-        if isinstance(streams, str):
-            skipped[log] = f"not a diegocal log ({streams})"
+        kind, streams = _streams(log)
+        if kind == "other":
+            skipped[log] = streams
             continue
-        units = _units(command, streams, needs, options)
+        if kind == "unreadable":  # a log that cannot be read is a failure, not "not applicable"
+            jobs.append(_job(spec, log, None, options, extra, problem=streams))
+            continue
+        units = _units(command, streams, needs, extra)
         if isinstance(units, str):
             skipped[log] = units
             continue
-        for domain in units:
-            jobs.append(_job(spec, log, domain, options))
+        jobs.extend(_job(spec, log, domain, options, extra) for domain in units)
     if not jobs:
         reasons = "; ".join(f"{p.name}: {r}" for p, r in list(skipped.items())[:3])
         raise InputFileError(f"{source}: no log that {command} can use ({reasons})")
@@ -194,11 +243,19 @@ def _needs(command: str, options: BatchOptions) -> tuple[str, ...]:
     return domain_record(bundle.kind).predict_needs
 
 
-def _units(command: str, streams, needs, options: BatchOptions):
+def _extra_params(command: str, extra: Sequence[str]) -> dict:
+    """The command's parameters with ``extra`` (what goes to every run), parsed by its own parser
+    with stand-ins for the logs: what the plan needs to know of them (diagnose's ``--domain``,
+    pneumatic-fit's ``--chamber``), and a usage error before any job runs."""
+    positional = ("MODEL", "LOG") if command == "predict" else ("LOG",)
+    return _parse(command, (*positional, *extra))
+
+
+def _units(command: str, streams, needs, extra: dict):
     """The domains to run for one log ([None] for commands without domains), or why none applies."""
     if command == "diagnose":
-        wanted = _option_values(options.extra, "--domain") or list(DOMAINS)
-        domains = [d for d in wanted if d in DOMAINS and all(s in streams for s in DOMAINS[d].streams)]
+        wanted = [extra["domain"]] if extra.get("domain") else list(DOMAINS)
+        domains = [d for d in wanted if all(s in streams for s in DOMAINS[d].streams)]
         if not domains:
             return f"no domain to diagnose (streams: {', '.join(streams) or 'none'})"
         return domains
@@ -206,16 +263,6 @@ def _units(command: str, streams, needs, options: BatchOptions):
     if missing:
         return f"no {', '.join(missing)} stream{'s' if len(missing) > 1 else ''} (needed by {command})"
     return [None]
-
-
-def _option_values(extra: Sequence[str], name: str) -> list[str]:
-    out = []
-    for i, a in enumerate(extra):
-        if a == name and i + 1 < len(extra):
-            out.append(extra[i + 1])
-        elif a.startswith(name + "="):
-            out.append(a.split("=", 1)[1])
-    return out
 
 
 def _without_option(extra: Sequence[str], name: str) -> tuple[str, ...]:
@@ -232,28 +279,28 @@ def _without_option(extra: Sequence[str], name: str) -> tuple[str, ...]:
 
 def output_path(command: str, log: Path, output_dir: Path | None = None, domain: str | None = None) -> Path:
     """Where batch puts ``command``'s output for ``log``: ``<dir>/<log stem><suffix>``."""
-    suffix = COMMANDS[command].suffix.replace("{domain}", domain or "")
+    suffix = COMMANDS[command].suffix.replace(".{domain}", f".{domain}" if domain else "")
     return (output_dir or log.parent) / (log.name.rsplit(".", 1)[0] + suffix)
 
 
-def _job(spec: CommandSpec, log: Path, domain: str | None, options: BatchOptions) -> Job:
+def _job(spec: CommandSpec, log: Path, domain, options: BatchOptions, extra: dict, problem: str = "") -> Job:
     out = output_path(spec.name, log, options.output_dir, domain)
-    extra = options.extra
+    rest = options.extra
     if spec.name == "predict":
         argv = ("predict", str(options.model), str(log), "-o", str(out))
         inputs = (log, options.model)
     else:
         argv = (spec.name, str(log), "-o", str(out))
         inputs = (log,)
-    if spec.name == "diagnose":
-        extra = _without_option(extra, "--domain")
+    if spec.name == "diagnose" and domain is not None:
+        rest = _without_option(rest, "--domain")
         argv += ("--domain", str(domain))
-    if spec.name == "pneumatic-fit" and not _option_values(extra, "--chamber") and "--all" not in extra:
+    if spec.name == "pneumatic-fit" and not extra.get("chamber") and not extra.get("all_chambers"):
         argv += ("--all",)
-    argv += (*extra, "--quiet")
+    argv += (*rest, "--quiet")
     stamp = out / "sgp.yaml" if spec.directory else out
-    fresh = not options.force and _newer(stamp, inputs)
-    return Job(spec.name, log, out, argv, inputs, domain, fresh)
+    fresh = not options.force and not problem and _newer(stamp, inputs)
+    return Job(spec.name, log, out, argv, inputs, domain, fresh, problem)
 
 
 def _newer(output: Path, inputs) -> bool:
@@ -265,47 +312,55 @@ def _newer(output: Path, inputs) -> bool:
         return False
 
 
-# ----------------------------------------------------------------------------- running
-def run_job(job: Job) -> Outcome:
-    """Run one job as its own ``diegocal`` process; never raises (a failure is an Outcome).
+# ----------------------------------------------------------------------------- parsing
+def _parse(command: str, argv: Sequence[str]) -> dict:
+    """``argv`` (after the command's name) parsed by the command's own parser, as the command line
+    parses it: the parameters by name. Raises OptionError for a usage error, DiegocalError for bad
+    input an option's check finds (an output folder that does not exist)."""
+    import typer
 
-    The process is the ordinary command line, so a job behaves exactly as the command typed by
-    hand; its last "error:" line (or its last line) is the failure's reason.
-    """
-    if job.up_to_date:
-        return Outcome(job, "up to date")
-    start = time.perf_counter()
+    from diegocal.cli.app import click_command
+
+    importlib.import_module(COMMANDS[command].module)
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "diegocal", *job.argv], capture_output=True, text=True, check=False, env=_env()
-        )
-    except OSError as exc:
-        return Outcome(job, "failed", time.perf_counter() - start, f"cannot start diegocal: {exc}")
-    seconds = time.perf_counter() - start
-    if proc.returncode == 0:
-        return Outcome(job, "done", seconds)
-    return Outcome(job, "failed", seconds, _reason(proc))
+        with click_command((command,)).make_context(f"diegocal {command}", list(argv)) as ctx:
+            return dict(ctx.params)
+    except typer.TyperException as exc:  # click's usage errors
+        raise OptionError(f"{command} {shlex.join(argv)}: {' '.join(exc.format_message().split())}") from None
 
 
-def _env() -> dict:
-    """This process's environment, with the diegocal it runs first on the path (so that a job runs
-    the same code as the batch, installed or not)."""
-    import diegocal
-
-    root = str(Path(diegocal.__file__).resolve().parent.parent)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
-    return env
+def job_args(job: Job):
+    """The job's options: its arguments parsed by the command's parser into the command's options
+    dataclass (:class:`diegocal.cli.stac_cmd.StacArgs`, ...). Raises OptionError or DiegocalError."""
+    spec = COMMANDS[job.command]
+    return getattr(importlib.import_module(spec.module), spec.args)(**_parse(job.command, job.argv[1:]))
 
 
-def _reason(proc: subprocess.CompletedProcess) -> str:
-    lines = [ln.strip() for ln in (proc.stderr or "").splitlines() + (proc.stdout or "").splitlines() if ln.strip()]
-    errors = [ln for ln in lines if ln.startswith("error:")]
-    if errors:
-        return errors[-1].removeprefix("error:").strip()
-    if proc.returncode < 0:
-        return f"killed by signal {-proc.returncode}" + (" (out of memory?)" if proc.returncode == -9 else "")
-    return lines[-1] if lines else f"exit status {proc.returncode}"
+# ----------------------------------------------------------------------------- running
+def run_job(job: Job, args=None) -> Outcome:
+    """Run one job in this process (``args``: :func:`job_args`, parsed here when None); never raises
+    (a failure is an Outcome carrying the exception's message). An up-to-date job is not run, but
+    its output is checked as a fresh one is."""
+    from diegocal.cli.common import collected_warnings, error_message
+
+    if job.problem:
+        return Outcome(job, "failed", 0.0, job.problem)
+    spec = COMMANDS[job.command]
+    module = importlib.import_module(spec.module)
+    start, warnings, status = time.perf_counter(), (), "up to date"
+    try:
+        args = job_args(job) if args is None else args
+        if not job.up_to_date:
+            with collected_warnings() as logged:
+                result = getattr(module, spec.run)(args, command_line(job))
+            warnings, status = (*logged, *getattr(result, "warnings", ())), "done"
+        why = getattr(module, spec.verdict)(args) if spec.verdict else None
+    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - one job's failure, never the batch's
+        return Outcome(job, "failed", time.perf_counter() - start, error_message(exc), warnings=warnings)
+    seconds = time.perf_counter() - start if status == "done" else 0.0
+    if why is not None:
+        return Outcome(job, "failed", seconds, why, judged=True, warnings=warnings)
+    return Outcome(job, status, seconds, warnings=warnings)
 
 
 def run_batch(
@@ -314,23 +369,29 @@ def run_batch(
     scheduler: str | None = None,
     progress: Callable[[Outcome, int, int], None] | None = None,
 ) -> list[Outcome]:
-    """Run the jobs: ``jobs_n`` at a time on this machine, or on the Dask cluster at ``scheduler``.
+    """Run the jobs: ``jobs_n`` at a time in worker processes on this machine, or on the Dask
+    cluster at ``scheduler``. Every job's arguments are parsed first, so a usage error (OptionError)
+    or an output folder that does not exist (DiegocalError) stops the batch before any job runs.
 
     Returns one Outcome per job, in the jobs' order; ``progress(outcome, done, total)`` is called
-    as each finishes. Raises DiegocalError when the scheduler cannot be reached.
+    as each job that is not up to date finishes. Raises DiegocalError when the scheduler cannot be
+    reached.
     """
+    parsed = [None if j.problem else job_args(j) for j in jobs]
     outcomes: dict[int, Outcome] = {}
-    todo = [(i, j) for i, j in enumerate(jobs) if not j.up_to_date]
-    for i, j in enumerate(jobs):
-        if j.up_to_date:
-            outcomes[i] = Outcome(j, "up to date")
-    total = len(todo)
+    total = sum(not j.up_to_date for j in jobs)
 
     def record(i: int, outcome: Outcome) -> None:
         outcomes[i] = outcome
-        if progress is not None:
-            progress(outcome, len(outcomes) - (len(jobs) - total), total)
+        if progress is not None and not jobs[i].up_to_date:
+            progress(outcome, sum(not jobs[k].up_to_date for k in outcomes), total)
 
+    todo = []
+    for i, (job, args) in enumerate(zip(jobs, parsed, strict=True)):
+        if job.up_to_date or job.problem:  # nothing to run: checked here
+            record(i, run_job(job, args))
+        else:
+            todo.append((i, job, args))
     if todo and scheduler:
         _run_dask(todo, scheduler, record)
     elif todo:
@@ -338,16 +399,44 @@ def run_batch(
     return [outcomes[i] for i in range(len(jobs))]
 
 
-def _run_local(todo, jobs_n: int, record) -> None:
-    from concurrent.futures import ThreadPoolExecutor, as_completed
+def _one_blas_thread() -> None:
+    """Worker initializer when several jobs share the machine: one BLAS thread each, unless the user
+    chose otherwise (set before the worker imports numpy)."""
+    for var in THREAD_VARS:
+        os.environ.setdefault(var, "1")
 
-    if jobs_n > 1:  # one BLAS thread per process, unless the user chose otherwise
-        for var in THREAD_VARS:
-            os.environ.setdefault(var, "1")
-    with ThreadPoolExecutor(max_workers=max(1, jobs_n)) as pool:  # each thread waits on its own process
-        futures = {pool.submit(run_job, job): i for i, job in todo}
+
+def _run_local(todo, jobs_n: int, record) -> None:
+    """The jobs in a pool of ``jobs_n`` worker processes (spawned: a fresh interpreter each). A job
+    whose process dies fails alone: after a death the jobs that were in flight are run again one at
+    a time, so that the one that kills its process is the one that fails."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    def pool(n: int) -> ProcessPoolExecutor:
+        init = _one_blas_thread if jobs_n > 1 else None
+        return ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"), initializer=init)
+
+    again = []
+    with pool(max(1, min(jobs_n, len(todo)))) as workers:
+        futures = {workers.submit(run_job, job, args): (i, job, args) for i, job, args in todo}
         for fut in as_completed(futures):
-            record(futures[fut], fut.result())
+            try:
+                record(futures[fut][0], fut.result())
+            except BrokenProcessPool:
+                again.append(futures[fut])
+    workers = None
+    for i, job, args in sorted(again, key=lambda t: t[0]):
+        workers = workers or pool(1)
+        try:
+            record(i, workers.submit(run_job, job, args).result())
+        except BrokenProcessPool:
+            record(i, Outcome(job, "failed", 0.0, DIED))
+            workers.shutdown()
+            workers = None
+    if workers is not None:
+        workers.shutdown()
 
 
 def _run_dask(todo, address: str, record) -> None:
@@ -360,15 +449,13 @@ def _run_dask(todo, address: str, record) -> None:
     except (OSError, TimeoutError, ValueError) as exc:
         raise DiegocalError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
     with client:
-        futures = client.map(run_job, [job for _, job in todo], pure=False)
-        index = {f.key: i for f, (i, _) in zip(futures, todo, strict=True)}
-        jobs = dict(todo)
-        for fut in as_completed(futures):
-            i = index[fut.key]
+        futures = {client.submit(run_job, job, args, pure=False): (i, job) for i, job, args in todo}
+        for fut in as_completed(list(futures)):
+            i, job = futures[fut]
             try:
                 outcome = fut.result()
             except Exception as exc:  # noqa: BLE001 - a lost worker fails its job, not the batch
-                outcome = Outcome(jobs[i], "failed", 0.0, f"Dask task failed: {type(exc).__name__}: {exc}")
+                outcome = Outcome(job, "failed", 0.0, f"Dask task failed: {type(exc).__name__}: {exc}")
             record(i, outcome)
 
 

@@ -1,7 +1,9 @@
 """The merged table of a batch: one row per job, the numbers that compare sessions side by side.
 
-Each row holds the log, its status (done, up to date, failed), the seconds the run took, the output
-and the failure's reason, then the numbers read back from the output (one reader per command):
+Each row holds the log, its status (done, up to date, failed), the seconds the run took, the output,
+the failure's reason and the job's warnings, then the numbers read back from the output (one reader
+per command; also for a job failed by what its output says, such as a calibration that did not
+converge):
 
     stac           iterations, converged, sigma pots [V], sigma markers [m], gain/bias of every pot
     sgp-fit        samples, in-sample nMSE of every joint, log marginal likelihood
@@ -26,7 +28,7 @@ from diegocal.batch.jobs import TABLE_HEADER, Outcome, Plan
 from diegocal.errors import DiegocalError
 
 #: Columns every row has, before the command's numbers.
-BASE_COLUMNS = ("log", "domain", "status", "seconds", "output", "reason")
+BASE_COLUMNS = ("log", "domain", "status", "seconds", "output", "reason", "warnings")
 #: The columns a one-page view (the report) shows per command, besides log, status and reason
 #: (a trailing * matches every column that starts so).
 HEADLINE = {
@@ -94,39 +96,36 @@ def _sgp(path: Path) -> dict:
 
 
 def _pneumatic(path: Path) -> dict:
+    from diegocal.api import drift_summary
     from diegocal.io import load_yaml
 
     d = load_yaml(path)
     drifts = {n: c.get("drift_2s") for n, c in (d.get("chambers") or {}).items() if c.get("drift_2s") is not None}
-    v = 100 * np.array(list(drifts.values()), float)
+    drift = drift_summary(drifts.values())
     row = {
         "chambers": len(d.get("chambers") or {}),
         "skipped": len((d.get("meta") or {}).get("skipped") or {}),
-        "drift 2 s median [%]": float(np.median(v)) if v.size else None,
-        "drift 2 s max [%]": float(v.max()) if v.size else None,
-        "chambers < 4 %": int((v < 4).sum()),
-        "chambers < 10 %": int((v < 10).sum()),
+        "drift 2 s median [%]": 100 * drift["median"] if drifts else None,
+        "drift 2 s max [%]": 100 * drift["max"] if drifts else None,
+        "chambers < 4 %": drift["below 4 %"],
+        "chambers < 10 %": drift["below 10 %"],
     }
     row.update({f"drift 2 s {n} [%]": 100 * float(x) for n, x in drifts.items()})
     return row
 
 
 def _diagnose(path: Path) -> dict:
+    from diegocal.api import pooled_heldout_rmse
     from diegocal.io import load_yaml
 
     d = load_yaml(path)
-    base, ext = d.get("baseline") or {}, d.get("extended") or {}
-    units = base.get("units") or {}
     row = {}
-    for unit in dict.fromkeys(units.values() or [base.get("unit", "")]):  # pooled per unit, never across
-        for name, block in (("baseline", base), ("extended", ext)):
-            x = [
-                v for c, v in (block.get("heldout_rmse") or {}).items() if v is not None and units.get(c, unit) == unit
-            ]
-            row[f"held-out RMSE {name} [{unit}]"] = float(np.sqrt(np.mean(np.square(x)))) if x else None
+    for unit, pair in pooled_heldout_rmse(d).items():  # pooled per unit, never across
+        for name, value in zip(("baseline", "extended"), pair, strict=True):
+            row[f"held-out RMSE {name} [{unit}]"] = None if np.isnan(value) else value
     findings = d.get("findings") or []
     row["findings"] = "; ".join(f"{f['cause']} on {f['channel']}" for f in findings) or "none"
-    row["baseline model"] = base.get("model")
+    row["baseline model"] = (d.get("baseline") or {}).get("model")
     return row
 
 
@@ -171,8 +170,9 @@ def rows(outcomes: list[Outcome]) -> list[dict]:
             "seconds": round(o.seconds, 2) if o.status == "done" else "",
             "output": str(job.output),
             "reason": o.message,
+            "warnings": "; ".join(o.warnings),
         }
-        if not o.failed:
+        if not o.failed or o.judged:
             row.update(metrics(job.command, job.output))
             if job.command == "predict":
                 try:

@@ -1,7 +1,8 @@
 """`diegocal batch COMMAND FOLDER|GLOB`: one command over every log, then a merged table.
 
-parse → :func:`diegocal.batch.plan_batch` → :func:`diegocal.batch.run_batch` (processes here, or a
-Dask cluster) → merged table (CSV) and its report page (PDF) → summary; exit 1 if any log failed.
+parse → :func:`diegocal.batch.plan_batch` → :func:`diegocal.batch.run_batch` (each job's arguments
+parsed by its command's parser, its job function run in a worker process here or on a Dask cluster)
+→ merged table (CSV) and its report page (PDF) → summary; exit 1 if any log failed.
 """
 
 from __future__ import annotations
@@ -98,6 +99,8 @@ def batch(
         tail = f"{outcome.seconds:.1f} s" if not outcome.failed else outcome.message
         label, tail = escape(outcome.job.label), escape(tail)
         errors.print(f"[dim]batch \\[{done}/{total}][/] {outcome.status:<6} {label}  {tail}", highlight=False)
+        for line in outcome.warnings:
+            errors.print(f"  [yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)
 
     outcomes = run_batch(plan.jobs, jobs, scheduler, progress)
     csv_path = table or (output_dir or _table_dir(plan)) / f"{command}.batch.csv"

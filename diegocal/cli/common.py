@@ -145,6 +145,18 @@ def split_words(text: str | None) -> tuple[str, ...]:
     return tuple(w.strip() for w in (text or "").split(",") if w.strip())
 
 
+def error_message(exc: BaseException) -> str:
+    """The one line that says what went wrong: a library error's own message, a file system
+    error's file and reason, anything else as an internal error with its type."""
+    if isinstance(exc, DiegocalError):
+        return str(exc)
+    if isinstance(exc, OSError):
+        return f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
+    if isinstance(exc, MemoryError):
+        return "out of memory"
+    return f"internal error: {type(exc).__name__}: {exc}"
+
+
 def cli_errors(fn):
     """Turn library errors into one line and exit 1 (STYLE.md: the CLI alone does this); a bad
     option value the library finds (:class:`~diegocal.errors.OptionError`) exits 2.
@@ -160,16 +172,14 @@ def cli_errors(fn):
             raise
         except OptionError as exc:  # a bad option value the parser could not see: a usage error
             raise typer.BadParameter(str(exc)) from None
-        except DiegocalError as exc:
-            raise fail(str(exc)) from None
-        except OSError as exc:
-            raise fail(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
         except KeyboardInterrupt:
             raise fail("interrupted; no output was written") from None
+        except (DiegocalError, OSError, MemoryError) as exc:
+            raise fail(error_message(exc)) from None
         except Exception as exc:  # noqa: BLE001 - the user must never see a traceback
             if os.environ.get("DIEGOCAL_DEBUG"):
                 raise
-            raise fail(f"internal error: {type(exc).__name__}: {exc} (set DIEGOCAL_DEBUG=1 for a traceback)") from None
+            raise fail(f"{error_message(exc)} (set DIEGOCAL_DEBUG=1 for a traceback)") from None
 
     return wrapper
 

@@ -1,12 +1,16 @@
 """`diegocal batch`: one command over a folder of logs, twice in a row, locally and on a Dask
-LocalCluster; failures of one log are reported in one line and do not stop the others."""
+LocalCluster; failures of one log are reported in one line and do not stop the others; a job runs
+in-process through the library (no `diegocal` subprocess whose text is parsed back), and a failure
+is never hidden: a calibration that did not converge, a log that cannot be read (#32)."""
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -59,7 +63,8 @@ def test_plan_takes_only_the_logs_a_command_can_use(source):
     assert [j.log.name for j in plan.jobs] == ["session1.h5", "session2.h5"]
     reasons = {p.name: r for p, r in plan.not_applicable.items()}
     assert "needed by stac" in reasons["swing.h5"]
-    assert "not a diegocal log" in reasons["camera.h5"] and "not a diegocal log" in reasons["notes.csv"]
+    assert "expected 'diegocal-log'" in reasons["camera.h5"] and "not a diegocal CSV log" in reasons["notes.csv"]
+    assert all(r.count("not a diegocal") <= 1 and str(source) not in r for r in reasons.values())  # said once
     diag = plan_batch("diagnose", str(source / "*.h5"))  # a glob; one job per log and domain
     assert {(j.log.name, j.domain) for j in diag.jobs} == {
         ("session1.h5", "kinematics"),
@@ -78,14 +83,14 @@ def test_derived_files_are_never_taken_for_logs(source, tmp_path):
 
 def test_stac_writes_no_side_file_beside_its_output(source, tmp_path):
     d = _copy(source, tmp_path, ["session1.h5"])
-    r = runner.invoke(app, ["stac", str(d / "session1.h5"), "--max-iterations", "3", "-q"])
+    r = runner.invoke(app, ["stac", str(d / "session1.h5"), "--max-iterations", "3", "--allow-unconverged", "-q"])
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in d.iterdir()) == ["session1.calib.yaml", "session1.h5"]
 
 
 def test_batch_twice_in_a_row_with_two_jobs(source, tmp_path):
     d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5", "notes.csv"])
-    first = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5")
+    first = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5", "--allow-unconverged")
     assert first.exit_code == 0, first.output
     outputs = [d / "session1.calib.yaml", d / "session2.calib.yaml"]
     stamps = [p.stat().st_mtime_ns for p in outputs]
@@ -95,13 +100,13 @@ def test_batch_twice_in_a_row_with_two_jobs(source, tmp_path):
     assert all(0 < float(r["sigma markers [m]"]) < 0.01 for r in rows)
     assert (d / "stac.batch.pdf").read_bytes().startswith(b"%PDF")
     # outputs beside the logs are not taken for logs; nothing is redone
-    second = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5")
+    second = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5", "--allow-unconverged")
     assert second.exit_code == 0, second.output
     assert [p.stat().st_mtime_ns for p in outputs] == stamps
     assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]] == ["up to date", "up to date"]
     # a log newer than its output is redone, as make would
     os.utime(d / "session2.h5", None)
-    third = _batch("stac", d, "--", "--max-iterations", "5")
+    third = _batch("stac", d, "--", "--max-iterations", "5", "--allow-unconverged")
     assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]] == ["up to date", "done"], third.output
 
 
@@ -112,7 +117,7 @@ def test_one_failure_does_not_stop_the_others(source, tmp_path):
         data[:, 0] = np.nan
         f["markers/data"][...] = data
     out = tmp_path / "out"
-    r = _batch("stac", d, "-o", out, "-q", "--", "--max-iterations", "3")
+    r = _batch("stac", d, "-o", out, "-q", "--", "--max-iterations", "3", "--allow-unconverged")
     assert r.exit_code == 1
     line = one_line_error(r)
     assert "session2.h5" in line and "never seen" in line
@@ -186,7 +191,7 @@ def test_make_calibrate_twice(source, tmp_path):
     """mk/batch.mk: `make -j2 calibrate LOGS=folder` fits every kinematic log once; a rerun fits nothing."""
     d = _copy(source, tmp_path, ["session1.h5", "session2.h5", "swing.h5"])
     out = tmp_path / "out"
-    cmd, env = _make("calibrate", d, out, "BATCH_ARGS=--max-iterations 5")
+    cmd, env = _make("calibrate", d, out, "BATCH_ARGS=--max-iterations 5 --allow-unconverged")
     first = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     assert first.returncode == 0, first.stderr
     fitted = sorted(p.name for p in out.glob("*.calib.yaml"))
@@ -251,3 +256,115 @@ def test_make_identify_and_pneumatic_models_twice_on_a_mixed_folder(source, tmp_
         assert again.returncode == 0, again.stderr
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     assert [r["status"] for r in read_table(out / "pneumatic-fit.batch.csv")[2]] == ["up to date"]
+
+
+def test_an_unconverged_calibration_is_a_failure(source, tmp_path):
+    """#32: a calibration that stopped before it converged counts as failed (it used to be "done",
+    "failed 0"), in the count, the table and the exit status, also when it is up to date; its numbers
+    stay in the table. --allow-unconverged (after --) accepts it."""
+    d = _copy(source, tmp_path, ["session1.h5"])
+    out = tmp_path / "out"
+    r = _batch("stac", d, "-o", out, "--", "--max-iterations", "2")
+    assert r.exit_code == 1
+    assert re.search(r"failed\s+│\s+1", r.output) and re.search(r"done\s+│\s+0", r.output)
+    row = read_table(out / "stac.batch.csv")[2][0]
+    assert row["status"] == "failed" and "did not converge" in row["reason"] and row["converged"] == "False"
+    assert row["iterations"] == "2"
+    again = _batch("stac", d, "-o", out, "-q", "--", "--max-iterations", "2")  # up to date: not rerun, still failed
+    assert again.exit_code == 1 and "did not converge" in one_line_error(again)
+    assert read_table(out / "stac.batch.csv")[2][0]["status"] == "failed"
+    allowed = _batch("stac", d, "-o", out, "-q", "--", "--max-iterations", "2", "--allow-unconverged")
+    assert allowed.exit_code == 0, allowed.output
+    assert read_table(out / "stac.batch.csv")[2][0]["status"] == "up to date"
+
+
+def test_a_log_that_cannot_be_read_is_a_failure(source, tmp_path):
+    """#32: a truncated HDF5 log and a .h5 that is no HDF5 file fail (exit 1, in the table), while
+    another program's files are left out as not applicable; no message says the same thing twice."""
+    d = _copy(source, tmp_path, ["session1.h5", "camera.h5", "notes.csv"])
+    (d / "cut.h5").write_bytes((source / "session2.h5").read_bytes()[:4000])
+    (d / "empty.h5").write_bytes(b"")
+    out = tmp_path / "out"
+    r = _batch("stac", d, "-o", out, "--", "--max-iterations", "3", "--allow-unconverged")
+    assert r.exit_code == 1
+    rows = {Path(x["log"]).name: x for x in read_table(out / "stac.batch.csv")[2]}
+    assert rows["session1.h5"]["status"] == "done"
+    assert rows["cut.h5"]["status"] == "failed" and "cannot read HDF5 file" in rows["cut.h5"]["reason"]
+    assert rows["empty.h5"]["status"] == "failed" and "not a diegocal log" in rows["empty.h5"]["reason"]
+    assert set(rows) == {"session1.h5", "cut.h5", "empty.h5"}  # camera.h5 and notes.csv: not applicable
+    failed = [line for line in r.output.splitlines() if line.startswith("failed:")]
+    assert len(failed) == 2 and re.search(r"failed\s+│\s+2", r.output)
+    for text in [*failed, *(x["reason"] for x in rows.values())]:
+        assert text.count("not a diegocal") <= 1 and text.count("cannot read") <= 1, text
+    assert _batch("stac", d, "--list").output.split() == [str(d / n) for n in ("cut.h5", "empty.h5", "session1.h5")]
+
+
+def test_a_job_runs_in_process_and_carries_the_exception_message(source, tmp_path, monkeypatch):
+    """#30: a job is the command's job function called with the options its own parser made, and a
+    failure's message is the exception's, not text parsed back from a `diegocal` process."""
+    import subprocess as sp
+
+    from diegocal.batch import job_args, run_job
+    from diegocal.cli.stac_cmd import StacArgs, run_stac
+    from diegocal.errors import DiegocalError, OptionError
+
+    def no_process(*args, **kwargs):
+        raise AssertionError("batch started a process")
+
+    monkeypatch.setattr(sp, "run", no_process)
+    monkeypatch.setattr(sp, "Popen", no_process)
+    d = _copy(source, tmp_path, ["session1.h5", "swing.h5"])
+    job = plan_batch("stac", d, BatchOptions(extra=("--loss", "huber", "--max-iterations", "3"))).jobs[0]
+    args = job_args(job)
+    assert isinstance(args, StacArgs) and (args.loss, args.max_iterations, args.quiet) == ("huber", 3, True)
+    assert run_job(job, args).message.startswith("the stac fit did not converge")  # what it wrote says so
+    swing = plan_batch("sgp-fit", d).jobs[0]
+    wrong = replace(job, log=swing.log, argv=("stac", str(swing.log), "-o", str(tmp_path / "s.calib.yaml")))
+    with pytest.raises(DiegocalError) as raised:
+        run_stac(job_args(wrong))
+    outcome = run_job(wrong)
+    assert outcome.failed and outcome.message == str(raised.value) and "needed by stac" in outcome.message
+    with pytest.raises(OptionError, match="'cauchy' is not one of"):  # the command's own parser
+        plan_batch("stac", d, BatchOptions(extra=("--loss", "cauchy")))
+
+
+def test_make_goes_on_past_a_bad_log_and_writes_the_table(source, tmp_path):
+    """#32: `make -j2 calibrate` with one log that cannot be read: the others are fitted, the merged
+    table is written (the bad log failed in it) and make exits non-zero."""
+    d = _copy(source, tmp_path, ["session1.h5", "session2.h5"])
+    (d / "bad.h5").write_bytes((source / "session1.h5").read_bytes()[:4000])
+    out = tmp_path / "out"
+    cmd, env = _make("calibrate", d, out, "BATCH_ARGS=--max-iterations 3 --allow-unconverged")
+    run = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    assert run.returncode != 0
+    assert sorted(p.name for p in out.glob("*.calib.yaml")) == ["session1.calib.yaml", "session2.calib.yaml"]
+    rows = {Path(r["log"]).name: r["status"] for r in read_table(out / "stac.batch.csv")[2]}
+    assert rows == {"bad.h5": "failed", "session1.h5": "up to date", "session2.h5": "up to date"}
+    assert "cannot read HDF5 file" in run.stderr
+
+
+def test_make_one_output_by_its_name(source, tmp_path):
+    """#32: `make BATCH_OUT/<log>.calib.yaml` and, for the logs of LOGS, `make out/<log>.calib.yaml`
+    (the names README gives) are targets."""
+    d = _copy(source, tmp_path, ["session1.h5"])
+    for target, extra in ((tmp_path / "b" / "session1.calib.yaml", (f"BATCH_OUT={tmp_path / 'b'}",)),
+                          ("out/session1.calib.yaml", ())):
+        cmd, env = _make(str(target), d, tmp_path / "b", "-n")
+        cmd = [c for c in cmd if not c.startswith("BATCH_OUT=")] + list(extra)
+        plan = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+        assert plan.returncode == 0, plan.stderr
+        assert f"stac {d / 'session1.h5'} -o {target}" in plan.stdout
+
+
+def test_reading_the_makefile_runs_no_python(tmp_path):
+    """#32: a fresh clone has no .venv: `make -n demo` (and every goal that needs no chamber list)
+    reads the Makefile without running its Python, so it prints no "python: not found" line."""
+    if shutil.which("make") is None:
+        pytest.skip("no make")
+    nowhere = tmp_path / "no-venv" / "bin"
+    for goal in ("demo", "test", "calibrate"):
+        run = subprocess.run(
+            ["make", "-n", "-C", str(REPO), goal, f"BIN={nowhere}", f"STAMP={tmp_path / 'stamp'}", "DIEGOCAL=true"],
+            capture_output=True, text=True, check=False,
+        )
+        assert run.returncode == 0 and run.stderr == "", (goal, run.stderr)

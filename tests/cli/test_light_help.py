@@ -120,6 +120,13 @@ def test_a_help_imports_only_its_own_command_module():
     assert modules["stac --help"] == {"diegocal.cli.stac_cmd"}
 
 
+def test_a_group_help_does_not_load_the_option_coercion():
+    """typer coerces option values with pydantic (0.1 s to import): a help passes through the
+    `diegocal` group, whose --help flag must be read without it (#32: help under 0.5 s)."""
+    for modules in run_helps([("--help",), ("stac", "--help"), ("simulate", "kinematics", "--help")]).values():
+        assert "pydantic" not in modules and "typer._adapters" not in modules
+
+
 def test_the_command_table_is_the_commands_own():
     """COMMANDS names every command, the module that defines it and its help's first paragraph."""
     from diegocal.cli.app import COMMANDS as TABLE
