@@ -25,6 +25,9 @@ per-iteration cost and noise levels; what the data could not determine::
     gauges:         # joint zeros the markers cannot fix
       - {joint: r_wrist, pot: r_wrist, kind: leaf, reason: "every marker joint r_wrist moves is ..."}
 
+and what a fit wrote off: ``rejected: {frames, reason}`` (single frames, robust losses) and, for
+static poses, ``rejected_poses: {poses: [{pose, frame, samples, disagreement}], reason}``.
+
 Files written before the header existed carry ``meta: {log, robot, command, created}`` instead, and
 older ones a ``prediction`` list (cross-sensor MAE rows that ``diegocal predict`` used to add; it no
 longer writes into the model it reads).
@@ -56,6 +59,13 @@ POT_UNITS = {"rotary": ("V/rad", "V"), "linear": ("V/m", "V"), "tendon": ("V/m",
 REJECTED_REASON = (
     "their pots disagree, far beyond their noise (chi-square tail 1e-6), with the joint angles their "
     "markers need: the markers are not this frame's (another pose's mocap frame?); written off as occluded"
+)
+
+#: Why calib.yaml's ``rejected_poses`` were written off (static-pose logs; stac/poses.py).
+REJECTED_POSES_REASON = (
+    "the pose's markers disagree with its pots, at a calibration fitted without them, far beyond the noise "
+    "of the other poses (chi-square tail 1e-6): another pose's mocap frame (a drifting clock?); its markers "
+    "are written off as occluded"
 )
 
 #: Why calib.yaml lists a sensor type under ``sigma: unresolved`` (stac/qphase.py floor_factor).
@@ -100,9 +110,12 @@ class Calibration:
     unobservable : ({pot, joints, reason}, ...) pots kept at their nominal gain and bias
     gauges : ({joint, pot, kind, reason}, ...) joint zeros fixed by keeping a pot's bias nominal
     rejected : frame indices (0-based, in the fitted log) whose markers a robust fit wrote off
+        (:func:`diegocal.stac.robust.gross_frames`)
+    rejected_poses : ({pose, frame, samples, disagreement}, ...) static poses whose markers were
+        written off as another pose's (:mod:`diegocal.stac.poses`): pose index, its first frame
+        (0-based), its samples, its disagreement over the threshold (> 1)
     sigma_unresolved : ({group, reason}, ...) sensor types whose σ the data do not resolve (held
         at its detection limit, :func:`diegocal.stac.qphase.floor_factor`)
-        (:func:`diegocal.stac.robust.gross_frames`)
     header : the bundle header (:func:`diegocal.io.bundle.header`), written first
     pot_units : ((gain unit, bias unit), ...) per pot (:data:`POT_UNITS`); () when not known
     """
@@ -129,6 +142,7 @@ class Calibration:
     unobservable: tuple = ()
     gauges: tuple = ()
     rejected: tuple = ()
+    rejected_poses: tuple = ()
     sigma_unresolved: tuple = ()
     header: dict = field(default_factory=dict)
     pot_units: tuple = ()
@@ -210,6 +224,8 @@ class Calibration:
             out["gauges"] = [dict(g) for g in self.gauges]
         if self.rejected:
             out["rejected"] = {"frames": [int(f) for f in self.rejected], "reason": REJECTED_REASON}
+        if self.rejected_poses:
+            out["rejected_poses"] = {"poses": [dict(r) for r in self.rejected_poses], "reason": REJECTED_POSES_REASON}
         if self.meta:
             out["meta"] = dict(self.meta)
         if self.terms:
@@ -241,6 +257,7 @@ class Calibration:
                 unobservable=tuple(dict(u) for u in (data.get("unobservable") or ())),
                 gauges=tuple(dict(g) for g in (data.get("gauges") or ())),
                 rejected=tuple(int(f) for f in ((data.get("rejected") or {}).get("frames") or ())),
+                rejected_poses=tuple(dict(r) for r in ((data.get("rejected_poses") or {}).get("poses") or ())),
                 sigma_unresolved=tuple(dict(u) for u in (sigma.get("unresolved") or ())),
                 header={k: data[k] for k in HEADER_KEYS if k in data},
             )

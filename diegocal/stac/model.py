@@ -151,6 +151,7 @@ class Observation:
         self.unobservable: tuple = ()  # ({pot, joints, reason}, ...) set by check_observable
         self.gauges: tuple = ()  # ({joint, pot, kind, reason}, ...) set by check_observable
         self.rejected = np.zeros(0, dtype=int)  # frames whose markers a robust fit wrote off
+        self.rejected_poses: tuple = ()  # static poses whose markers were written off (poses.py)
         self.sparsity = self._sparsity()
 
     def _sparsity(self) -> Sparsity:
@@ -199,6 +200,22 @@ class Observation:
         out.markers = np.where(frames[:, None, None], np.nan, self.markers)
         out.valid = self.valid & ~frames[:, None]
         out.rejected = np.union1d(self.rejected, np.flatnonzero(frames)).astype(int)
+        return out
+
+    def without_poses(self, frames: np.ndarray) -> Observation:
+        """The same observation with every marker of ``frames`` (T,) bool written off (as if
+        occluded), not recorded in ``rejected``: the frames of static poses filed with another
+        pose's markers (:mod:`diegocal.stac.poses`), listed as poses instead."""
+        out = copy.copy(self)
+        out.markers = np.where(frames[:, None, None], np.nan, self.markers)
+        out.valid = self.valid & ~frames[:, None]
+        return out
+
+    def with_rejected_poses(self, records: tuple) -> Observation:
+        """The same observation listing ``records`` ({pose, frame, samples, disagreement}, ...)
+        as the static poses whose markers were written off."""
+        out = copy.copy(self)
+        out.rejected_poses = tuple(records)
         return out
 
     # ------------------------------------------------------------------ checks
@@ -456,6 +473,7 @@ class Observation:
             unobservable=self.unobservable,
             gauges=self.gauges,
             rejected=tuple(int(f) for f in self.rejected),
+            rejected_poses=tuple(dict(r) for r in self.rejected_poses),
         )
         return cal if fit is None else replace(cal, fit=fit)
 

@@ -63,6 +63,8 @@ class StacOptions:
     marker_seed : 'origin' (markers start at their link origins, §2.7.1) or 'nominal' (sensors.yaml)
     joint : try a joint Gauss-Newton step on (q, pot gains/biases) each iteration (joint_step.py)
     anderson : depth of the Anderson acceleration of the alternation (0 = plain alternation)
+    check_poses : STAC on a static-pose log writes off the poses whose markers disagree with their
+        pots beyond the other poses' noise, and refits (:mod:`.poses`)
     on_iteration : optional callback(iteration, Calibration) after each outer iteration (benchmarks)
     """
 
@@ -80,4 +82,5 @@ class StacOptions:
     marker_seed: str = "origin"
     anderson: int = 0
     joint: bool = True
+    check_poses: bool = True
     on_iteration: Callable | None = None

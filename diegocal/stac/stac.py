@@ -71,10 +71,12 @@ from diegocal.stac import robust
 from diegocal.stac.calibration import FitInfo, unresolved
 from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
+from diegocal.stac.poses import write_off_foreign_poses
 from diegocal.stac.pphase import p_phase
 from diegocal.stac.qphase import Noise, normal_equations, pot_sigmas, q_step, resolvable, rho
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 from diegocal.stac.robust import LOSSES, REDESCENDING
+from diegocal.stac.static import static_poses
 
 SCHEDULES = ("lm-iter", "lm-batch", "bfgs")
 #: σ is re-estimated only once the cost at fixed σ moves by less than this (relative). Updating
@@ -238,24 +240,17 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
 
 def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
     t0 = time.perf_counter()
-    obs = Observation(log, robot)
-    obs.check_observable()
+    base = Observation(log, robot)
+    base.check_observable()
     history: list[IterationRecord] = []
-    if options.loss == "linear":
-        fine = _fit(obs, obs.nominal(options.marker_seed), options, t0, history)
-    else:
-        # the convex (Huber) fit first; frames filed with markers not their own have their markers
-        # written off and the fit is redone (robust.py); then a redescending loss from there
-        huber = replace(options, loss="huber")
-        for _ in range(MAX_REJECTIONS):
-            fine = _fit(obs, obs.nominal(options.marker_seed), huber, t0, history)
-            gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, options.batch_size))
-            if not gross.any():
-                break
-            obs = obs.without_markers(gross)
-        if options.loss != "huber":
-            stage = _alternate(obs, fine.params, fine.q, fine.sigma, options, t0, history, fine.lam)
-            fine = replace(stage, unresolved=fine.unresolved)  # σ stays the Huber stage's
+
+    def refit(obs: Observation):
+        return _robust_fit(obs, options, t0, history)
+
+    obs, fine = refit(base)
+    poses = static_poses(log) if options.check_poses else None
+    if poses is not None:  # static poses filed with another pose's markers (poses.py)
+        obs, fine = write_off_foreign_poses(base, obs, fine, poses, refit, options)
     params, sigma, q = fine.params, fine.sigma, fine.q
     # standard errors with q marginalised (the Schur complement of the last joint step, one
     # converged iteration from the solution), not the p-phase's conditional-on-q ones, which
@@ -273,6 +268,26 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
 
 #: Passes of "write off the markers of gross frames and fit again" (robust losses only).
 MAX_REJECTIONS = 3
+
+
+def _robust_fit(obs: Observation, options: StacOptions, t0: float, history: list) -> tuple[Observation, _Stage]:
+    """The fit under ``options.loss`` from the nominal θ; returns it with its Observation (under a
+    robust loss, with the markers of gross frames written off)."""
+    if options.loss == "linear":
+        return obs, _fit(obs, obs.nominal(options.marker_seed), options, t0, history)
+    # the convex (Huber) fit first; frames filed with markers not their own have their markers
+    # written off and the fit is redone (robust.py); then a redescending loss from there
+    huber = replace(options, loss="huber")
+    for _ in range(MAX_REJECTIONS):
+        fine = _fit(obs, obs.nominal(options.marker_seed), huber, t0, history)
+        gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, options.batch_size))
+        if not gross.any():
+            break
+        obs = obs.without_markers(gross)
+    if options.loss != "huber":
+        stage = _alternate(obs, fine.params, fine.q, fine.sigma, options, t0, history, fine.lam)
+        fine = replace(stage, unresolved=fine.unresolved)  # σ stays the Huber stage's
+    return obs, fine
 
 
 def _fit(obs: Observation, params: Params, options: StacOptions, t0: float, history: list) -> _Stage:

@@ -1,7 +1,7 @@
 """Static-pose calibrations (issue #15): a UR5 (example-robot-data) held still in tens of poses,
 encoders with gain 1, a rigid cluster of four markers on its tool, the mocap frame unknown. STAC
-recovers the joint offsets against the simulator's truth; a robust loss writes off the poses filed
-with another pose's mocap frame (exactly those); `stac --cv` prints the leave-one-pose-out marker
+recovers the joint offsets against the simulator's truth and writes off the poses filed with
+another pose's mocap frame (exactly those); `stac --cv` prints the leave-one-pose-out marker
 error, close to the error the true calibration itself makes, with the wrong poses standing out."""
 
 from __future__ import annotations
@@ -71,15 +71,18 @@ def test_static_poses_recover_the_joint_offsets(ur5_dir):
 
 
 @pytest.mark.parametrize("wrong", [1, 3])
-def test_robust_loss_writes_off_the_poses_with_another_poses_markers(ur5_dir, wrong):
+def test_poses_with_another_poses_markers_are_written_off(ur5_dir, wrong):
     robot = load_robot(ur5_dir)
     log = simulate_static_poses(robot, StaticPoseOptions(n_poses=30, wrong=wrong), np.random.default_rng(2))
     bad = log.truth.effects[0]["values"]["poses"]
-    gaussian = calibrate(log.without_truth(), robot).calibration
-    assert np.abs(_offsets(log, robot, gaussian)[0]).max() > 0.02  # one wrong pose is enough to spoil it
-    for loss in ("huber", "tukey"):
+    unchecked = calibrate(log.without_truth(), robot, StacOptions(check_poses=False)).calibration
+    assert np.abs(_offsets(log, robot, unchecked)[0]).max() > 0.02  # one wrong pose is enough to spoil it
+    # a robust loss's check of single frames finds them too (one sample per pose: frame k is pose k)
+    frames = calibrate(log.without_truth(), robot, StacOptions(loss="huber", check_poses=False)).calibration
+    assert list(frames.rejected) == bad
+    for loss in ("linear", "tukey"):
         cal = calibrate(log.without_truth(), robot, StacOptions(loss=loss)).calibration
-        assert list(cal.rejected) == bad  # one sample per pose: frame k is pose k
+        assert [r["pose"] for r in cal.rejected_poses] == bad and not cal.rejected
         err, z = _offsets(log, robot, cal)
         assert np.all(np.abs(z) < 4.0) and np.abs(err).max() < 0.01, (loss, err, z)
 
