@@ -31,7 +31,7 @@ def _run(*args):
 def fitted(logs, tree_dir):
     d, _ = logs
     res = _run(
-        "stac", d / "train.h5", "--robot", tree_dir, "--max-iterations", 20, "--joint-angles", d / "q.h5"
+        "stac", d / "train.h5", "--robot", tree_dir, "--joint-angles", d / "q.h5"
     )
     assert res.exit_code == 0, res.output
     assert "−log-likelihood, eq. 2.5 (nats" in " ".join(res.output.split())  # the cost says what it is
@@ -125,7 +125,7 @@ def test_unknown_pot_and_marker_names_are_ignored_with_one_line(logs, tree_dir, 
     pots = synth.make_stream(p.names + ("bogus",), np.column_stack([p.data, p.data[:, 0]]))
     markers = synth.make_stream(m.names + (m.names[0] + "x",), np.concatenate([m.data, m.data[:, :1]], axis=1))
     save_log(log.with_streams(pots=pots, markers=markers).without_truth(), tmp_path / "extra.h5")
-    res = _run("stac", tmp_path / "extra.h5", "--robot", tree_dir, "--quiet", "--max-iterations", 3)
+    res = _run("stac", tmp_path / "extra.h5", "--robot", tree_dir, "--quiet")
     assert res.exit_code == 0, res.output
     warnings = [line for line in res.output.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1, res.output

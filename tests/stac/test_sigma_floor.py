@@ -8,8 +8,8 @@ import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
-from diegocal.cli.common import robot_for_log
 from diegocal.io import load_log, load_yaml
+from diegocal.robot.resolve import robot_for_log
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.qphase import floor_factor
 from diegocal.stac.result import StacOptions
