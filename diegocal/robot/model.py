@@ -49,6 +49,9 @@ class Robot:
     directory : Path or None
     locked : {joint: configuration} of the URDF's joints held still in ``model``
     source : the directory or URDF file it was loaded from (default: ``directory``)
+    continuous : names of the joints that are continuous in the URDF: the model gives them the
+        limits ±π (:mod:`diegocal.robot.urdf`), but they turn without end, so fits must not clip
+        their angles to those limits (a wrist that has turned once more reads 2π further on)
 
     ``points``, ``points_jacobian`` and ``link_poses`` work on a Pinocchio ``Data`` of their own
     per call, so one Robot may serve several threads (``--jobs``); ``self.data`` is a spare one
@@ -63,6 +66,7 @@ class Robot:
         directory: Path | None = None,
         locked: dict | None = None,
         source: Path | None = None,
+        continuous=(),
     ):
         for j in range(1, model.njoints):
             if model.joints[j].nq != 1 or model.joints[j].nv != 1:
@@ -81,6 +85,8 @@ class Robot:
         self.source: Path | None = source if source is not None else directory
         self.joint_names: tuple[str, ...] = tuple(model.names[1:])
         self._joint_index = {n: i for i, n in enumerate(self.joint_names)}
+        #: joints of ``model`` that are continuous in the URDF (no limit on their angle)
+        self.continuous: frozenset = frozenset(continuous) & frozenset(self.joint_names)
         self.lower = np.array(model.lowerPositionLimit, dtype=float)
         self.upper = np.array(model.upperPositionLimit, dtype=float)
         if not model.existFrame(sensors.base_link):
@@ -89,6 +95,20 @@ class Robot:
             )
         self.base_frame = self.frame_id(sensors.base_link)
         self._check_sensor_names()
+
+    def with_model(self, model: pin.Model, sensors: SensorConfig | None = None) -> Robot:
+        """The same robot (name, directory, source, locked and continuous joints) with another
+        Pinocchio model of the same joints, or other sensors: a variant with shifted joint origins
+        or added markers."""
+        return Robot(
+            model,
+            self.sensors if sensors is None else sensors,
+            self.name,
+            self.directory,
+            locked=self.locked,
+            source=self.source,
+            continuous=self.continuous,
+        )
 
     @property
     def reference(self) -> str:
@@ -339,7 +359,8 @@ def load_robot(source, joints=None) -> Robot:
     keep = (used & known) or None  # nothing named: every one-DoF joint
     reduction = reduce_model(model, keep, sensors.locked)
     name = model.name or (directory.name if directory is not None else urdf.stem)
-    return Robot(reduction.model, sensors, name=name, directory=directory, locked=reduction.locked, source=source)
+    return Robot(reduction.model, sensors, name=name, directory=directory, locked=reduction.locked, source=source,
+                 continuous=loaded.continuous)
 
 
 def data_joints(log) -> set[str]:

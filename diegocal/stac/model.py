@@ -140,9 +140,11 @@ class Observation:
         self.n_frames = T
         # q is projected onto the joint limits widened by a margin: a joint's zero is only known up
         # to its pot's bias error (and exactly so for gauge joints, see _gauge_biases), so the
-        # tracked angles may legitimately sit past the nominal URDF limit by that much
+        # tracked angles may legitimately sit past the nominal URDF limit by that much; a joint
+        # continuous in the URDF has no limit (its ±π are the model's, not the robot's)
         lo, hi = robot.lower.copy(), robot.upper.copy()
-        bad = ~np.isfinite(lo) | ~np.isfinite(hi)
+        endless = np.array([n in getattr(robot, "continuous", ()) for n in robot.joint_names], dtype=bool)
+        bad = ~np.isfinite(lo) | ~np.isfinite(hi) | endless
         lo[bad], hi[bad] = -np.inf, np.inf
         margin = np.where(bad, 0.0, 0.25 * (hi - lo) + np.where(self.kin.prismatic, 0.0, 0.3))
         self.lower, self.upper = lo - margin, hi + margin
