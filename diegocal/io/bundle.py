@@ -22,6 +22,7 @@ a directory with ``sgp.yaml``: a dynamics model).
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -45,7 +46,11 @@ def robot_hash(source) -> str | None:
 
     ``source`` is a robot directory (the URDF is the one sensors.yaml names, default
     ``robot.urdf``) or a URDF file (dynamics alone: the file only). The bytes are hashed as they
-    are on disk, so any edit, even of a comment, gives another robot.
+    are on disk, so any edit, even of a comment, gives another robot. A xacro description is
+    hashed as the URDF it expands to (:func:`diegocal.io.urdf.urdf_text`) less its comments
+    (xacro's banner names the file's absolute path, which must not make a moved robot another
+    one), so that an edit of a file it includes, which its own bytes do not show, gives another
+    robot too; one it cannot expand is hashed as its bytes.
     """
     source = Path(source)
     if source.is_file():
@@ -63,9 +68,22 @@ def robot_hash(source) -> str | None:
     found = False
     for path in paths:
         if path.is_file():
-            h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+            h.update(path.name.encode() + b"\0" + _described(path) + b"\0")
             found = True
     return f"sha256:{h.hexdigest()}" if found else None
+
+
+def _described(path: Path) -> bytes:
+    """The bytes that describe the robot in ``path``: a xacro's expansion, any other file itself."""
+    # io.urdf loads scipy.spatial (most of a second): not at import, which every bundle reader does
+    from diegocal.io.urdf import is_xacro, urdf_text
+
+    if is_xacro(path):
+        try:
+            return re.sub(r"<!--.*?-->", "", urdf_text(path), flags=re.DOTALL).encode()
+        except InputFileError:
+            pass
+    return path.read_bytes()
 
 
 def robot_record(robot) -> dict:
@@ -90,11 +108,13 @@ def same_robot(record: dict, source) -> bool:
 
 
 def save_robot_copy(robot, directory) -> None:
-    """Write a self-contained copy of ``robot`` into ``directory``: ``robot.urdf`` and a
+    """Write a self-contained copy of ``robot`` into ``directory``: ``robot.urdf`` (a xacro
+    description expanded: the copy needs neither xacro nor the files it includes) and a
     ``sensors.yaml`` (the original's, or a minimal one for a URDF-only robot) whose ``locked``
     lists every joint the robot's reduced model holds still, so that loading the copy rebuilds
     the same model whatever data it is used with."""
     from diegocal.io.files import save_yaml, write_text
+    from diegocal.io.urdf import urdf_text
 
     directory = Path(directory)
     source = Path(getattr(robot, "source", None) or robot.directory)
@@ -108,7 +128,7 @@ def save_robot_copy(robot, directory) -> None:
     sensors["urdf"] = "robot.urdf"
     if getattr(robot, "locked", None):
         sensors["locked"] = dict(robot.locked)
-    write_text(directory / "robot.urdf", urdf.read_text())
+    write_text(directory / "robot.urdf", urdf_text(urdf))
     save_yaml(sensors, directory / "sensors.yaml")
 
 

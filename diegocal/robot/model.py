@@ -17,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from diegocal.errors import RobotConfigError, UnknownNameError
+from diegocal.io.urdf import is_xacro
 from diegocal.robot.sensors import SensorConfig, parse_sensors
 from diegocal.robot.urdf import load_urdf, reduce_model, root_link, sensor_joints
 
@@ -315,10 +316,27 @@ def shift_joint_origins(model: pin.Model, offsets: dict) -> pin.Model:
     return model
 
 
+def is_description(path) -> bool:
+    """Whether ``path`` is a robot description file: a ``.urdf``, or a xacro (``.xacro``,
+    ``.urdf.xacro``) that :func:`diegocal.io.urdf.urdf_text` expands to one."""
+    path = Path(path)
+    return path.is_file() and (path.suffix.lower() == ".urdf" or is_xacro(path))
+
+
+def description_stem(path) -> str:
+    """A description file's name without ``.urdf``/``.xacro``: ``arm`` for ``arm.urdf.xacro``."""
+    name = Path(path).name
+    for suffix in (".xacro", ".urdf"):
+        if name.lower().endswith(suffix):
+            name = name[: -len(suffix)]
+    return name
+
+
 def load_robot(source, joints=None) -> Robot:
     """Load a robot: a directory (``robot.urdf`` + ``sensors.yaml``, DESIGN.md) or, for dynamics
     alone, a URDF file or a directory with ``robot.urdf`` only (no sensors; the base link is the
-    URDF's root).
+    URDF's root). A xacro description (``.xacro``, ``.urdf.xacro``) is accepted wherever a URDF is,
+    expanded with its default arguments (:func:`diegocal.io.urdf.urdf_text`).
 
     Any URDF Pinocchio loads is accepted; the model is reduced to the joints the sensors use plus
     ``joints`` (the joint names the data use, e.g. :func:`data_joints` of a log; None: not known),
@@ -329,7 +347,7 @@ def load_robot(source, joints=None) -> Robot:
     source = Path(source)
     if source.is_dir() and not (source / "sensors.yaml").exists() and (source / "robot.urdf").is_file():
         source = source / "robot.urdf"  # sensors.yaml omitted: dynamics alone (DESIGN.md)
-    if source.is_file() and source.suffix.lower() == ".urdf":
+    if is_description(source):
         urdf, directory = source, None
         loaded = load_urdf(urdf)
         sensors = SensorConfig(urdf.name, root_link(loaded.model), (), (), ())
@@ -358,7 +376,7 @@ def load_robot(source, joints=None) -> Robot:
     used = sensor_joints(model, sensors) | set(joints or ())
     keep = (used & known) or None  # nothing named: every one-DoF joint
     reduction = reduce_model(model, keep, sensors.locked)
-    name = model.name or (directory.name if directory is not None else urdf.stem)
+    name = model.name or (directory.name if directory is not None else description_stem(urdf))
     return Robot(reduction.model, sensors, name=name, directory=directory, locked=reduction.locked, source=source,
                  continuous=loaded.continuous)
 
@@ -374,20 +392,20 @@ def resolve_robot_dir(robot: str | Path | None, log_robot: str | None) -> Path:
     """The robot directory (or URDF file) a command should use (DESIGN.md: --robot defaults to the
     log's robot).
 
-    ``robot`` is a directory, a URDF file or the name of a bundled robot; ``None`` means the log's
-    ``robot`` attribute (a directory, a URDF file or a bundled robot's name).
+    ``robot`` is a directory, a URDF file (or xacro description) or the name of a bundled robot;
+    ``None`` means the log's ``robot`` attribute (any of those).
     """
     if robot is None:
         if not log_robot:
             raise RobotConfigError("the log names no robot: pass --robot DIR")
         robot = log_robot
     path = Path(robot)
-    if path.is_dir() or (path.is_file() and path.suffix.lower() == ".urdf"):
+    if path.is_dir() or is_description(path):
         return path
     bundled = BUNDLED_ROBOTS / str(robot)
     if "/" not in str(robot) and bundled.is_dir():
         return bundled
     raise RobotConfigError(
-        f"robot {str(robot)!r} not found (neither a directory, a URDF file nor a bundled robot in "
+        f"robot {str(robot)!r} not found (neither a directory, a URDF or xacro file nor a bundled robot in "
         f"{BUNDLED_ROBOTS})"
     )
