@@ -33,6 +33,11 @@ class PointSet:
     xyz: np.ndarray
 
 
+#: A log channel of a joint stream this similar (difflib ratio) to a joint of the URDF that the log
+#: does not name is taken for a misspelling of it (``elbw``/``elbow`` 0.89), below for another
+#: device's channel (``gripper_motor``/``gripper_joint`` 0.77).
+TYPO_CUTOFF = 0.8
+
 #: Pinocchio's short names of the one-DoF prismatic joint models.
 PRISMATIC_KINDS = ("PX", "PY", "PZ", "PrismaticUnaligned")
 
@@ -340,7 +345,9 @@ def load_robot(source, joints=None) -> Robot:
 
     Any URDF Pinocchio loads is accepted; the model is reduced to the joints the sensors use plus
     ``joints`` (the joint names the data use, e.g. :func:`data_joints` of a log; None: not known),
-    the others locked (:mod:`diegocal.robot.urdf`; :attr:`Robot.locked` says at what).
+    the others locked (:mod:`diegocal.robot.urdf`; :attr:`Robot.locked` says at what). Names in
+    ``joints`` that are no joint of the URDF are skipped (the stream readers warn), unless one
+    reads like a joint the data do not name (TYPO_CUTOFF): that is an UnknownNameError.
     """
     from diegocal.io import load_yaml
 
@@ -365,15 +372,18 @@ def load_robot(source, joints=None) -> Robot:
         loaded = load_urdf(urdf)
     model = loaded.model
     known = set(model.names[1:])
-    unknown = sorted(set(joints or ()) - known)
-    if unknown:
-        match = difflib.get_close_matches(unknown[0], sorted(known), n=1, cutoff=0.6)
-        hint = f" — did you mean {match[0]!r}?" if match else ""
-        raise UnknownNameError(
-            f"log channel(s) {', '.join(repr(u) for u in unknown[:4])} of the joint streams (q, qd, qdd, tau) "
-            f"are not joints of {urdf.name}{hint}"
-        )
-    used = sensor_joints(model, sensors) | set(joints or ())
+    named = set(joints or ())
+    # a data channel that is no joint of the URDF (a gripper's motor) is left to the stream readers,
+    # which leave it out with a warning; one that reads like a joint the data do not name is a
+    # misspelling, which would lock that joint: an error
+    for u in sorted(named - known):
+        match = difflib.get_close_matches(u, sorted(known - named), n=1, cutoff=TYPO_CUTOFF)
+        if match:
+            raise UnknownNameError(
+                f"log channel {u!r} of the joint streams (q, qd, qdd, tau) is not a joint of {urdf.name} — "
+                f"did you mean {match[0]!r}?"
+            )
+    used = sensor_joints(model, sensors) | (named & known)
     keep = (used & known) or None  # nothing named: every one-DoF joint
     reduction = reduce_model(model, keep, sensors.locked)
     name = model.name or (directory.name if directory is not None else description_stem(urdf))

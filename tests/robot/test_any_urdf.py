@@ -140,8 +140,10 @@ def test_urdf_file_alone_keeps_every_one_dof_joint(tmp_path):
     assert only.joint_names == ("shoulder", "elbow")
     from diegocal.errors import UnknownNameError
 
-    with pytest.raises(UnknownNameError, match="'elbw' of the joint streams .* not joints of robot.urdf — did you"):
+    with pytest.raises(UnknownNameError, match="'elbw' of the joint streams .* not a joint of robot.urdf — did you"):
         load_robot(urdf, joints=("shoulder", "elbw"))
+    # another device's channel (a gripper's motor) is no misspelling: left to the stream readers
+    assert load_robot(urdf, joints=("shoulder", "elbow", "gripper_motor")).joint_names == ("shoulder", "elbow")
 
 
 def test_a_used_multi_dof_joint_is_one_clear_error(tmp_path):

@@ -1,0 +1,97 @@
+"""A log's joint streams (q, qd, qdd, tau) as arrays in a robot's joint order.
+
+A log may carry channels the robot model does not move: a gripper's motor beside an arm's joints,
+or a joint the model holds still (:attr:`diegocal.robot.Robot.locked`: sensors.yaml locks it, or no
+sensor and no stream used it when the robot was loaded). Those channels are left out with one
+warning that names them and, for a locked joint, says at what and why it is held (its motion is
+not modelled); they are not an error. A robot joint without a channel is one in q, qd and qdd
+(the regressor needs every joint's motion), and in tau only leaves that joint's torque unfitted.
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+
+import numpy as np
+
+from diegocal.errors import MissingStreamError
+from diegocal.sgp.options import INPUT_STREAMS
+
+LOG = logging.getLogger(__name__)
+
+
+def unused_channels(log, robot, streams) -> dict[str, list[str]]:
+    """{channel: [streams]} of the log's channels in ``streams`` that are not joints of ``robot``."""
+    out: dict[str, list[str]] = {}
+    for name in streams:
+        if log.has(name):
+            for c in log.streams[name].names:
+                if c not in robot.joint_names:
+                    out.setdefault(c, []).append(name)
+    return out
+
+
+def unused_line(unused: dict, robot) -> str:
+    """One warning line naming the channels :func:`unused_channels` found, and why each is left out."""
+    sensors_locked = getattr(robot.sensors, "locked", None) or {}
+    parts = []
+    for c, where in unused.items():
+        what = f"{c} ({', '.join(where)})"
+        if c in robot.locked:
+            why = (
+                "sensors.yaml locks it" if c in sensors_locked
+                else "no sensor and no stream used it when the robot was loaded"
+            )
+            value = robot.locked[c]
+            shown = f"{value:g}" if isinstance(value, float) else str(value)
+            what += f": a joint the model holds still at {shown} ({why}), so its motion is not modelled"
+        else:
+            match = difflib.get_close_matches(c, list(robot.joint_names), n=1, cutoff=0.75)
+            if match:
+                what += f" — did you mean {match[0]!r}?"
+        parts.append(what)
+    return f"ignored log channel(s) that are not joints of robot {robot.name!r}: {'; '.join(parts)}"
+
+
+def warn_unused(log, robot, streams) -> None:
+    """Warn once about the channels of ``streams`` that are left out (:func:`unused_line`)."""
+    unused = unused_channels(log, robot, streams)
+    if unused:
+        LOG.warning(unused_line(unused, robot))
+
+
+def torque_array(log, robot, warn: bool = True) -> tuple[np.ndarray, tuple]:
+    """The ``tau`` stream's columns of the robot's joints, in the robot's joint order.
+
+    Returns (tau (T, k), joint names (k,)): every joint that has a torque channel. A joint without
+    one (e.g. TIAGo's wrists, whose efforts are unusable) is simply absent, so that a model can be
+    fitted on the rows of the joints that have a torque; channels that are no joint of the robot
+    are left out with a warning (``warn``); a stream with no joint at all is a one-line error.
+    """
+    s = log.stream("tau", needed_by="sgp-fit")
+    if warn:
+        warn_unused(log, robot, ("tau",))
+    joints = tuple(j for j in robot.joint_names if j in s.names)
+    if not joints:
+        others = f" (its channels {', '.join(s.names)} are not joints of it)" if s.names else ""
+        raise MissingStreamError(f"stream 'tau' has no channel of robot {robot.name!r}: nothing to fit{others}")
+    return s.select(joints).data, joints
+
+
+def log_arrays(log, robot, need_tau: bool = True, needed_by: str | None = None, warn: bool = True):
+    """q, qd, qdd (and tau) of a log in the robot's joint order, (T, n) each; channels that are no
+    joint of the robot are left out with one warning (``warn``); one-line errors naming
+    ``needed_by`` (default: "sgp-fit" with tau, "sgp predict" without)."""
+    needed_by = needed_by or ("sgp-fit" if need_tau else "sgp predict")
+    names = INPUT_STREAMS + (("tau",) if need_tau else ())
+    out = []
+    for name in names:
+        s = log.stream(name, needed_by=needed_by)
+        missing = [j for j in robot.joint_names if j not in s.names]
+        if missing:
+            raise MissingStreamError(f"stream '{name}' lacks joint(s) {missing} of robot {robot.name!r}")
+        out.append(s.select(robot.joint_names).data)
+    if warn:
+        warn_unused(log, robot, names)
+    return tuple(out)
