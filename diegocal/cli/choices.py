@@ -7,9 +7,19 @@ tuples and numbers, and tests/cli/test_choices.py checks each against the librar
 copy that drifts fails the suite.
 """
 
-# effect -> domain, diagnose's domains, what SIZE means for a kinematic effect: the library's own
-from diegocal.causes import DOMAINS, KINEMATIC_SIZE_UNITS  # noqa: F401
-from diegocal.causes import VOCABULARY as EFFECTS  # noqa: F401
+#: effect -> domain (EFFECTS), diagnose's DOMAINS, what SIZE means for a kinematic effect
+#: (KINEMATIC_SIZE_UNITS): the cause registry's own, read when a command that names them is built
+#: (the registry takes a fiftieth of a second to import, which no other help needs)
+_FROM_CAUSES = {"EFFECTS": "VOCABULARY", "DOMAINS": "DOMAINS", "KINEMATIC_SIZE_UNITS": "KINEMATIC_SIZE_UNITS"}
+
+
+def __getattr__(name: str):
+    if name in _FROM_CAUSES:
+        import diegocal.causes
+
+        return getattr(diegocal.causes, _FROM_CAUSES[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 # sgp-fit (diegocal.sgp.model, diegocal.sgp.regressor)
 SGP_KINDS = ("sgp", "pr", "gp", "prgp")
