@@ -79,6 +79,7 @@ def batch(
 ) -> None:
     """Run a command over every log of a folder: one output per log, skipping logs whose outputs are
     newer (as make does), and a merged table of the results (CSV and a report page)."""
+    # the library is imported when the command runs, so that `--help` answers at once
     from diegocal.batch import BatchOptions, plan_batch, run_batch, save_table
 
     if scheduler and jobs > 1:  # a usage error: one line, exit 2, as the parser's own

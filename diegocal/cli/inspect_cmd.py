@@ -15,6 +15,7 @@ from diegocal.cli.common import cli_errors, console, warn
 @cli_errors
 def inspect(log: Annotated[Path, typer.Argument(help="A diegocal log (.h5 or .csv).")]) -> None:
     """Describe a log: streams, channel names, duration, rate, NaN or occlusion per channel."""
+    # the library is imported when the command runs, so that `--help` answers at once
     from rich.markup import escape
     from rich.table import Table
 

@@ -155,6 +155,7 @@ def pneumatic_merge(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Merge per-chamber pneumatic.yaml files (from `make -j`) into one."""
+    # the library is imported when the command runs, so that `--help` answers at once
     from diegocal.io import load_yaml, save_yaml
     from diegocal.pneumatic.files import merge_models
 
@@ -196,6 +197,7 @@ def simulate_pneumatics_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate valve-chamber systems with the thin-plate physics (thesis §4.2), truth in /truth."""
+    # the library is imported when the command runs, so that `--help` answers at once
     from diegocal.io import save_log
     from diegocal.robot import load_robot, resolve_robot_dir
     from diegocal.sim.effects import check_effects, parse_effects

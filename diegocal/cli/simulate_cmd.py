@@ -59,6 +59,7 @@ def simulate_kinematics_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate a kinematic calibration session (thesis §2.5.1) with truth in /truth."""
+    # the library is imported when the command runs, so that `--help` answers at once
     import numpy as np
 
     from diegocal.io import save_log

@@ -70,6 +70,7 @@ def simulate_dynamics_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Simulate q, qd, qdd, tau of any robot (thesis eq. 3.29 + effects) with truth in /truth."""
+    # the library is imported when the command runs, so that `--help` answers at once
     import numpy as np
 
     from diegocal.io import save_log

@@ -58,6 +58,7 @@ def split(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Cut a log in two contiguous parts in time: TRAIN to fit on, HELDOUT to predict."""
+    # the library is imported when the command runs, so that `--help` answers at once
     from diegocal.io import load_log, save_logs, split_log
 
     try:
