@@ -28,6 +28,7 @@ twice, even with its outputs beside the logs, finds the same logs.
 
 from __future__ import annotations
 
+import functools
 import glob
 import importlib
 import os
@@ -68,23 +69,23 @@ class CommandSpec:
     verdict: str | None = None  # verdict(args) -> why the output it wrote is a failure, or None
 
 
-_JOBS = {
-    "stac": ("diegocal.cli.stac_cmd", "StacArgs", "run_stac", "written_verdict"),
-    "sgp-fit": ("diegocal.cli.sgp_cmd", "SgpArgs", "run_sgp", None),
-    "pneumatic-fit": ("diegocal.cli.pneumatic_cmd", "PneumaticArgs", "run_pneumatic", None),
-    "diagnose": ("diegocal.cli.diagnose_cmd", "DiagnoseArgs", "run_diagnose", None),
-    "predict": ("diegocal.cli.predict_cmd", "PredictArgs", "run_predict", None),
-}
+def _fit(domain: str, module: str, args: str, run: str, verdict: str | None = None) -> CommandSpec:
+    """The spec of a domain's fit command (its output suffix and needed streams from the Domain record)."""
+    d = DOMAINS[domain]
+    return CommandSpec(d.fit_command, d.model_suffix, module, args, run, d.fit_needs, d.model_is_directory, verdict)
+
+
+CLI = "diegocal.cli."
+#: Command name -> how batch runs it.
 COMMANDS = {
-    **{
-        d.fit_command: CommandSpec(
-            d.fit_command, d.model_suffix, *_JOBS[d.fit_command][:3], d.fit_needs, d.model_is_directory,
-            _JOBS[d.fit_command][3],
-        )
-        for d in DOMAINS.values()
-    },
-    "diagnose": CommandSpec("diagnose", ".{domain}.diagnosis.yaml", *_JOBS["diagnose"][:3]),
-    "predict": CommandSpec("predict", ".prediction.h5", *_JOBS["predict"][:3]),
+    spec.name: spec
+    for spec in (
+        _fit("kinematics", CLI + "stac_cmd", "StacArgs", "run_stac", "written_verdict"),
+        _fit("dynamics", CLI + "sgp_cmd", "SgpArgs", "run_sgp"),
+        _fit("pneumatics", CLI + "pneumatic_cmd", "PneumaticArgs", "run_pneumatic"),
+        CommandSpec("diagnose", ".{domain}.diagnosis.yaml", CLI + "diagnose_cmd", "DiagnoseArgs", "run_diagnose"),
+        CommandSpec("predict", ".prediction.h5", CLI + "predict_cmd", "PredictArgs", "run_predict"),
+    )
 }
 
 
@@ -313,17 +314,22 @@ def _newer(output: Path, inputs) -> bool:
 
 
 # ----------------------------------------------------------------------------- parsing
+@functools.cache
+def _parser(command: str):
+    """The click command of ``command`` (built once per process)."""
+    from diegocal.cli.app import click_command
+
+    return click_command((command,))
+
+
 def _parse(command: str, argv: Sequence[str]) -> dict:
     """``argv`` (after the command's name) parsed by the command's own parser, as the command line
     parses it: the parameters by name. Raises OptionError for a usage error, DiegocalError for bad
     input an option's check finds (an output folder that does not exist)."""
     import typer
 
-    from diegocal.cli.app import click_command
-
-    importlib.import_module(COMMANDS[command].module)
     try:
-        with click_command((command,)).make_context(f"diegocal {command}", list(argv)) as ctx:
+        with _parser(command).make_context(f"diegocal {command}", list(argv)) as ctx:
             return dict(ctx.params)
     except typer.TyperException as exc:  # click's usage errors
         raise OptionError(f"{command} {shlex.join(argv)}: {' '.join(exc.format_message().split())}") from None

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from diegocal.batch import BatchOptions, find_logs, plan_batch, read_table
+from diegocal.batch import COMMANDS, BatchOptions, find_logs, plan_batch, read_table
 from diegocal.cli import app
 from diegocal.cli.testing import one_line_error
 from diegocal.io import save_log
@@ -368,3 +368,21 @@ def test_reading_the_makefile_runs_no_python(tmp_path):
             capture_output=True, text=True, check=False,
         )
         assert run.returncode == 0 and run.stderr == "", (goal, run.stderr)
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_each_command_parses_into_its_options_dataclass(command, tmp_path):
+    """The options dataclass of every command batch runs has exactly the command's parameters (an
+    option added to the command and not to the dataclass fails here, not in a user's batch)."""
+    import dataclasses
+    import importlib
+
+    from diegocal.batch.jobs import _parse
+
+    spec = COMMANDS[command]
+    argv = ("m.yaml", "r.h5") if command == "predict" else ("r.h5",)
+    argv += ("--all",) if command == "pneumatic-fit" else ()
+    params = _parse(command, (*argv, "-o", str(tmp_path / ("out.h5" if command == "predict" else "out"))))
+    cls = getattr(importlib.import_module(spec.module), spec.args)
+    assert {f.name for f in dataclasses.fields(cls)} == set(params)
+    assert cls(**params).quiet is False
