@@ -3,8 +3,8 @@
 Labs often calibrate from tens of static poses: the robot held still in each (encoders with gain 1,
 a rigid marker cluster on the end effector, the mocap frame unknown). STAC needs nothing special
 for them (a pose is one or a few frames; joint offsets are the encoders' biases, the cluster the
-marker positions, eq. 2.10), and with a robust loss it writes off poses filed with another pose's
-mocap frame (:func:`diegocal.stac.robust.gross_frames`). What it adds is the evaluation:
+marker positions, eq. 2.10), and it writes off poses filed with another pose's mocap frame
+(:mod:`diegocal.stac.poses`, which needs the poses found here). What this module adds:
 
 * :func:`find_poses` cuts a log into poses: a new pose begins where some pot moves by more than
   POSE_SIGMAS times its noise between two samples (:func:`pot_noise`: a robust scale of the
