@@ -93,19 +93,16 @@ class Diagnosis:
 
     @property
     def findings(self) -> tuple[Finding, ...]:
-        """Every unit's findings, most important first: data faults, then terms in the order the
-        rounds found them (each round's term removes the most validation error given the ones
-        before; validation gains of different rounds are fractions of different errors, on
-        different channels), units' terms of the same round by validation gain, then what stays
-        unexplained."""
-        order = {"fault": 0, "term": 1, "unexplained": 2}
+        """Every unit's findings, most important first: by the fraction of its channel's held-out
+        error it removed (:meth:`~diegocal.diagnose.types.Finding.gain`); findings without a
+        held-out gain (structure left unexplained, with nothing to absorb it) last, by validation
+        gain."""
         items = []
         for u in self.units:
-            rounds = 0
             for f in u.findings:
-                gain = f.evidence.get("validation_gain", 0.0)
-                items.append((order[f.kind], rounds if f.kind == "term" else 0, -gain, f))
-                rounds += f.kind == "term"
+                red = (f.gain() or {}).get("reduction")
+                held = red is not None and np.isfinite(red)
+                items.append((0 if held else 1, -(red if held else 0.0), -f.evidence.get("validation_gain", 0.0), f))
         return tuple(item[-1] for item in sorted(items, key=lambda item: item[:3]))
 
     def save_extended(self, path, header: dict) -> Path:

@@ -17,7 +17,7 @@ import numpy as np
 
 from diegocal.diagnose.evidence import curves, evidence_variable
 from diegocal.diagnose.selection import channel_weights, choose, evaluate_candidates
-from diegocal.diagnose.show import binned_candidate, region_of, show
+from diegocal.diagnose.show import binned_candidate, flexible_candidate, region_of, show
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
     Adapter,
@@ -80,22 +80,37 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
 
     faults = getattr(adapter, "faults", None)
     for fault in faults(fitted, res) if faults else []:
+        trial = dict(exclude)
         if fault.exclude:
             for c, m in fault.readings.items():
-                exclude[c] = np.asarray(exclude.get(c, np.zeros_like(m, bool)), bool) | np.asarray(m, bool)
+                trial[c] = np.asarray(trial.get(c, np.zeros_like(m, bool)), bool) | np.asarray(m, bool)
         new = adapter.fit(terms + (fault.term,), train)
-        before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
+        before, after = adapter.score(fitted, held, trial), adapter.score(new, held, trial)
         evidence = dict(fault.evidence, channels=list(fault.readings))
-        findings.append(Finding(fault.term, "fault", before, after, evidence))
+        finding = Finding(fault.term, "fault", before, after, evidence)
+        red = finding.gain().get("reduction", float("nan"))
+        if not (np.isfinite(red) and red > 0):  # writing it off removes nothing: no finding
+            say(f"{fault.term.cause} on {fault.term.channel}{unit}: writing it off removes nothing, left alone")
+            continue
+        exclude = trial
+        findings.append(finding)
         fitted, terms = new, adapter.terms(new)
         say(f"found {fault.term.cause} on {fault.term.channel}{unit}")
 
+    stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
     for _ in range(options.max_rounds):
         res = adapter.residuals(fitted)
         candidates = adapter.candidates(fitted, res, train)
         say(f"testing {len(candidates)} candidate terms{unit}")
         tested = evaluate_candidates(candidates, res, weights, train, val, options, exclude)
+        tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         best = choose(tested, val)
+        while best is not None and (flex := _outshone(best, res, weights, train, val, options, exclude)):
+            own = _own(best)
+            stand_ins[own] = (best, flex)
+            say(f"{best.term.cause} on {own}{unit} explains less than its state does: left unexplained")
+            tested = [t for t in tested if own not in t.channels]
+            best = choose(tested, val)
         if best is None:
             break
         new = adapter.fit(terms + (best.term,), train)
@@ -114,15 +129,19 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             evidence["curves"] = curves(
                 res, res_new, best.channels[0], variable, shown, length, train, options.n_bins, exclude
             )
-        runners = tuple(t.to_dict() for t in tested if t is not best)[:8]
+        runners = tuple(_runner_up(t, best) for t in tested if t is not best)[:8]
         new_terms = adapter.terms(new)
         fitted_term = next((t for t in new_terms if _same(t, best.term)), best.term)
         findings.append(Finding(fitted_term, "term", before, after, evidence, runners))
         fitted, terms = new, new_terms
         say(f"found {best.term.cause} on {best.term.channel}{unit} (validation gain {best.gain:.0%})")
 
-    # what remains: significant binned structure that no candidate explained
+    # what remains: the channels whose best term was a stand-in, then significant binned
+    # structure that no candidate explained
     res = adapter.residuals(fitted)
+    for channel, (stood, flex) in stand_ins.items():
+        masks = (train, val, shown)
+        findings.append(_stand_in_finding(channel, stood, flex, res, weights, masks, length, options, exclude))
     generic = [
         binned_candidate(res, c, v, train, options.n_bins)
         for c in res.channels
@@ -221,6 +240,65 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
         out.append(f)
     say(f"non-parametric part {'kept' if kept else 'dropped'}{unit}: validation RMSE {before:.4g} → {after:.4g}")
     return (new if kept else fitted), out
+
+
+#: A named term must explain at least this share of what the most flexible model of its channel's
+#: own state explains on the validation rows (:func:`~diegocal.diagnose.show.flexible_candidate`);
+#: less, and it is a stand-in for structure of another shape: the channel is ``unexplained``.
+STAND_IN_SHARE = 0.5
+
+
+def _runner_up(t: Tested, best: Tested) -> dict:
+    """A tested candidate that was not added, with why, in words, when it was significant."""
+    out = t.to_dict()
+    if t.significant:
+        if set(t.channels) & set(best.channels):
+            out["why_not"] = (f"{best.term.cause} explains more of the validation error of "
+                              f"{', '.join(sorted(set(t.channels) & set(best.channels)))}")
+        else:
+            out["why_not"] = f"tested again in the next round, after {best.term.cause} on {best.term.channel}"
+    return out
+
+
+def _own(t: Tested) -> str:
+    """The channel a tested term is judged on: its own when it acts there, else its first."""
+    return t.term.channel if t.term.channel in t.channels else t.channels[0]
+
+
+def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
+    """The flexible model's test on ``best``'s channel when it is significant and ``best`` explains
+    less than STAND_IN_SHARE of what it explains (None otherwise: the term may be named)."""
+    own = _own(best)
+    cand = flexible_candidate(res, own, train, options.n_bins)
+    if cand is None:
+        return None
+    (flex,) = evaluate_candidates([cand], res, weights, train, val, options, exclude) or (None,)
+    if flex is None or flex.test.t <= flex.threshold:
+        return None
+    gain = best.channel_gain if best.channel_gain is not None else best.test.gain
+    return flex if gain < STAND_IN_SHARE * flex.test.gain else None
+
+
+def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude) -> Finding:
+    """``unexplained`` on a channel whose best term was a stand-in: its evidence names the term that
+    stood in and both validation gains; the variable shown is the one whose binned test explains most."""
+    train, val, shown = masks
+    variables = list(res.channel_variables.get(channel, ()))
+    single = [binned_candidate(res, channel, v, train, options.n_bins) for v in variables]
+    tested = evaluate_candidates(single, res, weights, train, val, options, exclude)
+    variable = max(tested, key=lambda t: t.test.gain).term.region.variable if tested else variables[0]
+    region = next((region_of(t) for t in tested if t.term.region.variable == variable), None)
+    evidence = {
+        "channels": [channel],
+        "validation_gain": float(flex.test.gain),
+        "t": float(flex.test.t),
+        "threshold_t": float(flex.threshold),
+        "variable": variable,
+        "stand_in": {"term": stood.term.label, "validation_gain": float(stood.gain)},
+        "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
+    }
+    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence,
+                   (stood.to_dict(),))
 
 
 def _same(a: Term, b: Term) -> bool:

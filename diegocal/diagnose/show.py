@@ -58,6 +58,55 @@ def binned_candidate(res, channel: str, variable: str, train: np.ndarray, n_bins
     return Candidate(term, {channel: cols}, family="")
 
 
+#: Quantile levels of |x| on each side of zero for the bins of a variable that takes both signs
+#: (a velocity): fine near zero, where friction changes shape within a few hundredths of rad/s.
+SIGNED_LEVELS = (0.0, 0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0)
+
+
+def signed_edges(x: np.ndarray, n_bins: int) -> np.ndarray:
+    """Bin edges of ``x`` that never straddle 0 when x takes both signs with some mass on each
+    (a velocity): quantiles :data:`SIGNED_LEVELS` of |x| on each side, fine near zero, so that
+    structure there (friction's shape) is neither averaged away between the two signs nor over a
+    wide bin; plain quantile edges (``n_bins``) otherwise."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    neg, pos = -x[x < 0], x[x > 0]
+    if min(neg.size, pos.size) < 0.1 * max(x.size, 1):
+        return quantile_edges(x, n_bins)
+    lo = -np.quantile(neg, SIGNED_LEVELS)[::-1]
+    hi = np.quantile(pos, SIGNED_LEVELS)
+    return np.unique(np.concatenate([lo[:-1], [0.0], hi[1:]]))
+
+
+def flexible_candidate(res, channel: str, train: np.ndarray, n_bins: int):
+    """The most flexible model of ``channel``'s residual in its own state: an additive binned
+    function of every variable the domain names for it (:func:`signed_edges` bins; a constant and
+    each variable's bins but the first), a Candidate with an ``unexplained`` term. A named term
+    that explains much less than this is a stand-in for structure of another shape."""
+    names = res.channel_variables.get(channel, ())
+    r = np.asarray(res.channels[channel])
+    cols, edges_of = [], {}
+    for v in names:
+        x = np.asarray(res.variables[v], float)
+        edges = signed_edges(x[train], n_bins)
+        b = bin_index(x, edges)
+        B = edges.size - 1
+        if B < 2:
+            continue
+        onehot = np.zeros((x.size, B - 1))
+        ok = b >= 1
+        onehot[np.flatnonzero(ok), b[ok] - 1] = 1.0
+        onehot[b < 0] = np.nan
+        cols.append(onehot)
+        edges_of[v] = [float(e) for e in edges]
+    if not cols or r.ndim != 1:
+        return None
+    X = np.hstack([np.ones((r.size, 1)), *cols])
+    term = Term("unexplained", channel, tuple(Parameter(f"f{k}") for k in range(X.shape[1])), None,
+                {"edges": edges_of})
+    return Candidate(term, {channel: X}, family="")
+
+
 def region_of(tested, n_bins_axes: int | None = None) -> Region:
     """Where a significant binned term departs most: the contiguous run of bins around the bin
     of largest |mean|, extended while the neighbours exceed half of it (edges of the variable)."""

@@ -81,7 +81,22 @@ def sentence(f: dict) -> str:
         vg = (f.get("evidence") or {}).get("validation_gain")
         gain = f"; it accounts for {vg:.0%} of the validation error" if vg is not None else ""
     params = _parameters_text(f)
-    return f"{f['channel']}: {what}{gain}.{params}"
+    return f"{f['channel']}: {what}{gain}.{params}{_stand_in_text(f)}"
+
+
+def _stand_in_text(f: dict) -> str:
+    """Why an ``unexplained`` finding names no cause although a term was significant: the term
+    explained far less than a flexible function of the channel's own state (a stand-in)."""
+    ev = f.get("evidence") or {}
+    stood = ev.get("stand_in")
+    if not stood:
+        return ""
+    return (
+        f" The best term of the vocabulary, {stood['term']}, explains {stood['validation_gain']:.0%} of the "
+        f"validation error where a flexible function of {f['channel']}'s own state explains "
+        f"{ev.get('validation_gain', float('nan')):.0%}: it would stand in for structure of another shape, so "
+        "no cause is named."
+    )
 
 
 def _stderr(v: dict):
@@ -231,8 +246,18 @@ def runners_table(f: dict) -> tuple[list[Column], list[list]]:
         region = r.get("region")
         where = r["channel"] + (f" [{region['low']:.3g}..{region['high']:.3g}]" if region else "")
         score = [f"{100 * r['validation_gain']:.1f}", f"{r['t']:.1f}", f"{r['threshold_t']:.1f}"]
-        rows.append([r["cause"], where, *score, "yes" if r["significant"] else "no"])
+        rows.append([r["cause"], where, *score, _significant(r)])
     return columns, rows
+
+
+def _significant(r: dict) -> str:
+    """A runner-up's significance and, when it was significant, why it was not added (short)."""
+    if not r["significant"]:
+        return "no"
+    why = r.get("why_not") or ""
+    if why.startswith("tested again"):
+        return "yes; next round"
+    return "yes; less on its channel" if why else "yes"
 
 
 def channel_table(d: dict) -> tuple[list[Column], list[list]]:
@@ -299,7 +324,9 @@ def evidence_caption(ax, f: dict) -> str:
 RUNNERS_NOTE = (
     "The other candidate terms of the round, fitted on the training blocks and scored on the validation blocks "
     "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
-    "which holds the family-wise false-alarm rate over all candidates."
+    "which holds the family-wise false-alarm rate over all candidates; a significant one was not added because the "
+    "chosen term explains more of its channel's error (less on its channel) or acts elsewhere and is tested again "
+    "after it (next round)."
 )
 
 
