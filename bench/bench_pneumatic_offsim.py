@@ -12,7 +12,8 @@ on the chambers of effect logs that hide nothing.
 
 Sizes. offsim: the generator's ranges (valve delay 40-50 ms, leak orifice 0.35-0.8e-6 m²,
 supply-line orifice 0.8-1.6e-6 m², offset ±9-13 kPa). project: delay, leak and offset alike;
-supply droop 60-140 kPa per g/s (its own unit: the sag per supply flow). The project's simulator
+supply droop 60-140 kPa per g/s (its own unit: the sag per supply flow); offsets positive (its
+``--effect`` takes positive sizes). The project's simulator
 integrates the logs of one effect on one chamber together (``sessions``, one size per group).
 
 ``--new-session K``: for K named logs per effect, the diagnosed (extended) model and the
@@ -109,7 +110,7 @@ def plan(n_logs: int, seed: int, generators, chambers) -> list[Case]:
                 group = c_i * len(chambers) + (i + c_i) % len(chambers)
                 if g == "offsim" or i < len(chambers):
                     size = float(rng.uniform(lo, hi))
-                    if cause == "pressure_offset":
+                    if cause == "pressure_offset" and g == "offsim":  # project: sizes are positive
                         size *= float(rng.choice([-1.0, 1.0]))
                 if g == "project":
                     size = _group_size(out, g, group, size)
@@ -153,9 +154,8 @@ def make_logs(cases, settings: Settings, cache: Path | None, robot, clean: bool 
         key = ("offsim", i // 16) if c.generator == "offsim" else ("project", c.group, c.size)
         groups.setdefault(key, []).append(i)
     tasks = [([cases[i] for i in idx], settings, clean) for idx in groups.values()]
-    made = _map(_simulate, tasks, jobs)
-    for idx, out in zip(groups.values(), made, strict=True):
-        for i, log in zip(idx, out, strict=True):
+    for idx, out in zip(groups.values(), _imap(_simulate, tasks, jobs), strict=True):
+        for i, log in zip(idx, out, strict=True):  # saved as each group is done
             logs[i] = log
             p = _path(cache, cases[i], settings, tag)
             if p is not None:
@@ -164,11 +164,17 @@ def make_logs(cases, settings: Settings, cache: Path | None, robot, clean: bool 
     return logs
 
 
-def _map(fn, tasks, jobs):
+def _imap(fn, tasks, jobs):
+    """fn over tasks in order, yielding each result as it is ready."""
     if jobs > 1 and len(tasks) > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            return list(pool.map(fn, tasks))
-    return [fn(t) for t in tasks]
+            yield from pool.map(fn, tasks)
+    else:
+        yield from (fn(t) for t in tasks)
+
+
+def _map(fn, tasks, jobs):
+    return list(_imap(fn, tasks, jobs))
 
 
 def _simulate(task):

@@ -488,6 +488,27 @@ def _log(ch: Chambers, o: GeneratorOptions, qs, u, noise, valves: Valves, delay,
     return Log(time, streams, robot=ch.robot, rate_hz=o.rate_hz, truth=truth)
 
 
+def inputs(options: GeneratorOptions = GeneratorOptions(), robot_dir=ROBOT_DIR) -> Log:
+    """The session's commands and pot readings (noise-free) with the pressure held at room: the
+    inputs of a log without its physics, for data made by a parametric model
+    (``diegocal.pneumatic.synthetic``)."""
+    ch = load_chambers(robot_dir)
+    rng = np.random.default_rng([options.seed, 0x5E55])
+    q, _ = _joint_paths(ch, options.duration, rng)
+    n_ticks = int(round(options.duration * options.rate_hz))
+    u = _commands(ch, n_ticks, rng)
+    time = np.arange(n_ticks + 1) / options.rate_hz
+    q_t = q(time)
+    names = tuple(ch.pots)
+    pots = np.column_stack([g * q_t[:, j] + b for j, g, b in (ch.pots[n] for n in names)])
+    streams = {
+        "pressure": make_stream(ch.names, np.tile(ch.room / KPA, (n_ticks + 1, 1))),
+        "valve": make_stream(ch.names, np.vstack([u, u[-1:]])),
+        "pots": make_stream(names, pots),
+    }
+    return Log(time, streams, robot=ch.robot, rate_hz=options.rate_hz)
+
+
 def clean_twin(options: GeneratorOptions) -> GeneratorOptions:
     """The same session without its effects (the reference of an effect's own error)."""
     return replace(options, effects=())
