@@ -449,10 +449,11 @@ class _FromSample:
 
 
 def _seeded(robot, cal: Calibration):
-    """``robot`` with its markers' nominal positions at a calibration's (those it names)."""
+    """``robot`` with its markers' nominal positions at a calibration's (those it names); the rest
+    of the robot (locked and continuous joints, source) as it is."""
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
-    return type(robot)(robot.model, replace(robot.sensors, markers=markers), robot.name, robot.directory)
+    return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
 
 
 def _clock_moved(before, after) -> bool:

@@ -290,9 +290,11 @@ class BatchedRobot(Robot):
 
 
 def offset_robot(robot: Robot, offsets: dict) -> BatchedRobot:
-    """A batched copy of ``robot`` whose named joints' origins are shifted by (3,) m vectors."""
+    """A batched copy of ``robot`` whose named joints' origins are shifted by (3,) m vectors (its
+    locked and continuous joints and source kept, as :meth:`Robot.with_model` keeps them)."""
     model = shift_joint_origins(robot.model, offsets)
-    return BatchedRobot(model, robot.sensors, robot.name, robot.directory)
+    return BatchedRobot(model, robot.sensors, robot.name, robot.directory, locked=robot.locked,
+                        source=robot.source, continuous=robot.continuous)
 
 
 # ----------------------------------------------------------------------------- simulator

@@ -93,12 +93,14 @@ def pot_extra(cause: str, p: np.ndarray, sigma: float) -> dict:
 # ----------------------------------------------------------------------------- geometry
 def offset_robot(robot: Robot, offsets: dict, extra_markers=()) -> Robot:
     """A copy of ``robot`` with joint origins translated (joint -> (3,) m, in the parent joint's
-    frame) and ``extra_markers`` (MarkerSpec) appended to its sensors."""
+    frame) and ``extra_markers`` (MarkerSpec) appended to its sensors; its locked and continuous
+    joints and its source kept (:meth:`Robot.with_model`: an extended model must not clip a
+    continuous joint to ±π)."""
     model = shift_joint_origins(robot.model, offsets)
     sensors = robot.sensors
     if extra_markers:
         sensors = replace(sensors, markers=tuple(sensors.markers) + tuple(extra_markers))
-    return Robot(model, sensors, robot.name, robot.directory)
+    return robot.with_model(model, sensors)
 
 
 def shift_clock(x: np.ndarray, time: np.ndarray, seconds: float) -> np.ndarray:

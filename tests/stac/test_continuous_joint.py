@@ -4,6 +4,8 @@ its unwrapped angle while it turns from 0 past 2π is tracked and calibrated lik
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from synth import true_calibration
@@ -96,3 +98,36 @@ def test_a_wrist_past_two_pi_is_tracked_and_calibrated(spinner):
     truth_gain = np.array([p["parameters"]["gain"]["value"] for p in log.truth.params["baseline"][:2]])
     z = (cal.gain[:2] - truth_gain) / cal.gain_se[:2]
     assert np.all(np.abs(z) < 4.5), z
+
+
+def test_diagnose_keeps_the_wrist_continuous_in_its_extended_model(spinner):
+    """An extended model is a robot built anew (a slipped marker's second marker, moved joint
+    origins): it keeps the continuous wrist (issue #32 item 4 follow-up), so the diagnosis names a
+    hidden slip and its extended fit tracks the wrist past 2π with the markers at their noise."""
+    from diegocal.diagnose import DiagnoseOptions, diagnose
+    from diegocal.robot import PointSet
+    from diegocal.sim.kinematics import offset_robot
+    from diegocal.stac.calibration import Calibration
+    from diegocal.stac.terms import apply_terms
+    from diegocal.terms import make_term
+
+    log = _session(spinner)
+    x = log.stream("markers").data.copy()
+    names = log.stream("markers").names
+    k0, m = log.n_samples // 2, names.index("h1")
+    truth = Calibration.from_dict(log.truth.params)  # h1 slips 2 cm on the hand halfway through
+    d = truth.marker_xyz[m] + [0.0, 0.0, 0.02]
+    moved = spinner.points(log.truth.signals["q"].data[k0:], PointSet(("hand",), d[None]))
+    noise = np.random.default_rng(5).normal(0.0, SIGMA_X, (log.n_samples - k0, 3))
+    x[k0:, m] = moved[:, 0] @ truth.mocap_R.T + truth.mocap_T + noise
+    log = replace(log, streams={**log.streams, "markers": make_stream(names, x)})
+    assert offset_robot(spinner, {}).continuous == {"wrist"}  # the simulator's batched copy
+    term = make_term("link_offset", "elbow", [0.0, 0.0, 0.0])
+    assert apply_terms((term,), log, spinner).robot.continuous == {"wrist"}
+    diagnosis = diagnose(log, spinner, DiagnoseOptions(domain="kinematics"))
+    top = diagnosis.findings[0]
+    assert (top.cause, top.channel) == ("marker_slip", "h1"), [(f.cause, f.channel) for f in diagnosis.findings]
+    fitted = diagnosis.units[0].fitted
+    assert fitted.applied.robot.continuous == {"wrist"}
+    assert fitted.q[:, spinner.joint_index("wrist")].max() > 2 * np.pi + 1.0
+    assert fitted.cal.sigma_markers < 1.5 * SIGMA_X, fitted.cal.sigma_markers
