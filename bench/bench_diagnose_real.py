@@ -238,7 +238,7 @@ def main(argv=None) -> int:
     show_diagnosis("TX40", d, robot.joint_names)
     friction_check(d)
     fitted = d.units[0].fitted
-    judge_splits(tx40_splits(args.data, 1), fitted.terms, tx40=True, sgp=fitted.model is not None)
+    judge_splits(tx40_splits(args.data, 1), fitted.terms, tx40=True, sgp=fitted.gp is not None)
     # TIAGo
     robot = load_robot(BUNDLED_ROBOTS / "tiago")
     log = tiago_log(args.data)
@@ -251,7 +251,7 @@ def main(argv=None) -> int:
     show_diagnosis("TIAGo", d, split.rmse_joints)
     friction_check(d)
     fitted = d.units[0].fitted
-    judge_splits([split], fitted.terms, tx40=False, sgp=fitted.model is not None)
+    judge_splits([split], fitted.terms, tx40=False, sgp=fitted.gp is not None)
     print(f"\ntotal {time.time() - t0:.0f} s")
     return 0
 

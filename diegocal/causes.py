@@ -38,7 +38,9 @@ INF = math.inf
 @dataclass(frozen=True)
 class ParamSpec:
     """One parameter of a cause: name, unit, bounds, start value, meaning (and where its bounds
-    come from, ``note``)."""
+    come from, ``note``). ``shape``: not the coefficient of a regressor column but a parameter of
+    the column's shape (a velocity scale), held while the linear ones are fitted and searched
+    between its bounds by the fit that adds the term."""
 
     name: str
     unit: str
@@ -47,6 +49,7 @@ class ParamSpec:
     start: float = 0.0
     meaning: str = ""
     note: str = ""
+    shape: bool = False
 
 
 @dataclass(frozen=True)
@@ -81,8 +84,8 @@ class Cause:
         return self.role in ("term", "fault")
 
 
-def _p(name, unit, meaning, lower=-INF, upper=INF, start=0.0, note="") -> ParamSpec:
-    return ParamSpec(name, unit, lower, upper, start, meaning, note)
+def _p(name, unit, meaning, lower=-INF, upper=INF, start=0.0, note="", shape=False) -> ParamSpec:
+    return ParamSpec(name, unit, lower, upper, start, meaning, note, shape)
 
 
 _XYZ = tuple(_p(a, "m", f"displacement along {a[1]}") for a in ("dx", "dy", "dz"))
@@ -146,6 +149,12 @@ _CAUSES = (
     Cause("coulomb_friction", "dynamics", "term", "joint",
           (_p("coulomb", "N·m", "torque that follows the sign of the velocity"),),
           "Coulomb friction (a torque that follows the sign of the velocity)"),
+    Cause("stribeck_friction", "dynamics", "term", "joint",
+          (_p("amplitude", "N·m", "torque at zero velocity beyond Coulomb's (> 0: static friction above "
+              "Coulomb, Stribeck; < 0: a smooth, pre-sliding transition through zero velocity)"),
+           _p("velocity_scale", "rad/s", "speed over which it decays, e^(−|qd|/scale)", 1e-3, 2.0, 0.02,
+              shape=True)),
+          "friction's shape near zero velocity (a Stribeck or smooth transition)"),
     Cause("position_friction", "dynamics", "term", "joint",
           (_p("coulomb", "N·m", "Coulomb level inside the region"),
            _p("viscous", "N·m·s/rad", "viscous coefficient inside the region")),

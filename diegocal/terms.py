@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from diegocal.causes import CAUSES
 from diegocal.causes import cause as registry_entry
 from diegocal.errors import InputFileError, UnknownNameError
 from diegocal.io.files import to_plain
@@ -136,6 +137,23 @@ class Term:
         return replace(self, parameters=params)
 
     @property
+    def linear(self) -> tuple[Parameter, ...]:
+        """The parameters that are a column's coefficient (not a shape parameter, :mod:`diegocal.causes`)."""
+        shape = _shape_names(self.cause)
+        return tuple(p for p in self.parameters if p.name not in shape)
+
+    def with_linear_values(self, values, stderr=None) -> Term:
+        """The same term with new values (and standard errors) of its linear parameters, in order;
+        its shape parameters kept."""
+        values = np.asarray(values, dtype=float).ravel()
+        lin = self.linear
+        if values.size != len(lin):
+            raise ValueError(f"term {self.label}: expected {len(lin)} linear values, got {values.size}")
+        se = np.full(values.size, math.nan) if stderr is None else np.asarray(stderr, float).ravel()
+        new = {p.name: replace(p, value=float(v), stderr=float(e)) for p, v, e in zip(lin, values, se, strict=True)}
+        return replace(self, parameters=tuple(new.get(p.name, p) for p in self.parameters))
+
+    @property
     def label(self) -> str:
         """``cause:channel`` (with the region when there is one), for messages and tables."""
         text = f"{self.cause}:{self.channel}"
@@ -153,6 +171,12 @@ class Term:
         if self.extra:
             out["extra"] = to_plain(self.extra)
         return out
+
+
+def _shape_names(cause: str) -> frozenset:
+    """Names of a cause's shape parameters (none for a cause the registry does not know)."""
+    entry = CAUSES.get(cause)
+    return frozenset(p.name for p in entry.parameters if p.shape) if entry else frozenset()
 
 
 def make_term(cause: str, channel: str, values=None, region: Region | None = None, extra: dict | None = None,

@@ -113,28 +113,32 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             best = choose(tested, val)
         if best is None:
             break
-        new = adapter.fit(terms + (best.term,), train)
-        before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
-        res_new = adapter.residuals(new)
-        variable = evidence_variable(best.term, res)
-        evidence = {
-            "channels": list(best.channels),
-            "validation_gain": float(best.gain),
-            "own_channel": best.channel_gain is not None or len(best.channels) == 1,
-            "t": float(best.test.t),
-            "threshold_t": float(best.threshold),
-            "variable": variable,
-        }
-        if variable is not None:
-            evidence["curves"] = curves(
-                res, res_new, best.channels[0], variable, shown, length, train, options.n_bins, exclude
-            )
-        runners = tuple(_runner_up(t, best) for t in tested if t is not best)[:8]
-        new_terms = adapter.terms(new)
-        fitted_term = next((t for t in new_terms if _same(t, best.term)), best.term)
-        findings.append(Finding(fitted_term, "term", before, after, evidence, runners))
-        fitted, terms = new, new_terms
-        say(f"found {best.term.cause} on {best.term.channel}{unit} (validation gain {best.gain:.0%})")
+        group = [best, *_common(best, tested, res, weights, train, val, options, exclude, stand_ins)]
+        for chosen in group:
+            new = adapter.fit(terms + (chosen.term,), train)
+            before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
+            res_new = adapter.residuals(new)
+            variable = evidence_variable(chosen.term, res)
+            evidence = {
+                "channels": list(chosen.channels),
+                "validation_gain": float(chosen.gain),
+                "own_channel": chosen.channel_gain is not None or len(chosen.channels) == 1,
+                "t": float(chosen.test.t),
+                "threshold_t": float(chosen.threshold),
+                "variable": variable,
+            }
+            if chosen is not best:
+                evidence["common_cause"] = f"added with {best.term.label} in one round: the same cause"
+            if variable is not None:
+                evidence["curves"] = curves(
+                    res, res_new, chosen.channels[0], variable, shown, length, train, options.n_bins, exclude
+                )
+            runners = tuple(_runner_up(t, chosen) for t in tested if t not in group)[:8]
+            new_terms = adapter.terms(new)
+            fitted_term = next((t for t in new_terms if _same(t, chosen.term)), chosen.term)
+            findings.append(Finding(fitted_term, "term", before, after, evidence, runners))
+            fitted, terms = new, new_terms
+            say(f"found {chosen.term.cause} on {chosen.term.channel}{unit} (validation gain {chosen.gain:.0%})")
 
     # what remains: the channels whose best term was a stand-in, then significant binned
     # structure that no candidate explained
@@ -246,6 +250,23 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
 #: own state explains on the validation rows (:func:`~diegocal.diagnose.show.flexible_candidate`);
 #: less, and it is a stand-in for structure of another shape: the channel is ``unexplained``.
 STAND_IN_SHARE = 0.5
+
+
+def _common(best: Tested, tested, res, weights, train, val, options, exclude, stand_ins) -> list[Tested]:
+    """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
+    (friction's shape on every joint at once): one cause, added in the same round rather than a
+    round per channel; each passes the stand-in test of its own channel."""
+    out, used = [], set(best.channels)
+    for t in tested:
+        if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
+            continue
+        flex = _outshone(t, res, weights, train, val, options, exclude)
+        if flex is not None:
+            stand_ins[_own(t)] = (t, flex)
+            continue
+        out.append(t)
+        used |= set(t.channels)
+    return out
 
 
 def _runner_up(t: Tested, best: Tested) -> dict:

@@ -173,7 +173,7 @@ def evaluate_candidates(
         test = _test(cand, fit, va, chans, validation)
         thr = critical_t(options.alpha, n_tests, test.df)
         k = cand.n_params
-        term = cand.term.with_values(fit.coef[:k], fit.se)
+        term = cand.term.with_linear_values(fit.coef[:k], fit.se)
         own = _own_gain(cand, fit, va, chans) if len(chans) > 1 else None
         gain = test.gain if own is None else max(own, test.gain)
         sig = bool(test.t > thr and gain >= options.min_gain)

@@ -60,7 +60,7 @@ def binned_candidate(res, channel: str, variable: str, train: np.ndarray, n_bins
 
 #: Quantile levels of |x| on each side of zero for the bins of a variable that takes both signs
 #: (a velocity): fine near zero, where friction changes shape within a few hundredths of rad/s.
-SIGNED_LEVELS = (0.0, 0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0)
+SIGNED_LEVELS = (0.0, 0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32, 0.64, 1.0)
 
 
 def signed_edges(x: np.ndarray, n_bins: int) -> np.ndarray:

@@ -58,7 +58,8 @@ class Candidate:
 
     @property
     def n_params(self) -> int:
-        return len(self.term.parameters)
+        """Its columns' count: the term's linear parameters (a shape parameter is held)."""
+        return len(self.term.linear)
 
 
 @dataclass(frozen=True)

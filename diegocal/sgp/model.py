@@ -171,15 +171,16 @@ class DynamicsModel:
         return tuple(self.base_.names) + tuple(n for t in self.terms if not is_filter(t) for n in parameter_labels(t))
 
     def fitted_terms(self) -> tuple:
-        """The extra terms with their fitted values and standard errors (a lag as given)."""
+        """The extra terms with their fitted values and standard errors (a lag and a shape
+        parameter as given)."""
         par = self.parametric_
         out, at = [], self.base_.n_base
         for t in self.terms:
             if is_filter(t) or par is None:
                 out.append(t)
                 continue
-            k = len(t.parameters)
-            out.append(t.with_values(par.values[at : at + k], par.stderr[at : at + k]))
+            k = len(t.linear)  # its columns; a shape parameter is held as given
+            out.append(t.with_linear_values(par.values[at : at + k], par.stderr[at : at + k]))
             at += k
         return tuple(out)
 

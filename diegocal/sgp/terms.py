@@ -65,13 +65,14 @@ def joints_of(term: Term) -> tuple[str, ...]:
 
 
 def parameter_labels(term: Term) -> tuple[str, ...]:
-    """``<cause>:<channel>[<region>].<parameter>``: the names of a term's columns in a model."""
+    """``<cause>:<channel>[<region>].<parameter>``: the names of a term's columns in a model (its
+    linear parameters; a shape parameter is no column)."""
     where = ""
     if term.region is not None:
         where = f"[{term.region.low:.3g},{term.region.high:.3g}]"
     if term.cause == "coupled_friction":
         where = f"+{term.extra['partner']}*{float(term.extra['ratio']):g}"
-    return tuple(f"{term.cause}:{term.channel}{where}.{p.name}" for p in term.parameters)
+    return tuple(f"{term.cause}:{term.channel}{where}.{p.name}" for p in term.linear)
 
 
 # ----------------------------------------------------------------------------- behaviours
@@ -83,6 +84,13 @@ def _viscous(term, robot, j, q, qd, qdd, out):
 
 def _coulomb(term, robot, j, q, qd, qdd, out):
     out[:, j, 0] = friction_column("coulomb", qd[:, j])
+
+
+def _stribeck(term, robot, j, q, qd, qdd, out):
+    """Friction's shape near zero velocity: sign(qd) e^(−|qd|/scale) per unit of amplitude (a
+    Stribeck peak with amplitude > 0; with amplitude < 0 the Coulomb step smoothed over ~scale)."""
+    scale = term.value("velocity_scale")
+    out[:, j, 0] = np.sign(qd[:, j]) * np.exp(-np.abs(qd[:, j]) / scale)
 
 
 def _position_friction(term, robot, j, q, qd, qdd, out):
@@ -133,6 +141,7 @@ def _payload(term, robot, j, q, qd, qdd, out):
 COLUMNS: dict[str, Callable] = {
     "viscous_friction": _viscous,
     "coulomb_friction": _coulomb,
+    "stribeck_friction": _stribeck,
     "position_friction": _position_friction,
     "spring": _spring,
     "torque_offset": _torque_offset,
@@ -150,7 +159,7 @@ def columns(term: Term, robot, q, qd, qdd) -> np.ndarray:
     fill = COLUMNS.get(term.cause)
     if fill is None:
         raise InputFileError(f"{term.cause} is not a dynamics term")
-    out = np.zeros((q.shape[0], q.shape[1], len(term.parameters)))
+    out = np.zeros((q.shape[0], q.shape[1], len(term.linear)))
     j = None if term.cause == "payload" else robot.joint_index(term.channel)
     fill(term, robot, j, q, qd, qdd, out)
     return out
@@ -195,6 +204,8 @@ COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
 #: torque_lag variants: the column of lag L is (filter_L(τ̂) − τ̂) / L (its coefficient ≈ the lag;
 #: → −dτ̂/dt as L → 0)
 LAG_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+#: stribeck_friction variants: velocity scales, rad/s (the fit that adds it refines the scale)
+VELOCITY_SCALES = (0.003, 0.01, 0.03, 0.1, 0.3)
 
 
 @dataclass(frozen=True)
@@ -280,6 +291,16 @@ def _lags(cause: str, ctx: Context) -> list[Proposal]:
             col = (lag_filter(pred, ctx.time, lag) - pred) / lag
             out.append(Proposal(make_term(cause, j, {"lag": lag}), f"torque_lag:{j}", {j: col[:, None]}))
     return out
+
+
+def _stribeck_scales(cause: str, ctx: Context) -> list[Proposal]:
+    """Friction's shape near zero velocity, a family over velocity scales per joint."""
+    return [
+        Proposal(make_term(cause, j, {"velocity_scale": vs}), f"{cause}:{j}")
+        for j in ctx.joints
+        if (cause, j) not in ctx.have
+        for vs in VELOCITY_SCALES
+    ]
 
 
 def _regions(cause: str, ctx: Context) -> list[Proposal]:
@@ -376,6 +397,7 @@ PROPOSE: dict[str, Callable] = {
     "viscous_friction": _friction,
     "coulomb_friction": _friction,
     "spring": _springs,
+    "stribeck_friction": _stribeck_scales,
     "torque_lag": _lags,
     "position_friction": _regions,
     "coupled_friction": _coupled,

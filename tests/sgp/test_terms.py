@@ -184,3 +184,28 @@ def test_a_nominal_inertia_model_fits_friction_and_a_payload_and_survives_its_bu
     assert "inertia" not in SGPOptions().to_dict()
     with pytest.raises(ValueError, match="inertia"):
         SGPOptions(inertia="guessed")
+
+
+def test_a_shape_parameter_is_held_by_the_model_and_kept_with_its_term(arm3, tmp_path):
+    """stribeck_friction: amplitude · sign(qd) · e^(−|qd|/scale); its velocity scale is a shape
+    parameter (no column of its own): the model fits the amplitude with W and keeps the scale as
+    given, through the bundle too."""
+    time, q, qd, qdd = states(arm3, T=1500, seed=4)
+    term = make_term("stribeck_friction", "joint2", {"velocity_scale": 0.05})
+    assert [p.name for p in term.linear] == ["amplitude"] and columns(term, arm3, q, qd, qdd).shape[-1] == 1
+    col = np.sign(qd[:, 1]) * np.exp(-np.abs(qd[:, 1]) / 0.05)
+    np.testing.assert_allclose(columns(term, arm3, q, qd, qdd)[:, 1, 0], col)
+    base = DynamicsModel(arm3, SGPOptions(kind="pr"))
+    base.fit_arrays(q, qd, qdd, np.zeros((len(q), 3)) + 1e-3 * np.random.default_rng(0).standard_normal((len(q), 3)))
+    w_true = np.random.default_rng(5).normal(size=base.base_.n_base)
+    tau = base.features(q, qd, qdd) @ w_true
+    tau[:, 1] += -0.3 * col
+    tau += 1e-3 * np.random.default_rng(6).standard_normal(tau.shape)
+    model = DynamicsModel(arm3, SGPOptions(kind="pr"), terms=(term,)).fit_arrays(q, qd, qdd, tau)
+    (fitted,) = model.fitted_terms()
+    assert fitted.value("velocity_scale") == 0.05  # held as given
+    amp = fitted.parameters[0]
+    assert abs(amp.value + 0.3) < 4 * amp.stderr and amp.stderr < 0.01
+    model.save(tmp_path / "s.sgp")
+    (back,) = load_model(tmp_path / "s.sgp").fitted_terms()
+    assert back.value("velocity_scale") == 0.05 and back.value("amplitude") == pytest.approx(amp.value)

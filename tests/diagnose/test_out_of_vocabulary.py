@@ -1,0 +1,60 @@
+"""Off its own simulator, diagnose names what it can and says `unexplained` for what it cannot:
+a UR5 (example-robot-data inertias; experiments/dynamics_generator.py, written apart from
+diegocal's simulator) whose Coulomb friction switches smoothly through zero velocity got
+`torque_lag` on five joints before friction's shape near zero velocity was in the vocabulary."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import diegocal.sgp.terms as dynamics_terms
+from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.diagnose.dynamics import DynamicsAdapter
+from diegocal.robot.resolve import robot_for_log
+from experiments.dynamics_generator import Session, generate, urdf
+
+pytestmark = pytest.mark.skipif(not urdf("ur5").is_file(), reason="example-robot-data is not installed")
+
+
+def _diagnose(session: Session):
+    log = generate(session)
+    return log, diagnose(log, robot_for_log(None, log), DiagnoseOptions(domain="dynamics"))
+
+
+@pytest.fixture(scope="module")
+def smooth():
+    return _diagnose(Session(duration=20.0, seed=5, robot_seed=5, coulomb=(0.1, 0.2)))
+
+
+def test_smooth_friction_is_named_as_friction_never_a_lag(smooth):
+    log, d = smooth
+    causes = {f.cause for f in d.findings}
+    assert causes and causes <= {"stribeck_friction", "unexplained"}, causes
+    for f in d.findings:
+        if f.cause == "stribeck_friction":  # a smooth transition: below Coulomb near zero velocity
+            assert f.term.value("amplitude") < 0
+            assert 0.005 < f.term.value("velocity_scale") < 0.05  # tanh(qd / 0.02) ≈ 1 − 2 e^(−2|qd|/0.02)
+            assert np.isfinite(f.term.parameters[1].stderr)
+
+
+def test_without_its_term_the_stand_in_is_refused(monkeypatch):
+    """With friction's shape taken out of the vocabulary, the lags that stood in for it are not
+    named: the channels are unexplained, their evidence names the stand-in and the flexible
+    model's gain (the SGP that would absorb them is not fitted here: it is not what is tested)."""
+    monkeypatch.setitem(dynamics_terms.PROPOSE, "stribeck_friction", lambda cause, ctx: [])
+    monkeypatch.setattr(DynamicsAdapter, "absorb", lambda self, fitted, channels, train: None)
+    _, d = _diagnose(Session(duration=60.0, seed=0, robot_seed=0, coulomb=(0.1, 0.2)))
+    causes = [f.cause for f in d.findings]
+    assert "torque_lag" not in causes, causes
+    stood = [f for f in d.findings if f.cause == "unexplained" and "stand_in" in f.evidence]
+    assert stood, causes
+    ev = stood[0].evidence
+    assert ev["stand_in"]["validation_gain"] < 0.5 * ev["validation_gain"]
+
+
+def test_a_hidden_effect_beside_smooth_friction_is_named_first():
+    log, d = _diagnose(Session(duration=20.0, seed=7, robot_seed=7, coulomb=(0.1, 0.2), hidden="torque_offset"))
+    top = d.findings[0]
+    assert (top.cause, top.channel) == ("torque_offset", log.truth.effects[0]["channel"])
+    assert top.term.value("offset") == pytest.approx(log.truth.effects[0]["scale"], rel=0.1)
