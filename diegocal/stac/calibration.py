@@ -13,6 +13,11 @@ file of diegocal::
       - {cause: mocap_frame, channel: markers, parameters: {x, y, z (m), rx, ry, rz (rad, rotation vector)}}
     sigma:   {pots, markers, by_group}
     fit:     {cost, iterations, converged, seconds, history}
+    stderr:  {method: block_sandwich, blocks, block_s}   # how the standard errors were estimated
+
+A parameter whose estimate trades off with another's (|ρ| ≥ 0.9: a pot's gain and bias when its
+joint stays on one side of zero) carries ``correlated: {<channel>.<parameter>: ρ}`` beside its
+value and standard error (:mod:`diegocal.stac.covariance`).
 
 Layout 1 (files without ``layout``) wrote ``pots: {NAME: {gain, bias, gain_se, bias_se}}``,
 ``markers: {NAME: {link, xyz, xyz_se}}`` and ``mocap: {R, T}``; :meth:`Calibration.from_dict`
@@ -118,6 +123,9 @@ class Calibration:
         at its detection limit, :func:`diegocal.stac.qphase.floor_factor`)
     header : the bundle header (:func:`diegocal.io.bundle.header`), written first
     pot_units : ((gain unit, bias unit), ...) per pot (:data:`POT_UNITS`); () when not known
+    correlations : ((label, label, ρ), ...) estimates that trade off (|ρ| ≥ 0.9), labels
+        ``<pot>.gain``, ``<pot>.bias``, ``<marker>.x|y|z``: written next to each value
+    stderr : how the standard errors were estimated ({method, blocks, block_s}; {} unknown)
     """
 
     pot_names: tuple[str, ...]
@@ -146,6 +154,8 @@ class Calibration:
     sigma_unresolved: tuple = ()
     header: dict = field(default_factory=dict)
     pot_units: tuple = ()
+    correlations: tuple = ()
+    stderr: dict = field(default_factory=dict)
 
     @classmethod
     def nominal(cls, robot: Robot) -> Calibration:
@@ -210,6 +220,10 @@ class Calibration:
                 "seconds": _f(self.fit.seconds),
             },
         }
+        if self.correlations:
+            _write_correlations(out["baseline"], self.correlations)
+        if self.stderr:
+            out["stderr"] = dict(self.stderr)
         if self.sigma_by_group:
             out["sigma"]["by_group"] = {k: _f(v) for k, v in self.sigma_by_group.items()}
         if self.sigma_unresolved:
@@ -260,6 +274,8 @@ class Calibration:
                 rejected_poses=tuple(dict(r) for r in ((data.get("rejected_poses") or {}).get("poses") or ())),
                 sigma_unresolved=tuple(dict(u) for u in (sigma.get("unresolved") or ())),
                 header={k: data[k] for k in HEADER_KEYS if k in data},
+                correlations=_read_correlations(data.get("baseline")),
+                stderr=dict(data.get("stderr") or {}),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise InputFileError(f"{source}: not a valid calib.yaml ({type(exc).__name__}: {exc})") from None
@@ -312,6 +328,31 @@ def _baseline_v1(data: dict) -> dict:
         "mocap_R": np.array(mocap.get("R", np.eye(3)), dtype=float).reshape(3, 3),
         "mocap_T": np.array(mocap.get("T", [0.0, 0.0, 0.0]), dtype=float).reshape(3),
     }
+
+
+def _write_correlations(baseline: list, pairs) -> None:
+    """Each parameter that trades off gets ``correlated: {<label>: ρ}`` in its {value, stderr,
+    unit} mapping (an added key: readers that do not know it read the value as before)."""
+    by: dict = {}
+    for a, b, rho in pairs:
+        by.setdefault(a, {})[b] = round(float(rho), 3)
+        by.setdefault(b, {})[a] = round(float(rho), 3)
+    for d in baseline:
+        for name, p in (d.get("parameters") or {}).items():
+            if f"{d['channel']}.{name}" in by:
+                p["correlated"] = by[f"{d['channel']}.{name}"]
+
+
+def _read_correlations(items) -> tuple:
+    seen, out = set(), []
+    for d in items or ():
+        for name, p in ((d or {}).get("parameters") or {}).items():
+            for other, rho in ((p.get("correlated") or {}) if isinstance(p, dict) else {}).items():
+                a = f"{d['channel']}.{name}"
+                if (other, a) not in seen:
+                    seen.add((a, other))
+                    out.append((a, str(other), float(rho)))
+    return tuple(out)
 
 
 def _terms(items) -> tuple:

@@ -66,18 +66,24 @@ def _theta_jacobian(obs: Observation, params: Params, noise: Noise, s, Rl, pl, v
 
 def _theta_transpose_times(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
     """J_θᵀ v summed over frames (Nθ,) without forming J_θ; v (B, P + 3M), invalid rows zero."""
+    return _theta_rows(obs, params, noise, s, Rl, pl, v).sum(axis=0)
+
+
+def _theta_rows(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
+    """J_θ,tᵀ v_t of every frame (B, Nθ) without forming J_θ; v (B, P + 3M), invalid rows zero."""
     P, M = obs.n_pots, obs.n_markers
+    B = v.shape[0]
     vp = v[:, :P] / noise.sig_p
-    out = [np.einsum("bp,bp->p", vp, s), vp.sum(0)]
+    out = [vp * s, vp]
     if M:
         vx = v[:, P:].reshape(-1, M, 3) / noise.sig_x
         y = ((Rl @ params.xyz[:, :, None])[..., 0] + pl) @ params.R.T  # R x_b
-        out.append(np.einsum("bmki,bmk->mi", Rl, vx @ params.R).ravel())  # (R h_r)ᵀ v
-        out.append(np.cross(y, vx).sum((0, 1)))  # (−[y]×)ᵀ v = y × v
-        out.append(vx.sum((0, 1)))
+        out.append(np.einsum("bmki,bmk->bmi", Rl, vx @ params.R).reshape(B, 3 * M))  # (R h_r)ᵀ v
+        out.append(np.cross(y, vx).sum(1))  # (−[y]×)ᵀ v = y × v
+        out.append(vx.sum(1))
     else:
-        out += [np.zeros(0), np.zeros(3), np.zeros(3)]
-    return np.concatenate(out)
+        out += [np.zeros((B, 0)), np.zeros((B, 3)), np.zeros((B, 3))]
+    return np.concatenate(out, axis=1)
 
 
 def _times_q(obs: Observation, params: Params, noise: Noise, ex: dict, u: np.ndarray) -> np.ndarray:

@@ -69,6 +69,7 @@ from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac import robust
 from diegocal.stac.calibration import FitInfo, unresolved
+from diegocal.stac.covariance import covariance, theta_labels
 from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.poses import write_off_foreign_poses
@@ -253,17 +254,19 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
     if poses is not None:  # static poses filed with another pose's markers (poses.py)
         obs, fine = write_off_foreign_poses(base, obs, fine, poses, refit, options)
     params, sigma, q = fine.params, fine.sigma, fine.q
-    # standard errors with q marginalised (the Schur complement of the last joint step, one
-    # converged iteration from the solution), not the p-phase's conditional-on-q ones, which
-    # ignore the joint-angle uncertainty
-    se = fine.se_joint or fine.se
-    if obs.n_pots and fine.se_joint is None:
-        _, _, se = theta_step(
-            obs, params, _noise(obs, sigma, options), q, np.zeros(obs.n_frames), options.batch_size, jobs=options.jobs
-        )
+    # standard errors with q marginalised (the Schur complement of eq. 2.21), not the p-phase's
+    # conditional-on-q ones, which ignore the joint-angle uncertainty; cluster-robust over blocks
+    # of frames (covariance.py: the residuals are correlated in time)
+    cov = covariance(obs, params, _noise(obs, sigma, options), q, options.batch_size)
     fit = FitInfo(history[-1].cost, len(history), fine.converged, time.perf_counter() - t0)
-    cal = obs.to_calibration(params, se, sigma, "stac", fit)
-    cal = replace(_with_history(cal, history), sigma_unresolved=unresolved(fine.unresolved))
+    cal = obs.to_calibration(params, cov.se(), sigma, "stac", fit)
+    block_s = float(np.median(np.diff(log.time))) * obs.n_frames / cov.blocks if obs.n_frames > 1 else 0.0
+    cal = replace(
+        _with_history(cal, history),
+        sigma_unresolved=unresolved(fine.unresolved),
+        correlations=tuple(cov.correlations(theta_labels(obs))),
+        stderr={"method": "block_sandwich", "blocks": int(cov.blocks), "block_s": round(block_s, 3)},
+    )
     return StacResult(cal, q, tuple(history))
 
 

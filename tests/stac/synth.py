@@ -210,8 +210,10 @@ def simulate(
     sigma_markers=0.001,
     occlusion=0.0,
     truth: Calibration | None = None,
+    marker_time: float = 0.0,
 ) -> Log:
-    """A log of pots (V) and markers (m, NaN when occluded) with /truth (params + q)."""
+    """A log of pots (V) and markers (m, NaN when occluded) with /truth (params + q); marker noise
+    white, or with ``marker_time`` > 0 (s) an AR(1) process of that correlation time (the same σ)."""
     rng = np.random.default_rng(seed)
     truth = truth or true_calibration(robot, rng)
     q = smooth_q(robot, n_frames, rate_hz, rng)
@@ -219,7 +221,12 @@ def simulate(
     noise = np.where(tendon, 0.04 * sigma_pots, sigma_pots)  # tendons read metres, not volts
     pots = predict_pots(robot, q, truth.gain, truth.bias) + rng.normal(0, 1, (n_frames, len(truth.gain))) * noise
     mk = predict_markers(robot, q, truth.marker_xyz, truth.mocap_R, truth.mocap_T)
-    mk = mk + rng.normal(0, sigma_markers, mk.shape)
+    e = rng.normal(0, sigma_markers, mk.shape)
+    if marker_time > 0:  # x_t = a x_(t-1) + sqrt(1 - a²) e_t: stationary with σ, correlated over marker_time
+        a = np.exp(-1.0 / (marker_time * rate_hz))
+        for t in range(1, n_frames):
+            e[t] = a * e[t - 1] + np.sqrt(1 - a * a) * e[t]
+    mk = mk + e
     if occlusion:
         mk[rng.random(mk.shape[:2]) < occlusion] = np.nan
     streams = {

@@ -1,0 +1,135 @@
+"""Do STAC's ± cover the truth? (issue #31, item 5)
+
+For ``--seeds`` logs of each generator, STAC calibrates the whole log and every estimate is
+compared with the simulator's truth: the share of |estimate − truth| ≤ 2 SE, per family (pot
+gains, pot biases, marker positions), pooled over the seeds. 0.90-0.98 is the goal (0.95 for
+exact standard errors and an unbiased estimate). Only what the data determine is counted: pots
+whose gain and bias were estimated, biases in the gauge the fit fixed
+(:meth:`~diegocal.stac.model.Observation.gauge_equivalent_bias`), markers that take up no gauge.
+
+Generators: ``offsim`` (experiments/kinematics_generator.py: minimum-jerk motion, anisotropic
+white marker noise plus a slowly varying part, quantised pots) and ``project`` (``diegocal
+simulate kinematics``: white noise). Both on the same robot directory (``--robot``: the blind
+iCub of the generator, 32 pots and 16 markers, or the UR5). Clean logs: STAC's model is exact.
+
+Also printed: the median |z| per family (0.67 for exact SEs) and the worst seed's share.
+
+    .venv/bin/python bench/bench_se_coverage_stac.py --seeds 50 --robot icub
+    .venv/bin/python bench/bench_se_coverage_stac.py --quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from experiments import kinematics_generator as gen  # noqa: E402
+
+GENERATORS = ("offsim", "project")
+FAMILIES = ("gain", "bias", "marker")
+
+
+def make_log(generator: str, robot_dir: Path, seed: int, duration: float):
+    """A clean log of ``generator`` (module docstring)."""
+    if generator == "offsim":
+        return gen.generate(gen.Session(robot_dir, duration, seed=seed, hardware_seed=seed))
+    from diegocal.robot import load_robot
+    from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
+    robot = load_robot(robot_dir)
+    return simulate_kinematics(robot, KinematicsOptions(duration=duration), np.random.default_rng(seed))
+
+
+def z_scores(log, robot, cal) -> dict:
+    """(estimate − truth) / SE per family, for what the data determine (module docstring)."""
+    from diegocal.stac.calibration import Calibration
+    from diegocal.stac.model import Observation
+
+    truth = Calibration.from_dict(log.truth.params)
+    obs = Observation(log.without_truth(), robot)
+    obs.check_observable()
+    order = [truth.pot_names.index(n) for n in cal.pot_names]
+    tg, tb = truth.gain[order], truth.bias[order]
+    b_equiv = obs.gauge_equivalent_bias(tg, tb, cal.bias)
+    zg = (cal.gain - tg) / cal.gain_se
+    zb = np.where(~obs.fixed_bias, (cal.bias - b_equiv) / cal.bias_se, np.nan)
+    morder = [truth.marker_names.index(n) for n in cal.marker_names]
+    free = obs.gauge_free_markers()
+    zx = (cal.marker_xyz - truth.marker_xyz[morder]) / cal.marker_xyz_se
+    zx[~free] = np.nan
+    return {"gain": zg[np.isfinite(zg)], "bias": zb[np.isfinite(zb)], "marker": zx[np.isfinite(zx)].ravel()}
+
+
+def run_one(task) -> dict:
+    generator, robot_dir, seed, duration = task
+    from diegocal.robot import load_robot
+    from diegocal.stac import calibrate
+
+    log = make_log(generator, robot_dir, seed, duration)
+    robot = load_robot(robot_dir)
+    start = time.process_time()
+    cal = calibrate(log.without_truth(), robot).calibration
+    return {"generator": generator, "seed": seed, "z": z_scores(log, robot, cal),
+            "seconds": time.process_time() - start}
+
+
+def table(rows) -> str:
+    out = ["| generator | family | seeds | estimates | within 2 SE | median abs z (0.67) | worst seed |",
+           "|---|---|---|---|---|---|---|"]
+    for g in GENERATORS:
+        mine = [r for r in rows if r["generator"] == g]
+        if not mine:
+            continue
+        for fam in FAMILIES:
+            z = np.concatenate([r["z"][fam] for r in mine])
+            if not z.size:
+                continue
+            per = [np.mean(np.abs(r["z"][fam]) <= 2) for r in mine if r["z"][fam].size]
+            out.append(f"| {g} | {fam} | {len(mine)} | {z.size} | {np.mean(np.abs(z) <= 2):.3f} | "
+                       f"{np.median(np.abs(z)):.2f} | {min(per):.2f} |")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=50)
+    ap.add_argument("--seed", type=int, default=0, help="first seed")
+    ap.add_argument("--robot", choices=tuple(gen.ROBOTS), default="icub")
+    ap.add_argument("--duration", type=float, default=30.0, help="log length, s")
+    ap.add_argument("--generator", action="append", choices=GENERATORS, help="default: both")
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--quick", action="store_true", help="3 seeds of 10-s UR5 logs (a smoke run)")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.seeds, args.robot, args.duration = 3, "ur5", 10.0
+    generators = tuple(args.generator or GENERATORS)
+    with tempfile.TemporaryDirectory() as tmp:
+        robot_dir = gen.robot_dir(Path(tmp), args.robot)
+        last = args.seed + args.seeds - 1
+        print(f"bench_se_coverage_stac: {args.robot}, {args.duration:g}-s logs, seeds {args.seed}..{last}, "
+              f"load {os.getloadavg()[0]:.1f}")
+        tasks = [(g, robot_dir, args.seed + i, args.duration) for g in generators for i in range(args.seeds)]
+        t0 = time.perf_counter()
+        if args.jobs > 1:
+            with ProcessPoolExecutor(args.jobs) as pool:
+                rows = list(pool.map(run_one, tasks))
+        else:
+            rows = [run_one(t) for t in tasks]
+    print(table(rows))
+    print(f"{time.perf_counter() - t0:.0f} s wall, STAC median {np.median([r['seconds'] for r in rows]):.1f} CPU s "
+          f"per log, load average at the end {os.getloadavg()[0]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

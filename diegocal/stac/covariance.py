@@ -1,0 +1,151 @@
+"""Standard errors of θ that say what the data say: a sandwich over contiguous blocks of frames.
+
+With the joint angles q_t of every frame profiled out (the Schur complement of eq. 2.21, as the
+joint step forms it, :mod:`.joint_step`), θ = [gain, bias, d_1:M, ω, T0] is an M-estimate whose
+per-frame score is
+
+.. math:: g_t = (J_{θ,t} - J_{q,t} H_t^{-1} B_t)^T W_t z_t ,  \\qquad
+          A = \\sum_t J_{θ,t}^T W_t J_{θ,t} - B_t^T H_t^{-1} B_t ,
+
+z_t the frame's standardised residuals, H_t = J_qᵀ W J_q, B_t = J_qᵀ W J_θ. The model-based
+covariance A⁻¹ holds when the residuals are independent from frame to frame with the σ of their
+type; at 100 Hz they are not (mocap reconstruction smooths, a tracked q carries its errors from
+frame to frame), and one σ per type hides a worse camera axis. The cluster-robust (sandwich)
+covariance
+
+.. math:: V = \\frac{G}{G-1} A^{-1} \\Big(\\sum_b s_b s_b^T\\Big) A^{-1}, \\qquad s_b = \\sum_{t \\in b} g_t
+
+over G contiguous blocks of frames (:data:`BLOCKS`, each much longer than the residuals'
+correlation time) holds either way. Its variances are estimated from G block sums (noisier than
+A⁻¹'s), and with few blocks it errs low, so a parameter's standard error is the larger of the two:
+the model-based one when the data are as the model says, the sandwich when they are not.
+
+A is summed over an evenly spaced subset of at most ``max_frames`` frames, scaled (as the joint
+step does, to keep the dense per-frame Jacobians small); the scores over every frame (from the
+structure of J_θ, without forming it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from diegocal.stac.joint_step import _dense_q_jacobian, _theta_jacobian, _theta_rows, _times_q, free_mask
+from diegocal.stac.model import Observation, Params
+from diegocal.stac.qphase import Noise, block_solve, damped, normal_equations
+
+#: Contiguous blocks of frames the sandwich's meat is summed over (fewer on short logs: a block is
+#: at least MIN_BLOCK frames). 40 blocks of a 30-s log at 100 Hz are 0.75 s each, many times the
+#: correlation time of the tracking residuals (tens of ms).
+BLOCKS = 40
+MIN_BLOCK = 10
+#: Parameters whose estimates correlate at least this much are listed next to each other.
+CORRELATED = 0.9
+
+
+@dataclass(frozen=True)
+class Covariance:
+    """θ's covariance over the free entries (``free`` (Nθ,) bool of θ = [gain (P), bias (P),
+    d (3M), ω (3), T (3)]): ``model`` = A⁻¹, ``robust`` the block sandwich, ``blocks`` G.
+
+    :meth:`se` gives the standard errors the calibration reports; :meth:`correlations` the pairs
+    that trade off."""
+
+    free: np.ndarray
+    model: np.ndarray
+    robust: np.ndarray
+    blocks: int
+    n_pots: int
+    n_markers: int
+
+    @property
+    def reported(self) -> np.ndarray:
+        """The covariance the standard errors come from: the sandwich, its diagonal floored at
+        the model's (module docstring), the correlations the sandwich's."""
+        d = np.sqrt(np.maximum(np.diag(self.robust), np.diag(self.model)))
+        c = self.correlation()
+        return c * np.outer(d, d)
+
+    def correlation(self) -> np.ndarray:
+        d = np.sqrt(np.maximum(np.diag(self.robust), 1e-300))
+        c = self.robust / np.outer(d, d)
+        np.fill_diagonal(c, 1.0)
+        return np.clip(c, -1.0, 1.0)
+
+    def se(self) -> dict:
+        """``{"gain", "bias" (P,), "xyz" (M, 3)}``, NaN for the entries held fixed."""
+        P, M = self.n_pots, self.n_markers
+        sd = np.full(self.free.size, np.nan)
+        sd[self.free] = np.sqrt(np.diag(self.reported))
+        return {"gain": sd[:P], "bias": sd[P : 2 * P], "xyz": sd[2 * P : 2 * P + 3 * M].reshape(M, 3)}
+
+    def correlations(self, labels, threshold: float = CORRELATED) -> list[tuple[str, str, float]]:
+        """(label a, label b, ρ) of the free gains, biases and marker coordinates whose estimates
+        correlate by at least ``threshold`` (``labels`` (Nθ,) names θ's entries; ω, T left out)."""
+        P, M = self.n_pots, self.n_markers
+        idx = np.flatnonzero(self.free)
+        keep = idx < 2 * P + 3 * M
+        c = self.correlation()[np.ix_(keep, keep)]
+        names = [labels[i] for i in idx[keep]]
+        out = []
+        for a, b in zip(*np.triu_indices(c.shape[0], 1), strict=True):
+            if abs(c[a, b]) >= threshold:
+                out.append((names[a], names[b], float(c[a, b])))
+        return out
+
+
+def covariance(
+    obs: Observation, params: Params, noise: Noise, q: np.ndarray, batch: int = 250, max_frames: int = 500,
+    blocks: int = BLOCKS,
+) -> Covariance:
+    """θ's model-based and block-sandwich covariances at a fit (module docstring); q (T, n) the
+    tracked joint angles, ``noise`` the σ per type the fit ended with."""
+    T = q.shape[0]
+    P, M = obs.n_pots, obs.n_markers
+    A, scores = information(obs, params, noise, q, batch, max_frames)
+    free = free_mask(obs)
+    Af = 0.5 * (A + A.T)[np.ix_(free, free)]
+    Af = Af + 1e-9 * max(np.trace(Af), 1.0) / max(free.sum(), 1) * np.eye(free.sum())
+    model = np.linalg.inv(Af)
+    length = max(MIN_BLOCK, T // max(blocks, 1))
+    sums = np.add.reduceat(scores[:, free], np.arange(0, T, length), axis=0)
+    G = sums.shape[0]
+    meat = sums.T @ sums * (G / max(G - 1, 1))
+    robust = model @ meat @ model
+    return Covariance(free, model, 0.5 * (robust + robust.T), G, P, M)
+
+
+def information(
+    obs: Observation, params: Params, noise: Noise, q: np.ndarray, batch: int = 250, max_frames: int = 500
+) -> tuple[np.ndarray, np.ndarray]:
+    """A (Nθ, Nθ), the information of θ with q profiled out (from every ``stride``-th frame,
+    scaled), and the profiled scores g_t (T, Nθ) of every frame (module docstring; sign: minus)."""
+    T = q.shape[0]
+    N = 2 * obs.n_pots + 3 * obs.n_markers + 6
+    stride = max(1, -(-T // max_frames))
+    A = np.zeros((N, N))
+    scores = np.zeros((T, N))
+    for start in range(0, T, batch):
+        sl = slice(start, min(start + batch, T))
+        H, g, _, (s, Rl, pl), _, ex = normal_equations(obs, params, noise, q, sl, want_red=False)
+        Hd = damped(H, np.zeros(H.shape[0]), inplace=True)  # the tiny ridge only: joints no sensor sees
+        v = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ J_qᵀ W z
+        # J_θᵀ W (J_q H⁻¹ J_qᵀ W z − z) per frame: minus the profiled score (its sign is immaterial)
+        scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v))
+        k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)
+        wx = ex["wx"][k] if ex["wx"] is not None else None
+        Jq, w = _dense_q_jacobian(obs, params, noise, q[sl][k], ex["wp"][k], wx)
+        Jt = _theta_jacobian(obs, params, noise, s[k], Rl[k], pl[k], ex["valid"][k])
+        WJt = Jt * w[..., None]
+        Bt = np.swapaxes(Jq, 1, 2) @ WJt
+        X = block_solve(Hd[k], Bt, obs.sparsity.blocks)
+        A += stride * (WJt.reshape(-1, N).T @ Jt.reshape(-1, N) - Bt.reshape(-1, N).T @ X.reshape(-1, N))
+    return A, scores
+
+
+def theta_labels(obs: Observation) -> list[str]:
+    """Names of θ's entries (Nθ,): ``<pot>.gain``, ``<pot>.bias``, ``<marker>.x|y|z``, then ω, T."""
+    out = [f"{n}.gain" for n in obs.pot_names] + [f"{n}.bias" for n in obs.pot_names]
+    out += [f"{m}.{a}" for m in obs.marker_names for a in "xyz"]
+    return out + ["mocap.rx", "mocap.ry", "mocap.rz", "mocap.x", "mocap.y", "mocap.z"]
