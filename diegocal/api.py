@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from diegocal.diagnose.output import pooled_heldout_rmse  # noqa: F401 (part of the API)
 from diegocal.errors import FitError
 from diegocal.io import Log, load_log, save_yaml
 from diegocal.io.bundle import header
@@ -38,10 +39,8 @@ __all__ = [
     "Stac",
     "calibrate",
     "diagnose",
-    "drift_summary",
     "load_log",
     "load_robot",
-    "pooled_heldout_rmse",
     "predict",
     "report",
     "robot_for",
@@ -232,31 +231,3 @@ def report(results, output, heldout=(), robot=None, command: str = LIBRARY) -> P
 
 
 # ----------------------------------------------------------------------------- summaries of results
-def drift_summary(drifts) -> dict:
-    """The pneumatic fits' 2-s drift (thesis §4.5.3, a fraction of Pc - Pr per chamber) in four
-    numbers: ``median``, ``max``, and how many chambers stay ``below 4 %`` and ``below 10 %``."""
-    import numpy as np
-
-    v = np.asarray(list(drifts), float)
-    return {
-        "median": float(np.median(v)) if v.size else float("nan"),
-        "max": float(v.max()) if v.size else float("nan"),
-        "below 4 %": int((v < 0.04).sum()),
-        "below 10 %": int((v < 0.10).sum()),
-    }
-
-
-def pooled_heldout_rmse(diagnosis: dict) -> dict[str, tuple[float, float]]:
-    """Unit -> (baseline, extended) held-out RMSE of a diagnosis (its diagnosis.yaml mapping), pooled
-    as the root mean square over the channels measured in that unit, never across units (NaN where
-    no channel has one)."""
-    import numpy as np
-
-    base, ext = diagnosis.get("baseline") or {}, diagnosis.get("extended") or {}
-    units = base.get("units") or {}
-
-    def pooled(block: dict, unit: str) -> float:
-        x = [v for c, v in (block.get("heldout_rmse") or {}).items() if v is not None and units.get(c, unit) == unit]
-        return float(np.sqrt(np.mean(np.square(x)))) if x else float("nan")
-
-    return {u: (pooled(base, u), pooled(ext, u)) for u in dict.fromkeys(units.values() or [base.get("unit", "")])}

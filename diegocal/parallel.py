@@ -17,6 +17,8 @@ import functools
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 
+from threadpoolctl import ThreadpoolController
+
 _CONTROLLER = None
 
 
@@ -24,8 +26,6 @@ def _controller():
     """One threadpoolctl controller per process (listing the loaded libraries is the slow part)."""
     global _CONTROLLER
     if _CONTROLLER is None:
-        from threadpoolctl import ThreadpoolController
-
         _CONTROLLER = ThreadpoolController()
     return _CONTROLLER
 

@@ -96,8 +96,8 @@ def _sgp(path: Path) -> dict:
 
 
 def _pneumatic(path: Path) -> dict:
-    from diegocal.api import drift_summary
     from diegocal.io import load_yaml
+    from diegocal.pneumatic.predict import drift_summary
 
     d = load_yaml(path)
     drifts = {n: c.get("drift_2s") for n, c in (d.get("chambers") or {}).items() if c.get("drift_2s") is not None}
@@ -115,7 +115,7 @@ def _pneumatic(path: Path) -> dict:
 
 
 def _diagnose(path: Path) -> dict:
-    from diegocal.api import pooled_heldout_rmse
+    from diegocal.diagnose.output import pooled_heldout_rmse
     from diegocal.io import load_yaml
 
     d = load_yaml(path)

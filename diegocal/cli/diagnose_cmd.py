@@ -16,7 +16,7 @@ from diegocal.cli.app import app
 from diegocal.cli.common import cli_errors, command_line, default_output, errors, output_path, split_words, summary
 from diegocal.domains import DOMAIN_NAMES
 from diegocal.domains import domain as domain_record
-from diegocal.errors import DiegocalError, MissingStreamError
+from diegocal.errors import MissingStreamError
 
 if TYPE_CHECKING:
     from diegocal.diagnose import DiagnoseOptions
@@ -108,8 +108,7 @@ def run_diagnose(args: DiagnoseArgs, command: str = "diegocal diagnose", progres
     # the library is imported when the command runs, so that `--help` answers at once
     from diegocal.api import diagnose
     from diegocal.diagnose import domains_of
-    from diegocal.io import load_log, save_yaml
-    from diegocal.io.bundle import header
+    from diegocal.io import load_log, load_yaml
     from diegocal.robot.resolve import robot_for_log
 
     data = load_log(args.log)
@@ -125,13 +124,8 @@ def run_diagnose(args: DiagnoseArgs, command: str = "diegocal diagnose", progres
     for domain in todo:
         result = diagnose(data, robot, domain, args.options(progress))[domain]
         out, extended = output_paths(args.log, args.output, domain, len(todo) > 1)
-        try:
-            result.save_extended(extended, header(domain_record(domain).kind, robot, args.log, command))
-        except OSError as exc:
-            raise DiegocalError(f"{extended}: cannot write the extended model ({exc.strerror or exc})") from None
-        mapping = {**header("diagnosis", robot, args.log, command), **result.to_dict(extended_model=extended.name)}
-        save_yaml(mapping, out)
-        done.append(Diagnosed(domain, mapping, out, extended))
+        result.save(out, args.log, command, extended)
+        done.append(Diagnosed(domain, load_yaml(out), out, extended))
     return done
 
 
@@ -208,7 +202,7 @@ def diagnose_cmd(
 
 
 def _summary_rows(done: Diagnosed) -> list:
-    from diegocal.api import pooled_heldout_rmse
+    from diegocal.diagnose.output import pooled_heldout_rmse
 
     domain, mapping, out, extended = done.domain, done.mapping, done.output, done.extended
     base = mapping["baseline"]

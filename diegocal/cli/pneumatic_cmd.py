@@ -134,7 +134,7 @@ def pneumatic_fit(
     rows = [("chambers fitted", len(done.fits)), ("skipped", len(done.skipped))]
     if len(done.fits) <= 8:
         rows += [(f"{n}: rmse / drift 2 s", f"{f.rmse:.3g} / {f.drift_2s:.1%}") for n, f in done.fits.items()]
-    from diegocal.api import drift_summary
+    from diegocal.pneumatic.predict import drift_summary
 
     drift = drift_summary(f.drift_2s for f in done.fits.values())
     rows += [

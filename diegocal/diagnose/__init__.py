@@ -38,6 +38,8 @@ from diegocal.domains import DOMAIN_NAMES as DOMAINS
 from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError, MissingStreamError
 from diegocal.evaluate import Blocks, split_blocks
+from diegocal.io import save_yaml
+from diegocal.io.bundle import header
 from diegocal.parallel import one_blas_thread
 
 
@@ -90,6 +92,7 @@ class Diagnosis:
     time: np.ndarray
     options: DiagnoseOptions
     adapters: tuple = field(repr=False, default=())
+    robot: object = field(repr=False, default=None)
 
     @property
     def findings(self) -> tuple[Finding, ...]:
@@ -114,6 +117,21 @@ class Diagnosis:
 
     def to_dict(self, extended_model: str | None = None) -> dict:
         return diagnosis_dict(self, extended_model)
+
+    def save(self, path, log=None, command: str = "diegocal (Python)", extended: Path | None = None) -> Path:
+        """Write diagnosis.yaml at ``path`` and the extended model beside it (``extended``; default
+        the domain's suffix, ``run.extended.sgp``), both with their bundle headers (``log``: the
+        path of the log it diagnosed). Returns the extended model's path."""
+        path = Path(path)
+        if extended is None:
+            stem = path.name.removesuffix(".yaml").removesuffix(".diagnosis")
+            extended = path.with_name(stem + domain_record(self.domain).extended_suffix)
+        try:
+            self.save_extended(extended, header(domain_record(self.domain).kind, self.robot, log, command))
+        except OSError as exc:
+            raise DiegocalError(f"{extended}: cannot write the extended model ({exc.strerror or exc})") from None
+        save_yaml({**header("diagnosis", self.robot, log, command), **self.to_dict(extended.name)}, path)
+        return Path(extended)
 
 
 def domains_of(log) -> tuple[str, ...]:
@@ -164,7 +182,7 @@ def _diagnose(log, robot, options: DiagnoseOptions) -> Diagnosis:
                     options.progress(f"diagnosed {a.unit_name}")
     else:
         units = [run_unit(a, blocks, engine) for a in adapters]
-    return Diagnosis(options.domain, tuple(units), blocks, log.time, options, adapters)
+    return Diagnosis(options.domain, tuple(units), blocks, log.time, options, adapters, robot)
 
 
 __all__ = [

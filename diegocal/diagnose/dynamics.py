@@ -65,6 +65,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from diegocal.causes import MAX_LAG_S
 from diegocal.causes import cause as registry_entry
@@ -81,6 +82,7 @@ from diegocal.sgp.model import (
     torque_array,
 )
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
+from diegocal.sgp.store import save_model
 from diegocal.sgp.terms import (
     Context,
     columns,
@@ -297,8 +299,6 @@ class DynamicsAdapter:
     def _fit_lags(self, A, lags: dict, train, sigma) -> dict:
         """Each lagging sensor's time constant (s, in [0, MAX_LAG_S]) by bounded 1-D searches of
         the weighted training error, the linear parameters re-solved at every trial (two sweeps)."""
-        from scipy.optimize import minimize_scalar
-
         lags = dict(lags)
 
         def cost(r, lag):
@@ -322,8 +322,6 @@ class DynamicsAdapter:
         """Each shape parameter of ``terms`` (:mod:`diegocal.causes`: a Stribeck velocity scale) by
         a bounded 1-D search, in log space, of the weighted training error with the linear
         parameters re-solved at every trial (one sweep per parameter, two when there are several)."""
-        from scipy.optimize import minimize_scalar
-
         terms = list(terms)
         slots = [(i, p) for i, t in enumerate(terms) for p in _specs(t) if p.shape]
 
@@ -467,14 +465,15 @@ class DynamicsAdapter:
     def absorb(self, fitted: DynamicsFit, channels, train) -> DynamicsFit:
         """The non-parametric part for what stays ``unexplained`` (DESIGN.md: "the non-parametric
         part absorbs it"): the SGP of thesis eq. (3.1)-(3.20) with the found terms in its
-        parametric part, fitted on the training blocks with the library's guard (a GP per joint
-        on (q, qd) of every joint, kept by the guard's blocked cross-validation only where it
-        beats the parametric model by one standard error; elsewhere that joint is PR). Every
-        joint gets a GP candidate, not only ``channels``: the saved model is one SGP, and the
-        guard already keeps a GP off the joints it does not help. The engine keeps the result
-        if it lowers the validation error of ``channels``."""
+        parametric part, fitted on the training blocks with the library's guard: a GP on (q, qd)
+        of every joint for each of ``channels`` only, kept by the guard's blocked
+        cross-validation only where it beats the parametric model by one standard error; every
+        other joint is PR (a GP offered on a joint that needs none extrapolated far off the data
+        on a real robot). The engine keeps the result if it lowers the validation error of
+        ``channels`` and raises no other channel's."""
         tr = fitted.train
-        model = DynamicsModel(self.robot, self._options("sgp"), self.joints, fitted.terms)
+        options = replace(self._options("sgp"), gp_joints=tuple(c for c in self.joints if c in channels))
+        model = DynamicsModel(self.robot, options, self.joints, fitted.terms)
         model.fit_arrays(self.q[tr], self.qd[tr], self.qdd[tr], self.tau[tr], time=self.time[tr])
         pred = model.predict_arrays(self.q, self.qd, self.qdd, self.time).tau
         hyper = model.hyperparameters_
@@ -482,8 +481,6 @@ class DynamicsAdapter:
         return replace(fitted, pred=pred, model=model, gp=gp)
 
     def save(self, fitted: DynamicsFit, path, header: dict) -> Path:
-        from diegocal.sgp.store import save_model
-
         model = fitted.model
         meta = {
             "log": header.get("log"),

@@ -16,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from diegocal.diagnose.evidence import curves, evidence_variable
-from diegocal.diagnose.selection import channel_weights, choose, evaluate_candidates
+from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates
 from diegocal.diagnose.show import binned_candidate, flexible_candidate, region_of, show
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
@@ -103,9 +103,17 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         candidates = adapter.candidates(fitted, res, train)
         say(f"testing {len(candidates)} candidate terms{unit}")
         tested = evaluate_candidates(candidates, res, weights, train, val, options, exclude)
+        commons = common_candidates(tested)
+        if commons:  # the winners again beside the common causes: one family-wise rate for all
+            tested = evaluate_candidates([t.candidate for t in tested] + commons, res, weights, train, val, options,
+                                         exclude)
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         best = choose(tested, val)
-        while best is not None and (flex := _outshone(best, res, weights, train, val, options, exclude)):
+        while (
+            best is not None
+            and not best.candidate.members  # a common cause's members are judged one by one (_members)
+            and (flex := _outshone(best, res, weights, train, val, options, exclude))
+        ):
             own = _own(best)
             stand_ins[own] = (best, flex)
             say(f"{best.term.cause} on {own}{unit} explains less than its state does: left unexplained")
@@ -113,7 +121,12 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             best = choose(tested, val)
         if best is None:
             break
-        group = [best, *_common(best, tested, res, weights, train, val, options, exclude, stand_ins)]
+        if best.candidate.members:  # one cause on several channels: each channel's term
+            group = _members(best, res, weights, train, val, options, exclude, stand_ins)
+            if not group:
+                continue
+        else:
+            group = [best, *_common(best, tested, res, weights, train, val, options, exclude, stand_ins)]
         for chosen in group:
             new = adapter.fit(terms + (chosen.term,), train)
             before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
@@ -128,12 +141,18 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 "variable": variable,
             }
             if chosen is not best:
-                evidence["common_cause"] = f"added with {best.term.label} in one round: the same cause"
+                evidence["common_cause"] = (
+                    f"{best.term.cause} on {best.term.channel}, tested as one: t {best.test.t:.1f} "
+                    f"(threshold {best.threshold:.1f}), validation gain {best.test.gain:.0%}"
+                    if best.candidate.members
+                    else f"added with {best.term.label} in one round: the same cause"
+                )
             if variable is not None:
                 evidence["curves"] = curves(
                     res, res_new, chosen.channels[0], variable, shown, length, train, options.n_bins, exclude
                 )
-            runners = tuple(_runner_up(t, chosen) for t in tested if t not in group)[:8]
+            added = {(g.term.cause, g.term.channel) for g in group} | {(best.term.cause, best.term.channel)}
+            runners = tuple(_runner_up(t, chosen) for t in tested if (t.term.cause, t.term.channel) not in added)[:8]
             new_terms = adapter.terms(new)
             fitted_term = next((t for t in new_terms if _same(t, chosen.term)), chosen.term)
             findings.append(Finding(fitted_term, "term", before, after, evidence, runners))
@@ -210,8 +229,10 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
 def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, unit: str):
     """Step 3 for what stays ``unexplained``: the adapter's non-parametric extension (``absorb``),
     kept when it removes at least ``min_gain`` of the validation mean squared error pooled over
-    the unexplained channels (as a term must); each unexplained finding then gets its held-out
-    RMSE before → after and the evidence ``nonparametric``. ``masks``: train, validation, held out."""
+    the unexplained channels (as a term must) and raises the other channels' pooled one by no
+    more than that fraction; each
+    unexplained finding then gets its held-out RMSE before → after and the evidence
+    ``nonparametric``. ``masks``: train, validation, held out."""
     train, val, held = masks
     say = options.progress or (lambda text: None)
     absorb = getattr(adapter, "absorb", None)
@@ -222,11 +243,14 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
     new = absorb(fitted, channels, train)
     if new is None:
         return fitted, findings
-    before, after = (
-        pooled(adapter.score(fitted, val, exclude), channels),
-        pooled(adapter.score(new, val, exclude), channels),
-    )
-    kept = bool(np.isfinite(after) and after**2 <= (1.0 - options.min_gain) * before**2)
+    score_before, score_after = adapter.score(fitted, val, exclude), adapter.score(new, val, exclude)
+    before, after = pooled(score_before, channels), pooled(score_after, channels)
+    others = [c for c in score_before.channels if c not in channels]
+    # the others may move by noise, not by more than a term must gain
+    spoilt = bool(others) and not pooled(score_after, others) ** 2 <= (1.0 + options.min_gain) * pooled(
+        score_before, others
+    ) ** 2
+    kept = bool(np.isfinite(after) and after**2 <= (1.0 - options.min_gain) * before**2 and not spoilt)
     note = {
         "model": adapter.describe(new),
         "validation_rmse_before": before,
@@ -250,6 +274,9 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
 #: own state explains on the validation rows (:func:`~diegocal.diagnose.show.flexible_candidate`);
 #: less, and it is a stand-in for structure of another shape: the channel is ``unexplained``.
 STAND_IN_SHARE = 0.5
+#: A channel of a common cause (one cause tested on several channels at once) is added only with
+#: at least this t of its own (about a 5 % two-sided level for one test).
+MEMBER_T = 2.0
 
 
 def _common(best: Tested, tested, res, weights, train, val, options, exclude, stand_ins) -> list[Tested]:
@@ -266,6 +293,23 @@ def _common(best: Tested, tested, res, weights, train, val, options, exclude, st
             continue
         out.append(t)
         used |= set(t.channels)
+    return out
+
+
+def _members(best: Tested, res, weights, train, val, options, exclude, stand_ins) -> list[Tested]:
+    """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
+    their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
+    test holds the family-wise rate, not each channel's) and pass the stand-in test of their own
+    channel."""
+    out = []
+    for t in best.candidate.members:
+        if t.test.t < MEMBER_T or t.gain < options.min_gain:  # carried by the others, not its own evidence
+            continue
+        flex = _outshone(t, res, weights, train, val, options, exclude)
+        if flex is not None:
+            stand_ins[_own(t)] = (t, flex)
+            continue
+        out.append(t)
     return out
 
 
@@ -294,8 +338,8 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
     if cand is None:
         return None
     (flex,) = evaluate_candidates([cand], res, weights, train, val, options, exclude) or (None,)
-    if flex is None or flex.test.t <= flex.threshold:
-        return None
+    if flex is None or flex.test.t <= flex.threshold or flex.test.gain < options.unexplained_min_gain:
+        return None  # no structure worth an ``unexplained`` finding beside the term
     gain = best.channel_gain if best.channel_gain is not None else best.test.gain
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
 

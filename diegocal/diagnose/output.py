@@ -115,3 +115,17 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
 def _common_model(models) -> str:
     models = list(dict.fromkeys(models))
     return models[0] if len(models) == 1 else "; ".join(models)
+
+
+def pooled_heldout_rmse(diagnosis: dict) -> dict[str, tuple[float, float]]:
+    """Unit -> (baseline, extended) held-out RMSE of a diagnosis (its diagnosis.yaml mapping), pooled
+    as the root mean square over the channels measured in that unit, never across units (NaN where
+    no channel has one)."""
+    base, ext = diagnosis.get("baseline") or {}, diagnosis.get("extended") or {}
+    units = base.get("units") or {}
+
+    def pooled(block: dict, unit: str) -> float:
+        x = [v for c, v in (block.get("heldout_rmse") or {}).items() if v is not None and units.get(c, unit) == unit]
+        return float(np.sqrt(np.mean(np.square(x)))) if x else float("nan")
+
+    return {u: (pooled(base, u), pooled(ext, u)) for u in dict.fromkeys(units.values() or [base.get("unit", "")])}

@@ -19,6 +19,7 @@ import numpy as np
 
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
 from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested
+from diegocal.terms import Parameter, Term
 
 
 # ----------------------------------------------------------------------------- rows
@@ -179,6 +180,36 @@ def evaluate_candidates(
         sig = bool(test.t > thr and gain >= options.min_gain)
         out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain))
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
+    return out
+
+
+def common_candidates(tested: list[Tested]) -> list[Candidate]:
+    """One candidate per cause that more than one channel's best variant proposes with a positive
+    validation gain: their columns side by side, each channel its own parameters (one cause acting
+    on every joint at once, tested as one: more power than each channel alone, one test for the
+    family-wise rate). Causes with re-fit columns are left alone."""
+    by_cause: dict[str, list[Tested]] = {}
+    for t in tested:
+        if t.candidate.members or t.candidate.refit or t.test.gain <= 0:
+            continue
+        by_cause.setdefault(t.term.cause, []).append(t)
+    out = []
+    for cause, members in by_cause.items():
+        channels = [t.term.channel for t in members]
+        if len(members) < 2 or len(set(channels)) < len(channels):
+            continue
+        sizes = [t.candidate.n_params for t in members]
+        K, at, cols, params = sum(sizes), 0, {}, []
+        for t, k in zip(members, sizes, strict=True):
+            for c, x in t.candidate.columns.items():
+                x = np.asarray(x, float)
+                x = x[..., None] if x.ndim == 1 else x
+                slot = cols.setdefault(c, np.zeros((*x.shape[:-1], K)))
+                slot[..., at : at + k] += x
+            params += [Parameter(f"{t.term.channel}.{p.name}", p.value, p.unit) for p in t.term.linear]
+            at += k
+        term = Term(cause, "+".join(channels), tuple(params))
+        out.append(Candidate(term, cols, family=f"common:{cause}", members=tuple(members)))
     return out
 
 

@@ -49,12 +49,15 @@ class Candidate:
         the engine keeps the variant with the best fit on the training samples, then tests it
     refit : residual channel -> (T, k0) or (T, d, k0): directions of the current model re-fitted
         together with the term (so that it does not merely take over a baseline term's part)
+    members : for one cause on several channels tested as one (:func:`~diegocal.diagnose.
+        selection.common_candidates`), the tested candidates it joins; () otherwise
     """
 
     term: Term
     columns: dict
     family: str = ""
     refit: dict | None = None
+    members: tuple = ()
 
     @property
     def n_params(self) -> int:

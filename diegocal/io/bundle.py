@@ -27,9 +27,10 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from diegocal import __version__
 from diegocal.domains import domain
 from diegocal.errors import InputFileError
-from diegocal.io.files import load_yaml
+from diegocal.io.files import load_yaml, save_yaml, write_text
 
 KINDS = ("calibration", "pneumatic", "dynamics", "diagnosis")
 #: The file inside a dynamics bundle's directory that holds its header and summary.
@@ -75,7 +76,7 @@ def robot_hash(source) -> str | None:
 
 def _described(path: Path) -> bytes:
     """The bytes that describe the robot in ``path``: a xacro's expansion, any other file itself."""
-    # io.urdf loads scipy.spatial (most of a second): not at import, which every bundle reader does
+    # lazy: io.urdf loads scipy.spatial (most of a second): not at import, which every bundle reader does
     from diegocal.io.urdf import is_xacro, urdf_text
 
     if is_xacro(path):
@@ -113,8 +114,7 @@ def save_robot_copy(robot, directory) -> None:
     ``sensors.yaml`` (the original's, or a minimal one for a URDF-only robot) whose ``locked``
     lists every joint the robot's reduced model holds still, so that loading the copy rebuilds
     the same model whatever data it is used with."""
-    from diegocal.io.files import save_yaml, write_text
-    from diegocal.io.urdf import urdf_text
+    from diegocal.io.urdf import urdf_text  # lazy: io.urdf loads scipy.spatial (see _described)
 
     directory = Path(directory)
     source = Path(getattr(robot, "source", None) or robot.directory)
@@ -137,8 +137,6 @@ def header(kind: str, robot=None, log=None, command: str | None = None) -> dict:
 
     ``robot`` is a Robot (or None), ``log`` the path of the log it was fitted on (or None).
     """
-    from diegocal import __version__
-
     if kind != "diagnosis":  # a domain's word (or an older one) -> the kind its models carry
         kind = domain(kind).kind
     return {

@@ -314,7 +314,7 @@ def _save_csv(log: Log, path: Path) -> None:
 
 
 def _load_csv(path: Path, nan_ok: bool = False) -> Log:
-    import pandas as pd
+    import pandas as pd  # lazy: half a second, for CSV logs only
 
     robot, rate = None, None
     with open(path, errors="replace") as fh:

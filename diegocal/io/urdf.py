@@ -43,7 +43,7 @@ def urdf_text(path) -> str:
     if not is_xacro(path):
         return path.read_text()
     try:
-        import xacro
+        import xacro  # lazy: an optional package, and it loads scipy.spatial
     except ImportError:  # pragma: no cover - a runtime dependency
         raise InputFileError(f"{path}: reading xacro needs the xacro package (pip install xacro)") from None
     chatter = io.StringIO()

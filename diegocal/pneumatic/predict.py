@@ -182,3 +182,15 @@ def predict_with_resets(
     for k, (a, b) in enumerate(zip(starts, ends, strict=True)):
         out[a:b] = pred[k, : b - a]
     return out
+
+
+def drift_summary(drifts) -> dict:
+    """The pneumatic fits' 2-s drift (thesis §4.5.3, a fraction of Pc - Pr per chamber) in four
+    numbers: ``median``, ``max``, and how many chambers stay ``below 4 %`` and ``below 10 %``."""
+    v = np.asarray(list(drifts), float)
+    return {
+        "median": float(np.median(v)) if v.size else float("nan"),
+        "max": float(v.max()) if v.size else float("nan"),
+        "below 4 %": int((v < 0.04).sum()),
+        "below 10 %": int((v < 0.10).sum()),
+    }

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from diegocal.robot.batch import BatchKinematics
 from diegocal.robot.model import Robot
 
 
@@ -79,8 +80,6 @@ def gauge_joints(robot: Robot) -> tuple[str, ...]:
     -------
     tuple of joint names, in :attr:`Robot.joint_names` order (empty when there are no markers).
     """
-    from diegocal.robot.batch import BatchKinematics
-
     model = robot.model
     kin = BatchKinematics(robot)
     marker_joint = [model.frames[robot.frame_id(m.link)].parentJoint for m in robot.sensors.markers]

@@ -17,6 +17,8 @@ import numpy as np
 import pinocchio as pin
 
 from diegocal.errors import RobotConfigError, UnknownNameError
+from diegocal.io import load_yaml
+from diegocal.io.log import JOINT_STREAMS
 from diegocal.io.urdf import is_xacro
 from diegocal.robot.sensors import SensorConfig, parse_sensors
 from diegocal.robot.urdf import load_urdf, reduce_model, root_link, sensor_joints
@@ -349,8 +351,6 @@ def load_robot(source, joints=None) -> Robot:
     ``joints`` that are no joint of the URDF are skipped (the stream readers warn), unless one
     reads like a joint the data do not name (TYPO_CUTOFF): that is an UnknownNameError.
     """
-    from diegocal.io import load_yaml
-
     source = Path(source)
     if source.is_dir() and not (source / "sensors.yaml").exists() and (source / "robot.urdf").is_file():
         source = source / "robot.urdf"  # sensors.yaml omitted: dynamics alone (DESIGN.md)
@@ -393,8 +393,6 @@ def load_robot(source, joints=None) -> Robot:
 
 def data_joints(log) -> set[str]:
     """Channel names of a log's joint streams (q, qd, qdd, tau): the joints the data use."""
-    from diegocal.io.log import JOINT_STREAMS
-
     return {n for s in JOINT_STREAMS if log.has(s) for n in log.streams[s].names}
 
 

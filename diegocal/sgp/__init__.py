@@ -5,7 +5,7 @@ Public API::
     from diegocal.sgp import fit_dynamics, load_model, SGPOptions, TorquePrediction
     model = fit_dynamics(log, robot, SGPOptions(kind="sgp"))   # "pr" | "gp" | "prgp" | "sgp"
     pred = model.predict(log)            # TorquePrediction: tau, tau_std (T, n)
-    model.save("logs.sgp/"); load_model("logs.sgp/")
+    save_model(model, "logs.sgp/"); load_model("logs.sgp/")
 
 Lower level: :class:`SemiParametricGP` on plain arrays (any features), kernels in
 :mod:`diegocal.sgp.kernels`, the torque regressor and base parameters in

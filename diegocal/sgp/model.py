@@ -38,7 +38,14 @@ from diegocal.sgp.options import (  # noqa: F401
     default_guard,
     with_kind,
 )
-from diegocal.sgp.regressor import BaseParameters, base_parameters, check_friction, full_regressor, true_parameters
+from diegocal.sgp.regressor import (
+    BaseParameters,
+    base_parameters,
+    check_friction,
+    full_regressor,
+    parameter_names,
+    true_parameters,
+)
 from diegocal.sgp.streams import log_arrays, torque_array, warn_unused  # noqa: F401
 from diegocal.sgp.terms import apply_lags, dynamics_terms, is_filter, parameter_labels, term_columns
 
@@ -93,7 +100,6 @@ def nominal_torque(robot, q, qd, qdd) -> np.ndarray:
 def nominal_base(robot, friction) -> BaseParameters:
     """The 'base parameters' of a nominal-inertia model: the friction columns of the full
     regressor alone (:func:`~diegocal.sgp.regressor.full_regressor` order), nothing dependent."""
-    from diegocal.sgp.regressor import parameter_names
 
     n = robot.n_joints
     idx = np.arange(10 * n, 10 * n + n * len(check_friction(friction)))
@@ -185,7 +191,12 @@ class DynamicsModel:
         return tuple(out)
 
     def _kernels(self):
-        return [Subspace(self.gp_dims, SquaredExponential(len(self.gp_dims))) for _ in self.joint_names]
+        """A GP per fitted joint (``options.gp_joints``: those only; the others PR, W shared)."""
+        only = self.options.gp_joints
+        return [
+            Subspace(self.gp_dims, SquaredExponential(len(self.gp_dims))) if only is None or j in only else None
+            for j in self.joint_names
+        ]
 
     def _inference(self, N: int) -> str:
         o = self.options
@@ -369,11 +380,6 @@ class DynamicsModel:
             st["stages"] = self.gp_.stages_
             st["inducing_res"] = None if self.gp_.residual_ is None else self.gp_.residual_.inducing_
         return st
-
-    def save(self, directory, meta: dict | None = None) -> None:
-        from diegocal.sgp.store import save_model
-
-        save_model(self, directory, meta)
 
 
 def fit_dynamics(log, robot, options: SGPOptions | None = None, progress=None) -> DynamicsModel:

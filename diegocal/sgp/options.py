@@ -112,6 +112,8 @@ class SGPOptions:
     inertia : "identified" (W holds the base parameters, eq. 3.30) | "nominal" (the rigid body
         is fixed at the URDF's inertias, :func:`nominal_torque`; W holds friction and extra
         terms only: a model that can show an unmodelled payload)
+    gp_joints : the joints that get a GP (None: every joint with a torque); the others are PR
+        within the same model (W shared)
     """
 
     kind: str = "sgp"
@@ -131,6 +133,7 @@ class SGPOptions:
     maxiter: int = 200
     min_noise: float = 1e-4
     inertia: str = "identified"
+    gp_joints: tuple | None = None
 
     def __post_init__(self):
         if self.inertia not in INERTIA:
@@ -175,6 +178,7 @@ class SGPOptions:
             "min_noise": self.min_noise,
             # only when not the default: the summaries of default fits stay as they were
             **({"inertia": self.inertia} if self.inertia != "identified" else {}),
+            **({"gp_joints": list(self.gp_joints)} if self.gp_joints is not None else {}),
         }
 
     @classmethod
@@ -187,8 +191,9 @@ class SGPOptions:
                 g["lengthscale_prior"] = tuple(g["lengthscale_prior"])
             d["guard_options"] = Guard(**g)
         d["friction"] = tuple(d.get("friction", ()))
-        if d.get("gp_inputs") is not None:
-            d["gp_inputs"] = tuple(d["gp_inputs"])
+        for key in ("gp_inputs", "gp_joints"):
+            if d.get(key) is not None:
+                d[key] = tuple(d[key])
         return cls(**d)
 
 

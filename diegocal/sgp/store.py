@@ -33,10 +33,11 @@ import numpy as np
 
 from diegocal.errors import InputFileError
 from diegocal.io import atomic_path, load_yaml, save_yaml
-from diegocal.io.bundle import LAYOUT
+from diegocal.io.bundle import LAYOUT, save_robot_copy
 from diegocal.robot import load_robot
 from diegocal.sgp.gp import Hyperparameters, per_output
 from diegocal.sgp.guard_options import Stages
+from diegocal.sgp.model import DynamicsModel, SGPOptions
 from diegocal.sgp.terms import FRICTION_CAUSE
 from diegocal.terms import make_term, read_parameter, term_from_dict
 
@@ -193,8 +194,6 @@ def save_model(model, directory, meta: dict | None = None, header: dict | None =
         np.savez(fh, **arrays)
     robot = model.robot
     if robot.source is not None:  # with its locked joints, so the copy rebuilds the same model
-        from diegocal.io.bundle import save_robot_copy
-
         save_robot_copy(robot, directory / "robot")
     summary = summary_dict(model, meta)
     if header:  # the header's keys (kind: dynamics, robot: {name, dir, hash}, ...) win
@@ -225,8 +224,6 @@ def load_model(directory, robot=None):
 
     ``robot`` (a Robot) overrides the copy stored in ``directory/robot``.
     """
-    from diegocal.sgp.model import DynamicsModel, SGPOptions
-
     directory = Path(directory)
     summary = load_summary(directory)
     npz = directory / "model.npz"
@@ -239,8 +236,6 @@ def load_model(directory, robot=None):
         raise InputFileError(f"{npz}: cannot read ({exc})") from None
     if robot is None:
         robot = load_robot(directory / "robot")
-    from diegocal.terms import term_from_dict
-
     options = SGPOptions.from_dict(summary["options"])
     terms = [term_from_dict(t, f"{directory}/sgp.yaml terms", "dynamics") for t in summary.get("terms") or ()]
     model = DynamicsModel(robot, options, tau_joints=summary.get("joints"), terms=terms)

@@ -38,6 +38,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
+from scipy.signal import lfilter
 
 from diegocal.causes import causes_of
 from diegocal.errors import InputFileError
@@ -123,8 +125,6 @@ def _coupled_friction(term, robot, j, q, qd, qdd, out):
 def _payload(term, robot, j, q, qd, qdd, out):
     """The joint-torque regressor's ten columns (m, m·c, second moments; Pinocchio's order) of the
     body that carries the link (a point mass anywhere on it: moments in the parent joint's frame)."""
-    import pinocchio as pin
-
     model = robot.model
     frame = next((f for f in model.frames if f.name == term.channel), None)
     if frame is None or frame.parentJoint == 0:
@@ -382,8 +382,6 @@ def _payloads(cause: str, ctx: Context) -> list[Proposal]:
 def payload_links(robot) -> tuple[str, ...]:
     """The moving links a payload may sit on: per joint, the first body frame it carries (the
     frames of one joint share its inertial columns, so one of them stands for all)."""
-    import pinocchio as pin
-
     out, seen = [], set()
     for f in robot.model.frames:
         if f.type == pin.FrameType.BODY and f.parentJoint > 0 and f.parentJoint not in seen:
@@ -411,8 +409,6 @@ def lag_filter(X: np.ndarray, time: np.ndarray, lag: float) -> np.ndarray:
     first-order hold, so that a lag shorter than a sample delays by about ``lag``):
     y_k = a·y_{k−1} + (1 − c)·x_k + (c − a)·x_{k−1}, a = exp(−h/L), c = (L/h)(1 − a), h the median
     step. A gap in ``time`` (a step over 1.5 × the median) restarts it."""
-    from scipy.signal import lfilter
-
     X = np.asarray(X, float)
     if lag <= 0 or X.shape[0] < 2:
         return X.copy()

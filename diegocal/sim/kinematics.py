@@ -31,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
@@ -376,8 +377,6 @@ def mocap_clock(q_ext: np.ndarray, pad: int, T: int, shift: float) -> np.ndarray
     if float(shift).is_integer():
         k = int(shift)
         return q_ext[pad + k : pad + k + T]
-    from scipy.interpolate import CubicSpline
-
     return CubicSpline(np.arange(q_ext.shape[0]), q_ext, axis=0)(pad + shift + np.arange(T))
 
 

@@ -7,6 +7,7 @@ import pytest
 
 from diegocal.io import load_yaml, save_yaml
 from diegocal.sgp import DynamicsModel, SGPOptions, fit_dynamics, load_model, nmse
+from diegocal.sgp.store import save_model
 
 BUMP = (1, 0.0, 1.2, 1.5)  # extra viscous friction on the elbow for q ∈ (0, 1.2) rad: unmodelled
 
@@ -89,7 +90,7 @@ def test_uncertainty_grows_away_from_the_training_data(case, fitted):
 def test_save_load_round_trip(case, fitted, tmp_path, kind):
     test = case[1]
     model = fitted(kind)
-    model.save(tmp_path / "m.sgp", meta={"log": "train.h5"})
+    save_model(model, tmp_path / "m.sgp", meta={"log": "train.h5"})
     back = load_model(tmp_path / "m.sgp")
     a, b = model.predict(test), back.predict(test)
     np.testing.assert_allclose(b.tau, a.tau, rtol=1e-9, atol=1e-10)
@@ -109,7 +110,7 @@ def test_sparse_close_to_exact_on_the_same_data(arm2, case, fitted, tmp_path):
     e_exact = nmse(exact.predict(test).tau, clean)
     e_sparse = nmse(sparse.predict(test).tau, clean)
     assert np.all(e_sparse < 1.5 * e_exact + 2e-3), (e_exact, e_sparse)
-    sparse.save(tmp_path / "s.sgp")
+    save_model(sparse, tmp_path / "s.sgp")
     back = load_model(tmp_path / "s.sgp").predict(test)
     np.testing.assert_allclose(back.tau, sparse.predict(test).tau, rtol=1e-8, atol=1e-9)
 
@@ -173,7 +174,7 @@ def test_joints_without_a_torque_are_left_out_of_the_fit(arm2, case, tmp_path, c
     # the elbow row alone identifies what it needs: as good as the all-joint PR on the elbow
     e_full = nmse(full.predict(test).tau, clean)[1]
     assert nmse(pred.tau, clean[:, 1:])[0] < max(1.5 * e_full, 0.05)
-    model.save(tmp_path / "m.sgp")
+    save_model(model, tmp_path / "m.sgp")
     back = load_model(tmp_path / "m.sgp")
     assert back.joint_names == ("elbow",)
     np.testing.assert_allclose(back.predict(test).tau, pred.tau, rtol=1e-9, atol=1e-10)
@@ -194,7 +195,7 @@ def test_an_edited_guard_validation_entry_is_left_out_on_load(fitted, tmp_path):
     numbers does not stop the model from loading and predicting; well-formed, it is restored."""
     model = fitted("sgp")
     path = tmp_path / "m.sgp"
-    model.save(path, meta={"log": "train.h5"})
+    save_model(model, path, meta={"log": "train.h5"})
     assert load_model(path).hyperparameters_ == model.hyperparameters_
     summary = load_yaml(path / "sgp.yaml")
     joint = model.joint_names[0]

@@ -14,6 +14,7 @@ from diegocal.report.registry import ReportContext, section_for
 from diegocal.report.sgp import heldout_score
 from diegocal.report.sgp_text import joint_table, verdict
 from diegocal.sgp import SGPOptions, fit_dynamics, load_summary
+from diegocal.sgp.store import save_model
 from tests.report.checks import check_pages, page_texts
 
 pymupdf = pytest.importorskip("pymupdf")
@@ -37,7 +38,7 @@ def test_report_on_a_comparison_directory(arm2, simulate, tmp_path):
     save_log(held, tmp_path / "held.h5")
     results = tmp_path / "results"
     for kind in ("pr", "sgp"):
-        fit_dynamics(log, arm2, SGPOptions(kind=kind, maxiter=20)).save(results / f"{kind}.sgp")
+        save_model(fit_dynamics(log, arm2, SGPOptions(kind=kind, maxiter=20)), results / f"{kind}.sgp")
     assert section_for(results / "sgp.sgp").name == "sgp"
     assert section_for(results).name == "sgp"
     assert section_for(tmp_path / "train.h5").name == "log"  # plain logs stay with the log section
@@ -78,7 +79,7 @@ def test_empty_directory_is_not_an_sgp_result(tmp_path):
 def test_a_sparse_fit_shows_its_inducing_inputs(arm2, simulate, tmp_path):
     log, _ = simulate(arm2, T=80, seed=3)
     opts = SGPOptions(kind="sgp", maxiter=15, inference="sparse", n_inducing=12, guard=False)
-    fit_dynamics(log, arm2, opts).save(tmp_path / "m.sgp")
+    save_model(fit_dynamics(log, arm2, opts), tmp_path / "m.sgp")
     columns, rows, notes = joint_table([tmp_path / "m.sgp"], ReportContext())
     names = [c.name for c in columns]
     assert "inducing\ninputs" in names and "missed\nvariance" in names
@@ -94,7 +95,7 @@ def test_a_prediction_log_gets_its_heldout_section(arm2, simulate, tmp_path):
     log, _ = simulate(arm2, T=60, seed=0)
     held, _ = simulate(arm2, T=40, seed=1)
     save_log(held, tmp_path / "held.h5")
-    fit_dynamics(log, arm2, SGPOptions(kind="pr")).save(tmp_path / "pr.sgp")
+    save_model(fit_dynamics(log, arm2, SGPOptions(kind="pr")), tmp_path / "pr.sgp")
     r = runner.invoke(
         app, ["predict", str(tmp_path / "pr.sgp"), str(tmp_path / "held.h5"), "-o", str(tmp_path / "p.h5")]
     )
@@ -135,7 +136,7 @@ def test_the_joint_table_names_a_cut_gp(arm2, simulate, tmp_path):
     from diegocal.sgp.store import region_text
 
     log, _ = simulate(arm2, T=80, seed=3)
-    fit_dynamics(log, arm2, SGPOptions(kind="sgp", maxiter=15)).save(tmp_path / "m.sgp")
+    save_model(fit_dynamics(log, arm2, SGPOptions(kind="sgp", maxiter=15)), tmp_path / "m.sgp")
     path = tmp_path / "m.sgp" / "sgp.yaml"
     s = load_yaml(path)
     s["hyperparameters"]["shoulder"].update(guard_choice="two-stage", region={"input": "q.shoulder", "onset": 0.5})
@@ -157,7 +158,7 @@ def test_a_prediction_log_as_heldout_is_scored_against_its_measured_torque(arm2,
     log, _ = simulate(arm2, T=60, seed=0)
     held, _ = simulate(arm2, T=40, seed=1)
     save_log(held, tmp_path / "held.h5")
-    fit_dynamics(log, arm2, SGPOptions(kind="pr")).save(tmp_path / "pr.sgp")
+    save_model(fit_dynamics(log, arm2, SGPOptions(kind="pr")), tmp_path / "pr.sgp")
     args = ["predict", str(tmp_path / "pr.sgp"), str(tmp_path / "held.h5"), "-o", str(tmp_path / "p.h5")]
     r = runner.invoke(app, args)
     assert r.exit_code == 0, r.output

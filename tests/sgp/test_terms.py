@@ -14,6 +14,7 @@ from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions, load_model
 from diegocal.sgp.model import DynamicsModel
 from diegocal.sgp.regressor import full_regressor
+from diegocal.sgp.store import save_model
 from diegocal.sgp.terms import COLUMNS, columns, friction_terms, lag_filter, term_columns
 from diegocal.terms import Region, make_term, term_from_dict
 
@@ -109,12 +110,12 @@ def test_a_model_with_extra_terms_recovers_them_and_predicts_with_a_lag(arm3, tm
     pred = model.predict_arrays(q, qd, qdd, time).tau
     assert np.sqrt(np.mean((pred - tau) ** 2)) < 3e-3
     # saved and loaded: same prediction, terms listed with their values
-    model.save(tmp_path / "m.sgp", {"log": "x"})
+    save_model(model, tmp_path / "m.sgp", {"log": "x"})
     back = load_model(tmp_path / "m.sgp")
     assert [t.cause for t in back.terms] == ["torque_offset", "torque_lag"]
     np.testing.assert_allclose(back.predict_arrays(q, qd, qdd, time).tau, pred, atol=1e-9)
     # without terms the model is the one it always was: no 'terms' in its sgp.yaml
-    base.save(tmp_path / "b.sgp")
+    save_model(base, tmp_path / "b.sgp")
     assert "terms" not in (tmp_path / "b.sgp" / "sgp.yaml").read_text()
     assert load_model(tmp_path / "b.sgp").terms == ()
 
@@ -171,7 +172,7 @@ def test_a_nominal_inertia_model_fits_friction_and_a_payload_and_survives_its_bu
     assert model.fitted_terms()[0].value("mass") == pytest.approx(0.4, abs=0.01)
     pred = model.predict_arrays(q, qd, qdd, time)
     assert np.sqrt(np.mean((pred.tau - tau) ** 2)) < 3e-3
-    model.save(tmp_path / "n.sgp", {"log": "x"})
+    save_model(model, tmp_path / "n.sgp", {"log": "x"})
     assert "inertia: nominal" in (tmp_path / "n.sgp" / "sgp.yaml").read_text()
     back = load_model(tmp_path / "n.sgp")
     assert back.options.inertia == "nominal"
@@ -206,6 +207,6 @@ def test_a_shape_parameter_is_held_by_the_model_and_kept_with_its_term(arm3, tmp
     assert fitted.value("velocity_scale") == 0.05  # held as given
     amp = fitted.parameters[0]
     assert abs(amp.value + 0.3) < 4 * amp.stderr and amp.stderr < 0.01
-    model.save(tmp_path / "s.sgp")
+    save_model(model, tmp_path / "s.sgp")
     (back,) = load_model(tmp_path / "s.sgp").fitted_terms()
     assert back.value("velocity_scale") == 0.05 and back.value("amplitude") == pytest.approx(amp.value)
