@@ -203,6 +203,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: rich's boxed panels cost a help a third of its start-up
 )
 
 simulate_app = typer.Typer(
@@ -210,6 +211,7 @@ simulate_app = typer.Typer(
     help="Generate logs with ground truth in /truth: kinematics, dynamics, pneumatics.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,
 )
 app.add_typer(simulate_app, name="simulate")
 

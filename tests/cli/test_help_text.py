@@ -39,5 +39,6 @@ def test_the_help_as_printed(path):
     lines = [line.strip("│ ") for line in result.output.splitlines()]
     assert not any(re.search(r"\s\.$", line) for line in lines), result.output  # a default eaten as markup
     assert "<bool>" not in result.output  # a flag takes no value
-    options = [line for line in lines if line.startswith("--")]
+    # an option's line starts with its name (a wrapped help line may start with one mentioned in it)
+    options = [line for line in lines if re.match(r"--[a-z][\w-]*(\s|$)", line)]
     assert options and all(len(line.split(None, 1)) == 2 for line in options), result.output  # each has a text
