@@ -96,8 +96,8 @@ class Outcome:
 def plan(n_logs: int, seed: int, generators, chambers) -> list[Case]:
     """``n_logs`` logs per effect (chambers in turn, sizes drawn) and ``n_logs`` clean ones."""
     out = []
-    for g_i, g in enumerate(generators):
-        ss = np.random.SeedSequence([seed, g_i])
+    for g in generators:
+        ss = np.random.SeedSequence([seed, GENERATORS.index(g)])  # the same logs whichever run
         seeds = ss.generate_state(5 * n_logs)
         rng = np.random.default_rng(ss.spawn(1)[0])
         k = 0

@@ -6,6 +6,11 @@ with p̂ the exact step (4.7) of the model's terms (c1..c9 of eq. 4.10 and any e
 :class:`~diegocal.pneumatic.model.ChamberModel`), bounds of Table 4.1 (plus ``|c6| < 1`` on the
 normalised volume coordinate) and of the extra terms, and an analytic Jacobian for scipy's
 ``trf``. Parameters are packed by name at the optimiser's door only.
+
+Standard errors are cluster-robust (sandwich) over contiguous blocks of :data:`SE_BLOCK_S` of
+steps: the residuals of a 100 Hz next-step fit are correlated in time (the model's own error
+follows the command's holds), so s² (JᵀJ)⁻¹ understated them, a valve delay's many times over.
+Blocks never span a gap or a block edge of the fitted rows.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from diegocal.errors import DiegocalError, FitError
+from diegocal.evaluate import sub_blocks
 
 try:  # BLAS threads only slow down trf's SVD of a tall, 9-column Jacobian (measured: ~5x)
     from threadpoolctl import threadpool_limits
@@ -59,6 +65,8 @@ class ChamberFit:
     drift_curve : that fraction every 0.1 s of horizon
     start_costs : final cost from every start (multi-start spread; §4.5.3's convergence claim)
     start_params : (starts, 9) parameters reached from every start
+    covariance : (P, P) cluster-robust covariance of c1..c9 and the extra terms' parameters (the
+        order of ``params.full_vector()``), NaN where a direction is not identified
     """
 
     name: str
@@ -71,6 +79,17 @@ class ChamberFit:
     drift_curve: list = field(default_factory=list)
     start_costs: tuple = ()
     start_params: np.ndarray | None = None
+    covariance: np.ndarray | None = field(default=None, repr=False)
+
+    def correlation(self, a: str, b: str) -> float:
+        """The correlation of the estimates of parameters ``a`` and ``b`` (names of c1..c9 or of the
+        extra terms' parameters); NaN when either is not identified or not in the model."""
+        names = list(self.params.names())
+        if self.covariance is None or a not in names or b not in names:
+            return float("nan")
+        i, j = names.index(a), names.index(b)
+        c = self.covariance
+        return float(c[i, j] / np.sqrt(c[i, i] * c[j, j])) if c[i, i] > 0 and c[j, j] > 0 else float("nan")
 
     def to_dict(self) -> dict:
         out = self.params.to_dict(self.name)
@@ -124,6 +143,7 @@ class _Problem:
         v, vd = nominal.volume_coordinate(data.v[sl], data.vd[sl])
         self.args = (data.p[sl], data.u[sl], v, vd, np.diff(data.time)[sl])
         self.target = data.p[sl + 1]
+        self.rows = sl
         self.consts = (nominal.c_b, nominal.c_s, nominal.c_gamma)
         h = float(np.median(np.diff(data.time)))
         self.lags = data.u_lags(self.model.n_lags(h))[sl] if self.model.has_delay else None
@@ -197,6 +217,7 @@ def fit_chamber(
     rows: np.ndarray | None = None,
     start: ChamberParams | None = None,
     weights: np.ndarray | None = None,
+    fixed: tuple = (),
 ) -> ChamberFit:
     """Fit c1..c9 of one chamber, and any extra ``terms``, by next-step least squares (§4.5.3).
 
@@ -209,14 +230,16 @@ def fit_chamber(
         Table 4.1's start values and the data's own normalisation)
     weights : (T,) weight of the step from each sample (weighted least squares: the residual of
         step t -> t+1 is multiplied by ``weights[t]``); ``cost`` and ``rmse`` are then weighted too
+    fixed : names of extra terms' parameters held at their values (standard error 0: what the
+        data do not determine, such as a sensor lag beside a valve delay, is set by the caller)
     """
     if threadpool_limits is None:
-        return _fit_chamber(data, options, terms, rows, start, weights)
+        return _fit_chamber(data, options, terms, rows, start, weights, fixed)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit_chamber(data, options, terms, rows, start, weights)
+        return _fit_chamber(data, options, terms, rows, start, weights, fixed)
 
 
-def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None) -> ChamberFit:
+def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None, fixed=()) -> ChamberFit:
     model = ChamberModel(terms)
     if start is not None:
         nominal = replace(start, terms=model.extra, stderr={})
@@ -228,18 +251,28 @@ def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None) -
     problem = _Problem(data, nominal, model, rows, weights)
     lo, hi = model.lower(), model.upper()
     rng = np.random.default_rng(options.seed)
-    if options.jacobian == "analytic":
-        fun, jac = problem.residuals, problem.jacobian
-    elif options.jacobian == "2-point":
-        fun, jac = problem.residuals_only, "2-point"
-    else:
-        raise FitError(f"unknown jacobian {options.jacobian!r} (expected 'analytic' or '2-point')")
-    runs = []
     starts = start_points(max(1, options.starts), (lo, hi), rng, model)
     if start is not None:
         n = len(P.NAMES)
         starts[0, :n] = np.clip(start.vector(), lo[:n] + 1e-6, hi[:n] - 1e-6)
-    for x0 in starts:
+    held = np.array([name in fixed for name in model.names])
+    free = ~held
+    x_held = model.start()  # the held parameters keep their terms' values
+
+    def full(xf):
+        x = x_held.copy()
+        x[free] = xf
+        return x
+
+    if options.jacobian == "analytic":
+        fun, jac = (lambda xf: problem.residuals(full(xf))), (lambda xf: problem.jacobian(full(xf))[:, free])
+    elif options.jacobian == "2-point":
+        fun, jac = (lambda xf: problem.residuals_only(full(xf))), "2-point"
+    else:
+        raise FitError(f"unknown jacobian {options.jacobian!r} (expected 'analytic' or '2-point')")
+    lo, hi = lo[free], hi[free]
+    runs = []
+    for x0 in starts[:, free]:
         try:
             res = least_squares(
                 fun,
@@ -260,9 +293,13 @@ def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None) -
     if not np.isfinite(best.cost):
         raise FitError(f"chamber {data.name!r}: the fit diverged (non-finite cost)")
     n = problem.target.size
-    J = problem.jacobian(best.x)
-    stderr = _stderr(J, best.cost, n)
-    fitted = nominal.from_vector(best.x, stderr)
+    x_best = full(best.x)
+    J = problem.jacobian(x_best)
+    clusters = _clusters(data, problem.rows)
+    cov = np.zeros((model.n_params, model.n_params))
+    cov[np.ix_(free, free)] = covariance(J[:, free], problem.residuals(x_best), clusters)
+    stderr = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    fitted = nominal.from_vector(x_best, stderr)
     if options.drift_starts > 0:
         dr = drift(fitted, data, options.drift_starts, options.horizon_s)
         drift_2s, curve = dr.final, dr.curve()
@@ -278,21 +315,58 @@ def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None) -
         drift_2s=drift_2s,
         drift_curve=curve,
         start_costs=tuple(float(r.cost) for r in runs),
-        start_params=np.array([r.x for r in runs]),
+        start_params=np.array([full(r.x) for r in runs]),
+        covariance=cov,
     )
 
 
-def _stderr(J: np.ndarray, cost: float, n: int) -> np.ndarray:
-    """Standard errors sqrt(diag(s² (JᵀJ)⁻¹)), s² = 2 cost / (n - 9); NaN where not identifiable."""
-    dof = max(n - J.shape[1], 1)
-    s2 = 2.0 * cost / dof
+#: The length of the contiguous blocks of steps of the cluster-robust covariance, s: longer than
+#: the correlation time of the next-step residuals (the command's holds, 0.1-0.5 s), short
+#: enough that a 30-s training set has tens of blocks.
+SE_BLOCK_S = 1.0
+
+
+def _clusters(data: ChamberData, rows: np.ndarray) -> np.ndarray:
+    """(n,) block labels of the fitted steps ``rows`` (indices t of steps t -> t+1): contiguous
+    runs of rows cut into pieces of about :data:`SE_BLOCK_S` (never across a gap)."""
+    mask = np.zeros(data.n_samples, bool)
+    mask[rows] = True
+    length = max(1, int(round(SE_BLOCK_S / float(np.median(np.diff(data.time))))))
+    return sub_blocks(mask, length)[rows]
+
+
+def covariance(J: np.ndarray, r: np.ndarray, clusters: np.ndarray) -> np.ndarray:
+    """Cluster-robust (sandwich) covariance of a least-squares estimate, (P, P).
+
+    .. math:: V = \\frac{G}{G-1} \\frac{n-1}{n-P} (J^T J)^{-1}
+              \\Big(\\sum_g J_g^T r_g r_g^T J_g\\Big) (J^T J)^{-1}
+
+    with J (n, P) the Jacobian of the residuals r (n,) at the estimate and g the ``clusters`` (n,)
+    (contiguous blocks of time; CR1 small-sample factor). A variance is never below the
+    model-based one, s² (JᵀJ)⁻¹ with s² = |r|² / (n - P): with tens of blocks the sandwich is
+    itself uncertain and biased low, and independent residuals make the two equal (the matrix is
+    rescaled, its correlations kept). Rows and columns of a direction the data do not determine (a
+    singular value below 1e-12 of the largest) are NaN.
+    """
+    n, P = J.shape
     _, sv, vt = np.linalg.svd(J, full_matrices=False)
     keep = sv > sv[0] * 1e-12
-    inv = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
-    se = np.sqrt(np.maximum(np.diag(inv) * s2, 0.0))
+    bread = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    labels, idx = np.unique(clusters, return_inverse=True)
+    scores = np.zeros((labels.size, P))
+    np.add.at(scores, idx, J * r[:, None])
+    G = labels.size
+    factor = G / max(G - 1, 1) * (n - 1) / max(n - P, 1)
+    cov = factor * bread @ (scores.T @ scores) @ bread
+    model = np.diag(bread) * float(r @ r) / max(n - P, 1)
+    d = np.diag(cov)
+    scale = np.sqrt(np.where(d > 0, np.maximum(model, d) / np.where(d > 0, d, 1.0), 1.0))
+    cov = cov * scale[:, None] * scale[None, :]
     if (~keep).any():
-        se[np.abs(vt[~keep]).max(axis=0) > 1e-3] = np.nan
-    return se
+        bad = np.abs(vt[~keep]).max(axis=0) > 1e-3
+        cov[bad, :] = np.nan
+        cov[:, bad] = np.nan
+    return cov
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,8 @@ class ChamberModel:
     names : parameter names, c1..c9 then the extra terms' (the packed vector's order)
     specs : (P,) their :class:`~diegocal.pneumatic.terms.ParamSpec`
     has_delay : whether the model reads lagged commands (:meth:`n_lags`)
+    delay_at : positions of the delays in the packed vector (``sensor_lag``, ``valve_delay``): the
+        valve holds the command for their sum late (a valve delay seen through the sensors' lag)
     """
 
     def __init__(self, extra=()):
@@ -70,8 +72,6 @@ class ChamberModel:
         dup = {c for c in causes if causes.count(c) > 1}
         if dup:
             raise ValueError(f"a chamber model takes one term per cause; {sorted(dup)} given twice")
-        if sum(T.part(t).delay for t in extra) > 1:
-            raise ValueError("valve_delay and sensor_lag exclude each other (a delay includes the lag)")
         base = T.baseline_terms()
         self.extra = extra
         self.terms = tuple(sorted(base + extra, key=lambda t: T.part(t).stage))
@@ -81,11 +81,12 @@ class ChamberModel:
         self.has_flow = any(T.part(t).stage == 5 for t in extra)
         self.offset_at = self.index.get("offset")
         self.has_delay = any(T.part(t).delay for t in extra)
-        self.delay_at = next((self.index[t.parameters[0].name] for t in extra if T.part(t).delay), None)
+        self.delay_at = [self.index[t.parameters[0].name] for t in extra if T.part(t).delay]
 
     def n_lags(self, h: float) -> int:
         """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay."""
-        return int(np.ceil(T.MAX_DELAY_S / h - 1e-9)) + 1 if self.has_delay else 0
+        longest = T.MAX_DELAY_S + T.MAX_SENSOR_LAG_S
+        return int(np.ceil(longest / h - 1e-9)) + 1 if self.has_delay else 0
 
     @property
     def n_params(self) -> int:
@@ -137,8 +138,8 @@ class ChamberModel:
                 dr2 = drc + ev.dbeta
                 ds = (ds * rc[..., None] + s[..., None] * drc + ev.dalpha - s2[..., None] * dr2) / safe[..., None]
                 dr = dr2
-            s_p = (s_p * rc + (s - s2) * rc_p) / safe
-            s, r, r_p = s2, r2, rc_p
+            s_p = (s_p * rc + (s - s2) * rc_p + ev.alpha_p - s2 * ev.beta_p) / safe
+            s, r, r_p = s2, r2, rc_p + ev.beta_p
         return ModelTerms(s, r, ds, dr, s_p, r_p)
 
     def _exact_step(self, x, p, u, v, vd, h, consts, jacobian):
@@ -178,8 +179,7 @@ class ChamberModel:
         else:
             if u_lags is None:
                 raise ValueError("a model with a valve delay needs the lagged commands (u_lags)")
-            at = self.delay_at
-            D = np.clip(x[at] / h, 0.0, u_lags.shape[-1] - 1 - 1e-9)
+            D = np.clip(sum(x[i] for i in self.delay_at) / h, 0.0, u_lags.shape[-1] - 1 - 1e-9)
             n = np.floor(D).astype(int)
             f = D - n
             old = np.take_along_axis(u_lags, n[..., None] + 1, axis=-1)[..., 0]  # held first, f h
@@ -190,7 +190,9 @@ class ChamberModel:
             if jacobian:
                 jac = j2 + dp2[..., None] * j1
                 # d/d delay = (d/d f) / h; d p(τ)/d τ = r (s - p(τ)) at the end of an exact step
-                jac[..., at] = dp2 * r1 * (s1 - p_mid) - r2 * (s2 - p_next)
+                d_delay = dp2 * r1 * (s1 - p_mid) - r2 * (s2 - p_next)
+                for at in self.delay_at:
+                    jac[..., at] = d_delay
         if self.offset_at is not None:
             p_next = p_next + offset
         if not jacobian:

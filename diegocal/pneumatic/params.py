@@ -96,6 +96,10 @@ class ChamberParams:
         """The nine free parameters packed in the order of :data:`NAMES` (the optimiser's door)."""
         return np.array([float(self.values[n]) for n in NAMES])
 
+    def names(self) -> tuple[str, ...]:
+        """The names of :meth:`full_vector`'s entries: c1..c9, then the extra terms' parameters."""
+        return NAMES + tuple(p.name for t in self.terms for p in t.parameters)
+
     def full_vector(self) -> np.ndarray:
         """c1..c9 then the extra terms' parameters, in the order of the model's ``names``."""
         return np.concatenate([self.vector(), *[t.values for t in self.terms]])

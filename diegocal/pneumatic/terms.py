@@ -28,14 +28,15 @@ channel = the chamber) keep the form (4.6), so that the exact step (4.7) still a
   valve holds first the older command, then the newer one, and the model takes one exact step
   (4.7) per piece;
 - ``chamber_leak`` (leak, 1/s): air escapes to the room, an added outflow
-  ``-leak (p - P_r) / (1 + c6 v)`` (a flow into a chamber of volume ∝ 1 + c6 v);
-- ``supply_droop`` (droop, pressure unit): the supply sags while the valve draws from it: the
-  valve sees P_c - droop through its supply port, so s loses ``droop f`` with f = (1 + g)/2 the
-  supply's share of the port flow (the part of s between P_r and P_c);
+  ``-leak Φ(p) / (1 + c6 v)`` (a flow into a chamber of volume ∝ 1 + c6 v), Φ a thin-plate
+  orifice's outflow (``extra: {shape: orifice}``) or p - P_r;
+- ``supply_droop`` (droop, pressure unit): the supply sags while the valve draws from it: s loses
+  ``f Δ`` with f = (1 + g)/2 the supply's share of the port flow, Δ = droop (``share``) or the sag
+  of a line resistance that carries the port's flow (``extra: {shape: flow}``);
 - ``pressure_offset`` (offset, pressure unit): the sensor reads p + offset; the model runs on the
   reading minus the offset;
 - ``sensor_lag`` (lag_s, s; at most one tick): the tick-averaged pressure answers the command a
-  fraction of a tick late (thesis §4.5); the form of ``valve_delay``, which it excludes;
+  fraction of a tick late (thesis §4.5); the form of ``valve_delay``, to which it adds;
 - ``flow_saturation`` (sat, 1): the valve's rate r becomes r / (1 + sat |s - p| / c_s): the
   thin-plate flow (4.1) is choked far from equilibrium, less than proportional to s - p.
 
@@ -97,6 +98,8 @@ class Evaluation:
     dalpha: np.ndarray | None = None
     beta: np.ndarray | None = None
     dbeta: np.ndarray | None = None
+    alpha_p: np.ndarray | float = 0.0
+    beta_p: np.ndarray | float = 0.0
     s_p: np.ndarray | None = None
     factor: np.ndarray | None = None
     factor_p: np.ndarray | None = None
@@ -117,10 +120,13 @@ class Evaluation:
     def room(self) -> float:
         return self.c_b - self.c_s
 
-    def add_flow(self, alpha, beta, dalpha=None, dbeta=None) -> None:
-        """Add ``alpha - beta p`` to pdot (pu/s); derivatives (N, P) when ``jacobian``."""
+    def add_flow(self, alpha, beta, dalpha=None, dbeta=None, alpha_p=0.0, beta_p=0.0) -> None:
+        """Add ``alpha - beta p`` to pdot (pu/s); derivatives (N, P) when ``jacobian``; ``alpha_p``,
+        ``beta_p``: their derivatives in the pressure at the step's start (a flow linearised there)."""
         self.alpha = alpha if self.alpha is None else self.alpha + alpha
         self.beta = beta if self.beta is None else self.beta + beta
+        self.alpha_p = self.alpha_p + alpha_p
+        self.beta_p = self.beta_p + beta_p
         if self.jacobian:
             self.dalpha = dalpha if self.dalpha is None else self.dalpha + dalpha
             self.dbeta = dbeta if self.dbeta is None else self.dbeta + dbeta
@@ -204,43 +210,125 @@ def _chamber_volume(term: Term, ev: Evaluation) -> None:
 def _split_step(term: Term, ev: Evaluation) -> None:
     """``valve_delay`` (the valve answers the command ``delay_s`` late) and ``sensor_lag`` (the
     tick-averaged pressure answers a fraction of a tick late, thesis §4.5: not a fault, fitted with
-    the baseline so that only a delay beyond the sampling's own is a ``valve_delay``; the two
-    exclude each other). With D = delay / h = n + f, the valve holds u_{t-n-1} for the first f h
+    the baseline so that only a delay beyond the sampling's own is a ``valve_delay``; with both, the
+    reading answers the command their sum late). With D = delay / h = n + f, the valve holds u_{t-n-1} for the first f h
     of the step t -> t+1 and u_{t-n} for the rest: the model takes two exact steps (4.7), the exact
     solution of (4.6) for that piecewise-constant command. The model applies it; no part is added."""
     return None
 
 
 def _chamber_leak(term: Term, ev: Evaluation) -> None:
-    """Air escapes to the room: pdot += -leak (p - P_r) / (1 + c6 v)."""
+    """Air escapes to the room: pdot += -leak Φ(p) / (1 + c6 v), a flow into a chamber of volume ∝
+    1 + c6 v.
+
+    ``extra: {shape: orifice}`` (what ``diagnose`` fits): Φ is the thin-plate outflow of an orifice
+    to the room, thesis eq. (4.1), normalised to p where it is choked (:func:`orifice_outflow`), so
+    the leak falls off steeply near the room pressure; it enters the step linearised at the step's
+    start (α - β p with β = leak Φ'(p_t), α = -leak (Φ(p_t) - Φ'(p_t) p_t)). Without a shape (files
+    written before it): Φ = p - P_r. The orifice is what a hole is: on the thin-plate leaks of two
+    simulators it lowers the held-out error more than the linear form.
+    """
     c = ev.value("leak")
-    beta = c / ev.den
+    if term.extra.get("shape") == "orifice":
+        phi, dphi, d2phi = orifice_outflow(ev.p, ev.room)
+    else:
+        phi, dphi, d2phi = ev.p - ev.room, np.ones_like(np.asarray(ev.p, float)), 0.0
+    rest = phi - dphi * ev.p  # Φ(p) ≈ rest + Φ' p near the step's start
+    beta, alpha = c * dphi / ev.den, -c * rest / ev.den
     dbeta = dalpha = None
     if ev.jacobian:
         dbeta = -beta[..., None] * ev.dden / ev.den[..., None]
-        dbeta[..., ev.index["leak"]] += 1.0 / ev.den
-        dalpha = ev.room * dbeta
-    ev.add_flow(ev.room * beta, beta, dalpha, dbeta)
+        dbeta[..., ev.index["leak"]] += dphi / ev.den
+        dalpha = -alpha[..., None] * ev.dden / ev.den[..., None]
+        dalpha[..., ev.index["leak"]] -= rest / ev.den
+    ev.add_flow(alpha, beta, dalpha, dbeta, c * d2phi * ev.p / ev.den, c * d2phi / ev.den)
+
+
+#: Air's heat capacity ratio and the critical pressure ratio of thin-plate flow (thesis eq. 4.14);
+#: above ``_X_LAMINAR`` (p_d/p_u) the flow is continued linearly to 0 (eq. 4.1's slope is infinite
+#: at equal pressures).
+_KAPPA = 1.4
+_X_CRIT = (2.0 / (_KAPPA + 1.0)) ** (_KAPPA / (_KAPPA - 1.0))
+_X_LAMINAR = 0.98
+
+
+def _psi(x):
+    """Ψ(x) of thesis eq. (4.1) (x = p_d / p_u) and its first two derivatives in x: constant when
+    choked, subsonic above, linear in the laminar end."""
+    e1, e2, c = 2.0 / _KAPPA, (_KAPPA + 1.0) / _KAPPA, 2.0 * _KAPPA / (_KAPPA - 1.0)
+    xs = np.clip(x, _X_CRIT, _X_LAMINAR)
+    w = np.sqrt(c * (xs**e1 - xs**e2))
+    dw = c * (e1 * xs ** (e1 - 1.0) - e2 * xs ** (e2 - 1.0)) / (2.0 * w)
+    d2w = (c * (e1 * (e1 - 1.0) * xs ** (e1 - 2.0) - e2 * (e2 - 1.0) * xs ** (e2 - 2.0)) - 2.0 * dw**2) / (2.0 * w)
+    w_lam = np.sqrt(c * (_X_LAMINAR**e1 - _X_LAMINAR**e2))
+    lam, choked = x > _X_LAMINAR, x < _X_CRIT
+    psi = np.where(lam, w_lam * (1.0 - x) / (1.0 - _X_LAMINAR), w)
+    dpsi = np.where(lam, -w_lam / (1.0 - _X_LAMINAR), np.where(choked, 0.0, dw))
+    return psi, dpsi, np.where(lam | choked, 0.0, d2w)
+
+
+_PSI_CHOKED = float(_psi(np.array(0.0))[0])
+
+
+def orifice_outflow(p, room):
+    """Φ(p) = p Ψ(P_r / p) / Ψ_choked, the thin-plate outflow of an orifice to the room (thesis eq.
+    4.1) in pressure units, equal to p where it is choked and 0 at or below P_r, with dΦ/dp and
+    d²Φ/dp²."""
+    p = np.asarray(p, float)
+    pp = np.maximum(p, room * (1.0 + 1e-9))
+    x = room / pp
+    psi, dpsi, d2psi = _psi(x)
+    below = p <= room
+    phi = np.where(below, 0.0, pp * psi / _PSI_CHOKED)
+    dphi = np.where(below, 0.0, (psi - x * dpsi) / _PSI_CHOKED)
+    return phi, dphi, np.where(below, 0.0, x * x * d2psi / (pp * _PSI_CHOKED))
 
 
 def _supply_droop(term: Term, ev: Evaluation) -> None:
-    """The supply sags while the valve draws from it: the valve sees P_c - droop, so
-    s = f (P_c - droop) + (1 - f) P_r loses ``droop f``, f = (1 + g)/2 the supply's share of the
-    port flow (the part of s between P_r and P_c). Reads g (c1..c3) of the baseline.
+    """The supply sags while the valve draws from it; s loses f Δ, f = (1 + g)/2 the supply's share
+    of the port flow (the part of s between P_r and P_c), Δ the sag the valve sees. Reads g
+    (c1..c3) of the baseline and, for the flow shape, the rate's numerator n (c5, c7..c9).
 
-    A sag is felt only through the supply port, in proportion to its share: where the valve is
-    open to the room (f ≈ 0) nothing changes; where it is open to the supply, the chamber settles
-    ``droop`` below the supply pressure of sensors.yaml. (A sag proportional to the rate of flow
-    drawn, P_c' = P_c - k f n (P_c' - p), was tried first: on the simulator's supply line, whose
-    choked flow sags the supply by tens of kPa while a chamber fills, it fitted worse than a
-    pressure offset, which this shape does not.)
+    Two shapes of Δ, both in the pressure unit, chosen by ``extra: {shape: ...}``:
+
+    - ``share`` (the default): Δ = droop where the supply port is open, a sag that lasts while
+      flow is drawn, as through a supply line of high linear resistance that the valve's own
+      through-flow keeps loaded (the project's simulator);
+    - ``flow``: Δ = (P_c - p) x / (1 + x), x = droop f n / (c7 c_s · 1 V), the sag of a line
+      resistance in series with the supply port, whose flow f n (P_c' - p) it carries (x is the line's
+      resistance times the port's conductance): deep while a chamber fills, none once it is full.
+      ``droop`` is the sag (small-sag limit) when a supply port opened one volt beyond c1 fills a
+      chamber half a span below the supply. A restricted line (an orifice before a hose, the second
+      generator) shows as this shape, not as the first; where the valve's own parameters (its rate
+      asymmetry c8, the flow saturation) take the slower filling, it is not named.
+
+    A sag proportional to the flow drawn without the series form (P_c' = P_c - k f n (P_c - p)) was
+    tried first on the project's simulator: it fitted worse than a pressure offset.
     """
     c = ev.value("droop")
     f = 0.5 * (1.0 + ev.g)
-    ev.s = ev.s - c * f
+    at = ev.index["droop"]
+    if term.extra.get("shape") != "flow":
+        ev.s = ev.s - c * f
+        if ev.jacobian:
+            ev.ds = ev.ds - 0.5 * c * ev.dg
+            ev.ds[..., at] -= f
+        return
+    c7 = ev.value("c7")
+    gap = ev.supply - ev.p
+    w = f * ev.num / (c7 * ev.c_s)  # x per unit of droop
+    x = np.maximum(c * w, 0.0)
+    q = x / (1.0 + x)
+    dq = np.where(c * w > 0.0, 1.0 / (1.0 + x) ** 2, 0.0)
+    sag = q * gap
+    ev.s = ev.s - f * sag
+    ev.s_p = f * q if ev.s_p is None else ev.s_p + f * q  # d s / d p
     if ev.jacobian:
-        ev.ds = ev.ds - 0.5 * c * ev.dg
-        ev.ds[..., ev.index["droop"]] -= f
+        dw = (0.5 * ev.dg * ev.num[..., None] + f[..., None] * ev.dnum) / (c7 * ev.c_s)
+        dw[..., ev.index["c7"]] -= w / c7
+        ds = -(0.5 * sag)[..., None] * ev.dg - (f * dq * gap)[..., None] * (c * dw)
+        ds[..., at] -= f * dq * gap * w
+        ev.ds = ev.ds + ds
 
 
 def _pressure_offset(term: Term, ev: Evaluation) -> None:

@@ -87,3 +87,21 @@ def test_bad_chamber_data_is_refused_clearly(robot, train_log):
         chamber_data(log, robot.sensors, robot.sensors.chamber_names[1])
     with pytest.raises(FitError, match="at least"):
         chamber_data(train_log.slice(0, 20), robot.sensors, robot.sensors.chamber_names[1])
+
+
+def test_block_standard_errors_widen_with_correlated_residuals_and_agree_with_independent_ones():
+    from diegocal.pneumatic.fit import covariance
+
+    rng = np.random.default_rng(2)
+    n, blocks = 6000, np.repeat(np.arange(60), 100)
+    J = np.column_stack([np.ones(n), rng.normal(size=n)])
+    J[:, 1] = np.convolve(J[:, 1], np.ones(20) / 20, mode="same")  # a slowly varying regressor
+    white = rng.normal(size=n)
+    ar = np.zeros(n)
+    for t in range(1, n):  # AR(1), correlation time ~ 20 samples
+        ar[t] = 0.95 * ar[t - 1] + white[t]
+    ols = lambda r: np.sqrt(np.diag(np.linalg.inv(J.T @ J)) * (r @ r) / (n - 2))  # noqa: E731
+    se_white = np.sqrt(np.diag(covariance(J, white, blocks)))
+    se_ar = np.sqrt(np.diag(covariance(J, ar, blocks)))
+    assert np.all(se_white >= ols(white)) and np.all(se_white < 1.3 * ols(white))
+    assert np.all(se_ar > 3.0 * ols(ar))  # the sandwich sees the correlation; s² (JᵀJ)⁻¹ does not

@@ -164,3 +164,61 @@ def test_flow_saturation_slows_the_rate_far_from_the_steady_state_and_its_pressu
     fd = (model.step(x, p + e, u, v, vd, h, *CONSTS, lags, False)[0]
           - model.step(x, p - e, u, v, vd, h, *CONSTS, lags, False)[0]) / (2 * e)
     np.testing.assert_allclose(J[:, at], 1.0 - fd, rtol=1e-5, atol=1e-6)
+
+
+SHAPED = (
+    make_term("chamber_leak", "c", {"leak": 3.0}, extra={"shape": "orifice"}),
+    make_term("supply_droop", "c", {"droop": 40.0}, extra={"shape": "flow"}),
+    make_term("flow_saturation", "c", {"sat": 0.7}),
+    make_term("pressure_offset", "c", {"offset": 3.0}),
+)
+
+
+@pytest.mark.parametrize("terms", [SHAPED[:1], SHAPED[1:2], SHAPED[:2] + SHAPED[3:], SHAPED])
+def test_jacobian_of_the_orifice_leak_and_the_flow_droop_matches_finite_differences(rng, terms):
+    # their flows depend on the pressure at the step's start: the offset's column reads that too
+    model = ChamberModel(terms)
+    p, u, v, vd, h, lags = _samples(rng)
+    x = np.concatenate([X, [t.values[0] for t in terms]])
+    _, J = model.step(x, p, u, v, vd, h, *CONSTS, lags)
+    for i, name in enumerate(model.names):
+        e = 1e-6 * max(1.0, abs(x[i]))
+        xp, xm = x.copy(), x.copy()
+        xp[i] += e
+        xm[i] -= e
+        fd = (model.step(xp, p, u, v, vd, h, *CONSTS, lags, False)[0]
+              - model.step(xm, p, u, v, vd, h, *CONSTS, lags, False)[0]) / (2 * e)
+        np.testing.assert_allclose(J[:, i], fd, rtol=1e-5, atol=1e-6, err_msg=name)
+
+
+def test_an_orifice_leak_is_choked_above_twice_the_room_pressure_and_stops_at_it(rng):
+    from diegocal.pneumatic.terms import orifice_outflow
+
+    phi, dphi, _ = orifice_outflow(np.array([100.0, 150.0, 300.0, 600.0]), 100.0)
+    assert phi[0] == 0.0 and phi[2:] == pytest.approx([300.0, 600.0]) and dphi[2:] == pytest.approx(1.0)
+    assert 0.0 < phi[1] < 150.0
+    p, u, v, vd, h, lags = _samples(rng)
+    base = step_vector(X, p, u, v, vd, h, *CONSTS, jacobian=False)[0]
+    leaky = ChamberModel(SHAPED[:1]).step(np.append(X, 3.0), p, u, v, vd, h, *CONSTS, lags, False)[0]
+    assert (leaky <= base + 1e-9).all() and (leaky < base).any()
+
+
+def test_a_flow_droop_sags_while_the_chamber_fills_and_not_once_it_is_full(rng):
+    # a chamber at the supply pressure draws nothing: the flow-shaped sag is 0 there
+    model = ChamberModel(SHAPED[1:2])
+    x = np.append(X, 40.0)
+    u = np.full(3, 7.0)
+    p = np.array([150.0, 400.0, 620.0])
+    t = model.evaluate(x, p, u, np.zeros(3), np.zeros(3), 0.01, *CONSTS, jacobian=False)
+    b = BASELINE.evaluate(X, p, u, np.zeros(3), np.zeros(3), 0.01, *CONSTS, jacobian=False)
+    sag = b.s - t.s
+    assert sag[0] > sag[1] > 0.0 and sag[2] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_valve_delay_adds_to_the_sensor_lag(rng):
+    p, u, v, vd, h, lags = _samples(rng)
+    lag, delay = make_term("sensor_lag", "c", {"lag_s": 0.004}), make_term("valve_delay", "c", {"delay_s": 0.016})
+    both = ChamberModel((lag, delay))
+    one = ChamberModel(_extra(("valve_delay",)))
+    a = both.step(np.concatenate([X, [0.004, 0.016]]), p, u, v, vd, h, *CONSTS, lags, False)[0]
+    np.testing.assert_allclose(a, one.step(np.append(X, 0.02), p, u, v, vd, h, *CONSTS, lags, False)[0])
