@@ -135,11 +135,19 @@ def _warnings(cal: Calibration, time, out: Path) -> tuple[str, ...]:
             f"the markers of {len(cal.rejected)} frame(s) disagree with their pots (t = {times} s): written off "
             f"as another pose's (listed under 'rejected' in {out})"
         )
-    if cal.unobservable:
-        names = ", ".join(u["pot"] for u in cal.unobservable)
+    if cal.rejected_poses:
+        times = ", ".join(f"{time[r['frame']]:.4g}" for r in cal.rejected_poses[:8])
+        more = ", ..." if len(cal.rejected_poses) > 8 else ""
         lines.append(
-            f"{len(cal.unobservable)} pot(s) unobservable (no marker moves with their joints): {names}; "
-            f"their gain and bias keep their nominal values (listed under 'unobservable' in {out})"
+            f"the markers of {len(cal.rejected_poses)} static pose(s) disagree with the rest beyond their noise "
+            f"(starting at t = {times}{more} s): another pose's markers? written off (listed under "
+            f"'rejected_poses' in {out})"
+        )
+    if cal.unobservable:
+        names = "; ".join(f"{u['pot']} ({u.get('reason', 'not determined by this log')})" for u in cal.unobservable)
+        lines.append(
+            f"{len(cal.unobservable)} pot(s) unobservable: {names}; their gain and bias keep their nominal values "
+            f"(listed under 'unobservable' in {out})"
         )
     if cal.sigma_unresolved:
         names = ", ".join(u["group"] for u in cal.sigma_unresolved)
@@ -230,7 +238,7 @@ def stac(
         typer.Option(
             "--cv",
             help="Static poses: also calibrate without each pose and print its markers' error predicted "
-            "from its pots (leave-one-pose-out; a pose starts where a pot moves by 1 % of its range).",
+            "from its pots (leave-one-pose-out; a pose starts where a pot moves by more than 6√2 times its noise).",
         ),
     ] = False,
     allow_unconverged: Annotated[
@@ -262,7 +270,7 @@ def _summary(done: StacRun, args: StacArgs) -> None:
     rows = [
         ("method", cal.method),
         ("frames", len(done.time)),
-        ("pots", len(cal.pot_names)),
+        ("pots calibrated", f"{len(cal.calibrated_pots)} of {len(cal.pot_names)}"),
         ("markers", len(cal.marker_names)),
         ("iterations", cal.fit.iterations),
         ("converged", str(cal.fit.converged)),
@@ -275,6 +283,8 @@ def _summary(done: StacRun, args: StacArgs) -> None:
     rows += coverage_rows(cal, done.robot)
     if cal.rejected:
         rows.append(("frames written off (markers)", len(cal.rejected)))
+    if cal.rejected_poses:
+        rows.append(("poses written off (markers)", len(cal.rejected_poses)))
     if done.pose_cv is not None:
         rows += cv_rows(done.pose_cv)
     rows.append(("calibration", str(done.output)))
