@@ -14,7 +14,17 @@ iCub of the generator, 32 pots and 16 markers, or the UR5). Clean logs: STAC's m
 
 Also printed: the median |z| per family (0.67 for exact SEs) and the worst seed's share.
 
+``--terms``: the same for the parameters of a diagnosed kinematic term, as ``diagnose`` fits it
+(:class:`~diegocal.diagnose.kinematics.KinematicsAdapter`, the training blocks of a 10-block
+split), on logs that hide the term's cause: a clock shift (``seconds``; both generators), a
+slipped marker (``dx, dy, dz`` from its slip time; both generators: the offsim slip slides over
+0.2-0.5 s and the term's time is the middle of the slide) and a pot's quadratic transfer
+(``c2, c3``; the project's simulator, whose curve is the term's: c2 = its departure at the ends of
+the term's range, c3 = 0). The term's structure (cause, channel, slip time) is the truth's, so
+the count is of the standard errors, not of the naming.
+
     .venv/bin/python bench/bench_se_coverage_stac.py --seeds 50 --robot icub
+    .venv/bin/python bench/bench_se_coverage_stac.py --seeds 50 --robot icub --terms
     .venv/bin/python bench/bench_se_coverage_stac.py --quick
 """
 
@@ -83,6 +93,66 @@ def run_one(task) -> dict:
             "seconds": time.process_time() - start}
 
 
+TERM_CASES = (("offsim", "time_offset"), ("project", "time_offset"), ("offsim", "marker_slip"),
+              ("project", "marker_slip"), ("project", "sensor_nonlinearity"))
+
+
+def term_one(task) -> dict:
+    """One log hiding ``cause``: the term fitted with its true structure, z of its parameters."""
+    generator, cause, robot_dir, seed, duration = task
+    from diegocal.diagnose.kinematics import KinematicsAdapter
+    from diegocal.evaluate import split_blocks
+    from diegocal.robot import load_robot
+    from diegocal.terms import Region, make_term
+
+    robot = load_robot(robot_dir)
+    if generator == "offsim":
+        log = gen.generate(gen.Session(robot_dir, duration, cause, seed=seed, hardware_seed=seed))
+    else:
+        from diegocal.sim.effects import EffectRequest
+        from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
+        layout = gen.Layout.read(robot_dir)
+        choices = layout.channels(cause)
+        channel = choices[seed % len(choices)]
+        opts = KinematicsOptions(duration=duration, effects=(EffectRequest(cause, channel, None),))
+        log = simulate_kinematics(robot, opts, np.random.default_rng(seed))
+    effect = log.truth.effects[0]
+    v, ch = effect["values"], effect["channel"]
+    region = None
+    if cause == "marker_slip":
+        t0 = v["time"] + 0.5 * v.get("transition_s", 0.0)
+        region = Region("time", float(log.time[np.searchsorted(log.time, t0)]), float("inf"))
+    adapter = KinematicsAdapter(log, robot)
+    train = split_blocks(log.n_samples, 10).mask("train")
+    start = time.process_time()
+    term = adapter.fit((make_term(cause, ch, region=region),), train).terms[0]
+    if cause == "time_offset":
+        truth = [v["seconds"]]
+    elif cause == "marker_slip":
+        truth = v["dxyz"]
+    else:
+        from diegocal.stac.calibration import Calibration
+
+        cal = Calibration.from_dict(log.truth.params)
+        g = cal.gain[cal.pot_names.index(ch)]
+        truth = [v["c2"] * (term.extra["half"] / g) ** 2, 0.0]
+    z = (term.values - np.asarray(truth, float)) / term.stderrs
+    return {"generator": generator, "cause": cause, "seed": seed, "z": z, "seconds": time.process_time() - start}
+
+
+def term_table(rows) -> str:
+    out = ["| generator | term | logs | parameters | within 2 SE | median abs z (0.67) |", "|---|---|---|---|---|---|"]
+    for g, cause in TERM_CASES:
+        mine = [r for r in rows if r["generator"] == g and r["cause"] == cause]
+        if mine:
+            z = np.concatenate([r["z"] for r in mine])
+            z = z[np.isfinite(z)]
+            out.append(f"| {g} | {cause} | {len(mine)} | {z.size} | {np.mean(np.abs(z) <= 2):.3f} | "
+                       f"{np.median(np.abs(z)):.2f} |")
+    return "\n".join(out)
+
+
 def table(rows) -> str:
     out = ["| generator | family | seeds | estimates | within 2 SE | median abs z (0.67) | worst seed |",
            "|---|---|---|---|---|---|---|"]
@@ -100,6 +170,13 @@ def table(rows) -> str:
     return "\n".join(out)
 
 
+def _map(fn, tasks, jobs: int) -> list:
+    if jobs > 1:
+        with ProcessPoolExecutor(jobs) as pool:
+            return list(pool.map(fn, tasks))
+    return [fn(t) for t in tasks]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=50)
@@ -108,6 +185,7 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=30.0, help="log length, s")
     ap.add_argument("--generator", action="append", choices=GENERATORS, help="default: both")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--terms", action="store_true", help="the diagnosed terms' parameters (module docstring)")
     ap.add_argument("--quick", action="store_true", help="3 seeds of 10-s UR5 logs (a smoke run)")
     args = ap.parse_args(argv)
     if args.quick:
@@ -118,15 +196,17 @@ def main(argv=None) -> int:
         last = args.seed + args.seeds - 1
         print(f"bench_se_coverage_stac: {args.robot}, {args.duration:g}-s logs, seeds {args.seed}..{last}, "
               f"load {os.getloadavg()[0]:.1f}")
-        tasks = [(g, robot_dir, args.seed + i, args.duration) for g in generators for i in range(args.seeds)]
         t0 = time.perf_counter()
-        if args.jobs > 1:
-            with ProcessPoolExecutor(args.jobs) as pool:
-                rows = list(pool.map(run_one, tasks))
+        if args.terms:
+            tasks = [(g, c, robot_dir, args.seed + i, args.duration) for g, c in TERM_CASES if g in generators
+                     for i in range(args.seeds)]
+            rows = _map(term_one, tasks, args.jobs)
+            print(term_table(rows))
         else:
-            rows = [run_one(t) for t in tasks]
-    print(table(rows))
-    print(f"{time.perf_counter() - t0:.0f} s wall, STAC median {np.median([r['seconds'] for r in rows]):.1f} CPU s "
+            tasks = [(g, robot_dir, args.seed + i, args.duration) for g in generators for i in range(args.seeds)]
+            rows = _map(run_one, tasks, args.jobs)
+            print(table(rows))
+    print(f"{time.perf_counter() - t0:.0f} s wall, fit median {np.median([r['seconds'] for r in rows]):.1f} CPU s "
           f"per log, load average at the end {os.getloadavg()[0]:.1f}")
     return 0
 

@@ -16,7 +16,8 @@ read its joints. A clock shift is a family over shifts (:data:`TIME_SHIFTS`), ea
 predicted markers' change over its shift: a shift of many samples is far from its linearisation
 at zero. A marker slip re-fits its marker's position (``refit``); its change time is a family:
 in each run of training frames the time a change-point scan fits best, and the middle of each
-gap between runs (:func:`_slip_samples`).
+gap between runs (:func:`_slip_samples`). Its region is open, ``time`` from the change on: a
+marker that moved stays moved, in this log and in any later one on the same clock.
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
 trend, by a threshold with a family-wise false-alarm rate).
@@ -33,13 +34,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from scipy.stats import chi2
 
 from diegocal.diagnose.kinematics_lin import Linearised
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
-from diegocal.io import Log, make_stream
+from diegocal.io import Log, make_stream, save_yaml
 from diegocal.stac.calibration import Calibration
+from diegocal.stac.covariance import block_sandwich, standard_errors
 from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import calibrate
@@ -169,7 +172,9 @@ class KinematicsAdapter:
         if term.cause != "marker_slip":
             return term
         i, k = cal.marker_names.index(term.channel), cal.marker_names.index(term.channel + SLIP)
-        return term.with_values(cal.marker_xyz[k] - cal.marker_xyz[i])
+        se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full(cal.marker_xyz.shape, np.nan)
+        # the two positions are estimated from disjoint frames: their errors nearly independent
+        return term.with_values(cal.marker_xyz[k] - cal.marker_xyz[i], np.hypot(se[k], se[i]))
 
     def _refine(self, fitted: KinFit) -> tuple:
         """One Gauss-Newton step on every continuous term at once (their projected columns with
@@ -193,10 +198,11 @@ class KinematicsAdapter:
         rows = fitted.train[:, None] & np.isfinite(r) & np.isfinite(A).all(-1) & (lin.w > 0)
         w = np.sqrt(lin.w)[rows]
         coef = np.linalg.lstsq(A[rows] * w[:, None], r[rows] * w, rcond=None)[0]
+        se = _step_errors(A, r, lin.w, rows, coef)
         out = list(fitted.terms)
         for i, a0, k in blocks:
             t = out[i]
-            out[i] = t.with_values(t.values + coef[a0 : a0 + k], [p.stderr for p in t.parameters])
+            out[i] = t.with_values(t.values + coef[a0 : a0 + k], se[a0 : a0 + k])
         return tuple(out)
 
     # ------------------------------------------------------------------ residuals
@@ -313,7 +319,7 @@ class KinematicsAdapter:
             refit = lin.channels(cols)
             for k in _slip_samples(train, cols, r, w):
                 cols_k = {c: _FromSample(v, k) for c, v in refit.items()}
-                region = Region("time", float(self.time[k]), float(self.time[-1]))
+                region = Region("time", float(self.time[k]), float("inf"))  # moved for good: open
                 term = make_term("marker_slip", name, region=region)
                 out.append(Candidate(term, cols_k, family=f"marker_slip:{name}", refit=refit))
         return out
@@ -425,8 +431,6 @@ class KinematicsAdapter:
         )
 
     def save(self, fitted: KinFit, path, header: dict) -> Path:
-        from diegocal.io import save_yaml
-
         path = Path(path)
         data = self.calibration(fitted).to_dict()
         save_yaml({**header, "kind": "calibration", **data}, path)
@@ -454,6 +458,22 @@ def _seeded(robot, cal: Calibration):
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
     return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
+
+
+def _step_errors(A: np.ndarray, r: np.ndarray, w: np.ndarray, rows: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Standard errors (k,) of a Gauss-Newton step's coefficients: the weighted least squares of
+    the residual rows r (T, R) on the columns A (T, R, k) with weights w (T, R) over ``rows``
+    (T, R) bool, as STAC's own (:func:`diegocal.stac.covariance.block_sandwich`): the sandwich
+    over contiguous blocks of frames, at least the model-based (AᵀWA)⁻¹ (the residuals are
+    correlated in time; the frames of one block share their errors)."""
+    ww = np.where(rows, w, 0.0)
+    Ar = np.where(rows[..., None], A, 0.0)
+    e = np.where(rows, r - np.einsum("trk,k->tr", np.nan_to_num(A), coef), 0.0)
+    bread = np.einsum("trk,tr,trl->kl", Ar, ww, Ar)
+    inv = np.linalg.pinv(bread, hermitian=True)
+    scores = np.einsum("trk,tr->tk", Ar, ww * e)
+    robust, _ = block_sandwich(inv, scores)
+    return standard_errors(inv, robust)
 
 
 def _clock_moved(before, after) -> bool:
@@ -497,8 +517,6 @@ def _gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _running_median(x: np.ndarray, half: int) -> np.ndarray:
     """NaN-aware running median over ±half samples along axis 0 of (T, ...)."""
-    from numpy.lib.stride_tricks import sliding_window_view
-
     pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])
     win = sliding_window_view(pad, 2 * half + 1, axis=0)
     with np.errstate(all="ignore"), warnings.catch_warnings():

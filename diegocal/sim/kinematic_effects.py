@@ -223,10 +223,10 @@ def plan_effects(
             plan.slips[m] = (t_slip, d)
             t0 = t_slip / options.rate_hz
             values = {"sample": t_slip, "time": t0, "dxyz": d}
+            # open: the marker stays moved after the log ends (DESIGN.md's regions end where the
+            # effect does, not where the data do)
             plan.records.append(
-                effect_record(
-                    req.name, channel, values, region={"variable": "time", "low": t0, "high": (T - 1) / options.rate_hz}
-                )
+                effect_record(req.name, channel, values, region={"variable": "time", "low": t0, "high": float("inf")})
             )
             continue
         plan.records.append(effect_record(req.name, channel, values))

@@ -63,7 +63,7 @@ class Covariance:
     def reported(self) -> np.ndarray:
         """The covariance the standard errors come from: the sandwich, its diagonal floored at
         the model's (module docstring), the correlations the sandwich's."""
-        d = np.sqrt(np.maximum(np.diag(self.robust), np.diag(self.model)))
+        d = standard_errors(self.model, self.robust)
         c = self.correlation()
         return c * np.outer(d, d)
 
@@ -101,19 +101,33 @@ def covariance(
 ) -> Covariance:
     """θ's model-based and block-sandwich covariances at a fit (module docstring); q (T, n) the
     tracked joint angles, ``noise`` the σ per type the fit ended with."""
-    T = q.shape[0]
     P, M = obs.n_pots, obs.n_markers
     A, scores = information(obs, params, noise, q, batch, max_frames)
     free = free_mask(obs)
     Af = 0.5 * (A + A.T)[np.ix_(free, free)]
     Af = Af + 1e-9 * max(np.trace(Af), 1.0) / max(free.sum(), 1) * np.eye(free.sum())
     model = np.linalg.inv(Af)
+    robust, G = block_sandwich(model, scores[:, free], blocks)
+    return Covariance(free, model, robust, G, P, M)
+
+
+def block_sandwich(bread_inv: np.ndarray, scores: np.ndarray, blocks: int = BLOCKS) -> tuple[np.ndarray, int]:
+    """The cluster-robust covariance (k, k) ``G/(G−1) A⁻¹ (Σ_b s_b s_bᵀ) A⁻¹`` and G, for A⁻¹
+    ``bread_inv`` (k, k) and per-frame scores (T, k) (rows of frames outside the fit zero), the
+    frames cut into ``blocks`` contiguous blocks of at least MIN_BLOCK frames."""
+    T = scores.shape[0]
     length = max(MIN_BLOCK, T // max(blocks, 1))
-    sums = np.add.reduceat(scores[:, free], np.arange(0, T, length), axis=0)
-    G = sums.shape[0]
+    sums = np.add.reduceat(scores, np.arange(0, T, length), axis=0)
+    G = int(np.count_nonzero(np.any(sums != 0.0, axis=1)))
     meat = sums.T @ sums * (G / max(G - 1, 1))
-    robust = model @ meat @ model
-    return Covariance(free, model, 0.5 * (robust + robust.T), G, P, M)
+    robust = bread_inv @ meat @ bread_inv
+    return 0.5 * (robust + robust.T), G
+
+
+def standard_errors(model: np.ndarray, robust: np.ndarray) -> np.ndarray:
+    """Per parameter the larger of the model-based and the sandwich standard error (module
+    docstring)."""
+    return np.sqrt(np.maximum(np.diag(robust), np.diag(model)))
 
 
 def information(

@@ -391,3 +391,43 @@ def test_panda_from_example_robot_data(tmp_path):
     assert _named(d, log), [(f.cause, f.channel, f.gain()) for f in d.findings]
     assert np.linalg.norm(d.findings[0].term.values) == pytest.approx(0.01, rel=0.1)
     assert diagnose(_log(robot, 1), robot, DiagnoseOptions(domain="kinematics")).findings == ()
+
+
+def test_a_slip_region_is_open(baseline, finger):
+    """A marker that slipped stays moved: the slip candidates' regions (and the simulator's truth)
+    run from the change time on without end, so a calibration with the term predicts a later log
+    on the same clock with the marker moved throughout."""
+    adapter, fitted, blocks = baseline
+    lin = Linearised.at(fitted, adapter)
+    cands = adapter._slip_family(lin, fitted, set(), blocks.mask("train"))
+    assert cands and all(c.term.region.high == np.inf and c.term.region.low < adapter.time[-1] for c in cands)
+    log = _log(finger, 2, ("marker_slip",), duration=4.0)
+    assert log.truth.effects[0]["region"]["high"] == np.inf
+    later = log.without_truth()
+    from dataclasses import replace
+
+    later = replace(later, time=later.time + 100.0)
+    slip = make_term("marker_slip", "m3", [0.01, 0.0, 0.0], region=Region("time", 2.0, np.inf))
+    x = apply_terms((slip,), later, finger).log.stream("markers")
+    assert np.isnan(x.column("m3")).all() and not np.isnan(x.column("m3~slip")).all()
+
+
+@pytest.mark.parametrize("cause,seed", [("time_offset", 21), ("time_offset", 22), ("sensor_nonlinearity", 23)])
+def test_a_fitted_term_has_standard_errors_that_cover_the_truth(finger, cause, seed):
+    """A term the adapter fits (the Gauss-Newton step of its refinement) carries standard errors:
+    the block sandwich of that step's least squares (the residuals are correlated in time), at
+    least the model-based ones; the simulator's truth lies within 3 of them (a clock shift's
+    seconds; a quadratic transfer curve's c2 at the ends of the term's range, and c3 = 0)."""
+    log = _log(finger, seed, (cause,), duration=20.0)
+    adapter = KinematicsAdapter(log, finger)
+    effect = log.truth.effects[0]
+    term = adapter.fit((make_term(cause, effect["channel"]),), split_blocks(log.n_samples, 10).mask("train")).terms[0]
+    if cause == "time_offset":
+        truth = [effect["values"]["seconds"]]
+    else:
+        cal = Calibration.from_dict(log.truth.params)
+        g = cal.gain[cal.pot_names.index(effect["channel"])]
+        truth = [effect["values"]["c2"] * (term.extra["half"] / g) ** 2, 0.0]
+    assert np.all(np.isfinite(term.stderrs)) and np.all(term.stderrs > 0)
+    z = (term.values - truth) / term.stderrs
+    assert np.all(np.abs(z) < 3.0), z
