@@ -33,7 +33,8 @@ class Domain:
     streams : the streams a log needs to be diagnosed in this domain
     fit_needs : the streams its fit command needs
     predict_needs : the streams a log needs for ``predict`` with its model
-    kind : the ``kind`` its fitted models' bundles carry
+    kind : the ``kind`` its fitted models' bundles carry: its name (files of layout 1 wrote
+        ``calibration`` and ``pneumatic``, read as aliases)
     aliases : older words for it (bundle kinds of file layout 1, command-line words)
     """
 
@@ -55,12 +56,12 @@ class Domain:
 
 KINEMATICS = Domain(
     "kinematics", "stac", ".calib.yaml", False, ("pots", "markers"), ("pots", "markers"), ("pots", "markers"),
-    "calibration", ("calibration", "calib", "stac"),
+    "kinematics", ("calibration", "calib", "stac"),
 )
 DYNAMICS = Domain("dynamics", "sgp-fit", ".sgp", True, ("q", "tau"), ("q", "tau"), ("q",), "dynamics", ("sgp",))
 PNEUMATICS = Domain(
     "pneumatics", "pneumatic-fit", ".pneumatic.yaml", False, ("pressure", "valve"), ("pressure", "valve", "pots"),
-    ("pressure", "valve", "pots"), "pneumatic", ("pneumatic",),
+    ("pressure", "valve", "pots"), "pneumatics", ("pneumatic",),
 )
 
 #: Domain name -> record, in the order diagnose runs them.

@@ -110,7 +110,7 @@ def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> S
     robot = robot_for_log(args.robot, data)
     options = args.options()
     result = calibrate(data.without_truth(), robot, args.method, options)
-    cal = replace(result.calibration, header=header("calibration", robot, args.log, command))
+    cal = replace(result.calibration, header=header("kinematics", robot, args.log, command))
     mapping = cal.to_dict()
     pose_cv = None
     if args.cv:

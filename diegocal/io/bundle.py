@@ -2,7 +2,7 @@
 
 Every fitted output records the same header at its top level::
 
-    kind: calibration | pneumatic | dynamics | diagnosis
+    kind: kinematics | dynamics | pneumatics | diagnosis   # (layout 1: calibration, pneumatic)
     robot: {name: diego, dir: /abs/robots/diego, hash: sha256:…}   # hash of robot.urdf + sensors.yaml
                                      # (+ locked: {joint: value} when its model was reduced)
     log: /abs/path/run.h5            # the log it was fitted on
@@ -32,7 +32,7 @@ from diegocal.domains import domain
 from diegocal.errors import InputFileError
 from diegocal.io.files import load_yaml, save_yaml, write_text
 
-KINDS = ("calibration", "pneumatic", "dynamics", "diagnosis")
+KINDS = ("kinematics", "dynamics", "pneumatics", "diagnosis")
 #: The file inside a dynamics bundle's directory that holds its header and summary.
 DYNAMICS_SUMMARY = "sgp.yaml"
 #: The file layout diegocal writes: 2 writes every fitted parameter as ``{value, stderr, unit}``
@@ -209,10 +209,12 @@ def load_bundle(path) -> Bundle:
     kind = data.get("kind")
     if kind in KINDS:
         return Bundle(str(kind), path, data)
+    if isinstance(kind, str) and kind in ("calibration", "pneumatic"):  # layout 1's words
+        return Bundle(domain(kind).name, path, data)
     if "chambers" in data:
-        return Bundle("pneumatic", path, data)
+        return Bundle("pneumatics", path, data)
     if {"pots", "markers", "mocap"} & set(data):
-        return Bundle("calibration", path, data)
+        return Bundle("kinematics", path, data)
     if "findings" in data and "domain" in data:
         return Bundle("diagnosis", path, data)
     raise InputFileError(

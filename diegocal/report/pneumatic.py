@@ -314,7 +314,7 @@ def _sweep(model: PneumaticModel):
 
 
 def _recognise(path: Path) -> bool:
-    return is_bundle(path, "pneumatic")
+    return is_bundle(path, "pneumatics")
 
 
 def _describe(path: Path) -> dict:

@@ -14,7 +14,7 @@ from diegocal.report.stac_pages import HELDOUT_STREAMS, abstract, headline, page
 
 
 def recognise(path: Path) -> bool:
-    return is_bundle(path, "calibration")
+    return is_bundle(path, "kinematics")
 
 
 def describe(path: Path) -> dict:

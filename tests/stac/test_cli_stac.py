@@ -43,7 +43,7 @@ def test_stac_writes_calib_and_q(fitted, logs, tree_robot):
     data = load_yaml(fitted)
     assert {"layout", "baseline", "sigma", "fit", "kind", "robot", "log", "command", "version"} <= set(data)
     assert len(data["fit"]["history"]) == data["fit"]["iterations"]
-    assert data["kind"] == "calibration" and data["log"].endswith("train.h5")
+    assert data["kind"] == "kinematics" and data["log"].endswith("train.h5")
     assert data["robot"]["name"] == tree_robot.name and data["robot"]["hash"].startswith("sha256:")
     cal = Calibration.from_dict(data)
     truth = Calibration.from_dict(log.truth.params)
