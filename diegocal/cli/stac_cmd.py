@@ -54,10 +54,16 @@ class StacArgs:
     cv: bool
     allow_unconverged: bool
     quiet: bool
+    geometry: bool = False
 
     def __post_init__(self):
         if self.cv and self.method != "stac":
             raise OptionError("--cv is for --method stac")
+        if self.geometry and self.method != "stac":
+            raise OptionError("--geometry is for --method stac")
+        if self.geometry and self.joint_angles is not None:
+            raise OptionError("--geometry fits static poses: there are no tracked joint angles to write (the "
+                              "angles are the pots')")
 
     @property
     def out(self) -> Path:
@@ -91,6 +97,7 @@ class StacRun:
     joint_angles: Path | None
     pose_cv: PoseCV | None
     warnings: tuple[str, ...]
+    geometry: dict | None = None
 
 
 def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> StacRun:
@@ -109,11 +116,25 @@ def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> S
     data = load_log(args.log)
     robot = robot_for_log(args.robot, data)
     options = args.options()
-    result = calibrate(data.without_truth(), robot, args.method, options)
-    cal = replace(result.calibration, header=header("kinematics", robot, args.log, command))
+    geometry = None
+    if args.geometry:  # STAC, then the link geometry on the same static poses (issue #34)
+        from diegocal.stac.geometry import calibrate_geometry, geometry_calibration
+        from diegocal.stac.geometry_cv import pose_folds
+
+        fit = calibrate_geometry(data.without_truth(), robot, options)
+        geometry = fit.to_dict()
+        cal = replace(fit.calibration, header=header("kinematics", robot, args.log, command))
+    else:
+        result = calibrate(data.without_truth(), robot, args.method, options)
+        cal = replace(result.calibration, header=header("kinematics", robot, args.log, command))
     mapping = cal.to_dict()
     pose_cv = None
-    if args.cv:
+    if geometry is not None:
+        mapping["geometry"] = geometry
+        if args.cv:
+            pose_cv = pose_folds(data, robot, geometry_calibration, options, progress=progress)
+            mapping["cv"] = pose_cv.to_dict()
+    elif args.cv:
         from diegocal.stac.static import leave_one_pose_out
 
         pose_cv = leave_one_pose_out(data.without_truth(), robot, options, progress=progress)
@@ -124,7 +145,8 @@ def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> S
     if args.joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
         streams = {"q": make_stream(robot.joint_names, result.q)}
         save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), args.joint_angles)
-    return StacRun(cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out))
+    return StacRun(cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out),
+                   geometry)
 
 
 def _warnings(cal: Calibration, time, out: Path) -> tuple[str, ...]:
@@ -250,6 +272,15 @@ def stac(
         ),
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
+    geometry: Annotated[
+        bool,
+        typer.Option(
+            "--geometry",
+            help="Static poses: also fit each joint's origin and axis (6 parameters per joint, reduced to those "
+            "the poses identify; written as joint_geometry terms that predict uses). With --cv: ten contiguous "
+            "pose folds.",
+        ),
+    ] = False,
 ) -> None:
     """Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2)."""
     args = StacArgs(**ctx.params)
@@ -285,6 +316,11 @@ def _summary(done: StacRun, args: StacArgs) -> None:
         rows.append(("frames written off (markers)", len(cal.rejected)))
     if cal.rejected_poses:
         rows.append(("poses written off (markers)", len(cal.rejected_poses)))
+    if done.geometry is not None:
+        g = done.geometry
+        rows.append(("geometry: identifiable parameters", f"{g['identifiable']} of {g['parameters']} "
+                     f"({len(g['dropped'])} dropped: listed under geometry: dropped)"))
+        rows.append(("geometry: condition number", f"{g['condition']:.3g}"))
     if done.pose_cv is not None:
         rows += cv_rows(done.pose_cv)
     rows.append(("calibration", str(done.output)))
@@ -330,8 +366,9 @@ def _progress(label: str, quiet: bool):
 def cv_rows(pose_cv: PoseCV) -> list:
     """Summary rows of a leave-one-pose-out evaluation."""
     flagged = pose_cv.outliers()
+    folds = getattr(pose_cv, "folds", None)  # stac --geometry: contiguous pose folds (stac/geometry_cv.py)
     rows = [
-        ("poses (leave-one-out)", len(pose_cv.pose)),
+        (f"poses ({folds} contiguous folds)" if folds else "poses (leave-one-out)", len(pose_cv.pose)),
         ("pose marker error mean / median (mm)", f"{1000 * pose_cv.mean:.3g} / {1000 * pose_cv.median:.3g}"),
     ]
     if len(flagged):

@@ -323,6 +323,19 @@ def shift_joint_origins(model: pin.Model, offsets: dict) -> pin.Model:
     return model
 
 
+def perturb_joint_placements(model: pin.Model, deltas: dict) -> pin.Model:
+    """A copy of ``model`` whose named joints' placements are composed with a small rigid motion:
+    ``jointPlacement · SE3(exp(r), d)`` for joint -> (6,) [dx, dy, dz (m), rx, ry, rz (rad, a
+    rotation vector)], both in the joint's own nominal frame, the one its axis is written in (the
+    6-parameter per-joint deviation of geometric calibration: ``joint_geometry``)."""
+    model = pin.Model(model)
+    for joint, v in deltas.items():
+        v = np.asarray(v, float)
+        jid = model.getJointId(joint)
+        model.jointPlacements[jid] = model.jointPlacements[jid] * pin.SE3(pin.exp3(v[3:]), v[:3])
+    return model
+
+
 def is_description(path) -> bool:
     """Whether ``path`` is a robot description file: a ``.urdf``, or a xacro (``.xacro``,
     ``.urdf.xacro``) that :func:`diegocal.io.urdf.urdf_text` expands to one."""

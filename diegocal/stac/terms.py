@@ -13,6 +13,9 @@ the one place that says how, and both ``diagnose`` and ``predict`` use it:
   reading lags the joint by a dead band (exactly the play operator when half_width = W / 2).
 - ``link_offset:JOINT`` (dx, dy, dz, m): the joint's origin is translated in its parent joint's
   frame (the URDF's ``<origin xyz>`` is off).
+- ``joint_geometry:JOINT`` (dx, dy, dz, m; rx, ry, rz, rad): the joint's placement is composed
+  with ``SE3(exp(r), d)`` in its own nominal frame (origin and axis off; fitted from static poses
+  by :mod:`diegocal.stac.geometry`, a companion of the baseline rather than a finding).
 - ``time_offset:markers`` (seconds, s): the mocap clock is shifted: ``markers[t]`` observe
   ``q(t + seconds)``.
 - ``marker_slip:MARKER`` (dx, dy, dz, m, region ``time`` from t0): from t0 on the marker sits at
@@ -38,7 +41,7 @@ from diegocal.causes import CAUSES as CAUSE_REGISTRY
 from diegocal.causes import causes_of
 from diegocal.io import Log, make_stream
 from diegocal.robot import MarkerSpec, Robot
-from diegocal.robot.model import shift_joint_origins
+from diegocal.robot.model import perturb_joint_placements, shift_joint_origins
 from diegocal.terms import Term
 
 #: The kinematic causes this module implements (the registry's kinematic terms and faults).
@@ -91,12 +94,13 @@ def pot_extra(cause: str, p: np.ndarray, sigma: float) -> dict:
 
 
 # ----------------------------------------------------------------------------- geometry
-def offset_robot(robot: Robot, offsets: dict, extra_markers=()) -> Robot:
+def offset_robot(robot: Robot, offsets: dict, extra_markers=(), geometry: dict | None = None) -> Robot:
     """A copy of ``robot`` with joint origins translated (joint -> (3,) m, in the parent joint's
-    frame) and ``extra_markers`` (MarkerSpec) appended to its sensors; its locked and continuous
-    joints and its source kept (:meth:`Robot.with_model`: an extended model must not clip a
-    continuous joint to ±π)."""
-    model = shift_joint_origins(robot.model, offsets)
+    frame), joint placements perturbed (``geometry``: joint -> (6,), ``joint_geometry``) and
+    ``extra_markers`` (MarkerSpec) appended to its sensors; its locked and continuous joints and
+    its source kept (:meth:`Robot.with_model`: an extended model must not clip a continuous joint
+    to ±π)."""
+    model = perturb_joint_placements(shift_joint_origins(robot.model, offsets), geometry or {})
     sensors = robot.sensors
     if extra_markers:
         sensors = replace(sensors, markers=tuple(sensors.markers) + tuple(extra_markers))
@@ -162,12 +166,14 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
                 p[:, j] -= pot_columns(t, raw[:, j], model) @ t.values
         streams["pots"] = make_stream(st.names, p)
     names, slips, shift = (), {}, 0.0
-    offsets, extra = {}, []
+    offsets, extra, geometry = {}, [], {}
     for t in terms:
         if t.cause == "link_offset":
             offsets[t.channel] = offsets.get(t.channel, 0.0) + t.values
         elif t.cause == "time_offset":
             shift += float(t.values[0])
+        elif t.cause == "joint_geometry":
+            geometry[t.channel] = t.values
     if log.has("markers"):
         st = log.stream("markers")
         names = tuple(st.names)
@@ -198,7 +204,7 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
                 cols.append(second)
                 out_names.append(name)
         streams["markers"] = make_stream(tuple(out_names), np.concatenate(cols, axis=1))
-    robot2 = offset_robot(robot, offsets, extra) if (offsets or extra) else robot
+    robot2 = offset_robot(robot, offsets, extra, geometry) if (offsets or extra or geometry) else robot
     log2 = replace(log, streams={**log.streams, **streams}, truth=None)
     return Applied(log2, robot2, slips, shift, time, names)
 
