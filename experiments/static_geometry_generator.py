@@ -129,8 +129,9 @@ def tool_points(model: pin.Model, joints, tool: str, xyz: np.ndarray, R, T, q_ch
     return out
 
 
-def simulate(out: Path, session: Session) -> tuple[Path, Log]:
-    """Write the robot directory and return it with the session's log (module docstring)."""
+def simulate(out: Path, session: Session, q: np.ndarray | None = None) -> tuple[Path, Log]:
+    """Write the robot directory and return it with the session's log (module docstring); ``q``
+    (n_poses, n) rad: the chain's poses (default: drawn)."""
     d = robot_dir(out, session)
     urdf, joints, tool = ROBOTS[session.robot]
     nominal = pin.buildModelFromUrdf(str(SHARE / urdf))
@@ -142,7 +143,8 @@ def simulate(out: Path, session: Session) -> tuple[Path, Log]:
     idx = [model.idx_qs[model.getJointId(j)] for j in joints]
     lo, hi = model.lowerPositionLimit[idx], model.upperPositionLimit[idx]
     mid, half = 0.5 * (lo + hi), 0.4 * (hi - lo)
-    q = rng.uniform(mid - half, mid + half, (session.n_poses, len(joints)))
+    drawn = rng.uniform(mid - half, mid + half, (session.n_poses, len(joints)))
+    q = drawn if q is None else np.asarray(q, float).reshape(session.n_poses, len(joints))
     enc = q + bias + rng.normal(0.0, session.encoder_noise, q.shape)
     clean = tool_points(model, joints, tool, xyz, R, T, q)
     x = clean + rng.normal(0.0, session.marker_noise, clean.shape)
@@ -173,6 +175,16 @@ def simulate(out: Path, session: Session) -> tuple[Path, Log]:
         truth=Truth(params=params, effects=[], signals=signals),
     )
     return d, log
+
+
+def candidate_poses(session: Session, n: int, seed: int) -> np.ndarray:
+    """n candidate poses (n, joints) rad, uniform in the central 80 % of each joint's range."""
+    urdf, joints, _ = ROBOTS[session.robot]
+    model = pin.buildModelFromUrdf(str(SHARE / urdf))
+    idx = [model.idx_qs[model.getJointId(j)] for j in joints]
+    lo, hi = model.lowerPositionLimit[idx], model.upperPositionLimit[idx]
+    mid, half = 0.5 * (lo + hi), 0.4 * (hi - lo)
+    return np.random.default_rng(seed).uniform(mid - half, mid + half, (n, len(joints)))
 
 
 def main(argv=None) -> None:

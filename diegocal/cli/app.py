@@ -47,6 +47,10 @@ COMMANDS: dict[tuple[str, ...], tuple[str, str]] = {
         "diegocal.cli.stac_cmd",
         "Calibrate pots, markers and the mocap frame; track joint angles (thesis ch. 2).",
     ),
+    ("poses",): (
+        "diegocal.cli.poses_cmd",
+        "Propose the next N static poses for stac --geometry: D-optimal among candidate poses.",
+    ),
     ("sgp-fit",): (
         "diegocal.cli.sgp_cmd",
         "Fit a torque model: parametric (rigid body + friction) part, GP part and hyperparameters.",

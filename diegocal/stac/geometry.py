@@ -203,10 +203,14 @@ def start_state(robot: Robot, cal: Calibration, lay: Layout) -> State:
     )
 
 
-def fit_geometry(log: Log, robot: Robot, cal: Calibration, poses: np.ndarray | None = None) -> GeometryFit:
+def fit_geometry(
+    log: Log, robot: Robot, cal: Calibration, poses: np.ndarray | None = None, groups=(0, 1, 2)
+) -> GeometryFit:
     """Fit the link geometry with the baseline on the static poses of ``log``, starting at STAC's
     calibration ``cal`` (module docstring). ``poses`` (T,) int: the pose of each sample (default
-    :func:`static_poses`). Raises FitError when the poses cannot support the fit.
+    :func:`static_poses`). ``groups``: the parameter groups fitted (0 frame and markers, 1 the pots'
+    zeros and gains, 2 the geometry; the others held at their start: the bench's reduced models).
+    Raises FitError when the poses cannot support the fit.
 
     The poses whose markers are not their own are those STAC wrote off, re-judged with the
     geometry as :mod:`diegocal.stac.poses` judges them: a pose whose χ² under its covariance C_k
@@ -223,7 +227,7 @@ def fit_geometry(log: Log, robot: Robot, cal: Calibration, poses: np.ndarray | N
     written = np.isin(data.ids, [int(r["pose"]) for r in cal.rejected_poses])
     x, J, Jq = observe(robot, lay, state, links, data.pots)
     rw, Jw, _ = spectra(data.without(written).markers - x, J, Jq, lay, state, data).whiten(var_m, var_p)
-    kept = identifiable(Jw, lay.group).kept
+    kept = identifiable(Jw * np.isin(lay.group, groups), lay.group).kept
     steps = 0
     for _ in range(WRITE_OFF_ROUNDS):
         used = data.without(written)
@@ -261,7 +265,7 @@ def fit_geometry(log: Log, robot: Robot, cal: Calibration, poses: np.ndarray | N
         }
         for k in np.flatnonzero(written)
     )
-    calibration = replace(_calibration(cal, lay, state, stderr, var_m), rejected_poses=rejected)
+    calibration = replace(_calibration(cal, lay, state, stderr, var_m, 2 in groups), rejected_poses=rejected)
     LOG.info(f"geometry: {int(kept.sum())} of {len(kept)} parameters identifiable, condition {ident.condition:.3g}")
     return GeometryFit(
         calibration,
@@ -323,9 +327,9 @@ def _values(lay: Layout, state: State, cal: Calibration) -> np.ndarray:
     )
 
 
-def _calibration(cal, lay, state, stderr, var_m) -> Calibration:
-    """The calibration to write: STAC's with the fitted baseline and one ``joint_geometry`` term per
-    joint (its dropped parameters held at 0 and listed in the term's ``extra``)."""
+def _calibration(cal, lay, state, stderr, var_m, geometry: bool = True) -> Calibration:
+    """The calibration to write: STAC's with the fitted baseline and (``geometry``) one
+    ``joint_geometry`` term per joint (its dropped parameters held at 0 and listed in ``extra``)."""
     M, nb = lay.n_markers, len(lay.pots)
     bias_se = np.array(cal.bias_se if cal.bias_se is not None else np.full(len(cal.pot_names), np.nan), float)
     gain_se = np.array(cal.gain_se if cal.gain_se is not None else np.full(len(cal.pot_names), np.nan), float)
@@ -333,7 +337,7 @@ def _calibration(cal, lay, state, stderr, var_m) -> Calibration:
     gain_se[lay.pots[lay.gains]] = stderr[6 + 3 * M + nb : 6 + 3 * M + nb + int(lay.gains.sum())]
     geo_se = stderr[len(lay.names) - 6 * len(lay.geometry) :].reshape(-1, 6)
     terms = []
-    for j, joint in enumerate(lay.geometry):
+    for j, joint in enumerate(lay.geometry if geometry else ()):
         dropped = [a for a, s in zip(GEOMETRY, geo_se[j], strict=True) if not np.isfinite(s)]
         terms.append(
             make_term("joint_geometry", joint, state.geometry[j], extra={"dropped": dropped}, stderr=geo_se[j])
