@@ -301,8 +301,10 @@ class Linearised:
         calibration directions (markers' positions, the mocap frame, unrelated pots) are
         orthogonal to them up to what the q projection spreads."""
         C = np.nan_to_num(C)
-        N = np.stack([c for i in self.sharing(j) for c in (self.project_pot(i) * self.s[:, i, None],
-                                                           self.project_pot(i))], axis=-1)
+        N = np.stack(
+            [c for i in self.sharing(j) for c in (self.project_pot(i) * self.s[:, i, None], self.project_pot(i))],
+            axis=-1,
+        )
         wt = self.w * self.fitted.train[:, None]
         if j not in self._pot_pinv:
             self._pot_pinv[j] = np.linalg.pinv(_wgram(N, wt), rcond=1e-10, hermitian=True)

@@ -102,8 +102,7 @@ def flexible_candidate(res, channel: str, train: np.ndarray, n_bins: int):
     if not cols or r.ndim != 1:
         return None
     X = np.hstack([np.ones((r.size, 1)), *cols])
-    term = Term("unexplained", channel, tuple(Parameter(f"f{k}") for k in range(X.shape[1])), None,
-                {"edges": edges_of})
+    term = Term("unexplained", channel, tuple(Parameter(f"f{k}") for k in range(X.shape[1])), None, {"edges": edges_of})
     return Candidate(term, {channel: X}, family="")
 
 

@@ -73,7 +73,7 @@ REJECTED_POSES_REASON = (
     "are written off as occluded"
 )
 
-#: Why calib.yaml lists a sensor type under ``sigma: unresolved`` (stac/qphase.py floor_factor).
+#: Why calib.yaml lists a sensor type under ``sigma: unresolved`` (stac/robust.py floor_factor).
 UNRESOLVED_REASON = (
     "its readings keep fewer than sqrt(2N) residual degrees of freedom once q is fitted: the other sensors "
     "cannot tell its noise apart from zero, so sigma is held at that detection limit"
@@ -120,7 +120,7 @@ class Calibration:
         written off as another pose's (:mod:`diegocal.stac.poses`): pose index, its first frame
         (0-based), its samples, its disagreement over the threshold (> 1)
     sigma_unresolved : ({group, reason}, ...) sensor types whose σ the data do not resolve (held
-        at its detection limit, :func:`diegocal.stac.qphase.floor_factor`)
+        at its detection limit, :func:`diegocal.stac.robust.floor_factor`)
     header : the bundle header (:func:`diegocal.io.bundle.header`), written first
     pot_units : ((gain unit, bias unit), ...) per pot (:data:`POT_UNITS`); () when not known
     correlations : ((label, label, ρ), ...) estimates that trade off (|ρ| ≥ 0.9), labels
@@ -199,8 +199,9 @@ class Calibration:
                 t = replace(t, parameters=tuple(replace(p, unit=u) for p, u in zip(t.parameters, units, strict=True)))
             out.append(t)
         for i, n in enumerate(self.marker_names):
-            out.append(make_term("marker_position", n, self.marker_xyz[i], extra={"link": self.marker_links[i]},
-                                 stderr=xse[i]))
+            out.append(
+                make_term("marker_position", n, self.marker_xyz[i], extra={"link": self.marker_links[i]}, stderr=xse[i])
+            )
         rotvec = Rotation.from_matrix(np.asarray(self.mocap_R, float)).as_rotvec()
         out.append(make_term("mocap_frame", "markers", np.concatenate([np.asarray(self.mocap_T, float), rotvec])))
         return tuple(out)

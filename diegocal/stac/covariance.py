@@ -96,7 +96,12 @@ class Covariance:
 
 
 def covariance(
-    obs: Observation, params: Params, noise: Noise, q: np.ndarray, batch: int = 250, max_frames: int = 500,
+    obs: Observation,
+    params: Params,
+    noise: Noise,
+    q: np.ndarray,
+    batch: int = 250,
+    max_frames: int = 500,
     blocks: int = BLOCKS,
 ) -> Covariance:
     """θ's model-based and block-sandwich covariances at a fit (module docstring); q (T, n) the

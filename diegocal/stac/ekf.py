@@ -29,7 +29,7 @@ import numpy as np
 
 from diegocal.errors import FitError
 from diegocal.io import Log
-from diegocal.robot import Robot, pots_jacobian
+from diegocal.robot import Robot, marker_points, pots_jacobian
 from diegocal.stac.calibration import Calibration, FitInfo
 from diegocal.stac.classical import ThetaLayout, kabsch, marker_model, read_streams
 from diegocal.stac.pot_inverse import joint_angles_from_pots
@@ -87,8 +87,6 @@ def nominal_seed(robot: Robot, pots: np.ndarray, markers: np.ndarray) -> Calibra
 
     ``pots`` (T, P) V and ``markers`` (T, M, 3) m; joint angles from the nominal pot inverse.
     """
-    from diegocal.robot import marker_points
-
     nominal = Calibration.nominal(robot)
     q = joint_angles_from_pots(robot, nominal, pots).q
     xb = robot.points(q, marker_points(robot, nominal.marker_xyz))

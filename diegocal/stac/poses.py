@@ -49,8 +49,15 @@ MAX_ROUNDS = 10
 TRACK_STEPS = 40
 
 
-def disagreement(obs: Observation, params: Params, sigma: dict, q: np.ndarray, poses: np.ndarray,
-                 kept: np.ndarray, options: StacOptions) -> np.ndarray:
+def disagreement(
+    obs: Observation,
+    params: Params,
+    sigma: dict,
+    q: np.ndarray,
+    poses: np.ndarray,
+    kept: np.ndarray,
+    options: StacOptions,
+) -> np.ndarray:
     """D_k over its χ²_N quantile (K,) for every pose (see the module docstring).
 
     ``obs``: the Observation with every marker (none written off); ``params``, ``sigma``: the
@@ -91,8 +98,9 @@ def _decide(ratio: np.ndarray) -> np.ndarray:
     return new
 
 
-def write_off_foreign_poses(base: Observation, obs: Observation, stage, poses: np.ndarray,
-                            refit: Callable, options: StacOptions):
+def write_off_foreign_poses(
+    base: Observation, obs: Observation, stage, poses: np.ndarray, refit: Callable, options: StacOptions
+):
     """Check the poses of a static-pose log and refit without those that disagree (module docstring).
 
     ``base``: the Observation with every marker; ``obs`` and ``stage``: the fit made on it (its

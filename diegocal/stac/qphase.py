@@ -26,6 +26,7 @@ from threadpoolctl import threadpool_limits
 
 from diegocal.stac import robust
 from diegocal.stac.model import MARKERS, Observation, Params, State
+from diegocal.stac.robust import MIN_REDUNDANCY, floor_factor
 
 
 @dataclass(frozen=True)
@@ -249,33 +250,6 @@ def group_sigma(obs: Observation, params: Params, st: State, used: dict | None =
         dof = max(r.size - used.get(kind, 0.0), MIN_REDUNDANCY * r.size)
         out[kind] = float(np.sqrt(np.sum(r * r) / dof * floor_factor(r.size, dof)))
     return out
-
-
-#: r_g is kept above this share of N_g only to avoid dividing by zero (the floor below acts first)
-MIN_REDUNDANCY = 1e-9
-
-
-def floor_factor(n: float, dof: float) -> float:
-    """max(1, √(2N) / r): the factor that lifts σ² = RSS / r to the group's detection limit.
-
-    Why (Förstner's variance components, and where they break). With the q-phase's share of a
-    group's readings, h = used / N, RSS / r is the estimate σ² = E[e_del²] − g² v: the mean square
-    of the group's deleted residuals (its readings against q from the other sensors alone,
-    e_del = e / (1 − h)) less the part of it the other sensors' own uncertainty explains (g² v).
-    That difference has the standard error √(2/N) E[e_del²] (a mean of N squares), so σ² is told
-    apart from zero only while σ² > √(2/N) E[e_del²], i.e. while r > √(2N). Below that, a group
-    whose every reading fixes its joint (one rotary pot per joint) is not resolved by the data:
-    its Förstner iterate drifts to σ = 0 whenever the other sensors' σ is pessimistic about that
-    joint (pooled with a sensor that has model error, say), and at σ = 0 the likelihood of eq. 2.5
-    is unbounded (the q-phase pins the joints to the pots). There σ² is held at one standard error,
-    √(2/N) E[e_del²] = RSS √(2N) / r², as a boundary-avoiding prior holds a variance whose
-    likelihood peaks at zero one standard error off the boundary (Chung, Rabe-Hesketh, Dorie,
-    Gelman & Liu 2013, Psychometrika 78: 685-709); negative or zero variance components of
-    Helmert/Förstner estimation are the same problem (Koch 1999, Parameter Estimation and
-    Hypothesis Testing in Linear Models, §3.6; Teunissen & Amiri-Simkooei 2008, J. Geod. 82: 65-82).
-    ``n``: readings N_g (scalars: 3 per marker); ``dof``: their redundancy r_g.
-    """
-    return max(1.0, float(np.sqrt(2.0 * n)) / dof)
 
 
 def resolvable(obs: Observation, used: dict) -> dict:

@@ -4,6 +4,7 @@ alternation, and the thesis's "BFGS" q-phase (§2.6.1)."""
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import minimize
 
 from diegocal.stac.model import Observation
 from diegocal.stac.qphase import normal_equations
@@ -53,8 +54,6 @@ class BfgsSchedule:
         self.obs, self.options, self.inner = obs, options, inner
 
     def step(self, q, params, noise):
-        from scipy.optimize import minimize
-
         obs, T, n = self.obs, self.obs.n_frames, self.obs.robot.n_joints
         bounds = list(zip(np.tile(obs.lower, T), np.tile(obs.upper, T), strict=True))
 

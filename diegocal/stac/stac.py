@@ -11,7 +11,7 @@ eq. 2.21 at fixed θ, :mod:`.qphase`) and the dynamic
 variance adjustment σ_g = RMS residual of sensor type g. Each block is a descent step, so the
 cost recorded per iteration is non-increasing (up to the robust weights of Huber's loss).
 σ is re-estimated (with the q-phase's degrees of freedom, see :func:`.qphase.group_sigma`; a
-type the data do not resolve is held at its detection limit, :func:`.qphase.floor_factor`, and
+type the data do not resolve is held at its detection limit, :func:`.robust.floor_factor`, and
 listed in the calibration's ``sigma_unresolved``) in every iteration after (q, θ) have settled
 for it (SIGMA_SETTLE); that fixed-point iteration converges linearly, so every third estimate
 is extrapolated by Aitken's Δ² (:func:`_aitken`).
@@ -74,7 +74,7 @@ from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.poses import write_off_foreign_poses
 from diegocal.stac.pphase import p_phase
-from diegocal.stac.qphase import Noise, pot_sigmas, q_step, resolvable, rho
+from diegocal.stac.qphase import Noise, group_sigma, irls_weight, pot_sigmas, q_step, residuals, resolvable, rho
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 from diegocal.stac.robust import LOSSES, REDESCENDING
 from diegocal.stac.schedules import Anderson, BfgsSchedule
@@ -159,8 +159,6 @@ def weights(obs: Observation, params: Params, st: State, noise: Noise):
     wp = np.ones_like(obs.pots)
     wx = obs.valid.astype(float)
     if noise.loss != "linear":
-        from diegocal.stac.qphase import irls_weight, residuals
-
         _, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
         wx = irls_weight(zx, noise.loss, noise.huber) * obs.valid
     return wp, wx
@@ -168,8 +166,6 @@ def weights(obs: Observation, params: Params, st: State, noise: Noise):
 
 def total_cost(obs: Observation, params: Params, st: State, noise: Noise, sigma: dict) -> float:
     """LL of eq. 2.5/2.8 with per-type σ (constants dropped)."""
-    from diegocal.stac.qphase import residuals
-
     zp, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
     c = 0.0
     for g, sg in sigma.items():
@@ -188,9 +184,7 @@ def _noise(obs, sigma, options) -> Noise:
 def _update_sigma(obs, params, st, used, loss: str = "linear", sigma: dict | None = None) -> dict:
     """§2.3.5: re-estimate σ per type from the residuals, with the q-phase's degrees of freedom;
     under a robust loss from residuals clipped at a few current σ (:func:`.robust.group_sigma`).
-    A group the data do not resolve is held at its detection limit (:func:`.qphase.floor_factor`)."""
-    from diegocal.stac.qphase import group_sigma
-
+    A group the data do not resolve is held at its detection limit (:func:`.robust.floor_factor`)."""
     new = group_sigma(obs, params, st, used) if loss == "linear" else robust.group_sigma(obs, params, st, used, sigma)
     return {g: max(v, 1e-9) for g, v in new.items()}
 

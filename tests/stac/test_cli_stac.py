@@ -30,9 +30,7 @@ def _run(*args):
 @pytest.fixture(scope="module")
 def fitted(logs, tree_dir):
     d, _ = logs
-    res = _run(
-        "stac", d / "train.h5", "--robot", tree_dir, "--joint-angles", d / "q.h5"
-    )
+    res = _run("stac", d / "train.h5", "--robot", tree_dir, "--joint-angles", d / "q.h5")
     assert res.exit_code == 0, res.output
     assert "−log-likelihood, eq. 2.5 (nats" in " ".join(res.output.split())  # the cost says what it is
     return d / "train.calib.yaml"

@@ -61,11 +61,13 @@ def _session(robot, n: int = 1500, seed: int = 3) -> Log:
     """Shoulder and elbow swing within their limits; the wrist turns from 0 to 2.6π and back a bit."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0.0, 1.0, n)
-    q = np.column_stack([
-        1.2 * np.sin(2 * np.pi * 3.1 * t + 0.3),
-        1.1 * np.sin(2 * np.pi * 2.3 * t + 1.1),
-        2.6 * np.pi * t + 0.6 * np.sin(2 * np.pi * 4.7 * t),
-    ])
+    q = np.column_stack(
+        [
+            1.2 * np.sin(2 * np.pi * 3.1 * t + 0.3),
+            1.1 * np.sin(2 * np.pi * 2.3 * t + 1.1),
+            2.6 * np.pi * t + 0.6 * np.sin(2 * np.pi * 4.7 * t),
+        ]
+    )
     truth = true_calibration(robot, rng)
     pots = predict_pots(robot, q, truth.gain, truth.bias) + rng.normal(0.0, 0.005, (n, 3))
     markers = predict_markers(robot, q, truth.marker_xyz, truth.mocap_R, truth.mocap_T)

@@ -36,8 +36,11 @@ def _z(log, obs, cal) -> np.ndarray:
     truth = Calibration.from_dict(log.truth.params)
     b = obs.gauge_equivalent_bias(truth.gain, truth.bias, cal.bias)
     zx = (cal.marker_xyz - truth.marker_xyz) / cal.marker_xyz_se
-    z = [(cal.gain - truth.gain) / cal.gain_se, ((cal.bias - b) / cal.bias_se)[~obs.fixed_bias],
-         zx[obs.gauge_free_markers()].ravel()]
+    z = [
+        (cal.gain - truth.gain) / cal.gain_se,
+        ((cal.bias - b) / cal.bias_se)[~obs.fixed_bias],
+        zx[obs.gauge_free_markers()].ravel(),
+    ]
     z = np.concatenate(z)
     return z[np.isfinite(z)]
 
@@ -85,8 +88,10 @@ def test_block_sandwich_covers_the_truth_under_correlated_marker_noise(tree_robo
     for seed in range(3):
         log, res, obs, _, _ = _fit(tree_robot, 10 + seed)
         z_white.append(_z(log, obs, res.calibration))
-    within = {k: float(np.mean(np.abs(np.concatenate(v)) <= 2)) for k, v in
-              (("model", z_model), ("reported", z_reported), ("white", z_white))}
+    within = {
+        k: float(np.mean(np.abs(np.concatenate(v)) <= 2))
+        for k, v in (("model", z_model), ("reported", z_reported), ("white", z_white))
+    }
     assert within["model"] < 0.75, within
     assert within["reported"] >= 0.88, within
     assert within["white"] >= 0.88, within

@@ -49,9 +49,7 @@ def test_converges_from_a_good_seed_on_low_noise(rotary_robot):
         seed_trans=0.01,
     )
     # the thesis starts the filter at the true first-frame joint angles (§2.6.2)
-    res = calibrate_ekf(
-        log.without_truth(), rotary_robot, StacOptions(), ekf=opts, seed=seed, q0=q_true[0]
-    )
+    res = calibrate_ekf(log.without_truth(), rotary_robot, StacOptions(), ekf=opts, seed=seed, q0=q_true[0])
     cal = res.calibration
     assert cal.method == "ekf" and cal.fit.converged and np.isfinite(res.q).all()
     gain_err = np.abs(cal.gain - truth.gain) / truth.gain
@@ -87,9 +85,7 @@ def test_observation_jacobian_matches_finite_differences(tree_robot):
     visible = np.ones(3 * layout.n_markers, bool)
     visible[:3] = False  # an occluded marker drops its rows
     h, H = filt.observe(z, visible)
-    assert (
-        H.shape == (len(tree_robot.sensors.pots) + visible.sum(), z.size) and h.shape == H.shape[:1]
-    )
+    assert H.shape == (len(tree_robot.sensors.pots) + visible.sum(), z.size) and h.shape == H.shape[:1]
     fd = np.empty_like(H)
     for k in range(z.size):
         step = 1e-6 * max(1.0, abs(z[k]))

@@ -34,8 +34,22 @@ def icub_run(tmp_path_factory):
     rdir = erd.robot_dir(tmp, "icub_full", markers_per_link=1, seed=3)
     log = tmp / "k.h5"
     res = runner.invoke(
-        app, ["simulate", "kinematics", "--robot", str(rdir), "-o", str(log), "--duration", "20", "--rate", "50",
-              "--seed", "4", "-q"]
+        app,
+        [
+            "simulate",
+            "kinematics",
+            "--robot",
+            str(rdir),
+            "-o",
+            str(log),
+            "--duration",
+            "20",
+            "--rate",
+            "50",
+            "--seed",
+            "4",
+            "-q",
+        ],
     )
     assert res.exit_code == 0, res.output
     res = runner.invoke(app, ["stac", str(log)])

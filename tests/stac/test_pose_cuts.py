@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 import synth
 
-import diegocal.stac.stac as stac_module
+import diegocal.stac.pose_cv as stac_module
 from diegocal.errors import FitError
 from diegocal.robot import load_robot
 from diegocal.sim.static_poses import StaticPoseOptions, simulate_static_poses
-from diegocal.stac.static import find_poses, leave_one_pose_out, pot_noise, static_poses
+from diegocal.stac.pose_cv import leave_one_pose_out
+from diegocal.stac.static import find_poses, pot_noise, static_poses
 
 EXAMPLE = Path(__file__).parents[2] / "docs" / "example_robot"
 

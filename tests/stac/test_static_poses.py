@@ -28,8 +28,7 @@ from diegocal.stac.model import Observation  # noqa: E402
 from diegocal.stac.predict import predict  # noqa: E402
 from diegocal.stac.static import find_poses, take  # noqa: E402
 
-JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
-          "wrist_3_joint")
+JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")
 CLUSTER = [[0.05, 0.0, 0.02], [0.0, 0.05, 0.02], [-0.04, -0.03, 0.04], [0.0, 0.0, 0.08]]
 
 
@@ -90,8 +89,22 @@ def test_poses_with_another_poses_markers_are_written_off(ur5_dir, wrong):
 def test_stac_cv_prints_the_leave_one_pose_out_error(ur5_dir, tmp_path):
     log_path = tmp_path / "poses.h5"
     res = CliRunner().invoke(
-        app, ["simulate", "kinematics", "--robot", str(ur5_dir), "--poses", "12",
-              "--wrong-poses", "1", "--seed", "3", "-o", str(log_path), "-q"]
+        app,
+        [
+            "simulate",
+            "kinematics",
+            "--robot",
+            str(ur5_dir),
+            "--poses",
+            "12",
+            "--wrong-poses",
+            "1",
+            "--seed",
+            "3",
+            "-o",
+            str(log_path),
+            "-q",
+        ],
     )
     assert res.exit_code == 0, res.output
     res = CliRunner().invoke(app, ["stac", str(log_path), "--loss", "tukey", "--cv"])
