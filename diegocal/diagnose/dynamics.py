@@ -68,7 +68,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from diegocal.causes import MAX_LAG_S
-from diegocal.causes import cause as registry_entry
+from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
@@ -195,7 +195,8 @@ class DynamicsAdapter:
         C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
         A = np.concatenate([self.F, C], axis=2)
         lags = {self.row_of[t.channel]: t.value("lag") for t in terms if is_filter(t) and t.channel in self.row_of}
-        if lags or any(p.shape for t in terms for p in _specs(t)):
+        regions = any(t.cause == "position_friction" for t in terms)
+        if lags or regions or any(p.shape for t in terms for p in specs(t)):
             w, _ = self._solve(A, train, np.ones(len(self.joints)))
             e = self.tau[train] - (A @ w + self.tau0)[train]
             s = np.sqrt(np.nanmean(e * e, axis=0))  # each joint weighted by its residual std
@@ -206,7 +207,9 @@ class DynamicsAdapter:
                     t.with_values([lags[self.row_of[t.channel]]]) if is_filter(t) and t.channel in self.row_of else t
                     for t in terms
                 )
-            terms = self._fit_shapes(terms, lags, train, sigma)
+            terms = fit_shapes(self, terms, lags, train, sigma)
+            if regions:
+                terms = refine_regions(self, terms, lags, train, sigma)
         rows = train & np.isfinite(self.tau).all(axis=1)
         model = DynamicsModel(self.robot, self._options(), self.joints, terms)
         model.fit_arrays(self.q[rows], self.qd[rows], self.qdd[rows], self.tau[rows], time=self.time[rows])
@@ -221,12 +224,18 @@ class DynamicsAdapter:
                 r = self.row_of.get(t.channel)
                 se = None if r is None else [self._lag_se(A, w, r, t.value("lag"), pred, rows)]
                 out.append(t.with_values([t.value("lag")], se))
-            elif any(p.shape for p in _specs(t)):
-                out.append(self._with_shape_se(t, model, pred, rows))
+            elif any(p.shape for p in specs(t)):
+                out.append(with_shape_se(self, t, model, pred, rows))
             else:
                 out.append(t)
         if se_nan.size:  # a payload's parameters the torques cannot tell from the others
             out = self._with_nan_se(out, se_nan)
+        if regions:  # a region's edges are estimates too: their uncertainty in the coefficients'
+            fitted_terms = tuple(out)
+            out = [
+                with_region_se(self, t, fitted_terms, lags, rows, sigma) if t.cause == "position_friction" else t
+                for t in out
+            ]
         return DynamicsFit(w, tuple(out), sigma, pred, Aeff, rows, model)
 
     def _options(self, kind: str = "pr") -> SGPOptions:
@@ -318,53 +327,14 @@ class DynamicsAdapter:
                 lags[r] = float(res.x)
         return lags
 
-    def _fit_shapes(self, terms, lags: dict, train, sigma) -> tuple:
-        """Each shape parameter of ``terms`` (:mod:`diegocal.causes`: a Stribeck velocity scale) by
-        a bounded 1-D search, in log space, of the weighted training error with the linear
-        parameters re-solved at every trial (one sweep per parameter, two when there are several)."""
-        terms = list(terms)
-        slots = [(i, p) for i, t in enumerate(terms) for p in _specs(t) if p.shape]
-
-        def cost(i, name, log_value):
-            trial = list(terms)
-            trial[i] = _with_value(trial[i], name, float(np.exp(log_value)))
-            C = term_columns(trial, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
-            Aeff = self._lagged(np.concatenate([self.F, C], axis=2), lags)
-            offset = self._offset(lags)
-            w, _ = self._solve(Aeff, train, sigma, offset)
-            e = (self.tau[train] - (Aeff @ w + offset)[train]) / sigma
-            return float(np.nansum(e * e))
-
-        for _ in range(2 if len(slots) > 1 else 1):
-            for i, spec in slots:
-                bounds = (np.log(spec.lower), np.log(spec.upper))
-                res = minimize_scalar(lambda x, i=i, n=spec.name: cost(i, n, x), bounds=bounds, method="bounded",
-                                      options={"xatol": 1e-3})
-                terms[i] = _with_value(terms[i], spec.name, float(np.exp(res.x)))
-        return tuple(terms)
-
-    def _with_shape_se(self, term, model, pred, rows):
-        """``term`` with the standard errors of its shape parameters: the residual std of its
-        joint over the root sum of squares of the prediction's derivative in the parameter
-        (central difference; the linear parameters held), training rows."""
-        r = self.row_of.get(term.channel)
-        if r is None:
-            return term
-        out = term
-        amp = np.array([p.value for p in term.linear])
-        for spec in (p for p in _specs(term) if p.shape):
-            v = term.value(spec.name)
-            h = 0.01 * v
-            up, down = (columns(_with_value(term, spec.name, x), self.robot, self.q, self.qd, self.qdd)[:, self.rows[r]]
-                        for x in (v + h, v - h))
-            d = (up - down) @ amp / (2 * h)
-            ok = rows & np.isfinite(self.tau[:, r])
-            e = self.tau[ok, r] - pred[ok, r]
-            den = float(d[ok] @ d[ok])
-            se = float(np.sqrt(float(e @ e) / max(ok.sum() - 1, 1) / den)) if den > 0 else float("nan")
-            out = replace(out, parameters=tuple(replace(p, stderr=se) if p.name == spec.name else p
-                                                for p in out.parameters))
-        return out
+    def _cost(self, terms, lags: dict, train, sigma) -> float:
+        """The weighted training error of the model with ``terms`` (the linear parameters solved)."""
+        C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
+        Aeff = self._lagged(np.concatenate([self.F, C], axis=2), lags)
+        offset = self._offset(lags)
+        w, _ = self._solve(Aeff, train, sigma, offset)
+        e = (self.tau[train] - (Aeff @ w + offset)[train]) / sigma
+        return float(np.nansum(e * e))
 
     # ------------------------------------------------------------------ residuals and candidates
     def residuals(self, fitted: DynamicsFit) -> Residuals:
@@ -506,13 +476,3 @@ def adapters(log, robot, options) -> list[DynamicsAdapter]:
     friction = getattr(options, "friction", FRICTION_KINDS)
     inertia = getattr(options, "inertia", "identified")
     return [DynamicsAdapter(robot, log.time, q, qd, qdd, tau, joints, friction, inertia)]
-
-
-def _specs(term):
-    """The registry's parameter specs of a term's cause."""
-    return registry_entry(term.cause).parameters
-
-
-def _with_value(term, name: str, value: float):
-    """``term`` with parameter ``name`` set to ``value``."""
-    return replace(term, parameters=tuple(replace(p, value=value) if p.name == name else p for p in term.parameters))

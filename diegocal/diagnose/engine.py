@@ -105,28 +105,13 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         tested = evaluate_candidates(candidates, res, weights, train, val, options, exclude)
         commons = common_candidates(tested)
         if commons:  # the winners again beside the common causes: one family-wise rate for all
-            tested = evaluate_candidates([t.candidate for t in tested] + commons, res, weights, train, val, options,
-                                         exclude)
+            tested = evaluate_candidates(
+                [t.candidate for t in tested] + commons, res, weights, train, val, options, exclude
+            )
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
-        best = choose(tested, val)
-        while (
-            best is not None
-            and not best.candidate.members  # a common cause's members are judged one by one (_members)
-            and (flex := _outshone(best, res, weights, train, val, options, exclude))
-        ):
-            own = _own(best)
-            stand_ins[own] = (best, flex)
-            say(f"{best.term.cause} on {own}{unit} explains less than its state does: left unexplained")
-            tested = [t for t in tested if own not in t.channels]
-            best = choose(tested, val)
-        if best is None:
+        best, group, tested = _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit)
+        if not group:
             break
-        if best.candidate.members:  # one cause on several channels: each channel's term
-            group = _members(best, res, weights, train, val, options, exclude, stand_ins)
-            if not group:
-                continue
-        else:
-            group = [best, *_common(best, tested, res, weights, train, val, options, exclude, stand_ins)]
         for chosen in group:
             new = adapter.fit(terms + (chosen.term,), train)
             before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
@@ -247,9 +232,10 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
     before, after = pooled(score_before, channels), pooled(score_after, channels)
     others = [c for c in score_before.channels if c not in channels]
     # the others may move by noise, not by more than a term must gain
-    spoilt = bool(others) and not pooled(score_after, others) ** 2 <= (1.0 + options.min_gain) * pooled(
-        score_before, others
-    ) ** 2
+    spoilt = (
+        bool(others)
+        and not pooled(score_after, others) ** 2 <= (1.0 + options.min_gain) * pooled(score_before, others) ** 2
+    )
     kept = bool(np.isfinite(after) and after**2 <= (1.0 - options.min_gain) * before**2 and not spoilt)
     note = {
         "model": adapter.describe(new),
@@ -270,6 +256,29 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
     return (new if kept else fitted), out
 
 
+def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit) -> tuple:
+    """(the best candidate, the terms this round adds, the candidates left in the running): the
+    best and the other channels of its cause (no terms when nothing is significant). A best term
+    that its channel's state explains far better stands in for structure of another shape: its
+    channel goes to ``stand_ins`` (left unexplained) and the next best is chosen. A common cause
+    whose channels have no evidence of their own is dropped."""
+    while (best := choose(tested, val)) is not None:
+        if best.candidate.members:  # one cause on several channels: each channel's term
+            group = _members(best, res, weights, train, val, options, exclude)
+            if group:
+                return best, group, tested
+            tested = [t for t in tested if t is not best]
+            continue
+        flex = _outshone(best, res, weights, train, val, options, exclude)
+        if flex is None:
+            return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
+        own = _own(best)
+        stand_ins[own] = (best, flex)
+        say(f"{best.term.cause} on {own}{unit} explains less than its state does: left unexplained")
+        tested = [t for t in tested if own not in t.channels]
+    return None, [], tested
+
+
 #: A named term must explain at least this share of what the most flexible model of its channel's
 #: own state explains on the validation rows (:func:`~diegocal.diagnose.show.flexible_candidate`);
 #: less, and it is a stand-in for structure of another shape: the channel is ``unexplained``.
@@ -279,24 +288,23 @@ STAND_IN_SHARE = 0.5
 MEMBER_T = 2.0
 
 
-def _common(best: Tested, tested, res, weights, train, val, options, exclude, stand_ins) -> list[Tested]:
+def _common(best: Tested, tested, res, weights, train, val, options, exclude) -> list[Tested]:
     """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
     (friction's shape on every joint at once): one cause, added in the same round rather than a
-    round per channel; each passes the stand-in test of its own channel."""
+    round per channel; each passes the stand-in test of its own channel (one that fails is left to
+    a later round, where the best term of its channel is judged: it is not that channel's best)."""
     out, used = [], set(best.channels)
     for t in tested:
         if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
             continue
-        flex = _outshone(t, res, weights, train, val, options, exclude)
-        if flex is not None:
-            stand_ins[_own(t)] = (t, flex)
+        if _outshone(t, res, weights, train, val, options, exclude) is not None:
             continue
         out.append(t)
         used |= set(t.channels)
     return out
 
 
-def _members(best: Tested, res, weights, train, val, options, exclude, stand_ins) -> list[Tested]:
+def _members(best: Tested, res, weights, train, val, options, exclude) -> list[Tested]:
     """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
     their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
     test holds the family-wise rate, not each channel's) and pass the stand-in test of their own
@@ -305,9 +313,7 @@ def _members(best: Tested, res, weights, train, val, options, exclude, stand_ins
     for t in best.candidate.members:
         if t.test.t < MEMBER_T or t.gain < options.min_gain:  # carried by the others, not its own evidence
             continue
-        flex = _outshone(t, res, weights, train, val, options, exclude)
-        if flex is not None:
-            stand_ins[_own(t)] = (t, flex)
+        if _outshone(t, res, weights, train, val, options, exclude) is not None:
             continue
         out.append(t)
     return out
@@ -318,8 +324,10 @@ def _runner_up(t: Tested, best: Tested) -> dict:
     out = t.to_dict()
     if t.significant:
         if set(t.channels) & set(best.channels):
-            out["why_not"] = (f"{best.term.cause} explains more of the validation error of "
-                              f"{', '.join(sorted(set(t.channels) & set(best.channels)))}")
+            out["why_not"] = (
+                f"{best.term.cause} explains more of the validation error of "
+                f"{', '.join(sorted(set(t.channels) & set(best.channels)))}"
+            )
         else:
             out["why_not"] = f"tested again in the next round, after {best.term.cause} on {best.term.channel}"
     return out
@@ -362,9 +370,10 @@ def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks,
         "stand_in": {"term": stood.term.label, "validation_gain": float(stood.gain)},
         "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
     }
-    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence,
-                   (stood.to_dict(),))
+    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (stood.to_dict(),))
 
 
 def _same(a: Term, b: Term) -> bool:
-    return a.cause == b.cause and a.channel == b.channel and a.region == b.region
+    """Whether ``a`` is the fitted form of ``b``: one cause on one channel (and partner); its region
+    and shape parameters may have moved in the fit."""
+    return a.cause == b.cause and a.channel == b.channel and a.extra.get("partner") == b.extra.get("partner")

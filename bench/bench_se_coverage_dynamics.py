@@ -1,0 +1,112 @@
+"""Do the dynamics standard errors cover the truth as often as they claim? (issue #31, item 5)
+
+Over ``--seeds`` simulated arm3 logs (``diegocal simulate dynamics``'s simulator, the logs of
+``bench_diagnose.py``: one hidden effect of 3-10 × the noise on a random joint):
+
+- **PR base parameters**: on clean logs, the share of base parameters whose |estimate − truth| is
+  at most 2 standard errors (truth: the URDF's inertias and the simulator's friction reduced to
+  base parameters);
+- **each diagnosed term's parameters**: where the top finding names the hidden cause on its joint,
+  the share of its parameters within 2 SE of the simulator's value (a position friction only
+  where the region found overlaps the true one by more than half, its Coulomb and viscous values
+  being those of the region).
+
+A share of 0.95 is what a Gaussian ±2 SE promises; 0.90-0.98 is the goal. The bench reads
+``/truth`` to judge only.
+
+    python bench/bench_se_coverage_dynamics.py --seeds 50
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from bench_diagnose import BASELINE_FOR, simulate  # noqa: E402
+
+from diegocal.diagnose import DiagnoseOptions, diagnose  # noqa: E402
+from diegocal.sgp.model import DynamicsModel, SGPOptions, log_arrays, torque_array  # noqa: E402
+from diegocal.sgp.regressor import true_parameters  # noqa: E402
+from diegocal.sim.dynamics import true_friction  # noqa: E402
+
+#: The term parameters compared with the simulator's values, per cause (the simulator's name).
+COMPARED = {
+    "torque_offset": {"offset": "offset"},
+    "spring": {"stiffness": "stiffness"},
+    "armature": {"inertia": "inertia"},
+    "torque_lag": {"lag": "lag"},
+    "viscous_friction": {"viscous": "viscous"},
+    "coulomb_friction": {"coulomb": "coulomb"},
+    "position_friction": {"coulomb": "coulomb", "viscous": "viscous"},
+}
+
+
+def base_coverage(seed: int) -> tuple[int, int]:
+    """(within 2 SE, base parameters) of PR on a clean log."""
+    log, robot = simulate("dynamics", None, seed)
+    friction = true_friction(log.truth.params)
+    truth_full = true_parameters(robot, {k: np.array([friction[k][j] for j in robot.joint_names]) for k in friction})
+    q, qd, qdd = log_arrays(log, robot, need_tau=False)
+    tau, joints = torque_array(log, robot)
+    model = DynamicsModel(robot, SGPOptions(kind="pr"), joints).fit_arrays(q, qd, qdd, tau)
+    truth = model.base_.from_full(truth_full)
+    par = model.parametric_
+    n = model.base_.n_base
+    z = np.abs(par.values[:n] - truth) / par.stderr[:n]
+    return int(np.sum(z <= 2.0)), n
+
+
+def term_coverage(cause: str, seed: int) -> tuple[int, int] | None:
+    """(within 2 SE, compared) of the named term's parameters; None when the cause is not named."""
+    log, robot = simulate("dynamics", cause, seed)
+    effect = log.truth.effects[0]
+    d = diagnose(log, robot, DiagnoseOptions(domain="dynamics", **BASELINE_FOR.get(cause, {})))
+    top = d.findings[0] if d.findings else None
+    if top is None or top.cause != cause or top.channel != effect["channel"]:
+        return None
+    if cause == "position_friction":
+        r, t = top.term.region, effect["region"]
+        overlap = max(0.0, min(r.high, t["high"]) - max(r.low, t["low"]))
+        if overlap < 0.5 * (t["high"] - t["low"]):
+            return None
+    ok = n = 0
+    for name, truth_name in COMPARED[cause].items():
+        p = next(p for p in top.term.parameters if p.name == name)
+        if not np.isfinite(p.stderr):
+            continue
+        n += 1
+        ok += abs(p.value - effect["values"][truth_name]) <= 2.0 * p.stderr
+    return ok, n
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=50, help="Logs per family.")
+    parser.add_argument("--seed", type=int, default=1000, help="First seed.")
+    args = parser.parse_args(argv)
+    seeds = range(args.seed, args.seed + args.seeds)
+    print(f"bench_se_coverage_dynamics: arm3, {args.seeds} seeds from {args.seed}, load {os.getloadavg()[0]:.1f}")
+    print("| family | logs judged | parameters | within 2 SE | share (goal 0.90-0.98) |")
+    print("|---|---|---|---|---|")
+    counts = [base_coverage(s) for s in seeds]
+    ok, n = sum(c[0] for c in counts), sum(c[1] for c in counts)
+    print(f"| PR base parameters | {len(counts)} | {n} | {ok} | {ok / n:.3f} |")
+    for cause in COMPARED:
+        counts = [c for s in seeds if (c := term_coverage(cause, s)) is not None and c[1]]
+        ok, n = sum(c[0] for c in counts), sum(c[1] for c in counts)
+        share = f"{ok / n:.3f}" if n else "–"
+        print(f"| {cause} | {len(counts)} | {n} | {ok} | {share} |")
+    print(f"load average at the end: {os.getloadavg()[0]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,152 @@
+"""The nonlinear parameters of dynamics terms, searched with the linear ones re-solved at every
+trial: shape parameters (a Stribeck velocity scale) and where a position friction acts (its
+region's edges refined on the training data, their uncertainty carried into the friction's
+standard errors: the proposals' windows are bins of the joint's range, and an edge a bin off
+biases the coefficients beyond their standard errors).
+
+``fit`` is the :class:`diegocal.diagnose.dynamics.DynamicsAdapter` in hand (its data and its
+weighted least squares)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from diegocal.causes import cause as registry_entry
+from diegocal.sgp.terms import columns, is_filter, term_columns
+
+#: edges are refined over REGION_STEPS points within REGION_SPAN proposal bins either side
+REGION_STEPS = 33
+REGION_SPAN = 2.0
+
+
+def refine_regions(fit, terms, lags: dict, train, sigma) -> tuple:
+    """Each position friction's inner edges (not one open to a joint limit) moved to the least
+    weighted training error on a grid of REGION_STEPS points within REGION_SPAN of the
+    proposal's bin width either side: the proposals' windows are bins of the range, and an
+    edge a bin off biases the friction's coefficients beyond their standard errors."""
+    terms = list(terms)
+    for i, t in enumerate(terms):
+        if t.cause != "position_friction":
+            continue
+        col = fit.robot.joint_index(t.channel)
+        x = fit.q[train, col]
+        lo, hi = float(np.min(x)), float(np.max(x))
+        step = REGION_SPAN * (hi - lo) / 64.0
+        for edge in ("low", "high"):
+            r = terms[i].region
+            value = getattr(r, edge)
+            if value <= lo or value >= hi:  # open to the limit, or at the data's end
+                continue
+            grid = np.linspace(value - step, value + step, REGION_STEPS)
+            if edge == "low":
+                grid = grid[grid < r.high]
+            else:
+                grid = grid[grid > r.low]
+            costs = np.array(
+                [
+                    fit._cost(
+                        terms[:i] + [replace(terms[i], region=replace(r, **{edge: float(g)}))] + terms[i + 1 :],
+                        lags,
+                        train,
+                        sigma,
+                    )
+                    for g in grid
+                ]
+            )
+            best = int(np.argmin(costs))
+            # the edges whose error is within one (weighted, chi-square) unit: its standard error
+            near = grid[costs <= costs[best] + 1.0]
+            se = max(0.5 * float(near.max() - near.min()), float(grid[1] - grid[0]))
+            extra = {**terms[i].extra, f"{edge}_stderr": se}
+            terms[i] = replace(terms[i], region=replace(r, **{edge: float(grid[best])}), extra=extra)
+    return tuple(terms)
+
+
+def with_region_se(fit, term, terms, lags: dict, train, sigma):
+    """``term`` (a position friction) with standard errors that carry its region's: each
+    parameter's change when an inner edge moves by its standard error (``extra``), added in
+    quadrature to the fit's own."""
+    i = next(k for k, t in enumerate(terms) if t is term or (t.cause == term.cause and t.channel == term.channel))
+    base = linear_values(fit, terms, i, lags, train, sigma)
+    extra_var = np.zeros(len(term.linear))
+    for edge in ("low", "high"):
+        se = term.extra.get(f"{edge}_stderr")
+        if se is None:
+            continue
+        for sign in (-1.0, 1.0):
+            moved = replace(term, region=replace(term.region, **{edge: getattr(term.region, edge) + sign * se}))
+            trial = terms[:i] + (moved,) + terms[i + 1 :]
+            extra_var += 0.5 * (linear_values(fit, trial, i, lags, train, sigma) - base) ** 2
+    se = np.sqrt(np.array([p.stderr for p in term.linear]) ** 2 + extra_var)
+    return term.with_linear_values([p.value for p in term.linear], se)
+
+
+def linear_values(fit, terms, i: int, lags: dict, train, sigma) -> np.ndarray:
+    """The weighted least-squares values of term ``i``'s linear parameters in a model of ``terms``."""
+    C = term_columns(terms, fit.robot, fit.q, fit.qd, fit.qdd)[:, fit.rows]
+    Aeff = fit._lagged(np.concatenate([fit.F, C], axis=2), lags)
+    w, _ = fit._solve(Aeff, train, sigma, fit._offset(lags))
+    at = fit.base.n_base + sum(len(t.linear) for t in terms[:i] if not is_filter(t))
+    return w[at : at + len(terms[i].linear)]
+
+
+def fit_shapes(fit, terms, lags: dict, train, sigma) -> tuple:
+    """Each shape parameter of ``terms`` (:mod:`diegocal.causes`: a Stribeck velocity scale) by
+    a bounded 1-D search, in log space, of the weighted training error with the linear
+    parameters re-solved at every trial (one sweep per parameter, two when there are several)."""
+    terms = list(terms)
+    slots = [(i, p) for i, t in enumerate(terms) for p in specs(t) if p.shape]
+
+    def cost(i, name, log_value):
+        trial = list(terms)
+        trial[i] = with_value(trial[i], name, float(np.exp(log_value)))
+        return fit._cost(trial, lags, train, sigma)
+
+    for _ in range(2 if len(slots) > 1 else 1):
+        for i, spec in slots:
+            bounds = (np.log(spec.lower), np.log(spec.upper))
+            res = minimize_scalar(
+                lambda x, i=i, n=spec.name: cost(i, n, x), bounds=bounds, method="bounded", options={"xatol": 1e-3}
+            )
+            terms[i] = with_value(terms[i], spec.name, float(np.exp(res.x)))
+    return tuple(terms)
+
+
+def with_shape_se(fit, term, model, pred, rows):
+    """``term`` with the standard errors of its shape parameters: the residual std of its
+    joint over the root sum of squares of the prediction's derivative in the parameter
+    (central difference; the linear parameters held), training rows."""
+    r = fit.row_of.get(term.channel)
+    if r is None:
+        return term
+    out = term
+    amp = np.array([p.value for p in term.linear])
+    for spec in (p for p in specs(term) if p.shape):
+        v = term.value(spec.name)
+        h = 0.01 * v
+        up, down = (
+            columns(with_value(term, spec.name, x), fit.robot, fit.q, fit.qd, fit.qdd)[:, fit.rows[r]]
+            for x in (v + h, v - h)
+        )
+        d = (up - down) @ amp / (2 * h)
+        ok = rows & np.isfinite(fit.tau[:, r])
+        e = fit.tau[ok, r] - pred[ok, r]
+        den = float(d[ok] @ d[ok])
+        se = float(np.sqrt(float(e @ e) / max(ok.sum() - 1, 1) / den)) if den > 0 else float("nan")
+        out = replace(
+            out, parameters=tuple(replace(p, stderr=se) if p.name == spec.name else p for p in out.parameters)
+        )
+    return out
+
+
+def specs(term):
+    """The registry's parameter specs of a term's cause."""
+    return registry_entry(term.cause).parameters
+
+
+def with_value(term, name: str, value: float):
+    """``term`` with parameter ``name`` set to ``value``."""
+    return replace(term, parameters=tuple(replace(p, value=value) if p.name == name else p for p in term.parameters))
