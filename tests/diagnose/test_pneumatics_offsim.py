@@ -1,0 +1,46 @@
+"""`diagnose --domain pneumatics` on the independent generator (experiments/pneumatic_generator.py),
+whose faults have their physical shape: a restricted supply line (an orifice before a hose) is
+named ``supply_droop`` with the flow shape, a delayed valve ``valve_delay`` with its delay within
+two standard errors of the truth, and the clean chambers give nothing. Seeds fixed; one 60-s log.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.robot import load_robot
+from experiments import pneumatic_generator as gen
+
+
+@pytest.fixture(scope="module")
+def result():
+    effects = (gen.Effect("supply_droop", "elbow.ext", 1.469e-6), gen.Effect("valve_delay", "shoulder.flex", 0.045))
+    log = gen.generate(gen.GeneratorOptions(duration=60.0, seed=3178743623, effects=effects))
+    return log, diagnose(log, load_robot(gen.ROBOT_DIR), DiagnoseOptions(domain="pneumatics"))
+
+
+def _found(result, chamber):
+    return [f for f in result.findings if f.channel == chamber]
+
+
+def test_a_restricted_supply_line_is_named_supply_droop_with_the_flow_shape(result):
+    _, res = result
+    found = _found(res, "elbow.ext")
+    assert found and (found[0].kind, found[0].cause) == ("term", "supply_droop"), [f.cause for f in found]
+    assert found[0].term.extra.get("shape") == "flow"
+    assert found[0].gain()["reduction"] > 0
+
+
+def test_a_delayed_valve_is_named_with_the_valve_delay_within_two_standard_errors(result):
+    log, res = result
+    found = _found(res, "shoulder.flex")
+    assert found and found[0].cause == "valve_delay", [f.cause for f in found]
+    truth = next(e["values"]["delay_s"] for e in log.truth.effects if e["cause"] == "valve_delay")
+    delay, se = found[0].term.values[0], found[0].term.parameters[0].stderr
+    assert abs(delay - truth) <= 2.0 * se, (delay, truth, se)
+
+
+def test_the_clean_chambers_give_nothing(result):
+    _, res = result
+    assert _found(res, "shoulder.ext") == [] and _found(res, "elbow.flex") == []
