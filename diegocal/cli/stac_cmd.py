@@ -33,8 +33,8 @@ from diegocal.errors import OptionError
 if TYPE_CHECKING:
     from diegocal.robot import Robot
     from diegocal.stac.calibration import Calibration
+    from diegocal.stac.pose_cv import PoseCV
     from diegocal.stac.result import StacOptions
-    from diegocal.stac.static import PoseCV
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,7 @@ def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> S
             pose_cv = pose_folds(data, robot, geometry_calibration, options, progress=progress)
             mapping["cv"] = pose_cv.to_dict()
     elif args.cv:
-        from diegocal.stac.static import leave_one_pose_out
+        from diegocal.stac.pose_cv import leave_one_pose_out
 
         pose_cv = leave_one_pose_out(data.without_truth(), robot, options, progress=progress)
         mapping["cv"] = pose_cv.to_dict()
