@@ -228,16 +228,22 @@ def fit_geometry(
     x, J, Jq = observe(robot, lay, state, links, data.pots)
     rw, Jw, _ = spectra(data.without(written).markers - x, J, Jq, lay, state, data).whiten(var_m, var_p)
     kept = identifiable(Jw * np.isin(lay.group, groups), lay.group).kept
+    need = MIN_ROWS * kept.sum() + 10
+    n_all = int(np.isfinite(data.markers).all(-1).sum()) * 3
+    if n_all < need:
+        raise FitError(
+            f"--geometry: {len(data.ids)} poses give {n_all} marker coordinates for {int(kept.sum())} "
+            f"identifiable parameters (at least {MIN_ROWS:g} per parameter + 10 are needed); record more static "
+            "poses (diegocal poses proposes them)"
+        )
     steps = 0
     for _ in range(WRITE_OFF_ROUNDS):
         used = data.without(written)
         n_rows = int(np.isfinite(used.markers).all(-1).sum()) * 3
-        if n_rows < MIN_ROWS * kept.sum() + 10:
-            raise FitError(
-                f"--geometry: {len(data.ids)} poses give {n_rows} marker coordinates for {int(kept.sum())} "
-                f"identifiable parameters (at least {MIN_ROWS:g} per parameter + 10 are needed); record more static "
-                "poses (diegocal poses proposes them)"
-            )
+        if n_rows < need:  # too few left to judge the others by: every pose is kept
+            LOG.warning(f"geometry: writing off {int(written.sum())} pose(s) would leave too few; all are kept")
+            written = np.zeros_like(written)
+            used, n_rows = data, n_all
         for _ in range(ROUNDS):
             state, n = _gauss_newton(robot, lay, state, links, used, kept, var_m, var_p)
             steps += n
