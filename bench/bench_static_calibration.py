@@ -23,6 +23,7 @@ encoders. Rows:
 
 The floor is the error of the true model at the encoders' angles (noise alone). Run:
 ``python bench/bench_static_calibration.py [--poses 61] [--sessions 2] [--folds 10]``; with
+``--coverage K``, the standard errors' calibration over K hardware draws; with
 ``--design``, the pose-selection table instead: held-out error of a fit on N poses chosen by
 ``diegocal poses`` (D-optimal) against N random ones.
 """
@@ -266,6 +267,26 @@ def _ratio(tmp: Path, session, q, robot, test) -> float:
     return float(np.linalg.norm(predict(test, robot, cal, ("pots",), ("markers",)).markers - x, axis=-1).mean() / floor)
 
 
+def coverage_table(name: str, draws: int, tmp: Path) -> None:
+    """z = (θ̂ − θ) / SE of the identifiable parameters (θ: θ_kept + alias θ_dropped of the truth)
+    over ``draws`` hardware draws of 61 poses: the share within 2 and 3 SE, and the z's spread."""
+    from diegocal.stac.geometry import calibrate_geometry
+
+    zs = []
+    for k in range(draws):
+        d, log = gen.simulate(tmp / f"cov{k}", gen.Session(name, 61, 1, seed=80 + k, hardware_seed=80 + k))
+        fit = calibrate_geometry(log, load_robot(d))
+        ident = fit.identifiability
+        truth = gen.truth_of(fit.names, pin.exp3(-fit.value[3:6]) @ fit.calibration.mocap_R, log.truth.params)
+        target = truth[ident.kept] + ident.alias @ truth[~ident.kept]
+        zs.append((fit.value[ident.kept] - target) / fit.stderr[ident.kept])
+    z = np.concatenate(zs)
+    print(
+        f"{name:7} {len(z):4d} z over {draws} draws: |z| <= 2 {np.mean(np.abs(z) <= 2):.3f}, |z| <= 3 "
+        f"{np.mean(np.abs(z) <= 3):.3f}, sd {np.std(z):.2f}, max |z| {np.abs(z).max():.2f}"
+    )
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--poses", type=int, default=61)
@@ -273,7 +294,13 @@ def main(argv=None) -> None:
     ap.add_argument("--folds", type=int, default=10)
     ap.add_argument("--robots", default="panda,talos")
     ap.add_argument("--design", action="store_true", help="only the pose-selection table (D-optimal vs random)")
+    ap.add_argument("--coverage", type=int, default=0, help="only the z-score table, over this many hardware draws")
     a = ap.parse_args(argv)
+    if a.coverage:
+        with tempfile.TemporaryDirectory() as tmp:
+            for name in a.robots.split(","):
+                coverage_table(name, a.coverage, Path(tmp))
+        return
     if a.design:
         with tempfile.TemporaryDirectory() as tmp:
             for name in a.robots.split(","):

@@ -187,6 +187,28 @@ def candidate_poses(session: Session, n: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).uniform(mid - half, mid + half, (n, len(joints)))
 
 
+def truth_of(names, R_start: np.ndarray, params: dict) -> np.ndarray:
+    """The truth (p,) of parameters named as ``stac --geometry`` names them (``frame.x``,
+    ``frame.rx`` a left rotation vector from ``R_start``, ``<pot>.bias``, ``<marker>.x``,
+    ``joint_geometry:<joint>.dx`` .. ``.rz``: Translation · RPY as (xyz, log3(RPY))), from this
+    generator's own record ``params``."""
+    out = []
+    for name in names:
+        owner, what = name.rsplit(".", 1)
+        if owner == "frame":
+            rot = pin.log3(np.array(params["mocap"]["R"]) @ np.asarray(R_start).T)
+            out.append(np.r_[params["mocap"]["T"], rot][["x", "y", "z", "rx", "ry", "rz"].index(what)])
+        elif owner.startswith("joint_geometry:"):
+            g = params["geometry"][owner.split(":")[1]]
+            v = np.r_[g["xyz"], pin.log3(pin.rpy.rpyToMatrix(*g["rpy"]))]
+            out.append(v[["dx", "dy", "dz", "rx", "ry", "rz"].index(what)])
+        elif what == "bias":
+            out.append(params["encoder_bias"][owner])
+        else:
+            out.append(params["markers"][owner]["xyz".index(what)])
+    return np.array(out)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)

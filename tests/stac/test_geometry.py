@@ -25,30 +25,11 @@ if not (gen.SHARE / gen.ROBOTS["panda"][0]).is_file():
 runner = CliRunner()
 
 
-def truth_vector(fit, params) -> np.ndarray:
-    """θ's truth in the fit's layout, from the generator's own form (RPY, its mocap frame)."""
-    R_start = pin.exp3(-fit.value[3:6]) @ fit.calibration.mocap_R  # STAC's frame, the rotation's origin
-    out = []
-    for name in fit.names:
-        owner, what = name.rsplit(".", 1)
-        if owner == "frame":
-            rot = pin.log3(np.array(params["mocap"]["R"]) @ R_start.T)
-            out.append(np.r_[params["mocap"]["T"], rot]["x y z rx ry rz".split().index(what)])
-        elif owner.startswith("joint_geometry:"):
-            g = params["geometry"][owner.split(":")[1]]
-            v = np.r_[g["xyz"], pin.log3(pin.rpy.rpyToMatrix(*g["rpy"]))]
-            out.append(v["dx dy dz rx ry rz".split().index(what)])
-        elif what == "bias":
-            out.append(params["encoder_bias"][owner])
-        else:
-            out.append(params["markers"][owner]["xyz".index(what)])
-    return np.array(out)
-
-
 def z_scores(fit, params) -> np.ndarray:
     """(θ̂ − θ) / SE over the identifiable set, θ the truth of what it identifies: θ_kept + alias θ_dropped."""
     ident = fit.identifiability
-    truth = truth_vector(fit, params)
+    R_start = pin.exp3(-fit.value[3:6]) @ fit.calibration.mocap_R  # STAC's frame, the rotation's origin
+    truth = gen.truth_of(fit.names, R_start, params)
     target = truth[ident.kept] + ident.alias @ truth[~ident.kept]
     return (fit.value[ident.kept] - target) / fit.stderr[ident.kept]
 
