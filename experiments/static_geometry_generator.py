@@ -8,8 +8,9 @@ points on the tool measured in 3-D. The hardware (``hardware_seed``): every join
 its parent is off by a rigid motion, the URDF's ``<origin>`` composed with
 ``Translation(d) · RPY(a, b, c)`` (d ~ N(0, ``link_mm``) per axis, roll-pitch-yaw ~ N(0,
 ``axis_deg``)), applied to the Pinocchio model directly; the encoders' zeros are off by
-U(±0.02) rad; the tool points U(±5 mm) from where sensors.yaml puts them; the mocap frame a
-rotation about the vertical of any angle with a few degrees of tilt, 1-2 m away. A session
+U(±0.02) rad (``kind="rotary"``: pots of gain U(0.97, 1.03) instead of encoders); the tool
+points U(±5 mm) from where sensors.yaml puts them; the mocap frame a rotation about the vertical
+of any angle with a few degrees of tilt, 1-2 m away. A session
 (``seed``): poses uniform in the central 80 % of each joint's range (one sample each: snapshots
 2 s apart), encoder noise N(0, ``encoder_noise``) rad, marker noise N(0, ``marker_noise``) m;
 ``wrong`` poses filed with another pose's markers.
@@ -61,6 +62,7 @@ class Session:
     seed: int = 0
     hardware_seed: int = 1
     wrong: int = 0
+    kind: str = "encoder"
 
 
 def robot_dir(out: Path, session: Session) -> Path:
@@ -84,7 +86,7 @@ def robot_dir(out: Path, session: Session) -> Path:
     sensors = {
         "urdf": "robot.urdf",
         "base_link": root,
-        "pots": [{"name": f"{j}_enc", "kind": "encoder", "joint": j, "bias": 0.0} for j in joints],
+        "pots": [{"name": f"{j}_enc", "kind": session.kind, "joint": j, "bias": 0.0} for j in joints],
         "markers": points,
     }
     (d / "sensors.yaml").write_text(yaml.safe_dump(sensors, sort_keys=False))
@@ -98,11 +100,12 @@ def _hardware(model: pin.Model, joints, session: Session, nominal_xyz: np.ndarra
         for j in joints
     }
     bias = rng.uniform(-0.02, 0.02, len(joints))
+    gain = rng.uniform(0.97, 1.03, len(joints)) if session.kind == "rotary" else np.ones(len(joints))
     xyz = nominal_xyz + rng.uniform(-0.005, 0.005, nominal_xyz.shape)
     yaw = rng.uniform(-np.pi, np.pi)
     R = pin.rpy.rpyToMatrix(*rng.normal(0.0, np.deg2rad(3.0), 2), yaw)
     T = rng.uniform(1.0, 2.0, 3) * rng.choice([-1, 1], 3)
-    return geometry, bias, xyz, R, T
+    return geometry, bias, gain, xyz, R, T
 
 
 def true_model(model: pin.Model, geometry: dict) -> pin.Model:
@@ -137,7 +140,7 @@ def simulate(out: Path, session: Session, q: np.ndarray | None = None) -> tuple[
     nominal = pin.buildModelFromUrdf(str(SHARE / urdf))
     sensors = yaml.safe_load((d / "sensors.yaml").read_text())
     nominal_xyz = np.array([m["xyz"] for m in sensors["markers"]], float)
-    geometry, bias, xyz, R, T = _hardware(nominal, joints, session, nominal_xyz)
+    geometry, bias, gain, xyz, R, T = _hardware(nominal, joints, session, nominal_xyz)
     model = true_model(nominal, geometry)
     rng = np.random.default_rng(session.seed)
     idx = [model.idx_qs[model.getJointId(j)] for j in joints]
@@ -145,18 +148,19 @@ def simulate(out: Path, session: Session, q: np.ndarray | None = None) -> tuple[
     mid, half = 0.5 * (lo + hi), 0.4 * (hi - lo)
     drawn = rng.uniform(mid - half, mid + half, (session.n_poses, len(joints)))
     q = drawn if q is None else np.asarray(q, float).reshape(session.n_poses, len(joints))
-    enc = q + bias + rng.normal(0.0, session.encoder_noise, q.shape)
+    enc = gain * q + bias + rng.normal(0.0, session.encoder_noise, q.shape)
     clean = tool_points(model, joints, tool, xyz, R, T, q)
     x = clean + rng.normal(0.0, session.marker_noise, clean.shape)
     wrong = np.sort(rng.choice(session.n_poses, session.wrong, replace=False))
     for k in wrong:  # filed with another pose's markers (a labelling or clock mix-up)
         x[k] = clean[(k + session.n_poses // 2) % session.n_poses] + rng.normal(0.0, session.marker_noise, x[k].shape)
-    floor = tool_points(model, joints, tool, xyz, R, T, enc - bias)
+    floor = tool_points(model, joints, tool, xyz, R, T, (enc - bias) / gain)
     names = [m["name"] for m in sensors["markers"]]
     pots = [p["name"] for p in sensors["pots"]]
     params = {
         "geometry": {j: {"xyz": g["xyz"].tolist(), "rpy": g["rpy"].tolist()} for j, g in geometry.items()},
         "encoder_bias": dict(zip(pots, bias.tolist(), strict=True)),
+        "pot_gain": dict(zip(pots, gain.tolist(), strict=True)),
         "markers": {n: v.tolist() for n, v in zip(names, xyz, strict=True)},
         "mocap": {"R": R.tolist(), "T": T.tolist()},
         "noise": {"encoder": session.encoder_noise, "markers": session.marker_noise},
@@ -204,6 +208,8 @@ def truth_of(names, R_start: np.ndarray, params: dict) -> np.ndarray:
             out.append(v[["dx", "dy", "dz", "rx", "ry", "rz"].index(what)])
         elif what == "bias":
             out.append(params["encoder_bias"][owner])
+        elif what == "gain":
+            out.append(params["pot_gain"][owner])
         else:
             out.append(params["markers"][owner]["xyz".index(what)])
     return np.array(out)

@@ -48,6 +48,7 @@ from diegocal.stac.geometry_model import (
     Spectra,
     State,
     layout,
+    log_poses,
     observe,
     pose_means,
     spectra,
@@ -369,7 +370,9 @@ def calibrate_geometry(
     log: Log, robot: Robot, options: StacOptions | None = None, poses: np.ndarray | None = None
 ) -> GeometryFit:
     """STAC (:func:`diegocal.stac.stac.calibrate`: the start, and the poses whose markers are not
-    their own written off), then :func:`fit_geometry` on the same static poses."""
+    their own written off), then :func:`fit_geometry` on the same static poses (FitError, before
+    any fit, for a log that is not static poses)."""
+    poses = log_poses(log) if poses is None else poses
     cal = calibrate(log.without_truth(), robot, options).calibration
     return fit_geometry(log.without_truth(), robot, cal, poses)
 

@@ -186,17 +186,22 @@ class Poses:
         return Poses(self.pots, x, self.count, self.ids, self.first)
 
 
+def log_poses(log: Log) -> np.ndarray:
+    """The pose (T,) int of each sample of a static-pose log (:func:`static_poses`); FitError for a
+    log that is not one."""
+    poses = static_poses(log)
+    if poses is None:
+        raise FitError(
+            "--geometry needs static poses: this log's pots move within its holds like a moving session's "
+            "(each held pose must read as noise around one value)"
+        )
+    return poses
+
+
 def pose_means(log: Log, cal: Calibration, poses: np.ndarray | None = None) -> Poses:
     """Average each static pose of ``log`` (:func:`static_poses`); the markers of STAC's written-off
     frames (``cal.rejected``, a robust loss's) are left out."""
-    if poses is None:
-        poses = static_poses(log)
-        if poses is None:
-            raise FitError(
-                "--geometry needs static poses: this log's pots move within its holds like a moving session's "
-                "(each held pose must read as noise around one value)"
-            )
-    poses = np.asarray(poses, int)
+    poses = log_poses(log) if poses is None else np.asarray(poses, int)
     pst, mst = log.stream("pots", needed_by="stac --geometry"), log.stream("markers", needed_by="stac --geometry")
     T = log.n_samples
     p = np.full((T, len(cal.pot_names)), np.nan)

@@ -5,6 +5,7 @@ Pinocchio model's joint placements perturbed directly, encoders, tool points, no
 import numpy as np
 import pinocchio as pin
 import pytest
+import synth
 from typer.testing import CliRunner
 
 from diegocal.cli import app
@@ -152,6 +153,19 @@ def test_humanoid_torso_and_arm(tmp_path):
     assert np.abs(z).max() < 3.5 and np.mean(np.abs(z) <= 2.0) >= 0.85
 
 
+def test_pot_gains_are_fitted_with_the_geometry(tmp_path):
+    """Rotary pots (gain 1 ± 3 %) instead of encoders: each gain is one more identifiable parameter."""
+    d, log = gen.simulate(tmp_path, gen.Session("panda", 60, 1, kind="rotary", seed=3, hardware_seed=3))
+    _, test = gen.simulate(tmp_path, gen.Session("panda", 40, 1, kind="rotary", seed=103, hardware_seed=3))
+    robot = load_robot(d)
+    fit = calibrate_geometry(log, robot)
+    assert fit.identifiability.kept.sum() == 31 + 7
+    z = z_scores(fit, log.truth.params)
+    assert np.abs(z).max() < 3.5 and np.mean(np.abs(z) <= 2.0) >= 0.85
+    err, floor = held_out(robot, fit.calibration, test)
+    assert err < 1.2 * floor
+
+
 def test_too_few_poses_is_one_clear_error(tmp_path):
     d, log = gen.simulate(tmp_path, gen.Session("panda", 14, 1, seed=9))
     with pytest.raises(FitError, match="record more static poses"):
@@ -160,6 +174,11 @@ def test_too_few_poses_is_one_clear_error(tmp_path):
     res = runner.invoke(app, ["stac", str(tmp_path / "few.h5"), "--geometry", "-q"])
     assert res.exit_code == 1 and "record more static poses" in res.output
     assert "Traceback" not in res.output
+
+
+def test_a_moving_log_is_refused_before_any_fit(tree_robot):
+    with pytest.raises(FitError, match="needs static poses"):
+        calibrate_geometry(synth.simulate(tree_robot, 300, seed=4), tree_robot)
 
 
 def test_cli_geometry_cv_and_predict(tmp_path):
