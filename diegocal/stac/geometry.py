@@ -274,7 +274,7 @@ def fit_geometry(
     )
     calibration = replace(_calibration(cal, lay, state, stderr, var_m, 2 in groups), rejected_poses=rejected)
     LOG.info(f"geometry: {int(kept.sum())} of {len(kept)} parameters identifiable, condition {ident.condition:.3g}")
-    return GeometryFit(
+    fit = GeometryFit(
         calibration,
         lay.names,
         _values(lay, state, cal),
@@ -286,6 +286,28 @@ def fit_geometry(
         n_rows,
         steps,
     )
+    return replace(fit, calibration=_coverage(fit, lay, cal, robot))
+
+
+def _coverage(fit: GeometryFit, lay: Layout, cal: Calibration, robot: Robot) -> Calibration:
+    """The calibration's ``gauges`` and ``unobservable`` as the geometry fit found them (STAC's were
+    judged without the geometry): a fitted pot whose bias the poses do not determine is a gauge,
+    with the combination it is aliased with; STAC's unobservable pots stay so only where no marker
+    moves their joint."""
+    why = {d["parameter"]: d["reason"] for d in fit.dropped}
+    fitted = {cal.pot_names[i] for i in lay.pots}
+    gauges = tuple(
+        {
+            "joint": robot.joint_names[j],
+            "pot": cal.pot_names[i],
+            "kind": "geometry",
+            "reason": why[f"{cal.pot_names[i]}.bias"],
+        }
+        for i, j in zip(lay.pots, lay.joints, strict=True)
+        if f"{cal.pot_names[i]}.bias" in why
+    )
+    unobservable = tuple(u for u in cal.unobservable if u.get("pot") not in fitted)
+    return replace(fit.calibration, gauges=gauges, unobservable=unobservable)
 
 
 def _disagreement(spec: Spectra, var_m: float, var_p: float, n_poses: int) -> np.ndarray:
