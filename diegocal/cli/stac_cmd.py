@@ -62,8 +62,9 @@ class StacArgs:
         if self.geometry and self.method != "stac":
             raise OptionError("--geometry is for --method stac")
         if self.geometry and self.joint_angles is not None:
-            raise OptionError("--geometry fits static poses: there are no tracked joint angles to write (the "
-                              "angles are the pots')")
+            raise OptionError(
+                "--geometry fits static poses: there are no tracked joint angles to write (the angles are the pots')"
+            )
 
     @property
     def out(self) -> Path:
@@ -145,8 +146,9 @@ def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> S
     if args.joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
         streams = {"q": make_stream(robot.joint_names, result.q)}
         save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), args.joint_angles)
-    return StacRun(cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out),
-                   geometry)
+    return StacRun(
+        cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out), geometry
+    )
 
 
 def _warnings(cal: Calibration, time, out: Path) -> tuple[str, ...]:
@@ -318,8 +320,13 @@ def _summary(done: StacRun, args: StacArgs) -> None:
         rows.append(("poses written off (markers)", len(cal.rejected_poses)))
     if done.geometry is not None:
         g = done.geometry
-        rows.append(("geometry: identifiable parameters", f"{g['identifiable']} of {g['parameters']} "
-                     f"({len(g['dropped'])} dropped: listed under geometry: dropped)"))
+        rows.append(
+            (
+                "geometry: identifiable parameters",
+                f"{g['identifiable']} of {g['parameters']} "
+                f"({len(g['dropped'])} dropped: listed under geometry: dropped)",
+            )
+        )
         rows.append(("geometry: condition number", f"{g['condition']:.3g}"))
     if done.pose_cv is not None:
         rows += cv_rows(done.pose_cv)
@@ -382,8 +389,10 @@ def _pose_table(pose_cv: PoseCV, quiet: bool) -> None:
 
     show = np.argsort(-np.nan_to_num(pose_cv.error, nan=-1.0))[:10]
     flagged = set(pose_cv.outliers().tolist())
+    folds = getattr(pose_cv, "folds", None)  # stac --geometry: contiguous pose folds
+    cut = f"held-out marker error ({folds} contiguous pose folds)" if folds else "leave-one-pose-out marker error"
     summary(
-        "leave-one-pose-out marker error (worst first; * above 5 x the median)",
+        f"{cut} (worst first; * above 5 x the median)",
         [
             (
                 int(pose_cv.pose[i]),
