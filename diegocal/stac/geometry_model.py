@@ -48,6 +48,11 @@ def layout(robot: Robot, cal: Calibration) -> Layout:
     """θ's layout for ``robot`` (every joint that moves a marker gets a deviation and, through its
     rotary pot or encoder, a bias; a rotary pot also a gain)."""
     model = robot.model
+    if model.frames[robot.base_frame].parentJoint != 0:
+        raise FitError(
+            f"--geometry needs a base link no joint moves; {robot.sensors.base_link!r} hangs from joint "
+            f"{model.names[model.frames[robot.base_frame].parentJoint]!r}"
+        )
     moving = set()
     for m in robot.sensors.markers:
         moving |= {i - 1 for i in model.supports[model.frames[robot.frame_id(m.link)].parentJoint] if i > 0}
