@@ -14,7 +14,7 @@ eq. 2.21 from pots and markers with the calibration fixed). Held-out logs come f
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +37,7 @@ from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.predict import predict
 from diegocal.stac.result import StacOptions
+from diegocal.stac.terms import apply_terms
 
 GAIN_UNIT = {"rotary": "V/rad", "linear": "V/m", "tendon": "V/m", "encoder": "1"}
 MM = 1000.0
@@ -99,7 +100,11 @@ def evaluate(path: str, robot_dir: str | None, heldout: tuple[str, ...]) -> Eval
         try:
             if q is None:  # track again: the q-phase from every sensor, the calibration fixed
                 q = predict(log, robot, cal, ("pots", "markers"), ("markers",), options).q
-            residuals = residuals_by_type(cal, robot, log, q)
+            if cal.terms:  # an extended calibration: its terms map the log and the robot first
+                applied = apply_terms(cal.terms, log, robot)
+                residuals = residuals_by_type(replace(cal, terms=()), applied.robot, applied.log, q)
+            else:
+                residuals = residuals_by_type(cal, robot, log, q)
         except DiegocalError as exc:
             note = f"residuals not computed ({exc})"
     else:

@@ -20,6 +20,7 @@ import numpy as np
 from diegocal.errors import DiegocalError, FitError
 from diegocal.io import Log
 from diegocal.robot import Robot
+from diegocal.stac.pose_cv import PoseCV
 from diegocal.stac.predict import predict
 from diegocal.stac.static import static_poses, take
 
@@ -30,37 +31,15 @@ FOLDS = 10
 
 
 @dataclass(frozen=True)
-class FoldCV:
-    """Held-out marker error per pose.
+class FoldCV(PoseCV):
+    """Held-out marker error per pose, each pose held out with its fold.
 
-    pose : (K,) pose index; start : (K,) s, its first sample's time; samples : (K,) int;
-    fold : (K,) the fold that held it out; error : (K,) m, mean distance between its markers and
-    their prediction from its pots by a calibration fitted without its fold (NaN: no visible
-    marker, or that fold's fit failed); folds : number of folds
+    As :class:`~diegocal.stac.pose_cv.PoseCV` (error: by a calibration fitted without the pose's
+    fold), and fold : (K,) the fold that held each pose out; folds : number of folds.
     """
 
-    pose: np.ndarray
-    start: np.ndarray
-    samples: np.ndarray
-    fold: np.ndarray
-    error: np.ndarray
-    folds: int
-
-    @property
-    def mean(self) -> float:
-        return float(np.nanmean(self.error))
-
-    @property
-    def median(self) -> float:
-        return float(np.nanmedian(self.error))
-
-    @property
-    def worst(self) -> float:
-        return float(np.nanmax(self.error))
-
-    def outliers(self, factor: float = 5.0) -> np.ndarray:
-        """Poses whose error exceeds ``factor`` times the median: (k,) pose indices."""
-        return self.pose[self.error > factor * self.median]
+    fold: np.ndarray = None
+    folds: int = FOLDS
 
     def to_dict(self) -> dict:
         return {
@@ -125,4 +104,4 @@ def pose_folds(
     with np.errstate(invalid="ignore"):
         error = np.array([np.nanmean(dist[poses == k]) if np.isfinite(dist[poses == k]).any() else np.nan for k in ids])
     first = np.array([np.flatnonzero(poses == k)[0] for k in ids])
-    return FoldCV(ids, log.time[first], np.array([(poses == k).sum() for k in ids]), fold, error, folds)
+    return FoldCV(ids, log.time[first], np.array([(poses == k).sum() for k in ids]), error, fold=fold, folds=folds)

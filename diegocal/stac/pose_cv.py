@@ -48,6 +48,10 @@ class PoseCV:
     def median(self) -> float:
         return float(np.nanmedian(self.error))
 
+    @property
+    def worst(self) -> float:
+        return float(np.nanmax(self.error))
+
     def outliers(self, factor: float = 5.0) -> np.ndarray:
         """Poses whose error exceeds ``factor`` times the median: (k,) pose indices."""
         return self.pose[self.error > factor * self.median]
@@ -55,7 +59,7 @@ class PoseCV:
     def to_dict(self) -> dict:
         return {
             "kind": "leave-one-pose-out",
-            "marker_error": {"mean": self.mean, "median": self.median, "max": float(np.nanmax(self.error))},
+            "marker_error": {"mean": self.mean, "median": self.median, "max": self.worst},
             "poses": [
                 {"pose": int(k), "start": float(t), "samples": int(n), "marker_error": float(e)}
                 for k, t, n, e in zip(self.pose, self.start, self.samples, self.error, strict=True)

@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 from diegocal.cli import app
 from diegocal.errors import FitError
 from diegocal.io import load_yaml, save_log
+from diegocal.report.stac_pages import evaluate
 from diegocal.robot import load_robot
 from diegocal.robot.model import perturb_joint_placements
 from diegocal.stac.calibration import Calibration
@@ -199,5 +200,8 @@ def test_cli_geometry_cv_and_predict(tmp_path):
     assert res.exit_code == 0, res.output
     err, floor = held_out(load_robot(d), Calibration.from_dict(data), test)
     assert err < 1.3 * floor
+    # the report's residuals on the fit log are the calibrated model's, its geometry included
+    residuals, _ = evaluate(str(out), None, ()).residuals["markers"]
+    assert np.sqrt(np.mean(residuals**2)) < 2 * floor
     res = runner.invoke(app, ["stac", str(tmp_path / "train.h5"), "--geometry", "--method", "classical"])
     assert res.exit_code == 2 and "--geometry is for --method stac" in res.output
