@@ -95,6 +95,17 @@ def _stribeck(term, robot, j, q, qd, qdd, out):
     out[:, j, 0] = np.sign(qd[:, j]) * np.exp(-np.abs(qd[:, j]) / scale)
 
 
+def _load_friction(term, robot, j, q, qd, qdd, out):
+    """Friction in proportion to the load the joint carries, |τ_j| sign(qd_j) per unit of
+    coefficient: τ the rigid body's torque at the URDF's inertias (RNEA), the load a gear
+    transmits, whose friction grows with it (not the measured torque: it holds the noise and the
+    friction itself)."""
+    model = robot.model
+    data = model.createData()
+    tau = np.array([pin.rnea(model, data, q[t], qd[t], qdd[t])[j] for t in range(q.shape[0])])
+    out[:, j, 0] = np.abs(tau) * np.sign(qd[:, j])
+
+
 def _position_friction(term, robot, j, q, qd, qdd, out):
     inside = term.region.contains(q[:, j]).astype(float)
     out[:, j, 0] = inside * np.sign(qd[:, j])
@@ -142,6 +153,7 @@ COLUMNS: dict[str, Callable] = {
     "viscous_friction": _viscous,
     "coulomb_friction": _coulomb,
     "stribeck_friction": _stribeck,
+    "load_friction": _load_friction,
     "position_friction": _position_friction,
     "spring": _spring,
     "torque_offset": _torque_offset,

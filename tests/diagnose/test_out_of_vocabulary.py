@@ -58,3 +58,14 @@ def test_a_hidden_effect_beside_smooth_friction_is_named_first():
     top = d.findings[0]
     assert (top.cause, top.channel) == ("torque_offset", log.truth.effects[0]["channel"])
     assert top.term.value("offset") == pytest.approx(log.truth.effects[0]["scale"], rel=0.1)
+
+
+def test_friction_that_grows_with_the_load_is_named_load_friction():
+    """Friction in proportion to the joint's load torque (the generator's |τ| tanh(qd/0.02), beside
+    smooth friction on every joint) was named a position friction before load_friction was a cause."""
+    log, d = _diagnose(Session(duration=20.0, seed=2, robot_seed=2, hidden="load_friction"))
+    hidden = log.truth.effects[0]
+    top = d.findings[0]
+    assert (top.cause, top.channel) == ("load_friction", hidden["channel"]), [(f.cause, f.channel) for f in d.findings]
+    assert top.term.value("coefficient") == pytest.approx(hidden["scale"], rel=0.1)
+    assert {f.cause for f in d.findings} <= {"load_friction", "stribeck_friction", "unexplained"}
