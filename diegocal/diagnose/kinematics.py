@@ -46,15 +46,7 @@ from diegocal.stac.covariance import block_sandwich, standard_errors
 from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import calibrate
-from diegocal.stac.terms import (
-    POT_CAUSES,
-    SLIP,
-    Applied,
-    apply_terms,
-    pot_columns,
-    pot_extra,
-    shift_clock,
-)
+from diegocal.stac.terms import POT_CAUSES, SLIP, Applied, apply_terms, pot_columns, pot_extra, relabelled, shift_clock
 from diegocal.terms import Region, Term, make_term
 
 #: Half width (samples) of the running median a marker outlier is measured against.
@@ -388,7 +380,8 @@ class KinematicsAdapter:
             pred = predict(self.log, self.robot, self.calibration(fitted), (OTHERS,), ("pots", "markers"), self.options)
             pots = pred.pots[:, [pred.pot_names.index(n) for n in self.pot_names]]
             markers = pred.markers[:, [pred.marker_names.index(n) for n in self.marker_names]]
-            fitted.deleted = (self.raw_pots - pots, np.asarray(self.log.stream("markers").data, float) - markers)
+            readings = relabelled(self.log.stream("markers").data, self.marker_names, fitted.terms)  # labels as read
+            fitted.deleted = (self.raw_pots - pots, readings - markers)
         rp, rm = fitted.deleted[0].copy(), fitted.deleted[1].copy()
         for c, ex in (exclude or {}).items():
             ex = np.asarray(ex, bool)

@@ -147,6 +147,18 @@ def slip_sample(term: Term, time: np.ndarray) -> int:
     return int(np.searchsorted(time, term.region.low - 1e-9))
 
 
+def relabelled(markers: np.ndarray, names, terms) -> np.ndarray:
+    """``markers`` (T, M, 3) with the labels of ``swapped_labels`` terms swapped back in their frames."""
+    x = np.array(markers, float)
+    names = list(names)
+    for t in terms:
+        if t.cause == "swapped_labels" and t.channel in names and t.extra["partner"] in names:
+            a, b = names.index(t.channel), names.index(t.extra["partner"])
+            f = np.asarray(t.extra.get("frames", ()), int)
+            x[f, a], x[f, b] = x[f, b].copy(), x[f, a].copy()
+    return x
+
+
 def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = None) -> Applied:
     """Map ``log`` and ``robot`` into the baseline model's terms (module docstring).
 
@@ -179,12 +191,9 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
         names = tuple(st.names)
         x = np.array(st.data, float)
         specs = {m.name: m for m in robot.sensors.markers}
-        for t in terms:  # labelling faults first: they are facts about the raw stream
-            if t.cause == "swapped_labels" and t.channel in names:
-                a, b = names.index(t.channel), names.index(t.extra["partner"])
-                f = np.asarray(t.extra.get("frames", ()), int)
-                x[f, a], x[f, b] = x[f, b].copy(), x[f, a].copy()
-            elif t.cause == "marker_outliers":
+        x = relabelled(x, names, terms)  # labelling faults first: they are facts about the raw stream
+        for t in terms:
+            if t.cause == "marker_outliers":
                 for m, f in (t.extra.get("frames") or {}).items():
                     if m in names:
                         x[np.asarray(f, int), names.index(m)] = np.nan
