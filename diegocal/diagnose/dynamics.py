@@ -327,14 +327,19 @@ class DynamicsAdapter:
                 lags[r] = float(res.x)
         return lags
 
-    def _cost(self, terms, lags: dict, train, sigma) -> float:
-        """The weighted training error of the model with ``terms`` (the linear parameters solved)."""
+    def _weighted_fit(self, terms, lags: dict, train, sigma) -> tuple:
+        """(the linear parameters, the weighted training error) of the model with ``terms``, the
+        lags and shapes held: what each trial of a nonlinear search solves."""
         C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
         Aeff = self._lagged(np.concatenate([self.F, C], axis=2), lags)
         offset = self._offset(lags)
         w, _ = self._solve(Aeff, train, sigma, offset)
         e = (self.tau[train] - (Aeff @ w + offset)[train]) / sigma
-        return float(np.nansum(e * e))
+        return w, float(np.nansum(e * e))
+
+    def _cost(self, terms, lags: dict, train, sigma) -> float:
+        """The weighted training error of the model with ``terms`` (the linear parameters solved)."""
+        return self._weighted_fit(terms, lags, train, sigma)[1]
 
     # ------------------------------------------------------------------ residuals and candidates
     def residuals(self, fitted: DynamicsFit) -> Residuals:

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from diegocal.causes import cause as registry_entry
-from diegocal.sgp.terms import columns, is_filter, term_columns
+from diegocal.sgp.terms import columns, is_filter
 
 #: edges are refined over REGION_STEPS points within REGION_SPAN proposal bins either side
 REGION_STEPS = 33
@@ -86,9 +86,7 @@ def with_region_se(fit, term, terms, lags: dict, train, sigma):
 
 def linear_values(fit, terms, i: int, lags: dict, train, sigma) -> np.ndarray:
     """The weighted least-squares values of term ``i``'s linear parameters in a model of ``terms``."""
-    C = term_columns(terms, fit.robot, fit.q, fit.qd, fit.qdd)[:, fit.rows]
-    Aeff = fit._lagged(np.concatenate([fit.F, C], axis=2), lags)
-    w, _ = fit._solve(Aeff, train, sigma, fit._offset(lags))
+    w, _ = fit._weighted_fit(terms, lags, train, sigma)
     at = fit.base.n_base + sum(len(t.linear) for t in terms[:i] if not is_filter(t))
     return w[at : at + len(terms[i].linear)]
 
