@@ -99,6 +99,9 @@ UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
 #: fraction of its norm (training rows) lies in the model's span and is not offered
 SPAN_TOL = 1e-6
+#: Below this fraction left, the projector recomputes it from the residual itself instead of
+#: from the difference of squared norms (which keeps about 8 digits of the fraction: enough above it)
+NEAR_SPAN = 1e-3
 #: The SGP that absorbs what stays ``unexplained`` (:meth:`DynamicsAdapter.absorb`): the library's
 #: defaults (guard on) except that its hyperparameters and the guard's cross-validation use at
 #: most 500 training samples (a random subset) instead of 1000: the cost is cubic in it, and on a
@@ -359,25 +362,34 @@ class DynamicsAdapter:
         Frisch-Waugh-Lovell is exact), and the fraction of their norm that is left (0: the
         candidate lies in the model's span)."""
         wt = 1.0 / fitted.sigma  # the fit's own row weights: exactly the refit's projection
-        X = fitted.A * wt[None, :, None]  # (T, k, P)
-        Xt = X[train]
-        pinv = np.linalg.pinv(Xt.reshape(-1, X.shape[2]))  # (P, Ttr·k)
-        pinv = pinv.reshape(X.shape[2], Xt.shape[0], Xt.shape[1])
+        Xt = fitted.A[train] * wt[None, :, None]  # (Ttr, k, P)
+        P = Xt.shape[2]
+        pinv = np.linalg.pinv(Xt.reshape(-1, P)).reshape(P, *Xt.shape[:2])  # (P, Ttr, k)
+        # per joint, contiguous (k, ...) copies: a joint's strided slice of these arrays is off
+        # BLAS's fast path, and every candidate reads its joints' slices
+        pinv = np.ascontiguousarray(np.moveaxis(pinv, 2, 0))  # (k, P, Ttr)
+        Xt = np.ascontiguousarray(np.moveaxis(Xt, 1, 0))  # (k, Ttr, P)
+        A = np.ascontiguousarray(np.moveaxis(fitted.A, 1, 0))  # (k, T, P)
 
         def project(cols: dict) -> tuple[dict, float]:
             beta = 0.0
             norm = 0.0
+            explained = 0.0  # ‖X β‖² = cᵀ X β: β is the least-squares fit, X β the projection of c
+            cts = {}
             for j, c in cols.items():
                 r = self.row_of[j]
-                ct = np.asarray(c, float)[train] * wt[r]
-                beta = beta + pinv[:, :, r] @ ct
-                norm += float(np.sum(ct * ct))
-            left = Xt @ beta  # (Ttr, k, kc): the fit of the candidate on every joint's rows
-            for j, c in cols.items():
-                r = self.row_of[j]
-                left[:, r] -= np.asarray(c, float)[train] * wt[r]
-            frac = float(np.sqrt(np.sum(left * left) / norm)) if norm > 0 else 0.0
-            out = {j: np.asarray(c, float) - fitted.A[:, self.row_of[j]] @ beta for j, c in cols.items()}
+                cts[r] = np.asarray(c, float)[train] * wt[r]
+                beta = beta + pinv[r] @ cts[r]
+                norm += float(np.sum(cts[r] * cts[r]))
+            for r, ct in cts.items():
+                explained += float(np.sum((Xt[r].T @ ct) * beta))
+            frac = float(np.sqrt(max(norm - explained, 0.0) / norm)) if norm > 0 else 0.0
+            if frac < NEAR_SPAN:  # near the span, the difference of norms has lost its digits
+                left = np.stack([Xt[r] @ beta for r in range(len(Xt))], axis=1)  # (Ttr, k, kc)
+                for r, ct in cts.items():
+                    left[:, r] -= ct
+                frac = float(np.sqrt(np.sum(left * left) / norm)) if norm > 0 else 0.0
+            out = {j: np.asarray(c, float) - A[self.row_of[j]] @ beta for j, c in cols.items()}
             return out, frac
 
         return project
