@@ -81,7 +81,7 @@ from diegocal.sgp.model import (
     nominal_torque,
     torque_array,
 )
-from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, check_friction, full_regressor
+from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import save_model
 from diegocal.sgp.terms import (
     Context,
@@ -157,8 +157,7 @@ class DynamicsAdapter:
         else:
             self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
             self.tau0 = np.zeros_like(self.tau)
-        F = full_regressor(robot, self.q, self.qd, self.qdd, self.friction)
-        self.F = self.base.project(F[:, self.rows])  # (T, k, r)
+        self.F = base_regressor(robot, self.q, self.qd, self.qdd, self.base, self.friction, self.rows)  # (T, k, r)
 
     # ------------------------------------------------------------------ fit
     def _offset(self, lags: dict) -> np.ndarray:

@@ -39,8 +39,10 @@ from diegocal.sgp.options import (  # noqa: F401
     with_kind,
 )
 from diegocal.sgp.regressor import (
+    CHUNK,
     BaseParameters,
     base_parameters,
+    base_regressor,
     check_friction,
     full_regressor,
     parameter_names,
@@ -94,7 +96,12 @@ def nominal_torque(robot, q, qd, qdd) -> np.ndarray:
     inertial parameters, no friction; Pinocchio's regressor times them, i.e. its RNEA)."""
     n = robot.n_joints
     w = true_parameters(robot, friction=())[: 10 * n]
-    return full_regressor(robot, q, qd, qdd, ())[:, :, : 10 * n] @ w
+    q, qd, qdd = (robot.check_q(x) for x in (q, qd, qdd))
+    out = np.empty((len(q), n))
+    for i in range(0, len(q), CHUNK):  # a chunk's regressor at a time (regressor.CHUNK)
+        sl = slice(i, i + CHUNK)
+        out[sl] = full_regressor(robot, q[sl], qd[sl], qdd[sl], ())[:, :, : 10 * n] @ w
+    return out
 
 
 def nominal_base(robot, friction) -> BaseParameters:
@@ -145,8 +152,8 @@ class DynamicsModel:
         (T, k, r + K): their columns appended, ``torque_lag`` applied when ``time`` (T,) s is given
         (or the states are the training samples); without it, states are no time series (a grid
         of a report) and the columns are those of the torque before the sensor's lag."""
-        F = full_regressor(self.robot, q, qd, qdd, self.options.friction)
-        F = self.base_.project(F[:, self.rows] if self.joints_without_tau else F)
+        rows = self.rows if self.joints_without_tau else None
+        F = base_regressor(self.robot, q, qd, qdd, self.base_, self.options.friction, rows)
         if not self.terms:
             return F
         extra = term_columns(self.terms, self.robot, q, qd, qdd)[:, self.rows]

@@ -5,7 +5,7 @@ import pinocchio as pin
 import pytest
 
 from diegocal.sgp import SGPOptions, base_parameters, fit_dynamics, full_regressor, true_parameters
-from diegocal.sgp.regressor import parameter_names
+from diegocal.sgp.regressor import CHUNK, base_regressor, parameter_names
 
 
 def _states(robot, T, seed):
@@ -45,6 +45,15 @@ def test_base_parameters_preserve_torques(arm2):
     # planar 2-link arm with gravity: 2×(m·c_x, m·c_z, I_yy)-type combinations → few base params
     assert 4 <= base.n_base < 24
     assert np.linalg.matrix_rank(base.project(F).reshape(-1, base.n_base)) == base.n_base
+
+
+def test_base_regressor_in_chunks_equals_the_projected_full_one(arm2):
+    """Built a chunk at a time (a long log's full regressor is never held), the same numbers."""
+    base = base_parameters(arm2, seed=3)
+    q, qd, qdd = _states(arm2, CHUNK + 7, 6)
+    F = full_regressor(arm2, q, qd, qdd)
+    np.testing.assert_array_equal(base_regressor(arm2, q, qd, qdd, base), base.project(F))
+    np.testing.assert_array_equal(base_regressor(arm2, q, qd, qdd, base, rows=[1]), base.project(F[:, [1]]))
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.05])
