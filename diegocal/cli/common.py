@@ -210,3 +210,21 @@ def _fmt(v) -> str:
 
 def progress_enabled(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
+
+
+def eta_lines(what: str, total: int, quiet: bool):
+    """A callable to call as each of ``total`` items of a long loop finishes (any arguments): every
+    few seconds it prints on stderr how far ``what`` is, with the time left
+    (:class:`diegocal.progress.Eta`); None with --quiet."""
+    if quiet:
+        return None
+    from diegocal.progress import Eta  # lazy: the help reads this module
+
+    eta, done = Eta(total), [0]
+
+    def step(*_) -> None:
+        done[0] += 1
+        if eta.due(done[0]):
+            errors.print(f"[dim]{what}:[/] {eta.text(done[0])}", highlight=False)
+
+    return step

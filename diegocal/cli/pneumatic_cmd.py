@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -15,6 +16,7 @@ from diegocal.cli.common import (
     cli_errors,
     command_line,
     default_output,
+    eta_lines,
     log_output,
     output_path,
     positive,
@@ -60,9 +62,10 @@ class PneumaticRun:
     output: Path
 
 
-def run_pneumatic(args: PneumaticArgs, command: str = "diegocal pneumatic-fit") -> PneumaticRun:
+def run_pneumatic(args: PneumaticArgs, command: str = "diegocal pneumatic-fit", progress=None) -> PneumaticRun:
     """Load the log and its robot, fit each chamber (:class:`diegocal.api.Pneumatic`), write
-    pneumatic.yaml. Raises DiegocalError (FitError when no chamber could be fitted); prints nothing."""
+    pneumatic.yaml. Raises DiegocalError (FitError when no chamber could be fitted); prints nothing.
+    ``progress``: a factory ``progress(total)`` of the callable told as each chamber finishes."""
     if args.steady_state is not None and not args.steady_state.exists():
         raise InputFileError(f"{args.steady_state}: no such file")
     # the library is imported when the command runs, so that `--help` answers at once
@@ -79,7 +82,8 @@ def run_pneumatic(args: PneumaticArgs, command: str = "diegocal pneumatic-fit") 
         raise InputFileError(f"robot {robot.name!r} has no chambers in sensors.yaml")
     options = FitOptions(jacobian="2-point" if args.fd_jacobian else "analytic", starts=args.starts, seed=args.seed)
     chambers = () if args.all_chambers else tuple(dict.fromkeys(args.chamber))
-    model = Pneumatic(chambers, options, jobs=args.jobs).fit(data, robot)
+    step = None if progress is None else progress(len(chambers or robot.sensors.chamber_names))
+    model = Pneumatic(chambers, options, jobs=args.jobs).fit(data, robot, progress=step)
     meta = {} if args.steady_state is None else {"steady_state_log": str(args.steady_state.resolve())}
     model.save(args.out, log=args.log, command=command, meta=meta)
     return PneumaticRun(model.fits_, model.skipped_, args.out)
@@ -124,11 +128,12 @@ def pneumatic_fit(
         Path | None,
         typer.Option("--steady-state", help="Locked-cylinder sweep log, kept for the report (Fig. 4.10)."),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
 ) -> None:
     """Fit the 9-parameter valve-chamber model (thesis §4.5.3) by next-step least squares."""
     args = PneumaticArgs(**ctx.params)
-    done = run_pneumatic(args, command_line("diegocal pneumatic-fit"))
+    progress = functools.partial(eta_lines, "pneumatic-fit: chambers fitted", quiet=args.quiet)
+    done = run_pneumatic(args, command_line("diegocal pneumatic-fit"), progress)
     for name, reason in done.skipped.items():
         warn(f"chamber {name} not fitted: {reason}")
     rows = [("chambers fitted", len(done.fits)), ("skipped", len(done.skipped))]

@@ -41,6 +41,7 @@ from diegocal.evaluate import Blocks, split_blocks
 from diegocal.io import save_yaml
 from diegocal.io.bundle import header
 from diegocal.parallel import one_blas_thread
+from diegocal.progress import Eta
 
 
 @dataclass(frozen=True)
@@ -171,17 +172,23 @@ def _diagnose(log, robot, options: DiagnoseOptions) -> Diagnosis:
     if not adapters:
         raise DiegocalError(f"nothing to diagnose in the {options.domain} domain of this log")
     engine = options.engine(n_units=len(adapters))
+    eta = Eta(len(adapters), every=0.0)  # every unit is reported, with the time left
+
+    def done(units: list, unit, name: str) -> None:
+        units.append(unit)
+        if options.progress is not None and len(adapters) > 1 and eta.due(len(units)):
+            options.progress(f"diagnosed {name}: {eta.text(len(units))}")
+
+    units: list = []
     if options.jobs > 1 and len(adapters) > 1:
         quiet = replace(engine, progress=None)
         with ProcessPoolExecutor(max_workers=options.jobs) as pool:
             futures = [pool.submit(run_unit, a, blocks, quiet) for a in adapters]
-            units = []
             for a, fut in zip(adapters, futures, strict=True):
-                units.append(fut.result())
-                if options.progress is not None:
-                    options.progress(f"diagnosed {a.unit_name}")
+                done(units, fut.result(), a.unit_name)
     else:
-        units = [run_unit(a, blocks, engine) for a in adapters]
+        for a in adapters:
+            done(units, run_unit(a, blocks, engine), a.unit_name)
     return Diagnosis(options.domain, tuple(units), blocks, log.time, options, adapters, robot)
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
 from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested
+from diegocal.progress import Eta
 from diegocal.terms import Parameter, Term
 
 
@@ -160,9 +161,12 @@ def evaluate_candidates(
     tr = _Stack(res, weights, np.flatnonzero(train), exclude)
     va = _Stack(res, weights, np.flatnonzero(validation), exclude)
     best: dict[str, tuple[Candidate, _Fit]] = {}
+    eta = Eta(len(candidates))  # a long round says how far it is, with the time left
     for i, cand in enumerate(candidates):
         key = cand.family or f"#{i}"
         fit = _fit(cand, tr, _candidate_channels(cand))
+        if options.progress is not None and eta.due(i + 1):
+            options.progress(f"candidate terms fitted: {eta.text(i + 1)}")
         if fit is None:
             continue
         if key not in best or fit.train_gain > best[key][1].train_gain:
