@@ -352,7 +352,8 @@ class DynamicsAdapter:
             for i, j in enumerate(self.robot.joint_names):
                 variables[f"{s}.{j}"] = x[:, i]
         order = {j: (f"q.{j}", f"qd.{j}", f"qdd.{j}") for j in self.joints}
-        return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order)
+        context = {j: tuple(f"q.{k}" for k in self.robot.joint_names if k != j) for j in self.joints}
+        return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order, context)
 
     def _projector(self, fitted: DynamicsFit, train):
         """A function cols -> (projected cols, fraction left): a candidate's columns (on its own

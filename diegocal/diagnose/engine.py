@@ -17,7 +17,7 @@ import numpy as np
 
 from diegocal.diagnose.evidence import curves, evidence_variable
 from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates
-from diegocal.diagnose.show import binned_candidate, flexible_candidate, region_of, show
+from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, region_of, show
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
     Adapter,
@@ -334,8 +334,11 @@ def _runner_up(t: Tested, best: Tested) -> dict:
 
 
 def _own(t: Tested) -> str:
-    """The channel a tested term is judged on: its own when it acts there, else its first."""
-    return t.term.channel if t.term.channel in t.channels else t.channels[0]
+    """The channel a tested term is judged on: its own when it acts there, else the one it acts on
+    most (a payload: the joint its weight loads most), else its first."""
+    if t.term.channel in t.channels:
+        return t.term.channel
+    return t.strongest[0] if t.strongest else t.channels[0]
 
 
 def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
@@ -349,6 +352,8 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
     if flex is None or flex.test.t <= flex.threshold or flex.test.gain < options.unexplained_min_gain:
         return None  # no structure worth an ``unexplained`` finding beside the term
     gain = best.channel_gain if best.channel_gain is not None else best.test.gain
+    if best.strongest and best.strongest[0] == own:  # the gains compared are on the same channel
+        gain = best.strongest[1]
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
 
 
@@ -356,7 +361,7 @@ def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks,
     """``unexplained`` on a channel whose best term was a stand-in: its evidence names the term that
     stood in and both validation gains; the variable shown is the one whose binned test explains most."""
     train, val, shown = masks
-    variables = list(res.channel_variables.get(channel, ()))
+    variables = list(flexible_variables(res, channel))
     single = [binned_candidate(res, channel, v, train, options.n_bins) for v in variables]
     tested = evaluate_candidates(single, res, weights, train, val, options, exclude)
     variable = max(tested, key=lambda t: t.test.gain).term.region.variable if tested else variables[0]

@@ -116,26 +116,36 @@ def _test(cand: Candidate, fit: _Fit, stack: _Stack, channels, validation: np.nd
     return out_of_sample_test(r[ok], A[ok] @ fit.coef, samp[ok], validation)
 
 
-def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> float | None:
-    """Fraction of the validation error of the candidate's own channel (its term's channel, when
-    the fitted correction acts on it more than on any other) that the correction removes; None
-    when it has none (a joint's link offset seen mostly by markers, whatever a pot of the same
-    name gets from it)."""
-    own = cand.term.channel
-    if own not in cand.columns or own not in channels:
-        return None
+def _channel_gains(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[list[float], list[float]]:
+    """Per channel of ``channels``: the fraction of its validation error the fitted correction
+    removes, and the correction's energy there."""
     r, _ = stack.residual(channels)
     a = _columns(cand, stack, channels) @ fit.coef
     sizes = [stack.samples.size * stack.dims[c] for c in channels]
     edges = np.concatenate([[0], np.cumsum(sizes)])
-    energy = [float(np.nansum(a[edges[i] : edges[i + 1]] ** 2)) for i in range(len(channels))]
-    i = list(channels).index(own)
-    if energy[i] < max(energy):
-        return None
-    r, a = r[edges[i] : edges[i + 1]], a[edges[i] : edges[i + 1]]
-    ok = np.isfinite(r) & np.isfinite(a)
-    before = float(r[ok] @ r[ok])
-    return 1.0 - float((r[ok] - a[ok]) @ (r[ok] - a[ok])) / before if before > 0 else 0.0
+    gains, energy = [], []
+    for i in range(len(channels)):
+        ri, ai = r[edges[i] : edges[i + 1]], a[edges[i] : edges[i + 1]]
+        ok = np.isfinite(ri) & np.isfinite(ai)
+        before = float(ri[ok] @ ri[ok])
+        gains.append(1.0 - float((ri[ok] - ai[ok]) @ (ri[ok] - ai[ok])) / before if before > 0 else 0.0)
+        energy.append(float(ai[ok] @ ai[ok]))
+    return gains, energy
+
+
+def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[float | None, tuple | None]:
+    """Fraction of the validation error of the candidate's own channel (its term's channel, when
+    the fitted correction acts on it more than on any other) that the correction removes; None
+    when it has none (a joint's link offset seen mostly by markers, whatever a pot of the same
+    name gets from it). Second: (channel, its gain) where the correction acts most, when the term
+    names no channel it acts on (a payload on a link): the channel it is judged on."""
+    gains, energy = _channel_gains(cand, fit, stack, channels)
+    i = int(np.argmax(energy))
+    own = cand.term.channel
+    if own not in cand.columns or own not in channels:
+        return None, (channels[i], gains[i])
+    j = list(channels).index(own)
+    return (gains[j] if energy[j] >= energy[i] else None), None
 
 
 def _candidate_channels(cand: Candidate) -> tuple[str, ...]:
@@ -179,10 +189,10 @@ def evaluate_candidates(
         thr = critical_t(options.alpha, n_tests, test.df)
         k = cand.n_params
         term = cand.term.with_linear_values(fit.coef[:k], fit.se)
-        own = _own_gain(cand, fit, va, chans) if len(chans) > 1 else None
+        own, strongest = _own_gain(cand, fit, va, chans) if len(chans) > 1 else (None, None)
         gain = test.gain if own is None else max(own, test.gain)
         sig = bool(test.t > thr and gain >= options.min_gain)
-        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain))
+        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain, strongest))
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 

@@ -79,11 +79,12 @@ def signed_edges(x: np.ndarray, n_bins: int) -> np.ndarray:
 
 
 def flexible_candidate(res, channel: str, train: np.ndarray, n_bins: int):
-    """The most flexible model of ``channel``'s residual in its own state: an additive binned
-    function of every variable the domain names for it (:func:`signed_edges` bins; a constant and
-    each variable's bins but the first), a Candidate with an ``unexplained`` term. A named term
-    that explains much less than this is a stand-in for structure of another shape."""
-    names = res.channel_variables.get(channel, ())
+    """The most flexible model of ``channel``'s residual in its state: an additive binned function
+    of every variable the domain names for it and of its context (:func:`signed_edges` bins; a
+    constant and each variable's bins but the first), a Candidate with an ``unexplained`` term. A
+    named term that explains much less than this is a stand-in for structure of another shape: a
+    spring on a joint whose angle merely correlates with the next joint's, which pulls a hose."""
+    names = flexible_variables(res, channel)
     r = np.asarray(res.channels[channel])
     cols, edges_of = [], {}
     for v in names:
@@ -104,6 +105,12 @@ def flexible_candidate(res, channel: str, train: np.ndarray, n_bins: int):
     X = np.hstack([np.ones((r.size, 1)), *cols])
     term = Term("unexplained", channel, tuple(Parameter(f"f{k}") for k in range(X.shape[1])), None, {"edges": edges_of})
     return Candidate(term, {channel: X}, family="")
+
+
+def flexible_variables(res, channel: str) -> tuple:
+    """The variables of ``channel``'s flexible model: its own, then its context's."""
+    own = tuple(res.channel_variables.get(channel, ()))
+    return own + tuple(v for v in res.context.get(channel, ()) if v not in own)
 
 
 def region_of(tested, n_bins_axes: int | None = None) -> Region:

@@ -29,12 +29,16 @@ class Residuals:
     units : channel -> unit ("N·m", "V", "m", "kPa")
     variables : name -> (T,) state variables to show the residuals against ("q.joint3", "u", ...)
     channel_variables : channel -> names of ``variables`` worth showing it against, most relevant first
+    context : channel -> further ``variables`` its error may depend on through no term of the
+        vocabulary (the other joints' angles: a hose pulled by the next link); the flexible model a
+        named term is measured against uses them too (:func:`~diegocal.diagnose.show.flexible_candidate`)
     """
 
     channels: dict
     units: dict
     variables: dict = field(default_factory=dict)
     channel_variables: dict = field(default_factory=dict)
+    context: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -153,6 +157,8 @@ class Tested:
     significant : t above the threshold and validation gain at least ``min_gain``
     channel_gain : the larger of the validation gains on the term's own channel (when it names
         one it acts on most) and on all its channels (None: it has no such channel)
+    strongest : (channel, validation gain there) of the channel the correction acts on most, for a
+        term on several channels that names none of them (a payload on a link); None otherwise
     """
 
     term: Term
@@ -163,6 +169,7 @@ class Tested:
     n_params: int
     candidate: Candidate = field(repr=False)
     channel_gain: float | None = None
+    strongest: tuple | None = None
 
     @property
     def gain(self) -> float:

@@ -69,3 +69,18 @@ def test_friction_that_grows_with_the_load_is_named_load_friction():
     assert (top.cause, top.channel) == ("load_friction", hidden["channel"]), [(f.cause, f.channel) for f in d.findings]
     assert top.term.value("coefficient") == pytest.approx(hidden["scale"], rel=0.1)
     assert {f.cause for f in d.findings} <= {"load_friction", "stribeck_friction", "unexplained"}
+
+
+def test_a_hose_pulled_by_the_next_joint_is_unexplained_not_a_spring():
+    """A torque on one joint from the next joint's angle (a hose) was named a spring on the joint
+    whose angle correlates with the next one's: the flexible model it must match now sees the other
+    joints' angles too, and the finding is ``unexplained``, shown against another joint's angle (the
+    one whose binned mean predicts the validation blocks best: the puller or one that moves with it)."""
+    log, d = _diagnose(Session(duration=60.0, seed=3, robot_seed=3, coulomb=(0.1, 0.2), hidden="hose"))
+    hidden = log.truth.effects[0]
+    named = [(f.cause, f.channel) for f in d.findings]
+    assert {c for c, _ in named} <= {"stribeck_friction", "unexplained"}, named
+    (found,) = [f for f in d.findings if f.cause == "unexplained" and f.channel == hidden["channel"]]
+    assert found.evidence["variable"].startswith("q.")
+    assert found.evidence["variable"] != f"q.{hidden['channel']}"
+    assert found.evidence["stand_in"]["validation_gain"] < 0.5 * found.evidence["validation_gain"]
