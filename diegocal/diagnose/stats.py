@@ -119,7 +119,11 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     The sub-blocks are ``CORRELATION_TIMES`` correlation times of the residual *after* the
     correction (at least MIN_CLUSTER samples): that residual is the noise when the correction is
     right, and a correction that explains only part of the structure gets longer sub-blocks, so
-    fewer degrees of freedom, which errs on the side of no finding.
+    fewer degrees of freedom, which errs on the side of no finding. Where no run of validation
+    samples is long enough for MIN_RUN_PIECES sub-blocks of MIN_CLUSTER (a static-pose log: one
+    sample per pose, validation runs of a few poses) the floor is what the longest run allows
+    (:func:`_floor`); otherwise those runs would give fewer than three sub-blocks and no test at
+    all, whatever the error.
     """
 
     r, a = np.asarray(r, float), np.asarray(a, float)
@@ -128,15 +132,16 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     before = np.bincount(samples, weights=r * r, minlength=T)
     after = np.bincount(samples, weights=(r - a) ** 2, minlength=T)
     saa = float(a @ a)
-    if r.size < 3 * MIN_CLUSTER or saa <= 0 or not np.isfinite(saa):
-        return OutOfSample(0.0, 0.0, 1, 1.0, float(before.sum()), float(after.sum()), MIN_CLUSTER, before, after)
+    floor = _floor(mask)
+    if r.size < 3 * floor or saa <= 0 or not np.isfinite(saa):
+        return OutOfSample(0.0, 0.0, 1, 1.0, float(before.sum()), float(after.sum()), floor, before, after)
     slope = float(a @ r) / saa
     u = r - slope * a
     seen = np.zeros(T, bool)
     seen[samples] = True
     u_by_sample = np.bincount(samples, weights=u, minlength=T)[seen]
     tau = autocorrelation_time(u_by_sample)
-    length = int(max(MIN_CLUSTER, min(np.ceil(CORRELATION_TIMES * tau), _longest_sub_block(mask & seen))))
+    length = int(max(floor, min(np.ceil(CORRELATION_TIMES * tau), _longest_sub_block(mask & seen))))
     _, cl = np.unique(sub_blocks(mask & seen, length)[samples], return_inverse=True)
     C = int(cl.max()) + 1
     if C < 3:
@@ -161,11 +166,27 @@ def _longest_sub_block(mask: np.ndarray) -> int:
     freedom, and hide a strong effect behind a weaker one (two effects on one joint). Once the
     stronger effect is in the model, the next round tests the other on a residual near noise.
     """
-    idx = np.flatnonzero(mask)
-    if idx.size == 0:
+    runs = _runs(mask)
+    if runs.size == 0:
         return MIN_CLUSTER
+    return max(_floor(mask), int(runs.min()) // MIN_RUN_PIECES)
+
+
+def _runs(mask: np.ndarray) -> np.ndarray:
+    """Lengths (samples) of the runs of True in ``mask``."""
+    idx = np.flatnonzero(mask)
     starts = np.concatenate([[0], np.flatnonzero(np.diff(idx) > 1) + 1, [idx.size]])
-    return max(MIN_CLUSTER, int(np.diff(starts).min()) // MIN_RUN_PIECES)
+    return np.diff(starts) if idx.size else np.zeros(0, int)
+
+
+def _floor(mask: np.ndarray) -> int:
+    """The shortest sub-block: MIN_CLUSTER samples, or where no run of ``mask`` holds
+    MIN_RUN_PIECES of them, what the longest run does hold (at least 1). Only a log whose every
+    run is that short gets less: a static-pose log, whose samples are poses the robot moved
+    between, not a time series sampled faster than its correlation time."""
+    runs = _runs(mask)
+    longest = int(runs.max()) if runs.size else 0
+    return int(min(MIN_CLUSTER, max(1, longest // MIN_RUN_PIECES)))
 
 
 def paired_difference(x: np.ndarray, y: np.ndarray, mask: np.ndarray, length: int) -> tuple[float, float, int]:
