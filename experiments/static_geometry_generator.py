@@ -223,8 +223,24 @@ def main(argv=None) -> None:
     ap.add_argument("--points", type=int, default=1)
     ap.add_argument("--marker-noise", type=float, default=3e-4)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--hardware-seed", type=int, default=1)
+    ap.add_argument("--link-mm", type=float, default=2.0, help="joint placement error per axis, mm (0: none)")
+    ap.add_argument("--axis-deg", type=float, default=0.3, help="joint placement error per angle, deg (0: none)")
+    ap.add_argument("--wrong", type=int, default=0, help="poses filed with another pose's markers")
+    ap.add_argument("--kind", choices=("encoder", "rotary"), default="encoder")
     a = ap.parse_args(argv)
-    session = Session(a.robot, a.poses, a.points, marker_noise=a.marker_noise, seed=a.seed)
+    session = Session(
+        a.robot,
+        a.poses,
+        a.points,
+        marker_noise=a.marker_noise,
+        link_mm=a.link_mm,
+        axis_deg=a.axis_deg,
+        seed=a.seed,
+        hardware_seed=a.hardware_seed,
+        wrong=a.wrong,
+        kind=a.kind,
+    )
     d, log = simulate(a.out, session)
     save_log(log, a.out / f"{a.robot}_static.h5")
     print(d, a.out / f"{a.robot}_static.h5")
