@@ -37,15 +37,16 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.stats import chi2
 
-from diegocal.diagnose.kinematics_lin import Linearised
+from diegocal.diagnose import geometry
+from diegocal.diagnose.kinematics_lin import Linearised, step_errors
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream, save_yaml
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.covariance import block_sandwich, standard_errors
 from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import calibrate
+from diegocal.stac.static import static_poses
 from diegocal.stac.terms import POT_CAUSES, SLIP, Applied, apply_terms, pot_columns, pot_extra, relabelled, shift_clock
 from diegocal.terms import Region, Term, make_term
 
@@ -105,6 +106,7 @@ class KinematicsAdapter:
         self._baseline: KinFit | None = None
         self._lin = None
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
+        self.poses = static_poses(self.log)  # (T,) int on a static-pose log: link geometry is a candidate
 
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train) -> KinFit:
@@ -143,7 +145,10 @@ class KinematicsAdapter:
         robot, options = self.robot, self.options
         if previous is not None:
             robot, options = _seeded(robot, previous.cal), replace(options, marker_seed="nominal")
-        applied = apply_terms(terms, self.log, robot, None if previous is None else previous.pots)
+        chain = tuple(t for t in terms if geometry.is_chain(t))
+        terms = tuple(t for t in terms if not geometry.is_chain(t))
+        model_pots = None if previous is None else previous.pots
+        applied = apply_terms(terms, self.log, robot, model_pots)
         idx = np.flatnonzero(train)
         sub = Log(
             applied.log.time[idx],
@@ -151,8 +156,12 @@ class KinematicsAdapter:
             robot=applied.log.robot,
             rate_hz=applied.log.rate_hz,
         )
-        cal = calibrate(sub, applied.robot, options).calibration
-        terms = tuple(self._slip_value(t, cal) for t in terms)
+        if chain:  # stac --geometry on the training poses, its geometry then composed into the robot
+            cal, chain = geometry.fit_chain(sub, applied.robot, options, self.poses[idx])
+            applied = apply_terms(terms + geometry.per_joint(chain), self.log, robot, model_pots)
+        else:
+            cal = calibrate(sub, applied.robot, options).calibration
+        terms = tuple(self._slip_value(t, cal) for t in terms) + ((chain,) if chain else ())
         q0 = None if previous is None else previous.q
         both = ("pots", "markers")
         pred = predict(applied.log, applied.robot, cal, both, both, self.options, q_init=q0)
@@ -190,7 +199,7 @@ class KinematicsAdapter:
         rows = fitted.train[:, None] & np.isfinite(r) & np.isfinite(A).all(-1) & (lin.w > 0)
         w = np.sqrt(lin.w)[rows]
         coef = np.linalg.lstsq(A[rows] * w[:, None], r[rows] * w, rcond=None)[0]
-        se = _step_errors(A, r, lin.w, rows, coef)
+        se = step_errors(A, r, lin.w, rows, coef)
         out = list(fitted.terms)
         for i, a0, k in blocks:
             t = out[i]
@@ -285,8 +294,15 @@ class KinematicsAdapter:
                     term = make_term(cause, name, extra=ex)
                     fam = f"backlash:{name}" if cause == "backlash" else ""
                     offer(term, fam)
+        # static poses: the chain's geometry, which holds every joint's offset, instead of each offset
+        geometric = any(geometry.is_chain(t) for t in fitted.terms)
+        if self.poses is not None and not geometric:
+            chain = geometry.candidate(lin, fitted, self.poses, self.marker_names)
+        else:
+            chain = None
+        out += [chain] if chain is not None else []
         for joint in lin.observed_joints():
-            if ("link_offset", joint) not in have:
+            if ("link_offset", joint) not in have and not geometric and chain is None:
                 offer(make_term("link_offset", joint))
         if ("time_offset", "markers") not in have:
             for span in (0.0, *TIME_SHIFTS, *(-t for t in TIME_SHIFTS)):
@@ -420,7 +436,7 @@ class KinematicsAdapter:
             marker_links=tuple(cal.marker_links[i] for i in keep),
             marker_xyz=cal.marker_xyz[keep],
             marker_xyz_se=se,
-            terms=tuple(fitted.terms),
+            terms=geometry.expand(fitted.terms),
         )
 
     def save(self, fitted: KinFit, path, header: dict) -> Path:
@@ -451,22 +467,6 @@ def _seeded(robot, cal: Calibration):
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
     return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
-
-
-def _step_errors(A: np.ndarray, r: np.ndarray, w: np.ndarray, rows: np.ndarray, coef: np.ndarray) -> np.ndarray:
-    """Standard errors (k,) of a Gauss-Newton step's coefficients: the weighted least squares of
-    the residual rows r (T, R) on the columns A (T, R, k) with weights w (T, R) over ``rows``
-    (T, R) bool, as STAC's own (:func:`diegocal.stac.covariance.block_sandwich`): the sandwich
-    over contiguous blocks of frames, at least the model-based (AᵀWA)⁻¹ (the residuals are
-    correlated in time; the frames of one block share their errors)."""
-    ww = np.where(rows, w, 0.0)
-    Ar = np.where(rows[..., None], A, 0.0)
-    e = np.where(rows, r - np.einsum("trk,k->tr", np.nan_to_num(A), coef), 0.0)
-    bread = np.einsum("trk,tr,trl->kl", Ar, ww, Ar)
-    inv = np.linalg.pinv(bread, hermitian=True)
-    scores = np.einsum("trk,tr->tk", Ar, ww * e)
-    robust, _ = block_sandwich(inv, scores)
-    return standard_errors(inv, robust)
 
 
 def _clock_moved(before, after) -> bool:

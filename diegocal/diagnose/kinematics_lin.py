@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from diegocal.stac.covariance import block_sandwich, standard_errors
 from diegocal.stac.loo import FrameProjection, deleted_residuals, frame_projection, sigma_of
 from diegocal.stac.model import Observation
 
@@ -356,6 +357,22 @@ class Linearised:
                     col[first:] = mk[first:, v]
                 out[n] = col
         return out
+
+
+def step_errors(A: np.ndarray, r: np.ndarray, w: np.ndarray, rows: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Standard errors (k,) of a Gauss-Newton step's coefficients: the weighted least squares of
+    the residual rows r (T, R) on the columns A (T, R, k) with weights w (T, R) over ``rows``
+    (T, R) bool, as STAC's own (:func:`diegocal.stac.covariance.block_sandwich`): the sandwich
+    over contiguous blocks of frames, at least the model-based (AᵀWA)⁻¹ (the residuals are
+    correlated in time; the frames of one block share their errors)."""
+    ww = np.where(rows, w, 0.0)
+    Ar = np.where(rows[..., None], A, 0.0)
+    e = np.where(rows, r - np.einsum("trk,k->tr", np.nan_to_num(A), coef), 0.0)
+    bread = np.einsum("trk,tr,trl->kl", Ar, ww, Ar)
+    inv = np.linalg.pinv(bread, hermitian=True)
+    scores = np.einsum("trk,tr->tk", Ar, ww * e)
+    robust, _ = block_sandwich(inv, scores)
+    return standard_errors(inv, robust)
 
 
 def _skew(x: np.ndarray) -> np.ndarray:
