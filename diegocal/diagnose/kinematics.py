@@ -297,7 +297,7 @@ class KinematicsAdapter:
         # static poses: the chain's geometry, which holds every joint's offset, instead of each offset
         geometric = any(geometry.is_chain(t) for t in fitted.terms)
         if self.poses is not None and not geometric:
-            chain = geometry.candidate(lin, fitted, self.poses, self.marker_names)
+            chain = geometry.candidate(self, fitted, train)
         else:
             chain = None
         out += [chain] if chain is not None else []
