@@ -253,7 +253,7 @@ def bench_domain(name: str, lengths, versions: dict[str, Path], logs: Path, out:
                     run.stopped or same,
                 )
             )
-            print(f"  ... {name} {minutes:g} min {version}: {run.wall:.1f} s", file=sys.stderr, flush=True)
+            print(f"  ... {name} {minutes:g} min {version}: {rows[-1]}", file=sys.stderr, flush=True)
     print(f"\n## {name}: {' '.join(dom.command)}")
     header = ("min", "samples", "version", "wall s", "CPU s", "max RSS MB", "tree MB", "load", "output vs this")
     print_table(header, rows, ("{}", "{}", "{}", "{:.1f}", "{:.1f}", "{:.0f}", "{:.0f}", "{:.2f}", "{}"))
