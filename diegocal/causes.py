@@ -6,9 +6,10 @@ One table, plain data, no heavy imports (the command line's ``--help`` reads it)
 - its **domain** (kinematics, dynamics, pneumatics; ``any`` for ``unexplained``),
 - its **role**: ``baseline`` (a part of the domain's model before any diagnosis: a pot's transfer,
   a chamber's valve), ``term`` (a model error a diagnosis may name and add), ``fault`` (a data fault
-  whose readings are written off or repaired), ``companion`` (fitted with the baseline, never a
-  finding: a known limit of the model, such as the tick-averaged pressure sensors' lag) or
-  ``verdict`` (``unexplained``),
+  whose readings are written off or repaired), ``companion`` (fitted with the baseline where the
+  data allow, never simulated as a hidden effect: a known limit of the model, such as the
+  tick-averaged pressure sensors' lag, never a finding; ``joint_geometry``, a finding only where
+  ``diagnose`` tests it, on static poses) or ``verdict`` (``unexplained``),
 - what its **channel** names (a pot, a joint, a marker, a chamber, a link, the mocap clock),
 - its named **parameters** with unit, bounds, start value and meaning (lmfit's ``Parameter``),
 - whether it acts only in a **region** of a variable, and which **extra** facts it needs (a
@@ -128,7 +129,7 @@ _CAUSES = (
           "the joint's origin differs from the URDF"),
     Cause("joint_geometry", "kinematics", "companion", "joint",
           _XYZ + tuple(_p(a, "rad", f"rotation about {a[1]} (rotation vector)") for a in ("rx", "ry", "rz")),
-          "the joint's origin and axis differ from the URDF (stac --geometry, from static poses)"),
+          "the joint's origin and axis differ from the URDF (stac --geometry; diagnose on static poses)"),
     Cause("sensor_nonlinearity", "kinematics", "term", "pot",
           (_p("c2", "V", "quadratic departure at the ends of the range"),
            _p("c3", "V", "cubic departure at the ends of the range")),

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 import typer
 
+from diegocal.causes import CAUSES
 from diegocal.cli import app
 from diegocal.errors import DiegocalError
 
@@ -119,3 +120,10 @@ def test_every_shell_block_runs(where, line, block, tmp_path):
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
     res = subprocess.run(["bash", "-e", "-c", block], cwd=work, env=env, capture_output=True, text=True, timeout=1800)
     assert res.returncode == 0, (res.stdout[-1000:], res.stderr[-2000:])
+
+
+def test_the_vocabulary_table_lists_every_cause_of_the_registry():
+    """docs/formats.md's vocabulary table has a row per cause, with the registry's domain and role."""
+    text = (ROOT / "docs" / "formats.md").read_text()
+    for c in CAUSES.values():
+        assert re.search(rf"^\| {c.domain} \| `{c.id}` \| {c.role} \|", text, re.M), c.id
