@@ -57,6 +57,8 @@ PANDA = (
 MINUTES, QUICK = (1.0, 2.0, 5.0, 10.0), (0.25, 0.5)
 HEADER_KEYS = {"command", "created", "version", "log", "robot", "seconds"}  # provenance and timings
 REL_TOL = 1e-6
+#: the table's columns: minutes, samples, version, wall s, CPU s, max RSS MB, tree MB, load, agreement
+FORMATS = ("{}", "{}", "{}", "{:.1f}", "{:.1f}", "{:.0f}", "{:.0f}", "{:.2f}", "{}")
 
 
 @dataclass(frozen=True)
@@ -253,10 +255,11 @@ def bench_domain(name: str, lengths, versions: dict[str, Path], logs: Path, out:
                     run.stopped or same,
                 )
             )
-            print(f"  ... {name} {minutes:g} min {version}: {rows[-1]}", file=sys.stderr, flush=True)
+            cells = "  ".join(f.format(v) for f, v in zip(FORMATS, rows[-1], strict=True))
+            print(f"  ... {name}: {cells}", file=sys.stderr, flush=True)
     print(f"\n## {name}: {' '.join(dom.command)}")
     header = ("min", "samples", "version", "wall s", "CPU s", "max RSS MB", "tree MB", "load", "output vs this")
-    print_table(header, rows, ("{}", "{}", "{}", "{:.1f}", "{:.1f}", "{:.0f}", "{:.0f}", "{:.2f}", "{}"))
+    print_table(header, rows, FORMATS)
     for version, done in runs.items():
         kept = [(m, r) for m, r in done if not r.stopped]
         m = [m for m, _ in kept]

@@ -72,6 +72,7 @@ from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs,
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
+from diegocal.lstsq import CHUNK_ROWS, TallLstsq
 from diegocal.sgp.model import (
     INERTIA,
     INPUT_STREAMS,
@@ -172,18 +173,25 @@ class DynamicsAdapter:
 
     def _solve(self, A, train, sigma, offset=None):
         """Weighted least squares of tau − offset on A (T, k, P) over the training rows, joint rows
-        divided by ``sigma``: (w (P,), its covariance (P, P))."""
-        X = A[train] / sigma[None, :, None]
-        y = (self.tau[train] - (self.tau0 if offset is None else offset)[train]) / sigma[None, :]
-        X, y = X.reshape(-1, A.shape[2]), y.reshape(-1)
-        ok = np.isfinite(y) & np.isfinite(X).all(axis=1)
-        X, y = X[ok], y[ok]
-        if y.size <= X.shape[1]:
-            raise FitError(f"too few training torques ({y.size}) for {X.shape[1]} parameters")
-        w, *_ = np.linalg.lstsq(X, y, rcond=None)
-        e = y - X @ w
-        s2 = float(e @ e) / max(y.size - X.shape[1], 1)
-        cov = np.linalg.pinv(X.T @ X) * s2
+        divided by ``sigma``: (w (P,), its covariance (P, P)). The rows are weighed, filtered
+        (finite ones only) and factored a chunk at a time (:class:`~diegocal.lstsq.TallLstsq`):
+        the training rows of A are never copied whole."""
+        offset = self.tau0 if offset is None else offset
+        P = A.shape[2]
+        ls = TallLstsq(P)
+        idx = np.flatnonzero(train)
+        step = max(CHUNK_ROWS // A.shape[1], 1)
+        for i in range(0, idx.size, step):
+            rows = idx[i : i + step]
+            X = (A[rows] / sigma[None, :, None]).reshape(-1, P)
+            y = ((self.tau[rows] - offset[rows]) / sigma[None, :]).reshape(-1)
+            ok = np.isfinite(y) & np.isfinite(X).all(axis=1)
+            ls.add(X[ok], y[ok])
+        if ls.rows <= P:
+            raise FitError(f"too few training torques ({ls.rows}) for {P} parameters")
+        w, rss = ls.solve()
+        s2 = rss / max(ls.rows - P, 1)
+        cov = np.linalg.pinv(ls.gram()) * s2
         return w, cov
 
     def fit(self, terms, train) -> DynamicsFit:
