@@ -8,6 +8,7 @@ applies to the calib.yaml a job wrote.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
@@ -81,6 +82,7 @@ class StacArgs:
             seed=self.seed,
             quiet=self.quiet,
             schedule=self.schedule,
+            on_iteration=None if self.quiet else _iteration_lines(),
         )
 
 
@@ -349,6 +351,22 @@ def cost_label(method: str, loss: str) -> str | None:
     if method == "ekf":
         return "½ Σ νᵀS⁻¹ν, the EKF innovations' normalised squared error"
     return None
+
+
+def _iteration_lines():
+    """STAC's ``on_iteration``: every few seconds, a line on stderr with the iteration and the time
+    so far. No time left: the alternation runs until it converges, which no count foretells."""
+    from diegocal.progress import EVERY, duration
+
+    start, last = time.monotonic(), [time.monotonic()]
+
+    def step(iteration: int, _calibration) -> None:
+        now = time.monotonic()
+        if now - last[0] >= EVERY:
+            last[0] = now
+            errors.print(f"[dim]stac:[/] iteration {iteration}, {duration(now - start)} so far", highlight=False)
+
+    return step
 
 
 def _progress(label: str, quiet: bool):
