@@ -301,27 +301,38 @@ def stac(
 
 
 def _summary(done: StacRun, args: StacArgs) -> None:
-    cal = done.calibration
+    """The summary table. With ``--geometry`` the pots calibrated and the noise levels are the
+    geometry fit's (calib.yaml's ``geometry``), and STAC's iterations, cost and time are labelled as
+    its start's: STAC's σ per sensor type was fitted with the URDF's geometry, whose error it
+    absorbs."""
+    cal, g = done.calibration, done.geometry
+    stac = "" if g is None else " (STAC, the start)"
+    pots = len(cal.calibrated_pots) if g is None else len(g["pots"])
     rows = [
         ("method", cal.method),
         ("frames", len(done.time)),
-        ("pots calibrated", f"{len(cal.calibrated_pots)} of {len(cal.pot_names)}"),
+        ("pots calibrated" + ("" if g is None else " (geometry fit)"), f"{pots} of {len(cal.pot_names)}"),
         ("markers", len(cal.marker_names)),
-        ("iterations", cal.fit.iterations),
-        ("converged", str(cal.fit.converged)),
+        ("iterations" + stac, cal.fit.iterations),
+        ("converged" + stac, str(cal.fit.converged)),
     ]
     label = cost_label(args.method, args.loss)
     if label is not None:
-        rows.append((label, cal.fit.cost))
-    rows.append(("seconds", cal.fit.seconds))
-    rows += [(f"σ {g} ({'m' if g == 'markers' else 'sensor unit'})", v) for g, v in cal.sigma_by_group.items()]
+        rows.append((label + stac, cal.fit.cost))
+    rows.append(("seconds" + stac, cal.fit.seconds))
+    if g is None:
+        rows += [(f"σ {k} ({'m' if k == 'markers' else 'sensor unit'})", v) for k, v in cal.sigma_by_group.items()]
+    else:
+        rows += [
+            ("σ markers (m), geometry fit", g["sigma_markers"]),
+            ("σ pots (sensor unit), geometry fit", g["sigma_pots"]),
+        ]
     rows += coverage_rows(cal, done.robot)
     if cal.rejected:
         rows.append(("frames written off (markers)", len(cal.rejected)))
     if cal.rejected_poses:
         rows.append(("poses written off (markers)", len(cal.rejected_poses)))
-    if done.geometry is not None:
-        g = done.geometry
+    if g is not None:
         rows.append(
             (
                 "geometry: identifiable parameters",
@@ -330,6 +341,7 @@ def _summary(done: StacRun, args: StacArgs) -> None:
             )
         )
         rows.append(("geometry: condition number", f"{g['condition']:.3g}"))
+        rows.append(("geometry: Gauss-Newton steps", g["iterations"]))
     if done.pose_cv is not None:
         rows += cv_rows(done.pose_cv)
     rows.append(("calibration", str(done.output)))

@@ -115,6 +115,12 @@ class GeometryFit:
     iterations: int
 
     @property
+    def pots(self) -> tuple[str, ...]:
+        """The pots whose zero or gain the fit determined (a kept ``<pot>.bias`` or ``<pot>.gain``)."""
+        kept = [n.rsplit(".", 1) for n, k in zip(self.names, self.identifiability.kept, strict=True) if k]
+        return tuple(dict.fromkeys(owner for owner, what in kept if what in ("bias", "gain")))
+
+    @property
     def dropped(self) -> tuple[dict, ...]:
         """``{parameter, reason}`` of each parameter the poses do not determine."""
         ident = self.identifiability
@@ -146,6 +152,7 @@ class GeometryFit:
             "poses": self.poses,
             "sigma_markers": self.sigma_markers,
             "sigma_pots": self.sigma_pots,
+            "pots": list(self.pots),
             "iterations": self.iterations,
             "dropped": list(self.dropped),
         }

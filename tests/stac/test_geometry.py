@@ -193,6 +193,12 @@ def test_cli_geometry_cv_and_predict(tmp_path):
     assert "geometry: identifiable parameters" in res.output and "10 contiguous folds" in res.output
     data = load_yaml(out)
     assert data["geometry"]["identifiable"] == 37 and data["geometry"]["dropped"]
+    # the summary's noise and pots calibrated are the geometry fit's, not STAC's start's
+    g, table = data["geometry"], " ".join(res.output.split())
+    assert f"σ markers (m), geometry fit │ {g['sigma_markers']:.4g}" in table
+    assert f"σ pots (sensor unit), geometry fit │ {g['sigma_pots']:.4g}" in table
+    assert f"pots calibrated (geometry fit) │ {len(g['pots'])} of 7" in table
+    assert "σ encoder" not in table and g["pots"]
     assert data["cv"]["kind"] == "10 contiguous pose folds" and len(data["cv"]["poses"]) == 24
     assert data["cv"]["marker_error"]["median"] < 3e-3
     assert sum(t["cause"] == "joint_geometry" for t in data["terms"]) == 7
