@@ -26,8 +26,9 @@ and MB per minute of log) and the issue's goal.
 
 ``--ref GITREF`` checks GITREF out in a temporary ``git worktree`` and runs the same commands
 with its code (same interpreter and packages). ``--logs DIR`` keeps the simulated logs there and
-reuses them in later runs. A run over ``--timeout`` seconds or ``--mem-limit`` MB (summed over
-its processes) is stopped and shown as such.
+reuses them in later runs. A run over ``--timeout`` seconds (default 1800) or ``--mem-limit`` MB
+(summed over its processes; default 8192, four times the goal) is stopped and shown as such, so
+that ``make bench`` cannot exhaust the machine on the lengths today's code does not reach.
 """
 
 from __future__ import annotations
@@ -280,8 +281,10 @@ def main(argv=None) -> int:
     ap.add_argument("--domains", default=",".join(DOMAINS), help="Comma-separated: " + ", ".join(DOMAINS) + ".")
     ap.add_argument("--ref", default=None, help="Also run the code of this git ref (a temporary worktree).")
     ap.add_argument("--logs", type=Path, default=None, help="Keep the simulated logs here and reuse them.")
-    ap.add_argument("--timeout", type=float, default=None, help="Stop a run after this many seconds.")
-    ap.add_argument("--mem-limit", type=float, default=None, help="Stop a run whose processes hold more MB.")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="Stop a run after this many seconds.")
+    ap.add_argument(
+        "--mem-limit", type=float, default=8192.0, help="Stop a run whose processes hold more MB (4 x the goal)."
+    )
     args = ap.parse_args(argv)
     lengths = [float(m) for m in args.minutes.split(",")] if args.minutes else QUICK if args.quick else MINUTES
     names = [d.strip() for d in args.domains.split(",")]
