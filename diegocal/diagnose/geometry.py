@@ -27,19 +27,29 @@ named by the other terms):
   dropped ones with the reason, the condition number, the poses fitted and those written off;
 * the **extended model** (a calib.yaml) carries one ``joint_geometry`` term per joint
   (:func:`per_joint`), as ``stac --geometry`` writes it, which ``predict`` honours.
+
+Poses whose markers are not their own (a pose filed with another's markers) are a data fault,
+``marker_outliers`` with the poses as its samples (:func:`foreign_poses`): the adapter's fits on a
+static-pose log write nothing off themselves, so that what ``stac`` and ``stac --geometry`` would
+write off in their own fits is reported, left out of the residuals every candidate is fitted and
+tested on, and out of the held-out score. A running median of neighbours is meaningless between
+poses; each pose is judged whole instead, as :mod:`diegocal.stac.poses` judges it.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
+from scipy.stats import chi2
 
-from diegocal.diagnose.types import Candidate
+from diegocal.diagnose.types import Candidate, Fault
 from diegocal.errors import FitError
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.geometry import GeometryFit, calibrate_geometry
 from diegocal.stac.geometry_model import GEOMETRY, layout
+from diegocal.stac.poses import POSE_TAIL
 from diegocal.terms import Parameter, Term, make_term
 
 CAUSE = "joint_geometry"
@@ -125,6 +135,13 @@ def fit_chain(log, robot, options, pose_of: np.ndarray) -> tuple[Calibration, Te
     return replace(cal, terms=tuple(t for t in cal.terms if t.cause != CAUSE)), chain_term(fit, pose_of)
 
 
+def _unfitted(fitted) -> Term:
+    """The chain's term before its fit (the joints ``stac --geometry`` fits on ``fitted``'s robot);
+    raises FitError where the geometry fit cannot run."""
+    joints = layout(fitted.applied.robot, fitted.cal).geometry
+    return Term(CAUSE, chain_channel(joints), (Parameter("scale", 0.0, ""),), None, {"joints": list(joints)})
+
+
 def candidate(adapter, fitted, train: np.ndarray) -> Candidate | None:
     """The chain's geometry as a candidate at ``fitted`` (module docstring), or None where the
     geometry fit cannot run (a base link a joint moves, a joint that moves a marker without a
@@ -136,11 +153,70 @@ def candidate(adapter, fitted, train: np.ndarray) -> Candidate | None:
     makes; its one parameter (``scale``, 1 as fitted) is what the engine fits on the training rows
     and tests on the validation rows like any candidate's."""
     try:
-        joints = layout(fitted.applied.robot, fitted.cal).geometry
-        term = Term(CAUSE, chain_channel(joints), (Parameter("scale", 0.0, ""),), None, {"joints": list(joints)})
+        term = _unfitted(fitted)
         new = adapter.fit((*fitted.terms, term), train)
     except FitError:
         return None
     before, after = adapter.residuals(fitted).channels, adapter.residuals(new).channels
     cols = {n: np.nan_to_num(before[n] - after[n])[..., None] for n in adapter.marker_names}
     return Candidate(term, cols) if any(np.any(c) for c in cols.values()) else None
+
+
+def foreign_poses(adapter, fitted, swapped: np.ndarray) -> Fault | None:
+    """The poses of a static-pose log whose markers are not their own, as a ``marker_outliers``
+    fault (``extra``: ``frames`` per marker and ``poses``, the poses in the whole log), or None.
+
+    The poses are judged under the most complete model the training poses support:
+    ``stac --geometry``'s fit on them (STAC without the URDF's geometry can make a good pose
+    disagree, which the geometry fit readmits), or STAC's where the geometry fit cannot run.
+    A pose is foreign when that fit wrote it off, or when its markers' readings, each against its
+    prediction by the frame's other sensors (:meth:`KinematicsAdapter.deleted`), give
+    D_k = Σ ‖r‖² / s_m² beyond the 1 − POSE_TAIL quantile of χ²_N (N: 3 per reading), s_m² the
+    marker's median ‖r‖² over χ²_3's on the training poses kept (a high-breakdown scale, as
+    :func:`diegocal.stac.poses.disagreement`'s), and for the other poses, predicted out of sample
+    (their error holds the fit's), the larger of that and their own median (on a Panda's 60 poses
+    their median error was 1.6 x the training poses': with the training scale a clean pose read as
+    foreign). More than half the poses foreign is a wrong model, not wrong data: no fault.
+    ``fitted``: the baseline; ``swapped`` (T, M) bool: readings a swap of labels already explains,
+    left out."""
+    train, poses = fitted.train, adapter.poses
+    checked = replace(adapter.options, check_poses=True)
+    try:
+        judge = adapter._fit_once((_unfitted(fitted),), train, fitted, checked)
+        written = next(t for t in judge.terms if is_chain(t)).extra["written_off"]
+    except FitError:
+        judge = adapter._fit_once((), train, fitted, checked)
+        written = [int(poses[train][r["frame"]]) for r in judge.cal.rejected_poses]
+    e2 = np.sum(adapter.deleted(judge)[1] ** 2, axis=-1)  # (T, M) m²
+    e2 = np.where(swapped, np.nan, e2)
+    ok = np.isfinite(e2)
+    kept = train & ~np.isin(poses, written)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen on those poses: no scale
+        s2 = np.nanmedian(np.where(kept[:, None] & ok, e2, np.nan), axis=0)  # (M,) m²
+        s2_out = np.nanmedian(np.where(~train[:, None] & ok, e2, np.nan), axis=0)
+    s2 = np.where(np.isfinite(s2), s2, np.inf)
+    # the other poses' predictions are out of sample (the fit's parameter error adds to the noise)
+    s2 = np.where(train[:, None], s2, np.fmax(s2, s2_out))  # (T, M)
+    z2 = np.where(ok, e2 / np.maximum(s2 / chi2.median(3), 1e-24), 0.0)
+    d = np.bincount(poses, z2.sum(axis=1))
+    n = np.bincount(poses, 3 * ok.sum(axis=1))
+    bad = (n > 0) & (d > chi2.isf(POSE_TAIL, np.maximum(n, 1)))
+    bad[np.asarray(written, int)] = True
+    if not bad.any() or bad.sum() > bad.size // 2:
+        return None
+    mask = bad[poses][:, None] & ok  # (T, M) the foreign poses' readings
+    names = adapter.marker_names
+    frames = {names[m]: np.flatnonzero(mask[:, m]).tolist() for m in range(len(names)) if mask[:, m].any()}
+    if not frames:
+        return None
+    ch = next(iter(frames)) if len(frames) == 1 else "markers"
+    foreign = np.flatnonzero(bad).tolist()
+    fault = make_term("marker_outliers", ch, extra={"frames": frames, "poses": foreign})
+    evidence = {
+        "poses": len(foreign),
+        "readings": int(mask.sum()),
+        "written_off_by_fit": sorted(int(k) for k in written),
+        "tail": POSE_TAIL,
+    }
+    return Fault(fault, {n: mask[:, names.index(n)] for n in frames}, exclude=True, evidence=evidence)

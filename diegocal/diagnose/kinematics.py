@@ -20,7 +20,9 @@ gap between runs (:func:`_slip_samples`). Its region is open, ``time`` from the 
 marker that moved stays moved, in this log and in any later one on the same clock.
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
-trend, by a threshold with a family-wise false-alarm rate).
+trend, by a threshold with a family-wise false-alarm rate; on a static-pose log, whose neighbours
+are other poses, the poses whose markers are not their own: :func:`.geometry.foreign_poses`, and
+the fits leave the writing-off to that fault instead of doing it themselves).
 
 Held-out score: RMSE per channel of reading − prediction on the held-out frames, q tracked from
 every sensor with θ fixed. The extended model is a calib.yaml (kind ``calibration``) whose
@@ -34,11 +36,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
-from diegocal.diagnose.kinematics_lin import Linearised, step_errors
+from diegocal.diagnose.kinematics_lin import Linearised, running_median, step_errors
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream, save_yaml
@@ -107,6 +108,8 @@ class KinematicsAdapter:
         self._lin = None
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
         self.poses = static_poses(self.log)  # (T,) int on a static-pose log: link geometry is a candidate
+        if self.poses is not None:  # foreign poses are a fault the diagnosis writes off, not the fits
+            self.options = replace(self.options, check_poses=False)
 
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train) -> KinFit:
@@ -134,15 +137,16 @@ class KinematicsAdapter:
             return replace(term, extra={k: v for k, v in term.extra.items() if k != "span"})
         return term
 
-    def _fit_once(self, terms, train, previous: KinFit | None = None) -> KinFit:
+    def _fit_once(self, terms, train, previous: KinFit | None = None, options=None) -> KinFit:
         """STAC on the training frames of the log mapped into ``terms``, then q tracked on every
         frame (from ``previous``'s q: the pot terms act on its model readings).
 
         An extended model's STAC starts its markers where ``previous`` put them (``marker_seed``
         'nominal' on a robot carrying those positions; a slipped marker's second one at the first's
         plus the slip): from the link origins it can end in a degenerate optimum (a pot type's σ
-        collapsed to 0, tendons 3 x their noise) once a marker is split."""
-        robot, options = self.robot, self.options
+        collapsed to 0, tendons 3 x their noise) once a marker is split. ``options``: STAC's, default
+        the adapter's."""
+        robot, options = self.robot, options or self.options
         if previous is not None:
             robot, options = _seeded(robot, previous.cal), replace(options, marker_seed="nominal")
         chain = tuple(t for t in terms if geometry.is_chain(t))
@@ -362,8 +366,10 @@ class KinematicsAdapter:
                     ev = {"frames": int(swap.sum()), "partner": b, "threshold_m": float(np.sqrt(thr2))}
                     out.append(Fault(term, {a: mask, b: mask}, exclude=False, evidence=ev))
                     swapped[frames, m] = swapped[frames, k] = True
+        if self.poses is not None:  # a static-pose log: its poses judged, not a trend between them
+            return out + [f for f in (geometry.foreign_poses(self, fitted, swapped),) if f is not None]
         # outliers: the residual against its running median (a smooth model error is no outlier)
-        e = rm - _running_median(rm, OUTLIER_WINDOW)
+        e = rm - running_median(rm, OUTLIER_WINDOW)
         e2 = np.einsum("tmi,tmi->tm", e, e)
         ok = np.isfinite(e2)
         # each marker's own scale: the q tracking leaves markers on different links more or less
@@ -392,13 +398,7 @@ class KinematicsAdapter:
         joint's q has a small residual whatever its transfer curve, and a term that corrects it
         moves q back onto the other sensors, so its own residual grows while every other sensor's
         shrinks."""
-        if fitted.deleted is None:
-            pred = predict(self.log, self.robot, self.calibration(fitted), (OTHERS,), ("pots", "markers"), self.options)
-            pots = pred.pots[:, [pred.pot_names.index(n) for n in self.pot_names]]
-            markers = pred.markers[:, [pred.marker_names.index(n) for n in self.marker_names]]
-            readings = relabelled(self.log.stream("markers").data, self.marker_names, fitted.terms)  # labels as read
-            fitted.deleted = (self.raw_pots - pots, readings - markers)
-        rp, rm = fitted.deleted[0].copy(), fitted.deleted[1].copy()
+        rp, rm = (x.copy() for x in self.deleted(fitted))
         for c, ex in (exclude or {}).items():
             ex = np.asarray(ex, bool)
             if c in self.pot_names:
@@ -418,6 +418,17 @@ class KinematicsAdapter:
             np.concatenate([sp.n_samples, sm.n_samples]),
             "V (pots), m (markers)",
         )
+
+    def deleted(self, fitted: KinFit) -> tuple:
+        """(pots (T, P) V, markers (T, M, 3) m): each reading minus its prediction by the frame's
+        other sensors with the model as saved (:meth:`score`), computed once per fit."""
+        if fitted.deleted is None:
+            pred = predict(self.log, self.robot, self.calibration(fitted), (OTHERS,), ("pots", "markers"), self.options)
+            pots = pred.pots[:, [pred.pot_names.index(n) for n in self.pot_names]]
+            markers = pred.markers[:, [pred.marker_names.index(n) for n in self.marker_names]]
+            readings = relabelled(self.log.stream("markers").data, self.marker_names, fitted.terms)  # labels as read
+            fitted.deleted = (self.raw_pots - pots, readings - markers)
+        return fitted.deleted
 
     def terms(self, fitted: KinFit):
         return tuple(fitted.terms)
@@ -506,15 +517,6 @@ def _gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
     """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares
     fit of those columns removes."""
     return np.einsum("ki,ki->k", b, np.einsum("kij,kj->ki", np.linalg.pinv(G, hermitian=True), b))
-
-
-def _running_median(x: np.ndarray, half: int) -> np.ndarray:
-    """NaN-aware running median over ±half samples along axis 0 of (T, ...)."""
-    pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])
-    win = sliding_window_view(pad, 2 * half + 1, axis=0)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmedian(win, axis=-1)
 
 
 def adapters(log, robot, options) -> list[KinematicsAdapter]:

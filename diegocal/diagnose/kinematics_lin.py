@@ -23,9 +23,11 @@ in two steps:
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from diegocal.stac.covariance import block_sandwich, standard_errors
 from diegocal.stac.loo import FrameProjection, deleted_residuals, frame_projection, sigma_of
@@ -388,3 +390,12 @@ def _wgram(A: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Σ_rows w A Aᵀ (k, k) for columns A (..., k) and row weights w (...) (BLAS, not einsum)."""
     X = (A * np.sqrt(w)[..., None]).reshape(-1, A.shape[-1])
     return X.T @ X
+
+
+def running_median(x: np.ndarray, half: int) -> np.ndarray:
+    """NaN-aware running median over ±half samples along axis 0 of (T, ...)."""
+    pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])
+    win = sliding_window_view(pad, 2 * half + 1, axis=0)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(win, axis=-1)

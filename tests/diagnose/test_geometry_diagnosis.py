@@ -78,6 +78,31 @@ def test_nothing_is_named_on_a_static_log_without_geometry_error(tmp_path):
     assert unit.baseline_score.rmse[i] < 1.3 * _floor(log, diag.blocks.mask("heldout"))
 
 
+def test_mis_paired_poses_are_a_fault_and_the_geometry_still_named(tmp_path):
+    """Four poses filed with another pose's markers: one ``marker_outliers`` fault listing exactly
+    those poses (STAC and the geometry fit would write them off in their own fits, leaving their
+    readings in every residual and in the held-out score), written off, and the geometry named as
+    on the clean-paired session, its held-out error near the noise floor of the clean poses."""
+    session = gen.Session("panda", 60, 1, seed=5, hardware_seed=5, wrong=4)
+    d, log = gen.simulate(tmp_path, session)
+    diag = diagnose(log, load_robot(d), OPTIONS)
+    wrong = np.asarray(log.truth.params["wrong_poses"])
+    assert sorted(f.cause for f in diag.findings) == ["joint_geometry", "marker_outliers"]
+    (fault,) = [f for f in diag.findings if f.kind == "fault"]
+    diagnosed = diag.blocks.mask("train") | diag.blocks.mask("validation") | diag.blocks.mask("heldout")
+    assert fault.term.extra["poses"] == wrong[diagnosed[wrong]].tolist()
+    assert fault.term.extra["frames"] == {"tool0": wrong.tolist()}  # one sample per pose
+    assert fault.gain()["reduction"] > 0.5
+    (found,) = [f for f in diag.findings if f.cause == "joint_geometry"]
+    assert found.term.extra["written_off"] == []  # nothing left for the geometry fit to write off
+    held = diag.blocks.mask("heldout")
+    held[wrong] = False
+    unit = diag.units[0]
+    i = unit.extended_score.channels.index("tool0")
+    assert unit.extended_score.n_samples[i] == held.sum()  # the foreign poses are out of the score
+    assert unit.extended_score.rmse[i] < 1.5 * _floor(log, held)
+
+
 def test_a_few_independent_poses_are_testable():
     """Validation runs of 6 samples each (a static-pose log's poses): the out-of-sample test cuts
     them into sub-blocks shorter than MIN_CLUSTER and tests; before, fewer than three sub-blocks
