@@ -58,7 +58,11 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
        stays ``unexplained`` and the adapter has ``absorb``, its non-parametric part is fitted on
        the training blocks and kept if it lowers the validation error of those channels (the
        blocks that chose the terms; the held-out blocks stay unseen).
-    4. Measure the gain: held-out blocks only, never used to select.
+    4. Measure the gain: held-out blocks only, never used to choose between candidates. A term
+       is declined (listed among the runners-up, with why) when, added, the data do not determine
+       it (every coefficient within 2 standard errors of 0) or the held-out error rises, as a
+       fault whose writing-off removes nothing is: a validation test on a few clusters (a
+       static-pose log's poses) can pass by chance.
     """
     options = options or EngineOptions()
     say = options.progress or (lambda text: None)
@@ -98,6 +102,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         say(f"found {fault.term.cause} on {fault.term.channel}{unit}")
 
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
+    declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     for _ in range(options.max_rounds):
         res = adapter.residuals(fitted)
         candidates = adapter.candidates(fitted, res, train)
@@ -109,7 +114,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 [t.candidate for t in tested] + commons, res, weights, train, val, options, exclude
             )
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
+        tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         best, group, tested = _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit)
+        group = [g for g in group if _key(g.term) not in declined]
         if not group:
             break
         for chosen in group:
@@ -136,11 +143,17 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 evidence["curves"] = curves(
                     res, res_new, chosen.channels[0], variable, shown, length, train, options.n_bins, exclude
                 )
-            added = {(g.term.cause, g.term.channel) for g in group} | {(best.term.cause, best.term.channel)}
-            runners = tuple(_runner_up(t, chosen) for t in tested if (t.term.cause, t.term.channel) not in added)[:8]
+            added = {_key(g.term) for g in group} | {_key(best.term)}
+            runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]
             new_terms = adapter.terms(new)
             fitted_term = next((t for t in new_terms if _same(t, chosen.term)), chosen.term)
-            findings.append(Finding(fitted_term, "term", before, after, evidence, runners))
+            finding = Finding(fitted_term, "term", before, after, evidence, runners)
+            why = _decline(finding)
+            if why:
+                declined[_key(chosen.term)] = why
+                say(f"{chosen.term.cause} on {chosen.term.channel}{unit}: {why}; declined")
+                continue
+            findings.append(finding)
             fitted, terms = new, new_terms
             say(f"found {chosen.term.cause} on {chosen.term.channel}{unit} (validation gain {chosen.gain:.0%})")
 
@@ -319,10 +332,35 @@ def _members(best: Tested, res, weights, train, val, options, exclude) -> list[T
     return out
 
 
-def _runner_up(t: Tested, best: Tested) -> dict:
-    """A tested candidate that was not added, with why, in words, when it was significant."""
+def _key(term: Term) -> tuple[str, str]:
+    return term.cause, term.channel
+
+
+#: A fitted coefficient is determined by the data when it is at least this many standard errors
+#: from 0 (about a 5 % two-sided level).
+DETERMINED_Z = 2.0
+
+
+def _decline(finding: Finding) -> str:
+    """Why a significant term is not a finding after all, in words ("" when it is one): its
+    coefficients are all within DETERMINED_Z standard errors of 0 (unknown standard errors
+    excepted), or the held-out error rose when it was added."""
+    coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
+    if coef and all(abs(v) < DETERMINED_Z * se for v, se in coef):
+        return f"the data do not determine it (every coefficient within {DETERMINED_Z:g} standard errors of 0)"
+    red = finding.gain().get("reduction", float("nan"))
+    if np.isfinite(red) and red < 0:
+        return f"significant on validation, but the held-out error rose by {-red:.1%} with it"
+    return ""
+
+
+def _runner_up(t: Tested, best: Tested, declined: dict) -> dict:
+    """A tested candidate that was not added, with why, in words, when it was significant (or
+    declined for having no held-out gain)."""
     out = t.to_dict()
-    if t.significant:
+    if _key(t.term) in declined:
+        out["why_not"] = declined[_key(t.term)]
+    elif t.significant:
         if set(t.channels) & set(best.channels):
             out["why_not"] = (
                 f"{best.term.cause} explains more of the validation error of "
