@@ -1,11 +1,15 @@
 """`diegocal poses CANDIDATES -n N`: the next N static poses to record for ``stac --geometry``,
-D-optimal among candidate poses (:mod:`diegocal.stac.geometry_design`).
+chosen among candidate poses (:mod:`diegocal.stac.geometry_design`): by default those that make
+the calibrated model's predictions of the markers most precise over the candidates (I-optimal),
+with ``--criterion D`` those that make its parameters' confidence region smallest (D-optimal).
 
 CANDIDATES is a log whose samples are candidate poses: joint angles in a ``q`` stream (rad), or
 encoder/pot readings in ``pots`` (turned into angles with ``--calibration`` or sensors.yaml's
 gains and biases). ``--recorded LOG`` gives the poses already recorded (a static-pose log, its
-pots read the same way), so the new ones complete them. The chosen samples are written as a log
-(every stream of CANDIDATES at those samples), in the order they were chosen.
+pots read the same way), so the new ones complete them. With ``--calibration`` (a STAC
+calibration), the poses are weighed by its noise model (marker and pot noise). The chosen samples
+are written as a log (every stream of CANDIDATES at those samples), best first: the first k of
+them are themselves a good choice of k.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ class PosesArgs:
     robot: str | None
     calibration: Path | None
     recorded: Path | None
+    criterion: str
     output: Path | None
     seed: int
     quiet: bool
@@ -44,13 +49,17 @@ class PosesArgs:
 
 @dataclass(frozen=True)
 class PosesRun:
-    """What :func:`run_poses` chose: candidate indices (in order), the identifiable parameters, the
-    log det of their information and its median over random subsets of the same size, and the
-    mean standard error (unit noise, scaled parameters) of both."""
+    """What :func:`run_poses` chose: candidate indices (in order), the identifiable parameters, and
+    for the choice and the median over random subsets of the same size: the mean variance of a
+    marker coordinate's prediction over the candidates (in units of the marker noise's variance),
+    the log det of the parameters' information and their mean standard error (unit noise, scaled
+    parameters)."""
 
     chosen: object
     n_candidates: int
     parameters: int
+    variance: float
+    random_variance: float
     log_det: float
     random_log_det: float
     stderr: float
@@ -101,7 +110,7 @@ def run_poses(args: PosesArgs) -> PosesRun:
         done = _angles(load_log(args.recorded), robot, cal)
     design = pose_design(robot, cal, np.vstack([done, q]))
     recorded = np.arange(len(done))
-    chosen = select_poses(design, args.n, recorded) - len(done)
+    chosen = select_poses(design, args.n, recorded, criterion=args.criterion) - len(done)
     rng = np.random.default_rng(args.seed)
     draws = [np.r_[recorded, len(done) + rng.choice(len(q), args.n, replace=False)] for _ in range(RANDOM_DRAWS)]
     mine = np.r_[recorded, len(done) + chosen]
@@ -110,6 +119,8 @@ def run_poses(args: PosesArgs) -> PosesRun:
         chosen,
         len(q),
         len(design.names),
+        design.prediction_variance(mine),
+        float(np.median([design.prediction_variance(d) for d in draws])),
         design.log_det(mine),
         float(np.median([design.log_det(d) for d in draws])),
         float(design.stderr(mine).mean()),
@@ -134,6 +145,13 @@ def _in_order(data, chosen):
     return replace(out, time=np.arange(len(chosen), dtype=float), streams=streams)
 
 
+def _criterion(value: str) -> str:
+    """Callback of --criterion: I or D (else a usage error, exit 2)."""
+    if value.upper() not in ("I", "D"):
+        raise typer.BadParameter(f"{value!r} is not one of I, D")
+    return value.upper()
+
+
 @app.command("poses")
 @cli_errors
 def poses(
@@ -145,33 +163,50 @@ def poses(
     robot: RobotOfLog = None,
     calibration: Annotated[
         Path | None,
-        typer.Option(help="calib.yaml whose gains, biases and markers to use (default: sensors.yaml's)."),
+        typer.Option(
+            help="calib.yaml whose gains, biases and markers to use, and whose marker and pot noise weigh "
+            "the poses (default: sensors.yaml's, marker noise alone)."
+        ),
     ] = None,
     recorded: Annotated[
         Path | None,
         typer.Option(help="Static-pose log already recorded: the new poses complete it."),
     ] = None,
+    criterion: Annotated[
+        str,
+        typer.Option(
+            callback=_criterion,
+            help="I: the markers' predictions most precise over the candidates (what held-out poses judge); "
+            "D: the parameters' confidence region smallest (log det of their information, FIGAROH's).",
+        ),
+    ] = "I",
     output: Annotated[
         Path | None,
         typer.Option(
             "-o",
             "--output",
             callback=log_output,
-            help="Log of the chosen poses, in the order chosen; by default CANDIDATES.poses.h5.",
+            help="Log of the chosen poses, best first (its first k are a good choice of k); by default "
+            "CANDIDATES.poses.h5.",
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random subsets the choice is compared with.")] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
-    """Propose the next N static poses for stac --geometry: D-optimal among candidate poses."""
+    """Propose the next N static poses for stac --geometry among candidate poses: I-optimal (the
+    markers' predictions most precise) by default, D-optimal with --criterion D."""
     args = PosesArgs(**ctx.params)
     done = run_poses(args)
     summary(
         f"poses {Path(args.candidates).name}",
         [
             ("candidates", done.n_candidates),
-            ("chosen (D-optimal, greedy)", len(done.chosen)),
+            (f"chosen ({args.criterion}-optimal, greedy + exchange)", len(done.chosen)),
             ("identifiable parameters", done.parameters),
+            (
+                "prediction variance / marker noise variance: chosen / random (median)",
+                f"{done.variance:.3g} / {done.random_variance:.3g}",
+            ),
             ("log det information: chosen / random (median)", f"{done.log_det:.1f} / {done.random_log_det:.1f}"),
             ("mean standard error: chosen / random (median)", f"{done.stderr:.3g} / {done.random_stderr:.3g}"),
             ("poses", str(done.output)),

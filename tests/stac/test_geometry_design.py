@@ -1,11 +1,13 @@
-"""`diegocal poses` (issue #34): D-optimal static poses beat random ones of the same count, in the
-parameters' predicted uncertainty and in a calibration fitted from them."""
+"""`diegocal poses` (issue #34): chosen static poses beat random ones of the same count, in the
+predicted uncertainty of the parameters (D-optimal) and of the markers' predictions (I-optimal,
+the default), and in a calibration fitted from them."""
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
+from diegocal.errors import FitError
 from diegocal.io import Log, load_log, make_stream, save_log
 from diegocal.robot import load_robot
 from diegocal.stac.calibration import Calibration
@@ -33,12 +35,46 @@ def panda(tmp_path_factory):
 
 
 def test_d_optimal_poses_beat_random_ones_on_parameter_uncertainty(panda):
-    _, _, _, _, design, chosen = panda
+    _, _, _, _, design, _ = panda
+    chosen = select_poses(design, N, criterion="D")
     assert len(design.names) == 31 and len(set(chosen.tolist())) == N
     rng = np.random.default_rng(0)
     draws = [rng.choice(200, N, replace=False) for _ in range(10)]
     assert design.log_det(chosen) > max(design.log_det(d) for d in draws)
     assert design.stderr(chosen).mean() < min(design.stderr(d).mean() for d in draws)
+
+
+def test_i_optimal_poses_predict_the_markers_best(panda):
+    _, _, _, _, design, chosen = panda
+    assert len(set(chosen.tolist())) == N
+    rng = np.random.default_rng(0)
+    random = [design.prediction_variance(rng.choice(200, N, replace=False)) for _ in range(10)]
+    mine = design.prediction_variance(chosen)
+    assert mine < 0.75 * min(random)
+    # the criterion's own optimum: no worse than D-optimal's, nor than the greedy pass alone
+    assert mine <= design.prediction_variance(select_poses(design, N, criterion="D"))
+    assert mine <= design.prediction_variance(select_poses(design, N, exchange=False))
+
+
+def test_the_first_poses_of_the_list_are_a_good_choice_themselves(panda):
+    _, _, _, _, design, chosen = panda
+    rng = np.random.default_rng(2)
+    random = [design.prediction_variance(rng.choice(200, 20, replace=False)) for _ in range(10)]
+    assert design.prediction_variance(chosen[:20]) < min(random)
+
+
+def test_the_noise_model_weighs_the_poses(panda):
+    _, _, robot, candidates, design, _ = panda
+    weighed = pose_design(robot, Calibration.nominal(robot), candidates, sigma_markers=3e-4, sigma_pots=3e-3)
+    assert weighed.names == design.names
+    # pot noise propagated through the arm adds to every pose's covariance: less information
+    assert weighed.log_det(np.arange(200)) < design.log_det(np.arange(200))
+    assert weighed.prediction_variance(select_poses(weighed, N)) < weighed.prediction_variance(np.arange(N))
+
+
+def test_an_unknown_criterion_is_refused(panda):
+    with pytest.raises(FitError, match="unknown pose criterion 'A'"):
+        select_poses(panda[4], 5, criterion="A")
 
 
 def test_a_calibration_from_the_chosen_poses_beats_random_ones_on_held_out_poses(panda):
@@ -60,8 +96,9 @@ def test_a_calibration_from_the_chosen_poses_beats_random_ones_on_held_out_poses
 
 def test_recorded_poses_are_completed(panda):
     _, _, _, _, design, chosen = panda
-    more = select_poses(design, 5, recorded=chosen[:25])
-    assert not set(more.tolist()) & set(chosen[:25].tolist())
+    for criterion in ("I", "D"):
+        more = select_poses(design, 5, recorded=chosen[:25], criterion=criterion)
+        assert len(set(more.tolist())) == 5 and not set(more.tolist()) & set(chosen[:25].tolist())
 
 
 def test_cli_poses(panda, tmp_path):
@@ -71,8 +108,14 @@ def test_cli_poses(panda, tmp_path):
     save_log(log, tmp_path / "cand.h5")
     res = runner.invoke(app, ["poses", str(tmp_path / "cand.h5"), "-n", "12", "-o", str(tmp_path / "next.h5")])
     assert res.exit_code == 0, res.output
-    assert "D-optimal" in res.output
+    assert "I-optimal" in res.output
     chosen = load_log(tmp_path / "next.h5").stream("q").data
     assert chosen.shape == (12, 7) and all(any(np.allclose(c, k) for k in candidates) for c in chosen)
+    res = runner.invoke(
+        app, ["poses", str(tmp_path / "cand.h5"), "-n", "12", "--criterion", "d", "-o", str(tmp_path / "d.h5")]
+    )
+    assert res.exit_code == 0 and "D-optimal" in res.output, res.output
+    res = runner.invoke(app, ["poses", str(tmp_path / "cand.h5"), "--criterion", "A", "-o", str(tmp_path / "a.h5")])
+    assert res.exit_code == 2 and "'A' is not one of I, D" in res.output
     res = runner.invoke(app, ["poses", str(tmp_path / "cand.h5"), "-n", "500", "-o", str(tmp_path / "x.h5")])
     assert res.exit_code == 1 and "cannot choose 500 poses from 200" in res.output and "Traceback" not in res.output
