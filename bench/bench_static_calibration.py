@@ -24,8 +24,10 @@ encoders. Rows:
 The floor is the error of the true model at the encoders' angles (noise alone). Run:
 ``python bench/bench_static_calibration.py [--poses 61] [--sessions 2] [--folds 10]``; with
 ``--coverage K``, the standard errors' calibration over K hardware draws; with
-``--design``, the pose-selection table instead: held-out error of a fit on N poses chosen by
-``diegocal poses`` (D-optimal) against N random ones.
+``--design [--draws 12] [--methods ...] [--no-fit]``, the pose-selection tables instead: the
+held-out error of a fit on N poses chosen by ``diegocal poses`` (I-optimal with exchanges, its
+default; D-optimal greedy, FIGAROH's criterion) against N random ones of the same candidates, and
+the prediction variance the design predicts, over paired draws (:func:`design_table`).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from diegocal.errors import FitError  # noqa: E402
 from diegocal.robot import load_robot  # noqa: E402
 from diegocal.stac.geometry import fit_geometry  # noqa: E402
 from diegocal.stac.geometry_cv import fold_of  # noqa: E402
@@ -234,26 +237,100 @@ def folds_errors(log, robot, name, run, folds: int) -> tuple[np.ndarray, float]:
     return err, seconds / folds
 
 
-def design_table(name: str, sizes, tmp: Path, draws: int = 3) -> None:
-    """Held-out error over the floor of a geometry fit on N poses chosen D-optimally from 300
-    candidates (``diegocal poses``) against N random ones of the same candidates (mean of
-    ``draws``); every set recorded with the same noise draw, tested on 40 fresh poses."""
+#: The pose-selection table's methods: name -> (criterion, exchange) of ``select_poses``; None: random.
+DESIGNS = {
+    "random": None,
+    "D greedy": ("D", False),
+    "D + exchange": ("D", True),
+    "I greedy": ("I", False),
+    "I + exchange": ("I", True),
+}
+#: Poses per robot of the pose-selection table (the smallest a little above what the fit needs).
+DESIGN_SIZES = {"panda": (20, 25, 30, 40, 50), "talos": (25, 30, 35, 45, 55)}
+#: Held-out error over the floor whose pose counts the pose-selection table reports.
+DESIGN_TARGETS = (1.3, 1.2)
+#: The methods the pose-selection table compares by default.
+DESIGN_METHODS = ("random", "D greedy", "I + exchange")
+
+
+def design_table(name: str, tmp: Path, draws: int, methods=DESIGN_METHODS, fit: bool = True) -> dict:
+    """Held-out error over the floor of a geometry fit on N poses chosen from 300 candidates by each
+    of ``methods`` (:data:`DESIGNS`), over ``draws`` draws of the hardware, the candidates, the
+    noise and 100 held-out poses (the methods of one draw share all four: paired), and the
+    linearised prediction variance of those held-out poses' markers that the design predicts (in
+    σ_m²; ``fit=False``: that alone, no fit). Returns {"ratio" | "variance": {method: (draws, sizes)}}.
+    Printed: mean ± sd per size, the mean paired difference with random, and the poses needed to
+    reach each of :data:`DESIGN_TARGETS` (on the mean curve, linearly in 1/N; for the variance v,
+    where √(1 + v) reaches it)."""
     from diegocal.stac.calibration import Calibration
     from diegocal.stac.geometry_design import pose_design, select_poses
 
-    print(f"\n{name}: poses chosen by D-optimal design vs at random (300 candidates), held-out mean / floor")
-    print(f"{'poses':>5} {'D-optimal':>10} {'random':>8}")
-    for n in sizes:
-        session = gen.Session(name, n, 1, seed=70, hardware_seed=70)
-        d, _ = gen.simulate(tmp / "design", session)
+    sizes = DESIGN_SIZES[name]
+    out = {key: {m: np.full((draws, len(sizes)), np.nan) for m in methods} for key in ("ratio", "variance")}
+    for k in range(draws):
+        hw = 70 + k
+        d, _ = gen.simulate(tmp / "design", gen.Session(name, 10, 1, seed=hw, hardware_seed=hw))
         robot = load_robot(d)
-        cand = gen.candidate_poses(session, 300, seed=71)
-        _, test = gen.simulate(tmp / "design", gen.Session(name, 40, 1, seed=72, hardware_seed=70))
+        cand = gen.candidate_poses(gen.Session(name), 300, seed=1000 + k)
+        _, test = gen.simulate(tmp / "design", gen.Session(name, 100, 1, seed=2000 + k, hardware_seed=hw))
+        design = pose_design(robot, Calibration.nominal(robot), cand)
+        both = pose_design(robot, Calibration.nominal(robot), np.vstack([cand, test.truth.signals["q"].data]))
+        rows = both.rows[len(cand) :].reshape(-1, both.rows.shape[-1])
+        held = rows.T @ rows / len(rows)
+        order = np.random.default_rng(k).permutation(len(cand))
+        for m in methods:
+            for i, n in enumerate(sizes):
+                how = DESIGNS[m]
+                idx = order[:n] if how is None else select_poses(design, n, criterion=how[0], exchange=how[1])
+                out["variance"][m][k, i] = np.trace(np.linalg.solve(both.information(idx), held))
+                if fit:
+                    session = gen.Session(name, n, 1, seed=hw, hardware_seed=hw)
+                    try:
+                        out["ratio"][m][k, i] = _ratio(tmp, session, cand[idx], robot, test)
+                    except FitError as exc:  # counted in the table (NaN), never dropped silently
+                        print(f"  {name} draw {k + 1} {m} N={n}: the fit failed: {exc}", file=sys.stderr)
+        print(f"  {name} draw {k + 1}/{draws} done", file=sys.stderr, flush=True)
+    if fit:
+        _design_rows(f"{name}: held-out mean / floor of a geometry fit on N poses", sizes, out["ratio"], draws, False)
+    _design_rows(f"{name}: predicted mean variance of a held-out marker, σ_m²", sizes, out["variance"], draws, True)
+    return out
 
-        chosen = select_poses(pose_design(robot, Calibration.nominal(robot), cand), n)
-        rng = np.random.default_rng(n)
-        rand = [_ratio(tmp, session, cand[rng.choice(300, n, replace=False)], robot, test) for _ in range(draws)]
-        print(f"{n:5d} {_ratio(tmp, session, cand[chosen], robot, test):10.2f} {np.mean(rand):8.2f}")
+
+def _design_rows(title: str, sizes, table: dict, draws: int, variance: bool) -> None:
+    """One pose-selection table (:func:`design_table`)."""
+    print(f"\n{title} (of 300 candidates), mean ± sd over {draws} draws")
+    head = "".join(f"{'N@' + format(t, 'g'):>7}" for t in DESIGN_TARGETS)
+    print(f"{'method':16}" + "".join(f"{n:>13d}" for n in sizes) + head)
+    for m, r in table.items():
+        cells = "".join(f"{a:7.3f}±{b:5.3f}" for a, b in zip(np.nanmean(r, 0), np.nanstd(r, 0), strict=True))
+        curve = np.sqrt(1.0 + np.nanmean(r, 0)) if variance else np.nanmean(r, 0)
+        failed = int(np.isnan(r).sum())
+        print(
+            f"{m:16}{cells}"
+            + "".join(f"{_poses_to_reach(sizes, curve, t):>7}" for t in DESIGN_TARGETS)
+            + (f"  ({failed} fits failed, left out)" if failed else "")
+        )
+    for ref, short in (("random", "rnd"), ("D greedy", "D")):
+        for m, r in table.items():
+            if m not in (ref, "random") and ref in table:
+                diff = r - table[ref]
+                se = np.nanstd(diff, 0) / np.sqrt(np.maximum(np.isfinite(diff).sum(0), 1))
+                cells = "".join(f"{a:+7.3f}±{b:5.3f}" for a, b in zip(np.nanmean(diff, 0), se, strict=True))
+                print(f"{m[:12] + ' - ' + short:16}{cells}   (paired, ± standard error)")
+
+
+def _poses_to_reach(sizes, curve, target: float) -> str:
+    """The pose count at which ``curve`` (per size) first falls to ``target``, linearly in 1/N
+    ('>N' when it never does, '<=N' when it starts below)."""
+    below = np.flatnonzero(np.asarray(curve) <= target)
+    if not len(below):
+        return f">{sizes[-1]}"
+    i = below[0]
+    if i == 0:
+        return f"<={sizes[0]}"
+    a, b = 1.0 / sizes[i - 1], 1.0 / sizes[i]
+    w = (curve[i - 1] - target) / (curve[i - 1] - curve[i])
+    return f"{1.0 / (a + w * (b - a)):.1f}"
 
 
 def _ratio(tmp: Path, session, q, robot, test) -> float:
@@ -293,7 +370,12 @@ def main(argv=None) -> None:
     ap.add_argument("--sessions", type=int, default=2, help="hardware draws per robot")
     ap.add_argument("--folds", type=int, default=10)
     ap.add_argument("--robots", default="panda,talos")
-    ap.add_argument("--design", action="store_true", help="only the pose-selection table (D-optimal vs random)")
+    ap.add_argument("--design", action="store_true", help="only the pose-selection table (chosen vs random poses)")
+    ap.add_argument("--draws", type=int, default=12, help="--design: draws of hardware, candidates, noise, test poses")
+    ap.add_argument(
+        "--methods", default=",".join(DESIGN_METHODS), help=f"--design: comma-separated of {', '.join(DESIGNS)}"
+    )
+    ap.add_argument("--no-fit", action="store_true", help="--design: the predicted variance alone (no fits)")
     ap.add_argument("--coverage", type=int, default=0, help="only the z-score table, over this many hardware draws")
     a = ap.parse_args(argv)
     if a.coverage:
@@ -304,7 +386,7 @@ def main(argv=None) -> None:
     if a.design:
         with tempfile.TemporaryDirectory() as tmp:
             for name in a.robots.split(","):
-                design_table(name, (24, 30, 45), Path(tmp))
+                design_table(name, Path(tmp), a.draws, tuple(a.methods.split(",")), not a.no_fit)
         return
     python = figaroh_python()
     table = methods(python)
