@@ -20,7 +20,8 @@ integrates the logs of one effect on one chamber together (``sessions``, one siz
 baseline predict another session of the same robot (same valves, same effect, another seed) with
 resets every 2 s; the share of the effect's error removed against the noise-free reading is
 ``(E_base² - E_ext²) / (E_base² - E_ref²)``, E_ref the baseline fitted on the log's clean twin
-predicting the new session's clean twin (the model's own error). Median and worst are printed.
+predicting the new session's clean twin (the model's own error). Median and worst are printed;
+a log where the effect costs less than a tenth of E_base² beyond E_ref is n/a (:data:`MIN_COST`).
 
 Logs are cached under ``--cache`` (generation dominates the cost). The bench reads ``/truth`` to
 judge; the diagnosis never sees it.
@@ -293,6 +294,12 @@ def new_session(cases, logs, outcomes, settings, cache, per_effect: int, jobs: i
     return _map(_share, tasks, jobs)
 
 
+#: The effect's cost on the new session (E_base² − E_ref²) must be at least this share of E_base² for
+#: a share removed to mean anything: below it the model's own multi-step error (E_ref, a baseline
+#: fitted on the clean twin) is as large as the effect's, and the ratio divides noise by noise.
+MIN_COST = 0.1
+
+
 def _share(task):
     from diegocal.diagnose import DiagnoseOptions, diagnose
     from diegocal.pneumatic import chamber_data, predict_with_resets
@@ -313,7 +320,8 @@ def _share(task):
         return float(np.sqrt(np.mean((predict_with_resets(params, d) - truth) ** 2)))
 
     e_base, e_ext, e_ref = err(base, new_log), err(unit.fitted.params, new_log), err(ref, new_twin)
-    share = (e_base**2 - e_ext**2) / max(e_base**2 - e_ref**2, 1e-12)
+    cost = e_base**2 - e_ref**2
+    share = (e_base**2 - e_ext**2) / cost if cost > MIN_COST * e_base**2 else float("nan")
     return case, e_base, e_ext, e_ref, share
 
 
@@ -337,10 +345,13 @@ def share_table(rows) -> str:
             if not r:
                 continue
             s = np.array([x[4] for x in r])
+            ok = s[np.isfinite(s)]
+            shares = f"{np.median(ok):.0%} | {ok.min():.0%}" if ok.size else "n/a | n/a"
+            if ok.size < s.size:
+                shares += f" ({s.size - ok.size} n/a: the effect costs less than the model's own error)"
             out.append(
                 f"| {g} | {cause} | {len(r)} | {np.median([x[1] for x in r]):.2f} | "
-                f"{np.median([x[2] for x in r]):.2f} | {np.median([x[3] for x in r]):.2f} | "
-                f"{np.median(s):.0%} | {s.min():.0%} |"
+                f"{np.median([x[2] for x in r]):.2f} | {np.median([x[3] for x in r]):.2f} | {shares} |"
             )
     return "\n".join(out)
 
