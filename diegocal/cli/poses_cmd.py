@@ -204,7 +204,7 @@ def poses(
             (f"chosen ({args.criterion}-optimal, greedy + exchange)", len(done.chosen)),
             ("identifiable parameters", done.parameters),
             (
-                "prediction variance / marker noise variance: chosen / random (median)",
+                "mean prediction variance, σ_m²: chosen / random (median)",
                 f"{done.variance:.3g} / {done.random_variance:.3g}",
             ),
             ("log det information: chosen / random (median)", f"{done.log_det:.1f} / {done.random_log_det:.1f}"),
