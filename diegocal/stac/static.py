@@ -32,6 +32,9 @@ POSE_SIGMAS = 6.0
 #: scale (:func:`pot_noise`) is at least this fraction of its spread over the log: they then
 #: differ as much as any two samples (random poses give about 1; holds or motion, far less).
 SNAPSHOT_RATIO = 0.5
+#: Snapshots may have a few pots held at a few values (a chosen pose set): the share of moving
+#: pots that must look random (SNAPSHOT_RATIO) for the others to be judged by their jumps.
+SNAPSHOT_SHARE = 0.75
 #: Poses are static holds, not stretches of motion, when every pot's von Neumann ratio within
 #: them (mean squared change over twice the variance about the pose's mean; 1 for noise, near 0
 #: for a drifting or moving reading) is at least this.
@@ -50,10 +53,19 @@ def pot_noise(p: np.ndarray) -> np.ndarray:
 
 
 def _snapshots(p: np.ndarray, noise: np.ndarray) -> bool:
-    """Whether consecutive samples of p (T, P) are unrelated (see SNAPSHOT_RATIO)."""
+    """Whether consecutive samples of p (T, P) are unrelated (see SNAPSHOT_RATIO): every moving
+    pot's sample-to-sample scale is a fair share of its spread; or most are (SNAPSHOT_SHARE) and
+    each of the others jumps by that share somewhere, as a joint held at a few values does between
+    chosen poses (a torso at zero, a joint at its limits), never a joint moving in a session."""
     spread = np.std(p, axis=0)
     moving = spread > 0
-    return bool(moving.any() and np.all(noise[moving] >= SNAPSHOT_RATIO * spread[moving]))
+    if not moving.any():
+        return False
+    random = noise[moving] >= SNAPSHOT_RATIO * spread[moving]
+    if random.all():
+        return True
+    jumps = np.abs(np.diff(p[:, moving], axis=0)).max(axis=0) >= SNAPSHOT_RATIO * spread[moving]
+    return bool(random.mean() >= SNAPSHOT_SHARE and jumps[~random].all())
 
 
 def find_poses(log: Log, noise: np.ndarray | None = None) -> np.ndarray:

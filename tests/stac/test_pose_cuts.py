@@ -63,3 +63,17 @@ def test_leave_one_pose_out_holds_out_every_sample_of_a_pose(example_robot, monk
     cv = leave_one_pose_out(log, example_robot)
     assert list(cv.pose) == list(range(6)) and list(cv.samples) == [20] * 6
     assert seen == [100] * 6 and np.all(np.isfinite(cv.error))
+
+
+def test_snapshots_with_a_joint_held_at_a_few_values_are_one_pose_a_sample(tmp_path):
+    """Chosen poses (``diegocal poses``) or a lab's list often hold a joint at a few values in
+    turn (a torso at zero, a joint at its limits): that encoder has no sample-to-sample scale, and
+    the log was read as one held pose (a Panda's 7 encoders, 30 snapshots, joint 1 at two values)."""
+    gen = pytest.importorskip("experiments.static_geometry_generator")
+    if not (gen.SHARE / gen.ROBOTS["panda"][0]).is_file():
+        pytest.skip("example-robot-data is not installed")
+    session = gen.Session("panda", 30, 1, seed=5, hardware_seed=5)
+    q = gen.candidate_poses(session, 30, seed=6)
+    q[:, 0] = np.where(np.arange(30) % 6 < 4, q[:, 0].min(), q[:, 0].max())
+    _, log = gen.simulate(tmp_path, session, q=q)
+    assert np.array_equal(static_poses(log), np.arange(30))
