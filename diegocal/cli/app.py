@@ -49,7 +49,10 @@ COMMANDS: dict[tuple[str, ...], tuple[str, str]] = {
     ),
     ("poses",): (
         "diegocal.cli.poses_cmd",
-        "Propose the next N static poses for stac --geometry: D-optimal among candidate poses.",
+        (
+            "Propose the next N static poses for stac --geometry among candidate poses: I-optimal (the "
+            "markers' predictions most precise) by default, D-optimal with --criterion D."
+        ),
     ),
     ("sgp-fit",): (
         "diegocal.cli.sgp_cmd",
