@@ -271,25 +271,29 @@ def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None, f
     else:
         raise FitError(f"unknown jacobian {options.jacobian!r} (expected 'analytic' or '2-point')")
     lo, hi = lo[free], hi[free]
+
+    def solve(x0):
+        return least_squares(
+            fun,
+            x0,
+            jac=jac,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale="jac",
+            ftol=options.tol,
+            xtol=options.tol,
+            gtol=options.tol,
+            max_nfev=options.max_nfev,
+        )
+
     runs = []
     for x0 in starts[:, free]:
         try:
-            res = least_squares(
-                fun,
-                x0,
-                jac=jac,
-                bounds=(lo, hi),
-                method="trf",
-                x_scale="jac",
-                ftol=options.tol,
-                xtol=options.tol,
-                gtol=options.tol,
-                max_nfev=options.max_nfev,
-            )
+            res = solve(x0)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise FitError(f"chamber {data.name!r}: least squares failed ({exc})") from None
         runs.append(res)
-    best = min(runs, key=lambda r: r.cost)
+    best = _hop_delays(min(runs, key=lambda r: r.cost), model, free, data, solve)
     if not np.isfinite(best.cost):
         raise FitError(f"chamber {data.name!r}: the fit diverged (non-finite cost)")
     n = problem.target.size
@@ -324,6 +328,39 @@ def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None, f
 #: the correlation time of the next-step residuals (the command's holds, 0.1-0.5 s), short
 #: enough that a 30-s training set has tens of blocks.
 SE_BLOCK_S = 1.0
+
+
+#: Whole samples a fitted delay is moved by to restart the fit from (each sign): the step's cost
+#: has a kink wherever the delay crosses a whole sample (the valve's command switches between two
+#: lagged commands there), and a fit started within a sample of the truth can stop a sample away.
+DELAY_HOPS = (1, 2)
+
+
+def _hop_delays(best, model: ChamberModel, free: np.ndarray, data: ChamberData, solve):
+    """The lowest-cost of ``best`` and the fits restarted from it with each free delay moved by
+    DELAY_HOPS whole samples (inside its bounds); ``solve(x0)`` runs least squares on the free
+    parameters."""
+    at = [i for i in model.delay_at if free[i]]
+    if not at:
+        return best
+    h = float(np.median(np.diff(data.time)))
+    pos = np.cumsum(free) - 1  # index of a full parameter among the free ones
+    lo, hi = model.lower()[free], model.upper()[free]
+    out = best
+    for i in at:
+        for hop in DELAY_HOPS:
+            for sign in (-1.0, 1.0):
+                x0 = best.x.copy()
+                x0[pos[i]] += sign * hop * h
+                if not lo[pos[i]] < x0[pos[i]] < hi[pos[i]]:
+                    continue
+                try:
+                    res = solve(x0)
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+                if np.isfinite(res.cost) and res.cost < out.cost:
+                    out = res
+    return out
 
 
 def _clusters(data: ChamberData, rows: np.ndarray) -> np.ndarray:
