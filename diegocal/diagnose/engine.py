@@ -390,7 +390,7 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
     if flex is None or flex.test.t <= flex.threshold or flex.test.gain < options.unexplained_min_gain:
         return None  # no structure worth an ``unexplained`` finding beside the term
     gain = best.channel_gain if best.channel_gain is not None else best.test.gain
-    if best.strongest and best.strongest[0] == own:  # the gains compared are on the same channel
+    if best.strongest:  # judged on the channel it acts on most (_own): its gain there
         gain = best.strongest[1]
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
 

@@ -300,11 +300,9 @@ class KinematicsAdapter:
                     offer(term, fam)
         # static poses: the chain's geometry, which holds every joint's offset, instead of each offset
         geometric = any(geometry.is_chain(t) for t in fitted.terms)
-        if self.poses is not None and not geometric:
-            chain = geometry.candidate(self, fitted, train)
-        else:
-            chain = None
-        out += [chain] if chain is not None else []
+        chain = geometry.candidate(self, fitted, train) if self.poses is not None and not geometric else None
+        if chain is not None:
+            out.append(chain)
         for joint in lin.observed_joints():
             if ("link_offset", joint) not in have and not geometric and chain is None:
                 offer(make_term("link_offset", joint))
