@@ -124,8 +124,8 @@ def diegocal(code: Path) -> tuple[list[str], dict]:
     return [sys.executable, "-m", "diegocal"], env
 
 
-def tree_rss_mb(pid: int) -> float:
-    """Resident memory (MB) of ``pid`` and every descendant, read from /proc (0 once it is gone)."""
+def tree_rss(pid: int) -> dict[int, float]:
+    """Resident memory (MB) of ``pid`` and of every descendant, by process id, read from /proc."""
     children: dict[int, list[int]] = {}
     rss: dict[int, int] = {}
     for entry in os.scandir("/proc"):
@@ -141,12 +141,17 @@ def tree_rss_mb(pid: int) -> float:
         p = int(entry.name)
         children.setdefault(int(stat.rsplit(")", 1)[1].split()[1]), []).append(p)
         rss[p] = pages
-    total, todo = 0, [pid]
+    found, todo = {}, [pid]
     while todo:
         p = todo.pop()
-        total += rss.get(p, 0)
+        found[p] = rss.get(p, 0) * os.sysconf("SC_PAGE_SIZE") / 2**20
         todo.extend(children.get(p, ()))
-    return total * os.sysconf("SC_PAGE_SIZE") / 2**20
+    return found
+
+
+def tree_rss_mb(pid: int) -> float:
+    """Resident memory (MB) of ``pid`` and every descendant together (0 once it is gone)."""
+    return sum(tree_rss(pid).values())
 
 
 def timed(cmd: list[str], env: dict, timeout: float | None, mem_limit: float | None) -> Run:
