@@ -69,6 +69,7 @@ from scipy.optimize import minimize_scalar
 
 from diegocal.causes import MAX_LAG_S
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
+from diegocal.diagnose.dynamics_system import SAMPLES, TrainingSystem, feature_chunks, project
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
@@ -100,9 +101,6 @@ UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
 #: fraction of its norm (training rows) lies in the model's span and is not offered
 SPAN_TOL = 1e-6
-#: Below this fraction left, the projector recomputes it from the residual itself instead of
-#: from the difference of squared norms (which keeps about 8 digits of the fraction: enough above it)
-NEAR_SPAN = 1e-3
 #: The SGP that absorbs what stays ``unexplained`` (:meth:`DynamicsAdapter.absorb`): the library's
 #: defaults (guard on) except that its hyperparameters and the guard's cross-validation use at
 #: most 500 training samples (a random subset) instead of 1000: the cost is cubic in it, and on a
@@ -114,13 +112,13 @@ EXTENDED_SGP = {"hyper_max": 500}
 class DynamicsFit:
     """A fitted torque model (``model``, the :class:`~diegocal.sgp.model.DynamicsModel` that is
     saved): coefficients of [base parameters, extra terms' columns], the terms with their values,
-    the per-joint noise std σ_v of the fit, the prediction on every sample and the model's columns."""
+    the per-joint noise std σ_v of the fit and the prediction on every sample (the model's
+    columns are not kept: :func:`~diegocal.diagnose.dynamics_system.feature_chunks` rebuilds them)."""
 
     w: np.ndarray
     terms: tuple
     sigma: np.ndarray
     pred: np.ndarray = field(repr=False)
-    A: np.ndarray = field(repr=False)  # (T, k, P): the columns, lags applied
     train: np.ndarray = field(repr=False)
     model: object = field(repr=False, default=None)  # the fitted DynamicsModel (PR; the SGP once it absorbed)
     gp: tuple | None = None  # the joints where an absorbing SGP kept a GP (None: no SGP)
@@ -158,7 +156,24 @@ class DynamicsAdapter:
         else:
             self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
             self.tau0 = np.zeros_like(self.tau)
-        self.F = base_regressor(robot, self.q, self.qd, self.qdd, self.base, self.friction, self.rows)  # (T, k, r)
+        self._F = None  # (T, k, r) the base regressor of every sample, built only for a torque_lag
+        self._system_of = (None, None)  # (training mask, its TrainingSystem)
+
+    @property
+    def F(self) -> np.ndarray:
+        """(T, k, r) the base regressor of every sample: held only once a ``torque_lag`` needs it
+        (its filter runs along the whole log); every other fit works from :meth:`_system`."""
+        if self._F is None:
+            self._F = base_regressor(self.robot, self.q, self.qd, self.qdd, self.base, self.friction, self.rows)
+        return self._F
+
+    def _system(self, train) -> TrainingSystem:
+        """The factored weighted training least squares of ``train`` (built once per training set)."""
+        mask, system = self._system_of
+        if mask is None or not np.array_equal(mask, train):
+            system = TrainingSystem(self, train)
+            self._system_of = (np.array(train, bool), system)
+        return system
 
     # ------------------------------------------------------------------ fit
     def _offset(self, lags: dict) -> np.ndarray:
@@ -202,17 +217,13 @@ class DynamicsAdapter:
         (:meth:`_fit_lags`, weighted least squares), then held in the model."""
         train = np.asarray(train, bool)
         terms = dynamics_terms(terms)
-        C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
-        A = np.concatenate([self.F, C], axis=2)
         lags = {self.row_of[t.channel]: t.value("lag") for t in terms if is_filter(t) and t.channel in self.row_of}
         regions = any(t.cause == "position_friction" for t in terms)
         if lags or regions or any(p.shape for t in terms for p in specs(t)):
-            w, _ = self._solve(A, train, np.ones(len(self.joints)))
-            e = self.tau[train] - (A @ w + self.tau0)[train]
-            s = np.sqrt(np.nanmean(e * e, axis=0))  # each joint weighted by its residual std
-            sigma = np.where(np.isfinite(s) & (s > 0), s, 1.0)
+            sigma = self._joint_sigma(terms, train)  # each joint weighted by its residual std
             if lags:
-                lags = self._fit_lags(A, lags, train, sigma)
+                C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
+                lags = self._fit_lags(np.concatenate([self.F, C], axis=2), lags, train, sigma)
                 terms = tuple(
                     t.with_values([lags[self.row_of[t.channel]]]) if is_filter(t) and t.channel in self.row_of else t
                     for t in terms
@@ -223,16 +234,15 @@ class DynamicsAdapter:
         rows = train & np.isfinite(self.tau).all(axis=1)
         model = DynamicsModel(self.robot, self._options(), self.joints, terms)
         model.fit_arrays(self.q[rows], self.qd[rows], self.qdd[rows], self.tau[rows], time=self.time[rows])
-        pred = model.predict_arrays(self.q, self.qd, self.qdd, self.time, variance=False).tau
-        Aeff = model.features(self.q, self.qd, self.qdd, self.time)
+        pred = self._predict(model)
         sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
         w = model.parametric_.values
-        se_nan = self._unidentified(Aeff, rows, terms)
+        se_nan = self._unidentified(model, rows, terms)
         out = []
         for t in model.fitted_terms():
             if is_filter(t):
                 r = self.row_of.get(t.channel)
-                se = None if r is None else [self._lag_se(A, w, r, t.value("lag"), pred, rows)]
+                se = None if r is None else [self._lag_se(model, w, r, t.value("lag"), pred, rows)]
                 out.append(t.with_values([t.value("lag")], se))
             elif any(p.shape for p in specs(t)):
                 out.append(with_shape_se(self, t, model, pred, rows))
@@ -246,7 +256,33 @@ class DynamicsAdapter:
                 with_region_se(self, t, fitted_terms, lags, rows, sigma) if t.cause == "position_friction" else t
                 for t in out
             ]
-        return DynamicsFit(w, tuple(out), sigma, pred, Aeff, rows, model)
+        return DynamicsFit(w, tuple(out), sigma, pred, rows, model)
+
+    def _joint_sigma(self, terms, train) -> np.ndarray:
+        """(k,) each joint's training residual std in the unweighted least-squares fit of the
+        baseline with ``terms`` (lags not applied): the weights of the searches that follow."""
+        system = self._system(train)
+        got = system.weighted_fit(terms, np.ones(len(self.joints)))
+        if got is not None:
+            s = np.sqrt(got[2] / np.maximum(system.counts(), 1))
+        else:
+            C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
+            A = np.concatenate([self.F, C], axis=2)
+            w, _ = self._solve(A, train, np.ones(len(self.joints)))
+            e = self.tau[train] - (A @ w + self.tau0)[train]
+            s = np.sqrt(np.nanmean(e * e, axis=0))
+        return np.where(np.isfinite(s) & (s > 0), s, 1.0)
+
+    def _predict(self, model) -> np.ndarray:
+        """(T, k) the model's torque on every sample, :data:`SAMPLES` at a time (all at once with a
+        ``torque_lag``, whose filter runs along the whole log)."""
+        if any(is_filter(t) for t in model.terms):
+            return model.predict_arrays(self.q, self.qd, self.qdd, self.time, variance=False).tau
+        out = np.empty(self.tau.shape)
+        for i in range(0, len(self.time), SAMPLES):
+            sl = slice(i, i + SAMPLES)
+            out[sl] = model.predict_arrays(self.q[sl], self.qd[sl], self.qdd[sl], self.time[sl], variance=False).tau
+        return out
 
     def _options(self, kind: str = "pr") -> SGPOptions:
         """The options of the model the diagnosis fits and saves (``kind`` "sgp": the one that
@@ -268,13 +304,16 @@ class DynamicsAdapter:
             at += k
         return out
 
-    def _unidentified(self, A, train, terms) -> np.ndarray:
+    def _unidentified(self, model, train, terms) -> np.ndarray:
         """Indices of A's columns that belong to a ``payload`` and lie in the span of the others on
         the training rows (e.g. the mass of a link whose origin is on every earlier joint's axis:
         only its moments show in the torques): their values are the minimum-norm solution's
         (meaningless), their standard errors NaN (not identified)."""
         out, at = [], self.base.n_base
-        X = A[train].reshape(-1, A.shape[2])
+        if not any(t.cause == "payload" for t in terms):
+            return np.asarray(out, int)
+        X = np.concatenate([A for _, A in feature_chunks(model, self, np.flatnonzero(train))])
+        X = X.reshape(-1, X.shape[2])
         X = X[np.isfinite(X).all(axis=1)]
         for t in terms:
             if is_filter(t):
@@ -292,9 +331,10 @@ class DynamicsAdapter:
             at += k
         return np.asarray(out, int)
 
-    def _lag_se(self, A, w, r: int, lag: float, pred, train) -> float:
+    def _lag_se(self, model, w, r: int, lag: float, pred, train) -> float:
         """Standard error of a lag (s): the residual std of its joint over the root sum of squares
         of the prediction's derivative with respect to the lag (central difference), training rows."""
+        A = model.features(self.q, self.qd, self.qdd)  # the columns before the sensor's filter, whole
         h = max(1e-4, 0.01 * lag)
         d = (lag_filter(A[:, r], self.time, lag + h) - lag_filter(A[:, r], self.time, max(lag - h, 0.0))) @ w
         if self.inertia == "nominal":
@@ -339,7 +379,13 @@ class DynamicsAdapter:
 
     def _weighted_fit(self, terms, lags: dict, train, sigma) -> tuple:
         """(the linear parameters, the weighted training error) of the model with ``terms``, the
-        lags and shapes held: what each trial of a nonlinear search solves."""
+        lags and shapes held: what each trial of a nonlinear search solves. Without lags, from the
+        factored training system (:class:`~diegocal.diagnose.dynamics_system.TrainingSystem`: no
+        pass over the log); with lags (a filter along the whole log), or where it declines, directly."""
+        if not lags:
+            got = self._system(train).weighted_fit(terms, sigma)
+            if got is not None:
+                return got[0], got[1]
         C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
         Aeff = self._lagged(np.concatenate([self.F, C], axis=2), lags)
         offset = self._offset(lags)
@@ -363,45 +409,6 @@ class DynamicsAdapter:
         context = {j: tuple(f"q.{k}" for k in self.robot.joint_names if k != j) for j in self.joints}
         return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order, context)
 
-    def _projector(self, fitted: DynamicsFit, train):
-        """A function cols -> (projected cols, fraction left): a candidate's columns (on its own
-        joints) minus their least-squares fit by the current model's columns on every joint's
-        training rows, rows weighted as the fit weighs them (1 / σ_joint, so that
-        Frisch-Waugh-Lovell is exact), and the fraction of their norm that is left (0: the
-        candidate lies in the model's span)."""
-        wt = 1.0 / fitted.sigma  # the fit's own row weights: exactly the refit's projection
-        Xt = fitted.A[train] * wt[None, :, None]  # (Ttr, k, P)
-        P = Xt.shape[2]
-        pinv = np.linalg.pinv(Xt.reshape(-1, P)).reshape(P, *Xt.shape[:2])  # (P, Ttr, k)
-        # per joint, contiguous (k, ...) copies: a joint's strided slice of these arrays is off
-        # BLAS's fast path, and every candidate reads its joints' slices
-        pinv = np.ascontiguousarray(np.moveaxis(pinv, 2, 0))  # (k, P, Ttr)
-        Xt = np.ascontiguousarray(np.moveaxis(Xt, 1, 0))  # (k, Ttr, P)
-        A = np.ascontiguousarray(np.moveaxis(fitted.A, 1, 0))  # (k, T, P)
-
-        def project(cols: dict) -> tuple[dict, float]:
-            beta = 0.0
-            norm = 0.0
-            explained = 0.0  # ‖X β‖² = cᵀ X β: β is the least-squares fit, X β the projection of c
-            cts = {}
-            for j, c in cols.items():
-                r = self.row_of[j]
-                cts[r] = np.asarray(c, float)[train] * wt[r]
-                beta = beta + pinv[r] @ cts[r]
-                norm += float(np.sum(cts[r] * cts[r]))
-            for r, ct in cts.items():
-                explained += float(np.sum((Xt[r].T @ ct) * beta))
-            frac = float(np.sqrt(max(norm - explained, 0.0) / norm)) if norm > 0 else 0.0
-            if frac < NEAR_SPAN:  # near the span, the difference of norms has lost its digits
-                left = np.stack([Xt[r] @ beta for r in range(len(Xt))], axis=1)  # (Ttr, k, kc)
-                for r, ct in cts.items():
-                    left[:, r] -= ct
-                frac = float(np.sqrt(np.sum(left * left) / norm)) if norm > 0 else 0.0
-            out = {j: np.asarray(c, float) - A[self.row_of[j]] @ beta for j, c in cols.items()}
-            return out, frac
-
-        return project
-
     def _cols(self, term: Term) -> dict:
         X = columns(term, self.robot, self.q, self.qd, self.qdd)
         joints = self.joints if term.cause == "payload" else joints_of(term)  # a payload loads every joint
@@ -410,8 +417,8 @@ class DynamicsAdapter:
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
         """Every cause the model lacks, as its behaviour proposes it (:func:`diegocal.sgp.terms.
         proposals`: the registry's dynamics terms), its columns with their fit by the current
-        model subtracted (:meth:`_projector`); one whose columns lie in the model's span is not
-        offered."""
+        model subtracted (:func:`~diegocal.diagnose.dynamics_system.project`); one whose columns
+        lie in the model's span is not offered."""
         train = np.asarray(train, bool)
         ctx = Context(
             self.robot,
@@ -426,12 +433,16 @@ class DynamicsAdapter:
             self.friction,
             self.inertia,
         )
-        project = self._projector(fitted, train)
+        props = proposals(ctx)
+        cols = []
+        for p in props:  # a joint's (T, kc) float64, contiguous, projected in place
+            given = p.columns if p.columns is not None else self._cols(p.term)
+            cols.append({self.row_of[j]: np.ascontiguousarray(c, float) for j, c in given.items()})
+        left = project(self, fitted, train, cols)
         out = []
-        for p in proposals(ctx):
-            cols, left = project(p.columns if p.columns is not None else self._cols(p.term))
-            if left > SPAN_TOL:
-                out.append(Candidate(p.term, cols, family=p.family))
+        for p, c, f in zip(props, cols, left, strict=True):
+            if f > SPAN_TOL:
+                out.append(Candidate(p.term, {self.joints[r]: x for r, x in c.items()}, family=p.family))
         return out
 
     # ------------------------------------------------------------------ scores and output

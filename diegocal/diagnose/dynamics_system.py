@@ -1,0 +1,225 @@
+"""The dynamics diagnosis's weighted least squares on the training rows, factored once (issue #33:
+long logs), and its candidates' projection a chunk of samples at a time.
+
+:class:`TrainingSystem`: one pass over the training samples keeps, per joint j, the triangular
+factor R_j of ``[F_j y_j]`` (F_j the base regressor's rows of joint j, y_j its torque less the
+fixed part of the prediction; :class:`~diegocal.lstsq.TallLstsq`), a few (r + 1)² numbers.
+The rows of a joint share its weight 1 / σ_j, so the factor of the weighted system of every joint
+is the QR of the R_j / σ_j stacked, for any σ, with no pass over the data. A model with extra
+term columns C (a position friction, a Stribeck scale: what the shape and region searches of
+:mod:`.dynamics_shapes` re-solve at every trial) is solved from it by Frisch-Waugh-Lovell, C
+acting on a few joints J only:
+
+.. math:: S = C^T C - Z^T Z,\\quad Z = R_{11}^{-T} F^T C,\\quad
+          b = S^{-1} C^T e,\\quad \\mathrm{RSS} = \\mathrm{RSS}_F - (C^T e)^T b
+
+(e the residual of the base fit, ``a = a_F − R11⁻¹ Z b`` the base parameters), which needs F_j
+only on the training rows of the joints in J (kept, float64: the regressor of a whole long log
+is never held). The weighted least squares' solution and error are those of
+:meth:`DynamicsAdapter._solve <diegocal.diagnose.dynamics.DynamicsAdapter._solve>` on the full
+columns, to rounding; where the algebra could lose digits (F or S close to singular, a column
+not finite) :meth:`weighted_fit` returns None and the caller solves directly.
+
+:func:`feature_chunks` gives a fitted model's columns a chunk of samples at a time (all at once
+only for a model with a ``torque_lag``, whose filter runs along the whole log).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from diegocal.lstsq import TallLstsq
+from diegocal.sgp.regressor import CHUNK, base_regressor
+from diegocal.sgp.terms import is_filter, term_columns
+
+#: Samples per chunk where a fitted model's columns or prediction are rebuilt (about 55 MB of
+#: columns for a 9-joint arm with 80 of them)
+SAMPLES = 10_000
+#: Below this fraction of a candidate's norm left, its projection's fraction is recomputed from the
+#: residual itself (the difference of squared norms keeps about 8 digits of it: enough above)
+NEAR_SPAN = 1e-3
+#: S's smallest eigenvalue below this fraction of CᵀC's largest diagonal: the terms' columns are
+#: close to the base regressor's span, the difference CᵀC − ZᵀZ has lost its digits: solve directly
+NEAR_SINGULAR = 1e-8
+
+
+class TrainingSystem:
+    """The weighted training least squares of one adapter's base regressor (module docstring).
+
+    ``fit``: the :class:`~diegocal.diagnose.dynamics.DynamicsAdapter` (its robot, states, torques
+    and fixed part ``tau0``); ``train``: (T,) bool, the training samples.
+    """
+
+    def __init__(self, fit, train: np.ndarray):
+        self.fit = fit
+        self.idx = np.flatnonzero(train)
+        self.r = fit.base.n_base
+        k = len(fit.joints)
+        self.R = [TallLstsq(self.r) for _ in range(k)]
+        for rows, F in self._chunks(self.idx):
+            y = fit.tau[rows] - fit.tau0[rows]
+            for j in range(k):
+                ok = np.isfinite(y[:, j]) & np.isfinite(F[:, j]).all(axis=1)
+                self.R[j].add(F[ok, j], y[ok, j])
+        self._rows: dict[int, tuple] = {}  # joint row -> (F_j, y_j, ok) on the training samples
+
+    def _chunks(self, idx):
+        f = self.fit
+        for i in range(0, idx.size, CHUNK):
+            rows = idx[i : i + CHUNK]
+            yield rows, base_regressor(f.robot, f.q[rows], f.qd[rows], f.qdd[rows], f.base, f.friction, f.rows)
+
+    def joint_rows(self, joints) -> dict:
+        """Joint row -> (F_j (Ttr, r), y_j (Ttr,), finite (Ttr,)) on the training samples, unweighted;
+        computed for the joints not yet held in one pass (kept: the joints extra terms act on)."""
+        need = [j for j in joints if j not in self._rows]
+        if need:
+            parts = {j: [] for j in need}
+            for _, F in self._chunks(self.idx):
+                for j in need:
+                    parts[j].append(F[:, j])
+            f = self.fit
+            for j in need:
+                Fj = np.concatenate(parts.pop(j))
+                y = f.tau[self.idx, j] - f.tau0[self.idx, j]
+                self._rows[j] = (Fj, y, np.isfinite(y) & np.isfinite(Fj).all(axis=1))
+        return {j: self._rows[j] for j in joints}
+
+    def _base(self, sigma) -> tuple:
+        """(R11 (r, r), a_F (r,), RSS_F, training rows) of the weighted base fit."""
+        ls = TallLstsq(self.r)
+        stacked = np.concatenate([R.R / s for R, s in zip(self.R, sigma, strict=True)])
+        ls.add(stacked[:, : self.r], stacked[:, self.r])
+        ls.rows = sum(R.rows for R in self.R)  # the rank cutoff of the rows the factors stand for
+        a, rss = ls.solve()
+        return ls.R[: self.r, : self.r], a, rss, ls.rows
+
+    def weighted_fit(self, terms, sigma) -> tuple | None:
+        """(w (r + K,): base parameters then the terms' linear parameters, the weighted training
+        error Σ ((τ − τ̂) / σ_j)², per joint the unweighted training sum of squares (k,)) of the
+        baseline with ``terms`` (no ``torque_lag``); None where it must be solved directly."""
+        sigma = np.asarray(sigma, float)
+        R11, a, rss, n_rows = self._base(sigma)
+        d = np.abs(np.diag(R11))
+        if d.size and d.min() <= np.finfo(float).eps * max(n_rows, self.r) * d.max():
+            return None  # the base regressor is rank-deficient here: lstsq's minimum-norm solution
+        f = self.fit
+        terms = [t for t in terms if not is_filter(t)]
+        if not terms:
+            return a, rss, self._joint_rss(a, {}, np.zeros(0))
+        idx = self.idx
+        C = term_columns(terms, f.robot, f.q[idx], f.qd[idx], f.qdd[idx])[:, f.rows]  # (Ttr, k, K)
+        K = C.shape[2]
+        J = [j for j in range(C.shape[1]) if np.any(C[:, j] != 0)]
+        G, CC, Cy = np.zeros((self.r, K)), np.zeros((K, K)), np.zeros(K)
+        for j, (Fj, y, ok) in self.joint_rows(J).items():
+            c = C[ok, j] / sigma[j]
+            if not np.isfinite(c).all():
+                return None
+            G += (Fj[ok] / sigma[j]).T @ c
+            CC += c.T @ c
+            Cy += c.T @ (y[ok] / sigma[j])
+        Ce = Cy - G.T @ a  # Cᵀe: e = y − F a
+        Z = solve_triangular(R11, G, trans="T")
+        S = CC - Z.T @ Z
+        scale = float(np.max(np.diag(CC))) if K else 0.0
+        if K == 0 or scale <= 0 or np.linalg.eigvalsh(S).min() <= NEAR_SINGULAR * scale:
+            return None
+        b = np.linalg.solve(S, Ce)
+        w = np.concatenate([a - solve_triangular(R11, Z @ b), b])
+        return w, float(rss - Ce @ b), self._joint_rss(w[: self.r], {j: C[:, j] for j in J}, b)
+
+    def _joint_rss(self, a, cols: dict, b) -> np.ndarray:
+        """Per joint, Σ (y − F a − C b)² over its finite training rows (unweighted): from R_j
+        where no term acts, from the rows held where one does."""
+        out = np.empty(len(self.R))
+        for j, R in enumerate(self.R):
+            if j in cols:
+                Fj, y, ok = self._rows[j]
+                e = y[ok] - Fj[ok] @ a - cols[j][ok] @ b
+                out[j] = float(e @ e)
+            else:
+                v = np.zeros(self.r + 1)
+                v[: len(R.R)] = R.R @ np.append(a, -1.0)
+                out[j] = float(v @ v)
+        return out
+
+    def counts(self) -> np.ndarray:
+        """(k,) finite training rows per joint."""
+        return np.array([R.rows for R in self.R])
+
+
+def feature_chunks(model, fit, samples):
+    """(sample indices, the model's columns there (m, k, P)) a chunk of ``samples`` at a time: the
+    columns of :meth:`~diegocal.sgp.model.DynamicsModel.features` (a ``torque_lag``'s filter
+    applied). A model with a lag filters along the whole log: its columns are built once, whole."""
+    samples = np.asarray(samples)
+    if any(is_filter(t) for t in model.terms):
+        A = model.features(fit.q, fit.qd, fit.qdd, fit.time)
+        for i in range(0, samples.size, SAMPLES):
+            rows = samples[i : i + SAMPLES]
+            yield rows, A[rows]
+        return
+    for i in range(0, samples.size, SAMPLES):
+        rows = samples[i : i + SAMPLES]
+        yield rows, model.features(fit.q[rows], fit.qd[rows], fit.qdd[rows], fit.time[rows])
+
+
+def project(fit, fitted, train, cols: list[dict]) -> np.ndarray:
+    """Each candidate's columns (``cols``: joint row -> (T, kc) float64, changed in place) minus
+    their least-squares fit by the fitted model's columns X on every joint's training rows, rows
+    weighted as the fit weighs them (1 / σ_joint, so that Frisch-Waugh-Lovell is exact):
+    ``c − X pinv(X) c``, with ``pinv(X) = pinv(R)ᵀ... = pinv(R) pinv(R)ᵀ Xᵀ`` from the factor R of
+    the weighted X (``XᵀX = RᵀR``), so that X is never held: one pass over the training samples
+    for R and every candidate's Xᵀc, one over every sample to subtract. Returns (n,) the fraction
+    of each candidate's weighted training norm left (0: it lies in the model's span)."""
+    wt = 1.0 / fitted.sigma
+    model = fitted.model
+    P = fitted.w.size
+    n = len(cols)
+    by_row: dict[int, list] = {}
+    for i, c in enumerate(cols):
+        for r, x in c.items():
+            by_row.setdefault(r, []).append((i, x))
+    xtc = [np.zeros((P, next(iter(c.values())).shape[1])) if c else np.zeros((P, 0)) for c in cols]
+    norm = np.zeros(n)
+    ls = TallLstsq(P)
+    idx = np.flatnonzero(train)
+    for rows, A in feature_chunks(model, fit, idx):
+        Aw = A * wt[None, :, None]
+        ls.add(Aw.reshape(-1, P), np.zeros(Aw.shape[0] * Aw.shape[1]))
+        for r, group in by_row.items():
+            Cr = np.concatenate([x[rows] for _, x in group], axis=1) * wt[r]
+            M = np.ascontiguousarray(Aw[:, r]).T @ Cr
+            at = 0
+            for i, x in group:
+                kc = x.shape[1]
+                xtc[i] += M[:, at : at + kc]
+                norm[i] += float(np.sum(Cr[:, at : at + kc] ** 2))
+                at += kc
+    R = np.zeros((P, P))
+    R[: min(len(ls.R), P)] = ls.R[:P, :P]
+    Rp = np.linalg.pinv(R)  # pinv(X) = pinv(R) pinv(R)ᵀ Xᵀ: the singular values of R are X's
+    beta = [Rp @ (Rp.T @ g) for g in xtc]
+    explained = np.array([float(np.sum(g * b)) for g, b in zip(xtc, beta, strict=True)])  # ‖X β‖² = cᵀ X β
+    frac = np.sqrt(np.maximum(norm - explained, 0.0) / np.where(norm > 0, norm, 1.0))
+    near = [i for i in range(n) if norm[i] > 0 and frac[i] < NEAR_SPAN]
+    left = np.zeros(n)
+    for rows, A in feature_chunks(model, fit, np.arange(len(fit.time))):
+        tr = np.asarray(train, bool)[rows]
+        if near and tr.any():  # near the span, the difference of norms has lost its digits
+            Aw = A[tr] * wt[None, :, None]
+            for i in near:
+                L = Aw @ beta[i]  # (m, k, kc)
+                for r, x in cols[i].items():
+                    L[:, r] -= x[rows[tr]] * wt[r]
+                left[i] += float(np.sum(L * L))
+        for r, group in by_row.items():
+            Ar = np.ascontiguousarray(A[:, r])
+            for i, x in group:
+                x[rows] -= Ar @ beta[i]
+    for i in near:
+        frac[i] = np.sqrt(left[i] / norm[i])
+    frac[norm <= 0] = 0.0
+    return frac
