@@ -52,33 +52,68 @@ def sigma_of(calibration) -> dict:
 
 def frame_projection(obs: Observation, params, sigma: dict, q: np.ndarray) -> FrameProjection:
     """:class:`FrameProjection` at joint angles q (T, n) with ``sigma``: σ per sensor type
-    (:func:`sigma_of`), in the sensors' units."""
+    (:func:`sigma_of`), in the sensors' units. Built BATCH frames at a time (each frame's J and K
+    depend on that frame alone), so that only the result grows with the log."""
+    T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, q.shape[1]
+    R = P + 3 * M
+    out = FrameProjection(
+        np.empty((T, R, n)),
+        np.empty((T, n, R)),
+        np.empty((T, R)),
+        np.empty((T, P)),
+        np.empty((T, M, 3, 3)),
+        _sigmas(obs, sigma)[0],
+        np.empty((T, n)),
+    )
+    for i in range(0, T, BATCH):
+        part = _batch_projection(obs, params, sigma, q, slice(i, min(i + BATCH, T)))
+        for f in ("J", "K", "w", "s", "Rl", "D"):
+            getattr(out, f)[i : i + BATCH] = getattr(part, f)
+    return out
+
+
+def _sigmas(obs: Observation, sigma: dict) -> tuple[np.ndarray, float]:
+    """The pots' σ (P,) as weighed and the markers' σ, from σ per sensor type."""
     sigma_p = np.array([sigma[k] for k in obs.kinds], float)
     sig_x = float(sigma.get(MARKERS, 1.0))  # a log without markers: no marker row is weighed
     # a pot type fitted exactly (one pot per joint, its σ collapsed) pins its joints, but no
     # weight may swamp the others' in floating point
     floor = 1e-3 * float(np.max(np.concatenate([sigma_p, [sig_x / 0.1]])))
-    sigma_p = np.maximum(sigma_p, floor)
-    T, P, M, n = obs.n_frames, obs.n_pots, obs.n_markers, q.shape[1]
-    J = np.zeros((T, P + 3 * M, n))
-    s_all = np.zeros((T, P))
-    Rl_all = np.zeros((T, M, 3, 3))
-    for i in range(0, T, BATCH):
-        sl = slice(i, min(i + BATCH, T))
-        s, ds, Rl, _, Jx = obs.evaluate(q[sl], params.xyz)
-        J[sl, :P] = params.gain[None, :, None] * ds
-        J[sl, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(s.shape[0], 3 * M, n)
-        s_all[sl], Rl_all[sl] = s, Rl
-    w = np.zeros((T, P + 3 * M))
+    return np.maximum(sigma_p, floor), sig_x
+
+
+def _batch_projection(obs: Observation, params, sigma: dict, q: np.ndarray, sl: slice) -> FrameProjection:
+    """:class:`FrameProjection` of the frames ``sl`` (thesis eq. 2.22-2.23 per frame)."""
+    sigma_p, sig_x = _sigmas(obs, sigma)
+    P, M, n = obs.n_pots, obs.n_markers, q.shape[1]
+    B = len(range(*sl.indices(obs.n_frames)))
+    J = np.zeros((B, P + 3 * M, n))
+    s, ds, Rl, _, Jx = obs.evaluate(q[sl], params.xyz)
+    J[:, :P] = params.gain[None, :, None] * ds
+    J[:, P:] = np.einsum("ij,bmjn->bmin", params.R, Jx).reshape(B, 3 * M, n)
+    w = np.zeros((B, P + 3 * M))
     w[:, :P] = 1.0 / sigma_p**2
-    w[:, P:] = np.repeat(obs.valid.astype(float), 3, axis=1) / sig_x**2
+    w[:, P:] = np.repeat(obs.valid[sl].astype(float), 3, axis=1) / sig_x**2
     JW = np.swapaxes(J, 1, 2) * w[:, None, :]
     H = JW @ J
     diag = np.einsum("bii->bi", H)
     D = 1e-9 * diag + 1e-12  # keeps unobserved joints' H invertible
     diag += D
     K = np.linalg.solve(H, JW)
-    return FrameProjection(J, K, w, s_all, Rl_all, sigma_p, D)
+    return FrameProjection(J, K, w, s, Rl, sigma_p, D)
+
+
+def deleted_from_others(obs: Observation, params, sigma: dict, q: np.ndarray, r: np.ndarray):
+    """:func:`deleted_residuals` of the residuals r (T, R) at joint angles q (T, n), a BATCH of
+    frames at a time: the same numbers as ``deleted_residuals(frame_projection(...), r, P)``
+    without holding every frame's J and K (what ``predict --from others`` needs on a long log)."""
+    T, P = obs.n_frames, obs.n_pots
+    rp = np.empty((T, P))
+    rm = np.empty((T, obs.n_markers, 3))
+    for i in range(0, T, BATCH):
+        sl = slice(i, min(i + BATCH, T))
+        rp[sl], rm[sl] = deleted_residuals(_batch_projection(obs, params, sigma, q, sl), r[sl], P)
+    return rp, rm
 
 
 def deleted_residuals(proj: FrameProjection, r: np.ndarray, n_pots: int) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,7 @@ from diegocal.errors import FitError
 from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.loo import deleted_residuals, frame_projection
+from diegocal.stac.loo import deleted_from_others
 from diegocal.stac.model import MARKERS, Observation
 from diegocal.stac.qphase import Noise, q_step
 from diegocal.stac.result import StacOptions
@@ -139,9 +139,8 @@ def predict(
     markers = xb @ params.R.T + params.T
     full_pots = pots
     if OTHERS in sources:  # each reading from the others: reading − its deleted residual
-        proj = frame_projection(obs, params, sig, q)
         r = np.concatenate([obs.pots - pots, (obs.markers - markers).reshape(obs.n_frames, -1)], axis=1)
-        rp, rm = deleted_residuals(proj, r, obs.n_pots)
+        rp, rm = deleted_from_others(obs, params, sig, q, r)
         pots, markers = obs.pots - rp, obs.markers - rm
     mae = {}
     for g in sorted(tgt):
