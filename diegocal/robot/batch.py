@@ -200,11 +200,13 @@ class BatchKinematics:
     def twists(self, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
         """Joint twists in the base frame: ω (B, n, 3) and v (B, n, 3), so that a point x on a
         link the joint moves has velocity ``v + ω × x`` per unit joint speed (eq. 2.23)."""
-        xi = self._twists(poses)
+        xi = self.twist_rows(poses)
         return xi[:3].transpose(1, 2, 0), xi[3:].transpose(1, 2, 0)
 
-    def _twists(self, poses: Poses) -> np.ndarray:
-        """Twists component-major: (6, B, n) = (ω_x, ω_y, ω_z, v_x, v_y, v_z)."""
+    def twist_rows(self, poses: Poses) -> np.ndarray:
+        """Twists component-major: (6, B, n) = (ω_x, ω_y, ω_z, v_x, v_y, v_z). The point sums
+        below take them as ``xi`` when a caller keeps them (STAC re-uses one forward kinematics
+        per q for several steps)."""
         a, o = poses.axis, poses.p
         xi = np.empty((6, *a.shape[:2]))
         for i in range(3):
@@ -250,13 +252,14 @@ class BatchKinematics:
         return x, J
 
     def points_normal(
-        self, poses: Poses, x: np.ndarray, links, w: np.ndarray, f: np.ndarray
+        self, poses: Poses | None, x: np.ndarray, links, w: np.ndarray, f: np.ndarray, xi: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Gauss-Newton sums over points without their Jacobians J_m (3, n) (eq. 2.23).
 
         x : (B, N, 3) points in the base frame, m, on ``links`` (N,); w : (B, N) weights;
-        f : (B, N, 3) per-point vectors. Returns ``Σ_m w_m J_mᵀ J_m`` (B, n, n) and
-        ``Σ_m J_mᵀ f_m`` (B, n), accumulated as point masses per joint (module docstring).
+        f : (B, N, 3) per-point vectors; xi : the twists (6, B, n) of :meth:`twist_rows`, instead
+        of ``poses``. Returns ``Σ_m w_m J_mᵀ J_m`` (B, n, n) and ``Σ_m J_mᵀ f_m`` (B, n),
+        accumulated as point masses per joint (module docstring).
         """
         st = self._points_structure(links)
         B, N = x.shape[:2]
@@ -273,7 +276,7 @@ class BatchKinematics:
             np.multiply(xs[j], fs[k], out=mom[13 + i])
             mom[13 + i] -= xs[k] * fs[j]
         acc = (mom.reshape(16 * B, N) @ st.D).reshape(16, B, self.n)  # summed over the points each joint moves
-        xi = self._twists(poses)
+        xi = self.twist_rows(poses) if xi is None else xi
         om, v = xi[:3], xi[3:]
         mu, c = acc[0], acc[1:4]
         xx, yy, zz, xy, xz, yz = acc[4:10]
@@ -293,20 +296,26 @@ class BatchKinematics:
         g = (om * acc[13:16]).sum(0) + (v * acc[10:13]).sum(0)  # ξ_k · Σ (x × f, f)
         return H, g * st.sign_joint
 
-    def points_velocity(self, poses: Poses, x: np.ndarray, links, u: np.ndarray) -> np.ndarray:
-        """J_m u (B, N, 3) for points x (B, N, 3) on ``links`` and joint vectors u (B, n)."""
+    def points_velocity(
+        self, poses: Poses | None, x: np.ndarray, links, u: np.ndarray, xi: np.ndarray | None = None
+    ) -> np.ndarray:
+        """J_m u (B, N, 3) for points x (B, N, 3) on ``links`` and joint vectors u (B, n); the
+        twists ``xi`` (6, B, n) of :meth:`twist_rows` may stand for ``poses``."""
         st = self._points_structure(links)
         B, N = x.shape[:2]
-        omega, v = self.twists(poses)
-        tw = np.concatenate([omega, v], axis=2) * u[..., None]  # (B, n, 6)
+        xi = self.twist_rows(poses) if xi is None else xi
+        tw = xi.transpose(1, 2, 0) * u[..., None]  # (B, n, 6)
         sw = (np.ascontiguousarray(tw.transpose(0, 2, 1)).reshape(B * 6, self.n) @ st.sign.T).reshape(B, 6, N)
         return sw[:, 3:].transpose(0, 2, 1) + np.cross(sw[:, :3].transpose(0, 2, 1), x)
 
-    def points_project(self, poses: Poses, x: np.ndarray, links, f: np.ndarray, cols=None) -> np.ndarray:
+    def points_project(
+        self, poses: Poses | None, x: np.ndarray, links, f: np.ndarray, cols=None, xi: np.ndarray | None = None
+    ) -> np.ndarray:
         """f_mᵀ J_m (B, N, n): each point's Jacobian projected on a direction f (B, N, 3); only
-        the joints ``cols`` (c,) when given: (B, N, c)."""
+        the joints ``cols`` (c,) when given: (B, N, c). The twists ``xi`` (6, B, n) of
+        :meth:`twist_rows` may stand for ``poses``."""
         st = self._points_structure(links)
-        xi = self._twists(poses)
+        xi = self.twist_rows(poses) if xi is None else xi
         sign = st.sign
         if cols is not None:
             xi, sign = xi[:, :, cols], sign[:, cols]

@@ -28,7 +28,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from diegocal.stac.model import Observation, Params
+from diegocal.stac.model import Observation, Params, State
 from diegocal.stac.qphase import Noise, block_solve, damped, map_batches, normal_equations
 
 
@@ -97,7 +97,7 @@ def _times_q(obs: Observation, params: Params, noise: Noise, ex: dict, u: np.nda
             du[:, obs.linear] = np.einsum("blc,bc->bl", ex["lin"].ds_lin, u[:, obs.sparsity.lin_cols])
         out[:, :P] = ex["wp"] * (du * (params.gain / noise.sig_p) - ex["zp"])
     if noise.use_markers and M:
-        vel = obs.kin.points_velocity(ex["lin"].poses, ex["x"], obs.marker_links, u)  # eq. 2.23
+        vel = obs.kin.points_velocity(None, ex["x"], obs.marker_links, u, xi=ex["lin"].xi)  # eq. 2.23
         out[:, P:] = (ex["wx"][..., None] * (vel @ params.R.T / noise.sig_x - ex["rx"])).reshape(B, -1)
     return out
 
@@ -118,10 +118,10 @@ def _dense_q_jacobian(obs: Observation, params: Params, noise: Noise, q: np.ndar
     return Jq, w
 
 
-def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: slice, stride: int, want_red: bool):
+def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: slice, stride: int, want_red: bool, st):
     """One batch's share of the reduced system: Bᵀ H⁻¹ g − g_θ (Nθ,), the redundancy, and what
     the reduced matrix needs of its frames t ≡ 0 (mod stride)."""
-    H, g, _, (s, Rl, pl), red, ex = normal_equations(obs, params, noise, q, sl, want_red)
+    H, g, _, (s, Rl, pl), red, ex = normal_equations(obs, params, noise, q, sl, want_red, st)
     Hd = damped(H, lam[sl], inplace=True)
     u = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ g
     v = _times_q(obs, params, noise, ex, u)
@@ -143,6 +143,7 @@ def theta_step(
     want_red: bool = False,
     jobs: int = 1,
     damping: float = 0.0,
+    st: State | None = None,
 ) -> tuple[Params, dict, dict]:
     """θ + Δθ from the reduced (Schur) system, the q-phase redundancy per sensor type (when
     ``want_red``; else empty) and the standard errors of θ with q marginalised:
@@ -150,12 +151,13 @@ def theta_step(
     residuals are standardised, so it is the covariance itself); NaN for the entries held fixed.
     ``damping`` μ solves (A + μ diag A) Δθ = b instead (Marquardt: a shorter step, turned towards
     the gradient, after a full one overshot); the standard errors are the undamped ones.
-    Batches of frames run in ``jobs`` threads."""
+    Batches of frames run in ``jobs`` threads; ``st``, the State at ``q``, lends its kept
+    linearisation (:func:`~diegocal.stac.qphase.q_step`)."""
     T, n = q.shape
     P, M = obs.n_pots, obs.n_markers
     N = 2 * P + 3 * M + 6
     stride = max(1, T // max_frames)
-    parts = map_batches(lambda sl: _schur_batch(obs, params, noise, q, lam, sl, stride, want_red), T, batch, jobs)
+    parts = map_batches(lambda sl: _schur_batch(obs, params, noise, q, lam, sl, stride, want_red, st), T, batch, jobs)
     rhs = sum(p[0] for p in parts)
     used = {k: sum(p[1][k] for p in parts) for k in parts[0][1]}
     qp, Hd, wp, wx, s, Rl, pl, valid = (

@@ -53,14 +53,15 @@ class Params:
 @dataclass(frozen=True)
 class Linearisation:
     """The observation model at a batch q (B, n) for Gauss-Newton: s (B, P), Rl (B, M, 3, 3),
-    pl (B, M, 3) as in :class:`State`, the joint ``poses`` (:class:`diegocal.robot.batch.Poses`)
-    and ∂s/∂q of the linear pots ``ds_lin`` (B, L, c) on the joints ``Sparsity.lin_cols`` (c,)
-    (eq. 2.19-2.20; zero on the other joints)."""
+    pl (B, M, 3) as in :class:`State`, the joint twists ``xi`` (6, B, n)
+    (:meth:`diegocal.robot.batch.BatchKinematics.twist_rows`: all the markers' sums need of the
+    joint poses) and ∂s/∂q of the linear pots ``ds_lin`` (B, L, c) on the joints
+    ``Sparsity.lin_cols`` (c,) (eq. 2.19-2.20; zero on the other joints)."""
 
     s: np.ndarray
     Rl: np.ndarray
     pl: np.ndarray
-    poses: object
+    xi: np.ndarray
     ds_lin: np.ndarray
 
 
@@ -82,11 +83,24 @@ class Sparsity:
 
 @dataclass(frozen=True)
 class State:
-    """The p-phase's input at fixed q: s (T, P), marker link poses Rl (T, M, 3, 3), pl (T, M, 3)."""
+    """The p-phase's input at fixed q: s (T, P), marker link poses Rl (T, M, 3, 3), pl (T, M, 3).
+
+    The q-phase also keeps the rest of its :class:`Linearisation` at that q, the joint twists
+    ``xi`` (6, T, n) and ``ds_lin`` (T, L, c) (None where not kept): the joint step and the next
+    q-step linearise at the same q, so one forward kinematics per q serves them all.
+    """
 
     s: np.ndarray
     Rl: np.ndarray
     pl: np.ndarray
+    xi: np.ndarray | None = None
+    ds_lin: np.ndarray | None = None
+
+    def linearisation(self, sl: slice) -> Linearisation | None:
+        """The Linearisation of frames ``sl`` when it is kept, else None."""
+        if self.xi is None:
+            return None
+        return Linearisation(self.s[sl], self.Rl[sl], self.pl[sl], self.xi[:, sl], self.ds_lin[sl])
 
 
 class Observation(Observability):
@@ -249,6 +263,7 @@ class Observation(Observability):
         """s, marker link poses and joint poses at q (B, n), with ∂s/∂q of the linear pots
         (eq. 2.19-2.20: the unit vector between the anchors times their relative Jacobian)."""
         poses = self.kin.joint_poses(q)
+        xi = self.kin.twist_rows(poses)
         s = q @ self.A.T
         cols = self.sparsity.lin_cols
         ds_lin = np.zeros((q.shape[0], len(self.linear), len(cols)))
@@ -259,10 +274,10 @@ class Observation(Observability):
             s[:, self.linear] = length  # eq. 2.19-2.20
             u = d / length[..., None]
             f = np.stack([-u, u], axis=2).reshape(x.shape)  # ∂|d|/∂q = uᵀ (J_1 − J_0)
-            proj = self.kin.points_project(poses, x, self.anchors.links, f, cols)
+            proj = self.kin.points_project(None, x, self.anchors.links, f, cols, xi=xi)
             ds_lin = proj[:, 0::2] + proj[:, 1::2]
         Rl, pl = self.kin.link_poses(poses, self.marker_links)
-        return Linearisation(s, Rl, pl, poses, ds_lin)
+        return Linearisation(s, Rl, pl, xi, ds_lin)
 
     def state(self, q: np.ndarray, batch: int = 2000) -> State:
         """s(q) and link poses for every frame, in batches."""

@@ -71,18 +71,23 @@ def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarra
     return c
 
 
-def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarray, sl: slice, want_red: bool = True):
+def normal_equations(
+    obs: Observation, params: Params, noise: Noise, q: np.ndarray, sl: slice, want_red: bool = True, st=None
+):
     """JᵀWJ (B, n, n), gradient JᵀW r (B, n), per-frame cost (B,), the evaluation at q[sl], the
     redundancy of each sensor type (dict, summed over the batch; see :func:`redundancy`) and the
     linearisation with the robust weights (dict, for the joint step).
 
     J is eq. 2.22 (pots) and eq. 2.23 (markers), never formed densely: rotary/encoder/tendon pots
     have the constant ∂s/∂q = A, the linear pots' rows are few, and the markers' sums come from
-    the joint twists (:meth:`diegocal.robot.batch.BatchKinematics.points_normal`).
+    the joint twists (:meth:`diegocal.robot.batch.BatchKinematics.points_normal`). ``st``: the
+    :class:`State` at this very q (T frames); its kept linearisation, if any, replaces the
+    forward kinematics.
     """
     q = q[sl]
     pots, markers, valid = obs.pots[sl], obs.markers[sl], obs.valid[sl]
-    lin = obs.linearise(q)
+    lin = st.linearisation(sl) if st is not None else None
+    lin = obs.linearise(q) if lin is None else lin
     s, Rl, pl = lin.s, lin.Rl, lin.pl
     zp, zx, rx = residuals(obs, params, noise, s, Rl, pl, pots, markers, valid)
     B, n = q.shape
@@ -113,7 +118,7 @@ def normal_equations(obs: Observation, params: Params, noise: Noise, q: np.ndarr
         wx = irls_weight(zx, noise.loss, noise.huber) * valid
         x = (Rl @ params.xyz[:, :, None])[..., 0] + pl  # markers in the base frame (eq. 2.11)
         f = (wx / noise.sig_x)[..., None] * (rx @ params.R)  # w Rᵀ z / σ_x (eq. 2.23 with R)
-        Hm, gm = obs.kin.points_normal(lin.poses, x, obs.marker_links, wx / noise.sig_x**2, f)
+        Hm, gm = obs.kin.points_normal(None, x, obs.marker_links, wx / noise.sig_x**2, f, xi=lin.xi)
         parts[MARKERS] = None  # the rest of H
         H += Hm
         g += gm
@@ -180,24 +185,27 @@ def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     return out
 
 
-def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_red, out) -> dict:
-    """One LM step on the frames ``sl``, written into ``out`` (q, λ, s, Rl, pl, cost over all
-    frames); returns the batch's redundancy."""
+def _step_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_red, out, st) -> dict:
+    """One LM step on the frames ``sl``, written into ``out`` (q, λ, s, Rl, pl, twists, ∂s/∂q of
+    the linear pots, cost over all frames; the linearisation at the new q, kept for the next
+    step); returns the batch's redundancy."""
     lo, hi = obs.lower, obs.upper
-    H, g, c0, (s, Rl, pl), red, _ = normal_equations(obs, params, noise, q, sl, want_red)
+    H, g, c0, (s, Rl, pl), red, ex = normal_equations(obs, params, noise, q, sl, want_red, st)
     q, lam = q[sl], lam[sl]
     pots, markers, valid = obs.pots[sl], obs.markers[sl], obs.valid[sl]
     delta = -block_solve(damped(H, lam, inplace=True), g, obs.sparsity.blocks)
     cand = np.clip(q + delta, lo, hi)  # projection onto the joint limits
-    s1, _, Rl1, pl1, _ = obs.evaluate(cand)
-    c1 = frame_cost(obs, params, noise, s1, Rl1, pl1, pots, markers, valid)
+    new = obs.linearise(cand)
+    c1 = frame_cost(obs, params, noise, new.s, new.Rl, new.pl, pots, markers, valid)
     ok = c1 <= c0  # accept: λ/3; reject: λ x 4, keep q
-    q_out, lam_out, s_out, Rl_out, pl_out, c_out = (x[sl] for x in out)
+    q_out, lam_out, s_out, Rl_out, pl_out, ds_out, c_out = (x[sl] for x in out[:5] + out[6:])
     q_out[...] = np.where(ok[:, None], cand, q)
     lam_out[...] = np.where(ok, np.maximum(lam / 3.0, 1e-7), np.minimum(lam * 4.0, 1e7))
-    s_out[...] = np.where(ok[:, None], s1, s)
-    Rl_out[...] = np.where(ok[:, None, None, None], Rl1, Rl)
-    pl_out[...] = np.where(ok[:, None, None], pl1, pl)
+    s_out[...] = np.where(ok[:, None], new.s, s)
+    Rl_out[...] = np.where(ok[:, None, None, None], new.Rl, Rl)
+    pl_out[...] = np.where(ok[:, None, None], new.pl, pl)
+    out[5][:, sl] = np.where(ok[:, None], new.xi, ex["lin"].xi)
+    ds_out[...] = np.where(ok[:, None, None], new.ds_lin, ex["lin"].ds_lin)
     c_out[...] = np.where(ok, c1, c0)
     return red
 
@@ -211,24 +219,29 @@ def q_step(
     batch: int = 250,
     jobs: int = 1,
     want_red: bool = True,
+    st: State | None = None,
 ):
     """One LM step on every frame.
 
-    Returns (q (T, n), λ (T,), State at the new q, cost (T,), redundancy {group: Σ tr_g} at
-    the old q; empty unless ``want_red``: it costs one n x n inverse per frame).
+    Returns (q (T, n), λ (T,), State at the new q (with its linearisation kept), cost (T,),
+    redundancy {group: Σ tr_g} at the old q; empty unless ``want_red``: it costs one n x n
+    inverse per frame). ``st``: the State at ``q``, whose kept linearisation saves the forward
+    kinematics at ``q``.
     """
-    T, M = q.shape[0], obs.n_markers
+    T, M, n = q.shape[0], obs.n_markers, q.shape[1]
     out = (
         np.empty_like(q),
         np.empty_like(lam),
         np.empty((T, obs.n_pots)),
         np.empty((T, M, 3, 3)),
         np.empty((T, M, 3)),
+        np.empty((6, T, n)),
+        np.empty((T, len(obs.linear), len(obs.sparsity.lin_cols))),
         np.empty(T),
     )
-    reds = map_batches(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red, out), T, batch, jobs)
+    reds = map_batches(lambda sl: _step_batch(obs, params, noise, q, lam, sl, want_red, out, st), T, batch, jobs)
     red = {g: sum(r[g] for r in reds) for g in reds[0]}
-    return out[0], out[1], State(*out[2:5]), out[5], red
+    return out[0], out[1], State(*out[2:7]), out[7], red
 
 
 def group_sigma(obs: Observation, params: Params, st: State, used: dict | None = None) -> dict:

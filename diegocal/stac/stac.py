@@ -132,9 +132,9 @@ def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.nd
         scale = np.where(use, np.maximum(np.std(obs.pots, axis=0), 1e-6), np.inf)
         noise = Noise(scale, 1.0, use_markers=False)
         lam = np.full(obs.n_frames, 1e-2)
-        prev = np.inf
+        prev, st = np.inf, None
         for _ in range(10):
-            q, lam, _, cost, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
+            q, lam, st, cost, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, False, st)
             if cost.sum() > 0.99 * prev:
                 break
             prev = cost.sum()
@@ -366,9 +366,9 @@ def _alternate(
         stepped = False
         if options.joint and bfgs is None and obs.n_pots:
             params_j, _, se_joint = theta_step(
-                obs, params, noise, q, lam, options.batch_size, jobs=options.jobs, damping=mu
+                obs, params, noise, q, lam, options.batch_size, jobs=options.jobs, damping=mu, st=st
             )
-            q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red)
+            q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red, st)
             try:
                 ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
                 cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
@@ -386,7 +386,7 @@ def _alternate(
             else:
                 steps = options.q_steps if options.schedule == "lm-iter" else 30
                 for _ in range(steps):
-                    q, lam, st, _, used = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, red)
+                    q, lam, st, _, used = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, red, st)
                     if options.schedule == "lm-batch" and np.all(lam >= 1e3):
                         break
             ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
