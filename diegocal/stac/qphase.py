@@ -173,15 +173,24 @@ def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     B, n = H.shape[:2]
     blocks = blocks if blocks is not None else (np.arange(n),)
     eps = 1e-9 * (1.0 + np.einsum("bii->b", H))
-    Hi = np.zeros((B, n, n))
-    for ix in blocks:
+    out = {g: 0.0 for g, p in parts.items() if p is not None}
+    ridge = 0.0  # Σ_t ε_t tr(H_t⁻¹)
+    pos = np.empty(n, dtype=int)
+    for ix in blocks:  # H⁻¹ block by block (it is block diagonal too); never the full (B, n, n)
         Hb = H[:, ix[:, None], ix]
         np.einsum("bii->bi", Hb)[...] += eps[:, None]
-        Hi[:, ix[:, None], ix] = np.linalg.inv(Hb)
-    flat = Hi.reshape(B, n * n)
-    out = {g: float(np.vdot(flat[:, p[0]], p[1])) for g, p in parts.items() if p is not None}  # H_g, Hi symmetric
+        Hi = np.linalg.inv(Hb)
+        k = len(ix)
+        ridge += float(eps @ np.einsum("bii->b", Hi))
+        pos[:] = -1
+        pos[ix] = np.arange(k)
+        flat = Hi.reshape(B, k * k)
+        for g, (U, vals) in ((g, p) for g, p in parts.items() if p is not None):
+            r, c = pos[U // n], pos[U % n]
+            inside = r >= 0  # H_g's entries in this block (an entry never straddles two)
+            out[g] += float(np.vdot(flat[:, r[inside] * k + c[inside]], vals[:, inside]))  # H_g, Hi symmetric
     for g in (g for g, p in parts.items() if p is None):
-        out[g] = B * n - float(eps @ np.einsum("bii->b", Hi)) - sum(out.values())
+        out[g] = B * n - ridge - sum(out.values())
     return out
 
 
