@@ -95,7 +95,6 @@ from diegocal.sgp.terms import (
     proposals,
     term_columns,
 )
-from diegocal.terms import Term
 
 UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
@@ -409,10 +408,38 @@ class DynamicsAdapter:
         context = {j: tuple(f"q.{k}" for k in self.robot.joint_names if k != j) for j in self.joints}
         return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order, context)
 
-    def _cols(self, term: Term) -> dict:
-        X = columns(term, self.robot, self.q, self.qd, self.qdd)
-        joints = self.joints if term.cause == "payload" else joints_of(term)  # a payload loads every joint
-        return {j: X[:, self.robot.joint_index(j)] for j in joints if j in self.row_of}
+    def _stacked(self, props) -> tuple[dict, list]:
+        """The proposals' columns side by side per joint: joint row -> (T, w) float64, and per
+        proposal, joint row -> its slice of those columns (a payload loads every joint). A term's
+        own columns are computed :data:`SAMPLES` at a time (they are per sample), written in place."""
+        slots, width = [], {}
+        for p in props:
+            if p.columns is not None:
+                size = {self.row_of[j]: int(np.shape(c)[1]) for j, c in p.columns.items()}
+            else:
+                joints = self.joints if p.term.cause == "payload" else joints_of(p.term)
+                size = {self.row_of[j]: len(p.term.linear) for j in joints if j in self.row_of}
+            slot = {}
+            for r, kc in size.items():
+                slot[r] = slice(width.get(r, 0), width.get(r, 0) + kc)
+                width[r] = slot[r].stop
+            slots.append(slot)
+        T = len(self.time)
+        B = {r: np.empty((T, w)) for r, w in width.items()}
+        own = []
+        for p, slot in zip(props, slots, strict=True):
+            if p.columns is None:
+                own.append((p.term, slot))
+                continue
+            for j, c in p.columns.items():
+                B[self.row_of[j]][:, slot[self.row_of[j]]] = c
+        for i in range(0, T, SAMPLES):
+            sl = slice(i, i + SAMPLES)
+            for term, slot in own:
+                X = columns(term, self.robot, self.q[sl], self.qd[sl], self.qdd[sl])
+                for r, cs in slot.items():
+                    B[r][sl, cs] = X[:, self.rows[r]]
+        return B, slots
 
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
         """Every cause the model lacks, as its behaviour proposes it (:func:`diegocal.sgp.terms.
@@ -434,15 +461,13 @@ class DynamicsAdapter:
             self.inertia,
         )
         props = proposals(ctx)
-        cols = []
-        for p in props:  # a joint's (T, kc) float64, contiguous, projected in place
-            given = p.columns if p.columns is not None else self._cols(p.term)
-            cols.append({self.row_of[j]: np.ascontiguousarray(c, float) for j, c in given.items()})
-        left = project(self, fitted, train, cols)
+        B, slots = self._stacked(props)
+        props = [(p.term, p.family) for p in props]  # a lag's own columns are in B now
+        left = project(self, fitted, train, B, slots)
         out = []
-        for p, c, f in zip(props, cols, left, strict=True):
-            if f > SPAN_TOL:
-                out.append(Candidate(p.term, {self.joints[r]: x for r, x in c.items()}, family=p.family))
+        for (term, family), slot, f in zip(props, slots, left, strict=True):
+            if f > SPAN_TOL:  # each column a view of its joint's block
+                out.append(Candidate(term, {self.joints[r]: B[r][:, sl] for r, sl in slot.items()}, family=family))
         return out
 
     # ------------------------------------------------------------------ scores and output

@@ -166,59 +166,59 @@ def feature_chunks(model, fit, samples):
         yield rows, model.features(fit.q[rows], fit.qd[rows], fit.qdd[rows], fit.time[rows])
 
 
-def project(fit, fitted, train, cols: list[dict]) -> np.ndarray:
-    """Each candidate's columns (``cols``: joint row -> (T, kc) float64, changed in place) minus
-    their least-squares fit by the fitted model's columns X on every joint's training rows, rows
-    weighted as the fit weighs them (1 / σ_joint, so that Frisch-Waugh-Lovell is exact):
-    ``c − X pinv(X) c``, with ``pinv(X) = pinv(R)ᵀ... = pinv(R) pinv(R)ᵀ Xᵀ`` from the factor R of
-    the weighted X (``XᵀX = RᵀR``), so that X is never held: one pass over the training samples
-    for R and every candidate's Xᵀc, one over every sample to subtract. Returns (n,) the fraction
-    of each candidate's weighted training norm left (0: it lies in the model's span)."""
+def project(fit, fitted, train, B: dict, slots: list) -> np.ndarray:
+    """Every candidate's columns minus their least-squares fit by the fitted model's columns X on
+    every joint's training rows, rows weighted as the fit weighs them (1 / σ_joint, so that
+    Frisch-Waugh-Lovell is exact): ``c − X pinv(X) c``, with ``pinv(X) = pinv(R) pinv(R)ᵀ Xᵀ``
+    from the factor R of the weighted X (``XᵀX = RᵀR``, the same singular values), so that X is
+    never held: one pass over the training samples for R and every Xᵀc, one over every sample to
+    subtract, a chunk at a time.
+
+    ``B``: joint row -> (T, w) float64, the candidates' columns of that joint side by side,
+    projected in place; ``slots``: per candidate, joint row -> its slice of B's columns. Returns
+    (n,) the fraction of each candidate's weighted training norm left (0: in the model's span)."""
     wt = 1.0 / fitted.sigma
     model = fitted.model
     P = fitted.w.size
-    n = len(cols)
-    by_row: dict[int, list] = {}
-    for i, c in enumerate(cols):
-        for r, x in c.items():
-            by_row.setdefault(r, []).append((i, x))
-    xtc = [np.zeros((P, next(iter(c.values())).shape[1])) if c else np.zeros((P, 0)) for c in cols]
-    norm = np.zeros(n)
+    n = len(slots)
+    xtc = {r: np.zeros((P, b.shape[1])) for r, b in B.items()}
+    sq = {r: np.zeros(b.shape[1]) for r, b in B.items()}
     ls = TallLstsq(P)
-    idx = np.flatnonzero(train)
-    for rows, A in feature_chunks(model, fit, idx):
+    for rows, A in feature_chunks(model, fit, np.flatnonzero(train)):
         Aw = A * wt[None, :, None]
         ls.add(Aw.reshape(-1, P), np.zeros(Aw.shape[0] * Aw.shape[1]))
-        for r, group in by_row.items():
-            Cr = np.concatenate([x[rows] for _, x in group], axis=1) * wt[r]
-            M = np.ascontiguousarray(Aw[:, r]).T @ Cr
-            at = 0
-            for i, x in group:
-                kc = x.shape[1]
-                xtc[i] += M[:, at : at + kc]
-                norm[i] += float(np.sum(Cr[:, at : at + kc] ** 2))
-                at += kc
+        for r, b in B.items():
+            c = b[rows] * wt[r]
+            xtc[r] += np.ascontiguousarray(Aw[:, r]).T @ c
+            sq[r] += np.einsum("ij,ij->j", c, c)
     R = np.zeros((P, P))
     R[: min(len(ls.R), P)] = ls.R[:P, :P]
-    Rp = np.linalg.pinv(R)  # pinv(X) = pinv(R) pinv(R)ᵀ Xᵀ: the singular values of R are X's
-    beta = [Rp @ (Rp.T @ g) for g in xtc]
-    explained = np.array([float(np.sum(g * b)) for g, b in zip(xtc, beta, strict=True)])  # ‖X β‖² = cᵀ X β
+    Rp = np.linalg.pinv(R)
+    beta, norm, explained = [], np.zeros(n), np.zeros(n)
+    Beta = {r: np.zeros((P, b.shape[1])) for r, b in B.items()}
+    for i, s in enumerate(slots):
+        g = sum(xtc[r][:, sl] for r, sl in s.items()) if s else np.zeros((P, 0))
+        b = Rp @ (Rp.T @ g)  # the candidate's fit by X: one β over all its joints' rows
+        beta.append(b)
+        norm[i] = sum(float(np.sum(sq[r][sl])) for r, sl in s.items())
+        explained[i] = float(np.sum(g * b))  # ‖X β‖² = cᵀ X β
+        for r, sl in s.items():
+            Beta[r][:, sl] = b
     frac = np.sqrt(np.maximum(norm - explained, 0.0) / np.where(norm > 0, norm, 1.0))
     near = [i for i in range(n) if norm[i] > 0 and frac[i] < NEAR_SPAN]
     left = np.zeros(n)
+    is_train = np.asarray(train, bool)
     for rows, A in feature_chunks(model, fit, np.arange(len(fit.time))):
-        tr = np.asarray(train, bool)[rows]
+        tr = is_train[rows]
         if near and tr.any():  # near the span, the difference of norms has lost its digits
             Aw = A[tr] * wt[None, :, None]
             for i in near:
                 L = Aw @ beta[i]  # (m, k, kc)
-                for r, x in cols[i].items():
-                    L[:, r] -= x[rows[tr]] * wt[r]
+                for r, sl in slots[i].items():
+                    L[:, r] -= B[r][rows[tr], sl] * wt[r]
                 left[i] += float(np.sum(L * L))
-        for r, group in by_row.items():
-            Ar = np.ascontiguousarray(A[:, r])
-            for i, x in group:
-                x[rows] -= Ar @ beta[i]
+        for r, b in B.items():
+            b[rows] -= np.ascontiguousarray(A[:, r]) @ Beta[r]
     for i in near:
         frac[i] = np.sqrt(left[i] / norm[i])
     frac[norm <= 0] = 0.0
