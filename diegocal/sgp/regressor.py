@@ -88,12 +88,12 @@ def base_regressor(robot, q, qd, qdd, base: BaseParameters, friction=FRICTION_KI
     by default). Returns (T, k, r); ``F[t] @ w_base`` is the torque of those joints in N·m.
     """
     q, qd, qdd = (robot.check_q(x) for x in (q, qd, qdd))
-    k = robot.n_joints if rows is None else len(rows)
-    out = np.empty((q.shape[0], k, base.n_base))
+    joints = np.arange(robot.n_joints) if rows is None else np.asarray(rows, int)
+    out = np.empty((q.shape[0], joints.size, base.n_base))
+    pick = (joints[:, None], base.independent[None, :])  # base.project of those rows, one gather
     for i in range(0, q.shape[0], CHUNK):
         sl = slice(i, i + CHUNK)
-        F = full_regressor(robot, q[sl], qd[sl], qdd[sl], friction)
-        out[sl] = base.project(F if rows is None else F[:, rows])
+        out[sl] = full_regressor(robot, q[sl], qd[sl], qdd[sl], friction)[:, pick[0], pick[1]]
     return out
 
 
