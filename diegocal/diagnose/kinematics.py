@@ -105,7 +105,6 @@ class KinematicsAdapter:
         self.marker_names = tuple(self.log.stream("markers").names)
         self.time = np.asarray(self.log.time, float)
         self._baseline: KinFit | None = None
-        self._lin = None
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
         self.poses = static_poses(self.log)  # (T,) int on a static-pose log: link geometry is a candidate
         if self.poses is not None:  # foreign poses are a fault the diagnosis writes off, not the fits
@@ -247,11 +246,10 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ candidates
     def _linearise(self, fitted: KinFit) -> Linearised:
-        """The linearisation at a fit (the last one kept: scores and candidates share it)."""
-        if self._lin is None or self._lin[0] is not fitted:
-            self._lin = None  # free the old one first
-            self._lin = (fitted, Linearised.at(fitted, self))
-        return self._lin[1]
+        """The linearisation at a fit, made where it is needed (a step of :meth:`fit`, a round's
+        candidates) and not kept: it holds every frame's J and K, the largest arrays of the
+        diagnosis, and is cheap to remake beside the candidates made from it."""
+        return Linearised.at(fitted, self)
 
     def _term_columns(self, lin: Linearised, fitted: KinFit, term: Term):
         """(columns (T, R, k), None) of a term on the mapped rows, projected out of every frame's q

@@ -39,6 +39,16 @@ CHANNEL_SHARE = 0.02
 #: A direction of a term keeps less than this fraction of its squared norm once the calibration's
 #: span is projected out: the calibration takes it up (not identifiable).
 IDENTIFIABLE = 1e-6
+#: The dtype a candidate's columns are kept in (:meth:`Linearised.channels`): float32. They are
+#: the engine's regressors, held for every candidate of a round (most of the diagnosis's memory),
+#: and only read: projected and orthogonalised in float64 first, each kept to 7 digits, which moves
+#: a least-squares coefficient by ~1e-7 of itself on a well-conditioned design, far inside its
+#: standard error (the engine reads them back as float64).
+COLUMN_DTYPE = np.float32
+#: Projected pot unit columns (T, R) kept at once (:meth:`Linearised.project_pot`): a pot's
+#: candidates and the pots that share its joints, not every pot of the robot (each is a column of
+#: the whole log's rows).
+POT_CACHE = 12
 
 
 @dataclass
@@ -100,12 +110,16 @@ class Linearised:
         return out
 
     def project_pot(self, j: int) -> np.ndarray:
-        """The projected unit column of pot j: (T, R) (computed once per pot)."""
-        if j not in self._pots:
+        """The projected unit column of pot j: (T, R), the last POT_CACHE pots' kept (the candidates
+        of one pot and of the pots sharing its joints are made one after the other)."""
+        out = self._pots.pop(j, None)
+        if out is None:
             out = -np.einsum("trn,tn->tr", self.J, self.K[:, :, j])
             out[:, j] += 1.0
-            self._pots[j] = out
-        return self._pots[j]
+            while len(self._pots) >= POT_CACHE:
+                del self._pots[next(iter(self._pots))]  # the least recently used
+        self._pots[j] = out
+        return out
 
     def residual_rows(self) -> np.ndarray:
         """(T, R) residuals of the mapped rows (reading − prediction)."""
@@ -336,7 +350,8 @@ class Linearised:
 
     def channels(self, C: np.ndarray | None) -> dict | None:
         """Mapped rows (T, R, k) -> {channel: (T, k) pot or (T, 3, k) marker} on the log's
-        channels (slips merged back), channels the columns do not touch left out."""
+        channels (slips merged back), channels the columns do not touch left out; in COLUMN_DTYPE
+        (copies: C itself is not kept alive)."""
         if C is None:
             return None
         P, k = self.P, C.shape[-1]
@@ -346,7 +361,7 @@ class Linearised:
         out = {}
         for i, n in enumerate(self.obs.pot_names):
             if keep[i] and energy[i] > 0:
-                out[n] = np.ascontiguousarray(C[:, i])  # a copy: C itself is not kept alive
+                out[n] = C[:, i].astype(COLUMN_DTYPE)
         mk = C[:, P:].reshape(self.T, -1, 3, k)
         a = self.fitted.applied
         names = list(self.obs.marker_names)
@@ -354,7 +369,7 @@ class Linearised:
             j = P + names.index(n)
             second = [(names.index(v), first) for v, (o, first) in a.slips.items() if o == n]
             if any(keep[x] and energy[x] > 0 for x in [j, *[P + v for v, _ in second]]):
-                col = mk[:, j - P].copy()
+                col = mk[:, j - P].astype(COLUMN_DTYPE)
                 for v, first in second:
                     col[first:] = mk[first:, v]
                 out[n] = col

@@ -23,6 +23,7 @@ from diegocal.evaluate import split_blocks
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
 from diegocal.sim.kinematics import KinematicsOptions, backlash, simulate_kinematics
+from diegocal.stac import loo
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.terms import apply_terms, direction, shift_clock, to_log_markers
 from diegocal.terms import Region, make_term
@@ -194,6 +195,24 @@ def test_deleted_residuals_are_leave_one_sensor_out_refits(baseline, monkeypatch
             got = rp[t, key] if key < lin.P else rm[t, key - lin.P]
             if np.all(np.isfinite(got)):
                 np.testing.assert_allclose(got, loo, rtol=1e-6, atol=1e-9)
+
+
+def test_deleted_residuals_a_batch_at_a_time_equal_the_whole_log(baseline, monkeypatch):
+    """``predict --from others`` takes the deleted residuals a batch of frames at a time
+    (:func:`~diegocal.stac.loo.deleted_from_others`, no frame's J and K held past its batch): the
+    same numbers as every frame's projection at once, with batches that do not divide the log."""
+    adapter, fitted, _ = baseline
+    lin = Linearised.at(fitted, adapter)
+    r = np.random.default_rng(1).normal(0.0, 0.01, (lin.T, lin.R))
+    sigma = loo.sigma_of(fitted.cal)
+    want = loo.deleted_residuals(loo.frame_projection(lin.obs, lin.params, sigma, fitted.q), r, lin.P)
+    monkeypatch.setattr(loo, "BATCH", 37)
+    assert lin.T % 37
+    got = loo.deleted_from_others(lin.obs, lin.params, sigma, fitted.q, r)
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-15)
+    proj = loo.frame_projection(lin.obs, lin.params, sigma, fitted.q)  # filled batch by batch
+    np.testing.assert_allclose(proj.K, lin.K, rtol=1e-12, atol=1e-15)
 
 
 def test_calibration_span_from_its_structure_equals_the_dense_basis(baseline):
