@@ -279,8 +279,16 @@ class Observation(Observability):
         Rl, pl = self.kin.link_poses(poses, self.marker_links)
         return Linearisation(s, Rl, pl, xi, ds_lin)
 
-    def state(self, q: np.ndarray, batch: int = 2000) -> State:
-        """s(q) and link poses for every frame, in batches."""
+    def state(self, q: np.ndarray, batch: int = 2000, keep: bool = False) -> State:
+        """s(q) and link poses for every frame, in batches; with ``keep`` also the rest of the
+        linearisation (twists, ∂s/∂q of the linear pots: :class:`State`) for the q-phase."""
+        if keep:
+            parts = [self.linearise(q[i : i + batch]) for i in range(0, q.shape[0], batch)]
+            return State(
+                *(np.concatenate([getattr(p, k) for p in parts]) for k in ("s", "Rl", "pl")),
+                np.concatenate([p.xi for p in parts], axis=1),
+                np.concatenate([p.ds_lin for p in parts]),
+            )
         parts = [self.evaluate(q[i : i + batch]) for i in range(0, q.shape[0], batch)]
         return State(
             np.concatenate([p[0] for p in parts]),

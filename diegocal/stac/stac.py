@@ -343,7 +343,7 @@ def _alternate(
     iteration to ``history``. A fresh start (``sigma`` None) takes σ from the readings' spread
     and places θ by a first p-phase; a warm start (σ given, θ converged on a subset of the
     frames) may re-estimate σ from its first iteration on."""
-    st = obs.state(q, options.batch_size)
+    st = obs.state(q, options.batch_size, keep=options.schedule != "bfgs")  # the q-phase linearises from it
     warm = sigma is not None
     if not warm:
         sigma = dynamic_range(obs)
