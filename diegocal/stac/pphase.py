@@ -21,6 +21,9 @@ import numpy as np
 from diegocal.errors import NumericalError
 from diegocal.stac.model import Observation, Params, State
 
+#: Frames per chunk of the p-phase's sums over frames: its temporaries stay small on long logs.
+CHUNK = 4096
+
 
 @dataclass(frozen=True)
 class PhaseResult:
@@ -64,19 +67,26 @@ def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inne
     c_b = Σ_m (G_m d_m + Σ w h_p) / Σ w, S = Σ_m (C_m · d_m + D_m) (eq. 2.13-2.14; Σ w x_c = 0),
     and d_m = (Σ_ik R_ki C_m,i·k + G_mᵀ c_b − K_m) / Σ w (eq. 2.17, with T0 = c_x − R c_b).
     """
-    Rl, pl = st.Rl, st.pl
     sw = w.sum(0)  # (M,)
     if sw.sum() <= 0:
         raise NumericalError("Procrustes: no valid marker sample (all occluded?)")
-    x = np.where(w[..., None] > 0, np.nan_to_num(obs.markers), 0.0)
-    cx = np.einsum("tm,tmk->k", w, x) / sw.sum()
-    xc = (x - cx) * w[..., None]  # weighted, centred
+    chunks = [slice(i, i + CHUNK) for i in range(0, w.shape[0], CHUNK)]  # the frames' moments, a chunk at a time
+
+    def seen(sl):  # the markers of frames sl where they weigh, else 0 (occluded: NaN)
+        return np.where(w[sl, :, None] > 0, np.nan_to_num(obs.markers[sl]), 0.0)
+
+    cx = sum(np.einsum("tm,tmk->k", w[sl], seen(sl)) for sl in chunks) / sw.sum()
     M = w.shape[1]
-    G = np.einsum("tm,tmij->mij", w, Rl)
-    Pm = np.einsum("tm,tmi->mi", w, pl)
-    C = np.matmul(Rl.reshape(-1, M, 9).transpose(1, 2, 0), xc.transpose(1, 0, 2)).reshape(M, 3, 3, 3)
-    D = np.matmul(pl.transpose(1, 2, 0), xc.transpose(1, 0, 2))
-    K = np.einsum("tm,tmj->mj", w, np.einsum("tmij,tmi->tmj", Rl, pl))
+    G, Pm, C, D, K = np.zeros((M, 3, 3)), np.zeros((M, 3)), np.zeros((M, 9, 3)), np.zeros((M, 3, 3)), np.zeros((M, 3))
+    for sl in chunks:
+        Rl, pl, wc = st.Rl[sl], st.pl[sl], w[sl]
+        xc = (seen(sl) - cx) * wc[..., None]  # weighted, centred
+        G += np.einsum("tm,tmij->mij", wc, Rl)
+        Pm += np.einsum("tm,tmi->mi", wc, pl)
+        C += np.matmul(Rl.reshape(-1, M, 9).transpose(1, 2, 0), xc.transpose(1, 0, 2))
+        D += np.matmul(pl.transpose(1, 2, 0), xc.transpose(1, 0, 2))
+        K += np.einsum("tm,tmj->mj", wc, np.einsum("tmij,tmi->tmj", Rl, pl))
+    C = C.reshape(M, 3, 3, 3)
     R, d = params.R, params.xyz
     for _ in range(inner):
         cb = (np.einsum("mij,mj->i", G, d) + Pm.sum(0)) / sw.sum()  # eq. 2.13
@@ -85,10 +95,13 @@ def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inne
         d = np.where(sw[:, None] > 0, d_new, d)  # eq. 2.17; a marker with no weight keeps its position
     T = cx - R @ cb  # eq. 2.16
     # standard error of each mean from the spread of the marker in its link frame
-    local = np.einsum("tmji,tmj->tmi", Rl, (x - cx) @ R + cb - pl)  # h_rᵀ (R⁻¹ (x − T0) − h_p)
+    ss = np.zeros((M, 3))
+    for sl in chunks:
+        local = np.einsum("tmji,tmj->tmi", st.Rl[sl], (seen(sl) - cx) @ R + cb - st.pl[sl])  # h_rᵀ (R⁻¹ (x − T0) − h_p)
+        ss += (w[sl, :, None] * (local - d) ** 2).sum(0)
     n = (w > 0).sum(0)
     dof = np.where(n > 1, sw * (n - 1) / np.maximum(n, 1), np.nan)[:, None]  # NaN: a marker seen < 2 times
-    var = (w[..., None] * (local - d) ** 2).sum(0) / np.maximum(dof, 1e-300)
+    var = ss / np.maximum(dof, 1e-300)
     se = np.sqrt(var * (w**2).sum(0)[:, None]) / sw[:, None]
     return R, T, d, se
 

@@ -73,7 +73,7 @@ from diegocal.stac.covariance import covariance, theta_labels
 from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.poses import write_off_foreign_poses
-from diegocal.stac.pphase import p_phase
+from diegocal.stac.pphase import CHUNK, p_phase
 from diegocal.stac.qphase import Noise, group_sigma, irls_weight, pot_sigmas, q_step, residuals, resolvable, rho
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 from diegocal.stac.robust import LOSSES, REDESCENDING
@@ -165,15 +165,22 @@ def weights(obs: Observation, params: Params, st: State, noise: Noise):
 
 
 def total_cost(obs: Observation, params: Params, st: State, noise: Noise, sigma: dict) -> float:
-    """LL of eq. 2.5/2.8 with per-type σ (constants dropped)."""
-    zp, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
+    """LL of eq. 2.5/2.8 with per-type σ (constants dropped); the residuals a chunk of frames at
+    a time (CHUNK: their temporaries stay small on long logs)."""
     c = 0.0
+    for i in range(0, obs.n_frames, CHUNK):
+        sl = slice(i, i + CHUNK)
+        valid = obs.valid[sl]
+        zp, zx, _ = residuals(obs, params, noise, st.s[sl], st.Rl[sl], st.pl[sl], obs.pots[sl], obs.markers[sl], valid)
+        for g in sigma:
+            if g == MARKERS:
+                c += rho(zx[valid], noise.loss, noise.huber).sum()
+            else:
+                z = zp[:, obs.kinds == g]
+                c += 0.5 * (z * z).sum()
     for g, sg in sigma.items():
-        if g == MARKERS:
-            c += rho(zx[obs.valid], noise.loss, noise.huber).sum() + 3 * obs.valid.sum() * np.log(sg)
-        else:
-            z = zp[:, obs.kinds == g]
-            c += 0.5 * (z * z).sum() + z.size * np.log(sg)
+        n = 3 * obs.valid.sum() if g == MARKERS else obs.n_frames * np.sum(obs.kinds == g)
+        c += n * np.log(sg)
     return float(c)
 
 
@@ -379,6 +386,7 @@ def _alternate(
                 mu = mu / 10 if mu > JOINT_DAMPING / 10 else 0.0
             else:  # the full step overshot: damp the next one (and alternate plainly this time)
                 mu = max(10 * mu, JOINT_DAMPING)
+            q_j = st_j = None  # (a rejected step's State goes before the plain q-step makes another)
         if not stepped:
             q_old = q
             if bfgs is not None:
