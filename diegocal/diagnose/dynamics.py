@@ -408,10 +408,9 @@ class DynamicsAdapter:
         context = {j: tuple(f"q.{k}" for k in self.robot.joint_names if k != j) for j in self.joints}
         return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order, context)
 
-    def _stacked(self, props) -> tuple[dict, list]:
-        """The proposals' columns side by side per joint: joint row -> (T, w) float64, and per
-        proposal, joint row -> its slice of those columns (a payload loads every joint). A term's
-        own columns are computed :data:`SAMPLES` at a time (they are per sample), written in place."""
+    def _layout(self, props) -> tuple[dict, list]:
+        """Where the proposals' columns go side by side per joint: joint row -> the width of its
+        block, and per proposal, joint row -> its slice of the block (a payload loads every joint)."""
         slots, width = [], {}
         for p in props:
             if p.columns is not None:
@@ -424,22 +423,26 @@ class DynamicsAdapter:
                 slot[r] = slice(width.get(r, 0), width.get(r, 0) + kc)
                 width[r] = slot[r].stop
             slots.append(slot)
-        T = len(self.time)
-        B = {r: np.empty((T, w)) for r, w in width.items()}
-        own = []
-        for p, slot in zip(props, slots, strict=True):
-            if p.columns is None:
-                own.append((p.term, slot))
-                continue
-            for j, c in p.columns.items():
-                B[self.row_of[j]][:, slot[self.row_of[j]]] = c
-        for i in range(0, T, SAMPLES):
-            sl = slice(i, i + SAMPLES)
+        return width, slots
+
+    def _filler(self, props, width: dict, slots: list):
+        """A function rows (sample indices) -> {joint row: (m, width) float64}: the proposals'
+        columns on those samples, a term's own computed there (its columns are per sample)."""
+        given = [(p.columns, slot) for p, slot in zip(props, slots, strict=True) if p.columns is not None]
+        own = [(p.term, slot) for p, slot in zip(props, slots, strict=True) if p.columns is None]
+
+        def fill(rows) -> dict:
+            out = {r: np.empty((len(rows), w)) for r, w in width.items()}
+            for cols, slot in given:
+                for j, c in cols.items():
+                    out[self.row_of[j]][:, slot[self.row_of[j]]] = c[rows]
             for term, slot in own:
-                X = columns(term, self.robot, self.q[sl], self.qd[sl], self.qdd[sl])
+                X = columns(term, self.robot, self.q[rows], self.qd[rows], self.qdd[rows])
                 for r, cs in slot.items():
-                    B[r][sl, cs] = X[:, self.rows[r]]
-        return B, slots
+                    out[r][:, cs] = X[:, self.rows[r]]
+            return out
+
+        return fill
 
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
         """Every cause the model lacks, as its behaviour proposes it (:func:`diegocal.sgp.terms.
@@ -461,12 +464,12 @@ class DynamicsAdapter:
             self.inertia,
         )
         props = proposals(ctx)
-        B, slots = self._stacked(props)
-        props = [(p.term, p.family) for p in props]  # a lag's own columns are in B now
-        left = project(self, fitted, train, B, slots)
+        width, slots = self._layout(props)
+        B, left = project(self, fitted, train, width, slots, self._filler(props, width, slots))
+        props = [(p.term, p.family) for p in props]
         out = []
         for (term, family), slot, f in zip(props, slots, left, strict=True):
-            if f > SPAN_TOL:  # each column a view of its joint's block
+            if f > SPAN_TOL:  # each column a view of its joint's block (float32)
                 out.append(Candidate(term, {self.joints[r]: B[r][:, sl] for r, sl in slot.items()}, family=family))
         return out
 

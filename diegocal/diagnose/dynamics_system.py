@@ -166,36 +166,39 @@ def feature_chunks(model, fit, samples):
         yield rows, model.features(fit.q[rows], fit.qd[rows], fit.qdd[rows], fit.time[rows])
 
 
-def project(fit, fitted, train, B: dict, slots: list) -> np.ndarray:
+def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, np.ndarray]:
     """Every candidate's columns minus their least-squares fit by the fitted model's columns X on
     every joint's training rows, rows weighted as the fit weighs them (1 / σ_joint, so that
     Frisch-Waugh-Lovell is exact): ``c − X pinv(X) c``, with ``pinv(X) = pinv(R) pinv(R)ᵀ Xᵀ``
     from the factor R of the weighted X (``XᵀX = RᵀR``, the same singular values), so that X is
     never held: one pass over the training samples for R and every Xᵀc, one over every sample to
-    subtract, a chunk at a time.
+    subtract, a chunk at a time, the candidates' columns built in each (``fill``).
 
-    ``B``: joint row -> (T, w) float64, the candidates' columns of that joint side by side,
-    projected in place; ``slots``: per candidate, joint row -> its slice of B's columns. Returns
-    (n,) the fraction of each candidate's weighted training norm left (0: in the model's span)."""
+    ``width``: joint row -> the width of its block of candidates' columns; ``slots``: per
+    candidate, joint row -> its slice of the block; ``fill``: sample indices -> {joint row: (m,
+    width) float64}, those columns there. Returns (joint row -> (T, width), the projected columns
+    **in float32**: computed in float64 and rounded once, a relative 6e-8 of each projected value,
+    which halves the largest array of a round; the fraction of each candidate's weighted training
+    norm left (n,), 0 where it lies in the model's span)."""
     wt = 1.0 / fitted.sigma
     model = fitted.model
     P = fitted.w.size
     n = len(slots)
-    xtc = {r: np.zeros((P, b.shape[1])) for r, b in B.items()}
-    sq = {r: np.zeros(b.shape[1]) for r, b in B.items()}
+    xtc = {r: np.zeros((P, w)) for r, w in width.items()}
+    sq = {r: np.zeros(w) for r, w in width.items()}
     ls = TallLstsq(P)
     for rows, A in feature_chunks(model, fit, np.flatnonzero(train)):
         Aw = A * wt[None, :, None]
         ls.add(Aw.reshape(-1, P), np.zeros(Aw.shape[0] * Aw.shape[1]))
-        for r, b in B.items():
-            c = b[rows] * wt[r]
+        for r, c in fill(rows).items():
+            c *= wt[r]
             xtc[r] += np.ascontiguousarray(Aw[:, r]).T @ c
             sq[r] += np.einsum("ij,ij->j", c, c)
     R = np.zeros((P, P))
     R[: min(len(ls.R), P)] = ls.R[:P, :P]
     Rp = np.linalg.pinv(R)
     beta, norm, explained = [], np.zeros(n), np.zeros(n)
-    Beta = {r: np.zeros((P, b.shape[1])) for r, b in B.items()}
+    Beta = {r: np.zeros((P, w)) for r, w in width.items()}
     for i, s in enumerate(slots):
         g = sum(xtc[r][:, sl] for r, sl in s.items()) if s else np.zeros((P, 0))
         b = Rp @ (Rp.T @ g)  # the candidate's fit by X: one β over all its joints' rows
@@ -208,18 +211,21 @@ def project(fit, fitted, train, B: dict, slots: list) -> np.ndarray:
     near = [i for i in range(n) if norm[i] > 0 and frac[i] < NEAR_SPAN]
     left = np.zeros(n)
     is_train = np.asarray(train, bool)
-    for rows, A in feature_chunks(model, fit, np.arange(len(fit.time))):
+    T = len(fit.time)
+    B = {r: np.empty((T, w), np.float32) for r, w in width.items()}
+    for rows, A in feature_chunks(model, fit, np.arange(T)):
+        C = fill(rows)
         tr = is_train[rows]
         if near and tr.any():  # near the span, the difference of norms has lost its digits
             Aw = A[tr] * wt[None, :, None]
             for i in near:
                 L = Aw @ beta[i]  # (m, k, kc)
                 for r, sl in slots[i].items():
-                    L[:, r] -= B[r][rows[tr], sl] * wt[r]
+                    L[:, r] -= C[r][tr, sl] * wt[r]
                 left[i] += float(np.sum(L * L))
-        for r, b in B.items():
-            b[rows] -= np.ascontiguousarray(A[:, r]) @ Beta[r]
+        for r, c in C.items():
+            B[r][rows] = c - np.ascontiguousarray(A[:, r]) @ Beta[r]
     for i in near:
         frac[i] = np.sqrt(left[i] / norm[i])
     frac[norm <= 0] = 0.0
-    return frac
+    return B, frac
