@@ -119,9 +119,11 @@ class Run:
 
 
 def diegocal(code: Path) -> tuple[list[str], dict]:
-    """The command line and environment that run diegocal from the source tree ``code``."""
+    """The command line and environment that run diegocal from the source tree ``code`` (``-P``: the
+    working directory is not put before ``PYTHONPATH``, so a run from this checkout's root still
+    imports ``code``'s diegocal)."""
     env = {**os.environ, "PYTHONPATH": str(code), "COLUMNS": "100"}
-    return [sys.executable, "-m", "diegocal"], env
+    return [sys.executable, "-P", "-m", "diegocal"], env
 
 
 def tree_rss(pid: int) -> dict[int, float]:
