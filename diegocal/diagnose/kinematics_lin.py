@@ -30,7 +30,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from diegocal.stac.covariance import block_sandwich, standard_errors
-from diegocal.stac.loo import FrameProjection, deleted_residuals, frame_projection, sigma_of
+from diegocal.stac.loo import FrameProjection, deleted_residuals, frame_batches, sigma_of
 from diegocal.stac.model import Observation
 
 #: A candidate acts on the channels that carry at least this share of its largest channel's
@@ -56,8 +56,10 @@ class Linearised:
     """The observation Jacobian and the Schur projector of every frame at a fit (mapped rows:
     P pots, then 3 per mapped marker).
 
-    J : (T, R, n); K : (T, n, R) = (JᵀWJ + D)⁻¹ JᵀW; w : (T, R) weights 1/σ² (0 where occluded);
-    D : (T, n) the tiny diagonal that keeps JᵀWJ invertible
+    J : (T, R, n); Hi : (T, n, n) = (JᵀWJ + D)⁻¹, so that K = Hi JᵀW (T, n, R) (:attr:`K`, formed
+    only where asked: Hi is a third of its size, and every product with K is one with Hi after
+    one with JᵀW); w : (T, R) weights 1/σ² (0 where occluded); D : (T, n) the tiny diagonal that
+    keeps JᵀWJ invertible
     """
 
     adapter: object  # the KinematicsAdapter (its robot)
@@ -65,7 +67,7 @@ class Linearised:
     obs: Observation
     params: object
     J: np.ndarray
-    K: np.ndarray
+    Hi: np.ndarray
     w: np.ndarray
     s: np.ndarray
     Rl: np.ndarray
@@ -96,17 +98,34 @@ class Linearised:
         a = fitted.applied
         obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
         params = obs.params_from(fitted.cal)
-        f = frame_projection(obs, params, sigma_of(fitted.cal), fitted.q)
-        return cls(adapter, fitted, obs, params, f.J, f.K, f.w, f.s, f.Rl, f.sigma_p, f.D)
+        sigma = sigma_of(fitted.cal)
+        T, n = fitted.q.shape
+        R = obs.n_pots + 3 * obs.n_markers
+        J, Hi, w, D = np.empty((T, R, n)), np.empty((T, n, n)), np.empty((T, R)), np.empty((T, n))
+        s, Rl = np.empty((T, obs.n_pots)), np.empty((T, obs.n_markers, 3, 3))
+        sigma_p = None
+        for sl, f in frame_batches(obs, params, sigma, fitted.q):
+            H = (np.swapaxes(f.J, 1, 2) * f.w[:, None, :]) @ f.J
+            H[:, np.arange(n), np.arange(n)] += f.D  # as frame_projection's K
+            J[sl], Hi[sl], w[sl], D[sl], s[sl], Rl[sl], sigma_p = f.J, np.linalg.inv(H), f.w, f.D, f.s, f.Rl, f.sigma_p
+        return cls(adapter, fitted, obs, params, J, Hi, w, s, Rl, sigma_p, D)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(T, n, R) = (JᵀWJ + D)⁻¹ JᵀW of every frame (formed on each call: for tests and
+        :meth:`deleted_residuals`)."""
+        return self.Hi @ (np.swapaxes(self.J, 1, 2) * self.w[:, None, :])
 
     def project(self, C: np.ndarray) -> np.ndarray:
-        """Columns (T, R, k) minus their part along the frame's q directions (module docstring)."""
+        """Columns (T, R, k) minus their part along the frame's q directions (module docstring):
+        c − J Hi Jᵀ W c."""
         if C.shape[-1] > 3:
-            return C - self.J @ (self.K @ C)
+            return C - self.J @ (self.Hi @ (np.swapaxes(self.J, 1, 2) @ (self.w[..., None] * C)))
         out = np.empty(C.shape)
         for k in range(C.shape[-1]):  # a column at a time: einsum beats batched matmul twice over
             c = C[..., k]
-            out[..., k] = c - np.einsum("trn,tn->tr", self.J, np.einsum("tnr,tr->tn", self.K, c))
+            v = np.einsum("tnm,tm->tn", self.Hi, np.einsum("trn,tr->tn", self.J, self.w * c))
+            out[..., k] = c - np.einsum("trn,tn->tr", self.J, v)
         return out
 
     def project_pot(self, j: int) -> np.ndarray:
@@ -114,7 +133,8 @@ class Linearised:
         of one pot and of the pots sharing its joints are made one after the other)."""
         out = self._pots.pop(j, None)
         if out is None:
-            out = -np.einsum("trn,tn->tr", self.J, self.K[:, :, j])
+            kj = np.einsum("tnm,tm->tn", self.Hi, self.J[:, j]) * self.w[:, j, None]  # K[:, :, j]
+            out = -np.einsum("trn,tn->tr", self.J, kj)
             out[:, j] += 1.0
             while len(self._pots) >= POT_CACHE:
                 del self._pots[next(iter(self._pots))]  # the least recently used
@@ -287,7 +307,7 @@ class Linearised:
         for a in range(0, frames.size, 250):
             f = frames[a : a + 250]
             JW = np.swapaxes(self.J[f], 1, 2) * self.w[f][:, None, :]
-            A, B = self._op_basis(JW, f), self._op_basis(self.K[f], f)
+            A, B = self._op_basis(JW, f), self._op_basis(self.Hi[f] @ JW, f)
             G -= A.reshape(-1, k0).T @ B.reshape(-1, k0) + _wgram(B, self.D[f])
         self._cal_gram = 0.5 * (G + G.T)
         self._cal_pinv = np.linalg.pinv(self._cal_gram, rcond=1e-10, hermitian=True)

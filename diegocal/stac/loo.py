@@ -65,11 +65,19 @@ def frame_projection(obs: Observation, params, sigma: dict, q: np.ndarray) -> Fr
         _sigmas(obs, sigma)[0],
         np.empty((T, n)),
     )
-    for i in range(0, T, BATCH):
-        part = _batch_projection(obs, params, sigma, q, slice(i, min(i + BATCH, T)))
+    for sl, part in frame_batches(obs, params, sigma, q):
         for f in ("J", "K", "w", "s", "Rl", "D"):
-            getattr(out, f)[i : i + BATCH] = getattr(part, f)
+            getattr(out, f)[sl] = getattr(part, f)
     return out
+
+
+def frame_batches(obs: Observation, params, sigma: dict, q: np.ndarray):
+    """(frames, :class:`FrameProjection` of those frames) for each BATCH of frames in turn:
+    :func:`frame_projection` without holding the whole log's."""
+    T = obs.n_frames
+    for i in range(0, T, BATCH):
+        sl = slice(i, min(i + BATCH, T))
+        yield sl, _batch_projection(obs, params, sigma, q, sl)
 
 
 def _sigmas(obs: Observation, sigma: dict) -> tuple[np.ndarray, float]:
@@ -110,9 +118,8 @@ def deleted_from_others(obs: Observation, params, sigma: dict, q: np.ndarray, r:
     T, P = obs.n_frames, obs.n_pots
     rp = np.empty((T, P))
     rm = np.empty((T, obs.n_markers, 3))
-    for i in range(0, T, BATCH):
-        sl = slice(i, min(i + BATCH, T))
-        rp[sl], rm[sl] = deleted_residuals(_batch_projection(obs, params, sigma, q, sl), r[sl], P)
+    for sl, part in frame_batches(obs, params, sigma, q):
+        rp[sl], rm[sl] = deleted_residuals(part, r[sl], P)
     return rp, rm
 
 
