@@ -12,6 +12,9 @@ step is projected onto the joint limits, and each frame keeps its own damping λ
 reject: λ·4). J (eq. 2.22 pots, eq. 2.23 markers) is never formed: JᵀWJ and JᵀW r are summed
 from its structure (:func:`normal_equations`), and JᵀWJ is block diagonal over the joints that
 share no sensor (diego: torso, head and arms; each leg), so each block is solved on its own.
+A step ends with the forward kinematics at the q it returns (the candidate's, kept per frame),
+held in the returned :class:`~diegocal.stac.model.State`: the joint step and the next step at
+that q linearise from it, so each q costs one pass of the kinematics.
 Batches of frames (``batch_size``, 250: their arrays stay in cache) run in threads (``jobs``):
 numpy releases the GIL in the heavy products, and no robot model is pickled.
 """
