@@ -142,7 +142,11 @@ class ExactBlock:
         return g_noise, -0.5 * self.kernel.weighted_gradient(self.U, self.U, self.theta, Wm, self.K)
 
     def finalize(self, alpha: np.ndarray, F: np.ndarray) -> None:
-        self.alpha, self.F = alpha, F
+        """Keep what :meth:`predict` needs: α and, with a kernel, F_j (N, m) for F_jᵀ A⁻¹ k_q.
+        Without one only F_j's column count is kept (an empty (0, m) array): F_j is a view of
+        the whole scaled training regressor, which would otherwise live as long as the fit."""
+        self.alpha = alpha
+        self.F = F if self.kernel is not None else np.empty((0, F.shape[1]))
 
     def predict(self, Uq: np.ndarray, variance: bool = True):
         """(GP mean (Nq,), latent Z variance given W (Nq,), F_jᵀ A⁻¹ k_q as (Nq, m)); without
