@@ -104,6 +104,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     for _ in range(options.max_rounds):
+        candidates = tested = None  # the last round's columns go before this round's are built
         res = adapter.residuals(fitted)
         candidates = adapter.candidates(fitted, res, train)
         say(f"testing {len(candidates)} candidate terms{unit}")

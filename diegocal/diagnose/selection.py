@@ -216,9 +216,9 @@ def common_candidates(tested: list[Tested]) -> list[Candidate]:
         K, at, cols, params = sum(sizes), 0, {}, []
         for t, k in zip(members, sizes, strict=True):
             for c, x in t.candidate.columns.items():
-                x = np.asarray(x, float)
+                x = np.asarray(x)  # its own precision (a kinematics candidate's is float32)
                 x = x[..., None] if x.ndim == 1 else x
-                slot = cols.setdefault(c, np.zeros((*x.shape[:-1], K)))
+                slot = cols.setdefault(c, np.zeros((*x.shape[:-1], K), dtype=np.result_type(x.dtype, np.float32)))
                 slot[..., at : at + k] += x
             params += [Parameter(f"{t.term.channel}.{p.name}", p.value, p.unit) for p in t.term.linear]
             at += k
