@@ -131,16 +131,25 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         return U, Y, F
 
     # ------------------------------------------------------------------ fit
-    def _standardise(self, U, Y, F):
-        """Check the arrays, set the scaling attributes; returns U, Y, F, Us, Fs."""
+    def _standardise(self, U, Y, F, overwrite_features: bool = False):
+        """Check the arrays, set the scaling attributes; returns U, Y, F, Us, Fs.
+
+        With ``overwrite_features`` and no kernel on any output (a PR fit, which never reads the
+        unscaled F again), Fs is F scaled in F's own memory, so that a long log's features are
+        held once; the returned F is then Fs too."""
         U, Y, F = self._check(U, Y, F)
         if len(Y) < 3:
             raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
         self.u_mean_, self.u_std_ = input_scaling(U)
-        rms = np.sqrt(np.mean(F**2, axis=(0, 1))) if F.shape[2] else np.zeros(0)
+        N, n, m = F.shape  # the columns' RMS over samples and outputs, without a squared copy of F
+        rms = np.sqrt(np.einsum("tjm,tjm->m", F, F) / (N * n)) if m else np.zeros(0)
         self.f_scale_ = np.where(rms > 0, rms, 1.0)
         self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
         self._raw = (U, F)  # the two-stage candidate's GP scales them as this estimator does
+        if overwrite_features and all(k is None for k in self.kernels) and F.flags.writeable:
+            F = np.divide(F, self.f_scale_, out=F)
+            self._raw = None
+            return U, Y, F, (U - self.u_mean_) / self.u_std_, F
         return (U, Y, F, *self._scale(U, F))
 
     @single_threaded  # outermost: BLAS threads made when its limit is lifted start unflushed
@@ -163,6 +172,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         inducing=None,
         stages: Stages | None = None,
         residual_inducing=None,
+        overwrite_features: bool = False,
     ) -> SemiParametricGP:
         """Learn hyperparameters (unless given) and the posterior.
 
@@ -170,8 +180,10 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         ``hyperparameters``/``inducing`` (scaled inputs: one (M, p) array, or per output an
         (M_j, p) array or None, :func:`~diegocal.sgp.gp.per_output`), ``stages`` and
         ``residual_inducing`` (the two-stage GPs' inducing inputs) restore a saved fit exactly.
+        ``overwrite_features``: where no output has a kernel, F (float64) may be scaled in place
+        and is garbage afterwards (as scipy's ``overwrite_a``): one copy of F less.
         """
-        U, Y, F, Us, Fs = self._standardise(U, Y, F)
+        U, Y, F, Us, Fs = self._standardise(U, Y, F, overwrite_features)
         n = Y.shape[1]
         rng = np.random.default_rng(self.seed)
         self.stages_ = stages

@@ -159,9 +159,12 @@ def robust_w_cov(F, alpha, M_chol, parametric, B_gp=None, blocks: int = ROBUST_B
     F (N, n, m), α (N, n) and B_gp (m, m) in the posterior's coordinates, ``parametric`` (n,)
     bool; returns (m, m).
     """
-    h = np.einsum("tjm,tj->tm", F[:, parametric], alpha[:, parametric])
-    g = min(blocks, len(h))
-    s = np.array([part.sum(axis=0) for part in np.array_split(h, g)])
+    g = min(blocks, len(alpha))
+    s = np.zeros((g, F.shape[2]))
+    for i, part in enumerate(np.array_split(np.arange(len(alpha)), g)):  # s_g by one product per joint
+        rows = slice(part[0], part[-1] + 1) if part.size else slice(0, 0)
+        for j in np.flatnonzero(parametric):  # F[rows, j] a view: no copy of F's joints
+            s[i] += F[rows, j].T @ alpha[rows, j]
     meat = s.T @ s * g / max(g - 1, 1) + (0.0 if B_gp is None else B_gp)
     m_inv = cho_solve((M_chol, True), np.eye(F.shape[2]), check_finite=False)
     return m_inv @ meat @ m_inv
@@ -183,24 +186,36 @@ def parametric_robust_w_cov(post: Posterior, F: np.ndarray, left: np.ndarray) ->
     return robust_w_cov(F, left / post.noise_var, post.M_chol, np.ones(n, bool))
 
 
-def _shared_w(blocks, Y, F, sigma_w2):
-    """Solve the shared-W system. Returns a_j, G_j lists, B, b, M Cholesky, ŵ, α (N, n)."""
+def _shared_w(blocks, Y, F, sigma_w2, keep: bool = True):
+    """Solve the shared-W system. Returns a_j, G_j lists, B, b, M Cholesky, ŵ, α (N, n).
+
+    Without ``keep``, a block with no kernel (A_j = σ_v,j² I) gives G_j None: its
+    ``F_jᵀ A_j⁻¹ F_j`` and α_j are formed from ``F_j / σ_v,j²`` made for that product alone
+    (the numbers the solve gives), so that a PR fit of a long log holds one output's (N, m)
+    array at a time beside F, not n of them."""
     N, n = Y.shape
     m = F.shape[2]
-    a, G = [], []
+    a, G, B, b = [], [], np.zeros((m, m)), np.zeros(m)
     for j, blk in enumerate(blocks):  # one solve per block for [y_j, F_j]
-        S = blk.solve(np.column_stack([Y[:, j], F[:, j]]))
-        a.append(S[:, 0])
-        G.append(S[:, 1:])
-    B = sum(F[:, j].T @ G[j] for j in range(n)) if m else np.zeros((0, 0))
-    b = sum(F[:, j].T @ a[j] for j in range(n)) if m else np.zeros(0)
+        if not keep and getattr(blk, "kernel", None) is None:
+            a.append(Y[:, j] / blk.noise_var)
+            G.append(None)
+            B += F[:, j].T @ (F[:, j] / blk.noise_var)
+        else:
+            S = blk.solve(np.column_stack([Y[:, j], F[:, j]]))
+            a.append(S[:, 0])
+            G.append(S[:, 1:])
+            B += F[:, j].T @ G[j]
+        b += F[:, j].T @ a[j]
     if m:
         Mmat = B + np.eye(m) / sigma_w2
         LM, _ = cholesky(Mmat, "parameter precision Σ_w⁻¹ + Fᵀ A⁻¹ F")
         w = cho_solve((LM, True), b, check_finite=False)
     else:
         LM, w = None, np.zeros(0)
-    alpha = np.column_stack([a[j] - G[j] @ w for j in range(n)])
+    alpha = np.column_stack(
+        [a[j] - (G[j] @ w if G[j] is not None else (F[:, j] / blocks[j].noise_var) @ w) for j in range(n)]
+    )
     return a, G, B, b, LM, w, alpha
 
 
@@ -251,7 +266,7 @@ def fit_posterior(
     noise = np.exp(2.0 * hp.log_sigma_v)
     blocks = _blocks(kernels, U, hp, noise, inducing, jobs=jobs)
     sw2 = np.exp(2.0 * hp.log_sigma_w)
-    _, G, _, _, LM, w, alpha = _shared_w(blocks, Y, F, sw2)
+    _, G, _, _, LM, w, alpha = _shared_w(blocks, Y, F, sw2, keep=False)
     for j, blk in enumerate(blocks):
         blk.finalize(alpha[:, j], F[:, j])
     ll = _log_likelihood(blocks, Y, F.shape[2], sw2, LM, alpha)

@@ -52,6 +52,9 @@ from diegocal.sgp.streams import log_arrays, torque_array, warn_unused  # noqa: 
 from diegocal.sgp.terms import apply_lags, dynamics_terms, is_filter, parameter_labels, term_columns
 
 LOG = logging.getLogger(__name__)
+#: Samples whose prediction is made at once where a fit scores itself (nmse_in_sample_): about
+#: 40 MB of features for a 7-joint arm with 70 columns, however long the log
+PREDICT_SAMPLES = 10_000
 
 
 @dataclass(frozen=True)
@@ -153,17 +156,30 @@ class DynamicsModel:
         (or the states are the training samples); without it, states are no time series (a grid
         of a report) and the columns are those of the torque before the sensor's lag."""
         rows = self.rows if self.joints_without_tau else None
-        F = base_regressor(self.robot, q, qd, qdd, self.base_, self.options.friction, rows)
         if not self.terms:
-            return F
-        extra = term_columns(self.terms, self.robot, q, qd, qdd)[:, self.rows]
-        F = np.concatenate([F, extra], axis=2)
+            return base_regressor(self.robot, q, qd, qdd, self.base_, self.options.friction, rows)
+        F = self._columns(q, qd, qdd, rows)
         if any(is_filter(t) for t in self.terms):
             if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
                 time = self.time_  # the training samples
             if time is not None:
                 F = apply_lags(self.terms, F, time, {j: r for r, j in enumerate(self.joint_names)})
         return F
+
+    def _columns(self, q, qd, qdd, rows) -> np.ndarray:
+        """(T, k, r + K): the base regressor and the terms' columns (per sample, no lag) side by
+        side, written PREDICT_SAMPLES samples at a time into one array: a long log's columns are
+        held once, not as two parts and their concatenation."""
+        r, T = self.base_.n_base, len(q)
+        out = None
+        for i in range(0, max(T, 1), PREDICT_SAMPLES):
+            sl = slice(i, i + PREDICT_SAMPLES)
+            base = base_regressor(self.robot, q[sl], qd[sl], qdd[sl], self.base_, self.options.friction, rows)
+            extra = term_columns(self.terms, self.robot, q[sl], qd[sl], qdd[sl])[:, self.rows]
+            if out is None:
+                out = np.empty((T, base.shape[1], r + extra.shape[2]))
+            out[sl, :, :r], out[sl, :, r:] = base, extra
+        return out
 
     def offset(self, q, qd, qdd, time=None) -> np.ndarray:
         """The fixed part of the prediction, (T, k): the nominal rigid body's torque of the fitted
@@ -281,9 +297,23 @@ class DynamicsModel:
             self.gp_ = self._estimator("gp", T, False).fit(U, resid, F, st.get("hyper"), st.get("inducing"))
         else:
             est = self._estimator(o.kind, T, o.guard_active)
-            self.gp_ = est.fit(U, tau, F, st.get("hyper"), st.get("inducing"), st.get("stages"), st.get("inducing_res"))
-        self.nmse_in_sample_ = nmse(self.predict_arrays(q, qd, qdd, self.time_, variance=False).tau, self.tau_)
+            args = (st.get("hyper"), st.get("inducing"), st.get("stages"), st.get("inducing_res"))
+            self.gp_ = est.fit(U, tau, F, *args, overwrite_features=o.kind == "pr")  # F not read again
+        del F
+        self.nmse_in_sample_ = nmse(self._mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
         return self
+
+    def _mean_in_chunks(self, q, qd, qdd, time) -> np.ndarray:
+        """(T, k) the posterior mean torque at states (T, n) each, PREDICT_SAMPLES at a time, so
+        that a long log's features are never built whole (all at once for a model with a
+        ``torque_lag``, whose filter runs along the whole series)."""
+        if any(is_filter(t) for t in self.terms):
+            return self.predict_arrays(q, qd, qdd, time, variance=False).tau
+        out = np.empty((len(q), len(self.joint_names)))
+        for i in range(0, len(q), PREDICT_SAMPLES):
+            sl = slice(i, i + PREDICT_SAMPLES)
+            out[sl] = self.predict_arrays(q[sl], qd[sl], qdd[sl], None, variance=False).tau  # time: lags only
+        return out
 
     @property
     def _param_est(self) -> SemiParametricGP | None:
