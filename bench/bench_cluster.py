@@ -8,7 +8,7 @@ of two single-threaded worker processes, on the same logs, in the same run.
 The logs are simulated with this checkout (``diegocal simulate``; ``--folder`` keeps and reuses
 them): ``stac`` runs on diego kinematics logs (6,000 frames a minute), ``pneumatic-fit --all`` on
 diego's 76 chambers. Each route's row: wall and CPU seconds of the whole batch (for the cluster, the
-workers' CPU as they report it), the peak resident memory of each worker process (the largest and
+workers' CPU as they report it; user and system apart), the peak resident memory of each worker process (the largest and
 the smallest of the two; for ``--jobs`` sampled from /proc every 0.2 s, for Dask each worker's own
 ``ru_maxrss``), the batch command's own peak, the load when it started, and whether every log's
 output agrees with the ``--jobs`` route's (numbers within a relative 1e-6, words equal).
@@ -40,7 +40,13 @@ COMMANDS = {
     "stac": (("kinematics", "--robot", "diego"), (), ".calib.yaml"),
     "pneumatic-fit": (("pneumatics", "--robot", "diego"), ("--", "--all"), ".pneumatic.yaml"),
 }
-FORMATS = ("{}", "{:.1f}", "{:.1f}", "{:.0f}", "{:.0f}", "{:.0f}", "{:.2f}", "{}")
+#: The cluster routes, as Dask configuration: its defaults (a worker samples its tasks' stacks
+#: every 10 ms for its profile), and the same without the profiler.
+ROUTES = {
+    "LocalCluster 2x1": {},
+    "LocalCluster, no profiler": {"distributed.worker.profile.enabled": False},
+}
+FORMATS = ("{}", "{:.1f}", "{:.1f}", "{:.1f}", "{:.0f}", "{:.0f}", "{:.0f}", "{:.2f}", "{}")
 
 
 def simulate_logs(command: str, n: int, minutes: float, folder: Path) -> None:
@@ -53,9 +59,9 @@ def simulate_logs(command: str, n: int, minutes: float, folder: Path) -> None:
             subprocess.run([*cli, "simulate", *args, "-q"], env=env, check=True, stdout=subprocess.DEVNULL)
 
 
-def run_batch(cmd: list[str], env: dict) -> tuple[float, float, float, dict[int, float], float]:
-    """Run one batch command: wall s, CPU s (the command and its children), its own peak MB, each
-    descendant's peak MB by process id, and the load when it started."""
+def run_batch(cmd: list[str], env: dict) -> tuple[float, tuple, float, dict[int, float], float]:
+    """Run one batch command: wall s, (user, system) CPU s of the command and its children, its own
+    peak MB, each descendant's peak MB by process id, and the load when it started."""
     load, t0 = os.getloadavg()[0], time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     peaks: dict[int, float] = {}
@@ -76,13 +82,13 @@ def run_batch(cmd: list[str], env: dict) -> tuple[float, float, float, dict[int,
     if os.waitstatus_to_exitcode(status) != 0:
         raise RuntimeError(f"{' '.join(cmd[2:])} failed: {err.decode()[-2000:]}")
     peaks.pop(proc.pid, None)
-    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, peaks, load
+    return wall, (usage.ru_utime, usage.ru_stime), usage.ru_maxrss / 1024, peaks, load
 
 
-def worker_usage() -> tuple[float, float]:
-    """On a Dask worker: its CPU seconds and peak resident memory (MB)."""
+def worker_usage() -> tuple[float, float, float]:
+    """On a Dask worker: its user and system CPU seconds and peak resident memory (MB)."""
     u = resource.getrusage(resource.RUSAGE_SELF)
-    return u.ru_utime + u.ru_stime, u.ru_maxrss / 1024
+    return u.ru_utime, u.ru_stime, u.ru_maxrss / 1024
 
 
 def agree(folder_a: Path, folder_b: Path, suffix: str) -> str:
@@ -104,6 +110,7 @@ def main(argv=None) -> int:
     ap.add_argument("--command", choices=sorted(COMMANDS), default="stac", help="The batch's command.")
     ap.add_argument("--folder", type=Path, default=None, help="Keep the simulated logs here and reuse them.")
     args = ap.parse_args(argv)
+    import dask
     from distributed import Client, LocalCluster
 
     simulate_args, extra, suffix = COMMANDS[args.command]
@@ -120,24 +127,28 @@ def main(argv=None) -> int:
         batch = [*cli, "batch", args.command, str(logs), "-o", str(local_out), "-q"]
         wall, cpu, own, peaks, load = run_batch([*batch, "--jobs", "2", *extra], env)
         workers = sorted(peaks.values())[-2:]
-        rows.append(("--jobs 2", wall, cpu, max(workers), min(workers), own, load, "(reference)"))
+        rows.append(("--jobs 2", wall, *cpu, max(workers), min(workers), own, load, "(reference)"))
         print(f"  ... --jobs 2: {wall:.1f} s", file=sys.stderr, flush=True)
 
-        dask_out = tmp / "dask"
-        dask_out.mkdir()
-        with (
-            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-            Client(cluster) as client,
-        ):
-            before = client.run(worker_usage)
-            command = [*cli, "batch", args.command, str(logs), "-o", str(dask_out), "-q"]
-            wall, _, own, _, load = run_batch([*command, "--scheduler", cluster.scheduler_address, *extra], env)
-            after = client.run(worker_usage)
-        cpu = sum(after[w][0] - before[w][0] for w in after)
-        workers = [m for _, m in after.values()]
-        same = agree(local_out, dask_out, suffix)
-        rows.append(("LocalCluster 2x1", wall, cpu, max(workers), min(workers), own, load, same))
-        header = ("route", "wall s", "CPU s", "worker MB max", "worker MB min", "batch MB", "load", "outputs")
+        for route, config in ROUTES.items():
+            dask_out = tmp / route.replace(" ", "_")
+            dask_out.mkdir()
+            with (
+                dask.config.set(config),
+                LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+                Client(cluster) as client,
+            ):
+                before = client.run(worker_usage)
+                command = [*cli, "batch", args.command, str(logs), "-o", str(dask_out), "-q"]
+                wall, _, own, _, load = run_batch([*command, "--scheduler", cluster.scheduler_address, *extra], env)
+                after = client.run(worker_usage)
+            cpu = [sum(after[w][k] - before[w][k] for w in after) for k in (0, 1)]
+            workers = [m for *_, m in after.values()]
+            same = agree(local_out, dask_out, suffix)
+            rows.append((route, wall, *cpu, max(workers), min(workers), own, load, same))
+            print(f"  ... {route}: {wall:.1f} s", file=sys.stderr, flush=True)
+        header = ("route", "wall s", "user s", "system s", "worker MB max", "worker MB min", "batch MB", "load",
+                  "outputs")
         print_table(header, rows, FORMATS)
     return 0
 
