@@ -307,10 +307,19 @@ class PneumaticAdapter:
 #: of P_c - P_r (pressures), in 1/s (leak) or s (delay beyond the sensors' lag); ``*_flow``,
 #: ``*_orifice``: those shapes'. About twice what the 9-parameter model's own error puts into each
 #: term on clean chambers of the simulators (offset, lasting droop, linear leak and delay:
-#: linearised estimates on the project's; the orifice leak and the flow droop: the terms refitted
-#: as candidates are, on both generators). The model cannot tell a smaller effect from its own error at the ends of the
-#: pressure range, where these causes show.
-FLOORS = {"offset": 0.006, "droop": 0.006, "droop_flow": 0.024, "leak": 2.5, "leak_orifice": 1.5, "delay_s": 0.005}
+#: linearised estimates on the project's; the orifice leak and the flow and orifice droops: the
+#: terms refitted as candidates are, on both generators, twice the 99th percentile). The model
+#: cannot tell a smaller effect from its own error at the ends of the pressure range, where these
+#: causes show.
+FLOORS = {
+    "offset": 0.006,
+    "droop": 0.006,
+    "droop_flow": 0.024,
+    "droop_orifice": 0.024,
+    "leak": 2.5,
+    "leak_orifice": 1.5,
+    "delay_s": 0.005,
+}
 
 
 #: The sensors' lag beside a valve delay, in sample steps: (value, standard error). The data cannot
@@ -374,15 +383,17 @@ def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray, floor=None) -> b
 
 
 #: The candidates other than the delay, as (cause, extra): a leak through an orifice or linear in
-#: p - P_r, a supply sag of either shape (the shapes of a cause share a family: the engine tests
-#: the one that fits the training rows better), a pressure offset. See
-#: :mod:`diegocal.pneumatic.terms` for the shapes. The linear leak stays: a large leak (2e-6 m²)
-#: with the valve's own room port fits it better than the orifice, which small leaks fit better.
+#: p - P_r; a supply sag that lasts, or through a line resistance that is linear or an orifice (the
+#: shapes of a cause share a family: the engine tests the one that fits the training rows better);
+#: a pressure offset. See :mod:`diegocal.pneumatic.terms` for the shapes. The linear leak stays: a
+#: large leak (2e-6 m²) with the valve's own room port fits it better than the orifice, which small
+#: leaks fit better.
 SHAPES = (
     ("chamber_leak", {"shape": "orifice"}),
     ("chamber_leak", {}),
     ("supply_droop", {}),
     ("supply_droop", {"shape": "flow"}),
+    ("supply_droop", {"shape": "orifice"}),
     ("pressure_offset", {}),
 )
 

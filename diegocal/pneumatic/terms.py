@@ -300,7 +300,13 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
       ``droop`` is the sag (small-sag limit) when a supply port opened one volt beyond c1 fills a
       chamber half a span below the supply. A restricted line (an orifice before a hose, the second
       generator) shows as this shape, not as the first; where the valve's own parameters (its rate
-      asymmetry c8, the flow saturation) take the slower filling, it is not named.
+      asymmetry c8, the flow saturation) take the slower filling, it is not named;
+    - ``orifice``: the same series form with x = droop w (c_s w), w = f n / (c7 c_s · 1 V) the
+      flow shape's x per unit of droop: the sag of a restriction that is itself an orifice (a kinked
+      tube, a clogged filter): through two orifices in series the pressure drop divides as the
+      squares of their areas (flow ∝ area · √Δp, eq. 4.1 below choking), where linear resistances
+      divide it as their conductances. c_s w is about 1 at one volt beyond c1, so ``droop`` keeps
+      its meaning and unit.
 
     A sag proportional to the flow drawn without the series form (P_c' = P_c - k f n (P_c - p)) was
     tried first on the project's simulator: it fitted worse than a pressure offset.
@@ -308,7 +314,8 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
     c = ev.value("droop")
     f = 0.5 * (1.0 + ev.g)
     at = ev.index["droop"]
-    if term.extra.get("shape") != "flow":
+    shape = term.extra.get("shape")
+    if shape not in ("flow", "orifice"):
         ev.s = ev.s - c * f
         if ev.jacobian:
             ev.ds = ev.ds - 0.5 * c * ev.dg
@@ -316,18 +323,22 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
         return
     c7 = ev.value("c7")
     gap = ev.supply - ev.p
-    w = f * ev.num / (c7 * ev.c_s)  # x per unit of droop
-    x = np.maximum(c * w, 0.0)
+    w = f * ev.num / (c7 * ev.c_s)  # the port's conductance over the line's, per unit of droop
+    power = 2.0 if shape == "orifice" else 1.0
+    weight = (w * ev.c_s) ** (power - 1.0)  # orifice: the port's opening (about 1 at 1 V beyond c1)
+    wp = w * weight  # x per unit of droop
+    x = np.maximum(c * wp, 0.0)
     q = x / (1.0 + x)
-    dq = np.where(c * w > 0.0, 1.0 / (1.0 + x) ** 2, 0.0)
+    dq = np.where(c * wp > 0.0, 1.0 / (1.0 + x) ** 2, 0.0)
     sag = q * gap
     ev.s = ev.s - f * sag
     ev.s_p = f * q if ev.s_p is None else ev.s_p + f * q  # d s / d p
     if ev.jacobian:
         dw = (0.5 * ev.dg * ev.num[..., None] + f[..., None] * ev.dnum) / (c7 * ev.c_s)
         dw[..., ev.index["c7"]] -= w / c7
-        ds = -(0.5 * sag)[..., None] * ev.dg - (f * dq * gap)[..., None] * (c * dw)
-        ds[..., at] -= f * dq * gap * w
+        dwp = (power * weight)[..., None] * dw
+        ds = -(0.5 * sag)[..., None] * ev.dg - (f * dq * gap)[..., None] * (c * dwp)
+        ds[..., at] -= f * dq * gap * wp
         ev.ds = ev.ds + ds
 
 

@@ -179,7 +179,12 @@ SHAPED = (
 )
 
 
-@pytest.mark.parametrize("terms", [SHAPED[:1], SHAPED[1:2], SHAPED[:2] + SHAPED[3:], SHAPED])
+ORIFICE_DROOP = make_term("supply_droop", "c", {"droop": 40.0}, extra={"shape": "orifice"})
+
+
+@pytest.mark.parametrize(
+    "terms", [SHAPED[:1], SHAPED[1:2], SHAPED[:2] + SHAPED[3:], SHAPED, (ORIFICE_DROOP,), (ORIFICE_DROOP, SHAPED[3])]
+)
 def test_jacobian_of_the_orifice_leak_and_the_flow_droop_matches_finite_differences(rng, terms):
     # their flows depend on the pressure at the step's start: the offset's column reads that too
     model = ChamberModel(terms)
@@ -220,3 +225,22 @@ def test_a_valve_delay_adds_to_the_sensor_lag(rng):
     one = ChamberModel(_extra(("valve_delay",)))
     a = both.step(np.concatenate([X, [0.004, 0.016]]), p, u, v, vd, h, *CONSTS, lags, False)[0]
     np.testing.assert_allclose(a, one.step(np.append(X, 0.02), p, u, v, vd, h, *CONSTS, lags, False)[0])
+
+
+def test_an_orifice_droop_divides_the_drop_as_the_squares_of_the_areas(rng):
+    # two restrictions in series: x = droop w for linear ones (flow), droop c_s w² for orifices, w
+    # the port's conductance over the line's; at small sag orifice / flow = c_s w, the port's alone
+    # (the same for any droop) and larger where the port is open wider; none at the supply pressure
+    u = np.array([6.0, 7.0, 7.0])
+    p = np.array([150.0, 150.0, 620.0])
+    b = BASELINE.evaluate(X, p, u, np.zeros(3), np.zeros(3), 0.01, *CONSTS, jacobian=False)
+
+    def sag(shape, droop):
+        term = make_term("supply_droop", "c", {"droop": droop}, extra={"shape": shape})
+        x = np.append(X, droop)
+        return b.s - ChamberModel((term,)).evaluate(x, p, u, np.zeros(3), np.zeros(3), 0.01, *CONSTS,
+                                                     jacobian=False).s
+
+    w = [sag("orifice", d)[:2] / sag("flow", d)[:2] for d in (1e-4, 2e-4)]
+    assert w[0] == pytest.approx(w[1], rel=1e-3) and 0.0 < w[0][0] < w[0][1]
+    assert sag("orifice", 1e-4)[2] == pytest.approx(0.0, abs=1e-9)
