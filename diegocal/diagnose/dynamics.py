@@ -69,7 +69,7 @@ from scipy.optimize import minimize_scalar
 
 from diegocal.causes import MAX_LAG_S
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
-from diegocal.diagnose.dynamics_system import SAMPLES, TrainingSystem, feature_chunks, project
+from diegocal.diagnose.dynamics_system import SAMPLES, TrainingSystem, feature_chunks, filler, layout, project
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
@@ -85,16 +85,7 @@ from diegocal.sgp.model import (
 )
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import save_model
-from diegocal.sgp.terms import (
-    Context,
-    columns,
-    dynamics_terms,
-    is_filter,
-    joints_of,
-    lag_filter,
-    proposals,
-    term_columns,
-)
+from diegocal.sgp.terms import Context, dynamics_terms, is_filter, lag_filter, proposals, term_columns
 
 UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
@@ -408,42 +399,6 @@ class DynamicsAdapter:
         context = {j: tuple(f"q.{k}" for k in self.robot.joint_names if k != j) for j in self.joints}
         return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order, context)
 
-    def _layout(self, props) -> tuple[dict, list]:
-        """Where the proposals' columns go side by side per joint: joint row -> the width of its
-        block, and per proposal, joint row -> its slice of the block (a payload loads every joint)."""
-        slots, width = [], {}
-        for p in props:
-            if p.columns is not None:
-                size = {self.row_of[j]: int(np.shape(c)[1]) for j, c in p.columns.items()}
-            else:
-                joints = self.joints if p.term.cause == "payload" else joints_of(p.term)
-                size = {self.row_of[j]: len(p.term.linear) for j in joints if j in self.row_of}
-            slot = {}
-            for r, kc in size.items():
-                slot[r] = slice(width.get(r, 0), width.get(r, 0) + kc)
-                width[r] = slot[r].stop
-            slots.append(slot)
-        return width, slots
-
-    def _filler(self, props, width: dict, slots: list):
-        """A function rows (sample indices) -> {joint row: (m, width) float64}: the proposals'
-        columns on those samples, a term's own computed there (its columns are per sample)."""
-        given = [(p.columns, slot) for p, slot in zip(props, slots, strict=True) if p.columns is not None]
-        own = [(p.term, slot) for p, slot in zip(props, slots, strict=True) if p.columns is None]
-
-        def fill(rows) -> dict:
-            out = {r: np.empty((len(rows), w)) for r, w in width.items()}
-            for cols, slot in given:
-                for j, c in cols.items():
-                    out[self.row_of[j]][:, slot[self.row_of[j]]] = c[rows]
-            for term, slot in own:
-                X = columns(term, self.robot, self.q[rows], self.qd[rows], self.qdd[rows])
-                for r, cs in slot.items():
-                    out[r][:, cs] = X[:, self.rows[r]]
-            return out
-
-        return fill
-
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
         """Every cause the model lacks, as its behaviour proposes it (:func:`diegocal.sgp.terms.
         proposals`: the registry's dynamics terms), its columns with their fit by the current
@@ -464,8 +419,8 @@ class DynamicsAdapter:
             self.inertia,
         )
         props = proposals(ctx)
-        width, slots = self._layout(props)
-        B, left = project(self, fitted, train, width, slots, self._filler(props, width, slots))
+        width, slots = layout(self, props)
+        B, left = project(self, fitted, train, width, slots, filler(self, props, width, slots))
         props = [(p.term, p.family) for p in props]
         out = []
         for (term, family), slot, f in zip(props, slots, left, strict=True):

@@ -31,7 +31,7 @@ from scipy.linalg import solve_triangular
 
 from diegocal.lstsq import TallLstsq
 from diegocal.sgp.regressor import CHUNK, base_regressor
-from diegocal.sgp.terms import is_filter, term_columns
+from diegocal.sgp.terms import columns, is_filter, joints_of, term_columns
 
 #: Samples per chunk where a fitted model's columns or prediction are rebuilt (about 55 MB of
 #: columns for a 9-joint arm with 80 of them)
@@ -229,3 +229,41 @@ def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, n
         frac[i] = np.sqrt(left[i] / norm[i])
     frac[norm <= 0] = 0.0
     return B, frac
+
+
+def layout(adapter, props) -> tuple[dict, list]:
+    """Where the proposals' columns go side by side per joint of ``adapter`` (a DynamicsAdapter):
+    joint row -> the width of its block, and per proposal, joint row -> its slice of the block (a
+    payload loads every joint)."""
+    slots, width = [], {}
+    for p in props:
+        if p.columns is not None:
+            size = {adapter.row_of[j]: int(np.shape(c)[1]) for j, c in p.columns.items()}
+        else:
+            joints = adapter.joints if p.term.cause == "payload" else joints_of(p.term)
+            size = {adapter.row_of[j]: len(p.term.linear) for j in joints if j in adapter.row_of}
+        slot = {}
+        for r, kc in size.items():
+            slot[r] = slice(width.get(r, 0), width.get(r, 0) + kc)
+            width[r] = slot[r].stop
+        slots.append(slot)
+    return width, slots
+
+def filler(adapter, props, width: dict, slots: list):
+    """A function rows (sample indices) -> {joint row: (m, width) float64}: the proposals'
+    columns on those samples, a term's own computed there (its columns are per sample)."""
+    given = [(p.columns, slot) for p, slot in zip(props, slots, strict=True) if p.columns is not None]
+    own = [(p.term, slot) for p, slot in zip(props, slots, strict=True) if p.columns is None]
+
+    def fill(rows) -> dict:
+        out = {r: np.empty((len(rows), w)) for r, w in width.items()}
+        for cols, slot in given:
+            for j, c in cols.items():
+                out[adapter.row_of[j]][:, slot[adapter.row_of[j]]] = c[rows]
+        for term, slot in own:
+            X = columns(term, adapter.robot, adapter.q[rows], adapter.qd[rows], adapter.qdd[rows])
+            for r, cs in slot.items():
+                out[r][:, cs] = X[:, adapter.rows[r]]
+        return out
+
+    return fill
