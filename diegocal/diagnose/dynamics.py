@@ -69,7 +69,7 @@ from scipy.optimize import minimize_scalar
 
 from diegocal.causes import MAX_LAG_S
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
-from diegocal.diagnose.dynamics_system import SAMPLES, TrainingSystem, feature_chunks, filler, layout, project
+from diegocal.diagnose.dynamics_system import TrainingSystem, feature_chunks, filler, layout, project
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
@@ -224,7 +224,7 @@ class DynamicsAdapter:
         rows = train & np.isfinite(self.tau).all(axis=1)
         model = DynamicsModel(self.robot, self._options(), self.joints, terms)
         model.fit_arrays(self.q[rows], self.qd[rows], self.qdd[rows], self.tau[rows], time=self.time[rows])
-        pred = self._predict(model)
+        pred = model.mean_in_chunks(self.q, self.qd, self.qdd, self.time)
         sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
         w = model.parametric_.values
         se_nan = self._unidentified(model, rows, terms)
@@ -262,17 +262,6 @@ class DynamicsAdapter:
             e = self.tau[train] - (A @ w + self.tau0)[train]
             s = np.sqrt(np.nanmean(e * e, axis=0))
         return np.where(np.isfinite(s) & (s > 0), s, 1.0)
-
-    def _predict(self, model) -> np.ndarray:
-        """(T, k) the model's torque on every sample, :data:`SAMPLES` at a time (all at once with a
-        ``torque_lag``, whose filter runs along the whole log)."""
-        if any(is_filter(t) for t in model.terms):
-            return model.predict_arrays(self.q, self.qd, self.qdd, self.time, variance=False).tau
-        out = np.empty(self.tau.shape)
-        for i in range(0, len(self.time), SAMPLES):
-            sl = slice(i, i + SAMPLES)
-            out[sl] = model.predict_arrays(self.q[sl], self.qd[sl], self.qdd[sl], self.time[sl], variance=False).tau
-        return out
 
     def _options(self, kind: str = "pr") -> SGPOptions:
         """The options of the model the diagnosis fits and saves (``kind`` "sgp": the one that

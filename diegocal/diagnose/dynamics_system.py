@@ -30,12 +30,12 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from diegocal.lstsq import TallLstsq
+from diegocal.sgp.model import PREDICT_SAMPLES
 from diegocal.sgp.regressor import CHUNK, base_regressor
 from diegocal.sgp.terms import columns, is_filter, joints_of, term_columns
 
-#: Samples per chunk where a fitted model's columns or prediction are rebuilt (about 55 MB of
-#: columns for a 9-joint arm with 80 of them)
-SAMPLES = 10_000
+#: Samples per chunk where a fitted model's columns are rebuilt: the model's own prediction chunk
+SAMPLES = PREDICT_SAMPLES
 #: Below this fraction of a candidate's norm left, its projection's fraction is recomputed from the
 #: residual itself (the difference of squared norms keeps about 8 digits of it: enough above)
 NEAR_SPAN = 1e-3

@@ -300,10 +300,10 @@ class DynamicsModel:
             args = (st.get("hyper"), st.get("inducing"), st.get("stages"), st.get("inducing_res"))
             self.gp_ = est.fit(U, tau, F, *args, overwrite_features=o.kind == "pr")  # F not read again
         del F
-        self.nmse_in_sample_ = nmse(self._mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
+        self.nmse_in_sample_ = nmse(self.mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
         return self
 
-    def _mean_in_chunks(self, q, qd, qdd, time) -> np.ndarray:
+    def mean_in_chunks(self, q, qd, qdd, time) -> np.ndarray:
         """(T, k) the posterior mean torque at states (T, n) each, PREDICT_SAMPLES at a time, so
         that a long log's features are never built whole (all at once for a model with a
         ``torque_lag``, whose filter runs along the whole series)."""

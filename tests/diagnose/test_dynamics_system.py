@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import diegocal.diagnose.dynamics as dynamics
 import diegocal.diagnose.dynamics_system as system_module
+import diegocal.sgp.model as sgp_model
 from diegocal.diagnose.dynamics import adapters
 from diegocal.diagnose.dynamics_system import TrainingSystem, project
 from diegocal.robot import load_robot
@@ -40,7 +40,7 @@ def small_chunks(monkeypatch):
     """Chunks of a few samples, so that every chunked route really joins many chunks."""
     monkeypatch.setattr(system_module, "CHUNK", 97)
     monkeypatch.setattr(system_module, "SAMPLES", 211)
-    monkeypatch.setattr(dynamics, "SAMPLES", 211)
+    monkeypatch.setattr(sgp_model, "PREDICT_SAMPLES", 211)  # the model's own chunked prediction
 
 
 def friction_in(adapter, joint: int, low: float, high: float):

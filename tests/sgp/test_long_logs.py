@@ -79,7 +79,7 @@ def test_in_sample_score_in_chunks_equals_one_prediction(arm2, simulate, monkeyp
     monkeypatch.setattr(model_module, "PREDICT_SAMPLES", 7)
     model = DynamicsModel(arm2, SGPOptions(kind="pr"), tau_joints=joints).fit_arrays(q, qd, qdd, tau)
     whole = model.predict_arrays(q, qd, qdd, variance=False).tau
-    np.testing.assert_allclose(model._mean_in_chunks(q, qd, qdd, None), whole, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(model.mean_in_chunks(q, qd, qdd, None), whole, rtol=1e-13, atol=1e-13)
     np.testing.assert_allclose(model.nmse_in_sample_, model_module.nmse(whole, tau), rtol=1e-12)
 
 
