@@ -1,0 +1,71 @@
+"""Binned candidates keep a bin index per sample and build their one-hot columns when read
+(issue #33: every channel × variable of a long log tested in one round): the columns read are
+the indicator columns of the bins, NaN where the variable is missing."""
+
+import numpy as np
+
+from diegocal.diagnose.show import binned_candidate, flexible_candidate
+from diegocal.diagnose.types import Residuals
+
+
+def _residuals(T=300, seed=0):
+    rng = np.random.default_rng(seed)
+    x, z = rng.uniform(-1, 1, T), rng.normal(size=T)
+    x[[5, 77]] = np.nan
+    channels = {"j": rng.normal(size=T), "m": rng.normal(size=(T, 3))}
+    return Residuals(
+        channels,
+        {"j": "N·m", "m": "m"},
+        {"x": x, "z": z},
+        {"j": ("x",), "m": ("x",)},
+        {"j": ("z",)},
+    )
+
+
+def _indicators(x, edges):
+    """The expected columns, written out: 1 where x falls in [edges[k], edges[k+1]) (the ends
+    open), NaN rows where x is missing."""
+    B = edges.size - 1
+    out = np.zeros((x.size, B))
+    for t, v in enumerate(x):
+        if not np.isfinite(v):
+            out[t] = np.nan
+            continue
+        k = int(np.searchsorted(edges, v, side="right")) - 1
+        out[t, min(max(k, 0), B - 1)] = 1.0
+    return out
+
+
+def test_binned_columns_are_the_bins_indicators_on_each_axis():
+    res = _residuals()
+    train = np.arange(300) < 200
+    cand = binned_candidate(res, "j", "x", train, 8)
+    edges = np.asarray(cand.term.extra["edges"])
+    expected = _indicators(res.variables["x"], edges)
+    assert list(cand.columns) == ["j"] and "m" not in cand.columns and cand.columns.get("m") is None
+    np.testing.assert_array_equal(cand.columns["j"], expected)
+    assert cand.n_params == expected.shape[1]
+    assert cand.columns["j"] is not cand.columns["j"]  # built when read, not held
+    assert all(b.dtype.itemsize <= 2 for b, _ in cand.columns.index)  # held: 2 bytes per sample
+    axes = binned_candidate(res, "m", "x", train, 8).columns["m"]  # (T, 3, 3 B): one block per axis
+    B = expected.shape[1]
+    assert axes.shape == (300, 3, 3 * B)
+    for a in range(3):
+        np.testing.assert_array_equal(axes[:, a, a * B : (a + 1) * B], expected)
+        others = np.delete(axes[:, a], np.s_[a * B : (a + 1) * B], axis=1)
+        assert np.all(others == 0)
+
+
+def test_flexible_columns_are_a_constant_and_each_variables_bins_but_the_first():
+    res = _residuals(seed=1)
+    train = np.arange(300) < 200
+    cand = flexible_candidate(res, "j", train, 6)
+    X = cand.columns["j"]
+    parts = [np.ones((300, 1))]
+    for v in ("x", "z"):
+        parts.append(_indicators(res.variables[v], np.asarray(cand.term.extra["edges"][v]))[:, 1:])
+    expected = np.hstack(parts)
+    rows = np.isfinite(res.variables["x"])
+    np.testing.assert_array_equal(X[rows], expected[rows])
+    assert np.isnan(X[~rows]).any(axis=1).all()  # a missing variable leaves its rows out of every fit
+    assert X.shape[1] == cand.n_params
