@@ -32,10 +32,13 @@ from diegocal.sgp.guard import GuardCandidates
 from diegocal.sgp.guard_options import PARAMETRIC, TWO_STAGE, Guard, Stages
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE, greedy_inducing
 from diegocal.sgp.kernels import REGION_OFF, REGION_WIDTH, Region, cut_along
+from diegocal.sgp.pr_sums import GramSums, posterior_from_sums
 from diegocal.sgp.starts import MLStarts
 from diegocal.sgp.subnormals import flushed
 
 __all__ = ["Guard", "SemiParametricGP", "Stages"]
+
+CHUNK_SAMPLES = 20_000  # samples whose features fit_in_chunks builds at once
 
 
 
@@ -206,6 +209,46 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         self.log_likelihood_ = self.posterior_.log_likelihood
         return self
 
+    @single_threaded
+    @flushed()
+    def fit_in_chunks(self, U, Y, features, hyperparameters: Hyperparameters | None = None) -> SemiParametricGP:
+        """:meth:`fit` for PR (no kernel on any output) without the features held whole:
+        ``features(rows)`` gives F (len(rows), n, m) of the samples ``rows`` (a slice, or sorted
+        indices: the hyperparameter subset), called CHUNK_SAMPLES samples at a time in order.
+        The posterior comes from per-block Gram sums (:mod:`diegocal.sgp.pr_sums`): the same
+        numbers as :meth:`fit` up to the order of the sums."""
+        if any(k is not None for k in self.kernels) or not self.use_features:
+            raise ValueError("fit_in_chunks fits PR only: no kernel on any output, features used")
+        U, Y = np.asarray(U, float), np.asarray(Y, float)
+        N, n = Y.shape
+        if len(Y) < 3:
+            raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
+        sums = None
+        for i in range(0, N, CHUNK_SAMPLES):
+            F = np.asarray(features(slice(i, min(i + CHUNK_SAMPLES, N))), float)
+            sums = sums or GramSums(N, n, F.shape[2])
+            sums.add(F, Y[i : i + CHUNK_SAMPLES])
+        self.u_mean_, self.u_std_ = input_scaling(U)
+        rms = sums.feature_rms()
+        self.f_scale_ = np.where(rms > 0, rms, 1.0)
+        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+        Us = (U - self.u_mean_) / self.u_std_
+        rng = np.random.default_rng(self.seed)
+        self.stages_ = None
+        if hyperparameters is None:  # the subset fit() would learn on, drawn from the same stream
+            idx = self._hyper_subset(N, rng)
+            hyperparameters = self._learn(Us[idx], Y[idx], features(idx) / self.f_scale_, rng)
+        self.hyper_ = hyperparameters
+        self.inducing_ = per_output(None, n)
+        self.posterior_ = posterior_from_sums(sums.scaled(self.f_scale_), Us, hyperparameters)
+        self.pr_posterior_ = self.residual_ = self.pr_w_cov_robust_ = None
+        self._raw = None
+        self._say("posterior", 1, 1)
+        self.w_ = self.posterior_.w_mean / self.f_scale_
+        self.w_cov_ = self.posterior_.w_cov / np.outer(self.f_scale_, self.f_scale_)
+        self.log_likelihood_ = self.posterior_.log_likelihood
+        return self
+
     def _modes(self) -> list:
         """Per output: "joint" (the joint posterior predicts it), TWO_STAGE or PARAMETRIC."""
         n = len(self.kernels)
@@ -301,6 +344,12 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         """(n,) inducing inputs per output (0 for an exact block)."""
         return np.array([0 if z is None else len(z) for z in (self.inducing_ or [None] * len(self.kernels))])
 
+    def _hyper_subset(self, N: int, rng) -> np.ndarray:
+        """The samples (sorted indices) the hyperparameters are learnt on: at most hyper_max."""
+        if N > self.hyper_max:
+            return np.sort(rng.choice(N, self.hyper_max, replace=False))
+        return np.arange(N)
+
     def _learn(self, Us, Y, Fs, rng, start: Hyperparameters | None = None) -> Hyperparameters:
         """ML-II (or MAP with the guard's priors) from several starts; the best objective wins.
         With ``screen_starts``, where the hyperparameter subset holds more than 2·SCREEN_SAMPLES
@@ -313,10 +362,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         (σ_z at its floor, σ_w and σ_v as PR learns them; SGP → PR for that output) and, with
         ``guard.release_capped``, against the hyperparameters with the capped inputs released.
         """
-        N = len(Us)
-        idx = np.arange(N)
-        if N > self.hyper_max:
-            idx = np.sort(rng.choice(N, self.hyper_max, replace=False))
+        idx = self._hyper_subset(len(Us), rng)
         hp0, resid = self._initial(Us[idx], Y[idx], Fs[idx])
         sizes = [0 if k is None else k.n_params for k in self.kernels]
         bounds = self._bounds(hp0, resid)

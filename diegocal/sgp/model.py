@@ -287,10 +287,16 @@ class DynamicsModel:
                 f"({r} base parameters, {len(self.joint_names)} joints)"
             )
         U = np.hstack([q, qd, qdd])
-        F = self.features(q, qd, qdd, self.time_)
         self.U_, self.tau_ = U, tau
         tau = tau - self.offset(q, qd, qdd, self.time_)  # nominal inertias: W fits the rest
         st = state or {}
+        if o.kind == "pr" and not any(is_filter(t) for t in self.terms):  # features a chunk at a time
+            est = self._estimator("pr", T, False)
+            features = lambda rows: self.features(q[rows], qd[rows], qdd[rows])  # noqa: E731
+            self.gp_ = est.fit_in_chunks(U, tau, features, st.get("hyper"))
+            self.nmse_in_sample_ = nmse(self.mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
+            return self
+        F = self.features(q, qd, qdd, self.time_)
         if o.kind == "prgp":
             self.pr_ = self._estimator("pr", T, False).fit(U, tau, F, st.get("hyper_pr"), st.get("inducing_pr"))
             resid = tau - self.pr_.predict(U, F, variance=False)[0]
