@@ -125,6 +125,8 @@ class DynamicsAdapter:
     """
 
     domain = "dynamics"
+    #: callable(str) or None: told how far a pass over the log's samples is (the engine sets it)
+    progress = None
 
     def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS, inertia="identified"):
         self.robot = robot
@@ -409,7 +411,7 @@ class DynamicsAdapter:
         )
         props = proposals(ctx)
         width, slots = layout(self, props)
-        B, left = project(self, fitted, train, width, slots, filler(self, props, width, slots))
+        B, left = project(self, fitted, train, width, slots, filler(self, props, width, slots), self.progress)
         props = [(p.term, p.family) for p in props]
         out = []
         for (term, family), slot, f in zip(props, slots, left, strict=True):

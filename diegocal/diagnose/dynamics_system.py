@@ -30,6 +30,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from diegocal.lstsq import TallLstsq
+from diegocal.progress import Eta
 from diegocal.sgp.model import PREDICT_SAMPLES
 from diegocal.sgp.regressor import CHUNK, base_regressor
 from diegocal.sgp.terms import columns, is_filter, joints_of, term_columns
@@ -166,7 +167,7 @@ def feature_chunks(model, fit, samples):
         yield rows, model.features(fit.q[rows], fit.qd[rows], fit.qdd[rows], fit.time[rows])
 
 
-def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, np.ndarray]:
+def project(fit, fitted, train, width: dict, slots: list, fill, progress=None) -> tuple[dict, np.ndarray]:
     """Every candidate's columns minus their least-squares fit by the fitted model's columns X on
     every joint's training rows, rows weighted as the fit weighs them (1 / σ_joint, so that
     Frisch-Waugh-Lovell is exact): ``c − X pinv(X) c``, with ``pinv(X) = pinv(R) pinv(R)ᵀ Xᵀ``
@@ -179,7 +180,10 @@ def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, n
     width) float64}, those columns there. Returns (joint row -> (T, width), the projected columns
     **in float32**: computed in float64 and rounded once, a relative 6e-8 of each projected value,
     which halves the largest array of a round; the fraction of each candidate's weighted training
-    norm left (n,), 0 where it lies in the model's span)."""
+    norm left (n,), 0 where it lies in the model's span). ``progress``: callable(str) or None, told
+    how far the two passes are, with the time left (a long log's take minutes)."""
+    T = len(fit.time)
+    tick = _ticker(progress, -(-int(np.sum(train)) // SAMPLES) + -(-T // SAMPLES), "candidate columns projected")
     wt = 1.0 / fitted.sigma
     model = fitted.model
     P = fitted.w.size
@@ -194,6 +198,7 @@ def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, n
             c *= wt[r]
             xtc[r] += np.ascontiguousarray(Aw[:, r]).T @ c
             sq[r] += np.einsum("ij,ij->j", c, c)
+        tick()
     R = np.zeros((P, P))
     R[: min(len(ls.R), P)] = ls.R[:P, :P]
     Rp = np.linalg.pinv(R)
@@ -211,7 +216,6 @@ def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, n
     near = [i for i in range(n) if norm[i] > 0 and frac[i] < NEAR_SPAN]
     left = np.zeros(n)
     is_train = np.asarray(train, bool)
-    T = len(fit.time)
     B = {r: np.empty((T, w), np.float32) for r, w in width.items()}
     for rows, A in feature_chunks(model, fit, np.arange(T)):
         C = fill(rows)
@@ -225,10 +229,24 @@ def project(fit, fitted, train, width: dict, slots: list, fill) -> tuple[dict, n
                 left[i] += float(np.sum(L * L))
         for r, c in C.items():
             B[r][rows] = c - np.ascontiguousarray(A[:, r]) @ Beta[r]
+        tick()
     for i in near:
         frac[i] = np.sqrt(left[i] / norm[i])
     frac[norm <= 0] = 0.0
     return B, frac
+
+
+def _ticker(progress, total: int, what: str):
+    """A function to call after each of ``total`` chunks: tells ``progress`` (callable(str) or
+    None) "what, chunks of N samples: done/total, time so far, time left" when due (:class:`~diegocal.progress.Eta`)."""
+    eta, done = Eta(total), [0]
+
+    def tick() -> None:
+        done[0] += 1
+        if progress is not None and eta.due(done[0]):
+            progress(f"{what}, chunks of {SAMPLES} samples: {eta.text(done[0])}")
+
+    return tick
 
 
 def layout(adapter, props) -> tuple[dict, list]:

@@ -66,6 +66,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     """
     options = options or EngineOptions()
     say = options.progress or (lambda text: None)
+    if hasattr(adapter, "progress"):  # an adapter whose passes over a long log take long says how far
+        adapter.progress = options.progress
     train, val, held = blocks.mask("train"), blocks.mask("validation"), blocks.mask("heldout")
     unit = f" {adapter.unit_name}" if getattr(adapter, "unit_name", "") else ""
     say(f"fitting the baseline{unit} on {int(train.sum())} training samples")
@@ -106,6 +108,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     for _ in range(options.max_rounds):
         candidates = tested = None  # the last round's columns go before this round's are built
         res = adapter.residuals(fitted)
+        say(f"proposing candidate terms{unit}")
         candidates = adapter.candidates(fitted, res, train)
         say(f"testing {len(candidates)} candidate terms{unit}")
         tested = evaluate_candidates(candidates, res, weights, train, val, options, exclude)

@@ -11,6 +11,7 @@ import diegocal.diagnose.dynamics_system as system_module
 import diegocal.sgp.model as sgp_model
 from diegocal.diagnose.dynamics import adapters
 from diegocal.diagnose.dynamics_system import TrainingSystem, project
+from diegocal.progress import Eta
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp.terms import term_columns
@@ -126,3 +127,16 @@ def test_chunked_prediction_equals_whole(adapter, train):
     fitted = adapter.fit((), train)
     whole = fitted.model.predict_arrays(adapter.q, adapter.qd, adapter.qdd, adapter.time, variance=False).tau
     np.testing.assert_allclose(fitted.pred, whole, rtol=1e-12, atol=1e-12)
+
+
+def test_projection_says_how_far_its_passes_are(adapter, train, monkeypatch):
+    monkeypatch.setattr(system_module, "Eta", lambda total: Eta(total, every=0.0))  # every chunk
+    fitted = adapter.fit((), train)
+    T = len(adapter.time)
+    cols = np.random.default_rng(1).standard_normal((T, 2))
+    said = []
+    project(adapter, fitted, train, {0: 2}, [{0: slice(0, 2)}], lambda rows: {0: cols[rows]}, said.append)
+    chunks = -(-int(train.sum()) // 211) + -(-T // 211)  # the training pass, then every sample
+    assert len(said) == chunks
+    assert said[-1].startswith(f"candidate columns projected, chunks of 211 samples: {chunks}/{chunks}")
+    assert "left" in said[0]
