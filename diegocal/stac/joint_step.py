@@ -28,6 +28,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from diegocal.robot.batch import cross
 from diegocal.stac.model import Observation, Params, State
 from diegocal.stac.qphase import Noise, block_solve, damped, map_batches, normal_equations
 
@@ -79,7 +80,7 @@ def _theta_rows(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
         vx = v[:, P:].reshape(-1, M, 3) / noise.sig_x
         y = ((Rl @ params.xyz[:, :, None])[..., 0] + pl) @ params.R.T  # R x_b
         out.append(np.einsum("bmki,bmk->bmi", Rl, vx @ params.R).reshape(B, 3 * M))  # (R h_r)ᵀ v
-        out.append(np.cross(y, vx).sum(1))  # (−[y]×)ᵀ v = y × v
+        out.append(cross(y, vx).sum(1))  # (−[y]×)ᵀ v = y × v
         out.append(vx.sum(1))
     else:
         out += [np.zeros((B, 0)), np.zeros((B, 3)), np.zeros((B, 3))]

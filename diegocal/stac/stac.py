@@ -74,7 +74,17 @@ from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.poses import write_off_foreign_poses
 from diegocal.stac.pphase import CHUNK, p_phase
-from diegocal.stac.qphase import Noise, group_sigma, irls_weight, pot_sigmas, q_step, residuals, resolvable, rho
+from diegocal.stac.qphase import (
+    KINEMATICS_BATCH,
+    Noise,
+    group_sigma,
+    irls_weight,
+    pot_sigmas,
+    q_step,
+    residuals,
+    resolvable,
+    rho,
+)
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
 from diegocal.stac.robust import LOSSES, REDESCENDING
 from diegocal.stac.schedules import Anderson, BfgsSchedule
@@ -285,7 +295,7 @@ def _robust_fit(obs: Observation, options: StacOptions, t0: float, history: list
     huber = replace(options, loss="huber")
     for _ in range(MAX_REJECTIONS):
         fine = _fit(obs, obs.nominal(options.marker_seed), huber, t0, history)
-        gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, options.batch_size))
+        gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, _fk_batch(options)))
         if not gross.any():
             break
         obs = obs.without_markers(gross)
@@ -350,7 +360,7 @@ def _alternate(
     iteration to ``history``. A fresh start (``sigma`` None) takes σ from the readings' spread
     and places θ by a first p-phase; a warm start (σ given, θ converged on a subset of the
     frames) may re-estimate σ from its first iteration on."""
-    st = obs.state(q, options.batch_size, keep=options.schedule != "bfgs")  # the q-phase linearises from it
+    st = obs.state(q, _fk_batch(options), keep=options.schedule != "bfgs")  # the q-phase linearises from it
     warm = sigma is not None
     if not warm:
         sigma = dynamic_range(obs)
@@ -403,7 +413,7 @@ def _alternate(
                 q_mix = accel.mix(q_old, q)
                 if q_mix is not None:
                     q_mix = np.clip(q_mix, obs.lower, obs.upper)
-                    st_mix = obs.state(q_mix, options.batch_size)
+                    st_mix = obs.state(q_mix, _fk_batch(options))
                     ph_mix = p_phase(obs, st_mix, params, *weights(obs, params, st_mix, noise))
                     cost_mix = total_cost(obs, ph_mix.params, st_mix, noise, sigma)
                     if cost_mix < cost:
@@ -446,6 +456,11 @@ def _alternate(
             break
     unresolved = tuple(g for g, ok in resolved.items() if not ok)
     return _Stage(params, ph.se, se_joint, sigma, q, lam, converged, unresolved)
+
+
+def _fk_batch(options: StacOptions) -> int:
+    """Frames per forward-kinematics batch of a full pass (as the q-step's, KINEMATICS_BATCH)."""
+    return max(options.batch_size, KINEMATICS_BATCH)
 
 
 def _rms_pots(obs, sigma) -> float:
