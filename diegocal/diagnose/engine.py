@@ -106,7 +106,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     for _ in range(options.max_rounds):
-        candidates = tested = None  # the last round's columns go before this round's are built
+        # the last round's columns go before this round's are built (a tested candidate's columns
+        # are views of its round's whole block: one kept Tested keeps all of them)
+        candidates = tested = commons = best = group = chosen = None
         res = adapter.residuals(fitted)
         say(f"proposing candidate terms{unit}")
         candidates = adapter.candidates(fitted, res, train)
@@ -161,6 +163,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             fitted, terms = new, new_terms
             say(f"found {chosen.term.cause} on {chosen.term.channel}{unit} (validation gain {chosen.gain:.0%})")
 
+    candidates = tested = commons = best = group = chosen = None  # the last round's columns
     # what remains: the channels whose best term was a stand-in, then significant binned
     # structure that no candidate explained
     res = adapter.residuals(fitted)
@@ -290,7 +293,7 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
         if flex is None:
             return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
         own = _own(best)
-        stand_ins[own] = (best, flex)
+        stand_ins[own] = (replace(best, candidate=None), replace(flex, candidate=None))  # no columns kept
         say(f"{best.term.cause} on {own}{unit} explains less than its state does: left unexplained")
         tested = [t for t in tested if own not in t.channels]
     return None, [], tested

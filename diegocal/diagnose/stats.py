@@ -86,8 +86,9 @@ class OutOfSample:
     t, df, p : its cluster-robust t, degrees of freedom (clusters − 1), one-sided p-value
     sse_before, sse_after : Σ r², Σ (r − a)² over the validation rows (weighted units)
     length : the sub-block length (samples) the variance was taken over
-    before, after : (T,) Σ r² and Σ (r − a)² per sample (0 outside the validation rows), to compare
-        candidates on a common partition (:func:`paired_difference`)
+    before, after : Σ r² and Σ (r − a)² per validation sample (the mask's samples in time order,
+        not all T: every tested candidate keeps them), to compare candidates on a common
+        partition (:func:`paired_difference`)
     """
 
     slope: float
@@ -127,14 +128,16 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     """
 
     r, a = np.asarray(r, float), np.asarray(a, float)
-    samples = np.asarray(samples, int)
+    samples, mask = np.asarray(samples, int), np.asarray(mask, bool)
     T = mask.size
     before = np.bincount(samples, weights=r * r, minlength=T)
     after = np.bincount(samples, weights=(r - a) ** 2, minlength=T)
+    sse_before, sse_after = float(before.sum()), float(after.sum())
+    before, after = before[mask], after[mask]  # kept by every tested candidate: the mask's samples only
     saa = float(a @ a)
     floor = _floor(mask)
     if r.size < 3 * floor or saa <= 0 or not np.isfinite(saa):
-        return OutOfSample(0.0, 0.0, 1, 1.0, float(before.sum()), float(after.sum()), floor, before, after)
+        return OutOfSample(0.0, 0.0, 1, 1.0, sse_before, sse_after, floor, before, after)
     slope = float(a @ r) / saa
     u = r - slope * a
     seen = np.zeros(T, bool)
@@ -146,7 +149,7 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     C = int(cl.max()) + 1
     if C < 3:
         return OutOfSample(
-            slope, 0.0, max(C - 1, 1), 1.0, float(before.sum()), float(after.sum()), length, before, after
+            slope, 0.0, max(C - 1, 1), 1.0, sse_before, sse_after, length, before, after
         )
     s = np.bincount(cl, weights=a * u, minlength=C)
     var = float(s @ s) / saa**2 * C / (C - 1)
@@ -154,7 +157,7 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     t = slope / se if np.isfinite(se) else 0.0
     df = C - 1
     return OutOfSample(
-        slope, float(t), df, float(stats.t.sf(t, df)), float(before.sum()), float(after.sum()), length, before, after
+        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, before, after
     )
 
 
@@ -190,12 +193,12 @@ def _floor(mask: np.ndarray) -> int:
 
 
 def paired_difference(x: np.ndarray, y: np.ndarray, mask: np.ndarray, length: int) -> tuple[float, float, int]:
-    """Mean and standard error over sub-blocks of ``mask`` (of ``length`` samples) of the per-block
-    sums of ``x − y`` (per-sample arrays (T,)); and the number of sub-blocks."""
+    """Mean and standard error over sub-blocks of ``mask`` (T,) (of ``length`` samples) of the
+    per-block sums of ``x − y`` (values on the mask's samples, in time order: :class:`OutOfSample`'s
+    ``before``/``after``); and the number of sub-blocks."""
 
-    cl = sub_blocks(mask, length)
-    keep = cl >= 0
-    d = np.bincount(cl[keep], weights=(x - y)[keep])
+    cl = sub_blocks(mask, length)[np.asarray(mask, bool)]
+    d = np.bincount(cl, weights=x - y)
     if d.size < 3:
         return float(d.mean()) if d.size else 0.0, float("inf"), int(d.size)
     return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size)), int(d.size)

@@ -94,3 +94,26 @@ def test_one_standard_error_rule_prefers_the_simpler_term():
     causes = {t.term.cause for t in tested if t.significant}
     assert {"square", "poly"} <= causes
     assert choose(tested, blocks.mask("validation")).term.cause == "square"
+
+
+def test_a_tested_candidate_keeps_its_errors_on_the_validation_samples_only():
+    """Every tested candidate keeps its per-sample errors for the one-SE rule: on the validation
+    samples only (a fifth of a long log, not all of it), with the same paired comparison."""
+    from diegocal.diagnose.stats import paired_difference
+    from diegocal.evaluate import sub_blocks
+
+    rng = np.random.default_rng(7)
+    T = 2000
+    val = np.zeros(T, bool)
+    val[300:700] = val[1200:1500] = True
+    idx = np.flatnonzero(val)
+    r, a, b = rng.normal(size=(3, idx.size))
+    one, two = out_of_sample_test(r, a, idx, val), out_of_sample_test(r, b, idx, val)
+    assert one.after.shape == (val.sum(),)
+    np.testing.assert_array_equal(one.after, (r - a) ** 2)
+    assert one.sse_after == pytest.approx(np.sum((r - a) ** 2), rel=1e-12)
+    cl = sub_blocks(val, 50)[idx]  # the paired difference written out over the whole log's labels
+    d = np.bincount(cl, weights=(r - a) ** 2 - (r - b) ** 2)
+    mean, se, n = paired_difference(one.after, two.after, val, 50)
+    assert (mean, n) == (pytest.approx(d.mean(), rel=1e-12), d.size)
+    assert se == pytest.approx(d.std(ddof=1) / np.sqrt(d.size), rel=1e-12)
