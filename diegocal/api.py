@@ -23,13 +23,23 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from diegocal.diagnose.output import pooled_heldout_rmse  # noqa: F401 (part of the API)
 from diegocal.errors import FitError
 from diegocal.io import Log, load_log, save_yaml
 from diegocal.io.bundle import header
 from diegocal.predict import Prediction, PredictOptions, predict
 from diegocal.robot import Robot, load_robot
 from diegocal.robot.resolve import robot_for_log
+
+
+def __getattr__(name: str):
+    """``pooled_heldout_rmse`` (part of the API) is imported when first asked for: the diagnosis
+    package and scipy.stats need not load for a ``stac`` or ``predict`` call."""
+    if name == "pooled_heldout_rmse":
+        from diegocal.diagnose.output import pooled_heldout_rmse
+
+        return pooled_heldout_rmse
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "SGP",

@@ -31,7 +31,7 @@ import logging
 from collections.abc import Callable
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri  # the chi-square isf: no scipy.stats import
 
 from diegocal.errors import DiegocalError
 from diegocal.stac.model import MARKERS, Observation, Params
@@ -79,12 +79,12 @@ def disagreement(
     seen = obs.valid & kept[:, None]
     med = np.array([np.median(sq[seen[:, m], m]) if seen[:, m].any() else np.inf for m in range(obs.n_markers)])
     valid = obs.valid & np.isfinite(med)
-    zx2 = np.where(valid, sq / np.maximum(med / chi2.median(3), 1e-24), 0.0)
+    zx2 = np.where(valid, sq / np.maximum(med / chdtri(3, 0.5), 1e-24), 0.0)
     frame_d = zp2.sum(axis=1) + zx2.sum(axis=1)
     frame_n = use.sum() + 3 * valid.sum(axis=1)
     d = np.bincount(poses, frame_d)
     n = np.bincount(poses, frame_n)
-    return d / chi2.isf(POSE_TAIL, np.maximum(n, 1))
+    return d / chdtri(np.maximum(n, 1), POSE_TAIL)
 
 
 def _decide(ratio: np.ndarray) -> np.ndarray:

@@ -52,7 +52,7 @@ efficiency for Gaussian 3-D residuals (Monte Carlo; c = 4.685 is the 95 % point 
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtr, chdtrc, chdtri  # chi-square cdf, sf, isf: no scipy.stats import
 
 LOSSES = ("linear", "huber", "tukey")
 #: residuals beyond this many σ count as this many in the robust noise level (:func:`group_sigma`)
@@ -87,7 +87,7 @@ def _kappa(nu: int, c: float) -> float:
     """E[min(X, c²)] / ν for X ~ χ²_ν: the share of a Gaussian variance that survives clipping
     the squared residual at c² (σ = 1); E[X 1(X ≤ a)] = ν F_ν+2(a)."""
     a = c * c
-    return float((nu * chi2.cdf(a, nu + 2) + a * chi2.sf(a, nu)) / nu)
+    return float((nu * chdtr(nu + 2, a) + a * chdtrc(nu, a)) / nu)
 
 
 def group_sigma(obs, params, st, used: dict | None, sigma: dict) -> dict:
@@ -142,7 +142,7 @@ def gross_frames(obs, params, st) -> np.ndarray:
     r = (params.gain * st.s + params.bias - obs.pots)[:, use]
     scale = 1.4826 * np.median(np.abs(r), axis=0)
     z = r / np.maximum(scale, 1e-12)
-    return np.sum(z * z, axis=1) > chi2.isf(GROSS_TAIL, int(use.sum()))
+    return np.sum(z * z, axis=1) > chdtri(int(use.sum()), GROSS_TAIL)
 
 
 #: r_g is kept above this share of N_g only to avoid dividing by zero (the floor below acts first)
