@@ -55,12 +55,14 @@ class _Stack:
         zero rows for a channel the columns do not act on."""
         out = []
         for c in channels:
-            x = None if not cols else cols.get(c)
             n = self.samples.size * self.dims[c]
+            x = None if not cols or c not in cols else cols if hasattr(cols, "rows") else cols.get(c)
             if x is None:
                 out.append(np.zeros((n, k)))
-            else:
-                out.append((np.asarray(x, float)[self.samples] * self.weights[c]).reshape(n, k))
+                continue
+            # binned columns (show.BinColumns) build the rows asked for, never all T of them
+            rows = cols.rows(c, self.samples) if x is cols else np.asarray(x[self.samples], float)
+            out.append((rows * self.weights[c]).reshape(n, k))
         return np.vstack(out) if out else np.zeros((0, k))
 
 

@@ -42,24 +42,31 @@ class BinColumns(Mapping):
         self.channel, self.index, self.d = channel, index, d
         self.skip_first, self.constant = skip_first, constant
 
-    def _onehot(self) -> np.ndarray:
-        T = self.index[0][0].size
+    def _onehot(self, samples=slice(None)) -> np.ndarray:
+        index = [(b[samples], B) for b, B in self.index]
+        T = index[0][0].size
         parts = [np.ones((T, 1))] if self.constant else []
-        for b, B in self.index:
+        for b, B in index:
             cut = int(self.skip_first)
             x = np.zeros((T, B - cut))
             ok = b >= cut
             x[np.flatnonzero(ok), b[ok] - cut] = 1.0
             parts.append(x)
         out = np.hstack(parts)
-        for b, _ in self.index:
+        for b, _ in index:
             out[b < 0] = np.nan
         return out
 
+    def rows(self, channel: str, samples) -> np.ndarray:
+        """``self[channel][samples]``, built on those samples only (a fit on the training rows)."""
+        return self._axes(channel, self._onehot(samples))
+
     def __getitem__(self, channel: str) -> np.ndarray:
+        return self._axes(channel, self._onehot())
+
+    def _axes(self, channel: str, x: np.ndarray) -> np.ndarray:
         if channel != self.channel:
             raise KeyError(channel)
-        x = self._onehot()
         if self.d == 1:
             return x
         k = x.shape[1]

@@ -69,3 +69,12 @@ def test_flexible_columns_are_a_constant_and_each_variables_bins_but_the_first()
     np.testing.assert_array_equal(X[rows], expected[rows])
     assert np.isnan(X[~rows]).any(axis=1).all()  # a missing variable leaves its rows out of every fit
     assert X.shape[1] == cand.n_params
+
+
+def test_rows_asked_for_are_built_alone_and_equal_the_whole_columns_rows():
+    res = _residuals(seed=2)
+    train = np.arange(300) < 200
+    some = np.flatnonzero(~train)[::3]
+    for cand in (binned_candidate(res, "m", "x", train, 5), flexible_candidate(res, "j", train, 4)):
+        (channel,) = cand.columns
+        np.testing.assert_array_equal(cand.columns.rows(channel, some), cand.columns[channel][some])
