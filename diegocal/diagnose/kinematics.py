@@ -467,6 +467,12 @@ class _FromSample:
         out[: self.first] = 0.0
         return out
 
+    def __getitem__(self, rows):
+        """The rows asked for (the engine reads a fit's or a test's samples), zero before ``first``."""
+        out = np.array(self.base[rows])
+        out[np.arange(self.shape[0])[rows] < self.first] = 0.0
+        return out
+
 
 def _seeded(robot, cal: Calibration):
     """``robot`` with its markers' nominal positions at a calibration's (those it names); the rest
