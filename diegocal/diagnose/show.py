@@ -75,6 +75,9 @@ class BinColumns(Mapping):
             cols[:, a, a * k : (a + 1) * k] = x
         return cols
 
+    def __contains__(self, channel) -> bool:  # Mapping's own would build the columns to see
+        return channel == self.channel
+
     def __iter__(self):
         yield self.channel
 

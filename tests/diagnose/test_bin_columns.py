@@ -3,6 +3,7 @@
 the indicator columns of the bins, NaN where the variable is missing."""
 
 import numpy as np
+import pytest
 
 from diegocal.diagnose.show import binned_candidate, flexible_candidate
 from diegocal.diagnose.types import Residuals
@@ -78,3 +79,10 @@ def test_rows_asked_for_are_built_alone_and_equal_the_whole_columns_rows():
     for cand in (binned_candidate(res, "m", "x", train, 5), flexible_candidate(res, "j", train, 4)):
         (channel,) = cand.columns
         np.testing.assert_array_equal(cand.columns.rows(channel, some), cand.columns[channel][some])
+
+
+def test_asking_whether_a_channel_is_there_builds_nothing(monkeypatch):
+    res = _residuals(seed=3)
+    cols = binned_candidate(res, "j", "x", np.arange(300) < 200, 5).columns
+    monkeypatch.setattr(type(cols), "_onehot", lambda *a, **k: pytest.fail("columns built"))
+    assert "j" in cols and "m" not in cols and list(cols) == ["j"]
