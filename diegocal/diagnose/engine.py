@@ -123,6 +123,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         best, group, tested = _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit)
         group = [g for g in group if _key(g.term) not in declined]
+        candidates = commons = None  # what follows needs the tested terms, not their columns:
+        best, group, tested = _without_columns(best, group, tested)  # the refits run without them
         if not group:
             break
         for chosen in group:
@@ -376,6 +378,21 @@ def _runner_up(t: Tested, best: Tested, declined: dict) -> dict:
         else:
             out["why_not"] = f"tested again in the next round, after {best.term.cause} on {best.term.channel}"
     return out
+
+
+def _without_columns(best, group, tested) -> tuple:
+    """(best, group, tested) with every candidate's columns dropped (members' too), the same
+    Tested appearing as one object wherever it did: a round's columns are views of one block, and
+    a kept one keeps all of it through the refits that follow."""
+    bare: dict = {}
+
+    def strip(t):
+        if id(t) not in bare:
+            members = tuple(strip(m) for m in t.candidate.members)
+            bare[id(t)] = replace(t, candidate=replace(t.candidate, columns={}, refit=None, members=members))
+        return bare[id(t)]
+
+    return (None if best is None else strip(best)), [strip(g) for g in group], [strip(t) for t in tested]
 
 
 def _own(t: Tested) -> str:
