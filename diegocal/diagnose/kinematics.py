@@ -33,16 +33,18 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
-from diegocal.diagnose.kinematics_lin import Linearised, running_median, step_errors
+from diegocal.diagnose.kinematics_lin import Columns, Sweep, running_median, step_errors
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream, save_yaml
+from diegocal.lstsq import TallLstsq
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions
@@ -181,28 +183,38 @@ class KinematicsAdapter:
         return term.with_values(cal.marker_xyz[k] - cal.marker_xyz[i], np.hypot(se[k], se[i]))
 
     def _refine(self, fitted: KinFit) -> tuple:
-        """One Gauss-Newton step on every continuous term at once (their projected columns with
-        their refit columns, weighted least squares on the training frames)."""
-        lin = self._linearise(fitted)
-        r = lin.residual_rows()
-        cols, ref, blocks, at = [], [], [], 0
+        """One Gauss-Newton step on every continuous term at once (their projected columns,
+        weighted least squares on the training frames), its normal equations a block of frames at a
+        time (:meth:`Sweep.design`; the least squares by :class:`~diegocal.lstsq.TallLstsq`, each
+        frame's share of AᵀWA and AᵀWr kept for the standard errors: (T, k, k), k the terms'
+        parameters)."""
+        sweep = Sweep(fitted, self)
+        cols, blocks, at = [], [], 0
         for i, t in enumerate(fitted.terms):
-            made = self._term_columns(lin, fitted, t)
-            if made is None:
+            c = self._term_columns(sweep, fitted, t)
+            if c is None:
                 continue
-            c, rf = made
-            blocks.append((i, at, c.shape[-1]))
-            at += c.shape[-1]
+            k = int(np.size(t.values))
+            blocks.append((i, at, k))
+            at += k
             cols.append(c)
-            if rf is not None:
-                ref.append(rf)
         if not cols:
             return fitted.terms
-        A = np.concatenate([*cols, *ref], axis=-1)  # (T, R, k)
-        rows = fitted.train[:, None] & np.isfinite(r) & np.isfinite(A).all(-1) & (lin.w > 0)
-        w = np.sqrt(lin.w)[rows]
-        coef = np.linalg.lstsq(A[rows] * w[:, None], r[rows] * w, rcond=None)[0]
-        se = step_errors(A, r, lin.w, rows, coef)
+        tall = TallLstsq(at)
+        AWA, AWr = np.zeros((sweep.T, at, at)), np.zeros((sweep.T, at))
+
+        def normal(lin, A):  # A (B, R, k) on a block
+            r = lin.residual_rows()
+            rows = lin.train[:, None] & np.isfinite(r) & np.isfinite(A).all(-1) & (lin.w > 0)
+            w = np.sqrt(lin.w)[rows]
+            tall.add(A[rows] * w[:, None], r[rows] * w)
+            ww, Ar = np.where(rows, lin.w, 0.0), np.where(rows[..., None], A, 0.0)
+            AWA[lin.frames] = np.einsum("trk,tr,trl->tkl", Ar, ww, Ar)
+            AWr[lin.frames] = np.einsum("trk,tr->tk", Ar, ww * np.where(rows, r, 0.0))
+
+        sweep.design(cols, normal)
+        coef, _ = tall.solve()
+        se = step_errors(AWA.sum(axis=0), AWr - AWA @ coef)  # scores: Aᵀ W (r − A coef) per frame
         out = list(fitted.terms)
         for i, a0, k in blocks:
             t = out[i]
@@ -245,45 +257,30 @@ class KinematicsAdapter:
         return Residuals(channels, units, variables, chv)
 
     # ------------------------------------------------------------------ candidates
-    def _linearise(self, fitted: KinFit) -> Linearised:
-        """The linearisation at a fit, made where it is needed (a step of :meth:`fit`, a round's
-        candidates) and not kept: it holds every frame's J and K, the largest arrays of the
-        diagnosis, and is cheap to remake beside the candidates made from it."""
-        return Linearised.at(fitted, self)
-
-    def _term_columns(self, lin: Linearised, fitted: KinFit, term: Term):
-        """(columns (T, R, k), None) of a term on the mapped rows, projected out of every frame's q
-        and of the calibration's span (:meth:`Linearised.beyond_calibration`); None for a term without
-        continuous columns."""
-        P = lin.P
+    def _term_columns(self, sweep: Sweep, fitted: KinFit, term: Term) -> Columns | None:
+        """How a :class:`Sweep` makes a term's columns on the mapped rows, projected out of every
+        frame's q and of the calibration's span (:meth:`Linearised.beyond_calibration`; a pot term's:
+        of its pots' gains and biases); None for a term without continuous columns."""
         if term.cause in POT_CAUSES:
             j = self.pot_names.index(term.channel)
-            f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])
-            return lin.beyond_gain_bias(lin.project_pot(j)[..., None] * f[:, None, :], j), None
+            f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])  # (T, k): a dead band runs along the log
+            return Columns(partial(_pot_block, j=j, f=f), span=j, projected=True)
         if term.cause == "link_offset":
-            return lin.beyond_calibration(lin.project(lin.link_offset_basis(term.channel))), None
+            return Columns(partial(_link_block, joint=term.channel))
         if term.cause == "time_offset":
-            v = np.zeros((lin.T, lin.R, 1))
-            span = term.extra.get("span")
-            if span:  # the predicted markers' change over the shift, per second of it
-                xd = (shift_clock(fitted.markers, self.time, -span) - fitted.markers) / span
-            else:
-                xd = np.gradient(fitted.markers, self.time, axis=0)  # (T, M', 3)
-            v[:, P:, 0] = xd.reshape(lin.T, -1)
-            return lin.beyond_calibration(lin.project(np.nan_to_num(v))), None
+            return Columns(partial(_clock_block, markers=fitted.markers, time=self.time, span=term.extra.get("span")))
         return None
 
     def candidates(self, fitted: KinFit, residuals: Residuals, train) -> list[Candidate]:
+        """The round's candidates (module docstring), their columns made in one :class:`Sweep`."""
         train = np.asarray(train, bool)
-        lin = self._linearise(fitted)
+        sweep = Sweep(fitted, self)
         have = {(t.cause, t.channel) for t in fitted.terms}
-        sigma_p = lin.sigma_p
-        out = []
+        sigma_p = sweep.sigma_p
+        made = []  # (term, family, Columns) in the order offered, or a candidate made whole
 
         def offer(term, family=""):  # a term the calibration takes up entirely is no candidate
-            cols, _ = self._term_columns(lin, fitted, term)
-            if np.any(cols):
-                out.append(Candidate(term, lin.channels(cols), family=family))
+            made.append((term, family, self._term_columns(sweep, fitted, term)))
 
         for j, name in enumerate(self.pot_names):
             for cause in POT_CAUSES:
@@ -300,36 +297,44 @@ class KinematicsAdapter:
         geometric = any(geometry.is_chain(t) for t in fitted.terms)
         chain = geometry.candidate(self, fitted, train) if self.poses is not None and not geometric else None
         if chain is not None:
-            out.append(chain)
-        for joint in lin.observed_joints():
+            made.append(chain)
+        for joint in sweep.observed_joints():
             if ("link_offset", joint) not in have and not geometric and chain is None:
                 offer(make_term("link_offset", joint))
         if ("time_offset", "markers") not in have:
             for span in (0.0, *TIME_SHIFTS, *(-t for t in TIME_SHIFTS)):
                 term = make_term("time_offset", "markers", extra={"span": span} if span else None)
                 offer(term, "time_offset:markers")
-        out += self._slip_family(lin, fitted, have, train)
+        slips = [n for n in self.marker_names if ("marker_slip", n) not in have]
+        cols = [m[2] for m in made if isinstance(m, tuple)]
+        first = len(cols)
+        cols += [Columns(partial(_marker_block, m=sweep.mapped_index(n)), span=None) for n in slips]
+        scan = _SlipScan(sweep.T, slips, first)
+        chans = iter(sweep.channels(cols, see=scan.add))
+        out = []
+        for m in made:
+            if not isinstance(m, tuple):
+                out.append(m)
+                continue
+            c = next(chans)
+            if c is not None:
+                out.append(Candidate(m[0], c, family=m[1]))
+        for i, name in enumerate(slips):
+            out += self._slip_family(name, next(chans) or {}, scan.samples(i, train))
         return out
 
-    def _slip_family(self, lin: Linearised, fitted: KinFit, have, train) -> list[Candidate]:
-        """Per marker a family over change times (:func:`_slip_samples`: the best in each run of
-        training frames by a change-point scan of the marker's projected position columns, and the
-        middle of each gap between runs: the training frames cannot place a slip inside a gap more
-        finely; its middle halves the worst error)."""
+    def _slip_family(self, name: str, refit: dict, samples: list[int]) -> list[Candidate]:
+        """A marker's slip candidates: a family over change times (:func:`_slip_samples`: the best
+        in each run of training frames by a change-point scan of the marker's projected position
+        columns, and the middle of each gap between runs: the training frames cannot place a slip
+        inside a gap more finely; its middle halves the worst error), each its re-fit columns
+        ``refit`` from its change on."""
         out = []
-        r = lin.residual_rows()
-        ok = np.isfinite(r)
-        r, w = np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * train[:, None]
-        for name in self.marker_names:
-            if ("marker_slip", name) in have:
-                continue
-            cols = lin.project(lin.marker_basis(lin.mapped_index(name)))  # (T, R, 3)
-            refit = lin.channels(cols)
-            for k in _slip_samples(train, cols, r, w):
-                cols_k = {c: _FromSample(v, k) for c, v in refit.items()}
-                region = Region("time", float(self.time[k]), float("inf"))  # moved for good: open
-                term = make_term("marker_slip", name, region=region)
-                out.append(Candidate(term, cols_k, family=f"marker_slip:{name}", refit=refit))
+        for k in samples:
+            cols_k = {c: _FromSample(v, k) for c, v in refit.items()}
+            region = Region("time", float(self.time[k]), float("inf"))  # moved for good: open
+            term = make_term("marker_slip", name, region=region)
+            out.append(Candidate(term, cols_k, family=f"marker_slip:{name}", refit=refit))
         return out
 
     # ------------------------------------------------------------------ faults
@@ -498,10 +503,14 @@ def _slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndar
     after each change time k; the best k maximises the sum of the two fits' weighted gains
     bᵀ G⁻¹ b, from prefix sums of the per-frame G = Cᵀ W C and b = Cᵀ W r (O(T)). A change at a
     run's first frame is a change in the gap before it: the gap's middle stands for it."""
-    T = train.size
     Cw = cols * w[..., None]
-    G = np.cumsum(np.einsum("trk,trl->tkl", Cw, cols), axis=0)  # Σ over frames ≤ t
-    b = np.cumsum(np.einsum("trk,tr->tk", Cw, r), axis=0)
+    return _change_times(train, np.einsum("trk,trl->tkl", Cw, cols), np.einsum("trk,tr->tk", Cw, r))
+
+
+def _change_times(train: np.ndarray, G: np.ndarray, b: np.ndarray) -> list[int]:
+    """:func:`_slip_samples` from each frame's G (T, 3, 3) and b (T, 3)."""
+    T = train.size
+    G, b = np.cumsum(G, axis=0), np.cumsum(b, axis=0)  # Σ over frames ≤ t
     fit = _gain(G[:-1], b[:-1]) + _gain(G[-1] - G[:-1], b[-1] - b[:-1])  # change at k = 1..T-1
     edges = np.flatnonzero(np.diff(np.concatenate([[0], train.astype(int), [0]])))
     runs = list(zip(edges[0::2], edges[1::2], strict=True))
@@ -513,6 +522,62 @@ def _slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndar
             out.append(int((e + runs[i + 1][0]) // 2))
     lo, hi = int(0.05 * T), int(0.95 * T)
     return sorted({k for k in out if lo <= k <= hi})
+
+
+class _SlipScan:
+    """Each frame's G and b of :func:`_slip_samples` for the markers ``names``, gathered from the
+    projected position columns a :class:`Sweep` hands :meth:`add` (column sets ``first`` on):
+    (T, 3, 3) and (T, 3) per marker, not the (T, R, 3) columns."""
+
+    def __init__(self, T: int, names, first: int):
+        self.first = first
+        self.G, self.b = np.zeros((len(names), T, 3, 3)), np.zeros((len(names), T, 3))
+        self._r: tuple | None = None  # (block start, its residual rows and training weights)
+
+    def add(self, lin, i: int, cols: np.ndarray) -> None:
+        if i < self.first:
+            return
+        if self._r is None or self._r[0] != lin.start:
+            r = lin.residual_rows()
+            ok = np.isfinite(r)
+            self._r = (lin.start, np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * lin.train[:, None])
+        _, r, w = self._r
+        Cw = cols * w[..., None]
+        self.G[i - self.first, lin.frames] = np.einsum("trk,trl->tkl", Cw, cols)
+        self.b[i - self.first, lin.frames] = np.einsum("trk,tr->tk", Cw, r)
+
+    def samples(self, m: int, train: np.ndarray) -> list[int]:
+        return _change_times(train, self.G[m], self.b[m])
+
+
+def _pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:
+    """A pot term's columns on a block: pot j's projected unit column times ∂p̂/∂θ ``f`` (T, k)."""
+    return lin.project_pot(j)[..., None] * f[lin.frames][:, None, :]
+
+
+def _link_block(lin, joint: str) -> np.ndarray:
+    return lin.link_offset_basis(joint)
+
+
+def _marker_block(lin, m: int) -> np.ndarray:
+    return lin.marker_basis(m)
+
+
+def _clock_block(lin, markers: np.ndarray, time: np.ndarray, span) -> np.ndarray:
+    """A clock shift's column on a block: the predicted markers' (T, M', 3) change over the shift
+    ``span`` (s) per second of it, or their rate (no span), on the block's frames, from the frames
+    around it that it reads (the same numbers as on the whole log)."""
+    sl, T = lin.frames, time.size
+    if span:  # shift_clock reads the two frames around time + span
+        lo = max(min(sl.start, int(np.searchsorted(time, time[sl.start] + span)) - 2), 0)
+        hi = min(max(sl.stop, int(np.searchsorted(time, time[sl.stop - 1] + span)) + 2), T)
+        xd = (shift_clock(markers[lo:hi], time[lo:hi], -span)[sl.start - lo : sl.stop - lo] - markers[sl]) / span
+    else:
+        lo, hi = max(sl.start - 1, 0), min(sl.stop + 1, T)
+        xd = np.gradient(markers[lo:hi], time[lo:hi], axis=0)[sl.start - lo : sl.stop - lo]
+    v = np.zeros((lin.T, lin.R, 1))
+    v[:, lin.P :, 0] = xd.reshape(lin.T, -1)
+    return np.nan_to_num(v)
 
 
 def _gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:

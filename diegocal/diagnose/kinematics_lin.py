@@ -24,13 +24,14 @@ in two steps:
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from diegocal.stac.covariance import block_sandwich, standard_errors
-from diegocal.stac.loo import FrameProjection, deleted_residuals, frame_batches, sigma_of
+from diegocal.stac.loo import BATCH, FrameProjection, deleted_residuals, frame_batches, pot_sigmas, sigma_of
 from diegocal.stac.model import Observation
 
 #: A candidate acts on the channels that carry at least this share of its largest channel's
@@ -39,22 +40,24 @@ CHANNEL_SHARE = 0.02
 #: A direction of a term keeps less than this fraction of its squared norm once the calibration's
 #: span is projected out: the calibration takes it up (not identifiable).
 IDENTIFIABLE = 1e-6
+#: Frames per block of a :class:`Sweep`, and columns projected together on a block
+#: (:meth:`Sweep._each`): a block's transients are a few arrays of SWEEP_FRAMES x R x
+#: PROJECT_COLUMNS floats (7 MB on Diego San), the same for any log's length.
+SWEEP_FRAMES = BATCH
+PROJECT_COLUMNS = 32
 #: The dtype a candidate's columns are kept in (:meth:`Linearised.channels`): float32. They are
 #: the engine's regressors, held for every candidate of a round (most of the diagnosis's memory),
 #: and only read: projected and orthogonalised in float64 first, each kept to 7 digits, which moves
 #: a least-squares coefficient by ~1e-7 of itself on a well-conditioned design, far inside its
 #: standard error (the engine reads them back as float64).
 COLUMN_DTYPE = np.float32
-#: Projected pot unit columns (T, R) kept at once (:meth:`Linearised.project_pot`): a pot's
-#: candidates and the pots that share its joints, not every pot of the robot (each is a column of
-#: the whole log's rows).
-POT_CACHE = 12
 
 
 @dataclass
 class Linearised:
-    """The observation Jacobian and the Schur projector of every frame at a fit (mapped rows:
-    P pots, then 3 per mapped marker).
+    """The observation Jacobian and the Schur projector of every frame of a block of the log at a
+    fit (mapped rows: P pots, then 3 per mapped marker): the whole log's (:meth:`at`) or one block
+    of a :class:`Sweep`'s (frames ``start`` to ``start + T``).
 
     J : (T, R, n); Hi : (T, n, n) = (JᵀWJ + D)⁻¹, so that K = Hi JᵀW (T, n, R) (:attr:`K`, formed
     only where asked: Hi is a third of its size, and every product with K is one with Hi after
@@ -73,10 +76,12 @@ class Linearised:
     Rl: np.ndarray
     sigma_p: np.ndarray
     D: np.ndarray
-    _pots: dict = field(default_factory=dict)
+    start: int = 0
     _cal_gram: np.ndarray | None = None
     _cal_pinv: np.ndarray | None = None
-    _pot_pinv: dict = field(default_factory=dict)
+    _U: np.ndarray | None = None
+    _N: tuple | None = None
+    _poses: object = None
     _RRl: np.ndarray | None = None
     _x: np.ndarray | None = None
     _xs: np.ndarray | None = None
@@ -93,22 +98,23 @@ class Linearised:
     def P(self) -> int:
         return self.obs.n_pots
 
+    @property
+    def frames(self) -> slice:
+        """The log's frames this linearisation covers."""
+        return slice(self.start, self.start + self.T)
+
+    @property
+    def train(self) -> np.ndarray:
+        """(T,) bool: the training frames among them."""
+        return self.fitted.train[self.frames]
+
     @classmethod
     def at(cls, fitted, adapter) -> Linearised:
-        a = fitted.applied
-        obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
-        params = obs.params_from(fitted.cal)
-        sigma = sigma_of(fitted.cal)
-        T, n = fitted.q.shape
-        R = obs.n_pots + 3 * obs.n_markers
-        J, Hi, w, D = np.empty((T, R, n)), np.empty((T, n, n)), np.empty((T, R)), np.empty((T, n))
-        s, Rl = np.empty((T, obs.n_pots)), np.empty((T, obs.n_markers, 3, 3))
-        sigma_p = None
-        for sl, f in frame_batches(obs, params, sigma, fitted.q):
-            H = (np.swapaxes(f.J, 1, 2) * f.w[:, None, :]) @ f.J
-            H[:, np.arange(n), np.arange(n)] += f.D  # as frame_projection's K
-            J[sl], Hi[sl], w[sl], D[sl], s[sl], Rl[sl], sigma_p = f.J, np.linalg.inv(H), f.w, f.D, f.s, f.Rl, f.sigma_p
-        return cls(adapter, fitted, obs, params, J, Hi, w, s, Rl, sigma_p, D)
+        """Every frame of the log at once (what a :class:`Sweep` holds a block at a time)."""
+        sweep = Sweep(fitted, adapter)
+        parts = list(sweep.blocks())
+        whole = {k: np.concatenate([getattr(p, k) for p in parts]) for k in ("J", "Hi", "w", "s", "Rl", "D")}
+        return cls(adapter, fitted, sweep.obs, sweep.params, sigma_p=parts[0].sigma_p, **whole)
 
     @property
     def K(self) -> np.ndarray:
@@ -128,24 +134,48 @@ class Linearised:
             out[..., k] = c - np.einsum("trn,tn->tr", self.J, v)
         return out
 
+    def pot_units(self) -> np.ndarray:
+        """The projected unit columns of every pot (T, R, P): e_j − J K e_j, made once per block
+        (a round's pot candidates all read them)."""
+        if self._U is None:
+            P = self.P
+            KP = self.Hi @ (np.swapaxes(self.J[:, :P], 1, 2) * self.w[:, None, :P])  # K[:, :, :P]
+            self._U = -(self.J @ KP)
+            self._U[:, np.arange(P), np.arange(P)] += 1.0
+        return self._U
+
     def project_pot(self, j: int) -> np.ndarray:
-        """The projected unit column of pot j: (T, R), the last POT_CACHE pots' kept (the candidates
-        of one pot and of the pots sharing its joints are made one after the other)."""
-        out = self._pots.pop(j, None)
-        if out is None:
-            kj = np.einsum("tnm,tm->tn", self.Hi, self.J[:, j]) * self.w[:, j, None]  # K[:, :, j]
-            out = -np.einsum("trn,tn->tr", self.J, kj)
-            out[:, j] += 1.0
-            while len(self._pots) >= POT_CACHE:
-                del self._pots[next(iter(self._pots))]  # the least recently used
-        self._pots[j] = out
+        """The projected unit column of pot j: (T, R)."""
+        return self.pot_units()[:, :, j]
+
+    def pot_span(self, pots) -> np.ndarray:
+        """(T, R, 2 len(pots)): the projected gain and bias columns (s_i e_i, e_i projected) of
+        ``pots``, in that order (the last set asked for is kept: a pot's candidates come together)."""
+        pots = tuple(pots)
+        if self._N is None or self._N[0] != pots:
+            U = self.pot_units()
+            cols = [c for i in pots for c in (U[:, :, i] * self.s[:, i, None], U[:, :, i])]
+            self._N = (pots, np.stack(cols, axis=-1))
+        return self._N[1]
+
+    def pot_gram(self) -> np.ndarray:
+        """(2P, 2P): the weighted Gram matrix over the training frames of every pot's projected
+        gain and bias columns (:meth:`pot_span` of every pot), 50 frames at a time."""
+        U, s, wt = self.pot_units(), self.s, self.w * self.train[:, None]
+        P = self.P
+        out = np.zeros((2 * P, 2 * P))
+        for a in range(0, self.T, 50):
+            f = slice(a, a + 50)
+            N = np.empty((*U[f].shape[:2], 2 * P))
+            N[..., 0::2], N[..., 1::2] = U[f] * s[f][:, None, :], U[f]
+            out += _wgram(N, wt[f])
         return out
 
     def residual_rows(self) -> np.ndarray:
         """(T, R) residuals of the mapped rows (reading − prediction)."""
-        a, f = self.fitted.applied, self.fitted
-        rp = np.asarray(a.log.stream("pots").data, float) - f.pots
-        rm = np.asarray(a.log.stream("markers").data, float) - f.markers
+        a, f, sl = self.fitted.applied, self.fitted, self.frames
+        rp = np.asarray(a.log.stream("pots").data[sl], float) - f.pots[sl]
+        rm = np.asarray(a.log.stream("markers").data[sl], float) - f.markers[sl]
         return np.concatenate([rp, rm.reshape(self.T, -1)], axis=1)
 
     def deleted_residuals(self) -> tuple[np.ndarray, np.ndarray]:
@@ -154,9 +184,6 @@ class Linearised:
         proj = FrameProjection(self.J, self.K, self.w, self.s, self.Rl, self.sigma_p, self.D)
         return deleted_residuals(proj, self.residual_rows(), self.P)
 
-    def mapped_index(self, name: str) -> int:
-        return self.obs.marker_names.index(name)
-
     def marker_basis(self, m: int) -> np.ndarray:
         """∂x_m/∂d_m = R Rl (T, R, 3) on marker m's rows."""
         C = np.zeros((self.T, self.R, 3))
@@ -164,27 +191,19 @@ class Linearised:
         C[:, P + 3 * m : P + 3 * m + 3] = self.RRl[:, m]
         return C
 
-    def _moves(self, joint: str) -> np.ndarray:
-        kin = self.obs.kin
-        k = self.adapter.robot.joint_index(joint)
-        jl, _, _ = kin.link_info(self.obs.marker_links)
-        return kin._anc[jl, k].astype(float) - kin._anc[kin.base_joint, k]
-
-    def observed_joints(self) -> list[str]:
-        return [j for j in self.adapter.robot.joint_names if np.any(self._moves(j) != 0)]
-
     def link_offset_basis(self, joint: str) -> np.ndarray:
         """∂x/∂δ (T, R, 3) of a translation δ of the joint's origin in its parent joint's frame:
         every marker it moves shifts by R R_parent δ (linear pots: not modelled, rows 0)."""
         kin = self.obs.kin
         k = self.adapter.robot.joint_index(joint)
-        poses = kin.joint_poses(self.fitted.q)
+        if self._poses is None:  # every joint's candidate of the block reads them
+            self._poses = kin.joint_poses(self.fitted.q[self.frames])
         par = kin.parent[k]
-        Rp = poses.R[:, par] if par >= 0 else poses.root_R
+        Rp = self._poses.R[:, par] if par >= 0 else self._poses.root_R
         RRp = np.einsum("ij,tjk->tik", self.params.R, Rp)
         C = np.zeros((self.T, self.R, 3))
         P = self.P
-        for m, sgn in enumerate(self._moves(joint)):
+        for m, sgn in enumerate(_moves(self.obs, self.adapter.robot, joint)):
             if sgn:
                 C[:, P + 3 * m : P + 3 * m + 3] = sgn * RRp
         return C
@@ -201,7 +220,7 @@ class Linearised:
     def x_mocap(self) -> np.ndarray:
         """Predicted markers relative to the mocap translation (T, M, 3), m (0 where missing)."""
         if self._x is None:
-            self._x = np.nan_to_num(self.fitted.markers - self.params.T)
+            self._x = np.nan_to_num(self.fitted.markers[self.frames] - self.params.T)
         return self._x
 
     @property
@@ -275,14 +294,21 @@ class Linearised:
         return out
 
     def _gram(self) -> np.ndarray:
-        """(S F)ᵀ W (S F) over the training frames (k0, k0), S = I − J K the per-frame q projector:
+        """(S F)ᵀ W (S F) over the training frames (k0, k0) (:meth:`_gram_part`), its
+        pseudo-inverse kept beside it."""
+        if self._cal_gram is None:
+            G = self._gram_part()
+            self._cal_gram = 0.5 * (G + G.T)
+            self._cal_pinv = np.linalg.pinv(self._cal_gram, rcond=1e-10, hermitian=True)
+        return self._cal_gram
+
+    def _gram_part(self) -> np.ndarray:
+        """(S F)ᵀ W (S F) over these training frames (k0, k0), S = I − J K the per-frame q projector:
         Fᵀ W F − (Jᵀ W F)ᵀ K F − (K F)ᵀ D (K F) (expand it with Jᵀ W J = H − D, K = H⁻¹ Jᵀ W);
         Fᵀ W F from F's structure (the markers' rows are orthonormal R R_l, weighted alike on their
-        three axes)."""
-        if self._cal_gram is not None:
-            return self._cal_gram
+        three axes). Not yet symmetrised: a sweep adds the blocks' parts first."""
         P, M = self.P, self.obs.n_markers
-        tr = self.fitted.train
+        tr = self.train
         w, s = self.w[tr], self.s[tr]
         k0 = 2 * P + 3 * M + 6
         G = np.zeros((k0, k0))  # upper triangle first
@@ -309,9 +335,7 @@ class Linearised:
             JW = np.swapaxes(self.J[f], 1, 2) * self.w[f][:, None, :]
             A, B = self._op_basis(JW, f), self._op_basis(self.Hi[f] @ JW, f)
             G -= A.reshape(-1, k0).T @ B.reshape(-1, k0) + _wgram(B, self.D[f])
-        self._cal_gram = 0.5 * (G + G.T)
-        self._cal_pinv = np.linalg.pinv(self._cal_gram, rcond=1e-10, hermitian=True)
-        return self._cal_gram
+        return G
 
     def beyond_calibration(self, C: np.ndarray) -> np.ndarray:
         """Projected columns (T, R, k) minus their weighted least-squares fit, on the training
@@ -322,31 +346,83 @@ class Linearised:
         these columns alone equals fitting it on the term and a re-fit of the whole calibration.
         Directions of the term that the calibration takes up entirely (a joint origin moved along
         the joint's axis when the axes below are parallel to it: the markers' positions) are set to
-        zero rather than left as numerical noise."""
+        zero rather than left as numerical noise (:func:`_identifying`). On these frames alone: a
+        :class:`Sweep` fits over the whole log a block at a time."""
         C = np.nan_to_num(C)
-        wt = self.w * self.fitted.train[:, None]
+        wt = self.w * self.train[:, None]
         b = self._calibration_dot(wt[..., None] * C)  # (S F)ᵀ W C = Fᵀ W C, as S C = C
         self._gram()
-        beta = self._cal_pinv @ b  # (k0, k)
-        return self._identifiable(C, C - self.project(self._calibration_apply(beta)))
+        out = C - self.project(self._calibration_apply(self._cal_pinv @ b))
+        M = _identifying(_wgram(out, wt), _wgram(C, wt))
+        return out if M is None else out @ M
 
-    def beyond_gain_bias(self, C: np.ndarray, j: int) -> np.ndarray:
-        """:meth:`beyond_calibration` for a pot term's columns (T, R, k) of pot j, with the
-        calibration's span cut to the gains and biases of the pots that read a joint pot j reads
-        (their projected columns are cached: no further projection). A pot term's columns lie on
-        its own row before projection and on the q directions of its joints after it; the other
-        calibration directions (markers' positions, the mocap frame, unrelated pots) are
-        orthogonal to them up to what the q projection spreads."""
-        C = np.nan_to_num(C)
-        N = np.stack(
-            [c for i in self.sharing(j) for c in (self.project_pot(i) * self.s[:, i, None], self.project_pot(i))],
-            axis=-1,
-        )
-        wt = self.w * self.fitted.train[:, None]
-        if j not in self._pot_pinv:
-            self._pot_pinv[j] = np.linalg.pinv(_wgram(N, wt), rcond=1e-10, hermitian=True)
-        b = (N * wt[..., None]).reshape(-1, N.shape[-1]).T @ C.reshape(-1, C.shape[-1])
-        return self._identifiable(C, C - N @ (self._pot_pinv[j] @ b))
+
+#: What a column is fitted out of on the training frames (:class:`Columns`): the calibration's span.
+CALIBRATION = "calibration"
+
+
+@dataclass(frozen=True)
+class Columns:
+    """How a :class:`Sweep` makes a term's columns: ``make(lin)`` gives them (B, R, k) on a block
+    ``lin`` (:class:`Linearised`), which the sweep projects (:meth:`Linearised.project`) unless
+    ``projected``; ``span`` is what is fitted out of them on the training
+    frames: CALIBRATION (:meth:`Linearised.beyond_calibration`), a pot's index (the gains and biases
+    of the pots that read its joints, :meth:`Sweep.sharing`: a pot term's columns lie on its own row
+    before projection and on its joints' q directions after it; the other calibration directions
+    are orthogonal to them up to what the q projection spreads), or None (nothing, and no
+    identifiability test: a slipped marker's re-fit position)."""
+
+    make: Callable
+    span: object = CALIBRATION
+    projected: bool = False
+
+
+class Sweep:
+    """The linearisation at a fit (:class:`Linearised`), a block of frames at a time (module
+    docstring): the columns of many terms in one sweep of three passes (:meth:`channels`,
+    :meth:`design`)."""
+
+    def __init__(self, fitted, adapter):
+        a = fitted.applied
+        self.fitted, self.adapter = fitted, adapter
+        self.obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
+        self.params = self.obs.params_from(fitted.cal)
+        self.sigma = sigma_of(fitted.cal)
+        self.sigma_p = pot_sigmas(self.obs, self.sigma)  # the pots' σ as weighed (P,)
+        self.T, self.P = fitted.q.shape[0], self.obs.n_pots
+        self.R = self.P + 3 * self.obs.n_markers
+        self._cal_pinv: np.ndarray | None = None
+        self._pot_gram: np.ndarray | None = None  # (2P, 2P) of every pot's projected gain and bias
+        self._pot_pinv: dict = {}
+
+    def blocks(self):
+        """Each block's :class:`Linearised`, in turn."""
+        n = self.fitted.q.shape[1]
+        for sl, f in frame_batches(self.obs, self.params, self.sigma, self.fitted.q, SWEEP_FRAMES, solve=False):
+            H = (np.swapaxes(f.J, 1, 2) * f.w[:, None, :]) @ f.J
+            H[:, np.arange(n), np.arange(n)] += f.D  # as frame_projection's K
+            yield Linearised(
+                self.adapter,
+                self.fitted,
+                self.obs,
+                self.params,
+                f.J,
+                np.linalg.inv(H),
+                f.w,
+                f.s,
+                f.Rl,
+                f.sigma_p,
+                f.D,
+                start=sl.start,
+            )
+            del f, H  # the caller's block is the only one alive while the next is made
+
+    def mapped_index(self, name: str) -> int:
+        return self.obs.marker_names.index(name)
+
+    def observed_joints(self) -> list[str]:
+        robot = self.adapter.robot
+        return [j for j in robot.joint_names if np.any(_moves(self.obs, robot, j) != 0)]
 
     def sharing(self, j: int) -> list[int]:
         """Pots (mapped order) that read a joint pot j reads (j first)."""
@@ -356,58 +432,253 @@ class Linearised:
         others = [i for i in range(self.P) if i != j and self.obs.kinds[i] != "linear" and np.any(A[i] & A[j])]
         return [j, *others]
 
-    def _identifiable(self, C: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """``out`` (the columns C (T, R, k) orthogonalised) with the directions that kept less than
-        IDENTIFIABLE of their weighted squared norm set to zero."""
-        wt = self.w * self.fitted.train[:, None]
-        lam, V = np.linalg.eigh(_wgram(out, wt))
-        raw = np.einsum("kl,ka,la->a", _wgram(C, wt), V, V)
-        gone = lam <= IDENTIFIABLE * np.maximum(raw, 1e-300)
-        if gone.any():
-            keep = V[:, ~gone]
-            out = out @ (keep @ keep.T)
-        return out
+    # ------------------------------------------------------------------ the three passes
+    def _each(self, cols: list[Columns], betas, maps, see, block=None) -> None:
+        """For each block (``block(lin)`` first, when given) and each of ``cols`` in turn: its
+        projected columns on the block with their fit ``betas`` taken out and ``maps`` applied
+        (None: not), handed to ``see(lin, [(i, columns), ...])`` a group of sets at a time, in
+        order. The columns of several sets are projected
+        together, PROJECT_COLUMNS at a time: one product with each frame's J for all of them (six
+        times cheaper per column than one at a time)."""
+        if not cols and block is None:
+            return
+        for lin in self.blocks():
+            if block is not None:
+                block(lin)
+            pending, width = [], 0
+            for i, c in enumerate(cols):
+                C = c.make(lin)
+                pending.append((i, C))
+                width += C.shape[-1]
+                if width >= PROJECT_COLUMNS or i == len(cols) - 1:
+                    self._hand(lin, cols, pending, betas, maps, see)
+                    pending, width = [], 0
+            del lin, pending  # before the next block is made
 
-    def channels(self, C: np.ndarray | None) -> dict | None:
-        """Mapped rows (T, R, k) -> {channel: (T, k) pot or (T, 3, k) marker} on the log's
-        channels (slips merged back), channels the columns do not touch left out; in COLUMN_DTYPE
-        (copies: C itself is not kept alive)."""
-        if C is None:
-            return None
-        P, k = self.P, C.shape[-1]
-        Cw = np.nan_to_num(C * C) * self.w[..., None]
-        energy = np.concatenate([Cw[:, :P].sum(axis=(0, 2)), Cw[:, P:].reshape(self.T, -1, 3, k).sum(axis=(0, 2, 3))])
-        keep = energy >= CHANNEL_SHARE * (energy.max() if energy.size else 0.0)
-        out = {}
-        for i, n in enumerate(self.obs.pot_names):
-            if keep[i] and energy[i] > 0:
-                out[n] = C[:, i].astype(COLUMN_DTYPE)
-        mk = C[:, P:].reshape(self.T, -1, 3, k)
-        a = self.fitted.applied
+    def _hand(self, lin: Linearised, cols, pending, betas, maps, see) -> None:
+        """:meth:`_each` for the sets ``pending`` [(index, columns as made)] of one block."""
+        raw = [i for i, _ in pending if not cols[i].projected]
+        made = dict(pending)
+        if raw:
+            done = _finite(lin.project(np.concatenate([made[i] for i in raw], axis=-1)))
+            made.update(zip(raw, _split(done, [made[i] for i in raw]), strict=True))
+        made.update((i, _finite(made[i])) for i, _ in pending if cols[i].projected)
+        cal = [i for i, _ in pending if betas[i] is not None and cols[i].span == CALIBRATION]
+        if cal:  # S F β of every set at once
+            fits = lin.project(lin._calibration_apply(np.concatenate([betas[i] for i in cal], axis=-1)))
+            for i, f in zip(cal, _split(fits, [betas[i] for i in cal]), strict=True):
+                made[i] = made[i] - f
+        items = []
+        for i, _ in pending:
+            C = made.pop(i)
+            if betas[i] is not None and cols[i].span != CALIBRATION:
+                C = C - lin.pot_span(self.sharing(cols[i].span)) @ betas[i]
+            items.append((i, C if maps is None or maps[i] is None else C @ maps[i]))
+        see(lin, items)
+
+    def _fits(self, cols: list[Columns]) -> tuple[list, list]:
+        """Pass 1: each column set's fit by its span on the training frames (β (k_span, k)) and the
+        Gram matrix of its columns there (k, k); the calibration's and the pots' Gram matrices
+        (sums over the blocks) on the first sweep that needs them."""
+        n = len(cols)
+        b, raw = [None] * n, [None] * n
+        need_cal = self._cal_pinv is None and any(c.span == CALIBRATION for c in cols)
+        need_pot = self._pot_gram is None and any(c.span not in (None, CALIBRATION) for c in cols)
+        k0 = 2 * self.P + 3 * self.obs.n_markers + 6
+        G = np.zeros((k0, k0)) if need_cal else None
+        Gp = np.zeros((2 * self.P, 2 * self.P)) if need_pot else None
+
+        def block(lin):
+            nonlocal G, Gp
+            if need_cal:
+                G += lin._gram_part()
+            if need_pot:
+                Gp += lin.pot_gram()
+
+        def add(lin, items):
+            wt = lin.w * lin.train[:, None]
+            cal = [(i, C) for i, C in items if cols[i].span == CALIBRATION]
+            dots = {}
+            if cal:  # (S F)ᵀ W C = Fᵀ W C, as S C = C: every set's at once
+                both = lin._calibration_dot(wt[..., None] * np.concatenate([C for _, C in cal], axis=-1))
+                dots = dict(zip([i for i, _ in cal], _split(both, [C for _, C in cal]), strict=True))
+            for i, C in items:
+                if i in dots:
+                    bi = dots[i]
+                else:
+                    N = lin.pot_span(self.sharing(cols[i].span))
+                    bi = (N * wt[..., None]).reshape(-1, N.shape[-1]).T @ C.reshape(-1, C.shape[-1])
+                gi = _wgram(C, wt)
+                b[i], raw[i] = (bi, gi) if b[i] is None else (b[i] + bi, raw[i] + gi)
+
+        fitted = [i for i, c in enumerate(cols) if c.span is not None]
+        self._each(
+            [cols[i] for i in fitted],
+            [None] * len(fitted),
+            None,
+            lambda lin, items: add(lin, [(fitted[j], C) for j, C in items]),
+            block,
+        )
+        if need_cal:
+            self._cal_pinv = np.linalg.pinv(0.5 * (G + G.T), rcond=1e-10, hermitian=True)
+        if need_pot:
+            self._pot_gram = Gp
+        return [None if b[i] is None else self._span_pinv(c.span) @ b[i] for i, c in enumerate(cols)], raw
+
+    def _span_pinv(self, span) -> np.ndarray:
+        if span == CALIBRATION:
+            return self._cal_pinv
+        if span not in self._pot_pinv:
+            idx = [x for i in self.sharing(span) for x in (2 * i, 2 * i + 1)]
+            self._pot_pinv[span] = np.linalg.pinv(self._pot_gram[np.ix_(idx, idx)], rcond=1e-10, hermitian=True)
+        return self._pot_pinv[span]
+
+    def _maps(self, cols: list[Columns], betas, raw, see=None) -> tuple[list, list]:
+        """Pass 2: each column set's map onto its identifiable directions (None: all are, or no
+        test) and its weighted energy per mapped row (R,) over every frame; None for a set that is
+        zero everywhere. ``see(lin, i, columns)`` also reads each set's columns (no map applied)."""
+        n = len(cols)
+        kept = [np.zeros((c.shape[0], c.shape[0])) if c is not None else None for c in raw]
+        rows: list = [None] * n
+        nonzero = [False] * n
+
+        def add(lin, items):
+            sw = np.sqrt(lin.w).T[..., None]  # (R, B, 1)
+            for i, C in items:
+                X = np.swapaxes(C, 0, 1) * sw  # (R, B, k)
+                rg = np.swapaxes(X, 1, 2) @ X  # Σ over frames of w C Cᵀ per row
+                rows[i] = rg if rows[i] is None else rows[i] + rg
+                nonzero[i] = nonzero[i] or bool(np.any(C))
+                if kept[i] is not None:
+                    kept[i] += _wgram(C, lin.w * lin.train[:, None])
+                if see is not None:
+                    see(lin, i, C)
+
+        self._each(cols, betas, None, add)
+        maps = [None if kept[i] is None else _identifying(kept[i], raw[i]) for i in range(n)]
+        energy = []
+        for i in range(n):
+            M = maps[i]
+            if not nonzero[i] or (M is not None and not M.any()):
+                energy.append(None)
+                continue
+            e = np.einsum("rkk->r", rows[i]) if M is None else np.einsum("kl,rlm,mk->r", M, rows[i], M)
+            energy.append(e)
+        return maps, energy
+
+    def channels(self, cols: list[Columns], see=None) -> list[dict | None]:
+        """Each column set as the engine reads a candidate's: {channel: (T, k) pot or (T, 3, k)
+        marker} on the log's channels (slips merged back), in COLUMN_DTYPE, the channels with less
+        than CHANNEL_SHARE of its largest channel's weighted energy left out; None for a set that
+        is zero everywhere (the calibration takes the term up entirely). ``see``: :meth:`_maps`."""
+        betas, raw = self._fits(cols)
+        maps, energy = self._maps(cols, betas, raw, see)
+        P, T = self.P, self.T
         names = list(self.obs.marker_names)
-        for n in self.adapter.marker_names:
-            j = P + names.index(n)
-            second = [(names.index(v), first) for v, (o, first) in a.slips.items() if o == n]
-            if any(keep[x] and energy[x] > 0 for x in [j, *[P + v for v, _ in second]]):
-                col = mk[:, j - P].astype(COLUMN_DTYPE)
-                for v, first in second:
-                    col[first:] = mk[first:, v]
-                out[n] = col
+        slips = self.fitted.applied.slips
+        out, where = [], []  # where: per set, (channel, mapped rows, [(slip rows, first frame)])
+        for i in range(len(cols)):
+            if energy[i] is None:
+                out.append(None)
+                where.append(())
+                continue
+            e = np.concatenate([energy[i][:P], energy[i][P:].reshape(-1, 3).sum(axis=1)])
+            keep = (e >= CHANNEL_SHARE * e.max()) & (e > 0)
+            at = [(name, slice(p, p + 1), ()) for p, name in enumerate(self.obs.pot_names) if keep[p]]
+            for name in self.adapter.marker_names:
+                j = names.index(name)
+                second = [(names.index(v), first) for v, (o, first) in slips.items() if o == name]
+                if any(keep[P + x] for x in [j, *[v for v, _ in second]]):
+                    at.append((name, _rows(P, j), [(_rows(P, v), first) for v, first in second]))
+            out.append({})
+            where.append(at)
+
+        live = [i for i in range(len(cols)) if where[i]]
+
+        def write(lin, items):
+            for n, C in items:
+                _write(out[live[n]], where[live[n]], lin.frames, C, T)
+
+        self._each([cols[i] for i in live], [betas[i] for i in live], [maps[i] for i in live], write)
         return out
 
+    def design(self, cols: list[Columns], see) -> None:
+        """The columns of every set side by side on each block (B, R, Σk), fitted out and mapped as
+        :meth:`channels` would keep them, handed to ``see(lin, columns)`` (a Gauss-Newton step's
+        normal equations, a block at a time)."""
+        betas, raw = self._fits(cols)
+        maps, _ = self._maps(cols, betas, raw)
+        held: list = []
 
-def step_errors(A: np.ndarray, r: np.ndarray, w: np.ndarray, rows: np.ndarray, coef: np.ndarray) -> np.ndarray:
-    """Standard errors (k,) of a Gauss-Newton step's coefficients: the weighted least squares of
-    the residual rows r (T, R) on the columns A (T, R, k) with weights w (T, R) over ``rows``
-    (T, R) bool, as STAC's own (:func:`diegocal.stac.covariance.block_sandwich`): the sandwich
-    over contiguous blocks of frames, at least the model-based (AᵀWA)⁻¹ (the residuals are
+        def gather(lin, items):
+            held.extend(C for _, C in items)
+            if items[-1][0] == len(cols) - 1:
+                see(lin, np.concatenate(held, axis=-1))
+                held.clear()
+
+        self._each(cols, betas, maps, gather)
+
+
+def _write(out: dict, where, sl: slice, C: np.ndarray, T: int) -> None:
+    """A set's columns C (B, R, k) on the frames ``sl`` into its kept channels ``out`` (channel ->
+    (T, k) or (T, 3, k), made on the first block), ``where``: (channel, its mapped rows, [(a slip's
+    rows, its first frame)]): a slipped marker's columns from its slip on are its second marker's."""
+    for name, rows, second in where:
+        x = C[:, rows]
+        if name not in out:
+            out[name] = np.empty((T, C.shape[-1]) if x.shape[1] == 1 else (T, 3, C.shape[-1]), COLUMN_DTYPE)
+        dest = out[name][sl]
+        dest[...] = x[:, 0] if x.shape[1] == 1 else x
+        for srows, first in second:
+            a = max(first - sl.start, 0)
+            dest[a:] = C[a:, srows]
+
+
+def _finite(C: np.ndarray) -> np.ndarray:
+    """C with NaN set to 0 (in place: a sweep's own arrays), at the cost of one check where none is."""
+    return C if np.isfinite(C).all() else np.nan_to_num(C, copy=False)
+
+
+def _split(C: np.ndarray, like: list) -> list:
+    """Columns (..., Σk) side by side -> the sets of ``like``'s widths."""
+    return np.split(C, np.cumsum([x.shape[-1] for x in like])[:-1], axis=-1)
+
+
+def _rows(P: int, m: int) -> slice:
+    """Mapped marker m's three rows."""
+    return slice(P + 3 * m, P + 3 * m + 3)
+
+
+def _moves(obs: Observation, robot, joint: str) -> np.ndarray:
+    """(M,) +1 / −1 / 0: whether a translation of the joint's origin moves each marker (the markers
+    below it, relative to the mocap frame's link)."""
+    kin = obs.kin
+    k = robot.joint_index(joint)
+    jl, _, _ = kin.link_info(obs.marker_links)
+    return kin._anc[jl, k].astype(float) - kin._anc[kin.base_joint, k]
+
+
+def _identifying(gram: np.ndarray, raw: np.ndarray) -> np.ndarray | None:
+    """The map (k, k) onto the directions of orthogonalised columns whose weighted Gram matrix is
+    ``gram`` that kept at least IDENTIFIABLE of their squared norm before (``raw``: the Gram matrix
+    of the columns before); None when every direction did. The others the calibration takes up:
+    they are set to zero rather than left as numerical noise."""
+    lam, V = np.linalg.eigh(gram)
+    before = np.einsum("kl,ka,la->a", raw, V, V)
+    gone = lam <= IDENTIFIABLE * np.maximum(before, 1e-300)
+    if not gone.any():
+        return None
+    keep = V[:, ~gone]
+    return keep @ keep.T
+
+
+def step_errors(bread: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """Standard errors (k,) of a Gauss-Newton step's coefficients, from AᵀWA (k, k) over the rows
+    of the fit and each frame's score Aᵀ W e (T, k) at the step (e the residual after it; frames
+    outside the fit 0), as STAC's own (:func:`diegocal.stac.covariance.block_sandwich`): the
+    sandwich over contiguous blocks of frames, at least the model-based (AᵀWA)⁻¹ (the residuals are
     correlated in time; the frames of one block share their errors)."""
-    ww = np.where(rows, w, 0.0)
-    Ar = np.where(rows[..., None], A, 0.0)
-    e = np.where(rows, r - np.einsum("trk,k->tr", np.nan_to_num(A), coef), 0.0)
-    bread = np.einsum("trk,tr,trl->kl", Ar, ww, Ar)
     inv = np.linalg.pinv(bread, hermitian=True)
-    scores = np.einsum("trk,tr->tk", Ar, ww * e)
     robust, _ = block_sandwich(inv, scores)
     return standard_errors(inv, robust)
 

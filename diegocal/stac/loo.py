@@ -21,8 +21,9 @@ import numpy as np
 
 from diegocal.stac.model import MARKERS, Observation
 
-#: Frames per batch when the Jacobians are evaluated.
-BATCH = 500
+#: Frames per batch when the Jacobians are evaluated: a batch's J and K are 2 x BATCH x R x n
+#: floats (17 MB on Diego San), whatever the log's length.
+BATCH = 250
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,7 @@ class FrameProjection:
     """
 
     J: np.ndarray
-    K: np.ndarray
+    K: np.ndarray | None
     w: np.ndarray
     s: np.ndarray
     Rl: np.ndarray
@@ -62,7 +63,7 @@ def frame_projection(obs: Observation, params, sigma: dict, q: np.ndarray) -> Fr
         np.empty((T, R)),
         np.empty((T, P)),
         np.empty((T, M, 3, 3)),
-        _sigmas(obs, sigma)[0],
+        pot_sigmas(obs, sigma),
         np.empty((T, n)),
     )
     for sl, part in frame_batches(obs, params, sigma, q):
@@ -71,13 +72,19 @@ def frame_projection(obs: Observation, params, sigma: dict, q: np.ndarray) -> Fr
     return out
 
 
-def frame_batches(obs: Observation, params, sigma: dict, q: np.ndarray):
-    """(frames, :class:`FrameProjection` of those frames) for each BATCH of frames in turn:
-    :func:`frame_projection` without holding the whole log's."""
+def frame_batches(obs: Observation, params, sigma: dict, q: np.ndarray, batch: int = BATCH, solve: bool = True):
+    """(frames, :class:`FrameProjection` of those frames) for each ``batch`` of frames in turn:
+    :func:`frame_projection` without holding the whole log's (``solve`` False: without K, None,
+    for a caller that forms (JᵀWJ + D)⁻¹ itself)."""
     T = obs.n_frames
-    for i in range(0, T, BATCH):
-        sl = slice(i, min(i + BATCH, T))
-        yield sl, _batch_projection(obs, params, sigma, q, sl)
+    for i in range(0, T, batch):
+        sl = slice(i, min(i + batch, T))
+        yield sl, _batch_projection(obs, params, sigma, q, sl, solve)
+
+
+def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
+    """The pots' σ (P,) as the projection weighs them (floored: :func:`_sigmas`)."""
+    return _sigmas(obs, sigma)[0]
 
 
 def _sigmas(obs: Observation, sigma: dict) -> tuple[np.ndarray, float]:
@@ -90,7 +97,9 @@ def _sigmas(obs: Observation, sigma: dict) -> tuple[np.ndarray, float]:
     return np.maximum(sigma_p, floor), sig_x
 
 
-def _batch_projection(obs: Observation, params, sigma: dict, q: np.ndarray, sl: slice) -> FrameProjection:
+def _batch_projection(
+    obs: Observation, params, sigma: dict, q: np.ndarray, sl: slice, solve: bool = True
+) -> FrameProjection:
     """:class:`FrameProjection` of the frames ``sl`` (thesis eq. 2.22-2.23 per frame)."""
     sigma_p, sig_x = _sigmas(obs, sigma)
     P, M, n = obs.n_pots, obs.n_markers, q.shape[1]
@@ -107,7 +116,7 @@ def _batch_projection(obs: Observation, params, sigma: dict, q: np.ndarray, sl: 
     diag = np.einsum("bii->bi", H)
     D = 1e-9 * diag + 1e-12  # keeps unobserved joints' H invertible
     diag += D
-    K = np.linalg.solve(H, JW)
+    K = np.linalg.solve(H, JW) if solve else None
     return FrameProjection(J, K, w, s, Rl, sigma_p, D)
 
 
@@ -120,6 +129,7 @@ def deleted_from_others(obs: Observation, params, sigma: dict, q: np.ndarray, r:
     rm = np.empty((T, obs.n_markers, 3))
     for sl, part in frame_batches(obs, params, sigma, q):
         rp[sl], rm[sl] = deleted_residuals(part, r[sl], P)
+        del part  # before the next batch is made
     return rp, rm
 
 

@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics_lin
 from diegocal.diagnose.kinematics import KinematicsAdapter
-from diegocal.diagnose.kinematics_lin import Linearised
+from diegocal.diagnose.kinematics_lin import Columns, Linearised, Sweep
 from diegocal.evaluate import split_blocks
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
@@ -274,6 +274,35 @@ def test_link_offsets_the_calibration_takes_up_are_no_candidates(baseline):
         assert abs(V[0, -1]) > 0.99  # the one direction left: x, along the link
 
 
+def test_a_sweep_block_by_block_equals_the_whole_log(baseline, monkeypatch):
+    """A round's columns made a block of frames at a time (:class:`Sweep`: the fit's sums, then the
+    orthogonalised columns' Gram matrices, then the columns; blocks that do not divide the log,
+    a few sets projected together) equal those of every frame's linearisation at once: projected,
+    the calibration fitted out, the directions it takes up zeroed (mcp_abd: all of them, no
+    columns), in float32 on the channels that carry them."""
+    adapter, fitted, _ = baseline
+    monkeypatch.setattr(kinematics_lin, "SWEEP_FRAMES", 37)
+    monkeypatch.setattr(kinematics_lin, "PROJECT_COLUMNS", 4)
+    lin = Linearised.at(fitted, adapter)
+    sweep = Sweep(fitted, adapter)
+    assert sweep.T % 37
+    joints = sweep.observed_joints()
+    cols = [Columns(lambda b, j=j: b.link_offset_basis(j)) for j in joints]
+    got = sweep.channels(cols)
+    assert got[joints.index("mcp_abd")] is None
+    for joint, g in zip(joints, got, strict=True):
+        want = lin.beyond_calibration(lin.project(lin.link_offset_basis(joint)))
+        assert (g is None) == (not np.any(want))
+        for name, x in (g or {}).items():  # a pot (T, 3) or a marker (T, 3, 3)
+            if name in adapter.pot_names:
+                rows = want[:, adapter.pot_names.index(name)]
+            else:
+                m = sweep.mapped_index(name)
+                rows = want[:, lin.P + 3 * m : lin.P + 3 * m + 3]
+            assert x.dtype == np.float32
+            np.testing.assert_allclose(x, rows, atol=1e-6 * np.abs(want).max())
+
+
 def test_residual_channels_and_variables(baseline):
     adapter, fitted, _ = baseline
     res = adapter.residuals(fitted)
@@ -419,8 +448,8 @@ def test_a_slip_region_is_open(baseline, finger):
     run from the change time on without end, so a calibration with the term predicts a later log
     on the same clock with the marker moved throughout."""
     adapter, fitted, blocks = baseline
-    lin = Linearised.at(fitted, adapter)
-    cands = adapter._slip_family(lin, fitted, set(), blocks.mask("train"))
+    train = blocks.mask("train")
+    cands = [c for c in adapter.candidates(fitted, adapter.residuals(fitted), train) if c.term.cause == "marker_slip"]
     assert cands and all(c.term.region.high == np.inf and c.term.region.low < adapter.time[-1] for c in cands)
     log = _log(finger, 2, ("marker_slip",), duration=4.0)
     assert log.truth.effects[0]["region"]["high"] == np.inf
