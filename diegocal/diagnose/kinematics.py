@@ -16,7 +16,7 @@ read its joints. A clock shift is a family over shifts (:data:`TIME_SHIFTS`), ea
 predicted markers' change over its shift: a shift of many samples is far from its linearisation
 at zero. A marker slip re-fits its marker's position (``refit``); its change time is a family:
 in each run of training frames the time a change-point scan fits best, and the middle of each
-gap between runs (:func:`_slip_samples`). Its region is open, ``time`` from the change on: a
+gap between runs (:func:`slip_samples`). Its region is open, ``time`` from the change on: a
 marker that moved stays moved, in this log and in any later one on the same clock.
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
@@ -40,7 +40,9 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
-from diegocal.diagnose.kinematics_lin import Columns, Sweep, running_median, step_errors
+from diegocal.diagnose.kinematics_lin import running_median, step_errors
+from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
+from diegocal.diagnose.kinematics_sweep import Columns, Sweep
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, make_stream, save_yaml
@@ -309,7 +311,7 @@ class KinematicsAdapter:
         cols = [m[2] for m in made if isinstance(m, tuple)]
         first = len(cols)
         cols += [Columns(partial(_marker_block, m=sweep.mapped_index(n)), span=None) for n in slips]
-        scan = _SlipScan(sweep.T, slips, first)
+        scan = SlipScan(sweep.T, slips, first)
         chans = iter(sweep.channels(cols, see=scan.add))
         out = []
         for m in made:
@@ -324,14 +326,14 @@ class KinematicsAdapter:
         return out
 
     def _slip_family(self, name: str, refit: dict, samples: list[int]) -> list[Candidate]:
-        """A marker's slip candidates: a family over change times (:func:`_slip_samples`: the best
+        """A marker's slip candidates: a family over change times (:func:`slip_samples`: the best
         in each run of training frames by a change-point scan of the marker's projected position
         columns, and the middle of each gap between runs: the training frames cannot place a slip
         inside a gap more finely; its middle halves the worst error), each its re-fit columns
         ``refit`` from its change on."""
         out = []
         for k in samples:
-            cols_k = {c: _FromSample(v, k) for c, v in refit.items()}
+            cols_k = {c: FromSample(v, k) for c, v in refit.items()}
             region = Region("time", float(self.time[k]), float("inf"))  # moved for good: open
             term = make_term("marker_slip", name, region=region)
             out.append(Candidate(term, cols_k, family=f"marker_slip:{name}", refit=refit))
@@ -458,27 +460,6 @@ class KinematicsAdapter:
         return path
 
 
-class _FromSample:
-    """Columns (T, ...) that are zero before sample ``first``: a slip variant, made only when the
-    engine reads it (np.asarray), so that a family of change times shares one array."""
-
-    def __init__(self, base: np.ndarray, first: int):
-        self.base, self.first = base, first
-        self.shape = base.shape
-        self.ndim = base.ndim
-
-    def __array__(self, dtype=None, copy=None):
-        out = np.array(self.base, dtype=dtype)
-        out[: self.first] = 0.0
-        return out
-
-    def __getitem__(self, rows):
-        """The rows asked for (the engine reads a fit's or a test's samples), zero before ``first``."""
-        out = np.array(self.base[rows])
-        out[np.arange(self.shape[0])[rows] < self.first] = 0.0
-        return out
-
-
 def _seeded(robot, cal: Calibration):
     """``robot`` with its markers' nominal positions at a calibration's (those it names); the rest
     of the robot (locked and continuous joints, source) as it is."""
@@ -492,62 +473,6 @@ def _clock_moved(before, after) -> bool:
     a = {t.channel: float(t.values[0]) for t in before if t.cause == "time_offset"}
     b = {t.channel: float(t.values[0]) for t in after if t.cause == "time_offset"}
     return any(abs(b[c] - a[c]) > CLOCK_TOL * max(abs(b[c]), 1e-3) for c in b if c in a)
-
-
-def _slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndarray) -> list[int]:
-    """Candidate slip samples of a marker: in each run of training frames the change time that
-    fits best, and the middle of each gap between runs (none in the first and last 5 % of the log).
-
-    The scan fits the marker's (projected) position columns ``cols`` (T, R, 3) to the residual rows
-    ``r`` (T, R) with weights ``w`` (T, R) (zero off the training frames) separately before and
-    after each change time k; the best k maximises the sum of the two fits' weighted gains
-    bᵀ G⁻¹ b, from prefix sums of the per-frame G = Cᵀ W C and b = Cᵀ W r (O(T)). A change at a
-    run's first frame is a change in the gap before it: the gap's middle stands for it."""
-    Cw = cols * w[..., None]
-    return _change_times(train, np.einsum("trk,trl->tkl", Cw, cols), np.einsum("trk,tr->tk", Cw, r))
-
-
-def _change_times(train: np.ndarray, G: np.ndarray, b: np.ndarray) -> list[int]:
-    """:func:`_slip_samples` from each frame's G (T, 3, 3) and b (T, 3)."""
-    T = train.size
-    G, b = np.cumsum(G, axis=0), np.cumsum(b, axis=0)  # Σ over frames ≤ t
-    fit = _gain(G[:-1], b[:-1]) + _gain(G[-1] - G[:-1], b[-1] - b[:-1])  # change at k = 1..T-1
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], train.astype(int), [0]])))
-    runs = list(zip(edges[0::2], edges[1::2], strict=True))
-    out = []
-    for i, (a, e) in enumerate(runs):
-        if e - a > 2:  # a change after the run's first frame and before its last
-            out.append(int(a + 1 + np.argmax(fit[a : e - 1])))
-        if i + 1 < len(runs):
-            out.append(int((e + runs[i + 1][0]) // 2))
-    lo, hi = int(0.05 * T), int(0.95 * T)
-    return sorted({k for k in out if lo <= k <= hi})
-
-
-class _SlipScan:
-    """Each frame's G and b of :func:`_slip_samples` for the markers ``names``, gathered from the
-    projected position columns a :class:`Sweep` hands :meth:`add` (column sets ``first`` on):
-    (T, 3, 3) and (T, 3) per marker, not the (T, R, 3) columns."""
-
-    def __init__(self, T: int, names, first: int):
-        self.first = first
-        self.G, self.b = np.zeros((len(names), T, 3, 3)), np.zeros((len(names), T, 3))
-        self._r: tuple | None = None  # (block start, its residual rows and training weights)
-
-    def add(self, lin, i: int, cols: np.ndarray) -> None:
-        if i < self.first:
-            return
-        if self._r is None or self._r[0] != lin.start:
-            r = lin.residual_rows()
-            ok = np.isfinite(r)
-            self._r = (lin.start, np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * lin.train[:, None])
-        _, r, w = self._r
-        Cw = cols * w[..., None]
-        self.G[i - self.first, lin.frames] = np.einsum("trk,trl->tkl", Cw, cols)
-        self.b[i - self.first, lin.frames] = np.einsum("trk,tr->tk", Cw, r)
-
-    def samples(self, m: int, train: np.ndarray) -> list[int]:
-        return _change_times(train, self.G[m], self.b[m])
 
 
 def _pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:
@@ -578,12 +503,6 @@ def _clock_block(lin, markers: np.ndarray, time: np.ndarray, span) -> np.ndarray
     v = np.zeros((lin.T, lin.R, 1))
     v[:, lin.P :, 0] = xd.reshape(lin.T, -1)
     return np.nan_to_num(v)
-
-
-def _gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares
-    fit of those columns removes."""
-    return np.einsum("ki,ki->k", b, np.einsum("kij,kj->ki", np.linalg.pinv(G, hermitian=True), b))
 
 
 def adapters(log, robot, options) -> list[KinematicsAdapter]:

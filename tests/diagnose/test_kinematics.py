@@ -18,7 +18,7 @@ import pytest
 
 from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics_lin
 from diegocal.diagnose.kinematics import KinematicsAdapter
-from diegocal.diagnose.kinematics_lin import Columns, Linearised, Sweep
+from diegocal.diagnose.kinematics_sweep import Columns, Sweep, whole_log
 from diegocal.evaluate import split_blocks
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
@@ -130,7 +130,7 @@ def baseline(finger):
 def test_slip_time_scan_equals_brute_force_refits():
     """The change-point scan of a slip (prefix sums) picks, in each training run, the change time
     a least-squares refit before and after every time picks; a slip inside a gap is its middle."""
-    from diegocal.diagnose.kinematics import _slip_samples
+    from diegocal.diagnose.kinematics_slip import slip_samples as _slip_samples
 
     rng = np.random.default_rng(3)
     T, R = 400, 6
@@ -160,7 +160,7 @@ def test_schur_projection_is_orthogonal_to_q(baseline):
     """Projected candidate columns carry nothing a change of the frame's q could explain:
     Jᵀ W c = 0 per frame (the Schur complement of the brief)."""
     adapter, fitted, _ = baseline
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     raw_g = np.zeros((lin.T, lin.R, 1))
     raw_g[:, 0, 0] = 1.0
     raw_c = lin.link_offset_basis("dip")
@@ -178,7 +178,7 @@ def test_deleted_residuals_are_leave_one_sensor_out_refits(baseline, monkeypatch
     normal equations (a pot whose σ collapsed pinned its joint: its own residual ~0 whatever the
     other sensors say). Residuals are replaced by random ones to make Jᵀ W r ≠ 0."""
     adapter, fitted, _ = baseline
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     r = np.random.default_rng(0).normal(0.0, 0.01, (lin.T, lin.R))
     monkeypatch.setattr(lin, "residual_rows", lambda: r)
     rp, rm = lin.deleted_residuals()
@@ -202,7 +202,7 @@ def test_deleted_residuals_a_batch_at_a_time_equal_the_whole_log(baseline, monke
     (:func:`~diegocal.stac.loo.deleted_from_others`, no frame's J and K held past its batch): the
     same numbers as every frame's projection at once, with batches that do not divide the log."""
     adapter, fitted, _ = baseline
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     r = np.random.default_rng(1).normal(0.0, 0.01, (lin.T, lin.R))
     sigma = loo.sigma_of(fitted.cal)
     want = loo.deleted_residuals(loo.frame_projection(lin.obs, lin.params, sigma, fitted.q), r, lin.P)
@@ -221,7 +221,7 @@ def test_calibration_span_from_its_structure_equals_the_dense_basis(baseline):
     """Fᵀ V, F β and (S F)ᵀ W (S F) from F's structure equal the same products with F written out
     (two routes; F: every pot's gain and bias, every marker's position, the mocap frame)."""
     adapter, fitted, _ = baseline
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     F = lin._calibration_basis(slice(0, lin.T))
     rng = np.random.default_rng(0)
     V = rng.normal(size=(lin.T, lin.R, 2))
@@ -240,7 +240,7 @@ def test_fitting_beyond_the_calibration_equals_refitting_it(baseline):
     calibration re-fitted together explain; and the baseline's residual is that orthogonal (STAC's
     fit is the calibration's optimum) up to its convergence."""
     adapter, fitted, _ = baseline
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     r = np.nan_to_num(lin.residual_rows())
     rows = fitted.train[:, None] & (lin.w > 0)
     sw = np.sqrt(lin.w[rows])
@@ -264,7 +264,7 @@ def test_link_offsets_the_calibration_takes_up_are_no_candidates(baseline):
     positions below it, and moved across the link a pot bias (angle offsets of the joint and its
     parent): only the link's length (x) is left; mcp_abd hangs from the base (the mocap frame)."""
     adapter, fitted, _ = baseline
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     wt = lin.w * fitted.train[:, None]
     assert not np.any(lin.beyond_calibration(lin.project(lin.link_offset_basis("mcp_abd"))))
     for joint in ("pip", "dip"):
@@ -283,7 +283,7 @@ def test_a_sweep_block_by_block_equals_the_whole_log(baseline, monkeypatch):
     adapter, fitted, _ = baseline
     monkeypatch.setattr(kinematics_lin, "SWEEP_FRAMES", 37)
     monkeypatch.setattr(kinematics_lin, "PROJECT_COLUMNS", 4)
-    lin = Linearised.at(fitted, adapter)
+    lin = whole_log(fitted, adapter)
     sweep = Sweep(fitted, adapter)
     assert sweep.T % 37
     joints = sweep.observed_joints()

@@ -1,0 +1,90 @@
+"""A marker that slips on its link (the kinematics diagnosis's ``marker_slip``): where in the log
+it may have moved, from prefix sums of each frame's weighted normal equations (O(T)), and its
+columns from the change on, made only for the rows the engine reads."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class FromSample:
+    """Columns (T, ...) that are zero before sample ``first``: a slip variant, made only when the
+    engine reads it (np.asarray), so that a family of change times shares one array."""
+
+    def __init__(self, base: np.ndarray, first: int):
+        self.base, self.first = base, first
+        self.shape = base.shape
+        self.ndim = base.ndim
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.array(self.base, dtype=dtype)
+        out[: self.first] = 0.0
+        return out
+
+    def __getitem__(self, rows):
+        """The rows asked for (the engine reads a fit's or a test's samples), zero before ``first``."""
+        out = np.array(self.base[rows])
+        out[np.arange(self.shape[0])[rows] < self.first] = 0.0
+        return out
+
+
+def slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndarray) -> list[int]:
+    """Candidate slip samples of a marker: in each run of training frames the change time that
+    fits best, and the middle of each gap between runs (none in the first and last 5 % of the log).
+
+    The scan fits the marker's (projected) position columns ``cols`` (T, R, 3) to the residual rows
+    ``r`` (T, R) with weights ``w`` (T, R) (zero off the training frames) separately before and
+    after each change time k; the best k maximises the sum of the two fits' weighted gains
+    bᵀ G⁻¹ b, from prefix sums of the per-frame G = Cᵀ W C and b = Cᵀ W r (O(T)). A change at a
+    run's first frame is a change in the gap before it: the gap's middle stands for it."""
+    Cw = cols * w[..., None]
+    return change_times(train, np.einsum("trk,trl->tkl", Cw, cols), np.einsum("trk,tr->tk", Cw, r))
+
+
+def change_times(train: np.ndarray, G: np.ndarray, b: np.ndarray) -> list[int]:
+    """:func:`slip_samples` from each frame's G (T, 3, 3) and b (T, 3)."""
+    T = train.size
+    G, b = np.cumsum(G, axis=0), np.cumsum(b, axis=0)  # Σ over frames ≤ t
+    fit = gain(G[:-1], b[:-1]) + gain(G[-1] - G[:-1], b[-1] - b[:-1])  # change at k = 1..T-1
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], train.astype(int), [0]])))
+    runs = list(zip(edges[0::2], edges[1::2], strict=True))
+    out = []
+    for i, (a, e) in enumerate(runs):
+        if e - a > 2:  # a change after the run's first frame and before its last
+            out.append(int(a + 1 + np.argmax(fit[a : e - 1])))
+        if i + 1 < len(runs):
+            out.append(int((e + runs[i + 1][0]) // 2))
+    lo, hi = int(0.05 * T), int(0.95 * T)
+    return sorted({k for k in out if lo <= k <= hi})
+
+
+class SlipScan:
+    """Each frame's G and b of :func:`slip_samples` for the markers ``names``, gathered from the
+    projected position columns a :class:`Sweep` hands :meth:`add` (column sets ``first`` on):
+    (T, 3, 3) and (T, 3) per marker, not the (T, R, 3) columns."""
+
+    def __init__(self, T: int, names, first: int):
+        self.first = first
+        self.G, self.b = np.zeros((len(names), T, 3, 3)), np.zeros((len(names), T, 3))
+        self._r: tuple | None = None  # (block start, its residual rows and training weights)
+
+    def add(self, lin, i: int, cols: np.ndarray) -> None:
+        if i < self.first:
+            return
+        if self._r is None or self._r[0] != lin.start:
+            r = lin.residual_rows()
+            ok = np.isfinite(r)
+            self._r = (lin.start, np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * lin.train[:, None])
+        _, r, w = self._r
+        Cw = cols * w[..., None]
+        self.G[i - self.first, lin.frames] = np.einsum("trk,trl->tkl", Cw, cols)
+        self.b[i - self.first, lin.frames] = np.einsum("trk,tr->tk", Cw, r)
+
+    def samples(self, m: int, train: np.ndarray) -> list[int]:
+        return change_times(train, self.G[m], self.b[m])
+
+
+def gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares
+    fit of those columns removes."""
+    return np.einsum("ki,ki->k", b, np.einsum("kij,kj->ki", np.linalg.pinv(G, hermitian=True), b))
