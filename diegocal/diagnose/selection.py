@@ -13,6 +13,7 @@ rule among the significant ones. The data types (:class:`~diegocal.diagnose.engi
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -199,6 +200,44 @@ def evaluate_candidates(
     return out
 
 
+class JoinedColumns(Mapping):
+    """A common cause's columns, channel -> (T, K) or (T, d, K): its members' columns side by
+    side (each member its own slice of the K parameters, zero elsewhere), built when read and, for
+    a fit or a test (:meth:`rows`), on the samples asked for only: the members' columns are held
+    already, and a full-length copy of all of them per channel is what a long log cannot afford.
+
+    ``parts``: channel -> [(a member's columns mapping, its slice of the K columns)].
+    """
+
+    def __init__(self, parts: dict, K: int):
+        self.parts, self.K = parts, K
+
+    def rows(self, channel: str, samples) -> np.ndarray:
+        return self._join(channel, samples)
+
+    def __getitem__(self, channel: str) -> np.ndarray:
+        return self._join(channel, slice(None))
+
+    def _join(self, channel: str, samples) -> np.ndarray:
+        out = None
+        for cols, sl in self.parts[channel]:
+            x = cols.rows(channel, samples) if hasattr(cols, "rows") else np.asarray(cols[channel][samples])
+            x = x[..., None] if x.ndim == 1 else x  # its own precision (a kinematics candidate's is float32)
+            if out is None:
+                out = np.zeros((*x.shape[:-1], self.K), dtype=np.result_type(x.dtype, np.float32))
+            out[..., sl] += x
+        return out
+
+    def __contains__(self, channel) -> bool:
+        return channel in self.parts
+
+    def __iter__(self):
+        return iter(self.parts)
+
+    def __len__(self) -> int:
+        return len(self.parts)
+
+
 def common_candidates(tested: list[Tested]) -> list[Candidate]:
     """One candidate per cause that more than one channel's best variant proposes with a positive
     validation gain: their columns side by side, each channel its own parameters (one cause acting
@@ -215,15 +254,13 @@ def common_candidates(tested: list[Tested]) -> list[Candidate]:
         if len(members) < 2 or len(set(channels)) < len(channels):
             continue
         sizes = [t.candidate.n_params for t in members]
-        K, at, cols, params = sum(sizes), 0, {}, []
+        at, parts, params = 0, {}, []
         for t, k in zip(members, sizes, strict=True):
-            for c, x in t.candidate.columns.items():
-                x = np.asarray(x)  # its own precision (a kinematics candidate's is float32)
-                x = x[..., None] if x.ndim == 1 else x
-                slot = cols.setdefault(c, np.zeros((*x.shape[:-1], K), dtype=np.result_type(x.dtype, np.float32)))
-                slot[..., at : at + k] += x
+            for c in t.candidate.columns:
+                parts.setdefault(c, []).append((t.candidate.columns, slice(at, at + k)))
             params += [Parameter(f"{t.term.channel}.{p.name}", p.value, p.unit) for p in t.term.linear]
             at += k
+        cols = JoinedColumns(parts, sum(sizes))
         term = Term(cause, "+".join(channels), tuple(params))
         out.append(Candidate(term, cols, family=f"common:{cause}", members=tuple(members)))
     return out

@@ -86,3 +86,28 @@ def test_asking_whether_a_channel_is_there_builds_nothing(monkeypatch):
     cols = binned_candidate(res, "j", "x", np.arange(300) < 200, 5).columns
     monkeypatch.setattr(type(cols), "_onehot", lambda *a, **k: pytest.fail("columns built"))
     assert "j" in cols and "m" not in cols and list(cols) == ["j"]
+
+
+def test_a_common_cause_joins_its_members_columns_when_read():
+    """One cause on two channels tested as one: its columns are each member's on its own
+    parameters, zero elsewhere, built when read (the rows of a fit alone for a fit)."""
+    from diegocal.diagnose.selection import common_candidates, evaluate_candidates
+    from diegocal.diagnose.types import Candidate, EngineOptions
+    from diegocal.terms import Parameter, Term
+
+    rng = np.random.default_rng(4)
+    T = 400
+    x = {c: rng.normal(size=(T, 2)) for c in ("a", "b")}
+    res = Residuals({c: x[c] @ [1.0, -0.5] + 0.1 * rng.normal(size=T) for c in x}, dict.fromkeys(x, "N·m"))
+    cands = [Candidate(Term("spring", c, (Parameter("k1"), Parameter("k2"))), {c: x[c]}) for c in x]
+    train, val = np.arange(T) < 240, np.arange(T) >= 240
+    tested = evaluate_candidates(cands, res, {"a": 1.0, "b": 1.0}, train, val, EngineOptions())
+    (common,) = common_candidates(tested)
+    cols = common.columns
+    assert sorted(cols) == ["a", "b"] and "c" not in cols and common.n_params == 4
+    first = [t.term.channel for t in common.members].index("a")
+    expected = np.zeros((T, 4))
+    expected[:, 2 * first : 2 * first + 2] = x["a"]
+    np.testing.assert_array_equal(cols["a"], expected)
+    rows = np.flatnonzero(train)
+    np.testing.assert_array_equal(cols.rows("a", rows), expected[rows])
