@@ -141,19 +141,32 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         unscaled F again), Fs is F scaled in F's own memory, so that a long log's features are
         held once; the returned F is then Fs too."""
         U, Y, F = self._check(U, Y, F)
-        if len(Y) < 3:
-            raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
-        self.u_mean_, self.u_std_ = input_scaling(U)
         N, n, m = F.shape  # the columns' RMS over samples and outputs, without a squared copy of F
-        rms = np.sqrt(np.einsum("tjm,tjm->m", F, F) / (N * n)) if m else np.zeros(0)
-        self.f_scale_ = np.where(rms > 0, rms, 1.0)
-        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+        self._set_scaling(U, Y, np.sqrt(np.einsum("tjm,tjm->m", F, F) / (N * n)) if m else np.zeros(0))
         self._raw = (U, F)  # the two-stage candidate's GP scales them as this estimator does
         if overwrite_features and all(k is None for k in self.kernels) and F.flags.writeable:
             F = np.divide(F, self.f_scale_, out=F)
             self._raw = None
             return U, Y, F, (U - self.u_mean_) / self.u_std_, F
         return (U, Y, F, *self._scale(U, F))
+
+    def _set_scaling(self, U, Y, rms) -> None:
+        """The scaling attributes from the inputs U (N, p), the outputs Y (N, n) and the feature
+        columns' RMS over samples and outputs (m,)."""
+        if len(Y) < 3:
+            raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
+        self.u_mean_, self.u_std_ = input_scaling(U)
+        self.f_scale_ = np.where(rms > 0, rms, 1.0)
+        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+
+    def _keep(self, source) -> None:
+        """W's estimate (caller's units) from the posterior ``source`` that predicts it, and the
+        likelihood; the raw arrays let go."""
+        self._say("posterior", 1, 1)
+        self._raw = None
+        self.w_ = source.w_mean / self.f_scale_
+        self.w_cov_ = source.w_cov / np.outer(self.f_scale_, self.f_scale_)
+        self.log_likelihood_ = self.posterior_.log_likelihood
 
     @single_threaded  # outermost: BLAS threads made when its limit is lifted start unflushed
     @flushed()
@@ -201,12 +214,8 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         self.inducing_ = None if inducing is None else per_output(inducing, n)
         self.posterior_ = fit_posterior(kernels, Us, Y, Fs, hyperparameters, inducing, jobs=self.jobs)
         self._fit_stages(U, Y, F, Us, Fs, residual_inducing)
-        self._say("posterior", 1, 1)
-        self._raw = None
-        source = self.posterior_ if self.pr_posterior_ is None or self._modes().count("joint") else self.pr_posterior_
-        self.w_ = source.w_mean / self.f_scale_
-        self.w_cov_ = source.w_cov / np.outer(self.f_scale_, self.f_scale_)
-        self.log_likelihood_ = self.posterior_.log_likelihood
+        joint = self.pr_posterior_ is None or self._modes().count("joint")
+        self._keep(self.posterior_ if joint else self.pr_posterior_)
         return self
 
     @single_threaded
@@ -221,17 +230,12 @@ class SemiParametricGP(GuardCandidates, MLStarts):
             raise ValueError("fit_in_chunks fits PR only: no kernel on any output, features used")
         U, Y = np.asarray(U, float), np.asarray(Y, float)
         N, n = Y.shape
-        if len(Y) < 3:
-            raise FitError(f"need at least 3 samples to fit, got {len(Y)}")
         sums = None
         for i in range(0, N, CHUNK_SAMPLES):
             F = np.asarray(features(slice(i, min(i + CHUNK_SAMPLES, N))), float)
             sums = sums or GramSums(N, n, F.shape[2])
             sums.add(F, Y[i : i + CHUNK_SAMPLES])
-        self.u_mean_, self.u_std_ = input_scaling(U)
-        rms = sums.feature_rms()
-        self.f_scale_ = np.where(rms > 0, rms, 1.0)
-        self.y_std_ = np.where(Y.std(0) > 0, Y.std(0), 1.0)
+        self._set_scaling(U, Y, sums.feature_rms() if sums else np.zeros(0))
         Us = (U - self.u_mean_) / self.u_std_
         rng = np.random.default_rng(self.seed)
         self.stages_ = None
@@ -239,14 +243,10 @@ class SemiParametricGP(GuardCandidates, MLStarts):
             idx = self._hyper_subset(N, rng)
             hyperparameters = self._learn(Us[idx], Y[idx], features(idx) / self.f_scale_, rng)
         self.hyper_ = hyperparameters
-        self.inducing_ = per_output(None, n)
+        self.inducing_ = None  # every block exact (no GP), as fit() leaves it
         self.posterior_ = posterior_from_sums(sums.scaled(self.f_scale_), Us, hyperparameters)
         self.pr_posterior_ = self.residual_ = self.pr_w_cov_robust_ = None
-        self._raw = None
-        self._say("posterior", 1, 1)
-        self.w_ = self.posterior_.w_mean / self.f_scale_
-        self.w_cov_ = self.posterior_.w_cov / np.outer(self.f_scale_, self.f_scale_)
-        self.log_likelihood_ = self.posterior_.log_likelihood
+        self._keep(self.posterior_)
         return self
 
     def _modes(self) -> list:

@@ -19,6 +19,8 @@ gives on the whole arrays (the same numbers up to the order of the sums).
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from scipy.linalg import cho_solve
 
@@ -61,8 +63,7 @@ class GramSums:
     def scaled(self, f_scale: np.ndarray) -> GramSums:
         """The sums of the features divided column-wise by ``f_scale`` (m,)."""
         s = np.concatenate([f_scale, [1.0]])
-        out = GramSums.__new__(GramSums)
-        out.N, out.n, out.m, out.edges, out.rows = self.N, self.n, self.m, self.edges, self.rows
+        out = copy.copy(self)
         out.G = self.G / np.outer(s, s)
         return out
 
@@ -78,7 +79,7 @@ def posterior_from_sums(sums: GramSums, U: np.ndarray, hp: Hyperparameters, robu
     blocks = []
     for j in range(n):
         blk = ExactBlock(None, U, np.zeros(0), float(noise[j]))
-        blk.alpha, blk.F = None, np.empty((0, m))  # PR predicts from ŵ alone (finalize's shape)
+        blk.finalize(None, np.empty((0, m)))  # PR predicts from ŵ alone: no α, F_j's width only
         blocks.append(blk)
     B = np.einsum("jab,j->ab", Gff, 1.0 / noise)
     b = Gfy.T @ (1.0 / noise)

@@ -130,6 +130,7 @@ def test_pr_fit_in_chunks_equals_the_fit_on_whole_features(monkeypatch):
     np.testing.assert_allclose(lean.hyper_.pack(), plain.hyper_.pack(), rtol=1e-5)
     np.testing.assert_allclose(lean.w_, plain.w_, rtol=1e-6)
     np.testing.assert_allclose(lean.w_cov_, plain.w_cov_, rtol=1e-5)
+    assert lean.inducing_ is None and plain.inducing_ is None  # sgp.yaml's n_inducing: null for PR
     given = SemiParametricGP([None] * 3).fit_in_chunks(U, Y, features, plain.hyper_)
     np.testing.assert_allclose(given.w_, plain.w_, rtol=1e-11)
     np.testing.assert_allclose(given.log_likelihood_, plain.log_likelihood_, rtol=1e-12)
