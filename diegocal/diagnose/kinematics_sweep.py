@@ -66,17 +66,14 @@ class Sweep:
 
     def blocks(self):
         """Each block's :class:`Linearised`, in turn."""
-        n = self.fitted.q.shape[1]
         for sl, f in frame_batches(self.obs, self.params, self.sigma, self.fitted.q, SWEEP_FRAMES, solve=False):
-            H = (np.swapaxes(f.J, 1, 2) * f.w[:, None, :]) @ f.J
-            H[:, np.arange(n), np.arange(n)] += f.D  # as frame_projection's K
             yield Linearised(
                 self.adapter,
                 self.fitted,
                 self.obs,
                 self.params,
                 f.J,
-                np.linalg.inv(H),
+                np.linalg.inv(f.H),  # (JᵀWJ + D)⁻¹, as frame_projection's K solves with it
                 f.w,
                 f.s,
                 f.Rl,
@@ -84,7 +81,7 @@ class Sweep:
                 f.D,
                 start=sl.start,
             )
-            del f, H  # the caller's block is the only one alive while the next is made
+            del f  # the caller's block is the only one alive while the next is made
 
     def mapped_index(self, name: str) -> int:
         return self.obs.marker_names.index(name)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
-from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested
+from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested, column_rows
 from diegocal.progress import Eta
 from diegocal.terms import Parameter, Term
 
@@ -57,13 +57,8 @@ class _Stack:
         out = []
         for c in channels:
             n = self.samples.size * self.dims[c]
-            x = None if not cols or c not in cols else cols if hasattr(cols, "rows") else cols.get(c)
-            if x is None:
-                out.append(np.zeros((n, k)))
-                continue
-            # binned columns (show.BinColumns) build the rows asked for, never all T of them
-            rows = cols.rows(c, self.samples) if x is cols else np.asarray(x[self.samples], float)
-            out.append((rows * self.weights[c]).reshape(n, k))
+            x = column_rows(cols, c, self.samples)
+            out.append(np.zeros((n, k)) if x is None else (np.asarray(x, float) * self.weights[c]).reshape(n, k))
         return np.vstack(out) if out else np.zeros((0, k))
 
 
@@ -221,8 +216,8 @@ class JoinedColumns(Mapping):
     def _join(self, channel: str, samples) -> np.ndarray:
         out = None
         for cols, sl in self.parts[channel]:
-            x = cols.rows(channel, samples) if hasattr(cols, "rows") else np.asarray(cols[channel][samples])
-            x = x[..., None] if x.ndim == 1 else x  # its own precision (a kinematics candidate's is float32)
+            x = np.asarray(column_rows(cols, channel, samples))  # its own precision (kinematics: float32)
+            x = x[..., None] if x.ndim == 1 else x
             if out is None:
                 out = np.zeros((*x.shape[:-1], self.K), dtype=np.result_type(x.dtype, np.float32))
             out[..., sl] += x

@@ -69,6 +69,18 @@ class Candidate:
         return len(self.term.linear)
 
 
+def column_rows(columns, channel: str, samples):
+    """A candidate's columns of ``channel`` on ``samples`` (None where it has none there): those
+    rows alone, from a columns mapping that builds them itself (``rows``: binned and joined
+    columns, which never build all T) or by indexing the channel's array."""
+    if not columns or channel not in columns:
+        return None
+    if hasattr(columns, "rows"):
+        return columns.rows(channel, samples)
+    x = columns[channel]
+    return None if x is None else x[samples]
+
+
 @dataclass(frozen=True)
 class Fault:
     """A per-reading data fault (marker outliers, swapped labels): not a regression.

@@ -32,7 +32,8 @@ class FrameProjection:
 
     J : (T, R, n); K : (T, n, R); w : (T, R) the weights 1/σ² (0 where occluded); s : (T, P) the
     sensed lengths or angles; Rl : (T, M, 3, 3) the markers' link rotations; sigma_p : (P,) the
-    pots' σ used; D : (T, n) the tiny diagonal that keeps JᵀWJ invertible (unobserved joints)
+    pots' σ used; D : (T, n) the tiny diagonal that keeps JᵀWJ invertible (unobserved joints);
+    H : (T, n, n) JᵀWJ + D, kept in place of K where the caller forms its inverse itself (else None)
     """
 
     J: np.ndarray
@@ -42,6 +43,7 @@ class FrameProjection:
     Rl: np.ndarray
     sigma_p: np.ndarray
     D: np.ndarray
+    H: np.ndarray | None = None
 
 
 def sigma_of(calibration) -> dict:
@@ -74,7 +76,7 @@ def frame_projection(obs: Observation, params, sigma: dict, q: np.ndarray) -> Fr
 
 def frame_batches(obs: Observation, params, sigma: dict, q: np.ndarray, batch: int = BATCH, solve: bool = True):
     """(frames, :class:`FrameProjection` of those frames) for each ``batch`` of frames in turn:
-    :func:`frame_projection` without holding the whole log's (``solve`` False: without K, None,
+    :func:`frame_projection` without holding the whole log's (``solve`` False: K None and H kept,
     for a caller that forms (JᵀWJ + D)⁻¹ itself)."""
     T = obs.n_frames
     for i in range(0, T, batch):
@@ -116,8 +118,9 @@ def _batch_projection(
     diag = np.einsum("bii->bi", H)
     D = 1e-9 * diag + 1e-12  # keeps unobserved joints' H invertible
     diag += D
-    K = np.linalg.solve(H, JW) if solve else None
-    return FrameProjection(J, K, w, s, Rl, sigma_p, D)
+    if solve:
+        return FrameProjection(J, np.linalg.solve(H, JW), w, s, Rl, sigma_p, D)
+    return FrameProjection(J, None, w, s, Rl, sigma_p, D, H)
 
 
 def deleted_from_others(obs: Observation, params, sigma: dict, q: np.ndarray, r: np.ndarray):
