@@ -267,6 +267,7 @@ def layout(adapter, props) -> tuple[dict, list]:
         slots.append(slot)
     return width, slots
 
+
 def filler(adapter, props, width: dict, slots: list):
     """A function rows (sample indices) -> {joint row: (m, width) float64}: the proposals'
     columns on those samples, a term's own computed there (its columns are per sample)."""

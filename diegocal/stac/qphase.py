@@ -250,6 +250,11 @@ def _blank(obs: Observation, T: int) -> State:
 KINEMATICS_BATCH = 2000
 
 
+def kinematics_batch(batch: int) -> int:
+    """Frames per forward-kinematics pass where the steps are solved ``batch`` at a time."""
+    return max(batch, KINEMATICS_BATCH)
+
+
 def q_step(
     obs: Observation,
     params: Params,
@@ -280,7 +285,7 @@ def q_step(
     )
     red = {g: sum(r[g] for r in reds) for g in reds[0]}
     new = _blank(obs, T)
-    map_batches(lambda sl: _try_batch(obs, params, noise, cand, sl, new, c1), T, max(batch, KINEMATICS_BATCH), jobs)
+    map_batches(lambda sl: _try_batch(obs, params, noise, cand, sl, new, c1), T, kinematics_batch(batch), jobs)
     ok = c1 <= c0  # accept: λ/3; reject: λ x 4, keep q
     lam_out = np.where(ok, np.maximum(lam / 3.0, 1e-7), np.minimum(lam * 4.0, 1e7))
     back = np.flatnonzero(~ok)

@@ -75,10 +75,10 @@ from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.poses import write_off_foreign_poses
 from diegocal.stac.pphase import CHUNK, p_phase
 from diegocal.stac.qphase import (
-    KINEMATICS_BATCH,
     Noise,
     group_sigma,
     irls_weight,
+    kinematics_batch,
     pot_sigmas,
     q_step,
     residuals,
@@ -295,7 +295,7 @@ def _robust_fit(obs: Observation, options: StacOptions, t0: float, history: list
     huber = replace(options, loss="huber")
     for _ in range(MAX_REJECTIONS):
         fine = _fit(obs, obs.nominal(options.marker_seed), huber, t0, history)
-        gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, _fk_batch(options)))
+        gross = robust.gross_frames(obs, fine.params, obs.state(fine.q, kinematics_batch(options.batch_size)))
         if not gross.any():
             break
         obs = obs.without_markers(gross)
@@ -360,7 +360,8 @@ def _alternate(
     iteration to ``history``. A fresh start (``sigma`` None) takes σ from the readings' spread
     and places θ by a first p-phase; a warm start (σ given, θ converged on a subset of the
     frames) may re-estimate σ from its first iteration on."""
-    st = obs.state(q, _fk_batch(options), keep=options.schedule != "bfgs")  # the q-phase linearises from it
+    # the q-phase linearises from it
+    st = obs.state(q, kinematics_batch(options.batch_size), keep=options.schedule != "bfgs")
     warm = sigma is not None
     if not warm:
         sigma = dynamic_range(obs)
@@ -413,7 +414,7 @@ def _alternate(
                 q_mix = accel.mix(q_old, q)
                 if q_mix is not None:
                     q_mix = np.clip(q_mix, obs.lower, obs.upper)
-                    st_mix = obs.state(q_mix, _fk_batch(options))
+                    st_mix = obs.state(q_mix, kinematics_batch(options.batch_size))
                     ph_mix = p_phase(obs, st_mix, params, *weights(obs, params, st_mix, noise))
                     cost_mix = total_cost(obs, ph_mix.params, st_mix, noise, sigma)
                     if cost_mix < cost:
@@ -456,11 +457,6 @@ def _alternate(
             break
     unresolved = tuple(g for g, ok in resolved.items() if not ok)
     return _Stage(params, ph.se, se_joint, sigma, q, lam, converged, unresolved)
-
-
-def _fk_batch(options: StacOptions) -> int:
-    """Frames per forward-kinematics batch of a full pass (as the q-step's, KINEMATICS_BATCH)."""
-    return max(options.batch_size, KINEMATICS_BATCH)
 
 
 def _rms_pots(obs, sigma) -> float:
