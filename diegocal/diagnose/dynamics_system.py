@@ -33,7 +33,7 @@ from diegocal.lstsq import TallLstsq
 from diegocal.progress import Eta
 from diegocal.sgp.model import PREDICT_SAMPLES
 from diegocal.sgp.regressor import CHUNK, base_regressor
-from diegocal.sgp.terms import columns, is_filter, joints_of, term_columns
+from diegocal.sgp.terms import Motion, is_filter, joints_of, motion_columns, term_columns
 
 #: Samples per chunk where a fitted model's columns are rebuilt: the model's own prediction chunk
 SAMPLES = PREDICT_SAMPLES
@@ -279,8 +279,9 @@ def filler(adapter, props, width: dict, slots: list):
         for cols, slot in given:
             for j, c in cols.items():
                 out[adapter.row_of[j]][:, slot[adapter.row_of[j]]] = c[rows]
+        m = Motion(adapter.robot, adapter.q[rows], adapter.qd[rows], adapter.qdd[rows])
         for term, slot in own:
-            X = columns(term, adapter.robot, adapter.q[rows], adapter.qd[rows], adapter.qdd[rows])
+            X = motion_columns(term, m)
             for r, cs in slot.items():
                 out[r][:, cs] = X[:, adapter.rows[r]]
         return out

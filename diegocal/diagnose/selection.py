@@ -100,7 +100,7 @@ def _fit(cand: Candidate, stack: _Stack, channels) -> _Fit | None:
     gain = float(r @ r - e @ e)
     dof = max(r.size - A.shape[1], 1)
     # correlated residuals: the variance of a sum is inflated by the correlation time
-    tau = autocorrelation_time(np.bincount(samp, weights=e)[np.unique(samp)])
+    tau = autocorrelation_time(np.bincount(samp, weights=e)[np.bincount(samp) > 0])  # per sample, in order
     s2 = float(e @ e) / dof * max(tau, 1.0)
     cov = np.linalg.pinv(A.T @ A) * s2
     k = cand.n_params

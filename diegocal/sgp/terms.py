@@ -78,72 +78,91 @@ def parameter_labels(term: Term) -> tuple[str, ...]:
 
 
 # ----------------------------------------------------------------------------- behaviours
-# Each fills ``out`` (T, n, k): the torque on each joint per unit of each parameter, joint ``j``
-# the term's channel (None for a payload, whose channel is a link).
-def _viscous(term, robot, j, q, qd, qdd, out):
-    out[:, j, 0] = friction_column("viscous", qd[:, j])
+class Motion:
+    """The samples a term's columns are computed on: ``robot``, ``q``, ``qd``, ``qdd`` (T, n), and
+    what several terms share, computed once when first asked for (the rigid body's torque: every
+    joint's ``load_friction`` reads it)."""
+
+    def __init__(self, robot, q, qd, qdd):
+        self.robot = robot
+        self.q, self.qd, self.qdd = (np.asarray(x, float) for x in (q, qd, qdd))
+        self._rigid = None
+
+    @property
+    def rigid_torque(self) -> np.ndarray:
+        """(T, n): the inverse dynamics at the URDF's inertias (RNEA, eq. 3.30 with the file's w)."""
+        if self._rigid is None:
+            model = self.robot.model
+            data = model.createData()
+            q, qd, qdd = self.q, self.qd, self.qdd
+            self._rigid = np.array([pin.rnea(model, data, q[t], qd[t], qdd[t]) for t in range(q.shape[0])])
+        return self._rigid
 
 
-def _coulomb(term, robot, j, q, qd, qdd, out):
-    out[:, j, 0] = friction_column("coulomb", qd[:, j])
+# Each fills ``out`` (T, n, k): the torque on each joint per unit of each parameter on the samples
+# of ``m`` (a :class:`Motion`), joint ``j`` the term's channel (None for a payload, whose channel
+# is a link).
+def _viscous(term, m, j, out):
+    out[:, j, 0] = friction_column("viscous", m.qd[:, j])
 
 
-def _stribeck(term, robot, j, q, qd, qdd, out):
+def _coulomb(term, m, j, out):
+    out[:, j, 0] = friction_column("coulomb", m.qd[:, j])
+
+
+def _stribeck(term, m, j, out):
     """Friction's shape near zero velocity: sign(qd) e^(−|qd|/scale) per unit of amplitude (a
     Stribeck peak with amplitude > 0; with amplitude < 0 the Coulomb step smoothed over ~scale)."""
     scale = term.value("velocity_scale")
-    out[:, j, 0] = np.sign(qd[:, j]) * np.exp(-np.abs(qd[:, j]) / scale)
+    out[:, j, 0] = np.sign(m.qd[:, j]) * np.exp(-np.abs(m.qd[:, j]) / scale)
 
 
-def _load_friction(term, robot, j, q, qd, qdd, out):
+def _load_friction(term, m, j, out):
     """Friction in proportion to the load the joint carries, |τ_j| sign(qd_j) per unit of
     coefficient: τ the rigid body's torque at the URDF's inertias (RNEA), the load a gear
     transmits, whose friction grows with it (not the measured torque: it holds the noise and the
     friction itself)."""
-    model = robot.model
-    data = model.createData()
-    tau = np.array([pin.rnea(model, data, q[t], qd[t], qdd[t])[j] for t in range(q.shape[0])])
-    out[:, j, 0] = np.abs(tau) * np.sign(qd[:, j])
+    out[:, j, 0] = np.abs(m.rigid_torque[:, j]) * np.sign(m.qd[:, j])
 
 
-def _position_friction(term, robot, j, q, qd, qdd, out):
-    inside = term.region.contains(q[:, j]).astype(float)
-    out[:, j, 0] = inside * np.sign(qd[:, j])
-    out[:, j, 1] = inside * qd[:, j]
+def _position_friction(term, m, j, out):
+    inside = term.region.contains(m.q[:, j]).astype(float)
+    out[:, j, 0] = inside * np.sign(m.qd[:, j])
+    out[:, j, 1] = inside * m.qd[:, j]
 
 
-def _spring(term, robot, j, q, qd, qdd, out):
-    out[:, j, 0] = q[:, j] - float(term.extra.get("reference", 0.0))
+def _spring(term, m, j, out):
+    out[:, j, 0] = m.q[:, j] - float(term.extra.get("reference", 0.0))
 
 
-def _torque_offset(term, robot, j, q, qd, qdd, out):
+def _torque_offset(term, m, j, out):
     out[:, j, 0] = 1.0
 
 
-def _armature(term, robot, j, q, qd, qdd, out):
-    out[:, j, 0] = qdd[:, j]
+def _armature(term, m, j, out):
+    out[:, j, 0] = m.qdd[:, j]
 
 
-def _coupled_friction(term, robot, j, q, qd, qdd, out):
-    a = robot.joint_index(str(term.extra["partner"]))
+def _coupled_friction(term, m, j, out):
+    a = m.robot.joint_index(str(term.extra["partner"]))
     ratio = float(term.extra["ratio"])
-    v = qd[:, j] + ratio * qd[:, a]
+    v = m.qd[:, j] + ratio * m.qd[:, a]
     cols = np.stack([np.sign(v), v], axis=1)
     out[:, j, :] = cols
     out[:, a, :] += ratio * cols
 
 
-def _payload(term, robot, j, q, qd, qdd, out):
+def _payload(term, m, j, out):
     """The joint-torque regressor's ten columns (m, m·c, second moments; Pinocchio's order) of the
     body that carries the link (a point mass anywhere on it: moments in the parent joint's frame)."""
-    model = robot.model
+    model = m.robot.model
     frame = next((f for f in model.frames if f.name == term.channel), None)
     if frame is None or frame.parentJoint == 0:
-        raise InputFileError(f"payload: {term.channel!r} is not a moving link of robot {robot.name!r}")
+        raise InputFileError(f"payload: {term.channel!r} is not a moving link of robot {m.robot.name!r}")
     i = frame.parentJoint - 1  # the body's block of ten columns
     data = model.createData()
-    for t in range(q.shape[0]):
-        Y = pin.computeJointTorqueRegressor(model, data, q[t], qd[t], qdd[t])
+    for t in range(m.q.shape[0]):
+        Y = pin.computeJointTorqueRegressor(model, data, m.q[t], m.qd[t], m.qdd[t])
         out[t] = Y[:, 10 * i : 10 * i + 10]
 
 
@@ -165,15 +184,20 @@ COLUMNS: dict[str, Callable] = {
 
 def columns(term: Term, robot, q, qd, qdd) -> np.ndarray:
     """(T, n, k): the torque on each joint per unit of each of ``term``'s parameters (N·m per unit)."""
-    q, qd, qdd = (np.asarray(x, float) for x in (q, qd, qdd))
+    return motion_columns(term, Motion(robot, q, qd, qdd))
+
+
+def motion_columns(term: Term, m: Motion) -> np.ndarray:
+    """:func:`columns` on the samples of ``m``: terms computed on the same samples share what
+    they have in common (:class:`Motion`)."""
     if is_filter(term):
         raise ValueError("torque_lag filters the model's columns; it has none of its own")
     fill = COLUMNS.get(term.cause)
     if fill is None:
         raise InputFileError(f"{term.cause} is not a dynamics term")
-    out = np.zeros((q.shape[0], q.shape[1], len(term.linear)))
-    j = None if term.cause == "payload" else robot.joint_index(term.channel)
-    fill(term, robot, j, q, qd, qdd, out)
+    out = np.zeros((m.q.shape[0], m.q.shape[1], len(term.linear)))
+    j = None if term.cause == "payload" else m.robot.joint_index(term.channel)
+    fill(term, m, j, out)
     return out
 
 
@@ -193,7 +217,8 @@ def friction_terms(joint_names, friction) -> tuple[Term, ...]:
 
 def term_columns(terms, robot, q, qd, qdd) -> np.ndarray:
     """(T, n, K): the columns of every non-filter term, in order (K = their parameters)."""
-    cols = [columns(t, robot, q, qd, qdd) for t in terms if not is_filter(t)]
+    m = Motion(robot, q, qd, qdd)
+    cols = [motion_columns(t, m) for t in terms if not is_filter(t)]
     if not cols:
         return np.zeros((np.shape(q)[0], robot.n_joints, 0))
     return np.concatenate(cols, axis=2)
