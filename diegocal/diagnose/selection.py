@@ -20,11 +20,17 @@ import numpy as np
 
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
 from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested, column_rows
+from diegocal.lstsq import TallLstsq
 from diegocal.progress import Eta
 from diegocal.terms import Parameter, Term
 
-
 # ----------------------------------------------------------------------------- rows
+#: Samples per piece of a candidate's design: a fit or a test builds its columns this many samples
+#: of one channel at a time (a flexible model of a 10-min log at 1 kHz has ~100 columns on 420,000
+#: training samples: 340 MB whole, and lstsq copied it), never for all of them.
+PIECE = 20000
+
+
 class _Stack:
     """Residual channels as weighted rows on a set of samples.
 
@@ -36,30 +42,47 @@ class _Stack:
     def __init__(self, res: Residuals, weights: dict, samples: np.ndarray, exclude: dict):
         self.res, self.weights, self.samples, self.exclude = res, weights, samples, exclude
         self.dims = {c: 1 if np.ndim(r) == 1 else int(np.shape(r)[1]) for c, r in res.channels.items()}
+        self.length = len(next(iter(res.channels.values()))) if res.channels else 0  # T
+        self._weighted: dict = {}  # channel -> its weighted residual rows, made once
 
-    def residual(self, channels) -> tuple[np.ndarray, np.ndarray]:
-        """(rows,) weighted residual (NaN where missing or excluded) and (rows,) sample index."""
-        parts, samp = [], []
-        for c in channels:
+    def channel(self, c: str) -> np.ndarray:
+        """(n·d,) channel ``c``'s weighted residual on the samples (NaN where missing or excluded)."""
+        if c not in self._weighted:
             r = np.array(self.res.channels[c], float)
             if c in self.exclude:
                 r[np.asarray(self.exclude[c], bool)] = np.nan
-            r = r[self.samples] * self.weights[c]
-            parts.append(r.reshape(-1))
-            samp.append(np.repeat(self.samples, self.dims[c]))
-        if not parts:
-            return np.zeros(0), np.zeros(0, int)
-        return np.concatenate(parts), np.concatenate(samp)
+            self._weighted[c] = (r[self.samples] * self.weights[c]).reshape(-1)
+        return self._weighted[c]
 
-    def design(self, cols: dict | None, channels, k: int) -> np.ndarray:
-        """(rows, k): the columns (channel -> (T, k) or (T, d, k)) in :meth:`residual`'s row order;
-        zero rows for a channel the columns do not act on."""
-        out = []
+    def pieces(self, cand: Candidate, channels):
+        """(r, A, sample index) of the rows of ``channels``, PIECE samples of one channel at a
+        time, rows where r and A are finite only: the weighted residual, the candidate's columns
+        (then its re-fit columns) and each row's sample."""
+        k, k0 = cand.n_params, _refit_width(cand)
         for c in channels:
-            n = self.samples.size * self.dims[c]
-            x = column_rows(cols, c, self.samples)
-            out.append(np.zeros((n, k)) if x is None else (np.asarray(x, float) * self.weights[c]).reshape(n, k))
-        return np.vstack(out) if out else np.zeros((0, k))
+            d, r = self.dims[c], self.channel(c)
+            for i in range(0, self.samples.size, PIECE):
+                sub = self.samples[i : i + PIECE]
+                A = self._design(cand.columns, c, sub, k)
+                if k0:
+                    A = np.hstack([A, self._design(cand.refit, c, sub, k0)])
+                ri = r[i * d : (i + sub.size) * d]
+                ok = np.isfinite(ri) & np.isfinite(A).all(axis=1)
+                yield ri[ok], A[ok], np.repeat(sub, d)[ok]
+
+    def _design(self, cols, c: str, sub: np.ndarray, k: int) -> np.ndarray:
+        """(n·d, k): the columns (channel -> (T, k) or (T, d, k)) of channel ``c`` on samples ``sub``,
+        weighted; zero where the columns do not act on it."""
+        n = sub.size * self.dims[c]
+        x = column_rows(cols, c, sub)
+        return np.zeros((n, k)) if x is None else (np.asarray(x, float) * self.weights[c]).reshape(n, k)
+
+    def predicted(self, cand: Candidate, coef: np.ndarray, channels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(r, A @ coef, sample index) over the finite rows of ``channels``, in :meth:`pieces`' order."""
+        parts = [(r, A @ coef, s) for r, A, s in self.pieces(cand, channels)]
+        if not parts:
+            return np.zeros(0), np.zeros(0), np.zeros(0, int)
+        return tuple(np.concatenate(x) for x in zip(*parts, strict=True))
 
 
 def channel_weights(res: Residuals, train: np.ndarray) -> dict:
@@ -79,55 +102,48 @@ class _Fit:
     train_gain: float  # Σ r² − Σ (r − A coef)² on the training rows (weighted)
 
 
-def _columns(cand: Candidate, stack: _Stack, channels) -> np.ndarray:
-    k = cand.n_params
-    A = stack.design(cand.columns, channels, k)
-    if cand.refit:
-        k0 = next(iter(np.shape(v)[-1] for v in cand.refit.values()))
-        A = np.hstack([A, stack.design(cand.refit, channels, k0)])
-    return A
+def _refit_width(cand: Candidate) -> int:
+    """The number of the current model's directions re-fitted with the candidate (0: none)."""
+    return next(iter(np.shape(v)[-1] for v in cand.refit.values())) if cand.refit else 0
 
 
 def _fit(cand: Candidate, stack: _Stack, channels) -> _Fit | None:
-    r, samp = stack.residual(channels)
-    A = _columns(cand, stack, channels)
-    ok = np.isfinite(r) & np.isfinite(A).all(axis=1)
-    if ok.sum() <= A.shape[1] + 2:
+    """Least squares of the residual on the candidate's columns, a piece of rows at a time
+    (:class:`~diegocal.lstsq.TallLstsq`: lstsq's solution and rank cutoff, to rounding)."""
+    ls, rr = TallLstsq(cand.n_params + _refit_width(cand)), 0.0
+    for r, A, _ in stack.pieces(cand, channels):
+        ls.add(A, r)
+        rr += float(r @ r)
+    if ls.rows <= ls.p + 2:
         return None
-    A, r, samp = A[ok], r[ok], samp[ok]
-    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
-    e = r - A @ coef
-    gain = float(r @ r - e @ e)
-    dof = max(r.size - A.shape[1], 1)
+    coef, ee = ls.solve()
+    dof = max(ls.rows - ls.p, 1)
     # correlated residuals: the variance of a sum is inflated by the correlation time
-    tau = autocorrelation_time(np.bincount(samp, weights=e)[np.bincount(samp) > 0])  # per sample, in order
-    s2 = float(e @ e) / dof * max(tau, 1.0)
-    cov = np.linalg.pinv(A.T @ A) * s2
+    e_sum, seen = np.zeros(stack.length), np.zeros(stack.length, bool)
+    for r, A, samp in stack.pieces(cand, channels):
+        np.add.at(e_sum, samp, r - A @ coef)  # a sample's rows (channels, axes) summed
+        seen[samp] = True
+    tau = autocorrelation_time(e_sum[seen])  # per sample, in order
+    s2 = ee / dof * max(tau, 1.0)
+    cov = np.linalg.pinv(ls.gram()) * s2
     k = cand.n_params
-    return _Fit(coef, np.sqrt(np.maximum(np.diag(cov)[:k], 0.0)), gain)
+    return _Fit(coef, np.sqrt(np.maximum(np.diag(cov)[:k], 0.0)), rr - ee)
 
 
 def _test(cand: Candidate, fit: _Fit, stack: _Stack, channels, validation: np.ndarray):
-    r, samp = stack.residual(channels)
-    A = _columns(cand, stack, channels)
-    ok = np.isfinite(r) & np.isfinite(A).all(axis=1)
-    return out_of_sample_test(r[ok], A[ok] @ fit.coef, samp[ok], validation)
+    r, a, samp = stack.predicted(cand, fit.coef, channels)
+    return out_of_sample_test(r, a, samp, validation)
 
 
 def _channel_gains(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[list[float], list[float]]:
     """Per channel of ``channels``: the fraction of its validation error the fitted correction
     removes, and the correction's energy there."""
-    r, _ = stack.residual(channels)
-    a = _columns(cand, stack, channels) @ fit.coef
-    sizes = [stack.samples.size * stack.dims[c] for c in channels]
-    edges = np.concatenate([[0], np.cumsum(sizes)])
     gains, energy = [], []
-    for i in range(len(channels)):
-        ri, ai = r[edges[i] : edges[i + 1]], a[edges[i] : edges[i + 1]]
-        ok = np.isfinite(ri) & np.isfinite(ai)
-        before = float(ri[ok] @ ri[ok])
-        gains.append(1.0 - float((ri[ok] - ai[ok]) @ (ri[ok] - ai[ok])) / before if before > 0 else 0.0)
-        energy.append(float(ai[ok] @ ai[ok]))
+    for c in channels:
+        r, a, _ = stack.predicted(cand, fit.coef, (c,))
+        before = float(r @ r)
+        gains.append(1.0 - float((r - a) @ (r - a)) / before if before > 0 else 0.0)
+        energy.append(float(a @ a))
     return gains, energy
 
 
