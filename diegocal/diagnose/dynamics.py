@@ -69,7 +69,7 @@ from scipy.optimize import minimize_scalar
 
 from diegocal.causes import MAX_LAG_S
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
-from diegocal.diagnose.dynamics_system import TrainingSystem, feature_chunks, filler, layout, project
+from diegocal.diagnose.dynamics_system import FamilyRanks, TrainingSystem, feature_chunks, filler, layout, project
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
@@ -127,6 +127,9 @@ class DynamicsAdapter:
     domain = "dynamics"
     #: callable(str) or None: told how far a pass over the log's samples is (the engine sets it)
     progress = None
+    #: channel -> the selection's weight of its rows, set by the engine: the candidates it proposes
+    #: are then each family's best variant only (:class:`~diegocal.diagnose.dynamics_system.FamilyRanks`)
+    selection_weights = None
 
     def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS, inertia="identified"):
         self.robot = robot
@@ -411,11 +414,18 @@ class DynamicsAdapter:
         )
         props = proposals(ctx)
         width, slots = layout(self, props)
-        B, left = project(self, fitted, train, width, slots, filler(self, props, width, slots), self.progress)
+        fill = filler(self, props, width, slots)
+        families = None
+        if self.selection_weights is not None:  # only each family's best variant is held (FamilyRanks)
+            rows = {r: residuals.channels[j] for r, j in enumerate(self.joints)}
+            weights = {r: self.selection_weights[j] for r, j in enumerate(self.joints)}
+            families = FamilyRanks(rows, weights, [p.family for p in props])
+        B, left, *held = project(self, fitted, train, width, slots, fill, self.progress, families)
+        slots = held[0] if held else slots
         props = [(p.term, p.family) for p in props]
         out = []
         for (term, family), slot, f in zip(props, slots, left, strict=True):
-            if f > SPAN_TOL:  # each column a view of its joint's block (float32)
+            if slot is not None and f > SPAN_TOL:  # each column a view of its joint's block (float32)
                 out.append(Candidate(term, {self.joints[r]: B[r][:, sl] for r, sl in slot.items()}, family=family))
         return out
 

@@ -167,7 +167,7 @@ def feature_chunks(model, fit, samples):
         yield rows, model.features(fit.q[rows], fit.qd[rows], fit.qdd[rows], fit.time[rows])
 
 
-def project(fit, fitted, train, width: dict, slots: list, fill, progress=None) -> tuple[dict, np.ndarray]:
+def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, families=None) -> tuple:
     """Every candidate's columns minus their least-squares fit by the fitted model's columns X on
     every joint's training rows, rows weighted as the fit weighs them (1 / σ_joint, so that
     Frisch-Waugh-Lovell is exact): ``c − X pinv(X) c``, with ``pinv(X) = pinv(R) pinv(R)ᵀ Xᵀ``
@@ -181,7 +181,12 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None) -
     **in float32**: computed in float64 and rounded once, a relative 6e-8 of each projected value,
     which halves the largest array of a round; the fraction of each candidate's weighted training
     norm left (n,), 0 where it lies in the model's span). ``progress``: callable(str) or None, told
-    how far the two passes are, with the time left (a long log's take minutes)."""
+    how far the two passes are, with the time left (a long log's take minutes).
+
+    ``families`` (:class:`FamilyRanks`): only the variant of each family that the selection would
+    keep is projected and held (the best training fit of its projected columns, from sums of the
+    first pass); then the slots of the others are None in a third return value, the slots of the
+    held ones index the smaller blocks, and the blocks are a third as wide as all variants'."""
     T = len(fit.time)
     tick = _ticker(progress, -(-int(np.sum(train)) // SAMPLES) + -(-T // SAMPLES), "candidate columns projected")
     wt = 1.0 / fitted.sigma
@@ -195,6 +200,8 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None) -
         Aw = A * wt[None, :, None]
         ls.add(Aw.reshape(-1, P), np.zeros(Aw.shape[0] * Aw.shape[1]))
         for r, c in fill(rows).items():
+            if families is not None:
+                families.add(r, rows, A[:, r], c)
             c *= wt[r]
             xtc[r] += np.ascontiguousarray(Aw[:, r]).T @ c
             sq[r] += np.einsum("ij,ij->j", c, c)
@@ -214,6 +221,12 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None) -
             Beta[r][:, sl] = b
     frac = np.sqrt(np.maximum(norm - explained, 0.0) / np.where(norm > 0, norm, 1.0))
     near = [i for i in range(n) if norm[i] > 0 and frac[i] < NEAR_SPAN]
+    held = {r: np.arange(w) for r, w in width.items()}  # joint row -> the block's columns held
+    kept = slots
+    if families is not None:
+        kept, held = _compact(families.keep(slots, Beta, near), width)
+        width = {r: h.size for r, h in held.items()}
+        Beta = {r: Beta[r][:, held[r]] for r in Beta}
     left = np.zeros(n)
     is_train = np.asarray(train, bool)
     B = {r: np.empty((T, w), np.float32) for r, w in width.items()}
@@ -228,12 +241,89 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None) -
                     L[:, r] -= C[r][tr, sl] * wt[r]
                 left[i] += float(np.sum(L * L))
         for r, c in C.items():
-            B[r][rows] = c - np.ascontiguousarray(A[:, r]) @ Beta[r]
+            B[r][rows] = c[:, held[r]] - np.ascontiguousarray(A[:, r]) @ Beta[r]
         tick()
     for i in near:
         frac[i] = np.sqrt(left[i] / norm[i])
     frac[norm <= 0] = 0.0
-    return B, frac
+    return (B, frac) if families is None else (B, frac, kept)
+
+
+class FamilyRanks:
+    """Which variant of each family :func:`project` holds: the one whose projected columns fit the
+    training residual best, the family's only variant that the selection tests (:func:`~diegocal.
+    diagnose.selection.evaluate_candidates`: the best training fit per family, each joint's rows
+    weighted as there), ranked from sums made in the projection's first pass, so that the others'
+    columns are never held for every sample.
+
+    ``residual``: joint row -> (T,) the residual; ``weights``: joint row -> the selection's weight
+    of that joint (1 / its baseline training RMS); ``names``: per candidate, its family ("": a
+    family of its own). The sums are of the unweighted rows where the residual is finite.
+    """
+
+    def __init__(self, residual: dict, weights: dict, names: list):
+        self.residual, self.weights, self.names = residual, weights, list(names)
+        self.sums: dict = {}  # joint row -> [AᵀA, AᵀC, CᵀC, Cᵀy, Aᵀy]
+
+    def add(self, r: int, rows, A: np.ndarray, C: np.ndarray) -> None:
+        """A chunk of training samples ``rows``: joint row r's model columns A (m, P), the
+        candidates' columns C (m, width), both unweighted."""
+        y = self.residual[r][rows]
+        ok = np.isfinite(y) & np.isfinite(C).all(axis=1)
+        A, C, y = np.ascontiguousarray(A[ok]), C[ok], y[ok]
+        parts = (A.T @ A, A.T @ C, C.T @ C, C.T @ y, A.T @ y)
+        if r not in self.sums:
+            self.sums[r] = list(parts)
+        else:
+            for acc, x in zip(self.sums[r], parts, strict=True):
+                acc += x
+
+    def gain(self, slot: dict, Beta: dict) -> float:
+        """Σ r² − Σ (r − C b)² at the least-squares b, C the projected columns ``c − A β`` of one
+        candidate (its slice of each joint's block), each joint weighted."""
+        k = next(iter(slot.values())).stop - next(iter(slot.values())).start
+        G, g = np.zeros((k, k)), np.zeros(k)
+        for r, sl in slot.items():
+            if r not in self.sums:
+                continue
+            AA, AC, CC, Cy, Ay = self.sums[r]
+            beta = Beta[r][:, sl]
+            cross = beta.T @ AC[:, sl]
+            w2 = self.weights[r] ** 2
+            G += w2 * (CC[sl, sl] - cross - cross.T + beta.T @ AA @ beta)
+            g += w2 * (Cy[sl] - beta.T @ Ay)
+        return float(g @ np.linalg.pinv(G) @ g)
+
+    def keep(self, slots: list, Beta: dict, near) -> list:
+        """``slots`` with None for every variant but its family's best (first of equals); a
+        candidate near the model's span is kept (its sums have lost their digits)."""
+        best: dict = {}
+        for i, slot in enumerate(slots):
+            if not slot or i in near or not self.names[i]:
+                continue
+            g = self.gain(slot, Beta)
+            if self.names[i] not in best or g > best[self.names[i]][1]:
+                best[self.names[i]] = (i, g)
+        chosen = {i for i, _ in best.values()}
+        return [s if (not self.names[i] or i in near or i in chosen) else None for i, s in enumerate(slots)]
+
+
+def _compact(kept: list, width: dict) -> tuple[list, dict]:
+    """The kept candidates' slots in blocks of their columns only (None stays None), and per joint
+    row the indices of those columns in the full block."""
+    held: dict = {r: [] for r in width}
+    out = []
+    for slot in kept:
+        if slot is None:
+            out.append(None)
+            continue
+        new = {}
+        for r, sl in slot.items():
+            start = len(held[r])
+            held[r].extend(range(sl.start, sl.stop))
+            new[r] = slice(start, len(held[r]))
+        out.append(new)
+    return out, {r: np.array(h, int) for r, h in held.items()}
 
 
 def _ticker(progress, total: int, what: str):

@@ -75,6 +75,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     baseline = fitted
     res = adapter.residuals(fitted)
     weights = channel_weights(res, train)
+    if hasattr(adapter, "selection_weights"):  # an adapter that proposes each family's best variant ranks them so
+        adapter.selection_weights = weights
     length = cluster_length([np.asarray(r, float)[train] for r in res.channels.values()])
     shown = val | held
     time = res.variables.get("time")

@@ -11,6 +11,8 @@ import diegocal.diagnose.dynamics_system as system_module
 import diegocal.sgp.model as sgp_model
 from diegocal.diagnose.dynamics import adapters
 from diegocal.diagnose.dynamics_system import TrainingSystem, project
+from diegocal.diagnose.selection import channel_weights, evaluate_candidates
+from diegocal.diagnose.types import EngineOptions
 from diegocal.progress import Eta
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
@@ -140,3 +142,34 @@ def test_projection_says_how_far_its_passes_are(adapter, train, monkeypatch):
     assert len(said) == chunks
     assert said[-1].startswith(f"candidate columns projected, chunks of 211 samples: {chunks}/{chunks}")
     assert "left" in said[0]
+
+
+def test_each_family_keeps_the_variant_the_selection_tests(adapter, train):
+    """With the engine's weights set, the adapter holds one variant per family, ranked from the
+    projection's sums: the very variant the selection keeps when it fits all of them, with the
+    same projected columns."""
+    fitted = adapter.fit((), train)
+    res = adapter.residuals(fitted)
+    weights = channel_weights(res, train)
+    validation = ~train
+    everything = adapter.candidates(fitted, res, train)
+    tested = evaluate_candidates(everything, res, weights, train, validation, EngineOptions())
+    best = {t.candidate.family: t for t in tested}
+    try:
+        adapter.selection_weights = weights
+        held = adapter.candidates(fitted, res, train)
+    finally:
+        adapter.selection_weights = None
+    families = [c.family for c in held if c.family]
+    assert len(families) == len(set(families)) == len({c.family for c in everything if c.family})
+    assert len(held) < len(everything) / 2  # lags, scales, regions, ratios: one of each kept
+
+    def variant(term):
+        return term.cause, term.channel, term.region, sorted(term.extra.items())
+
+    for cand in held:
+        if cand.family:
+            assert variant(cand.term) == variant(best[cand.family].term)
+            whole = best[cand.family].candidate.columns
+            for joint, cols in cand.columns.items():
+                np.testing.assert_allclose(cols, whole[joint], rtol=1e-6, atol=1e-6 * np.abs(whole[joint]).max())
