@@ -76,13 +76,15 @@ class TrainingSystem:
         computed for the joints not yet held in one pass (kept: the joints extra terms act on)."""
         need = [j for j in joints if j not in self._rows]
         if need:
-            parts = {j: [] for j in need}
-            for _, F in self._chunks(self.idx):
+            held = {j: np.empty((self.idx.size, self.r)) for j in need}
+            at = 0
+            for rows, F in self._chunks(self.idx):
                 for j in need:
-                    parts[j].append(F[:, j])
+                    held[j][at : at + rows.size] = F[:, j]
+                at += rows.size
             f = self.fit
             for j in need:
-                Fj = np.concatenate(parts.pop(j))
+                Fj = held.pop(j)
                 y = f.tau[self.idx, j] - f.tau0[self.idx, j]
                 self._rows[j] = (Fj, y, np.isfinite(y) & np.isfinite(Fj).all(axis=1))
         return {j: self._rows[j] for j in joints}
