@@ -90,7 +90,8 @@ class ExactBlock:
         self.kernel, self.U, self.theta, self.noise_var = kernel, U, theta, noise_var
         N = len(U)
         self.K = None
-        if kernel is None:
+        if kernel is None:  # no GP: only the row count is needed (the inputs would live as long as the fit)
+            self.U = np.empty((0, np.shape(U)[1] if np.ndim(U) == 2 else 0))
             self.L = None
             self._logdet = N * np.log(noise_var)
         else:

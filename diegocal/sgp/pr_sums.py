@@ -70,7 +70,7 @@ class GramSums:
 
 def posterior_from_sums(sums: GramSums, U: np.ndarray, hp: Hyperparameters, robust: bool = True) -> Posterior:
     """:func:`~diegocal.sgp.gp.fit_posterior` for outputs without a GP, from ``sums`` (of the
-    scaled features, all rows added); U (N, p) the scaled inputs (the blocks keep a reference)."""
+    scaled features, all rows added); U (N, p) the scaled inputs (a block without a GP keeps their count)."""
     n, m, N = sums.n, sums.m, sums.N
     noise = np.exp(2.0 * hp.log_sigma_v)
     sw2 = np.exp(2.0 * hp.log_sigma_w)
