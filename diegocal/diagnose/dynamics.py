@@ -150,7 +150,7 @@ class DynamicsAdapter:
             self.tau0 = nominal_torque(robot, self.q, self.qd, self.qdd)[:, self.rows]
         else:
             self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
-            self.tau0 = np.zeros_like(self.tau)
+            self.tau0 = np.broadcast_to(0.0, self.tau.shape)  # zeros that take no memory (read-only)
         self._F = None  # (T, k, r) the base regressor of every sample, built only for a torque_lag
         self._system_of = (None, None)  # (training mask, its TrainingSystem)
 
