@@ -232,8 +232,9 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, f
     left = np.zeros(n)
     is_train = np.asarray(train, bool)
     B = {r: np.empty((T, w), np.float32) for r, w in width.items()}
+    wanted = None if families is None else [s is not None for s in kept]
     for rows, A in feature_chunks(model, fit, np.arange(T)):
-        C = fill(rows)
+        C = fill(rows) if wanted is None else fill(rows, wanted)
         tr = is_train[rows]
         if near and tr.any():  # near the span, the difference of norms has lost its digits
             Aw = A[tr] * wt[None, :, None]
@@ -361,21 +362,25 @@ def layout(adapter, props) -> tuple[dict, list]:
 
 
 def filler(adapter, props, width: dict, slots: list):
-    """A function rows (sample indices) -> {joint row: (m, width) float64}: the proposals'
-    columns on those samples, a term's own computed there (its columns are per sample)."""
-    given = [(p.columns, slot) for p, slot in zip(props, slots, strict=True) if p.columns is not None]
-    own = [(p.term, slot) for p, slot in zip(props, slots, strict=True) if p.columns is None]
+    """A function (rows (sample indices), keep) -> {joint row: (m, width) float64}: the proposals'
+    columns on those samples, a term's own computed there (its columns are per sample); ``keep``
+    (a bool per proposal, or None: all): the others' columns are left unwritten (never read)."""
+    both = list(enumerate(zip(props, slots, strict=True)))
+    given = [(i, p.columns, slot) for i, (p, slot) in both if p.columns is not None]
+    own = [(i, p.term, slot) for i, (p, slot) in both if p.columns is None]
 
-    def fill(rows) -> dict:
+    def fill(rows, keep=None) -> dict:
         out = {r: np.empty((len(rows), w)) for r, w in width.items()}
-        for cols, slot in given:
-            for j, c in cols.items():
-                out[adapter.row_of[j]][:, slot[adapter.row_of[j]]] = c[rows]
+        for i, cols, slot in given:
+            if keep is None or keep[i]:
+                for j, c in cols.items():
+                    out[adapter.row_of[j]][:, slot[adapter.row_of[j]]] = c[rows]
         m = Motion(adapter.robot, adapter.q[rows], adapter.qd[rows], adapter.qdd[rows])
-        for term, slot in own:
-            X = motion_columns(term, m)
-            for r, cs in slot.items():
-                out[r][:, cs] = X[:, adapter.rows[r]]
+        for i, term, slot in own:
+            if keep is None or keep[i]:
+                X = motion_columns(term, m)
+                for r, cs in slot.items():
+                    out[r][:, cs] = X[:, adapter.rows[r]]
         return out
 
     return fill

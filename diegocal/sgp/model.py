@@ -294,7 +294,7 @@ class DynamicsModel:
             est = self._estimator("pr", T, False)
             features = lambda rows: self.features(q[rows], qd[rows], qdd[rows])  # noqa: E731
             self.gp_ = est.fit_in_chunks(U, tau, features, st.get("hyper"))
-            self.nmse_in_sample_ = nmse(self.mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
+            self._nmse = None  # made when first read: a pass over the training features
             return self
         F = self.features(q, qd, qdd, self.time_)
         if o.kind == "prgp":
@@ -306,8 +306,19 @@ class DynamicsModel:
             args = (st.get("hyper"), st.get("inducing"), st.get("stages"), st.get("inducing_res"))
             self.gp_ = est.fit(U, tau, F, *args, overwrite_features=o.kind == "pr")  # F not read again
         del F
-        self.nmse_in_sample_ = nmse(self.mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
+        self._nmse = None
         return self
+
+    @property
+    def nmse_in_sample_(self) -> np.ndarray:
+        """(n,) the fit's normalised MSE on its own training samples, made when first read (a fit
+        that is never saved nor shown, as most of a diagnosis's are, skips that pass)."""
+        if getattr(self, "_nmse", None) is None:
+            if getattr(self, "U_", None) is None:
+                raise AttributeError("nmse_in_sample_: the model is not fitted")
+            q, qd, qdd = np.split(self.U_, 3, axis=1)
+            self._nmse = nmse(self.mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
+        return self._nmse
 
     def mean_in_chunks(self, q, qd, qdd, time) -> np.ndarray:
         """(T, k) the posterior mean torque at states (T, n) each, PREDICT_SAMPLES at a time, so
