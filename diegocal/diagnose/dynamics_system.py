@@ -261,12 +261,20 @@ class FamilyRanks:
 
     ``residual``: joint row -> (T,) the residual; ``weights``: joint row -> the selection's weight
     of that joint (1 / its baseline training RMS); ``names``: per candidate, its family ("": a
-    family of its own). The sums are of the unweighted rows where the residual is finite.
+    family of its own). The sums are of the unweighted rows where the residual and every
+    candidate's column are finite (the selection drops a row per candidate: the same while the
+    columns are finite, as every term's are on finite states). The selection ranks float32 columns
+    by their QR, these sums rank float64 ones: variants within TIE of the best (relative to the
+    family's weighted training energy; two springs whose difference is a constant in the model's
+    span tie exactly) are all held, and the selection decides between them.
     """
+
+    #: Gains closer than this fraction of Σ w² r² (the family's joints, training rows) are ties.
+    TIE = 1e-9
 
     def __init__(self, residual: dict, weights: dict, names: list):
         self.residual, self.weights, self.names = residual, weights, list(names)
-        self.sums: dict = {}  # joint row -> [AᵀA, AᵀC, CᵀC, Cᵀy, Aᵀy]
+        self.sums: dict = {}  # joint row -> [AᵀA, AᵀC, CᵀC, Cᵀy, Aᵀy, yᵀy]
 
     def add(self, r: int, rows, A: np.ndarray, C: np.ndarray) -> None:
         """A chunk of training samples ``rows``: joint row r's model columns A (m, P), the
@@ -274,40 +282,42 @@ class FamilyRanks:
         y = self.residual[r][rows]
         ok = np.isfinite(y) & np.isfinite(C).all(axis=1)
         A, C, y = np.ascontiguousarray(A[ok]), C[ok], y[ok]
-        parts = (A.T @ A, A.T @ C, C.T @ C, C.T @ y, A.T @ y)
+        parts = (A.T @ A, A.T @ C, C.T @ C, C.T @ y, A.T @ y, np.array(y @ y))
         if r not in self.sums:
             self.sums[r] = list(parts)
         else:
             for acc, x in zip(self.sums[r], parts, strict=True):
                 acc += x
 
-    def gain(self, slot: dict, Beta: dict) -> float:
-        """Σ r² − Σ (r − C b)² at the least-squares b, C the projected columns ``c − A β`` of one
-        candidate (its slice of each joint's block), each joint weighted."""
+    def gain(self, slot: dict, Beta: dict) -> tuple[float, float]:
+        """(Σ r² − Σ (r − C b)² at the least-squares b, Σ r²), C the projected columns ``c − A β``
+        of one candidate (its slice of each joint's block), each joint weighted."""
         k = next(iter(slot.values())).stop - next(iter(slot.values())).start
-        G, g = np.zeros((k, k)), np.zeros(k)
+        G, g, energy = np.zeros((k, k)), np.zeros(k), 0.0
         for r, sl in slot.items():
             if r not in self.sums:
                 continue
-            AA, AC, CC, Cy, Ay = self.sums[r]
+            AA, AC, CC, Cy, Ay, yy = self.sums[r]
             beta = Beta[r][:, sl]
             cross = beta.T @ AC[:, sl]
             w2 = self.weights[r] ** 2
             G += w2 * (CC[sl, sl] - cross - cross.T + beta.T @ AA @ beta)
             g += w2 * (Cy[sl] - beta.T @ Ay)
-        return float(g @ np.linalg.pinv(G) @ g)
+            energy += w2 * float(yy)
+        return float(g @ np.linalg.pinv(G) @ g), energy
 
     def keep(self, slots: list, Beta: dict, near) -> list:
-        """``slots`` with None for every variant but its family's best (first of equals); a
-        candidate near the model's span is kept (its sums have lost their digits)."""
-        best: dict = {}
+        """``slots`` with None for every variant that is not its family's best nor within TIE of
+        it; a candidate near the model's span is kept (its sums have lost their digits)."""
+        gains: dict = {}  # family -> [(candidate, gain, energy)]
         for i, slot in enumerate(slots):
-            if not slot or i in near or not self.names[i]:
-                continue
-            g = self.gain(slot, Beta)
-            if self.names[i] not in best or g > best[self.names[i]][1]:
-                best[self.names[i]] = (i, g)
-        chosen = {i for i, _ in best.values()}
+            if slot and i not in near and self.names[i]:
+                gains.setdefault(self.names[i], []).append((i, *self.gain(slot, Beta)))
+        chosen = set()
+        for family in gains.values():
+            top = max(g for _, g, _ in family)
+            tie = self.TIE * max(e for _, _, e in family)
+            chosen |= {i for i, g, _ in family if g >= top - tie}
         return [s if (not self.names[i] or i in near or i in chosen) else None for i, s in enumerate(slots)]
 
 

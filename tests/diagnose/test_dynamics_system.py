@@ -144,11 +144,15 @@ def test_projection_says_how_far_its_passes_are(adapter, train, monkeypatch):
     assert "left" in said[0]
 
 
-def test_each_family_keeps_the_variant_the_selection_tests(adapter, train):
-    """With the engine's weights set, the adapter holds one variant per family, ranked from the
-    projection's sums: the very variant the selection keeps when it fits all of them, with the
-    same projected columns."""
-    fitted = adapter.fit((), train)
+@pytest.mark.parametrize("offsets", [False, True])
+def test_each_family_keeps_the_variant_the_selection_tests(adapter, train, offsets):
+    """With the engine's weights set, the adapter holds each family's best variant, ranked from
+    the projection's sums (and any within a tie of it), with the same projected columns: the
+    selection then keeps the very variant it keeps when it fits all of them. With a torque offset
+    on every joint the two springs of a joint (about 0 and about the mean angle) tie exactly: both
+    are held, and the selection's first-of-equals decides as before."""
+    terms = tuple(make_term("torque_offset", j) for j in adapter.joints) if offsets else ()
+    fitted = adapter.fit(terms, train)
     res = adapter.residuals(fitted)
     weights = channel_weights(res, train)
     validation = ~train
@@ -160,16 +164,21 @@ def test_each_family_keeps_the_variant_the_selection_tests(adapter, train):
         held = adapter.candidates(fitted, res, train)
     finally:
         adapter.selection_weights = None
-    families = [c.family for c in held if c.family]
-    assert len(families) == len(set(families)) == len({c.family for c in everything if c.family})
-    assert len(held) < len(everything) / 2  # lags, scales, regions, ratios: one of each kept
+    assert {c.family for c in held} == {c.family for c in everything}
+    assert len(held) < len(everything) / 2  # lags, scales, regions, ratios: about one of each kept
+    again = {t.candidate.family: t for t in evaluate_candidates(held, res, weights, train, validation, EngineOptions())}
 
     def variant(term):
         return term.cause, term.channel, term.region, sorted(term.extra.items())
 
-    for cand in held:
-        if cand.family:
-            assert variant(cand.term) == variant(best[cand.family].term)
-            whole = best[cand.family].candidate.columns
-            for joint, cols in cand.columns.items():
-                np.testing.assert_allclose(cols, whole[joint], rtol=1e-6, atol=1e-6 * np.abs(whole[joint]).max())
+    for family, t in best.items():
+        if not family:  # a family of its own: held whatever its fit
+            continue
+        assert variant(again[family].term) == variant(t.term)
+        assert again[family].test.t == pytest.approx(t.test.t, rel=1e-9)
+        for joint, cols in again[family].candidate.columns.items():
+            whole = t.candidate.columns[joint]
+            np.testing.assert_allclose(cols, whole, rtol=1e-6, atol=1e-6 * np.abs(whole).max())
+    springs = [c for c in held if c.term.cause == "spring"]
+    if offsets:  # every joint's two springs tie
+        assert len(springs) == 2 * len(adapter.joints)
