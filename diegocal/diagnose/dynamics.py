@@ -420,8 +420,7 @@ class DynamicsAdapter:
             rows = {r: residuals.channels[j] for r, j in enumerate(self.joints)}
             weights = {r: self.selection_weights[j] for r, j in enumerate(self.joints)}
             families = FamilyRanks(rows, weights, [p.family for p in props])
-        B, left, *held = project(self, fitted, train, width, slots, fill, self.progress, families)
-        slots = held[0] if held else slots
+        B, left, slots = project(self, fitted, train, width, slots, fill, self.progress, families)
         props = [(p.term, p.family) for p in props]
         out = []
         for (term, family), slot, f in zip(props, slots, left, strict=True):

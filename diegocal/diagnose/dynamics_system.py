@@ -178,17 +178,19 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, f
     subtract, a chunk at a time, the candidates' columns built in each (``fill``).
 
     ``width``: joint row -> the width of its block of candidates' columns; ``slots``: per
-    candidate, joint row -> its slice of the block; ``fill``: sample indices -> {joint row: (m,
-    width) float64}, those columns there. Returns (joint row -> (T, width), the projected columns
+    candidate, joint row -> its slice of the block; ``fill``: (sample indices, a bool per candidate
+    or None) -> {joint row: (m, width) float64}, the columns of those candidates there
+    (:func:`filler`). Returns (joint row -> (T, width), the projected columns
     **in float32**: computed in float64 and rounded once, a relative 6e-8 of each projected value,
     which halves the largest array of a round; the fraction of each candidate's weighted training
     norm left (n,), 0 where it lies in the model's span). ``progress``: callable(str) or None, told
     how far the two passes are, with the time left (a long log's take minutes).
 
+    Third: the slots of the held candidates (all of them, ``slots`` itself, without ``families``).
     ``families`` (:class:`FamilyRanks`): only the variant of each family that the selection would
     keep is projected and held (the best training fit of its projected columns, from sums of the
-    first pass); then the slots of the others are None in a third return value, the slots of the
-    held ones index the smaller blocks, and the blocks are a third as wide as all variants'."""
+    first pass); the others' slots are None, the held ones' index the smaller blocks, and the
+    blocks are a third as wide as all variants'."""
     T = len(fit.time)
     tick = _ticker(progress, -(-int(np.sum(train)) // SAMPLES) + -(-T // SAMPLES), "candidate columns projected")
     wt = 1.0 / fitted.sigma
@@ -201,7 +203,7 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, f
     for rows, A in feature_chunks(model, fit, np.flatnonzero(train)):
         Aw = A * wt[None, :, None]
         ls.add(Aw.reshape(-1, P), np.zeros(Aw.shape[0] * Aw.shape[1]))
-        for r, c in fill(rows).items():
+        for r, c in fill(rows, None).items():
             if families is not None:
                 families.add(r, rows, A[:, r], c)
             c *= wt[r]
@@ -232,9 +234,9 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, f
     left = np.zeros(n)
     is_train = np.asarray(train, bool)
     B = {r: np.empty((T, w), np.float32) for r, w in width.items()}
-    wanted = None if families is None else [s is not None for s in kept]
+    wanted = [s is not None for s in kept]
     for rows, A in feature_chunks(model, fit, np.arange(T)):
-        C = fill(rows) if wanted is None else fill(rows, wanted)
+        C = fill(rows, wanted)
         tr = is_train[rows]
         if near and tr.any():  # near the span, the difference of norms has lost its digits
             Aw = A[tr] * wt[None, :, None]
@@ -249,7 +251,7 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, f
     for i in near:
         frac[i] = np.sqrt(left[i] / norm[i])
     frac[norm <= 0] = 0.0
-    return (B, frac) if families is None else (B, frac, kept)
+    return B, frac, kept
 
 
 class FamilyRanks:

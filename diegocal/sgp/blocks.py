@@ -91,7 +91,7 @@ class ExactBlock:
         N = len(U)
         self.K = None
         if kernel is None:  # no GP: only the row count is needed (the inputs would live as long as the fit)
-            self.U = np.empty((0, np.shape(U)[1] if np.ndim(U) == 2 else 0))
+            self.U = U[:0].copy()
             self.L = None
             self._logdet = N * np.log(noise_var)
         else:

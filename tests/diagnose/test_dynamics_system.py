@@ -104,7 +104,8 @@ def test_projection_equals_pinv(adapter, train):
     ]
     original = {r: b.copy() for r, b in B.items()}
     width = {r: b.shape[1] for r, b in B.items()}
-    B, frac = project(adapter, fitted, train, width, slots, lambda rows: {r: b[rows] for r, b in original.items()})
+    fill = lambda rows, keep: {r: b[rows] for r, b in original.items()}  # noqa: E731
+    B, frac, _ = project(adapter, fitted, train, width, slots, fill)
     # the direct route: c − X pinv(X) c, X the model's weighted training columns
     wt = 1.0 / fitted.sigma
     Xt = (A[train] * wt[None, :, None]).reshape(-1, A.shape[2])
@@ -137,7 +138,7 @@ def test_projection_says_how_far_its_passes_are(adapter, train, monkeypatch):
     T = len(adapter.time)
     cols = np.random.default_rng(1).standard_normal((T, 2))
     said = []
-    project(adapter, fitted, train, {0: 2}, [{0: slice(0, 2)}], lambda rows: {0: cols[rows]}, said.append)
+    project(adapter, fitted, train, {0: 2}, [{0: slice(0, 2)}], lambda rows, keep: {0: cols[rows]}, said.append)
     chunks = -(-int(train.sum()) // 211) + -(-T // 211)  # the training pass, then every sample
     assert len(said) == chunks
     assert said[-1].startswith(f"candidate columns projected, chunks of 211 samples: {chunks}/{chunks}")
