@@ -60,9 +60,13 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
        blocks that chose the terms; the held-out blocks stay unseen).
     4. Measure the gain: held-out blocks only, never used to choose between candidates. A term
        is declined (listed among the runners-up, with why) when, added, the data do not determine
-       it (every coefficient within 2 standard errors of 0) or the held-out error rises, as a
-       fault whose writing-off removes nothing is: a validation test on a few clusters (a
-       static-pose log's poses) can pass by chance.
+       it (every coefficient within 2 standard errors of 0) or the held-out error rises: a
+       validation test on a few clusters (a static-pose log's poses) can pass by chance. A fault
+       is a finding only when writing it off removes at least ``min_gain`` of the held-out mean
+       squared error (the bar a term's validation gain must clear): a detector flags a few
+       readings of any log, and leaving out readings that were not faulty changes next to
+       nothing. A time region whose edge falls between training blocks (a slip inside a held-out
+       block) has its gain measured outside that span (:func:`unplaced_span`).
     """
     options = options or EngineOptions()
     say = options.progress or (lambda text: None)
@@ -84,6 +88,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     shown_tests = show(res, weights, train, val, shown, length, options, time)
     exclude: dict = {}
     findings: list[Finding] = []
+    left_alone: list[Finding] = []  # faults a detector flagged whose writing-off removes too little
     terms: tuple[Term, ...] = ()
 
     faults = getattr(adapter, "faults", None)
@@ -97,8 +102,13 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         evidence = dict(fault.evidence, channels=list(fault.readings))
         finding = Finding(fault.term, "fault", before, after, evidence)
         red = finding.gain().get("reduction", float("nan"))
-        if not (np.isfinite(red) and red > 0):  # writing it off removes nothing: no finding
-            say(f"{fault.term.cause} on {fault.term.channel}{unit}: writing it off removes nothing, left alone")
+        removed = 1.0 - (1.0 - red) ** 2 if np.isfinite(red) else float("nan")  # of the held-out MSE
+        if not removed >= options.min_gain:  # a fault that removes (next to) nothing is no finding
+            say(
+                f"{fault.term.cause} on {fault.term.channel}{unit}: writing it off removes "
+                f"{removed:.1%} of the held-out error (under {options.min_gain:.0%}), left alone"
+            )
+            left_alone.append(finding)
             continue
         exclude = trial
         findings.append(finding)
@@ -131,7 +141,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             break
         for chosen in group:
             new = adapter.fit(terms + (chosen.term,), train)
-            before, after = adapter.score(fitted, held, exclude), adapter.score(new, held, exclude)
+            unplaced = unplaced_span(chosen.term, time, train)
+            scored = held if unplaced is None else held & ~unplaced
+            before, after = adapter.score(fitted, scored, exclude), adapter.score(new, scored, exclude)
             res_new = adapter.residuals(new)
             variable = evidence_variable(chosen.term, res)
             evidence = {
@@ -142,6 +154,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 "threshold_t": float(chosen.threshold),
                 "variable": variable,
             }
+            if unplaced is not None and (held & unplaced).any():
+                edges = time[np.flatnonzero(unplaced)[[0, -1]]]
+                evidence["heldout_leaves_out"] = [float(edges[0]), float(edges[1])]
             if chosen is not best:
                 evidence["common_cause"] = (
                     f"{best.term.cause} on {best.term.channel}, tested as one: t {best.test.t:.1f} "
@@ -232,6 +247,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         fitted,
         exclude,
         dict(res.units),
+        tuple(left_alone),
     )
 
 
@@ -350,6 +366,24 @@ def _key(term: Term) -> tuple[str, str]:
 #: A fitted coefficient is determined by the data when it is at least this many standard errors
 #: from 0 (about a 5 % two-sided level).
 DETERMINED_Z = 2.0
+
+
+def unplaced_span(term: Term, time, train: np.ndarray) -> np.ndarray | None:
+    """(T,) bool, the samples between the training samples either side of a time region's edge
+    (a slip's start), or None: the fit puts the edge somewhere in that span without data to place
+    it (a slip inside a held-out block starts in its middle), so the finding's held-out gain is
+    measured outside it; the extended model's held-out score keeps every sample."""
+    region = term.region
+    if region is None or region.variable != "time" or time is None:
+        return None
+    time = np.asarray(time, float)
+    out = np.zeros(time.size, bool)
+    for edge in (region.low, region.high):
+        if not np.isfinite(edge):
+            continue
+        before, after = np.flatnonzero(train & (time < edge)), np.flatnonzero(train & (time >= edge))
+        out[(before[-1] + 1 if before.size else 0) : (after[0] if after.size else time.size)] = True
+    return out if out.any() else None
 
 
 def _decline(finding: Finding) -> str:

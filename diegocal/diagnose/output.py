@@ -14,7 +14,10 @@
         kind: term             # term | fault | unexplained
         unit: N·m
         evidence: {validation_gain, t, threshold_t, variable, curves: {before, after}}
+                               # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
         runners_up: [{cause, channel, region, validation_gain, t, threshold_t, significant}, ...]
+    faults_left_alone:         # flagged by a fault detector, but writing them off removed under min_gain
+      - {cause: marker_outliers, channel: m2, readings: 14, gain: {rmse_before, rmse_after, reduction}}
     extended_model: run.extended.sgp
     extended: {model: ..., heldout_rmse: {...}}
     blocks: {train: [[t0, t1], ...], validation: [...], heldout: [...]}   # seconds
@@ -100,6 +103,7 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
             "units": channel_units,
         },
         "findings": [finding_dict(f, channel_units) for f in diag.findings],
+        "faults_left_alone": [_left_alone(f) for u in units for f in u.faults_left_alone],
         "extended_model": extended_model,
         "extended": {
             "model": units[0].extended_model if len(units) == 1 else "per chamber (see findings)",
@@ -109,6 +113,18 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
         "blocks": diag.blocks.to_dict(diag.time),
         "options": {"alpha": o.alpha, "min_gain": o.min_gain, "max_rounds": o.max_rounds, "n_blocks": o.n_blocks},
         "residual_tests": _clean({(f"{u.unit}/{c}" if u.unit else c): v for u in units for c, v in u.show.items()}),
+    }
+
+
+def _left_alone(f) -> dict:
+    """A data fault the detector flagged that is no finding: what it flagged and what writing it
+    off changed on the held-out blocks."""
+    gain = f.gain()
+    return {
+        "cause": f.cause,
+        "channel": f.channel,
+        "readings": f.evidence.get("readings", f.evidence.get("frames")),  # flagged (a swap: frames)
+        "gain": {k: float(v) for k, v in gain.items()},
     }
 
 

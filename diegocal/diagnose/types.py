@@ -138,7 +138,8 @@ class EngineOptions:
         most (a pot, a joint: where its held-out gain is measured, :meth:`Finding.gain`). A real
         but negligible model error is not worth a term; pooling a pot's term with every sensor its
         q projection touches dilutes it, and its own channel alone misses it where the pot fixes
-        its joint's q (its in-sample residual follows it).
+        its joint's q (its in-sample residual follows it). A fault must remove as much of the
+        held-out error (:func:`~diegocal.diagnose.engine.run_unit`, step 4).
     unexplained_min_gain : the same for ``unexplained``: a binned correction spends ``n_bins``
         parameters on one channel where a term spends one to three, so it must pay more (on clean
         thin-plate chambers the 9-parameter model's known valve approximation leaves binned
@@ -255,6 +256,7 @@ class UnitDiagnosis:
     fitted: Any = field(repr=False, default=None)
     exclude: dict = field(repr=False, default_factory=dict)
     units: dict = field(default_factory=dict)  # channel -> unit ("V", "m", "N·m", "kPa")
+    faults_left_alone: tuple[Finding, ...] = ()  # detected, but writing them off removed too little
 
 
 def pooled(score: Score, channels) -> float:

@@ -77,6 +77,9 @@ def sentence(f: dict) -> str:
             f"; {how} {g['reduction']:.0%} of the held-out error "
             f"(RMSE {g['rmse_before']:.3g} → {g['rmse_after']:.3g} {unit})"
         )
+        span = (f.get("evidence") or {}).get("heldout_leaves_out")
+        if span:  # a region's edge in a span without training data: where it is, the data do not say
+            gain += f", outside {span[0]:.3g}-{span[1]:.3g} s, where no training data place its edge"
     else:
         vg = (f.get("evidence") or {}).get("validation_gain")
         gain = f"; it accounts for {vg:.0%} of the validation error" if vg is not None else ""
@@ -170,6 +173,13 @@ def summary_lines(d: dict) -> list[str]:
             f"extended model ({ext['model']}): {pooled}."
         )
         out += [f"{k + 1}. " + sentence(f) for k, f in enumerate(findings)]
+    for f in d.get("faults_left_alone") or []:
+        red = (f.get("gain") or {}).get("reduction")
+        out.append(
+            f"Left alone: {PHRASES.get(f['cause'], f['cause'])} on {f['channel']} ({f.get('readings')} flagged); "
+            f"writing them off changes the held-out error by {f'{-red:+.1%}' if red is not None else 'nothing'}, "
+            "under what a finding must remove."
+        )
     return out
 
 

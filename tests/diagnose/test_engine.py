@@ -5,18 +5,21 @@ measures the gain on held-out blocks only."""
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from toy import ToyAdapter, make_data  # noqa: E402
+from toy import CHANNELS, ToyAdapter, make_data  # noqa: E402
 
-from diegocal.diagnose.engine import EngineOptions, run_unit  # noqa: E402
+from diegocal.diagnose.engine import EngineOptions, run_unit, unplaced_span  # noqa: E402
 from diegocal.diagnose.selection import choose, evaluate_candidates  # noqa: E402
 from diegocal.diagnose.stats import out_of_sample_test  # noqa: E402
-from diegocal.evaluate import split_blocks  # noqa: E402
+from diegocal.diagnose.types import Fault  # noqa: E402
+from diegocal.evaluate import score, split_blocks  # noqa: E402
+from diegocal.terms import Region, Term  # noqa: E402
 
 
 def run(seed, effects, **kw):
@@ -117,3 +120,60 @@ def test_a_tested_candidate_keeps_its_errors_on_the_validation_samples_only():
     mean, se, n = paired_difference(one.after, two.after, val, 50)
     assert (mean, n) == (pytest.approx(d.mean(), rel=1e-12), d.size)
     assert se == pytest.approx(d.std(ddof=1) / np.sqrt(d.size), rel=1e-12)
+
+
+class SpikyToy(ToyAdapter):
+    """The toy with a detector that flags readings of c0 as a fault (``spikes``): the flagged
+    readings are left out of the fit and of every score."""
+
+    def __init__(self, t, x, y, flagged):
+        super().__init__(t, x, y)
+        self.flagged = flagged
+
+    def faults(self, fitted, res):
+        term = Term("spikes", "c0", ())
+        return [Fault(term, {"c0": self.flagged}, exclude=True)]
+
+    def fit(self, terms, train):
+        spikes = any(t.cause == "spikes" for t in terms)
+        fitted = super().fit([t for t in terms if t.cause != "spikes"], train & ~self.flagged if spikes else train)
+        return replace(fitted, terms=tuple(terms))
+
+    def terms(self, fitted):
+        return super().terms(fitted) + tuple(t for t in fitted.terms if t.cause == "spikes")
+
+    def score(self, fitted, mask, exclude=None):
+        y = self.y.copy()
+        for c, m in (exclude or {}).items():
+            y[np.asarray(m, bool), CHANNELS.index(c)] = np.nan
+        return score(y, self.predict(fitted), CHANNELS, mask=mask, unit="u")
+
+
+@pytest.mark.parametrize("spiked", [True, False])
+def test_a_fault_is_a_finding_only_when_writing_it_off_removes_error(spiked):
+    """Readings flagged by a detector: spikes 100x the noise on them are a fault worth writing
+    off; the same readings without spikes (a detector's false alarms) are no finding, however
+    slightly leaving them out happens to lower the held-out error."""
+    t, x, y = make_data(11)
+    flagged = np.zeros(len(t), bool)
+    flagged[np.random.default_rng(2).choice(len(t), 40, replace=False)] = True
+    if spiked:
+        y[flagged, 0] += 10.0
+    d = run_unit(SpikyToy(t, x, y, flagged), split_blocks(len(t)), EngineOptions())
+    faults = [f for f in d.findings if f.kind == "fault"]
+    if spiked:
+        assert [f.cause for f in faults] == ["spikes"] and faults[0].gain()["reduction"] > 0.2
+    else:
+        assert faults == []
+    assert [f.cause for f in d.faults_left_alone] == ([] if spiked else ["spikes"])  # said, not a finding
+
+
+def test_the_unplaced_span_of_a_time_region_is_the_gap_around_its_edge():
+    time = np.arange(100) * 0.1
+    train = np.ones(100, bool)
+    train[40:60] = False
+    assert unplaced_span(Term("slip", "c0", (), Region("time", 5.0, np.inf)), time, train).nonzero()[
+        0
+    ].tolist() == list(range(40, 60))
+    assert unplaced_span(Term("slip", "c0", (), Region("time", 2.0, np.inf)), time, train) is None  # among training
+    assert unplaced_span(Term("bump", "c0", (), Region("x.c0", 5.0, 6.0)), time, train) is None  # not in time

@@ -350,3 +350,23 @@ def test_a_single_diagnosis_report_has_contents_and_summary(results, tmp_path):
     assert entry and int(entry.group(1)) == front + 1
     assert "Domain dynamics, log swing.h5" in " ".join(pages[:front])  # the summary in plain words
     assert pages[front].startswith("Diagnosis, dynamics: swing.diagnosis.yaml")
+
+
+def test_a_fault_left_alone_is_said_but_is_no_finding():
+    from diegocal.report.diagnose import summary_lines
+
+    d = {
+        "domain": "kinematics",
+        "baseline": {"model": "stac", "heldout_rmse": {"m2": 0.002}, "unit": "m"},
+        "extended": {"model": "stac", "heldout_rmse": {"m2": 0.002}, "unit": "m"},
+        "findings": [],
+        "faults_left_alone": [
+            {"cause": "marker_outliers", "channel": "m2", "readings": 14, "gain": {"reduction": 0.0004}}
+        ],
+        "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
+        "options": {"alpha": 0.01, "min_gain": 0.05},
+    }
+    text = " ".join(summary_lines(d))
+    assert "Nothing significant" in text
+    assert "Left alone: some marker readings are outliers (ghosts, reflections) on m2 (14 flagged)" in text
+    assert "-0.0%" in text
