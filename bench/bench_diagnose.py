@@ -12,6 +12,8 @@ default ranges. Every log is diagnosed with the defaults a user gets, except tha
 cause the default baseline already contains is diagnosed against a baseline without it
 (:data:`BASELINE_FOR`). A hidden effect counts as *named* when the top finding has its cause and
 channel and a positive held-out gain; a clean log is a *false alarm* when it gives any finding.
+A hidden data fault found as a *minor fault* (its writing-off removed under ``min_gain`` of the
+held-out error: no finding) is counted apart, as are clean logs with a minor fault.
 Printed per domain and per cause: the naming rate, the false-alarm rate and the wall time per log
 (load average beside it).
 
@@ -107,6 +109,14 @@ class Outcome:
     error: str = ""
     also: tuple = ()  # other channels that name the same effect (a swapped pair's partner)
     ratio: float = float("nan")  # the hidden effect's size on its channel / that channel's noise
+    minor: tuple = ()  # "cause:channel" of each minor fault (found, no finding: it removed under min_gain)
+
+    @property
+    def minor_fault(self) -> bool:
+        """The hidden fault was found, but as a minor fault (writing it off removed too little)."""
+        return self.cause is not None and bool(
+            set(self.minor) & {f"{self.cause}:{c}" for c in (self.channel, *self.also)}
+        )
 
     @property
     def named(self) -> bool:
@@ -265,7 +275,8 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
     if findings:
         top = f"{findings[0].cause}:{findings[0].channel}"
         gain = float(findings[0].gain().get("reduction", float("nan")))
-    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds, also=also, ratio=ratio)
+    minor = tuple(f"{f.cause}:{f.channel}" for u in result.units for f in u.minor_faults)
+    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds, also=also, ratio=ratio, minor=minor)
 
 
 def plan(domain: str, n_logs: int, seed: int) -> list[tuple[str, str | None, int]]:
@@ -288,13 +299,15 @@ def table(outcomes: list[Outcome]) -> str:
     for (domain, cause), group in sorted(by.items(), key=lambda kv: (kv[0][0], kv[0][1] == "(clean)", kv[0][1])):
         n = len(group)
         named = sum(o.named for o in group) if cause != "(clean)" else None
+        minor = sum(o.minor_fault and not o.named for o in group) if cause != "(clean)" else None
         alarms = sum(o.n_findings > 0 for o in group) if cause == "(clean)" else None
         sec = float(np.median([o.seconds for o in group]))
         errs = sum(bool(o.error) for o in group)
         ratios = [o.ratio for o in group if np.isfinite(o.ratio)]
         size = f"{min(ratios):.1f}-{max(ratios):.1f}" if ratios else ""
         rows.append(
-            f"| {domain} | {cause} | {n} | {'' if named is None else f'{named}/{n}'} | "
+            f"| {domain} | {cause} | {n} | {'' if named is None else f'{named}/{n}'}"
+            f"{f' (+{minor} minor fault)' if minor else ''} | "
             f"{'' if alarms is None else f'{alarms}/{n}'} | {size} | {sec:.1f} | {errs} |"
         )
     for domain in sorted({o.domain for o in outcomes}):
@@ -302,9 +315,12 @@ def table(outcomes: list[Outcome]) -> str:
         cln = [o for o in outcomes if o.domain == domain and not o.cause]
         rate = sum(o.named for o in hid) / max(len(hid), 1)
         fa = sum(o.n_findings > 0 for o in cln) / max(len(cln), 1)
+        minor = sum(o.minor_fault and not o.named for o in hid)
         rows.append(
-            f"| **{domain}** | all | {len(hid)} + {len(cln)} | **{rate:.0%}** (goal ≥ 90 %) | "
-            f"**{fa:.0%}** (goal ≤ 5 %) | | {np.median([o.seconds for o in hid + cln]):.1f} | |"
+            f"| **{domain}** | all | {len(hid)} + {len(cln)} | **{rate:.0%}** (goal ≥ 90 %)"
+            f"{f'; +{minor} as minor faults' if minor else ''} | "
+            f"**{fa:.0%}** (goal ≤ 5 %){f'; {sum(bool(o.minor) for o in cln)} with a minor fault' if cln else ''} | | "
+            f"{np.median([o.seconds for o in hid + cln]):.1f} | |"
         )
     return "\n".join(rows)
 

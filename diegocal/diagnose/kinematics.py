@@ -19,10 +19,11 @@ in each run of training frames the time a change-point scan fits best, and the m
 gap between runs (:func:`slip_samples`). Its region is open, ``time`` from the change on: a
 marker that moved stays moved, in this log and in any later one on the same clock.
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
-prediction over runs of frames) and ``marker_outliers`` (readings far off their neighbours'
-trend, by a threshold with a family-wise false-alarm rate; on a static-pose log, whose neighbours
-are other poses, the poses whose markers are not their own: :func:`.geometry.foreign_poses`, and
-the fits leave the writing-off to that fault instead of doing it themselves).
+prediction over runs of frames; where one of them is not seen, the other's reading alone)
+and ``marker_outliers`` (readings far off their neighbours' trend, by a threshold with a
+family-wise false-alarm rate; on a static-pose log, whose neighbours are other poses, the poses
+whose markers are not their own: :func:`.geometry.foreign_poses`, and the fits leave the
+writing-off to that fault instead of doing it themselves).
 
 Held-out score: RMSE per channel of reading − prediction on the held-out frames, q tracked from
 every sensor with θ fixed. The extended model is a calib.yaml (kind ``calibration``) whose
@@ -343,7 +344,7 @@ class KinematicsAdapter:
     def faults(self, fitted: KinFit, residuals: Residuals) -> list[Fault]:
         """Swapped labels, then marker outliers (module docstring), on the baseline's residuals."""
         _, rm, xm = self._residual_arrays(fitted)
-        pred = xm - rm
+        pred = self._merge(fitted.applied, fitted.markers)  # every frame's, seen or not
         T, M = rm.shape[:2]
         n_tests = max(T * M, 1)
         sig = float(fitted.cal.sigma_markers)
@@ -352,14 +353,19 @@ class KinematicsAdapter:
         own = np.einsum("tmi,tmi->tm", rm, rm)
         out = []
         swapped = np.zeros((T, M), bool)
+        seen = np.isfinite(own)
+        off = seen & (own > thr2)
         for m in range(M):
             for k in range(m + 1, M):
-                bad = (own[:, m] > thr2) & (own[:, k] > thr2)
+                # each reading of the pair that is seen is off its own marker: a swap needs one
+                bad = (off[:, m] | ~seen[:, m]) & (off[:, k] | ~seen[:, k]) & (off[:, m] | off[:, k])
                 if bad.sum() < 3:
                     continue
-                dm = np.sum((xm[:, m] - pred[:, k]) ** 2, -1)
-                dk = np.sum((xm[:, k] - pred[:, m]) ** 2, -1)
-                swap = bad & (dm < thr2) & (dk < thr2)
+                with np.errstate(invalid="ignore"):
+                    dm = np.sum((xm[:, m] - pred[:, k]) ** 2, -1)
+                    dk = np.sum((xm[:, k] - pred[:, m]) ** 2, -1)
+                # ... and on the other's prediction (a label moved onto a marker the cameras lost)
+                swap = bad & ((dm < thr2) | ~seen[:, m]) & ((dk < thr2) | ~seen[:, k])
                 if swap.sum() >= 3:
                     frames = np.flatnonzero(swap)
                     a, b = self.marker_names[m], self.marker_names[k]

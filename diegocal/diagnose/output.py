@@ -16,8 +16,8 @@
         evidence: {validation_gain, t, threshold_t, variable, curves: {before, after}}
                                # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
         runners_up: [{cause, channel, region, validation_gain, t, threshold_t, significant}, ...]
-    faults_left_alone:         # flagged by a fault detector, but writing them off removed under min_gain
-      - {cause: marker_outliers, channel: m2, readings: 14, gain: {rmse_before, rmse_after, reduction}}
+    minor_faults:              # flagged by a fault detector; writing them off removed under min_gain
+      - {cause: marker_outliers, channel: m2, readings: 14, gain: {...}, written_off: true}
     extended_model: run.extended.sgp
     extended: {model: ..., heldout_rmse: {...}}
     blocks: {train: [[t0, t1], ...], validation: [...], heldout: [...]}   # seconds
@@ -103,7 +103,7 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
             "units": channel_units,
         },
         "findings": [finding_dict(f, channel_units) for f in diag.findings],
-        "faults_left_alone": [_left_alone(f) for u in units for f in u.faults_left_alone],
+        "minor_faults": [_minor_fault(f) for u in units for f in u.minor_faults],
         "extended_model": extended_model,
         "extended": {
             "model": units[0].extended_model if len(units) == 1 else "per chamber (see findings)",
@@ -116,15 +116,15 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
     }
 
 
-def _left_alone(f) -> dict:
-    """A data fault the detector flagged that is no finding: what it flagged and what writing it
-    off changed on the held-out blocks."""
-    gain = f.gain()
+def _minor_fault(f) -> dict:
+    """A data fault that is no finding: what the detector flagged, what writing it off changed on
+    the held-out blocks, and whether the extended model writes it off all the same."""
     return {
         "cause": f.cause,
         "channel": f.channel,
         "readings": f.evidence.get("readings", f.evidence.get("frames")),  # flagged (a swap: frames)
-        "gain": {k: float(v) for k, v in gain.items()},
+        "gain": {k: float(v) for k, v in f.gain().items()},
+        "written_off": bool(f.evidence.get("written_off")),
     }
 
 

@@ -256,7 +256,7 @@ class UnitDiagnosis:
     fitted: Any = field(repr=False, default=None)
     exclude: dict = field(repr=False, default_factory=dict)
     units: dict = field(default_factory=dict)  # channel -> unit ("V", "m", "N·m", "kPa")
-    faults_left_alone: tuple[Finding, ...] = ()  # detected, but writing them off removed too little
+    minor_faults: tuple[Finding, ...] = ()  # detected, writing-off removed under min_gain (evidence.written_off)
 
 
 def pooled(score: Score, channels) -> float:

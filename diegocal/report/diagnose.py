@@ -173,12 +173,13 @@ def summary_lines(d: dict) -> list[str]:
             f"extended model ({ext['model']}): {pooled}."
         )
         out += [f"{k + 1}. " + sentence(f) for k, f in enumerate(findings)]
-    for f in d.get("faults_left_alone") or []:
+    for f in d.get("minor_faults") or []:
         red = (f.get("gain") or {}).get("reduction")
         out.append(
-            f"Left alone: {PHRASES.get(f['cause'], f['cause'])} on {f['channel']} ({f.get('readings')} flagged); "
-            f"writing them off changes the held-out error by {f'{-red:+.1%}' if red is not None else 'nothing'}, "
-            "under what a finding must remove."
+            f"Minor data fault, no finding: {PHRASES.get(f['cause'], f['cause'])} on {f['channel']} "
+            f"({f.get('readings')} flagged); writing them off changes the held-out error by "
+            f"{f'{-red:+.1%}' if red is not None else 'nothing measurable'}, under what a finding must remove"
+            + ("; written off all the same." if f.get("written_off") else "; left in the data.")
         )
     return out
 

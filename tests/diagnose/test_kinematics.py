@@ -20,6 +20,7 @@ from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics_lin
 from diegocal.diagnose.kinematics import KinematicsAdapter
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep, whole_log
 from diegocal.evaluate import split_blocks
+from diegocal.io.log import Stream
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
 from diegocal.sim.kinematics import KinematicsOptions, backlash, simulate_kinematics
@@ -494,3 +495,21 @@ def test_a_slip_inside_a_heldout_block_is_scored_where_its_start_is_known(finger
     top = d.findings[0]
     assert top.evidence["heldout_leaves_out"] == pytest.approx([12.0, 14.99])
     assert top.gain()["reduction"] > 0.5
+
+
+def test_a_swap_with_a_marker_the_cameras_lost_is_found(finger):
+    """Two labels swapped while one of the markers is not seen: the other's reading sits on the
+    lost marker's predicted place (its prediction, not its missing reading, is compared)."""
+    log = _log(finger, 11, ("swapped_labels",), duration=20.0)
+    truth = log.truth.effects[0]
+    a, b = truth["channel"], truth["values"]["partner"]
+    markers = log.stream("markers")
+    frames = np.flatnonzero(log.truth.signals["markers_corrupted"].data[:, markers.index(a)].astype(bool))
+    data = markers.data.copy()
+    data[frames, markers.index(b)] = np.nan  # the partner lost in every swapped frame
+    log = log.with_streams(markers=Stream(markers.names, data)).without_truth()
+    adapter = KinematicsAdapter(log, finger)
+    fitted = adapter.fit((), split_blocks(log.n_samples, 10).mask("train"))
+    swaps = [f for f in adapter.faults(fitted, adapter.residuals(fitted)) if f.term.cause == "swapped_labels"]
+    assert [{f.term.channel, f.term.extra["partner"]} for f in swaps] == [{a, b}]
+    assert len(set(swaps[0].term.extra["frames"]) & set(frames)) >= 0.9 * len(frames)

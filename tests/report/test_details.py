@@ -352,7 +352,7 @@ def test_a_single_diagnosis_report_has_contents_and_summary(results, tmp_path):
     assert pages[front].startswith("Diagnosis, dynamics: swing.diagnosis.yaml")
 
 
-def test_a_fault_left_alone_is_said_but_is_no_finding():
+def test_a_minor_fault_is_said_but_is_no_finding():
     from diegocal.report.diagnose import summary_lines
 
     d = {
@@ -360,13 +360,19 @@ def test_a_fault_left_alone_is_said_but_is_no_finding():
         "baseline": {"model": "stac", "heldout_rmse": {"m2": 0.002}, "unit": "m"},
         "extended": {"model": "stac", "heldout_rmse": {"m2": 0.002}, "unit": "m"},
         "findings": [],
-        "faults_left_alone": [
-            {"cause": "marker_outliers", "channel": "m2", "readings": 14, "gain": {"reduction": 0.0004}}
+        "minor_faults": [
+            {
+                "cause": "marker_outliers",
+                "channel": "m2",
+                "readings": 14,
+                "gain": {"reduction": 0.0004},
+                "written_off": True,
+            }
         ],
         "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
         "options": {"alpha": 0.01, "min_gain": 0.05},
     }
     text = " ".join(summary_lines(d))
     assert "Nothing significant" in text
-    assert "Left alone: some marker readings are outliers (ghosts, reflections) on m2 (14 flagged)" in text
-    assert "-0.0%" in text
+    assert "no finding: some marker readings are outliers (ghosts, reflections) on m2 (14 flagged)" in text
+    assert "by -0.0%" in text and "written off all the same" in text
