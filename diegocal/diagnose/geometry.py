@@ -182,10 +182,10 @@ def foreign_poses(adapter, fitted, swapped: np.ndarray) -> Fault | None:
     train, poses = fitted.train, adapter.poses
     checked = replace(adapter.options, check_poses=True)
     try:
-        judge = adapter._fit_once((_unfitted(fitted),), train, fitted, checked)
+        judge = adapter.fit_once((_unfitted(fitted),), train, fitted, checked)
         written = next(t for t in judge.terms if is_chain(t)).extra["written_off"]
     except FitError:
-        judge = adapter._fit_once((), train, fitted, checked)
+        judge = adapter.fit_once((), train, fitted, checked)
         written = [int(poses[train][r["frame"]]) for r in judge.cal.rejected_poses]
     e2 = np.sum(adapter.deleted(judge)[1] ** 2, axis=-1)  # (T, M) m²
     e2 = np.where(swapped, np.nan, e2)

@@ -120,7 +120,7 @@ class KinematicsAdapter:
         train = np.asarray(train, bool)
         terms = tuple(self._own(t, train) for t in terms)
         base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
-        fitted = self._fit_once(terms, train, base)
+        fitted = self.fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
         for i in range(REFINE + CLOCK_REFINE):
@@ -129,7 +129,7 @@ class KinematicsAdapter:
             if i >= REFINE and not _clock_moved(terms, fitted.terms):
                 break
             terms = fitted.terms
-            fitted = self._fit_once(self._refine(fitted), train, fitted)
+            fitted = self.fit_once(self._refine(fitted), train, fitted)
         return fitted
 
     def _own(self, term: Term, train) -> Term:
@@ -141,7 +141,7 @@ class KinematicsAdapter:
             return replace(term, extra={k: v for k, v in term.extra.items() if k != "span"})
         return term
 
-    def _fit_once(self, terms, train, previous: KinFit | None = None, options=None) -> KinFit:
+    def fit_once(self, terms, train, previous: KinFit | None = None, options=None) -> KinFit:
         """STAC on the training frames of the log mapped into ``terms``, then q tracked on every
         frame (from ``previous``'s q: the pot terms act on its model readings).
 
