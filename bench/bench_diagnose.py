@@ -11,7 +11,8 @@ is the mocap frame's, which no calibration can tell apart). Pneumatics: the simu
 default ranges. Every log is diagnosed with the defaults a user gets, except that a
 cause the default baseline already contains is diagnosed against a baseline without it
 (:data:`BASELINE_FOR`). A hidden effect counts as *named* when the top finding has its cause and
-channel and a positive held-out gain; a clean log is a *false alarm* when it gives any finding.
+channel (or names that channel as one the data cannot tell from its own) and a positive held-out
+gain; a clean log is a *false alarm* when it gives any finding.
 A hidden data fault found as a *minor fault* (its writing-off removed under ``min_gain`` of the
 held-out error: no finding) is counted apart, as are clean logs with a minor fault.
 Printed per domain and per cause: the naming rate, the false-alarm rate and the wall time per log
@@ -110,6 +111,7 @@ class Outcome:
     also: tuple = ()  # other channels that name the same effect (a swapped pair's partner)
     ratio: float = float("nan")  # the hidden effect's size on its channel / that channel's noise
     minor: tuple = ()  # "cause:channel" of each minor fault (found, no finding: it removed under min_gain)
+    twins: tuple = ()  # channels the top finding's data cannot tell from its own (its evidence)
 
     @property
     def minor_fault(self) -> bool:
@@ -122,7 +124,11 @@ class Outcome:
     def named(self) -> bool:
         if self.cause is None or not self.top:
             return False
-        return self.top in {f"{self.cause}:{c}" for c in (self.channel, *self.also)} and self.gain > 0
+        channels = {self.channel, *self.also}
+        same = self.top in {f"{self.cause}:{c}" for c in channels} or (
+            self.top.split(":")[0] == self.cause and bool(channels & set(self.twins))
+        )
+        return same and self.gain > 0
 
 
 def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None = None):
@@ -276,7 +282,21 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
         top = f"{findings[0].cause}:{findings[0].channel}"
         gain = float(findings[0].gain().get("reduction", float("nan")))
     minor = tuple(f"{f.cause}:{f.channel}" for u in result.units for f in u.minor_faults)
-    return Outcome(domain, cause, channel, seed, top, len(findings), gain, seconds, also=also, ratio=ratio, minor=minor)
+    twins = tuple(findings[0].evidence.get("indistinguishable_from", ())) if findings else ()
+    return Outcome(
+        domain,
+        cause,
+        channel,
+        seed,
+        top,
+        len(findings),
+        gain,
+        seconds,
+        also=also,
+        ratio=ratio,
+        minor=minor,
+        twins=twins,
+    )
 
 
 def plan(domain: str, n_logs: int, seed: int) -> list[tuple[str, str | None, int]]:

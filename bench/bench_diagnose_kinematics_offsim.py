@@ -9,7 +9,8 @@ pots, anisotropic and partly slow marker noise, the effects in their physical fo
 logs per effect (time_offset 20-30 ms, backlash, sensor_nonlinearity, marker_slip,
 link_offset; channel and size drawn from the seed, the same for both generators) and ``--logs``
 clean logs, diagnosed with the defaults a user gets. Per effect: *named* when the top finding
-is the cause on its channel (a link offset: the joint), *anywhere* when some finding is; a clean
+is the cause on its channel (a link offset: the joint; or on a channel the finding says the data
+cannot tell from it), *anywhere* when some finding is; a clean
 log gives a *false alarm* when it gives any finding. Sizes: offsim's :data:`SIZES`; the project's
 simulator gets the same numbers in its own units (the dead band's and the transfer curve's width
 on the reading, in V; a link lengthened along the link).
@@ -71,6 +72,7 @@ class Outcome:
     truth_channel: str | None = None
     share: dict = field(default_factory=dict)
     error: str = ""
+    twins: tuple = ()  # channels the top finding's data cannot tell from its own (evidence)
 
     @property
     def top(self) -> str:
@@ -78,7 +80,11 @@ class Outcome:
 
     @property
     def named(self) -> bool:
-        return bool(self.findings) and self.top == f"{self.case.cause}:{self.truth_channel}"
+        """The top finding is the cause on its channel, or on a channel it says the data cannot
+        tell from that one (a joint's offset along the axis of the joint before it)."""
+        if not self.findings or self.findings[0][0] != self.case.cause:
+            return False
+        return self.findings[0][1] == self.truth_channel or self.truth_channel in self.twins
 
     @property
     def anywhere(self) -> bool:
@@ -141,7 +147,8 @@ def diagnose_one(task) -> Outcome:
     except DiegocalError as exc:
         return Outcome(case, (), time.process_time() - start, truth, error=str(exc))
     found = tuple((f.cause, f.channel, f.kind, float(f.gain().get("reduction", np.nan))) for f in d.findings)
-    out = Outcome(case, found, time.process_time() - start, truth)
+    twins = tuple(d.findings[0].evidence.get("indistinguishable_from", ())) if d.findings else ()
+    out = Outcome(case, found, time.process_time() - start, truth, twins=twins)
     if new_session and case.generator == "offsim" and out.named:
         out.share = new_session_share(d, log, case, robot_dir, duration)
     return out
@@ -162,8 +169,7 @@ def oracle_term(effect: dict, robot):
         return make_term(cause, ch, list(v["dxyz"]))
     if cause == "backlash":
         gain = next(p.gain for p in robot.sensors.pots if p.name == ch)
-        return make_term(cause, ch, [-0.5 * np.sign(gain) * v["width_reading"]],
-                         extra={"width": v["width_reading"]})
+        return make_term(cause, ch, [-0.5 * np.sign(gain) * v["width_reading"]], extra={"width": v["width_reading"]})
     return make_term(cause, ch)  # sensor_nonlinearity: its centre and range from the training readings
 
 
@@ -217,8 +223,10 @@ def new_session_share(d, log, case: Case, robot_dir: Path, duration: float) -> d
 
 # ----------------------------------------------------------------------------- tables
 def table(outcomes) -> str:
-    rows = ["| generator | cause | logs | named (top) | named anywhere | false alarms | what else was on top |",
-            "|---|---|---|---|---|---|---|"]
+    rows = [
+        "| generator | cause | logs | named (top) | named anywhere | false alarms | what else was on top |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for g in GENERATORS:
         mine = [o for o in outcomes if o.case.generator == g]
         if not mine:
@@ -239,28 +247,37 @@ def table(outcomes) -> str:
             named = "" if cause is None else f"{sum(o.named for o in grp)}/{n}"
             anywhere = "" if cause is None else f"{sum(o.anywhere for o in grp)}/{n}"
             alarms = f"{sum(bool(o.findings) for o in grp)}/{n}" if cause is None else ""
-            rows.append(f"| {g} | {cause or '(clean)'} | {n} | {named} | {anywhere} | {alarms} | "
-                        + ", ".join(f"{k} {v}" for k, v in sorted(other.items())) + " |")
+            rows.append(
+                f"| {g} | {cause or '(clean)'} | {n} | {named} | {anywhere} | {alarms} | "
+                + ", ".join(f"{k} {v}" for k, v in sorted(other.items()))
+                + " |"
+            )
         hid = [o for o in mine if o.case.cause]
         cln = [o for o in mine if not o.case.cause]
         alarms = sum(bool(o.findings) for o in cln)
-        rows.append(f"| **{g}** | all | {len(hid)} + {len(cln)} | **{sum(o.named for o in hid)}/{len(hid)}** | "
-                    f"{sum(o.anywhere for o in hid)}/{len(hid)} | **{alarms}/{len(cln)}** | |")
+        rows.append(
+            f"| **{g}** | all | {len(hid)} + {len(cln)} | **{sum(o.named for o in hid)}/{len(hid)}** | "
+            f"{sum(o.anywhere for o in hid)}/{len(hid)} | **{alarms}/{len(cln)}** | |"
+        )
     return "\n".join(rows)
 
 
 def share_table(outcomes) -> str:
-    out = ["| cause | logs | E_base | E_ext | E_oracle (medians) | share removed: median | worst |",
-           "|---|---|---|---|---|---|---|"]
+    out = [
+        "| cause | logs | E_base | E_ext | E_oracle (medians) | share removed: median | worst |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for cause in CAUSES:
         r = [o.share for o in outcomes if o.share and o.case.cause == cause]
         if not r:
             continue
         s = np.array([x["share"] for x in r])
         unit = "V" if cause in ("backlash", "sensor_nonlinearity") else "m"
-        out.append(f"| {cause} | {len(r)} | {np.median([x['base'] for x in r]):.4g} {unit} | "
-                   f"{np.median([x['ext'] for x in r]):.4g} | {np.median([x['oracle'] for x in r]):.4g} | "
-                   f"{np.median(s):.0%} | {s.min():.0%} |")
+        out.append(
+            f"| {cause} | {len(r)} | {np.median([x['base'] for x in r]):.4g} {unit} | "
+            f"{np.median([x['ext'] for x in r]):.4g} | {np.median([x['oracle'] for x in r]):.4g} | "
+            f"{np.median(s):.0%} | {s.min():.0%} |"
+        )
     return "\n".join(out)
 
 
@@ -285,8 +302,10 @@ def main(argv=None) -> int:
         cases = plan(args.logs, args.seed, generators, robot_dir)
         if args.cause:
             cases = [c for c in cases if c.cause in args.cause]
-        print(f"bench_diagnose_kinematics_offsim: {args.robot}, seed {args.seed}, {args.logs} logs per effect + "
-              f"{args.logs} clean per generator, {args.duration:g}-s logs, load {os.getloadavg()[0]:.1f}")
+        print(
+            f"bench_diagnose_kinematics_offsim: {args.robot}, seed {args.seed}, {args.logs} logs per effect + "
+            f"{args.logs} clean per generator, {args.duration:g}-s logs, load {os.getloadavg()[0]:.1f}"
+        )
         tasks = [(c, robot_dir, args.duration, args.new_session) for c in cases]
         t0 = time.perf_counter()
         if args.jobs > 1:
@@ -298,14 +317,19 @@ def main(argv=None) -> int:
         for o in outcomes:
             c = o.case
             extra = f" share {o.share['share']:.2f}" if o.share else ""
+            extra += f" (the data cannot tell it from {', '.join(o.twins)})" if o.twins else ""
             found = [(f[0], f[1], f[2], round(f[3], 3)) for f in o.findings]
-            print(f"{c.generator:8s} {str(c.cause):20s} {str(o.truth_channel):22s} size {c.size:<8.4g} "
-                  f"seed {c.seed:<11d} {found}{extra} {o.error}")
+            print(
+                f"{c.generator:8s} {str(c.cause):20s} {str(o.truth_channel):22s} size {c.size:<8.4g} "
+                f"seed {c.seed:<11d} {found}{extra} {o.error}"
+            )
     print(table(outcomes))
     if args.new_session:
         print(share_table(outcomes))
-    print(f"{time.perf_counter() - t0:.0f} s wall, diagnosis median {np.median([o.seconds for o in outcomes]):.0f} "
-          f"CPU s per log, --jobs {args.jobs}, load average at the end {os.getloadavg()[0]:.1f}")
+    print(
+        f"{time.perf_counter() - t0:.0f} s wall, diagnosis median {np.median([o.seconds for o in outcomes]):.0f} "
+        f"CPU s per log, --jobs {args.jobs}, load average at the end {os.getloadavg()[0]:.1f}"
+    )
     return 0
 
 

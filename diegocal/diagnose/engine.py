@@ -160,6 +160,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 "threshold_t": float(chosen.threshold),
                 "variable": variable,
             }
+            twins = indistinguishable(chosen, tested)
+            if twins:
+                evidence["indistinguishable_from"] = twins
             if unplaced is not None and (held & unplaced).any():
                 edges = time[np.flatnonzero(unplaced)[[0, -1]]]
                 evidence["heldout_leaves_out"] = [float(edges[0]), float(edges[1])]
@@ -367,6 +370,31 @@ def _members(best: Tested, res, weights, train, val, options, exclude) -> list[T
 
 def _key(term: Term) -> tuple[str, str]:
     return term.cause, term.channel
+
+
+#: Two candidates of one cause whose validation fits differ by less than this share of what the
+#: chosen one removes are one finding to the data (:func:`indistinguishable`).
+TWIN = 0.01
+
+
+def indistinguishable(chosen: Tested, tested) -> list[str]:
+    """The channels on which ``chosen``'s cause, acting on the same residual channels, fits the
+    validation data as well to within TWIN of what ``chosen`` removes: (nearly) the same columns,
+    as a joint's offset along the axis of the joint before it is that joint's offset; the data
+    cannot tell which channel it is, and the finding says so."""
+    ref = next((t for t in tested if _key(t.term) == _key(chosen.term)), chosen)
+    removed = ref.test.sse_before - ref.test.sse_after
+    if not removed > 0:
+        return []
+    return [
+        t.term.channel
+        for t in tested
+        if t.term.cause == ref.term.cause
+        and t.term.channel != ref.term.channel
+        and set(t.channels) == set(ref.channels)
+        and np.isclose(t.test.sse_before, ref.test.sse_before)
+        and abs(t.test.sse_after - ref.test.sse_after) <= TWIN * removed
+    ]
 
 
 #: A fitted coefficient is determined by the data when it is at least this many standard errors

@@ -15,6 +15,7 @@
         unit: N·m
         evidence: {validation_gain, t, threshold_t, variable, curves: {before, after}}
                                # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
+                               # + indistinguishable_from: [channel, ...] (the same cause there fits the same)
         runners_up: [{cause, channel, region, validation_gain, t, threshold_t, significant}, ...]
     minor_faults:              # flagged by a fault detector; writing them off removed under min_gain
       - {cause: marker_outliers, channel: m2, readings: 14, gain: {...}, written_off: true}

@@ -84,6 +84,12 @@ def sentence(f: dict) -> str:
         vg = (f.get("evidence") or {}).get("validation_gain")
         gain = f"; it accounts for {vg:.0%} of the validation error" if vg is not None else ""
     params = _parameters_text(f)
+    twins = (f.get("evidence") or {}).get("indistinguishable_from")
+    if twins:  # the same cause elsewhere fits the data the same: which one, the log cannot say
+        params += (
+            f" The data cannot tell it from the same cause on {', '.join(twins)} (each fits the validation "
+            "data the same to within 1 % of what it removes)."
+        )
     return f"{f['channel']}: {what}{gain}.{params}{_stand_in_text(f)}"
 
 

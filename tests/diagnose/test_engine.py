@@ -7,6 +7,7 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from toy import CHANNELS, ToyAdapter, make_data  # noqa: E402
 
-from diegocal.diagnose.engine import EngineOptions, run_unit, unplaced_span  # noqa: E402
+from diegocal.diagnose.engine import EngineOptions, indistinguishable, run_unit, unplaced_span  # noqa: E402
 from diegocal.diagnose.selection import choose, evaluate_candidates  # noqa: E402
 from diegocal.diagnose.stats import out_of_sample_test  # noqa: E402
 from diegocal.diagnose.types import Fault  # noqa: E402
@@ -178,3 +179,22 @@ def test_the_unplaced_span_of_a_time_region_is_the_gap_around_its_edge():
     ].tolist() == list(range(40, 60))
     assert unplaced_span(Term("slip", "c0", (), Region("time", 2.0, np.inf)), time, train) is None  # among training
     assert unplaced_span(Term("bump", "c0", (), Region("x.c0", 5.0, 6.0)), time, train) is None  # not in time
+
+
+def test_candidates_that_fit_the_data_the_same_are_one_finding_to_it():
+    """A joint's offset along the axis of the joint before it is that joint's offset: both fit
+    the validation data the same (to rounding), and the finding names the other as
+    indistinguishable; a candidate that fits a little worse, or acts on other channels, is not."""
+
+    def tested(channel, sse_after, channels=("m1", "m2")):
+        test = SimpleNamespace(sse_before=100.0, sse_after=sse_after)
+        return SimpleNamespace(term=Term("link_offset", channel, ()), channels=channels, test=test)
+
+    chosen = tested("hip_yaw", 60.0)
+    others = [
+        chosen,
+        tested("knee", 60.3),  # 0.75 % of the 40 removed
+        tested("ankle", 61.0),  # 2.5 %: the data prefer the chosen one
+        tested("elbow", 60.0, ("m3",)),  # other channels
+    ]
+    assert indistinguishable(chosen, others) == ["knee"]
