@@ -233,15 +233,16 @@ class KinematicsAdapter:
             out[k:, self.marker_names.index(orig)] = x[k:, names.index(name)]
         return out
 
-    def _residual_arrays(self, fitted: KinFit):
+    def _marker_arrays(self, fitted: KinFit):
+        """(readings, predictions), each (T, M, 3) on the log's markers: a prediction on every
+        frame, seen or not (a reading is NaN where the cameras lost it)."""
         a = fitted.applied
-        rp = np.asarray(a.log.stream("pots").data, float) - fitted.pots
-        xm = self._merge(a, np.asarray(a.log.stream("markers").data, float))
-        rm = xm - self._merge(a, fitted.markers)
-        return rp, rm, xm
+        return self._merge(a, np.asarray(a.log.stream("markers").data, float)), self._merge(a, fitted.markers)
 
     def residuals(self, fitted: KinFit) -> Residuals:
-        rp, rm, _ = self._residual_arrays(fitted)
+        rp = np.asarray(fitted.applied.log.stream("pots").data, float) - fitted.pots
+        xm, pred = self._marker_arrays(fitted)
+        rm = xm - pred
         channels = {n: rp[:, i] for i, n in enumerate(self.pot_names)}
         channels.update({n: rm[:, i] for i, n in enumerate(self.marker_names)})
         units = {n: "V" for n in self.pot_names}
@@ -343,8 +344,8 @@ class KinematicsAdapter:
     # ------------------------------------------------------------------ faults
     def faults(self, fitted: KinFit, residuals: Residuals) -> list[Fault]:
         """Swapped labels, then marker outliers (module docstring), on the baseline's residuals."""
-        _, rm, xm = self._residual_arrays(fitted)
-        pred = self._merge(fitted.applied, fitted.markers)  # every frame's, seen or not
+        xm, pred = self._marker_arrays(fitted)
+        rm = xm - pred
         T, M = rm.shape[:2]
         n_tests = max(T * M, 1)
         sig = float(fitted.cal.sigma_markers)
