@@ -15,6 +15,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from diegocal.diagnose.engine import TWIN
 from diegocal.io import load_yaml
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
@@ -88,7 +89,7 @@ def sentence(f: dict) -> str:
     if twins:  # the same cause elsewhere fits the data the same: which one, the log cannot say
         params += (
             f" The data cannot tell it from the same cause on {', '.join(twins)} (each fits the validation "
-            "data the same to within 1 % of what it removes)."
+            f"data the same to within {TWIN * 100:g} % of what it removes)."
         )
     return f"{f['channel']}: {what}{gain}.{params}{_stand_in_text(f)}"
 

@@ -376,3 +376,20 @@ def test_a_minor_fault_is_said_but_is_no_finding():
     assert "Nothing significant" in text
     assert "no finding: some marker readings are outliers (ghosts, reflections) on m2 (14 flagged)" in text
     assert "by -0.0%" in text and "written off all the same" in text
+
+
+def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
+    from diegocal.diagnose.engine import TWIN
+    from diegocal.report.diagnose import sentence
+
+    f = {
+        "cause": "link_offset",
+        "channel": "l_hip_yaw",
+        "gain": {"reduction": 0.22, "rmse_before": 0.004, "rmse_after": 0.0031},
+        "unit": "m",
+        "evidence": {"indistinguishable_from": ["l_knee"]},
+    }
+    text = sentence(f)
+    assert "cannot tell it from the same cause on l_knee" in text
+    assert f"within {TWIN * 100:g} % of what it removes" in text
+    assert "cannot tell" not in sentence({**f, "evidence": {}})
