@@ -486,6 +486,8 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
     gain = best.channel_gain if best.channel_gain is not None else best.test.gain
     if best.strongest:  # judged on the channel it acts on most (_own): its gain there
         gain = best.strongest[1]
+    elif best.own_gain is not None:  # on the flexible model's channel too: not diluted by the others
+        gain = max(gain, best.own_gain)
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
 
 

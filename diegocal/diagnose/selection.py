@@ -147,19 +147,21 @@ def _channel_gains(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple
     return gains, energy
 
 
-def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[float | None, tuple | None]:
+def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[float | None, tuple | None, float | None]:
     """Fraction of the validation error of the candidate's own channel (its term's channel, when
     the fitted correction acts on it more than on any other) that the correction removes; None
     when it has none (a joint's link offset seen mostly by markers, whatever a pot of the same
     name gets from it). Second: (channel, its gain) where the correction acts most, when the term
-    names no channel it acts on (a payload on a link): the channel it is judged on."""
+    names no channel it acts on (a payload on a link): the channel it is judged on. Third: the
+    gain on its own channel whatever acts most (a pot's curve moves the tracked joint, so its
+    markers too): what a flexible model of that channel is weighed against."""
     gains, energy = _channel_gains(cand, fit, stack, channels)
     i = int(np.argmax(energy))
     own = cand.term.channel
     if own not in cand.columns or own not in channels:
-        return None, (channels[i], gains[i])
+        return None, (channels[i], gains[i]), None
     j = list(channels).index(own)
-    return (gains[j] if energy[j] >= energy[i] else None), None
+    return (gains[j] if energy[j] >= energy[i] else None), None, gains[j]
 
 
 def _candidate_channels(cand: Candidate) -> tuple[str, ...]:
@@ -203,10 +205,12 @@ def evaluate_candidates(
         thr = critical_t(options.alpha, n_tests, test.df)
         k = cand.n_params
         term = cand.term.with_linear_values(fit.coef[:k], fit.se)
-        own, strongest = _own_gain(cand, fit, va, chans) if len(chans) > 1 else (None, None)
+        own, strongest, on_own = _own_gain(cand, fit, va, chans) if len(chans) > 1 else (None, None, None)
         gain = test.gain if own is None else max(own, test.gain)
         sig = bool(test.t > thr and gain >= options.min_gain)
-        out.append(Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain, strongest))
+        out.append(
+            Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain, strongest, on_own)
+        )
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 

@@ -172,6 +172,8 @@ class Tested:
         one it acts on most) and on all its channels (None: it has no such channel)
     strongest : (channel, validation gain there) of the channel the correction acts on most, for a
         term on several channels that names none of them (a payload on a link); None otherwise
+    own_gain : the validation gain on the term's own channel, for a term on several channels that
+        names one of them, whichever it acts on most (None otherwise)
     """
 
     term: Term
@@ -183,6 +185,7 @@ class Tested:
     candidate: Candidate = field(repr=False)
     channel_gain: float | None = None
     strongest: tuple | None = None
+    own_gain: float | None = None
 
     @property
     def gain(self) -> float:

@@ -198,3 +198,34 @@ def test_candidates_that_fit_the_data_the_same_are_one_finding_to_it():
         tested("elbow", 60.0, ("m3",)),  # other channels
     ]
     assert indistinguishable(chosen, others) == ["knee"]
+
+
+def test_a_term_is_weighed_against_the_flexible_model_on_its_own_channel():
+    """A pot's curve moves the tracked joint, so its correction reaches the markers too, more there
+    than on the pot. The flexible model is fitted on the pot only: the term must be weighed by what
+    it explains there, not by its share over every channel it touches (diluted by a noisy marker,
+    which made the offsim iCub's loaded-wiper pot a stand-in, left ``unexplained``)."""
+    from diegocal.diagnose.engine import _outshone
+    from diegocal.diagnose.types import Candidate, Residuals
+    from diegocal.terms import Parameter
+
+    rng = np.random.default_rng(3)
+    T = 4000
+    x = np.sin(2 * np.pi * 0.07 * np.arange(T) * 0.01) + 0.1 * rng.normal(size=T).cumsum() / 30
+    curve = 0.3 * x**2
+    res = Residuals(
+        {"pot": curve + rng.normal(0, 0.1, T), "marker": 3 * curve + rng.normal(0, 3.0, T)},
+        {"pot": "V", "marker": "m"},
+        {"time": np.arange(T) * 0.01, "p.pot": x},
+        {"pot": ("p.pot",), "marker": ()},
+    )
+    blocks = split_blocks(T)
+    train, val = blocks.mask("train"), blocks.mask("validation")
+    term = Term("sensor_nonlinearity", "pot", (Parameter("c2"),))
+    cand = Candidate(term, {"pot": x[:, None] ** 2, "marker": 3 * x[:, None] ** 2})
+    weights = {"pot": 1.0, "marker": 1.0}
+    options = EngineOptions()
+    (t,) = evaluate_candidates([cand], res, weights, train, val, options)
+    assert t.channel_gain is None  # it acts more on the marker than on its pot
+    assert t.test.gain < 0.3 < 0.6 < t.own_gain  # diluted over both; most of the pot's error
+    assert _outshone(t, res, weights, train, val, options, {}) is None
