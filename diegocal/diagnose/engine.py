@@ -182,7 +182,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             new_terms = adapter.terms(new)
             fitted_term = next((t for t in new_terms if _same(t, chosen.term)), chosen.term)
             finding = Finding(fitted_term, "term", before, after, evidence, runners)
-            why = _decline(finding)
+            why = _decline(finding, options.min_gain)
             if why:
                 declined[_key(chosen.term)] = why
                 say(f"{chosen.term.cause} on {chosen.term.channel}{unit}: {why}; declined")
@@ -420,16 +420,21 @@ def unplaced_span(term: Term, time, train: np.ndarray) -> np.ndarray | None:
     return out if out.any() else None
 
 
-def _decline(finding: Finding) -> str:
+def _decline(finding: Finding, min_gain: float) -> str:
     """Why a significant term is not a finding after all, in words ("" when it is one): its
     coefficients are all within DETERMINED_Z standard errors of 0 (unknown standard errors
-    excepted), or the held-out error rose when it was added."""
+    excepted), the held-out error rose when it was added, or it removed under ``min_gain`` of the
+    held-out mean squared error: the bar its validation gain cleared, and a fault's (a pot's
+    drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out)."""
     coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
     if coef and all(abs(v) < DETERMINED_Z * se for v, se in coef):
         return f"the data do not determine it (every coefficient within {DETERMINED_Z:g} standard errors of 0)"
     red = finding.gain().get("reduction", float("nan"))
     if np.isfinite(red) and red < 0:
         return f"significant on validation, but the held-out error rose by {-red:.1%} with it"
+    removed = 1.0 - (1.0 - red) ** 2  # of the held-out mean squared error
+    if np.isfinite(red) and removed < min_gain:
+        return f"significant on validation, but it removes {removed:.1%} of the held-out error (under {min_gain:.0%})"
     return ""
 
 
