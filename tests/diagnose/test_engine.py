@@ -229,3 +229,25 @@ def test_a_term_is_weighed_against_the_flexible_model_on_its_own_channel():
     assert t.channel_gain is None  # it acts more on the marker than on its pot
     assert t.test.gain < 0.3 < 0.6 < t.own_gain  # diluted over both; most of the pot's error
     assert _outshone(t, res, weights, train, val, options, {}) is None
+
+
+def test_a_term_that_removes_little_held_out_error_is_declined():
+    """Significant on validation is not enough: a term must remove ``min_gain`` of the held-out mean
+    squared error on its channel, as a fault must (a warming pot was named a backlash on its
+    sibling pot with 0.6 % held out)."""
+    from diegocal.diagnose.engine import _decline
+    from diegocal.diagnose.types import Finding
+    from diegocal.terms import Parameter
+
+    rng = np.random.default_rng(1)
+    y = rng.normal(size=(400, 1))
+    term = Term("backlash", "dip", (Parameter("half_width", 0.004, "V", stderr=0.0005),))
+
+    def finding(ratio):  # the held-out RMSE after = ratio × before
+        before = score(y, np.zeros_like(y), ("dip",), unit="V")
+        after = score(y, y * (1.0 - ratio), ("dip",), unit="V")
+        return Finding(term, "term", before, after, {"channels": ["dip"]})
+
+    assert "removes 3.2% of the held-out error (under 5%)" in _decline(finding(0.984), 0.05)  # 1.6 % RMSE
+    assert _decline(finding(0.97), 0.05) == ""  # 3 % RMSE: 5.9 % of the mean squared error
+    assert "rose" in _decline(finding(1.02), 0.05)
