@@ -138,8 +138,8 @@ class EngineOptions:
         most (a pot, a joint: where its held-out gain is measured, :meth:`Finding.gain`). A real
         but negligible model error is not worth a term; pooling a pot's term with every sensor its
         q projection touches dilutes it, and its own channel alone misses it where the pot fixes
-        its joint's q (its in-sample residual follows it). A fault must remove as much of the
-        held-out error (:func:`~diegocal.diagnose.engine.run_unit`, step 4).
+        its joint's q (its in-sample residual follows it). A term, once added, and a fault must
+        remove as much of the held-out mean squared error (:func:`~diegocal.diagnose.engine.run_unit`).
     unexplained_min_gain : the same for ``unexplained``: a binned correction spends ``n_bins``
         parameters on one channel where a term spends one to three, so it must pay more (on clean
         thin-plate chambers the 9-parameter model's known valve approximation leaves binned
