@@ -122,10 +122,12 @@ def friction_check(d, alpha: float = 0.01) -> None:
     - low-velocity, sign(qd)·exp(−|qd|/v): friction near zero velocity other than the Coulomb
       level (Stribeck: above it; negative: a smooth change of sign), v = 0.02-0.5 × std(qd), the
       best on the training blocks."""
+    from diegocal.diagnose.dynamics_system import filler, layout, project
     from diegocal.diagnose.engine import Candidate, EngineOptions
     from diegocal.diagnose.selection import evaluate_candidates
     from diegocal.diagnose.stats import cluster_length
     from diegocal.evaluate import sub_blocks
+    from diegocal.sgp.terms import Proposal
     from diegocal.terms import Parameter, Term
 
     ad, fitted = d.adapters[0], d.units[0].fitted
@@ -137,10 +139,9 @@ def friction_check(d, alpha: float = 0.01) -> None:
     for c, r in res.channels.items():
         rms = float(np.sqrt(np.nanmean(r[train] ** 2)))
         weights[c] = 1.0 / rms if rms > 0 else 1.0
-    project = ad._projector(fitted, train)
     shown = val | held
     clusters = sub_blocks(shown, cluster_length([r[train] for r in res.channels.values()]))
-    cands = []
+    props = []
     for j in ad.joints:
         v = ad.qd[:, ad.robot.joint_index(j)]
         s = float(np.std(v[train]))
@@ -148,8 +149,15 @@ def friction_check(d, alpha: float = 0.01) -> None:
         columns["low-velocity"] = [np.sign(v) * np.exp(-np.abs(v) / (f * s)) for f in (0.02, 0.05, 0.1, 0.2, 0.5)]
         for label, cols in columns.items():
             for col in cols:
-                proj, _ = project({j: col[:, None]})
-                cands.append(Candidate(Term(label, j, (Parameter("c", 0.0, "N·m"),)), proj, family=f"{label}:{j}"))
+                term = Term(label, j, (Parameter("c", 0.0, "N·m"),))
+                props.append(Proposal(term, f"{label}:{j}", {j: col[:, None]}))
+    # each column minus its fit by the model's columns (Frisch-Waugh-Lovell, as the diagnosis does)
+    width, slots = layout(ad, props)
+    B, _, slots = project(ad, fitted, train, width, slots, filler(ad, props, width, slots))
+    cands = [
+        Candidate(p.term, {ad.joints[r]: B[r][:, sl].astype(float) for r, sl in slot.items()}, family=p.family)
+        for p, slot in zip(props, slots, strict=True)
+    ]
     tested = {
         (t.term.cause, t.term.channel): t
         for t in evaluate_candidates(cands, res, weights, train, val, EngineOptions(alpha=alpha))
