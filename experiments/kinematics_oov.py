@@ -22,8 +22,11 @@ from dataclasses import replace
 
 import numpy as np
 
+from diegocal.sim.kinematics import KinematicsOptions
+
 SHAPES = ("worn_track", "runout", "warm_up", "crosstalk", "wobble")
-POT_NOISE, MARKER_NOISE = 0.005, 0.002  # the naming bench's (bench_diagnose.py)
+SESSION = KinematicsOptions(duration=30.0)  # the simulator's noise, as the naming bench's
+POT_NOISE, MARKER_NOISE = SESSION.pot_noise, SESSION.marker_noise
 STALK_HZ = 6.0
 WARM_UP_S = 8.0
 
@@ -32,12 +35,11 @@ def clean_session(seed: int):
     """A clean finger log and its robot, the noise-free pot readings (T, P) and markers (T, M, 3)."""
     from diegocal.robot import load_robot, resolve_robot_dir
     from diegocal.robot.observe import pot_transmission
-    from diegocal.sim.kinematics import KinematicsOptions, marker_positions, offset_robot, simulate_kinematics
+    from diegocal.sim.kinematics import marker_positions, offset_robot, simulate_kinematics
     from diegocal.stac.calibration import Calibration
 
     robot = load_robot(resolve_robot_dir("finger", None))
-    opts = KinematicsOptions(duration=30.0, pot_noise=POT_NOISE, marker_noise=MARKER_NOISE)
-    log = simulate_kinematics(robot, opts, np.random.default_rng(seed))
+    log = simulate_kinematics(robot, SESSION, np.random.default_rng(seed))
     truth = Calibration.from_dict(log.truth.params)
     q = log.truth.signals["q"].data
     fast = offset_robot(robot, {})
@@ -52,7 +54,6 @@ def add_shape(shape: str, seed: int):
     ratio = rng.uniform(4.0, 10.0)
     t = log.time
     p = log.streams["pots"].data.copy()
-    x = log.streams["markers"].data.copy()
     names = log.streams["pots"].names
     i = int(rng.integers(len(names)))
     s = pots[:, i]
@@ -71,6 +72,7 @@ def add_shape(shape: str, seed: int):
         other = pots[:, j] - pots[:, j].mean()
         p[:, i] += ratio * POT_NOISE * other / np.sqrt(np.mean(other**2))
     elif shape == "wobble":
+        x = log.streams["markers"].data.copy()
         m = int(rng.integers(x.shape[1]))
         acc = np.gradient(np.gradient(markers[:, m], t, axis=0), t, axis=0)
         d = -acc / (2 * np.pi * STALK_HZ) ** 2

@@ -103,8 +103,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         new = adapter.fit(terms + (fault.term,), train)
         before, after = adapter.score(fitted, held, trial), adapter.score(new, held, trial)
         finding = Finding(fault.term, "fault", before, after, dict(fault.evidence, channels=list(fault.readings)))
-        red = finding.gain().get("reduction", float("nan"))
-        removed = 1.0 - (1.0 - red) ** 2 if np.isfinite(red) else float("nan")  # of the held-out MSE
+        removed = heldout_removed(finding)
         if not removed >= options.min_gain:  # a minor fault: no finding
             written_off = bool(removed >= 0.0)  # the readings repaired all the same: they mislead the tests
             say(
@@ -432,10 +431,17 @@ def _decline(finding: Finding, min_gain: float) -> str:
     red = finding.gain().get("reduction", float("nan"))
     if np.isfinite(red) and red < 0:
         return f"significant on validation, but the held-out error rose by {-red:.1%} with it"
-    removed = 1.0 - (1.0 - red) ** 2  # of the held-out mean squared error
-    if np.isfinite(red) and removed < min_gain:
+    removed = heldout_removed(finding)
+    if removed < min_gain:
         return f"significant on validation, but it removes {removed:.1%} of the held-out error (under {min_gain:.0%})"
     return ""
+
+
+def heldout_removed(finding: Finding) -> float:
+    """The share of the held-out mean squared error a finding removes (its gain is an RMSE
+    reduction; NaN where it has none): what ``min_gain`` bars, for a term as for a fault."""
+    red = finding.gain().get("reduction", float("nan"))
+    return 1.0 - (1.0 - red) ** 2 if np.isfinite(red) else float("nan")
 
 
 def _runner_up(t: Tested, best: Tested, declined: dict) -> dict:
@@ -488,11 +494,10 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
     (flex,) = evaluate_candidates([cand], res, weights, train, val, options, exclude) or (None,)
     if flex is None or flex.test.t <= flex.threshold or flex.test.gain < options.unexplained_min_gain:
         return None  # no structure worth an ``unexplained`` finding beside the term
-    gain = best.channel_gain if best.channel_gain is not None else best.test.gain
     if best.strongest:  # judged on the channel it acts on most (_own): its gain there
         gain = best.strongest[1]
-    elif best.own_gain is not None:  # on the flexible model's channel too: not diluted by the others
-        gain = max(gain, best.own_gain)
+    else:  # over all its channels, or on its own (the flexible model's) where that is larger
+        gain = max(best.test.gain, best.own_gain if best.own_gain is not None else -np.inf)
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
 
 
