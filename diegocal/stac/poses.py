@@ -35,7 +35,7 @@ from scipy.special import chdtri  # the chi-square isf: no scipy.stats import
 
 from diegocal.errors import DiegocalError
 from diegocal.stac.model import MARKERS, Observation, Params
-from diegocal.stac.qphase import Noise, pot_sigmas, q_step
+from diegocal.stac.qphase import Noise, pot_sigmas, track
 from diegocal.stac.result import StacOptions
 
 LOG = logging.getLogger(__name__)
@@ -65,11 +65,7 @@ def disagreement(
     0..K-1; ``kept`` (T,) bool: the frames whose residuals set the robust scales.
     """
     noise = Noise(pot_sigmas(obs, sigma), sigma.get(MARKERS, 1.0))
-    lam = np.full(obs.n_frames, 1e-2)
-    for _ in range(TRACK_STEPS):
-        q, lam, st, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
-        if np.all(lam >= 1e3):
-            break
+    q, st = track(obs, params, noise, q, TRACK_STEPS, options.batch_size, options.jobs)
     use = ~obs.fixed_gain  # pots held at nominal fit their joints exactly: no evidence
     rp = (params.gain * st.s + params.bias - obs.pots)[:, use]
     scale = 1.4826 * np.median(np.abs(rp[kept]), axis=0) if kept.any() else np.full(rp.shape[1], np.inf)

@@ -21,7 +21,7 @@ from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.loo import deleted_from_others
 from diegocal.stac.model import MARKERS, Observation
-from diegocal.stac.qphase import Noise, q_step
+from diegocal.stac.qphase import Noise, track
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import initial_q
 from diegocal.stac.terms import POT_CAUSES, apply_terms, pot_columns, to_log_markers, with_slip_markers
@@ -129,11 +129,7 @@ def predict(
         q = initial_q(obs, params, options, use=np.isin(obs.kinds, list(src)))
     else:
         q = np.tile(robot.neutral(), (obs.n_frames, 1))
-    lam = np.full(obs.n_frames, 1e-2)
-    for _ in range(max_steps):
-        q, lam, st, _, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, want_red=False)
-        if np.all(lam >= 1e3):
-            break
+    q, st = track(obs, params, noise, q, max_steps, options.batch_size, options.jobs)
     pots = params.gain * st.s + params.bias
     xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
     markers = xb @ params.R.T + params.T

@@ -332,3 +332,24 @@ def resolvable(obs: Observation, used: dict) -> dict:
 def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
     """σ of each pot from its type's σ: (P,)."""
     return np.array([sigma[k] for k in obs.kinds], dtype=float)
+
+
+#: A frame is tracked once an accepted LM step lowers its cost by at most this share of it (or its
+#: steps keep failing): the cost is then within about that share of its minimum.
+TRACK_TOL = 1e-8
+
+
+def track(obs: Observation, params: Params, noise: Noise, q, max_steps: int, batch: int = 250, jobs: int = 1):
+    """LM steps (:func:`q_step`) from q (T, n) until every frame is tracked (:data:`TRACK_TOL`) or
+    ``max_steps``: (q, the State at q). A frame's steps keep being accepted long after it has
+    converged (the cost still falls by rounding), so λ alone never says it is done."""
+    lam, cost = np.full(q.shape[0], 1e-2), np.full(q.shape[0], np.inf)
+    tracked = np.zeros(q.shape[0], dtype=bool)
+    for _ in range(max_steps):
+        q, new_lam, st, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, want_red=False)
+        accepted = new_lam < lam  # a failed step says nothing
+        tracked |= (new_lam >= 1e3) | (accepted & np.isfinite(cost) & (cost - c <= TRACK_TOL * cost))
+        lam, cost = new_lam, c
+        if np.all(tracked):
+            break
+    return q, st

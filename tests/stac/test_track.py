@@ -1,0 +1,38 @@
+"""Tracking q with the calibration fixed stops once every frame has converged: LM steps keep being
+accepted long after that (the cost falls by rounding), so a stop on λ alone ran every step."""
+
+import numpy as np
+import synth
+
+import diegocal.stac.qphase as qphase
+from diegocal.stac.calibration import Calibration
+from diegocal.stac.model import Observation
+from diegocal.stac.qphase import Noise, q_step, track
+
+
+def _cost(obs, params, noise, q):
+    lam = np.full(obs.n_frames, 1e7)  # a step this damped barely moves: its cost at q is returned
+    return q_step(obs, params, noise, q, lam, want_red=False)[3]
+
+
+def test_tracking_stops_when_every_frame_has_converged(tree_robot, monkeypatch):
+    log = synth.simulate(tree_robot, 40, seed=5, occlusion=0.3)
+    obs = Observation(log, tree_robot)
+    params = obs.params_from(Calibration.from_dict(log.truth.params))
+    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    q0 = log.truth.signals["q"].data + np.random.default_rng(4).normal(0.0, 0.2, (obs.n_frames, tree_robot.n_joints))
+    q0 = np.clip(q0, obs.lower, obs.upper)
+
+    steps = []
+    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: steps.append(1) or q_step(*a, **k))
+    q_stop, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
+    monkeypatch.undo()
+    assert 2 < len(steps) < 40
+
+    q_all, lam = q0, np.full(obs.n_frames, 1e-2)
+    for _ in range(40):  # every step, as the λ-only stop ran them
+        q_all, lam = q_step(obs, params, noise, q_all, lam, batch=7, want_red=False)[:2]
+    stop, full = _cost(obs, params, noise, q_stop), _cost(obs, params, noise, q_all)
+    np.testing.assert_allclose(stop, full, rtol=1e-7)
+    start = _cost(obs, params, noise, q0)
+    assert np.all(stop < start)  # the frames were far from converged at q0
