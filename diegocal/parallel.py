@@ -14,6 +14,8 @@ default) uses one core whatever the machine has.
 from __future__ import annotations
 
 import functools
+import queue
+import threading
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 
@@ -55,3 +57,51 @@ def thread_map(fn: Callable, items: Iterable, jobs: int = 1) -> list:
         return [fn(x) for x in items]
     with ThreadPoolExecutor(max_workers=min(int(jobs), len(items))) as pool:
         return list(pool.map(fn, items))
+
+
+def in_order(producers: list, jobs: int = 1, depth: int = 2):
+    """The items of each generator function of ``producers`` in turn (all of the first's, then the
+    second's, ...), made in ``jobs`` threads when jobs > 1: while the caller consumes one
+    producer's items, the next producers already make theirs, each at most ``depth`` ahead, so
+    that what is alive stays a few items per thread whatever the number of producers. The items
+    and their order are those of the plain loop; a producer's exception is re-raised here."""
+    if jobs <= 1 or len(producers) <= 1:
+        for make in producers:
+            yield from make()
+        return
+    queues = [queue.Queue(maxsize=depth) for _ in producers]
+    stop = threading.Event()
+    done = object()
+
+    def put(k: int, item) -> bool:
+        while not stop.is_set():
+            try:
+                queues[k].put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work(k: int) -> None:
+        try:
+            for item in producers[k]():
+                if not put(k, (None, item)):
+                    return
+            put(k, (done, None))
+        except BaseException as exc:  # handed to the consumer, raised there
+            put(k, (exc, None))
+
+    with ThreadPoolExecutor(max_workers=min(int(jobs), len(producers))) as pool:
+        for k in range(len(producers)):
+            pool.submit(work, k)
+        try:
+            for q in queues:
+                while True:
+                    flag, item = q.get()
+                    if flag is done:
+                        break
+                    if flag is not None:
+                        raise flag
+                    yield item
+        finally:
+            stop.set()  # producers still running give up at their next item

@@ -513,5 +513,6 @@ def _clock_block(lin, markers: np.ndarray, time: np.ndarray, span) -> np.ndarray
 
 
 def adapters(log, robot, options) -> list[KinematicsAdapter]:
-    """One adapter: the robot's pots and markers together (they share q)."""
-    return [KinematicsAdapter(log, robot)]
+    """One adapter: the robot's pots and markers together (they share q); ``options.jobs`` threads
+    share its per-frame work (one unit: no processes to spread)."""
+    return [KinematicsAdapter(log, robot, StacOptions(jobs=max(1, options.jobs)))]

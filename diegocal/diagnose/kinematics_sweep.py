@@ -23,7 +23,8 @@ from diegocal.diagnose.kinematics_lin import (
     marker_moves,
     weighted_gram,
 )
-from diegocal.stac.loo import frame_batches, pot_sigmas, sigma_of
+from diegocal.parallel import in_order
+from diegocal.stac.loo import batch_projection, pot_sigmas, sigma_of
 from diegocal.stac.model import Observation
 
 #: What a column is fitted out of on the training frames (:class:`Columns`): the calibration's span.
@@ -63,25 +64,34 @@ class Sweep:
         self._cal_pinv: np.ndarray | None = None
         self._pot_gram: np.ndarray | None = None  # (2P, 2P) of every pot's projected gain and bias
         self._pot_pinv: dict = {}
+        self.jobs = max(1, int(getattr(getattr(adapter, "options", None), "jobs", 1)))
+        self._sharing: dict = {}
 
     def blocks(self):
         """Each block's :class:`Linearised`, in turn."""
-        for sl, f in frame_batches(self.obs, self.params, self.sigma, self.fitted.q, SWEEP_FRAMES, solve=False):
-            yield Linearised(
-                self.adapter,
-                self.fitted,
-                self.obs,
-                self.params,
-                f.J,
-                np.linalg.inv(f.H),  # (JᵀWJ + D)⁻¹, as frame_projection's K solves with it
-                f.w,
-                f.s,
-                f.Rl,
-                f.sigma_p,
-                f.D,
-                start=sl.start,
-            )
-            del f  # the caller's block is the only one alive while the next is made
+        for sl in self._slices():
+            yield self._block(sl)  # the caller's block is the only one alive while the next is made
+
+    def _slices(self) -> list[slice]:
+        return [slice(i, min(i + SWEEP_FRAMES, self.T)) for i in range(0, self.T, SWEEP_FRAMES)]
+
+    def _block(self, sl: slice) -> Linearised:
+        """The :class:`Linearised` of the frames ``sl``."""
+        f = batch_projection(self.obs, self.params, self.sigma, self.fitted.q, sl, solve=False)
+        return Linearised(
+            self.adapter,
+            self.fitted,
+            self.obs,
+            self.params,
+            f.J,
+            np.linalg.inv(f.H),  # (JᵀWJ + D)⁻¹, as frame_projection's K solves with it
+            f.w,
+            f.s,
+            f.Rl,
+            f.sigma_p,
+            f.D,
+            start=sl.start,
+        )
 
     def mapped_index(self, name: str) -> int:
         return self.obs.marker_names.index(name)
@@ -92,37 +102,53 @@ class Sweep:
 
     def sharing(self, j: int) -> list[int]:
         """Pots (mapped order) that read a joint pot j reads (j first)."""
-        A = self.obs.A != 0
-        if self.obs.kinds[j] == "linear" or not A[j].any():
-            return [j]
-        others = [i for i in range(self.P) if i != j and self.obs.kinds[i] != "linear" and np.any(A[i] & A[j])]
-        return [j, *others]
+        if j not in self._sharing:
+            A = self.obs.A != 0
+            if self.obs.kinds[j] == "linear" or not A[j].any():
+                self._sharing[j] = [j]
+            else:
+                kin = self.obs.kinds
+                others = [i for i in range(self.P) if i != j and kin[i] != "linear" and np.any(A[i] & A[j])]
+                self._sharing[j] = [j, *others]
+        return self._sharing[j]
 
     # ------------------------------------------------------------------ the three passes
     def _each(self, cols: list[Columns], betas, maps, see, block=None) -> None:
         """For each block (``block(lin)`` first, when given) and each of ``cols`` in turn: its
         projected columns on the block with their fit ``betas`` taken out and ``maps`` applied
         (None: not), handed to ``see(lin, [(i, columns), ...])`` a group of sets at a time, in
-        order. The columns of several sets are projected
-        together, PROJECT_COLUMNS at a time: one product with each frame's J for all of them (six
-        times cheaper per column than one at a time)."""
+        order. The columns of several sets are projected together, PROJECT_COLUMNS at a time: one
+        product with each frame's J for all of them (six times cheaper per column than one at a
+        time). With ``jobs`` > 1 the next blocks' columns are made in threads while ``see`` reads
+        this one's (:func:`~diegocal.parallel.in_order`: the same calls in the same order)."""
         if not cols and block is None:
             return
-        for lin in self.blocks():
-            if block is not None:
-                block(lin)
-            pending, width = [], 0
-            for i, c in enumerate(cols):
-                C = c.make(lin)
-                pending.append((i, C))
-                width += C.shape[-1]
-                if width >= PROJECT_COLUMNS or i == len(cols) - 1:
-                    self._hand(lin, cols, pending, betas, maps, see)
-                    pending, width = [], 0
-            del lin, pending  # before the next block is made
 
-    def _hand(self, lin: Linearised, cols, pending, betas, maps, see) -> None:
-        """:meth:`_each` for the sets ``pending`` [(index, columns as made)] of one block."""
+        def producer(sl):
+            def made():
+                lin = self._block(sl)
+                if block is not None:
+                    yield lin, None
+                pending, width = [], 0
+                for i, c in enumerate(cols):
+                    C = c.make(lin)
+                    pending.append((i, C))
+                    width += C.shape[-1]
+                    if width >= PROJECT_COLUMNS or i == len(cols) - 1:
+                        yield lin, self._items(lin, cols, pending, betas, maps)
+                        pending, width = [], 0
+
+            return made
+
+        for lin, items in in_order([producer(sl) for sl in self._slices()], self.jobs):
+            if items is None:
+                block(lin)
+            else:
+                see(lin, items)
+
+    def _items(self, lin: Linearised, cols, pending, betas, maps) -> list:
+        """:meth:`_each`'s [(index, columns)] for the sets ``pending`` [(index, columns as made)]
+        of one block."""
         raw = [i for i, _ in pending if not cols[i].projected]
         made = dict(pending)
         if raw:
@@ -140,7 +166,7 @@ class Sweep:
             if betas[i] is not None and cols[i].span != CALIBRATION:
                 C = C - lin.pot_span(self.sharing(cols[i].span)) @ betas[i]
             items.append((i, C if maps is None or maps[i] is None else C @ maps[i]))
-        see(lin, items)
+        return items
 
     def _fits(self, cols: list[Columns]) -> tuple[list, list]:
         """Pass 1: each column set's fit by its span on the training frames (β (k_span, k)) and the

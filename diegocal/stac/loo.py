@@ -81,7 +81,7 @@ def frame_batches(obs: Observation, params, sigma: dict, q: np.ndarray, batch: i
     T = obs.n_frames
     for i in range(0, T, batch):
         sl = slice(i, min(i + batch, T))
-        yield sl, _batch_projection(obs, params, sigma, q, sl, solve)
+        yield sl, batch_projection(obs, params, sigma, q, sl, solve)
 
 
 def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
@@ -99,7 +99,7 @@ def _sigmas(obs: Observation, sigma: dict) -> tuple[np.ndarray, float]:
     return np.maximum(sigma_p, floor), sig_x
 
 
-def _batch_projection(
+def batch_projection(
     obs: Observation, params, sigma: dict, q: np.ndarray, sl: slice, solve: bool = True
 ) -> FrameProjection:
     """:class:`FrameProjection` of the frames ``sl`` (thesis eq. 2.22-2.23 per frame)."""

@@ -305,6 +305,31 @@ def test_a_sweep_block_by_block_equals_the_whole_log(baseline, monkeypatch):
             np.testing.assert_allclose(x, rows, atol=1e-6 * np.abs(want).max())
 
 
+def test_a_sweep_in_threads_equals_one_thread(baseline, monkeypatch):
+    """``--jobs 2``: the next blocks' columns made in threads while this block's are read give the
+    same numbers, bit for bit (the same calls in the same order), in every pass."""
+    adapter, fitted, _ = baseline
+    monkeypatch.setattr(kinematics_lin, "SWEEP_FRAMES", 53)
+    joints = Sweep(fitted, adapter).observed_joints()
+    cols = [Columns(lambda b, j=j: b.link_offset_basis(j)) for j in joints]
+    got = {}
+    for jobs in (1, 2):
+        sweep = Sweep(fitted, adapter)
+        sweep.jobs = jobs
+        designs = []
+        sweep.design(cols, lambda lin, C, out=designs: out.append((lin.frames, C.copy())))
+        got[jobs] = (sweep.channels(cols), designs)
+    (one, d1), (two, d2) = got[1], got[2]
+    assert len(d1) == len(d2) > 3
+    for (f1, c1), (f2, c2) in zip(d1, d2, strict=True):
+        assert f1 == f2
+        np.testing.assert_array_equal(c1, c2)
+    for a, b in zip(one, two, strict=True):
+        assert (a is None) == (b is None)
+        for name in a or {}:
+            np.testing.assert_array_equal(a[name], b[name])
+
+
 def test_residual_channels_and_variables(baseline):
     adapter, fitted, _ = baseline
     res = adapter.residuals(fitted)
