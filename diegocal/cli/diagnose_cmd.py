@@ -129,6 +129,10 @@ def run_diagnose(args: DiagnoseArgs, command: str = "diegocal diagnose", progres
     return done
 
 
+#: What `--jobs` spreads, by domain.
+JOBS_HELP = "Parallel workers (pneumatics: a process per chamber; kinematics: threads over frames)."
+
+
 @app.command("diagnose")
 @cli_errors
 def diagnose_cmd(
@@ -186,15 +190,7 @@ def diagnose_cmd(
         int,
         typer.Option("--blocks", min=5, help="Contiguous blocks the log is cut into (train / validation / held out)."),
     ] = 10,
-    jobs: Annotated[
-        int,
-        typer.Option(
-            "--jobs",
-            "-j",
-            min=1,
-            help="Parallel workers (pneumatics: a process per chamber; kinematics: threads over frames).",
-        ),
-    ] = 1,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help=JOBS_HELP)] = 1,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
 ) -> None:
     """Show what the model gets wrong, name the cause, extend the model and measure the gain on
