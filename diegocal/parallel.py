@@ -83,6 +83,8 @@ def in_order(producers: list, jobs: int = 1, depth: int = 2):
         return False
 
     def work(k: int) -> None:
+        if stop.is_set():  # the consumer has stopped: the producers not yet started make nothing
+            return
         try:
             for item in producers[k]():
                 if not put(k, (None, item)):

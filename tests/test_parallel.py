@@ -61,3 +61,16 @@ def test_a_producers_exception_reaches_the_consumer():
         for x in in_order([good, bad, good], jobs=2):
             got.append(x)
     assert got == [0, 1, 2, 10]
+
+
+def test_a_consumer_that_stops_leaves_the_producers_not_yet_started_unmade():
+    lock, made = threading.Lock(), []
+    items = in_order(_producers(40, 3, made, lock), jobs=2)
+    with pytest.raises(RuntimeError):
+        for k, i, _ in items:
+            if (k, i) == (1, 0):
+                raise RuntimeError("the consumer fails")
+    items.close()  # as the garbage collector would: the threads are told to stop and joined
+    with lock:
+        blocks = {k for k, _ in made}
+    assert len(blocks) <= 6  # a few producers ahead at most, not all 40
