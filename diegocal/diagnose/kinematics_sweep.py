@@ -145,6 +145,7 @@ class Sweep:
                 block(lin)
             else:
                 see(lin, items)
+            del lin, items  # before the next block is made
 
     def _items(self, lin: Linearised, cols, pending, betas, maps) -> list:
         """:meth:`_each`'s [(index, columns)] for the sets ``pending`` [(index, columns as made)]
