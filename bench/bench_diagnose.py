@@ -298,11 +298,7 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
         gain = float(findings[0].gain().get("reduction", float("nan")))
     minor = tuple(f"{f.cause}:{f.channel}" for u in result.units for f in u.minor_faults)
     twins = tuple(findings[0].evidence.get("indistinguishable_from", ())) if findings else ()
-    left = float("nan")
-    if cause and top != f"{cause}:{channel}":  # a miss, perhaps: what did the baseline leave?
-        twin, _ = simulate(domain, None, seed, robot_name)
-        left = _left(result, diagnose(twin, robot, options), channel)
-    return Outcome(
+    outcome = Outcome(
         domain,
         cause,
         channel,
@@ -315,8 +311,11 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
         ratio=ratio,
         minor=minor,
         twins=twins,
-        left=left,
     )
+    if cause and not outcome.named:  # a miss: what did the baseline leave of the effect?
+        twin, _ = simulate(domain, None, seed, robot_name)
+        outcome = replace(outcome, left=_left(result, diagnose(twin, robot, options), channel))
+    return outcome
 
 
 def _left(result, twin, channel: str) -> float:

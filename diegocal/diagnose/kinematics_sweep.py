@@ -24,7 +24,7 @@ from diegocal.diagnose.kinematics_lin import (
     weighted_gram,
 )
 from diegocal.parallel import in_order
-from diegocal.stac.loo import batch_projection, pot_sigmas, sigma_of
+from diegocal.stac.loo import batch_projection, frame_slices, pot_sigmas, sigma_of
 from diegocal.stac.model import Observation
 
 #: What a column is fitted out of on the training frames (:class:`Columns`): the calibration's span.
@@ -64,16 +64,13 @@ class Sweep:
         self._cal_pinv: np.ndarray | None = None
         self._pot_gram: np.ndarray | None = None  # (2P, 2P) of every pot's projected gain and bias
         self._pot_pinv: dict = {}
-        self.jobs = max(1, int(getattr(getattr(adapter, "options", None), "jobs", 1)))
+        self.jobs = adapter.options.jobs  # threads making blocks (:meth:`_each`)
         self._sharing: dict = {}
 
     def blocks(self):
         """Each block's :class:`Linearised`, in turn."""
-        for sl in self._slices():
+        for sl in frame_slices(self.T, SWEEP_FRAMES):
             yield self._block(sl)  # the caller's block is the only one alive while the next is made
-
-    def _slices(self) -> list[slice]:
-        return [slice(i, min(i + SWEEP_FRAMES, self.T)) for i in range(0, self.T, SWEEP_FRAMES)]
 
     def _block(self, sl: slice) -> Linearised:
         """The :class:`Linearised` of the frames ``sl``."""
@@ -140,7 +137,7 @@ class Sweep:
 
             return made
 
-        for lin, items in in_order([producer(sl) for sl in self._slices()], self.jobs):
+        for lin, items in in_order([producer(sl) for sl in frame_slices(self.T, SWEEP_FRAMES)], self.jobs):
             if items is None:
                 block(lin)
             else:

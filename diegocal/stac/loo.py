@@ -78,10 +78,13 @@ def frame_batches(obs: Observation, params, sigma: dict, q: np.ndarray, batch: i
     """(frames, :class:`FrameProjection` of those frames) for each ``batch`` of frames in turn:
     :func:`frame_projection` without holding the whole log's (``solve`` False: K None and H kept,
     for a caller that forms (JᵀWJ + D)⁻¹ itself)."""
-    T = obs.n_frames
-    for i in range(0, T, batch):
-        sl = slice(i, min(i + batch, T))
+    for sl in frame_slices(obs.n_frames, batch):
         yield sl, batch_projection(obs, params, sigma, q, sl, solve)
+
+
+def frame_slices(T: int, batch: int = BATCH) -> list[slice]:
+    """The frames 0..T-1 in consecutive slices of ``batch`` (the last one shorter)."""
+    return [slice(i, min(i + batch, T)) for i in range(0, T, batch)]
 
 
 def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:

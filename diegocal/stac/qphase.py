@@ -28,6 +28,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from diegocal.stac import robust
+from diegocal.stac.loo import frame_slices
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.robust import MIN_REDUNDANCY, floor_factor
 
@@ -151,7 +152,7 @@ def damped(H: np.ndarray, lam: np.ndarray, inplace: bool = False) -> np.ndarray:
 def map_batches(fn, T: int, batch: int, jobs: int = 1) -> list:
     """[fn(slice) for each batch of ``batch`` frames out of T], in ``jobs`` threads (numpy
     releases the GIL in the heavy products; the results do not depend on ``jobs``)."""
-    slices = [slice(i, min(i + batch, T)) for i in range(0, T, batch)]
+    slices = frame_slices(T, batch)
     if jobs > 1 and len(slices) > 1:
         with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(jobs) as pool:
             return list(pool.map(fn, slices))  # one BLAS thread per worker

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics_lin
+from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics_sweep
 from diegocal.diagnose.kinematics import KinematicsAdapter
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep, whole_log
 from diegocal.evaluate import split_blocks
@@ -283,8 +283,8 @@ def test_a_sweep_block_by_block_equals_the_whole_log(baseline, monkeypatch):
     the calibration fitted out, the directions it takes up zeroed (mcp_abd: all of them, no
     columns), in float32 on the channels that carry them."""
     adapter, fitted, _ = baseline
-    monkeypatch.setattr(kinematics_lin, "SWEEP_FRAMES", 37)
-    monkeypatch.setattr(kinematics_lin, "PROJECT_COLUMNS", 4)
+    monkeypatch.setattr(kinematics_sweep, "SWEEP_FRAMES", 37)
+    monkeypatch.setattr(kinematics_sweep, "PROJECT_COLUMNS", 4)
     lin = whole_log(fitted, adapter)
     sweep = Sweep(fitted, adapter)
     assert sweep.T % 37
@@ -309,7 +309,7 @@ def test_a_sweep_in_threads_equals_one_thread(baseline, monkeypatch):
     """``--jobs 2``: the next blocks' columns made in threads while this block's are read give the
     same numbers, bit for bit (the same calls in the same order), in every pass."""
     adapter, fitted, _ = baseline
-    monkeypatch.setattr(kinematics_lin, "SWEEP_FRAMES", 53)
+    monkeypatch.setattr(kinematics_sweep, "SWEEP_FRAMES", 53)
     joints = Sweep(fitted, adapter).observed_joints()
     cols = [Columns(lambda b, j=j: b.link_offset_basis(j)) for j in joints]
     got = {}
