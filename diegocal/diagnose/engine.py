@@ -119,7 +119,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             say(f"found {fault.term.cause} on {fault.term.channel}{unit}")
         exclude = trial
         fitted, terms = new, adapter.terms(new)
-
+    if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
+        adapter.selection_exclude = exclude
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     for _ in range(options.max_rounds):

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
+from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
@@ -100,6 +101,10 @@ class KinematicsAdapter:
 
     domain = "kinematics"
     unit_name = ""
+    #: The engine's channel weights and written-off readings (set by it): only the variant of each
+    #: family that its selection would test is written (:class:`FamilyRanks`); None: every variant.
+    selection_weights = None
+    selection_exclude = None
 
     def __init__(self, log: Log, robot, options: StacOptions | None = None):
         self.log, self.robot = log.without_truth(), robot
@@ -314,7 +319,11 @@ class KinematicsAdapter:
         first = len(cols)
         cols += [Columns(partial(_marker_block, m=sweep.mapped_index(n)), span=None) for n in slips]
         scan = SlipScan(sweep.T, slips, first)
-        chans = iter(sweep.channels(cols, see=scan.add))
+        families = None
+        if self.selection_weights is not None:
+            names = [m[1] for m in made if isinstance(m, tuple)] + [""] * len(slips)
+            families = FamilyRanks(sweep, names, residuals, self.selection_weights, self.selection_exclude, train)
+        chans = iter(sweep.channels(cols, see=scan.add, families=families))
         out = []
         for m in made:
             if not isinstance(m, tuple):

@@ -223,10 +223,11 @@ class Sweep:
             self._pot_pinv[span] = np.linalg.pinv(self._pot_gram[np.ix_(idx, idx)], rcond=1e-10, hermitian=True)
         return self._pot_pinv[span]
 
-    def _maps(self, cols: list[Columns], betas, raw, see=None) -> tuple[list, list]:
+    def _maps(self, cols: list[Columns], betas, raw, see=None, families=None) -> tuple[list, list]:
         """Pass 2: each column set's map onto its identifiable directions (None: all are, or no
         test) and its weighted energy per mapped row (R,) over every frame; None for a set that is
-        zero everywhere. ``see(lin, i, columns)`` also reads each set's columns (no map applied)."""
+        zero everywhere. ``see(lin, i, columns)`` also reads each set's columns (no map applied),
+        and ``families`` (:class:`~diegocal.diagnose.kinematics_families.FamilyRanks`) those it ranks."""
         n = len(cols)
         kept = [np.zeros((c.shape[0], c.shape[0])) if c is not None else None for c in raw]
         rows: list = [None] * n
@@ -243,6 +244,8 @@ class Sweep:
                     kept[i] += weighted_gram(C, lin.w * lin.train[:, None])
                 if see is not None:
                     see(lin, i, C)
+                if families is not None and families.ranked(i):
+                    families.add(lin, i, C)
 
         self._each(cols, betas, None, add)
         maps = [None if kept[i] is None else identifying(kept[i], raw[i]) for i in range(n)]
@@ -256,13 +259,14 @@ class Sweep:
             energy.append(e)
         return maps, energy
 
-    def channels(self, cols: list[Columns], see=None) -> list[dict | None]:
+    def channels(self, cols: list[Columns], see=None, families=None) -> list[dict | None]:
         """Each column set as the engine reads a candidate's: {channel: (T, k) pot or (T, 3, k)
         marker} on the log's channels (slips merged back), in COLUMN_DTYPE, the channels with less
         than CHANNEL_SHARE of its largest channel's weighted energy left out; None for a set that
-        is zero everywhere (the calibration takes the term up entirely). ``see``: :meth:`_maps`."""
+        is zero everywhere (the calibration takes the term up entirely) and for a family's variant
+        that ``families`` ranks below the best (never written). ``see``: :meth:`_maps`."""
         betas, raw = self._fits(cols)
-        maps, energy = self._maps(cols, betas, raw, see)
+        maps, energy = self._maps(cols, betas, raw, see, families)
         P, T = self.P, self.T
         names = list(self.obs.marker_names)
         slips = self.fitted.applied.slips
@@ -282,6 +286,10 @@ class Sweep:
                     at.append((name, _rows(P, j), [(_rows(P, v), first) for v, first in second]))
             out.append({})
             where.append(at)
+        if families is not None:
+            rows = {i: _mapped_rows(at) for i, at in enumerate(where)}
+            for i in families.dropped(rows, maps):
+                out[i], where[i] = None, ()
 
         live = [i for i in range(len(cols)) if where[i]]
 
@@ -322,6 +330,12 @@ def _write(out: dict, where, sl: slice, C: np.ndarray, T: int) -> None:
         for srows, first in second:
             a = max(first - sl.start, 0)
             dest[a:] = C[a:, srows]
+
+
+def _mapped_rows(where) -> np.ndarray:
+    """The mapped rows of a set's kept channels (:meth:`Sweep.channels`' ``where``)."""
+    spans = [r for _, rows, second in where for r in (rows, *(s for s, _ in second))]
+    return np.concatenate([np.arange(s.start, s.stop) for s in spans]) if spans else np.zeros(0, int)
 
 
 def _finite(C: np.ndarray) -> np.ndarray:
