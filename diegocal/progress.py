@@ -66,3 +66,16 @@ class Eta:
         left = self.left(done)
         tail = "" if left is None or done >= self.total else f", about {duration(left)} left"
         return f"{done}/{self.total}, {duration(self.elapsed())} so far{tail}"
+
+
+def ticker(progress: Callable[[str], None] | None, total: int, what: str) -> Callable[[], None]:
+    """A function to call after each of ``total`` steps of a loop: tells ``progress`` (None: no
+    one) "what: done/total, time so far, time left" when :meth:`Eta.due`."""
+    eta, done = Eta(total), [0]
+
+    def tick() -> None:
+        done[0] += 1
+        if progress is not None and eta.due(done[0]):
+            progress(f"{what}: {eta.text(done[0])}")
+
+    return tick

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from diegocal.lstsq import TallLstsq
-from diegocal.progress import Eta
+from diegocal.progress import ticker
 from diegocal.sgp.model import PREDICT_SAMPLES
 from diegocal.sgp.regressor import CHUNK, base_regressor
 from diegocal.sgp.terms import Motion, is_filter, joints_of, motion_columns, term_columns
@@ -192,7 +192,8 @@ def project(fit, fitted, train, width: dict, slots: list, fill, progress=None, f
     first pass); the others' slots are None, the held ones' index the smaller blocks, and the
     blocks are a third as wide as all variants'."""
     T = len(fit.time)
-    tick = _ticker(progress, -(-int(np.sum(train)) // SAMPLES) + -(-T // SAMPLES), "candidate columns projected")
+    chunks = -(-int(np.sum(train)) // SAMPLES) + -(-T // SAMPLES)
+    tick = ticker(progress, chunks, f"candidate columns projected, chunks of {SAMPLES} samples")
     wt = 1.0 / fitted.sigma
     model = fitted.model
     P = fitted.w.size
@@ -339,19 +340,6 @@ def _compact(kept: list, width: dict) -> tuple[list, dict]:
             new[r] = slice(start, len(held[r]))
         out.append(new)
     return out, {r: np.array(h, int) for r, h in held.items()}
-
-
-def _ticker(progress, total: int, what: str):
-    """A function to call after each of ``total`` chunks: tells ``progress`` (callable(str) or
-    None) "what, chunks of N samples: done/total, time so far, time left" when due (:class:`~diegocal.progress.Eta`)."""
-    eta, done = Eta(total), [0]
-
-    def tick() -> None:
-        done[0] += 1
-        if progress is not None and eta.due(done[0]):
-            progress(f"{what}, chunks of {SAMPLES} samples: {eta.text(done[0])}")
-
-    return tick
 
 
 def layout(adapter, props) -> tuple[dict, list]:

@@ -105,6 +105,7 @@ class KinematicsAdapter:
     #: family that its selection would test is written (:class:`FamilyRanks`); None: every variant.
     selection_weights = None
     selection_exclude = None
+    progress = None  # callable(str), set by the engine: how far a long log's sweeps are
 
     def __init__(self, log: Log, robot, options: StacOptions | None = None):
         self.log, self.robot = log.without_truth(), robot

@@ -24,6 +24,7 @@ from diegocal.diagnose.kinematics_lin import (
     weighted_gram,
 )
 from diegocal.parallel import in_order
+from diegocal.progress import ticker
 from diegocal.stac.loo import batch_projection, frame_slices, pot_sigmas, sigma_of
 from diegocal.stac.model import Observation
 
@@ -65,6 +66,8 @@ class Sweep:
         self._pot_gram: np.ndarray | None = None  # (2P, 2P) of every pot's projected gain and bias
         self._pot_pinv: dict = {}
         self.jobs = adapter.options.jobs  # threads making blocks (:meth:`_each`)
+        self.progress = getattr(adapter, "progress", None)  # told how far the three passes are
+        self._tick = lambda: None
         self._sharing: dict = {}
 
     def blocks(self):
@@ -110,6 +113,12 @@ class Sweep:
         return self._sharing[j]
 
     # ------------------------------------------------------------------ the three passes
+    def _passes(self, n: int) -> None:
+        """Progress over the next ``n`` passes, with the time left (a long log's take minutes)."""
+        blocks = len(frame_slices(self.T, SWEEP_FRAMES))
+        what = f"candidate columns, {n} passes over blocks of {SWEEP_FRAMES} frames"
+        self._tick = ticker(self.progress, n * blocks, what)
+
     def _each(self, cols: list[Columns], betas, maps, see, block=None) -> None:
         """For each block (``block(lin)`` first, when given) and each of ``cols`` in turn: its
         projected columns on the block with their fit ``betas`` taken out and ``maps`` applied
@@ -137,11 +146,14 @@ class Sweep:
 
             return made
 
+        last = len(cols) - 1
         for lin, items in in_order([producer(sl) for sl in frame_slices(self.T, SWEEP_FRAMES)], self.jobs):
             if items is None:
                 block(lin)
             else:
                 see(lin, items)
+            if last < 0 if items is None else items[-1][0] == last:  # the block's last call
+                self._tick()
             del lin, items  # before the next block is made
 
     def _items(self, lin: Linearised, cols, pending, betas, maps) -> list:
@@ -265,6 +277,7 @@ class Sweep:
         than CHANNEL_SHARE of its largest channel's weighted energy left out; None for a set that
         is zero everywhere (the calibration takes the term up entirely) and for a family's variant
         that ``families`` ranks below the best (never written). ``see``: :meth:`_maps`."""
+        self._passes(3)
         betas, raw = self._fits(cols)
         maps, energy = self._maps(cols, betas, raw, see, families)
         P, T = self.P, self.T
@@ -304,6 +317,7 @@ class Sweep:
         """The columns of every set side by side on each block (B, R, Σk), fitted out and mapped as
         :meth:`channels` would keep them, handed to ``see(lin, columns)`` (a Gauss-Newton step's
         normal equations, a block at a time)."""
+        self._passes(3)
         betas, raw = self._fits(cols)
         maps, _ = self._maps(cols, betas, raw)
         held: list = []

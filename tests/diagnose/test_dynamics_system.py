@@ -9,6 +9,7 @@ import pytest
 
 import diegocal.diagnose.dynamics_system as system_module
 import diegocal.sgp.model as sgp_model
+from diegocal import progress
 from diegocal.diagnose.dynamics import adapters
 from diegocal.diagnose.dynamics_system import TrainingSystem, project
 from diegocal.diagnose.selection import channel_weights, evaluate_candidates
@@ -133,7 +134,7 @@ def test_chunked_prediction_equals_whole(adapter, train):
 
 
 def test_projection_says_how_far_its_passes_are(adapter, train, monkeypatch):
-    monkeypatch.setattr(system_module, "Eta", lambda total: Eta(total, every=0.0))  # every chunk
+    monkeypatch.setattr(progress, "Eta", lambda total: Eta(total, every=0.0))  # every chunk
     fitted = adapter.fit((), train)
     T = len(adapter.time)
     cols = np.random.default_rng(1).standard_normal((T, 2))

@@ -16,11 +16,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from diegocal import progress
 from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics_sweep
 from diegocal.diagnose.kinematics import KinematicsAdapter
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep, whole_log
 from diegocal.evaluate import split_blocks
 from diegocal.io.log import Stream
+from diegocal.progress import Eta
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
 from diegocal.sim.kinematics import KinematicsOptions, backlash, simulate_kinematics
@@ -328,6 +330,23 @@ def test_a_sweep_in_threads_equals_one_thread(baseline, monkeypatch):
         assert (a is None) == (b is None)
         for name in a or {}:
             np.testing.assert_array_equal(a[name], b[name])
+
+
+def test_a_sweep_says_how_far_its_passes_are(baseline, monkeypatch):
+    """A long log's sweep takes minutes: each block of each of the three passes is counted, with
+    the time left."""
+    adapter, fitted, _ = baseline
+    monkeypatch.setattr(kinematics_sweep, "SWEEP_FRAMES", 211)
+    monkeypatch.setattr(progress, "Eta", lambda total: Eta(total, every=0.0))  # every block
+    said = []
+    monkeypatch.setattr(adapter, "progress", said.append)
+    sweep = Sweep(fitted, adapter)
+    joints = sweep.observed_joints()
+    sweep.channels([Columns(lambda b, j=j: b.link_offset_basis(j)) for j in joints])
+    n = 3 * -(-sweep.T // 211)
+    assert len(said) == n
+    assert said[-1].startswith(f"candidate columns, 3 passes over blocks of 211 frames: {n}/{n}")
+    assert "left" in said[0]
 
 
 def test_residual_channels_and_variables(baseline):
