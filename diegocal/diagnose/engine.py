@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from diegocal.diagnose.evidence import curves, evidence_variable
+from diegocal.diagnose.faults import heldout_removed, write_off
 from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates
 from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, region_of, show
 from diegocal.diagnose.stats import cluster_length
@@ -78,8 +79,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     train, val, held = blocks.mask("train"), blocks.mask("validation"), blocks.mask("heldout")
     unit = f" {adapter.unit_name}" if getattr(adapter, "unit_name", "") else ""
     say(f"fitting the baseline{unit} on {int(train.sum())} training samples")
-    fitted = adapter.fit((), train)
-    baseline = fitted
+    fitted = baseline = adapter.fit((), train)
     res = adapter.residuals(fitted)
     weights = channel_weights(res, train)
     if hasattr(adapter, "selection_weights"):  # an adapter that proposes each family's best variant ranks them so
@@ -89,36 +89,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     time = res.variables.get("time")
     say(f"Show step{unit}: {len(res.channels)} channels")
     shown_tests = show(res, weights, train, val, shown, length, options, time)
-    exclude: dict = {}
-    findings: list[Finding] = []
-    minor: list[Finding] = []  # faults whose writing-off removes under min_gain: no findings
-    terms: tuple[Term, ...] = ()
-
-    faults = getattr(adapter, "faults", None)
-    for fault in faults(fitted, res) if faults else []:
-        trial = dict(exclude)
-        if fault.exclude:
-            for c, m in fault.readings.items():
-                trial[c] = np.asarray(trial.get(c, np.zeros_like(m, bool)), bool) | np.asarray(m, bool)
-        new = adapter.fit(terms + (fault.term,), train)
-        before, after = adapter.score(fitted, held, trial), adapter.score(new, held, trial)
-        finding = Finding(fault.term, "fault", before, after, dict(fault.evidence, channels=list(fault.readings)))
-        removed = heldout_removed(finding)
-        if not removed >= options.min_gain:  # a minor fault: no finding
-            written_off = bool(removed >= 0.0)  # the readings repaired all the same: they mislead the tests
-            say(
-                f"{fault.term.cause} on {fault.term.channel}{unit}: writing it off removes {removed:.1%} of the "
-                f"held-out error (under {options.min_gain:.0%}): no finding, "
-                + ("written off" if written_off else "left alone")
-            )
-            minor.append(replace(finding, evidence={**finding.evidence, "written_off": written_off}))
-            if not written_off:
-                continue
-        else:
-            findings.append(finding)
-            say(f"found {fault.term.cause} on {fault.term.channel}{unit}")
-        exclude = trial
-        fitted, terms = new, adapter.terms(new)
+    fitted, terms, exclude, findings, minor = write_off(adapter, fitted, res, train, held, options, say, unit)
     if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
         adapter.selection_exclude = exclude
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
@@ -436,13 +407,6 @@ def _decline(finding: Finding, min_gain: float) -> str:
     if removed < min_gain:
         return f"significant on validation, but it removes {removed:.1%} of the held-out error (under {min_gain:.0%})"
     return ""
-
-
-def heldout_removed(finding: Finding) -> float:
-    """The share of the held-out mean squared error a finding removes (its gain is an RMSE
-    reduction; NaN where it has none): what ``min_gain`` bars, for a term as for a fault."""
-    red = finding.gain().get("reduction", float("nan"))
-    return 1.0 - (1.0 - red) ** 2 if np.isfinite(red) else float("nan")
 
 
 def _runner_up(t: Tested, best: Tested, declined: dict) -> dict:

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
+from diegocal.diagnose.kinematics_clock import clock_fault
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
@@ -353,7 +354,8 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ faults
     def faults(self, fitted: KinFit, residuals: Residuals) -> list[Fault]:
-        """Swapped labels, then marker outliers (module docstring), on the baseline's residuals."""
+        """A mocap clock seconds off (:func:`clock_fault`), swapped labels, then marker outliers (module
+        docstring), on the baseline's residuals."""
         xm, pred = self._marker_arrays(fitted)
         rm = xm - pred
         T, M = rm.shape[:2]
@@ -362,7 +364,7 @@ class KinematicsAdapter:
         # a reading is off when its residual's squared norm passes chi²_3 at alpha / readings
         thr2 = chi2.isf(0.01 / n_tests, 3) * sig**2
         own = np.einsum("tmi,tmi->tm", rm, rm)
-        out = []
+        out = [f for f in (clock_fault(self, fitted.train, TIME_SHIFTS[-1]),) if f is not None]  # moves every marker
         swapped = np.zeros((T, M), bool)
         seen = np.isfinite(own)
         off = seen & (own > thr2)
