@@ -41,7 +41,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
-from diegocal.diagnose.kinematics_clock import clock_fault
+from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
@@ -127,6 +127,7 @@ class KinematicsAdapter:
         train = np.asarray(train, bool)
         terms = tuple(self._own(t, train) for t in terms)
         base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
+        base = None if far_clock(terms, TIME_SHIFTS[-1]) else base  # the baseline's markers fit the other clock
         fitted = self.fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
@@ -354,8 +355,7 @@ class KinematicsAdapter:
 
     # ------------------------------------------------------------------ faults
     def faults(self, fitted: KinFit, residuals: Residuals) -> list[Fault]:
-        """A mocap clock seconds off (:func:`clock_fault`), swapped labels, then marker outliers (module
-        docstring), on the baseline's residuals."""
+        """A clock seconds off (:func:`clock_fault`), swapped labels, marker outliers, on the baseline's residuals."""
         xm, pred = self._marker_arrays(fitted)
         rm = xm - pred
         T, M = rm.shape[:2]
@@ -488,10 +488,10 @@ def _seeded(robot, cal: Calibration):
 
 
 def _clock_moved(before, after) -> bool:
-    """Whether a time offset's value changed by more than CLOCK_TOL of itself between two fits."""
+    """Whether a time offset moved by more than CLOCK_TOL of itself (of TIME_SHIFTS[-1] at most) between fits."""
     a = {t.channel: float(t.values[0]) for t in before if t.cause == "time_offset"}
     b = {t.channel: float(t.values[0]) for t in after if t.cause == "time_offset"}
-    return any(abs(b[c] - a[c]) > CLOCK_TOL * max(abs(b[c]), 1e-3) for c in b if c in a)
+    return any(abs(b[c] - a[c]) > CLOCK_TOL * min(max(abs(b[c]), 1e-3), TIME_SHIFTS[-1]) for c in b if c in a)
 
 
 def _pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:

@@ -95,22 +95,3 @@ def test_the_cli_warns_and_shows_the_offset(two_clocks, tmp_path):
                   "-o", tmp_path / "two.h5"]).output
     assert "warning: pots.csv and mocap.c3d: their clocks disagree by +3.5" in out
     assert "clock offset amp" in out
-
-
-def test_the_masked_correlation_is_the_plain_one_when_every_point_counts():
-    """Counting only some points (a log's training frames) reduces to the plain correlation when
-    every point counts; with a mask, no uncounted point is read."""
-    from diegocal.io.importers.clocks import MIN_OVERLAP, _masked_pearson_by_shift, _pearson_by_shift
-
-    rng = np.random.default_rng(0)
-    a, b = rng.standard_normal(300).cumsum(), rng.standard_normal(250).cumsum()
-    ones_a, ones_b = np.ones(a.size), np.ones(b.size)
-    plain = _pearson_by_shift(a, b, int(MIN_OVERLAP * 250))
-    masked = _masked_pearson_by_shift(a, b, ones_a, ones_b)
-    np.testing.assert_array_equal(np.isnan(plain), np.isnan(masked))
-    np.testing.assert_allclose(masked[np.isfinite(plain)], plain[np.isfinite(plain)], atol=1e-9)
-    ca = (np.arange(a.size) // 30) % 2 == 0  # every other run of 30 points counts
-    other = a.copy()
-    other[~ca] = 1e6  # what is not counted is not read
-    np.testing.assert_allclose(_masked_pearson_by_shift(other, b, ca, ones_b),
-                               _masked_pearson_by_shift(a, b, ca, ones_b), atol=1e-9, equal_nan=True)

@@ -125,17 +125,12 @@ def motion_speed(stream: str, time: np.ndarray, data: np.ndarray, rate: float) -
     return (grid, np.linalg.norm(v[:, moving] / spread[moving], axis=1)) if moving.any() else None
 
 
-def estimate_offset(a, b, names=("", ""), signals: str = "", counts=None) -> OffsetEstimate | None:
+def estimate_offset(a, b, names=("", ""), signals: str = "") -> OffsetEstimate | None:
     """The offset of ``b`` = (grid, speed) against ``a`` (grids at one rate); None when the peak
-    correlation stays below MIN_CORRELATION. ``counts`` = (ca, cb), 0/1 per grid point of each:
-    only pairs of points that both count are correlated (a log's training frames: the others
-    stay unread), and a shift needs MIN_OVERLAP of the fewer counted points."""
+    correlation stays below MIN_CORRELATION."""
     (ga, xa), (gb, xb) = a, b
     rate = 1.0 / float(ga[1] - ga[0])
-    if counts is None:
-        r = _pearson_by_shift(xa, xb, int(MIN_OVERLAP * min(xa.size, xb.size)))
-    else:
-        r = _masked_pearson_by_shift(xa, xb, *counts)
+    r = _pearson_by_shift(xa, xb, int(MIN_OVERLAP * min(xa.size, xb.size)))
     k = int(np.nanargmax(r)) if np.isfinite(r).any() else -1
     if k < 0 or r[k] < MIN_CORRELATION:
         return None
@@ -176,24 +171,4 @@ def _pearson_by_shift(a: np.ndarray, b: np.ndarray, min_overlap: int) -> np.ndar
         var = (saa - sa * sa / n) * (sbb - sb * sb / n)
         r = cov / np.sqrt(var)
     r[(n < max(min_overlap, 8)) | ~(var > 0)] = np.nan
-    return r
-
-
-def _masked_pearson_by_shift(a: np.ndarray, b: np.ndarray, ca: np.ndarray, cb: np.ndarray) -> np.ndarray:
-    """:func:`_pearson_by_shift` over the pairs a[j + m], b[j] whose counts ``ca``, ``cb`` (0/1) are
-    both 1; every sum by FFT (a shift's pairs are not one window)."""
-    from scipy.signal import correlate
-
-    def xc(x, y):
-        return correlate(x, y, mode="full", method="fft")
-
-    ca, cb = np.asarray(ca, float), np.asarray(cb, float)
-    a, b = np.where(ca > 0, a, 0.0), np.where(cb > 0, b, 0.0)
-    n = np.round(xc(ca, cb))
-    sa, sb = xc(a, cb), xc(ca, b)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cov = xc(a, b) - sa * sb / n
-        var = (xc(a * a, cb) - sa * sa / n) * (xc(ca, b * b) - sb * sb / n)
-        r = cov / np.sqrt(var)
-    r[(n < max(int(MIN_OVERLAP * min(ca.sum(), cb.sum())), 8)) | ~(var > 0)] = np.nan
     return r
