@@ -41,7 +41,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
-from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
+from diegocal.diagnose.kinematics_clock import clock_fault, clock_tol, far_clock
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
@@ -488,10 +488,10 @@ def _seeded(robot, cal: Calibration):
 
 
 def _clock_moved(before, after) -> bool:
-    """Whether a time offset moved by more than CLOCK_TOL of itself (of TIME_SHIFTS[-1] at most) between fits."""
+    """Whether a time offset moved by more than its tolerance (:func:`clock_tol`) between two fits."""
     a = {t.channel: float(t.values[0]) for t in before if t.cause == "time_offset"}
     b = {t.channel: float(t.values[0]) for t in after if t.cause == "time_offset"}
-    return any(abs(b[c] - a[c]) > CLOCK_TOL * min(max(abs(b[c]), 1e-3), TIME_SHIFTS[-1]) for c in b if c in a)
+    return any(abs(b[c] - a[c]) > clock_tol(b[c], CLOCK_TOL, TIME_SHIFTS[-1]) for c in b if c in a)
 
 
 def _pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:

@@ -32,6 +32,9 @@ GRID_HZ = 20.0
 BETTER = 0.5
 #: A shift counts only the pairs of training frames it joins; it must join at least this share.
 MIN_PAIRS = 0.5
+#: A clock seconds off is refined until it moves by less than this (s): a share of itself, as
+#: the candidates' shifts are, stopped a 0.6-s shift 2 ms (2.5 standard errors) off.
+FAR_TOL = 1e-4
 
 
 def far_shift(time: np.ndarray, pots: np.ndarray, markers: np.ndarray, train: np.ndarray) -> tuple | None:
@@ -99,3 +102,9 @@ def far_clock(terms, beyond: float) -> bool:
     start from the baseline's, whose marker positions and mocap frame fit the unshifted clock (from
     there a 0.8-s shift stayed 46 ms off)."""
     return any(t.cause == "time_offset" and abs(float(t.values[0])) > beyond for t in terms)
+
+
+def clock_tol(shift: float, rel: float, beyond: float) -> float:
+    """How little a refined clock shift must move to stop: ``rel`` of itself within the candidates'
+    reach ``beyond``, FAR_TOL beyond it."""
+    return rel * max(abs(shift), 1e-3) if abs(shift) <= beyond else FAR_TOL
