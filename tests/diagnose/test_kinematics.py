@@ -415,8 +415,17 @@ CASES = [
 @pytest.mark.slow
 @pytest.mark.parametrize("cause,seed", [(c, s) for c, seeds in CASES for s in seeds])
 def test_cause_named_slow(finger, cause, seed):
+    """Named first; a data fault whose writing-off removes under ``min_gain`` (seed 10's swap of 116
+    frames: 0.4 % of the held-out error) is found as a minor fault on its pair instead, written
+    off, with no finding."""
     log = _log(finger, seed, (cause,))
     d = diagnose(log, finger, DiagnoseOptions(domain="kinematics"))
+    truth = log.truth.effects[0]
+    pair = {truth["channel"], truth["values"].get("partner")}
+    minor = [f for u in d.units for f in u.minor_faults if f.cause == cause and f.evidence["written_off"]]
+    if not d.findings and minor and cause == "swapped_labels":
+        assert {minor[0].channel, minor[0].term.extra["partner"]} == pair
+        return
     assert _named(d, log), [(f.cause, f.channel, f.gain()) for f in d.findings]
     if cause == "marker_slip":  # the slip time within one block (the training blocks' resolution)
         t0 = log.truth.effects[0]["region"]["low"]
