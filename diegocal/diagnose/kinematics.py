@@ -364,7 +364,7 @@ class KinematicsAdapter:
         # a reading is off when its residual's squared norm passes chi²_3 at alpha / readings
         thr2 = chi2.isf(0.01 / n_tests, 3) * sig**2
         own = np.einsum("tmi,tmi->tm", rm, rm)
-        out = [f for f in (clock_fault(self, fitted.train, TIME_SHIFTS[-1]),) if f is not None]  # moves every marker
+        out = [f for f in (clock_fault(self, fitted, TIME_SHIFTS[-1]),) if f is not None]  # moves every marker
         swapped = np.zeros((T, M), bool)
         seen = np.isfinite(own)
         off = seen & (own > thr2)

@@ -79,11 +79,14 @@ def far_shift(time: np.ndarray, pots: np.ndarray, markers: np.ndarray, train: np
     return (best + step) / GRID_HZ, left[best], left[0]
 
 
-def clock_fault(adapter, train: np.ndarray, beyond: float) -> Fault | None:
-    """A ``time_offset`` of the shift :func:`far_shift` finds on ``adapter``'s log (a
-    KinematicsAdapter), when it lies beyond ``beyond`` s (the candidates' reach) and leaves at most
-    BETTER of what no shift leaves; it predicts every marker (no reading is written off)."""
-    est = far_shift(adapter.time, adapter.raw_pots, adapter.log.stream("markers").data, train)
+def clock_fault(adapter, fitted, beyond: float) -> Fault | None:
+    """A ``time_offset`` of the shift :func:`far_shift` finds on the training frames of
+    ``fitted`` (a KinFit of ``adapter``, a KinematicsAdapter), when it lies beyond ``beyond`` s (the
+    candidates' reach) and leaves at most BETTER of what no shift leaves; it predicts every marker
+    (no reading is written off). None for a model that shifts the clock already."""
+    if any(t.cause == "time_offset" for t in fitted.terms):
+        return None
+    est = far_shift(adapter.time, adapter.raw_pots, adapter.log.stream("markers").data, fitted.train)
     if est is None or not abs(est[0]) > beyond or not est[1] <= BETTER * est[2]:
         return None
     term = make_term("time_offset", "markers").with_linear_values([est[0]])

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from diegocal.diagnose.kinematics_lin import row_gram
+
 
 class FamilyRanks:
     """The training fit of each family variant's cleaned columns, from sums over the blocks.
@@ -41,9 +43,9 @@ class FamilyRanks:
         return bool(self.names[i])
 
     def _rows(self, lin) -> tuple[np.ndarray, np.ndarray]:
-        """(Y, M) (B, R) on the block ``lin``: w² r of the channel each mapped row is read as, and
-        w² where that reading counts (0 elsewhere: not a training frame, missing, written off, or
-        a row no channel reads there)."""
+        """(Y, √M) (B, R) on the block ``lin``: w² r of the channel each mapped row is read as, and
+        the root of M, w² where that reading counts (0 elsewhere: not a training frame, missing,
+        written off, or a row no channel reads there)."""
         if self._block is not None and self._block[0] == lin.start:
             return self._block[1:]
         sweep, sl = self.sweep, lin.frames
@@ -52,16 +54,15 @@ class FamilyRanks:
         tr = self.train[sl]
         for p, name in enumerate(sweep.obs.pot_names):
             self._put(Y, M, name, np.full((B, 1), p), tr, sl)
-        names = list(sweep.obs.marker_names)
         for name in sweep.adapter.marker_names:
-            src = np.full(B, names.index(name))
-            for v, (o, first) in sweep.fitted.applied.slips.items():
-                if o == name:  # in Sweep.channels' order: each later slip writes over the earlier
-                    src[max(first - sl.start, 0) :] = names.index(v)
+            j, second = sweep.marker_sources(name)
+            src = np.full(B, j)
+            for v, first in second:  # in Sweep.channels' order: each later slip writes over the earlier
+                src[max(first - sl.start, 0) :] = v
             self._put(Y, M, name, P + 3 * src[:, None] + np.arange(3), tr, sl)
         self.yy += np.einsum("br,br->r", Y, np.divide(Y, M, out=np.zeros_like(Y), where=M > 0))
-        self._block = (lin.start, Y, M)
-        return Y, M
+        self._block = (lin.start, Y, np.sqrt(M))
+        return self._block[1:]
 
     def _put(self, Y, M, name: str, cols: np.ndarray, tr: np.ndarray, sl: slice) -> None:
         """Channel ``name``'s weighted residual into the mapped rows ``cols`` (B, d) of Y and M."""
@@ -77,10 +78,9 @@ class FamilyRanks:
 
     def add(self, lin, i: int, C: np.ndarray) -> None:
         """Set i's cleaned columns C (B, R, k) on the block ``lin`` (the sweep's second pass)."""
-        Y, M = self._rows(lin)
+        Y, root = self._rows(lin)
         g = np.einsum("brk,br->rk", C, Y)
-        X = np.swapaxes(C * np.sqrt(M)[..., None], 0, 1)  # (R, B, k)
-        G = np.swapaxes(X, 1, 2) @ X
+        G = row_gram(C, root)
         if i in self.g:
             self.g[i] += g
             self.G[i] += G

@@ -397,6 +397,13 @@ def weighted_gram(A: np.ndarray, w: np.ndarray) -> np.ndarray:
     return X.T @ X
 
 
+def row_gram(C: np.ndarray, root_w: np.ndarray) -> np.ndarray:
+    """Σ over frames of w C Cᵀ per mapped row (R, k, k), for columns C (B, R, k) and the square
+    roots of their weights ``root_w`` (B, R)."""
+    X = np.swapaxes(C, 0, 1) * root_w.T[..., None]  # (R, B, k)
+    return np.swapaxes(X, 1, 2) @ X
+
+
 def running_median(x: np.ndarray, half: int) -> np.ndarray:
     """NaN-aware running median over ±half samples along axis 0 of (T, ...)."""
     pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])

@@ -21,6 +21,7 @@ from diegocal.diagnose.kinematics_lin import (
     Linearised,
     identifying,
     marker_moves,
+    row_gram,
     weighted_gram,
 )
 from diegocal.parallel import in_order
@@ -95,6 +96,13 @@ class Sweep:
 
     def mapped_index(self, name: str) -> int:
         return self.obs.marker_names.index(name)
+
+    def marker_sources(self, name: str) -> tuple[int, list]:
+        """A log marker channel's mapped marker and its slips' [(second mapped marker, first
+        frame)], in order: from each slip on, the channel is read as its second marker."""
+        names = self.obs.marker_names
+        slips = self.fitted.applied.slips.items()
+        return names.index(name), [(names.index(v), first) for v, (o, first) in slips if o == name]
 
     def observed_joints(self) -> list[str]:
         robot = self.adapter.robot
@@ -246,10 +254,9 @@ class Sweep:
         nonzero = [False] * n
 
         def add(lin, items):
-            sw = np.sqrt(lin.w).T[..., None]  # (R, B, 1)
+            root = np.sqrt(lin.w)
             for i, C in items:
-                X = np.swapaxes(C, 0, 1) * sw  # (R, B, k)
-                rg = np.swapaxes(X, 1, 2) @ X  # Σ over frames of w C Cᵀ per row
+                rg = row_gram(C, root)
                 rows[i] = rg if rows[i] is None else rows[i] + rg
                 nonzero[i] = nonzero[i] or bool(np.any(C))
                 if kept[i] is not None:
@@ -281,8 +288,6 @@ class Sweep:
         betas, raw = self._fits(cols)
         maps, energy = self._maps(cols, betas, raw, see, families)
         P, T = self.P, self.T
-        names = list(self.obs.marker_names)
-        slips = self.fitted.applied.slips
         out, where = [], []  # where: per set, (channel, mapped rows, [(slip rows, first frame)])
         for i in range(len(cols)):
             if energy[i] is None:
@@ -293,8 +298,7 @@ class Sweep:
             keep = (e >= CHANNEL_SHARE * e.max()) & (e > 0)
             at = [(name, slice(p, p + 1), ()) for p, name in enumerate(self.obs.pot_names) if keep[p]]
             for name in self.adapter.marker_names:
-                j = names.index(name)
-                second = [(names.index(v), first) for v, (o, first) in slips.items() if o == name]
+                j, second = self.marker_sources(name)
                 if any(keep[P + x] for x in [j, *[v for v, _ in second]]):
                     at.append((name, _rows(P, j), [(_rows(P, v), first) for v, first in second]))
             out.append({})
