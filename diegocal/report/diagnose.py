@@ -114,6 +114,15 @@ def _stderr(v: dict):
     return v.get("stderr", v.get("std"))
 
 
+def _value_text(value: float, se) -> str:
+    """A fitted value to the digits its standard error gives it (two of the SE's): a 1-s clock
+    shift of −0.99963 ± 0.00027 s is not "−1 ± 0.00027"; three significant digits without one."""
+    if se is None or not np.isfinite(se) or se <= 0:
+        return f"{value:.3g}"
+    decimals = int(min(max(1 - np.floor(np.log10(se)), 0), 10))
+    return f"{value:.{decimals}f}"
+
+
 def _parameters_text(f: dict) -> str:
     p = f.get("parameters") or {}
     if not p or f["cause"] == "unexplained":
@@ -126,7 +135,7 @@ def _parameters_text(f: dict) -> str:
     for name, v in p.items():
         if v.get("value") is None:
             continue
-        s = f"{name} = {v['value']:.3g}"
+        s = f"{name} = {_value_text(v['value'], _stderr(v))}"
         if _stderr(v) is not None:
             s += f" ± {_stderr(v):.2g}"
         parts.append(s + (f" {v['unit']}" if v.get("unit") else ""))
@@ -382,6 +391,14 @@ NOT_STORED = (
 )
 
 
+#: What a finding without an evidence curve shows instead of an empty plot.
+NO_CURVE = (
+    "No residual curve: this finding was not chosen from the residual binned against one variable (a data "
+    "fault whose readings are written off, or a cause tried whole, such as a mocap clock seconds off); its "
+    "held-out RMSE above is its evidence."
+)
+
+
 @dataclass(frozen=True)
 class Drawn:
     """A finding as drawn: the sheets it ends on (more than one only for a runners-up table longer
@@ -401,7 +418,10 @@ def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool
     sheet.heading(f"Finding {k + 1}: {f['cause']} on {f['channel']}")
     if repeat:
         sheet.paragraph(sentence(f))
-    caption = evidence_caption(plot_evidence(f, sheet.axes(plot_height)), f)
+    if (f.get("evidence") or {}).get("curves"):
+        caption = evidence_caption(plot_evidence(f, sheet.axes(plot_height)), f)
+    else:  # nothing to plot: no residual against one variable chose it
+        caption = NO_CURVE
     same = after is not None and after.caption == caption
     sheet.caption(f"Lines, bands and shading as in Finding {after.number}'s figure above." if same else caption)
     columns, rows = runners_table(f)

@@ -82,3 +82,34 @@ def test_small_findings_share_a_page(diagnosis, tmp_path):
         assert captions == len(re.findall(r"Finding \d+: ", t)), t
         assert t.count("No other candidate was tested in this round.") == len(re.findall(r"Finding \d+: ", t))
     assert doc.page_count - front_pages(doc) <= (len(d["findings"]) + 2) // 2
+
+
+def test_a_finding_without_curves_says_so_instead_of_an_empty_plot(diagnosis, tmp_path):
+    """A fault, or a cause tried whole (a mocap clock seconds off), stores no residual curve: its
+    page says why in words and draws no axes for it."""
+    from diegocal.io import save_yaml
+
+    d, _ = diagnosis
+    first = d["findings"][0]
+    bare = {**first, "evidence": {k: v for k, v in first["evidence"].items() if k != "curves"}}
+    save_yaml({**d, "findings": [bare]}, tmp_path / "bare.diagnosis.yaml")
+    _cli("report", tmp_path / "bare.diagnosis.yaml", "-o", tmp_path / "b.pdf", "-q")
+    doc = pymupdf.open(tmp_path / "b.pdf")
+    check_pages(doc)
+    page = page_texts(doc)[front_pages(doc)]
+    assert "No residual curve" in " ".join(page.split())
+    assert "residual on the validation" not in page  # no plot title: no empty plot
+    assert "samples in 0 bins" not in page
+
+
+def test_a_fitted_value_has_the_digits_its_standard_error_gives_it():
+    from diegocal.report.diagnose import _parameters_text
+
+    def text(value, se):
+        seconds = {"value": value, "stderr": se, "unit": "s"}
+        return _parameters_text({"cause": "time_offset", "parameters": {"seconds": seconds}})
+
+    assert text(-0.999627869784981, 0.00027) == " Fitted: seconds = -0.99963 ± 0.00027 s."  # was "-1 ± 0.00027"
+    assert text(0.0452634, 0.0007) == " Fitted: seconds = 0.04526 ± 0.0007 s."
+    assert text(1234.5, 30.0) == " Fitted: seconds = 1234 ± 30 s."
+    assert text(0.0452634, None) == " Fitted: seconds = 0.0453 s."
