@@ -170,6 +170,23 @@ def block_solve(A: np.ndarray, b: np.ndarray, blocks) -> np.ndarray:
     return out[..., 0] if vec else out
 
 
+def spd_inverse(A: np.ndarray) -> np.ndarray:
+    """A⁻¹ per frame for symmetric positive definite A (B, k, k): A = L Lᵀ (Cholesky), then
+    A⁻¹ = L⁻ᵀ L⁻¹, a third of the flops of the LU inverse (``np.linalg.inv`` solves A X = I);
+    the LU inverse where a frame's A is not numerically positive definite."""
+    try:
+        L = np.linalg.cholesky(A)
+    except np.linalg.LinAlgError:
+        return np.linalg.inv(A)
+    Li = np.zeros_like(L)  # L⁻¹ by forward substitution, row by row, every frame at once
+    d = 1.0 / np.einsum("bii->bi", L)
+    for i in range(L.shape[1]):
+        r = -(L[:, i : i + 1, :i] @ Li[:, :i, : i + 1])[:, 0]
+        r[:, i] += 1.0
+        Li[:, i, : i + 1] = r * d[:, i : i + 1]
+    return np.swapaxes(Li, 1, 2) @ Li
+
+
 def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     """Variance-component redundancy per sensor type: tr(H⁻¹ H_g) summed over frames.
 
@@ -192,7 +209,7 @@ def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     for ix in blocks:  # H⁻¹ block by block (it is block diagonal too); never the full (B, n, n)
         Hb = H[:, ix[:, None], ix]
         np.einsum("bii->bi", Hb)[...] += eps[:, None]
-        Hi = np.linalg.inv(Hb)
+        Hi = spd_inverse(Hb)
         k = len(ix)
         ridge += float(eps @ np.einsum("bii->b", Hi))
         pos[:] = -1
