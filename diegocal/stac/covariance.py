@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diegocal.stac.joint_step import _dense_q_jacobian, _theta_jacobian, _theta_rows, _times_q, free_mask
-from diegocal.stac.model import Observation, Params
+from diegocal.stac.joint_step import _theta_rows, _times_q, free_mask, reduced_matrix
+from diegocal.stac.model import Observation, Params, State
 from diegocal.stac.qphase import Noise, block_solve, damped, normal_equations
 
 #: Contiguous blocks of frames the sandwich's meat is summed over (fewer on short logs: a block is
@@ -103,11 +103,13 @@ def covariance(
     batch: int = 250,
     max_frames: int = 500,
     blocks: int = BLOCKS,
+    st: State | None = None,
 ) -> Covariance:
     """θ's model-based and block-sandwich covariances at a fit (module docstring); q (T, n) the
-    tracked joint angles, ``noise`` the σ per type the fit ended with."""
+    tracked joint angles, ``noise`` the σ per type the fit ended with; ``st``, the State at q,
+    lends its kept linearisation (:func:`~diegocal.stac.qphase.normal_equations`)."""
     P, M = obs.n_pots, obs.n_markers
-    A, scores = information(obs, params, noise, q, batch, max_frames)
+    A, scores = information(obs, params, noise, q, batch, max_frames, st)
     free = free_mask(obs)
     Af = 0.5 * (A + A.T)[np.ix_(free, free)]
     Af = Af + 1e-9 * max(np.trace(Af), 1.0) / max(free.sum(), 1) * np.eye(free.sum())
@@ -136,31 +138,32 @@ def standard_errors(model: np.ndarray, robust: np.ndarray) -> np.ndarray:
 
 
 def information(
-    obs: Observation, params: Params, noise: Noise, q: np.ndarray, batch: int = 250, max_frames: int = 500
+    obs: Observation,
+    params: Params,
+    noise: Noise,
+    q: np.ndarray,
+    batch: int = 250,
+    max_frames: int = 500,
+    st: State | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A (Nθ, Nθ), the information of θ with q profiled out (from every ``stride``-th frame,
     scaled), and the profiled scores g_t (T, Nθ) of every frame (module docstring; sign: minus)."""
     T = q.shape[0]
     N = 2 * obs.n_pots + 3 * obs.n_markers + 6
     stride = max(1, -(-T // max_frames))
-    A = np.zeros((N, N))
     scores = np.zeros((T, N))
+    picked = []  # what A needs of the frames t ≡ 0 (mod stride), summed after the loop
     for start in range(0, T, batch):
         sl = slice(start, min(start + batch, T))
-        H, g, _, (s, Rl, pl), _, ex = normal_equations(obs, params, noise, q, sl, want_red=False)
+        H, g, _, (s, Rl, pl), _, ex = normal_equations(obs, params, noise, q, sl, want_red=False, st=st)
         Hd = damped(H, np.zeros(H.shape[0]), inplace=True)  # the tiny ridge only: joints no sensor sees
         v = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ J_qᵀ W z
         # J_θᵀ W (J_q H⁻¹ J_qᵀ W z − z) per frame: minus the profiled score (its sign is immaterial)
         scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v))
         k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)
         wx = ex["wx"][k] if ex["wx"] is not None else None
-        Jq, w = _dense_q_jacobian(obs, params, noise, q[sl][k], ex["wp"][k], wx)
-        Jt = _theta_jacobian(obs, params, noise, s[k], Rl[k], pl[k], ex["valid"][k])
-        WJt = Jt * w[..., None]
-        Bt = np.swapaxes(Jq, 1, 2) @ WJt
-        X = block_solve(Hd[k], Bt, obs.sparsity.blocks)
-        A += stride * (WJt.reshape(-1, N).T @ Jt.reshape(-1, N) - Bt.reshape(-1, N).T @ X.reshape(-1, N))
-    return A, scores
+        picked.append((q[sl][k], Hd[k], ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k]))
+    return stride * reduced_matrix(obs, params, noise, picked), scores
 
 
 def theta_labels(obs: Observation) -> list[str]:

@@ -119,6 +119,27 @@ def _dense_q_jacobian(obs: Observation, params: Params, noise: Noise, q: np.ndar
     return Jq, w
 
 
+def reduced_matrix(obs: Observation, params: Params, noise: Noise, picked: list, chunk: int = 100) -> np.ndarray:
+    """Σ_t J_θ,tᵀ W_t J_θ,t − B_tᵀ H_t⁻¹ B_t (Nθ, Nθ), the Schur complement's matrix (module
+    docstring), over the frames ``picked``: a list of (q (b, n), damped H (b, n, n), wp (b, P),
+    wx (b, M) or None, s, Rl, pl, valid) per batch (:func:`_schur_batch`), taken ``chunk``
+    frames at a time (the dense per-frame Jacobians stay small)."""
+    qp, Hd, wp, wx, s, Rl, pl, valid = (
+        None if picked[0][i] is None else np.concatenate([p[i] for p in picked]) for i in range(8)
+    )
+    N = 2 * obs.n_pots + 3 * obs.n_markers + 6
+    S = np.zeros((N, N))
+    for i in range(0, qp.shape[0], chunk):
+        c = slice(i, i + chunk)
+        Jq, w = _dense_q_jacobian(obs, params, noise, qp[c], wp[c], None if wx is None else wx[c])
+        Jt = _theta_jacobian(obs, params, noise, s[c], Rl[c], pl[c], valid[c])
+        WJt = Jt * w[..., None]
+        Bt = np.swapaxes(Jq, 1, 2) @ WJt  # (b, n, Nθ)
+        X = block_solve(Hd[c], Bt, obs.sparsity.blocks)
+        S += WJt.reshape(-1, N).T @ Jt.reshape(-1, N) - Bt.reshape(-1, N).T @ X.reshape(-1, N)
+    return S
+
+
 def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: slice, stride: int, want_red: bool, st):
     """One batch's share of the reduced system: Bᵀ H⁻¹ g − g_θ (Nθ,), the redundancy, and what
     the reduced matrix needs of its frames t ≡ 0 (mod stride)."""
@@ -161,16 +182,8 @@ def theta_step(
     parts = map_batches(lambda sl: _schur_batch(obs, params, noise, q, lam, sl, stride, want_red, st), T, batch, jobs)
     rhs = sum(p[0] for p in parts)
     used = {k: sum(p[1][k] for p in parts) for k in parts[0][1]}
-    qp, Hd, wp, wx, s, Rl, pl, valid = (
-        None if parts[0][2][i] is None else np.concatenate([p[2][i] for p in parts]) for i in range(8)
-    )
-    Jq, w = _dense_q_jacobian(obs, params, noise, qp, wp, wx)
-    Jt = _theta_jacobian(obs, params, noise, s, Rl, pl, valid)
-    WJt = Jt * w[..., None]
-    Bt = np.swapaxes(Jq, 1, 2) @ WJt  # (b, n, Nθ)
-    X = block_solve(Hd, Bt, obs.sparsity.blocks)
     # the reduced matrix from every stride-th frame, scaled (a quasi-Newton approximation)
-    S = stride * (WJt.reshape(-1, N).T @ Jt.reshape(-1, N) - Bt.reshape(-1, N).T @ X.reshape(-1, N))
+    S = stride * reduced_matrix(obs, params, noise, [p[2] for p in parts])
     free = free_mask(obs)
     A = S[np.ix_(free, free)]
     A = A + 1e-9 * max(np.trace(A), 1.0) / max(free.sum(), 1) * np.eye(free.sum())

@@ -268,7 +268,7 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
     # standard errors with q marginalised (the Schur complement of eq. 2.21), not the p-phase's
     # conditional-on-q ones, which ignore the joint-angle uncertainty; cluster-robust over blocks
     # of frames (covariance.py: the residuals are correlated in time)
-    cov = covariance(obs, params, _noise(obs, sigma, options), q, options.batch_size)
+    cov = covariance(obs, params, _noise(obs, sigma, options), q, options.batch_size, st=fine.state)
     fit = FitInfo(history[-1].cost, len(history), fine.converged, time.perf_counter() - t0)
     cal = obs.to_calibration(params, cov.se(), sigma, "stac", fit)
     block_s = float(np.median(np.diff(log.time))) * obs.n_frames / cov.blocks if obs.n_frames > 1 else 0.0
@@ -333,7 +333,9 @@ def _fit(obs: Observation, params: Params, options: StacOptions, t0: float, hist
 class _Stage:
     """Where one run of the alternation ended: θ, its p-phase SEs (conditional on q), the joint
     step's SEs (q marginalised; None without joint steps), σ per type, q (T, n), LM damping (T,),
-    the groups whose σ the last re-estimate held at its detection limit."""
+    the groups whose σ the last re-estimate held at its detection limit, the State at q (the
+    markers' link poses and pot transmissions are functions of q alone, so it serves any
+    Observation of the same frames: the covariance linearises from it)."""
 
     params: Params
     se: dict
@@ -343,6 +345,7 @@ class _Stage:
     lam: np.ndarray
     converged: bool
     unresolved: tuple = ()
+    state: State | None = None
 
 
 def _alternate(
@@ -456,7 +459,7 @@ def _alternate(
             converged = True
             break
     unresolved = tuple(g for g, ok in resolved.items() if not ok)
-    return _Stage(params, ph.se, se_joint, sigma, q, lam, converged, unresolved)
+    return _Stage(params, ph.se, se_joint, sigma, q, lam, converged, unresolved, st)
 
 
 def _rms_pots(obs, sigma) -> float:
