@@ -72,15 +72,14 @@ def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inne
         raise NumericalError("Procrustes: no valid marker sample (all occluded?)")
     chunks = [slice(i, i + CHUNK) for i in range(0, w.shape[0], CHUNK)]  # the frames' moments, a chunk at a time
 
-    def seen(sl):  # the markers of frames sl where they weigh, else 0 (occluded: NaN)
-        return np.where(w[sl, :, None] > 0, np.nan_to_num(obs.markers[sl]), 0.0)
-
-    cx = sum(np.einsum("tm,tmk->k", w[sl], seen(sl)) for sl in chunks) / sw.sum()
+    # the markers of each chunk where they weigh, else 0 (occluded: NaN, never picked by where)
+    seen = [np.where(w[sl, :, None] > 0, obs.markers[sl], 0.0) for sl in chunks]
+    cx = sum(np.einsum("tm,tmk->k", w[sl], x) for sl, x in zip(chunks, seen, strict=True)) / sw.sum()
     M = w.shape[1]
     G, Pm, C, D, K = np.zeros((M, 3, 3)), np.zeros((M, 3)), np.zeros((M, 9, 3)), np.zeros((M, 3, 3)), np.zeros((M, 3))
-    for sl in chunks:
+    for sl, x in zip(chunks, seen, strict=True):
         Rl, pl, wc = st.Rl[sl], st.pl[sl], w[sl]
-        xc = (seen(sl) - cx) * wc[..., None]  # weighted, centred
+        xc = (x - cx) * wc[..., None]  # weighted, centred
         G += np.einsum("tm,tmij->mij", wc, Rl)
         Pm += np.einsum("tm,tmi->mi", wc, pl)
         C += np.matmul(Rl.reshape(-1, M, 9).transpose(1, 2, 0), xc.transpose(1, 0, 2))
@@ -96,8 +95,9 @@ def markers_fit(obs: Observation, st: State, params: Params, w: np.ndarray, inne
     T = cx - R @ cb  # eq. 2.16
     # standard error of each mean from the spread of the marker in its link frame
     ss = np.zeros((M, 3))
-    for sl in chunks:
-        local = np.einsum("tmji,tmj->tmi", st.Rl[sl], (seen(sl) - cx) @ R + cb - st.pl[sl])  # h_rᵀ (R⁻¹ (x − T0) − h_p)
+    for sl, x in zip(chunks, seen, strict=True):
+        y = ((x - cx).reshape(-1, 3) @ R).reshape(x.shape)  # R⁻¹ (x − c_x): one product, not one per frame
+        local = np.einsum("tmji,tmj->tmi", st.Rl[sl], y + cb - st.pl[sl])  # h_rᵀ (R⁻¹ (x − T0) − h_p)
         ss += (w[sl, :, None] * (local - d) ** 2).sum(0)
     n = (w > 0).sum(0)
     dof = np.where(n > 1, sw * (n - 1) / np.maximum(n, 1), np.nan)[:, None]  # NaN: a marker seen < 2 times
@@ -116,39 +116,36 @@ def pots_fit(obs: Observation, st: State, w: np.ndarray, bias0: np.ndarray, gain
     SE: σ̂² (Xᵀ W X)⁻¹ with σ̂² = Σ w r² / (N − k), the usual LS covariance with q held fixed.
     """
     P = obs.n_pots
-    gain, bias, gse, bse = np.ones(P), np.zeros(P), np.full(P, np.nan), np.full(P, np.nan)
-    for j in range(P):
-        s, p, wj = st.s[:, j], obs.pots[:, j], w[:, j]
-        sw = wj.sum()
-        if obs.fixed_gain[j]:
-            gain[j], bias[j] = (1.0 if gain0 is None else gain0[j]), bias0[j]
-            continue
-        if obs.fixed_bias[j]:
-            bias[j] = bias0[j]
-            if obs.kinds[j] != "encoder":
-                ss = (wj * s * s).sum()
-                gain[j] = (wj * s * (p - bias0[j])).sum() / ss
-                r = p - gain[j] * s - bias0[j]
-                gse[j] = np.sqrt((wj * r * r).sum() / max(sw - 1, 1) / ss)
-            continue
-        if obs.kinds[j] == "encoder":
-            bias[j] = (wj * (p - s)).sum() / sw
-            r = p - s - bias[j]
-            bse[j] = np.sqrt((wj * r * r).sum() / max(sw - 1, 1) / sw)
-            continue
-        X = np.stack([s, np.ones_like(s)], axis=1)
-        XtW = X.T * wj
-        N = XtW @ X
-        if np.linalg.cond(N) > 1e12:
+    s, p = st.s, obs.pots
+    gain = np.ones(P) if gain0 is None else np.where(obs.fixed_gain, gain0, 1.0)
+    bias = bias0.astype(float).copy()
+    gse, bse = np.full(P, np.nan), np.full(P, np.nan)
+    # the weighted sums of every pot at once (T, P) -> (P,): Σw, Σws, Σws², Σwp, Σwsp
+    ws = w * s
+    sw, sws, swss, swp, swsp = w.sum(0), ws.sum(0), (ws * s).sum(0), (w * p).sum(0), (ws * p).sum(0)
+    encoder = obs.kinds == "encoder"
+    fixed = obs.fixed_gain  # gain and bias nominal
+    gain_only = obs.fixed_bias & ~fixed & ~encoder  # bias held: the gain alone
+    enc = ~fixed & ~obs.fixed_bias & encoder  # gain 1: the bias alone
+    both = ~fixed & ~obs.fixed_bias & ~encoder  # gain and bias (eq. 2.18-2.20)
+    gain[gain_only] = (swsp - bias0 * sws)[gain_only] / swss[gain_only]
+    bias[enc] = (swp - sws)[enc] / sw[enc]
+    N = np.stack([np.stack([swss, sws], -1), np.stack([sws, sw], -1)], -2)[both]  # Xᵀ W X, X = [s, 1]
+    if N.size:
+        bad = np.linalg.cond(N) > 1e12
+        if bad.any():
             raise NumericalError(
-                f"pot {obs.pot_names[j]!r}: its transmission does not vary in the log; "
-                "record motion of its joint(s) to calibrate it"
+                f"pot {obs.pot_names[np.flatnonzero(both)[np.argmax(bad)]]!r}: its transmission does not vary in "
+                "the log; record motion of its joint(s) to calibrate it"
             )
-        gain[j], bias[j] = np.linalg.solve(N, XtW @ p)
-        r = p - X @ np.array([gain[j], bias[j]])
-        s2 = (wj * r * r).sum() / max(sw - 2, 1)
-        cov = s2 * np.linalg.inv(N)
-        gse[j], bse[j] = np.sqrt(np.diag(cov))
+        gain[both], bias[both] = np.linalg.solve(N, np.stack([swsp, swp], -1)[both, :, None])[..., 0].T
+    r = p - gain * s - bias
+    rss = (w * r * r).sum(0)
+    gse[gain_only] = np.sqrt(rss / np.maximum(sw - 1, 1) / swss)[gain_only]
+    bse[enc] = np.sqrt(rss / np.maximum(sw - 1, 1) / sw)[enc]
+    if N.size:
+        var = (rss / np.maximum(sw - 2, 1))[both, None] * np.diagonal(np.linalg.inv(N), axis1=1, axis2=2)
+        gse[both], bse[both] = np.sqrt(var).T
     return gain, bias, gse, bse
 
 

@@ -316,14 +316,9 @@ def q_step(
     return cand, lam_out, new, np.where(ok, c1, c0), red
 
 
-def group_sigma(obs: Observation, params: Params, st: State, used: dict | None = None) -> dict:
-    """Dynamic variance adjustment (§2.3.5): σ_g² = RSS_g / r_g, r_g = N_g − used_g, per sensor
-    type, held at the detection limit (:func:`resolvable`) where r_g is too small.
-
-    ``used`` is the degrees of freedom the q-phase took from each type (:func:`redundancy`);
-    without it this is the plain RMS residual.
-    """
-    used = used or {}
+def group_rss(obs: Observation, params: Params, st: State) -> dict:
+    """{group: (RSS_g, N_g)}: each sensor type's sum of squared residuals (V², m²) at θ and the
+    State ``st`` (eq. 2.5, 2.8-2.9), and its number of readings (a marker: three)."""
     out = {}
     rp = params.gain * st.s + params.bias - obs.pots
     for kind in obs.groups:
@@ -332,8 +327,23 @@ def group_sigma(obs: Observation, params: Params, st: State, used: dict | None =
             r = (xb @ params.R.T + params.T - obs.markers)[obs.valid]
         else:
             r = rp[:, obs.kinds == kind]
-        dof = max(r.size - used.get(kind, 0.0), MIN_REDUNDANCY * r.size)
-        out[kind] = float(np.sqrt(np.sum(r * r) / dof * floor_factor(r.size, dof)))
+        out[kind] = (float(np.sum(r * r)), r.size)
+    return out
+
+
+def group_sigma(obs: Observation, params: Params, st: State, used: dict | None = None, rss: dict | None = None) -> dict:
+    """Dynamic variance adjustment (§2.3.5): σ_g² = RSS_g / r_g, r_g = N_g − used_g, per sensor
+    type, held at the detection limit (:func:`resolvable`) where r_g is too small.
+
+    ``used`` is the degrees of freedom the q-phase took from each type (:func:`redundancy`);
+    without it this is the plain RMS residual. ``rss``: :func:`group_rss` at (θ, st) when the
+    caller has it.
+    """
+    used = used or {}
+    out = {}
+    for kind, (ss, n) in (group_rss(obs, params, st) if rss is None else rss).items():
+        dof = max(n - used.get(kind, 0.0), MIN_REDUNDANCY * n)
+        out[kind] = float(np.sqrt(ss / dof * floor_factor(n, dof)))
     return out
 
 

@@ -76,6 +76,7 @@ from diegocal.stac.poses import write_off_foreign_poses
 from diegocal.stac.pphase import CHUNK, p_phase
 from diegocal.stac.qphase import (
     Noise,
+    group_rss,
     group_sigma,
     irls_weight,
     kinematics_batch,
@@ -174,9 +175,16 @@ def weights(obs: Observation, params: Params, st: State, noise: Noise):
     return wp, wx
 
 
-def total_cost(obs: Observation, params: Params, st: State, noise: Noise, sigma: dict) -> float:
-    """LL of eq. 2.5/2.8 with per-type σ (constants dropped); the residuals a chunk of frames at
-    a time (CHUNK: their temporaries stay small on long logs)."""
+def total_cost(
+    obs: Observation, params: Params, st: State, noise: Noise, sigma: dict, rss: dict | None = None
+) -> float:
+    """LL of eq. 2.5/2.8 with per-type σ (constants dropped). Under the linear loss it is
+    Σ_g RSS_g / 2σ_g² + N_g log σ_g, from ``rss`` (:func:`.qphase.group_rss` at θ and ``st``, which
+    σ's re-estimate needs too; computed when not given); under a robust one the residuals a
+    chunk of frames at a time (CHUNK: their temporaries stay small on long logs)."""
+    if noise.loss == "linear":
+        rss = group_rss(obs, params, st) if rss is None else rss
+        return float(sum(ss / (2.0 * sigma[g] ** 2) + n * np.log(sigma[g]) for g, (ss, n) in rss.items()))
     c = 0.0
     for i in range(0, obs.n_frames, CHUNK):
         sl = slice(i, i + CHUNK)
@@ -198,11 +206,15 @@ def _noise(obs, sigma, options) -> Noise:
     return Noise(pot_sigmas(obs, sigma), sigma.get(MARKERS, 1.0), options.loss, options.huber_scale)
 
 
-def _update_sigma(obs, params, st, used, loss: str = "linear", sigma: dict | None = None) -> dict:
+def _update_sigma(obs, params, st, used, loss: str = "linear", sigma: dict | None = None, rss=None) -> dict:
     """§2.3.5: re-estimate σ per type from the residuals, with the q-phase's degrees of freedom;
     under a robust loss from residuals clipped at a few current σ (:func:`.robust.group_sigma`).
     A group the data do not resolve is held at its detection limit (:func:`.robust.floor_factor`)."""
-    new = group_sigma(obs, params, st, used) if loss == "linear" else robust.group_sigma(obs, params, st, used, sigma)
+    new = (
+        group_sigma(obs, params, st, used, rss)
+        if loss == "linear"
+        else robust.group_sigma(obs, params, st, used, sigma)
+    )
     return {g: max(v, 1e-9) for g, v in new.items()}
 
 
@@ -392,11 +404,12 @@ def _alternate(
             q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red, st)
             try:
                 ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
-                cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma)
+                rss_j = _rss(obs, ph_j.params, st_j, options)
+                cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma, rss_j)
             except NumericalError:  # a step so far off that a redescending loss drops every marker
                 cost_j = np.inf
             if cost_j < cost:
-                q, lam, st, ph, cost, stepped = q_j, lam_j, st_j, ph_j, cost_j, True
+                q, lam, st, ph, cost, rss, stepped = q_j, lam_j, st_j, ph_j, cost_j, rss_j, True
                 mu = mu / 10 if mu > JOINT_DAMPING / 10 else 0.0
             else:  # the full step overshot: damp the next one (and alternate plainly this time)
                 mu = max(10 * mu, JOINT_DAMPING)
@@ -412,16 +425,18 @@ def _alternate(
                     if options.schedule == "lm-batch" and np.all(lam >= 1e3):
                         break
             ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
-            cost = total_cost(obs, ph.params, st, noise, sigma)
+            rss = _rss(obs, ph.params, st, options)
+            cost = total_cost(obs, ph.params, st, noise, sigma, rss)
             if accel is not None:  # Anderson extrapolation of the (q -> q-phase(p-phase(q))) fixed point
                 q_mix = accel.mix(q_old, q)
                 if q_mix is not None:
                     q_mix = np.clip(q_mix, obs.lower, obs.upper)
                     st_mix = obs.state(q_mix, kinematics_batch(options.batch_size))
                     ph_mix = p_phase(obs, st_mix, params, *weights(obs, params, st_mix, noise))
-                    cost_mix = total_cost(obs, ph_mix.params, st_mix, noise, sigma)
+                    rss_mix = _rss(obs, ph_mix.params, st_mix, options)
+                    cost_mix = total_cost(obs, ph_mix.params, st_mix, noise, sigma, rss_mix)
                     if cost_mix < cost:
-                        q, st, ph, cost = q_mix, st_mix, ph_mix, cost_mix
+                        q, st, ph, cost, rss = q_mix, st_mix, ph_mix, cost_mix, rss_mix
                     else:
                         accel.reset()
         params = ph.params
@@ -429,14 +444,14 @@ def _alternate(
         # §2.3.5, once (q, θ) have settled (SIGMA_SETTLE); at once on a warm start
         frozen = options.loss in REDESCENDING  # σ from the Huber stage (robust.py)
         if not frozen and (change < SIGMA_SETTLE * max(abs(cost), 1.0) or (warm and not np.isfinite(prev_fixed))):
-            new = _update_sigma(obs, params, st, used, options.loss, sigma)
+            new = _update_sigma(obs, params, st, used, options.loss, sigma, rss)
             resolved = resolvable(obs, used)
             sigmas.append(new)
             if len(sigmas) == 3:  # a group at its floor is not extrapolated past it
                 new = {g: v if resolved[g] else new[g] for g, v in _aitken(sigmas).items()}
             sigma_change = max(abs(new[g] / sigma[g] - 1.0) for g in new)
             sigma = new
-            cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma)
+            cost = total_cost(obs, params, st, _noise(obs, sigma, options), sigma, rss)
         prev_fixed = cost
         if accel is not None:
             accel.reset()
@@ -460,6 +475,11 @@ def _alternate(
             break
     unresolved = tuple(g for g, ok in resolved.items() if not ok)
     return _Stage(params, ph.se, se_joint, sigma, q, lam, converged, unresolved, st)
+
+
+def _rss(obs: Observation, params: Params, st: State, options: StacOptions) -> dict | None:
+    """:func:`.qphase.group_rss` under the linear loss (the cost and σ's re-estimate share it)."""
+    return group_rss(obs, params, st) if options.loss == "linear" else None
 
 
 def _rms_pots(obs, sigma) -> float:
