@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from diegocal.stac.joint_step import _theta_rows, _times_q, free_mask, reduced_matrix
+from diegocal.stac.joint_step import _theta_rows, _times_q, free_mask, pick, reduced_matrix
 from diegocal.stac.model import Observation, Params, State
 from diegocal.stac.qphase import Noise, block_solve, damped, normal_equations
 
@@ -160,9 +160,7 @@ def information(
         v = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ J_qᵀ W z
         # J_θᵀ W (J_q H⁻¹ J_qᵀ W z − z) per frame: minus the profiled score (its sign is immaterial)
         scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v))
-        k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)
-        wx = ex["wx"][k] if ex["wx"] is not None else None
-        picked.append((q[sl][k], Hd[k], ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k]))
+        picked.append(pick(Hd, ex, s, Rl, pl, np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)))
     return stride * reduced_matrix(obs, params, noise, picked), scores
 
 

@@ -119,24 +119,96 @@ def _dense_q_jacobian(obs: Observation, params: Params, noise: Noise, q: np.ndar
     return Jq, w
 
 
+def _q_jacobian(obs: Observation, params: Params, noise: Noise, xi, ds_lin, x, wp, wx) -> np.ndarray:
+    """:func:`_dense_q_jacobian` from a kept linearisation instead of the forward kinematics: the
+    joint twists xi (b, 6, n), ∂s/∂q of the linear pots ds_lin (b, L, c) and the markers in the
+    base frame x (b, M, 3) (None without markers); a marker's column k is s_mk (ω_k × x_m + v_k)
+    (eq. 2.23, s_mk = ±1 where joint k moves the marker, else 0)."""
+    b, P, M = xi.shape[0], obs.n_pots, obs.n_markers
+    n = xi.shape[2]
+    Jq = np.zeros((b, P + 3 * M, n))
+    w = np.zeros((b, P + 3 * M))
+    if noise.use_pots and P:
+        kp = params.gain / noise.sig_p
+        Jq[:, :P] = obs.A * kp[:, None]  # eq. 2.22
+        Jq[:, obs.linear[:, None], obs.sparsity.lin_cols] = ds_lin * kp[obs.linear, None]
+        w[:, :P] = wp
+    if noise.use_markers and M:
+        sign = obs.kin._points_structure(obs.marker_links).sign  # (M, n)
+        om, v = xi[:, None, :3], xi[:, None, 3:]  # (b, 1, 3, n)
+        xm = x[..., None]  # (b, M, 3, 1)
+        Jx = v + np.stack(
+            [
+                om[:, :, 1] * xm[:, :, 2] - om[:, :, 2] * xm[:, :, 1],
+                om[:, :, 2] * xm[:, :, 0] - om[:, :, 0] * xm[:, :, 2],
+                om[:, :, 0] * xm[:, :, 1] - om[:, :, 1] * xm[:, :, 0],
+            ],
+            axis=2,
+        )  # (b, M, 3, n): ω × x + v
+        Jx *= sign[None, :, None, :]
+        Jq[:, P:] = (np.einsum("ij,bmjn->bmin", params.R, Jx) / noise.sig_x).reshape(b, -1, n)  # eq. 2.23
+        w[:, P:] = np.repeat(wx, 3, axis=1)
+    return Jq, w
+
+
+def pick(Hd: np.ndarray, ex: dict, s, Rl, pl, k: np.ndarray) -> tuple:
+    """What :func:`reduced_matrix` needs of the frames ``k`` of a batch: from its damped normal
+    matrix Hd, the linearisation ``ex`` of :func:`~diegocal.stac.qphase.normal_equations` and
+    s, Rl, pl."""
+    wx = None if ex["wx"] is None else ex["wx"][k]
+    x = None if ex["x"] is None else ex["x"][k]
+    xi = np.moveaxis(ex["lin"].xi[:, k], 0, 1)
+    return (Hd[k], ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k], xi, ex["lin"].ds_lin[k], x)
+
+
 def reduced_matrix(obs: Observation, params: Params, noise: Noise, picked: list, chunk: int = 100) -> np.ndarray:
     """Σ_t J_θ,tᵀ W_t J_θ,t − B_tᵀ H_t⁻¹ B_t (Nθ, Nθ), the Schur complement's matrix (module
-    docstring), over the frames ``picked``: a list of (q (b, n), damped H (b, n, n), wp (b, P),
-    wx (b, M) or None, s, Rl, pl, valid) per batch (:func:`_schur_batch`), taken ``chunk``
+    docstring), over the frames ``picked``: a list of :func:`pick` per batch, taken ``chunk``
     frames at a time (the dense per-frame Jacobians stay small)."""
-    qp, Hd, wp, wx, s, Rl, pl, valid = (
-        None if picked[0][i] is None else np.concatenate([p[i] for p in picked]) for i in range(8)
+    Hd, wp, wx, s, Rl, pl, valid, xi, ds_lin, x = (
+        None if picked[0][i] is None else np.concatenate([p[i] for p in picked]) for i in range(10)
     )
     N = 2 * obs.n_pots + 3 * obs.n_markers + 6
     S = np.zeros((N, N))
-    for i in range(0, qp.shape[0], chunk):
+    for i in range(0, Hd.shape[0], chunk):
         c = slice(i, i + chunk)
-        Jq, w = _dense_q_jacobian(obs, params, noise, qp[c], wp[c], None if wx is None else wx[c])
+        Jq, w = _q_jacobian(
+            obs, params, noise, xi[c], ds_lin[c], None if x is None else x[c], wp[c], None if wx is None else wx[c]
+        )
         Jt = _theta_jacobian(obs, params, noise, s[c], Rl[c], pl[c], valid[c])
         WJt = Jt * w[..., None]
+        S += _theta_gram(obs, Jt, WJt)
         Bt = np.swapaxes(Jq, 1, 2) @ WJt  # (b, n, Nθ)
-        X = block_solve(Hd[c], Bt, obs.sparsity.blocks)
-        S += WJt.reshape(-1, N).T @ Jt.reshape(-1, N) - Bt.reshape(-1, N).T @ X.reshape(-1, N)
+        for ix in obs.sparsity.blocks:  # Bᵀ H⁻¹ B block by block, on the entries of θ the block's joints see
+            Bb = Bt[:, ix]
+            cols = np.flatnonzero(np.any(Bb != 0.0, axis=(0, 1)))
+            Bb = Bb[:, :, cols]
+            X = np.linalg.solve(Hd[c][:, ix[:, None], ix], Bb)
+            S[np.ix_(cols, cols)] -= Bb.reshape(-1, len(cols)).T @ X.reshape(-1, len(cols))
+    return S
+
+
+def _theta_gram(obs: Observation, Jt: np.ndarray, WJt: np.ndarray) -> np.ndarray:
+    """Σ_t J_θ,tᵀ W_t J_θ,t (Nθ, Nθ) from J_θ (b, P + 3M, Nθ) and W J_θ by its structure
+    (:func:`_theta_jacobian`): a pot's row holds its gain and bias, a marker's three rows its
+    position d_m, ω and T0; the products of the entries that are zero are left out."""
+    P, M = obs.n_pots, obs.n_markers
+    N = Jt.shape[2]
+    S = np.zeros((N, N))
+    p = np.arange(P)
+    for a in (p, P + p):  # the pots' 2 x 2 blocks (gain, bias)
+        for b in (p, P + p):
+            S[a, b] = np.einsum("tp,tp->p", WJt[:, p, a], Jt[:, p, b])
+    if M:
+        m = np.arange(M)
+        # each marker's nine columns: its d_m, then ω and T0 (shared by all markers)
+        cols = np.concatenate([2 * P + 3 * m[:, None] + np.arange(3), np.broadcast_to(np.arange(N - 6, N), (M, 6))], 1)
+        rows = P + 3 * m[:, None] + np.arange(3)  # (M, 3)
+        K = Jt[:, rows[:, :, None], cols[:, None, :]]  # (b, M, 3, 9)
+        WK = WJt[:, rows[:, :, None], cols[:, None, :]]
+        G = np.einsum("tmik,tmil->mkl", WK, K)  # (M, 9, 9)
+        for j in range(M):
+            S[np.ix_(cols[j], cols[j])] += G[j]
     return S
 
 
@@ -149,9 +221,7 @@ def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: sli
     v = _times_q(obs, params, noise, ex, u)
     rhs = _theta_transpose_times(obs, params, noise, s, Rl, pl, v)
     k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)
-    wx = ex["wx"][k] if ex["wx"] is not None else None
-    picked = (q[sl][k], Hd[k], ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k])
-    return rhs, red, picked
+    return rhs, red, pick(Hd, ex, s, Rl, pl, k)
 
 
 def theta_step(

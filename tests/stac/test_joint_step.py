@@ -7,7 +7,7 @@ import pytest
 import synth
 from scipy.spatial.transform import Rotation
 
-from diegocal.stac.joint_step import _theta_jacobian, _theta_transpose_times
+from diegocal.stac.joint_step import _dense_q_jacobian, _q_jacobian, _theta_jacobian, _theta_transpose_times
 from diegocal.stac.model import Observation, Params
 from diegocal.stac.qphase import Noise, normal_equations, residuals
 
@@ -52,6 +52,19 @@ def test_theta_jacobian_matches_finite_differences(tree_robot):
         )
         fd = (_flat_residuals(obs, p, noise, st) - r0) / h
         np.testing.assert_allclose(J[..., k], fd, atol=2e-3 * max(1.0, np.abs(fd).max()))
+
+
+def test_q_jacobian_from_the_linearisation_equals_the_forward_kinematics(tree_robot):
+    """J_q from the kept twists (the reduced matrix's route) equals J_q from the kinematics."""
+    obs, params, noise, _ = _setup(tree_robot)
+    q = synth.simulate(tree_robot, 6, seed=3, occlusion=0.3).truth.signals["q"].data
+    lin = obs.linearise(q)
+    x = np.einsum("bmij,mj->bmi", lin.Rl, params.xyz) + lin.pl
+    wp, wx = np.ones_like(obs.pots), obs.valid.astype(float)
+    Jq, w = _q_jacobian(obs, params, noise, np.moveaxis(lin.xi, 0, 1), lin.ds_lin, x, wp, wx)
+    Jd, wd = _dense_q_jacobian(obs, params, noise, q, wp, wx)
+    np.testing.assert_allclose(Jq, Jd, rtol=1e-10, atol=1e-10 * np.abs(Jd).max())
+    np.testing.assert_array_equal(w, wd)
 
 
 def test_structured_transpose_product(tree_robot):
