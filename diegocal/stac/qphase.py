@@ -30,6 +30,7 @@ from threadpoolctl import threadpool_limits
 from diegocal.stac import robust
 from diegocal.stac.loo import frame_slices
 from diegocal.stac.model import MARKERS, Observation, Params, State
+from diegocal.stac.pphase import CHUNK
 from diegocal.stac.robust import MIN_REDUNDANCY, floor_factor
 
 
@@ -64,8 +65,7 @@ def _residuals(params: Params, noise: Noise, s, Rl, pl, pots, markers, valid):
     """:func:`residuals` and the markers in the base frame xb (B, M, 3) (eq. 2.11), which the
     normal equations use too."""
     zp = (params.gain * s + params.bias - pots) / noise.sig_p
-    xb = (Rl @ params.xyz[:, :, None])[..., 0]
-    xb += pl
+    xb = base_points(Rl, pl, params.xyz)
     B, M = xb.shape[:2]
     rx = (xb.reshape(B * M, 3) @ params.R.T).reshape(B, M, 3)  # one product, not one per frame
     rx += params.T
@@ -73,6 +73,17 @@ def _residuals(params: Params, noise: Noise, s, Rl, pl, pots, markers, valid):
     rx /= noise.sig_x
     rx[~valid] = 0.0  # occluded (NaN) markers
     return zp, np.sqrt(np.einsum("bmi,bmi->bm", rx, rx)), rx, xb
+
+
+def base_points(Rl: np.ndarray, pl: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """The markers in the base frame x_b = R_l d + p_l (B, M, 3), m (eq. 2.11), for their links'
+    poses Rl (B, M, 3, 3), pl (B, M, 3) and positions xyz (M, 3): three multiply-adds over the
+    whole arrays (a broadcast matmul is one tiny product per frame and marker)."""
+    xb = Rl[..., 0] * xyz[:, 0, None]
+    xb += Rl[..., 1] * xyz[:, 1, None]
+    xb += Rl[..., 2] * xyz[:, 2, None]
+    xb += pl
+    return xb
 
 
 def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarray:
@@ -322,12 +333,18 @@ def group_rss(obs: Observation, params: Params, st: State) -> dict:
     out = {}
     rp = params.gain * st.s + params.bias - obs.pots
     for kind in obs.groups:
-        if kind == MARKERS:
-            xb = (st.Rl @ params.xyz[:, :, None])[..., 0] + st.pl
-            r = (xb @ params.R.T + params.T - obs.markers)[obs.valid]
+        if kind == MARKERS:  # a chunk of frames at a time (CHUNK: the temporaries stay small)
+            ss = 0.0
+            for i in range(0, obs.n_frames, CHUNK):
+                sl = slice(i, i + CHUNK)
+                xb = base_points(st.Rl[sl], st.pl[sl], params.xyz)
+                r = (xb.reshape(-1, 3) @ params.R.T).reshape(xb.shape) + params.T - obs.markers[sl]
+                r = r[obs.valid[sl]]
+                ss += float(np.sum(r * r))
+            out[kind] = (ss, 3 * int(obs.valid.sum()))
         else:
             r = rp[:, obs.kinds == kind]
-        out[kind] = (float(np.sum(r * r)), r.size)
+            out[kind] = (float(np.sum(r * r)), r.size)
     return out
 
 
