@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from diegocal.robot.batch import cross
 from diegocal.stac.model import Observation, Params, State
-from diegocal.stac.qphase import Noise, block_solve, damped, map_batches, normal_equations
+from diegocal.stac.qphase import Noise, base_points, block_solve, damped, map_batches, normal_equations
 
 
 def free_mask(obs: Observation) -> np.ndarray:
@@ -78,8 +78,8 @@ def _theta_rows(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
     out = [vp * s, vp]
     if M:
         vx = v[:, P:].reshape(-1, M, 3) / noise.sig_x
-        y = ((Rl @ params.xyz[:, :, None])[..., 0] + pl) @ params.R.T  # R x_b
-        out.append(np.einsum("bmki,bmk->bmi", Rl, vx @ params.R).reshape(B, 3 * M))  # (R h_r)ᵀ v
+        y = _rotate(base_points(Rl, pl, params.xyz), params.R.T)  # R x_b
+        out.append(np.einsum("bmki,bmk->bmi", Rl, _rotate(vx, params.R)).reshape(B, 3 * M))  # (R h_r)ᵀ v
         out.append(cross(y, vx).sum(1))  # (−[y]×)ᵀ v = y × v
         out.append(vx.sum(1))
     else:
@@ -99,8 +99,13 @@ def _times_q(obs: Observation, params: Params, noise: Noise, ex: dict, u: np.nda
         out[:, :P] = ex["wp"] * (du * (params.gain / noise.sig_p) - ex["zp"])
     if noise.use_markers and M:
         vel = obs.kin.points_velocity(None, ex["x"], obs.marker_links, u, xi=ex["lin"].xi)  # eq. 2.23
-        out[:, P:] = (ex["wx"][..., None] * (vel @ params.R.T / noise.sig_x - ex["rx"])).reshape(B, -1)
+        out[:, P:] = (ex["wx"][..., None] * (_rotate(vel, params.R.T) / noise.sig_x - ex["rx"])).reshape(B, -1)
     return out
+
+
+def _rotate(v: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """v @ R for v (..., 3) as one (·, 3) x (3, 3) product (a broadcast matmul is one per frame)."""
+    return (v.reshape(-1, 3) @ R).reshape(v.shape)
 
 
 def _dense_q_jacobian(obs: Observation, params: Params, noise: Noise, q: np.ndarray, wp, wx) -> np.ndarray:

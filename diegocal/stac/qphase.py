@@ -177,8 +177,18 @@ def block_solve(A: np.ndarray, b: np.ndarray, blocks) -> np.ndarray:
     b = b[..., None] if vec else b
     out = np.zeros(b.shape)
     for ix in blocks:
-        out[:, ix] = np.linalg.solve(A[:, ix[:, None], ix], b[:, ix])
+        rows, cols = _block_index(ix)
+        out[:, cols] = np.linalg.solve(A[:, rows, cols], b[:, cols])
     return out[..., 0] if vec else out
+
+
+def _block_index(ix: np.ndarray) -> tuple:
+    """Indices that pick the block ``ix`` (k,) of joints out of (B, n, n) and (B, n) arrays: basic
+    slices (a view, no gather) when its joints are consecutive, as in a URDF's depth-first order."""
+    if ix[-1] - ix[0] + 1 == len(ix):
+        sl = slice(int(ix[0]), int(ix[-1]) + 1)
+        return sl, sl
+    return ix[:, None], ix
 
 
 def spd_inverse(A: np.ndarray) -> np.ndarray:
@@ -218,7 +228,8 @@ def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     ridge = 0.0  # Σ_t ε_t tr(H_t⁻¹)
     pos = np.empty(n, dtype=int)
     for ix in blocks:  # H⁻¹ block by block (it is block diagonal too); never the full (B, n, n)
-        Hb = H[:, ix[:, None], ix]
+        rows, cols = _block_index(ix)
+        Hb = np.array(H[:, rows, cols])
         np.einsum("bii->bi", Hb)[...] += eps[:, None]
         Hi = spd_inverse(Hb)
         k = len(ix)
