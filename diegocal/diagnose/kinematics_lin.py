@@ -404,10 +404,14 @@ def row_gram(C: np.ndarray, root_w: np.ndarray) -> np.ndarray:
     return np.swapaxes(X, 1, 2) @ X
 
 
-def running_median(x: np.ndarray, half: int) -> np.ndarray:
-    """NaN-aware running median over ±half samples along axis 0 of (T, ...)."""
+def running_median(x: np.ndarray, half: int, chunk: int = 1024) -> np.ndarray:
+    """NaN-aware running median over ±half samples along axis 0 of (T, ...), ``chunk`` samples at
+    a time: the windows of a whole long log at once are (T, ..., 2·half + 1) floats."""
     pad = np.concatenate([np.full((half, *x.shape[1:]), np.nan), x, np.full((half, *x.shape[1:]), np.nan)])
-    win = sliding_window_view(pad, 2 * half + 1, axis=0)
+    out = np.empty(x.shape)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmedian(win, axis=-1)
+        for a in range(0, x.shape[0], chunk):
+            b = min(a + chunk, x.shape[0])
+            out[a:b] = np.nanmedian(sliding_window_view(pad[a : b + 2 * half], 2 * half + 1, axis=0), axis=-1)
+    return out

@@ -24,6 +24,7 @@ from diegocal.diagnose.kinematics_lin import (
     row_gram,
     weighted_gram,
 )
+from diegocal.diagnose.spill import Spill
 from diegocal.parallel import in_order
 from diegocal.progress import ticker
 from diegocal.stac.loo import batch_projection, frame_slices, pot_sigmas, sigma_of
@@ -280,7 +281,8 @@ class Sweep:
 
     def channels(self, cols: list[Columns], see=None, families=None) -> list[dict | None]:
         """Each column set as the engine reads a candidate's: {channel: (T, k) pot or (T, 3, k)
-        marker} on the log's channels (slips merged back), in COLUMN_DTYPE, the channels with less
+        marker} on the log's channels (slips merged back), in COLUMN_DTYPE on disk
+        (:class:`~diegocal.diagnose.spill.DiskArray`), the channels with less
         than CHANNEL_SHARE of its largest channel's weighted energy left out; None for a set that
         is zero everywhere (the calibration takes the term up entirely) and for a family's variant
         that ``families`` ranks below the best (never written). ``see``: :meth:`_maps`."""
@@ -309,10 +311,11 @@ class Sweep:
                 out[i], where[i] = None, ()
 
         live = [i for i in range(len(cols)) if where[i]]
+        spill = Spill()  # the round's columns on disk: a long log's would not fit in memory
 
         def write(lin, items):
             for n, C in items:
-                _write(out[live[n]], where[live[n]], lin.frames, C, T)
+                _write(out[live[n]], where[live[n]], lin.frames, C, T, spill)
 
         self._each([cols[i] for i in live], [betas[i] for i in live], [maps[i] for i in live], write)
         return out
@@ -335,19 +338,20 @@ class Sweep:
         self._each(cols, betas, maps, gather)
 
 
-def _write(out: dict, where, sl: slice, C: np.ndarray, T: int) -> None:
+def _write(out: dict, where, sl: slice, C: np.ndarray, T: int, spill: Spill) -> None:
     """A set's columns C (B, R, k) on the frames ``sl`` into its kept channels ``out`` (channel ->
-    (T, k) or (T, 3, k), made on the first block), ``where``: (channel, its mapped rows, [(a slip's
-    rows, its first frame)]): a slipped marker's columns from its slip on are its second marker's."""
+    (T, k) or (T, 3, k) in ``spill``'s file, made on the first block), ``where``: (channel, its
+    mapped rows, [(a slip's rows, its first frame)]): a slipped marker's columns from its slip on
+    are its second marker's."""
     for name, rows, second in where:
         x = C[:, rows]
-        if name not in out:
-            out[name] = np.empty((T, C.shape[-1]) if x.shape[1] == 1 else (T, 3, C.shape[-1]), COLUMN_DTYPE)
-        dest = out[name][sl]
-        dest[...] = x[:, 0] if x.shape[1] == 1 else x
+        block = np.array(x[:, 0] if x.shape[1] == 1 else x, COLUMN_DTYPE)
         for srows, first in second:
             a = max(first - sl.start, 0)
-            dest[a:] = C[a:, srows]
+            block[a:] = C[a:, srows]
+        if name not in out:
+            out[name] = spill.array((T, *block.shape[1:]), COLUMN_DTYPE)
+        out[name].write(sl.start, block)
 
 
 def _mapped_rows(where) -> np.ndarray:

@@ -1,0 +1,87 @@
+"""A round's candidate columns on disk (issue #33: long logs).
+
+The kinematics diagnosis makes every candidate's columns in one sweep over the log and the engine
+then reads each candidate's a piece of samples at a time (a fit, a test, a channel's gain). Held
+in memory, a round's columns grow with the log (about 2.7 MB per second of a diego log: 1.6 GB
+for ten minutes). :class:`Spill` writes them, as made, into one temporary file (unlinked: the
+operating system removes it when the round's candidates are dropped or the process ends) and a
+:class:`DiskArray` reads back only the samples asked for, so the process holds a block and a
+piece, whatever the log's length. The values are the same bits as the in-memory arrays'. The
+file goes where :mod:`tempfile` puts it (``TMPDIR``); the kernel's page cache may keep it in
+memory it can take back.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+
+
+class Spill:
+    """One temporary file that column arrays are laid out in, end to end."""
+
+    def __init__(self):
+        self._file = tempfile.TemporaryFile(prefix="diegocal-columns-")
+        self.fd = self._file.fileno()
+        self._end = 0
+
+    def array(self, shape: tuple, dtype) -> DiskArray:
+        """A new (uninitialised) array of ``shape`` in the file: rows written by :meth:`DiskArray.write`."""
+        out = DiskArray(self, self._end, tuple(int(n) for n in shape), np.dtype(dtype))
+        self._end += out.nbytes
+        return out
+
+
+class DiskArray:
+    """An array (T, ...) in a :class:`Spill`'s file, read by rows: ``x[samples]`` (a slice or
+    integer indices) reads the span they cover and returns those rows as a numpy array."""
+
+    def __init__(self, spill: Spill, offset: int, shape: tuple, dtype: np.dtype):
+        self.spill, self.offset, self.shape, self.dtype = spill, offset, shape, dtype
+        self.ndim = len(shape)
+        self.row_bytes = int(np.prod(shape[1:], dtype=np.int64)) * dtype.itemsize
+        self.nbytes = self.row_bytes * shape[0]
+
+    def write(self, start: int, rows: np.ndarray) -> None:
+        """Rows ``start`` to ``start + len(rows)`` set to ``rows`` (B, ...)."""
+        data = np.ascontiguousarray(rows, self.dtype)
+        if data.shape[1:] != self.shape[1:] or not 0 <= start <= self.shape[0] - data.shape[0]:
+            raise ValueError(f"rows of shape {data.shape} at {start} do not fit an array of shape {self.shape}")
+        view, at = memoryview(data).cast("B"), self.offset + start * self.row_bytes
+        while view.nbytes:
+            n = os.pwrite(self.spill.fd, view, at)
+            view, at = view[n:], at + n
+
+    def span(self, first: int, stop: int) -> np.ndarray:
+        """Rows ``first`` to ``stop`` (exclusive), read from the file."""
+        out = np.empty((max(stop - first, 0), *self.shape[1:]), self.dtype)
+        view, at = memoryview(out).cast("B"), self.offset + first * self.row_bytes
+        while view.nbytes:
+            n = os.preadv(self.spill.fd, [view], at)
+            if n <= 0:
+                raise OSError(f"the candidate columns' temporary file ended early (at byte {at})")
+            view, at = view[n:], at + n
+        return out
+
+    def __getitem__(self, key):
+        if isinstance(key, slice):
+            first, stop, step = key.indices(self.shape[0])
+            return self.span(first, stop)[::step] if step > 0 else self.span(0, self.shape[0])[key]
+        rows = np.arange(self.shape[0])[key] if np.asarray(key).dtype == bool else np.asarray(key, np.intp)
+        rows = np.where(rows < 0, rows + self.shape[0], rows)
+        if rows.size == 0:
+            return np.empty((0, *self.shape[1:]), self.dtype)
+        first = int(rows.min())
+        return self.span(first, int(rows.max()) + 1)[rows - first]
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.span(0, self.shape[0])
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def __reduce__(self):  # sent to another process as the array it holds (the file stays here)
+        return (np.asarray, (np.asarray(self),))

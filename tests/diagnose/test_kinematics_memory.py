@@ -1,0 +1,49 @@
+"""What keeps a long log's kinematics diagnosis within memory (issue #33): the round's candidate
+columns on disk (diegocal/diagnose/spill.py) and the outlier test's running median a chunk of
+frames at a time; each the same numbers as the whole arrays in memory."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+
+from diegocal.diagnose.kinematics_lin import running_median
+from diegocal.diagnose.spill import Spill
+
+
+def test_columns_read_back_from_disk_are_the_rows_written():
+    rng = np.random.default_rng(0)
+    spill = Spill()
+    pot = rng.normal(size=(1000, 2)).astype(np.float32)
+    marker = rng.normal(size=(1000, 3, 4)).astype(np.float32)
+    a, b = spill.array(pot.shape, np.float32), spill.array(marker.shape, np.float32)
+    for start in range(0, 1000, 250):  # a block at a time, as the sweep writes them
+        b.write(start, marker[start : start + 250])
+        a.write(start, pot[start : start + 250])
+    train = np.flatnonzero(rng.random(1000) < 0.6)
+    assert np.array_equal(a[train], pot[train]) and np.array_equal(b[train], marker[train])
+    assert np.array_equal(b[100:400], marker[100:400]) and np.array_equal(b[::7], marker[::7])
+    assert np.array_equal(np.asarray(b), marker) and b.shape == marker.shape and b.ndim == 3
+    assert np.array_equal(b[train[::-1]], marker[train[::-1]])  # any order
+    assert np.array_equal(pickle.loads(pickle.dumps(b)), marker)  # another process gets the array
+    with pytest.raises(ValueError, match="do not fit"):
+        a.write(900, pot[:200])
+
+
+def test_the_running_median_a_chunk_at_a_time_is_each_frame_s_median():
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(2500, 3, 3))
+    x[rng.random(x.shape) < 0.2] = np.nan
+    x[1020:1030, 1] = np.nan  # a gap across a chunk's edge
+    half = 8
+    got = running_median(x, half, chunk=1024)
+    for t in (0, 5, 1016, 1023, 1024, 1030, 2048, 2499):  # every chunk's edges and the log's
+        window = x[max(t - half, 0) : t + half + 1]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN window's median is NaN
+            want = np.nanmedian(window, axis=0)
+        assert np.array_equal(got[t], want, equal_nan=True)
+
