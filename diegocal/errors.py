@@ -47,3 +47,8 @@ class OptionError(DiegocalError, ValueError):
 
 class FitError(DiegocalError, RuntimeError):
     """A fit cannot proceed with the given data (too few samples, unobservable parameters)."""
+
+
+class ScratchSpaceError(DiegocalError, OSError):
+    """A temporary file a long run writes (the kinematics diagnosis's candidate columns) does not fit
+    where ``TMPDIR`` puts it."""

@@ -18,12 +18,20 @@ import tempfile
 
 import numpy as np
 
+from diegocal.errors import ScratchSpaceError
+
+#: Said with a failed write: what the file needs.
+ROOM = "about 2.7 MB per second of a 38-joint log"
+
 
 class Spill:
     """One temporary file that column arrays are laid out in, end to end."""
 
     def __init__(self):
-        self._file = tempfile.TemporaryFile(prefix="diegocal-columns-")
+        try:
+            self._file = tempfile.TemporaryFile(prefix="diegocal-columns-")
+        except OSError as exc:
+            raise _no_room(exc) from None
         self.fd = self._file.fileno()
         self._end = 0
 
@@ -51,7 +59,10 @@ class DiskArray:
             raise ValueError(f"rows of shape {data.shape} at {start} do not fit an array of shape {self.shape}")
         view, at = memoryview(data).cast("B"), self.offset + start * self.row_bytes
         while view.nbytes:
-            n = os.pwrite(self.spill.fd, view, at)
+            try:
+                n = os.pwrite(self.spill.fd, view, at)
+            except OSError as exc:
+                raise _no_room(exc) from None
             view, at = view[n:], at + n
 
     def span(self, first: int, stop: int) -> np.ndarray:
@@ -85,3 +96,12 @@ class DiskArray:
 
     def __reduce__(self):  # sent to another process as the array it holds (the file stays here)
         return (np.asarray, (np.asarray(self),))
+
+
+def _no_room(exc: OSError) -> ScratchSpaceError:
+    """The error a failed temporary file says, with where it was and what to change."""
+    where = tempfile.gettempdir()
+    return ScratchSpaceError(
+        f"cannot write the candidate columns' temporary file in {where}: {exc.strerror or exc}; "
+        f"set TMPDIR to a folder with room ({ROOM})"
+    )

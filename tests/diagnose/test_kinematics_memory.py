@@ -4,6 +4,8 @@ frames at a time; each the same numbers as the whole arrays in memory."""
 
 from __future__ import annotations
 
+import errno
+import os
 import pickle
 import warnings
 
@@ -12,6 +14,7 @@ import pytest
 
 from diegocal.diagnose.kinematics_lin import running_median
 from diegocal.diagnose.spill import Spill
+from diegocal.errors import ScratchSpaceError
 
 
 def test_columns_read_back_from_disk_are_the_rows_written():
@@ -47,3 +50,13 @@ def test_the_running_median_a_chunk_at_a_time_is_each_frame_s_median():
             want = np.nanmedian(window, axis=0)
         assert np.array_equal(got[t], want, equal_nan=True)
 
+
+
+def test_a_full_disk_is_one_error_that_says_where_and_what_to_change(monkeypatch):
+    def full(*args):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    a = Spill().array((10, 2), np.float32)
+    monkeypatch.setattr(os, "pwrite", full)
+    with pytest.raises(ScratchSpaceError, match="No space left on device; set TMPDIR to a folder with room"):
+        a.write(0, np.zeros((10, 2)))
