@@ -26,7 +26,10 @@ masses below joint k are accumulated once (mass, first and second moments), and
           \\hat G_k ξ = (c_k × v + (\\mathrm{tr} Q_k - Q_k) ω,\\ μ_k v + ω × c_k)
 
 for k the deeper of the two joints (the points that both move are those that the deeper one
-moves); s_j = ±1 is the column sign above.
+moves); s_j = ±1 is the column sign above. Per frame these are entries of the product
+Ξᵀ Y of the twists Ξ (6, n) and Y = (Ĝ_k ξ_k)_k (6, n), formed per block of joints that move
+points in common (a leg, the torso with its arms and head): a few small dense products instead
+of one gather per pair.
 
 The tests check that these equal ``Robot.points`` and ``Robot.points_jacobian`` (two routes
 agree), and that the summed forms equal the dense Jacobian's products.
@@ -37,6 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse.csgraph import connected_components
 
 from diegocal.errors import RobotConfigError
 from diegocal.robot.model import PointSet, Robot
@@ -63,17 +67,18 @@ class Poses:
 @dataclass(frozen=True)
 class _Structure:
     """Which joints move which points: sign (N, n) ∈ {−1, 0, 1}, D = |sign| (N, n), the sign of
-    each joint's column (n,), and the pairs of joints that move points in common, as
-    (o, d) index arrays with d the deeper joint (it moves a subset of o's points; o == d on
-    the diagonal) and s_o s_d (pairs,); ``pattern`` (n, n) bool is where H can be non-zero."""
+    each joint's column (n,); ``pattern`` (n, n) bool is where H can be non-zero (the pairs of
+    joints that move points in common); ``blocks``: per connected component of the pattern, its
+    joints (a slice when consecutive, else an index array), their index into (n, n) and the
+    (k, k) weights that turn the block of Ξᵀ Y into H's upper triangle: s_o s_d at (o, d) for
+    each pair with d the deeper joint (it moves a subset of o's points; o == d on the diagonal,
+    where the weight is halved), zero elsewhere."""
 
     sign: np.ndarray
     D: np.ndarray
     sign_joint: np.ndarray
-    pair_o: np.ndarray
-    pair_d: np.ndarray
-    pair_sign: np.ndarray
     pattern: np.ndarray
+    blocks: tuple
 
 
 class BatchKinematics:
@@ -280,19 +285,19 @@ class BatchKinematics:
         om, v = xi[:3], xi[3:]
         mu, c = acc[0], acc[1:4]
         xx, yy, zz, xy, xz, yz = acc[4:10]
-        Y = np.empty((6, B, self.n))  # Ĝ_k ξ_k = (c × v + (tr Q − Q) ω, μ v + ω × c)
-        Y[0] = (yy + zz) * om[0] - xy * om[1] - xz * om[2] + c[1] * v[2] - c[2] * v[1]
-        Y[1] = (xx + zz) * om[1] - xy * om[0] - yz * om[2] + c[2] * v[0] - c[0] * v[2]
-        Y[2] = (xx + yy) * om[2] - xz * om[0] - yz * om[1] + c[0] * v[1] - c[1] * v[0]
-        Y[3] = mu * v[0] + om[1] * c[2] - om[2] * c[1]
-        Y[4] = mu * v[1] + om[2] * c[0] - om[0] * c[2]
-        Y[5] = mu * v[2] + om[0] * c[1] - om[1] * c[0]
-        o, d, n = st.pair_o, st.pair_d, self.n
-        vals = np.einsum("fbp,fbp->bp", xi[:, :, o], Y[:, :, d]) * st.pair_sign  # s_o s_d ξ_o · Ĝ_d ξ_d
-        H = np.zeros((B, n, n))
-        flat = H.reshape(B, n * n)
-        flat[:, o * n + d] = vals
-        flat[:, d * n + o] = vals
+        Y = np.empty((B, 6, self.n))  # Ĝ_k ξ_k = (c × v + (tr Q − Q) ω, μ v + ω × c)
+        Y[:, 0] = (yy + zz) * om[0] - xy * om[1] - xz * om[2] + c[1] * v[2] - c[2] * v[1]
+        Y[:, 1] = (xx + zz) * om[1] - xy * om[0] - yz * om[2] + c[2] * v[0] - c[0] * v[2]
+        Y[:, 2] = (xx + yy) * om[2] - xz * om[0] - yz * om[1] + c[0] * v[1] - c[1] * v[0]
+        Y[:, 3] = mu * v[0] + om[1] * c[2] - om[2] * c[1]
+        Y[:, 4] = mu * v[1] + om[2] * c[0] - om[0] * c[2]
+        Y[:, 5] = mu * v[2] + om[0] * c[1] - om[1] * c[0]
+        XiT = np.ascontiguousarray(xi.transpose(1, 2, 0))  # (B, n, 6)
+        H = np.zeros((B, self.n, self.n))
+        for ix, (rows, cols), C in st.blocks:  # s_o s_d ξ_o · Ĝ_d ξ_d: Ξᵀ Y's upper triangle, mirrored
+            U = XiT[:, ix] @ Y[:, :, ix]
+            U *= C
+            H[:, rows, cols] = U + U.transpose(0, 2, 1)
         g = (om * acc[13:16]).sum(0) + (v * acc[10:13]).sum(0)  # ξ_k · Σ (x × f, f)
         return H, g * st.sign_joint
 
@@ -334,7 +339,18 @@ class BatchKinematics:
                 raise RobotConfigError("kinematic tree expected: two joints move overlapping point sets")
             sj = np.where(self._anc[self.base_joint], -1.0, 1.0)
             o, d = np.nonzero(share & nested & (~nested.T | np.tri(self.n, dtype=bool).T))  # one per pair
-            self._structure[key] = _Structure(sign, D.astype(float), sj, o, d, sj[o] * sj[d], share)
+            C = np.zeros((self.n, self.n))
+            C[o, d] = np.where(o == d, 0.5, 1.0) * sj[o] * sj[d]
+            _, label = connected_components(share, directed=False)
+            blocks = []
+            for comp in np.unique(label[np.flatnonzero(share.any(axis=0))]):
+                ix = np.flatnonzero(label == comp)
+                if ix[-1] - ix[0] + 1 == len(ix):  # consecutive (a URDF's depth-first order): views
+                    sel = slice(int(ix[0]), int(ix[-1]) + 1)
+                    blocks.append((sel, (sel, sel), C[sel, sel]))
+                else:
+                    blocks.append((ix, np.ix_(ix, ix), C[np.ix_(ix, ix)]))
+            self._structure[key] = _Structure(sign, D.astype(float), sj, share, tuple(blocks))
         return self._structure[key]
 
     def _joint_or_root(self, poses: Poses, joint: np.ndarray, B: int):
