@@ -143,9 +143,12 @@ def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.nd
         scale = np.where(use, np.maximum(np.std(obs.pots, axis=0), 1e-6), np.inf)
         noise = Noise(scale, 1.0, use_markers=False)
         lam = np.full(obs.n_frames, 1e-2)
-        prev, st = np.inf, None
+        prev, st, spare = np.inf, None, None
         for _ in range(10):
-            q, lam, st, cost, _ = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, False, st)
+            q, lam, st_new, cost, _ = q_step(
+                obs, params, noise, q, lam, options.batch_size, options.jobs, False, st, spare
+            )
+            spare, st = st, st_new
             if cost.sum() > 0.99 * prev:
                 break
             prev = cost.sum()
@@ -393,6 +396,7 @@ def _alternate(
     accel = Anderson(options.anderson) if options.anderson and bfgs is None else None
     cost = total_cost(obs, params, st, noise, sigma)
     mu = 0.0  # Marquardt damping of the joint step (JOINT_DAMPING)
+    spare = None  # a State no longer needed, overwritten by the next q-step (q_step's ``out``)
     for _ in range(options.max_iterations):
         noise = _noise(obs, sigma, options)
         red = warm or np.isfinite(prev_fixed)  # the q-phase's degrees of freedom, for σ below
@@ -401,7 +405,9 @@ def _alternate(
             params_j, _, se_joint = theta_step(
                 obs, params, noise, q, lam, options.batch_size, jobs=options.jobs, damping=mu, st=st
             )
-            q_j, lam_j, st_j, _, used = q_step(obs, params_j, noise, q, lam, options.batch_size, options.jobs, red, st)
+            q_j, lam_j, st_j, _, used = q_step(
+                obs, params_j, noise, q, lam, options.batch_size, options.jobs, red, st, spare
+            )
             try:
                 ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
                 rss_j = _rss(obs, ph_j.params, st_j, options)
@@ -409,11 +415,13 @@ def _alternate(
             except NumericalError:  # a step so far off that a redescending loss drops every marker
                 cost_j = np.inf
             if cost_j < cost:
-                q, lam, st, ph, cost, rss, stepped = q_j, lam_j, st_j, ph_j, cost_j, rss_j, True
+                spare, st = st, st_j
+                q, lam, ph, cost, rss, stepped = q_j, lam_j, ph_j, cost_j, rss_j, True
                 mu = mu / 10 if mu > JOINT_DAMPING / 10 else 0.0
             else:  # the full step overshot: damp the next one (and alternate plainly this time)
+                spare = st_j  # (a rejected step's State: the plain q-step overwrites it)
                 mu = max(10 * mu, JOINT_DAMPING)
-            q_j = st_j = None  # (a rejected step's State goes before the plain q-step makes another)
+            q_j = st_j = None
         if not stepped:
             q_old = q
             if bfgs is not None:
@@ -421,7 +429,10 @@ def _alternate(
             else:
                 steps = options.q_steps if options.schedule == "lm-iter" else 30
                 for _ in range(steps):
-                    q, lam, st, _, used = q_step(obs, params, noise, q, lam, options.batch_size, options.jobs, red, st)
+                    q, lam, st_new, _, used = q_step(
+                        obs, params, noise, q, lam, options.batch_size, options.jobs, red, st, spare
+                    )
+                    spare, st = st, st_new
                     if options.schedule == "lm-batch" and np.all(lam >= 1e3):
                         break
             ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
