@@ -282,13 +282,26 @@ class Observation(Observability):
     def state(self, q: np.ndarray, batch: int = 2000, keep: bool = False) -> State:
         """s(q) and link poses for every frame, in batches; with ``keep`` also the rest of the
         linearisation (twists, ∂s/∂q of the linear pots: :class:`State`) for the q-phase."""
-        if keep:
-            parts = [self.linearise(q[i : i + batch]) for i in range(0, q.shape[0], batch)]
-            return State(
-                *(np.concatenate([getattr(p, k) for p in parts]) for k in ("s", "Rl", "pl")),
-                np.concatenate([p.xi for p in parts], axis=1),
-                np.concatenate([p.ds_lin for p in parts]),
-            )
+        if keep:  # each batch written into the State's arrays (no list of parts to concatenate)
+            out = None
+            for i in range(0, q.shape[0], batch):
+                sl = slice(i, i + batch)
+                lin = self.linearise(q[sl])
+                if out is None:
+                    T = q.shape[0]
+                    out = State(
+                        *(np.empty((T, *getattr(lin, k).shape[1:])) for k in ("s", "Rl", "pl")),
+                        np.empty((6, T, lin.xi.shape[2])),
+                        np.empty((T, *lin.ds_lin.shape[1:])),
+                    )
+                out.s[sl], out.Rl[sl], out.pl[sl], out.xi[:, sl], out.ds_lin[sl] = (
+                    lin.s,
+                    lin.Rl,
+                    lin.pl,
+                    lin.xi,
+                    lin.ds_lin,
+                )
+            return out
         parts = [self.evaluate(q[i : i + batch]) for i in range(0, q.shape[0], batch)]
         return State(
             np.concatenate([p[0] for p in parts]),
