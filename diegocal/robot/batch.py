@@ -132,6 +132,7 @@ class BatchKinematics:
         self._chain_t = np.ascontiguousarray(np.swapaxes(self._chain, 1, 2))
         self._links: dict = {}  # links -> (parent joints, placements R, p, all placements identity)
         self._structure: dict = {}
+        self._layouts: dict = {}  # (links, blocks) -> points_normal_blocks' layout
 
     # ------------------------------------------------------------------ links
     def link_info(self, links) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -266,6 +267,21 @@ class BatchKinematics:
         accumulated as point masses per joint (module docstring).
         """
         st = self._points_structure(links)
+        joints = np.arange(self.n)
+        blocks = tuple(joints[sel] for sel, _, _ in st.blocks)
+        Hb, g = self.points_normal_blocks(poses, x, links, w, f, blocks, xi)
+        H = np.zeros((x.shape[0], self.n, self.n))
+        for (_, (rows, cols), _), h in zip(st.blocks, Hb, strict=True):
+            H[:, rows, cols] = h
+        return H, g
+
+    def points_normal_blocks(
+        self, poses: Poses | None, x: np.ndarray, links, w: np.ndarray, f: np.ndarray, blocks, xi=None
+    ) -> tuple[tuple, np.ndarray]:
+        """:meth:`points_normal` with ``Σ_m w_m J_mᵀ J_m`` as its diagonal blocks on ``blocks``
+        (index arrays of joints, increasing, each holding whole groups of joints that move points
+        in common: H is zero between two blocks): a tuple of (B, k, k), and ``Σ_m J_mᵀ f_m`` (B, n)."""
+        st = self._points_structure(links)
         B, N = x.shape[:2]
         xs = [x[..., i] for i in range(3)]
         fs = [f[..., i] for i in range(3)]
@@ -292,13 +308,47 @@ class BatchKinematics:
         Y[:, 4] = mu * v[1] + om[2] * c[0] - om[0] * c[2]
         Y[:, 5] = mu * v[2] + om[0] * c[1] - om[1] * c[0]
         XiT = np.ascontiguousarray(xi.transpose(1, 2, 0))  # (B, n, 6)
-        H = np.zeros((B, self.n, self.n))
-        for ix, (rows, cols), C in st.blocks:  # s_o s_d ξ_o · Ĝ_d ξ_d: Ξᵀ Y's upper triangle, mirrored
-            U = XiT[:, ix] @ Y[:, :, ix]
-            U *= C
-            H[:, rows, cols] = U + U.transpose(0, 2, 1)
+        out = []
+        for k, groups in self._block_layout(links, blocks):
+            Hb = None if len(groups) == 1 and groups[0][1] is None else np.zeros((B, k, k))
+            for sel, local, C in groups:  # s_o s_d ξ_o · Ĝ_d ξ_d: Ξᵀ Y's upper triangle, mirrored
+                U = XiT[:, sel] @ Y[:, :, sel]
+                U *= C
+                if Hb is None:  # the group is the whole block
+                    Hb = U + U.transpose(0, 2, 1)
+                else:
+                    Hb[:, local[0], local[1]] = U + U.transpose(0, 2, 1)
+            out.append(Hb)
         g = (om * acc[13:16]).sum(0) + (v * acc[10:13]).sum(0)  # ξ_k · Σ (x × f, f)
-        return H, g * st.sign_joint
+        return tuple(out), g * st.sign_joint
+
+    def _block_layout(self, links, blocks) -> tuple:
+        """Per block of ``blocks``: its size k and its groups of joints that move points in common,
+        as (their joints, their place in the block (None: the whole block), the weights C) of
+        :class:`_Structure`'s ``blocks``."""
+        key = (tuple(links), tuple(tuple(int(j) for j in b) for b in blocks))
+        if key not in self._layouts:
+            st = self._points_structure(links)
+            owner = np.full(self.n, -1)
+            for i, b in enumerate(blocks):
+                owner[np.asarray(b, dtype=int)] = i
+            layout = [(len(b), []) for b in blocks]
+            for sel, _, C in st.blocks:
+                joints = np.arange(self.n)[sel]
+                i = int(owner[joints[0]])
+                b = np.asarray(blocks[i], dtype=int)
+                local = np.searchsorted(b, joints)
+                if np.any(owner[joints] != i) or np.any(b[local] != joints):
+                    raise RobotConfigError("a block of joints splits joints that move points in common")
+                if len(joints) == len(b):
+                    place = None
+                elif local[-1] - local[0] + 1 == len(local):
+                    place = (slice(int(local[0]), int(local[-1]) + 1),) * 2
+                else:
+                    place = np.ix_(local, local)
+                layout[i][1].append((sel, place, C))
+            self._layouts[key] = tuple((k, tuple(groups)) for k, groups in layout)
+        return self._layouts[key]
 
     def points_velocity(
         self, poses: Poses | None, x: np.ndarray, links, u: np.ndarray, xi: np.ndarray | None = None

@@ -156,8 +156,8 @@ def information(
     for start in range(0, T, batch):
         sl = slice(start, min(start + batch, T))
         H, g, _, (s, Rl, pl), _, ex = normal_equations(obs, params, noise, q, sl, want_red=False, st=st)
-        Hd = damped(H, np.zeros(H.shape[0]), inplace=True)  # the tiny ridge only: joints no sensor sees
-        v = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ J_qᵀ W z
+        Hd = damped(H, np.zeros(g.shape[0]), inplace=True)  # the tiny ridge only: joints no sensor sees
+        v = block_solve(Hd, g)  # H⁻¹ J_qᵀ W z
         # J_θᵀ W (J_q H⁻¹ J_qᵀ W z − z) per frame: minus the profiled score (its sign is immaterial)
         scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v))
         picked.append(pick(Hd, ex, s, Rl, pl, np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)))

@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from diegocal.robot.batch import cross
 from diegocal.stac.model import Observation, Params, State
-from diegocal.stac.qphase import Noise, base_points, block_solve, damped, map_batches, normal_equations
+from diegocal.stac.qphase import BlockDiag, Noise, base_points, block_solve, damped, map_batches, normal_equations
 
 
 def free_mask(obs: Observation) -> np.ndarray:
@@ -156,26 +156,27 @@ def _q_jacobian(obs: Observation, params: Params, noise: Noise, xi, ds_lin, x, w
     return Jq, w
 
 
-def pick(Hd: np.ndarray, ex: dict, s, Rl, pl, k: np.ndarray) -> tuple:
+def pick(Hd: BlockDiag, ex: dict, s, Rl, pl, k: np.ndarray) -> tuple:
     """What :func:`reduced_matrix` needs of the frames ``k`` of a batch: from its damped normal
     matrix Hd, the linearisation ``ex`` of :func:`~diegocal.stac.qphase.normal_equations` and
     s, Rl, pl."""
     wx = None if ex["wx"] is None else ex["wx"][k]
     x = None if ex["x"] is None else ex["x"][k]
     xi = np.moveaxis(ex["lin"].xi[:, k], 0, 1)
-    return (Hd[k], ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k], xi, ex["lin"].ds_lin[k], x)
+    return (Hd.take(k), ex["wp"][k], wx, s[k], Rl[k], pl[k], ex["valid"][k], xi, ex["lin"].ds_lin[k], x)
 
 
 def reduced_matrix(obs: Observation, params: Params, noise: Noise, picked: list, chunk: int = 100) -> np.ndarray:
     """Σ_t J_θ,tᵀ W_t J_θ,t − B_tᵀ H_t⁻¹ B_t (Nθ, Nθ), the Schur complement's matrix (module
     docstring), over the frames ``picked``: a list of :func:`pick` per batch, taken ``chunk``
     frames at a time (the dense per-frame Jacobians stay small)."""
-    Hd, wp, wx, s, Rl, pl, valid, xi, ds_lin, x = (
-        None if picked[0][i] is None else np.concatenate([p[i] for p in picked]) for i in range(10)
+    wp, wx, s, Rl, pl, valid, xi, ds_lin, x = (
+        None if picked[0][i] is None else np.concatenate([p[i] for p in picked]) for i in range(1, 10)
     )
+    Hd = BlockDiag.concat([p[0] for p in picked])
     N = 2 * obs.n_pots + 3 * obs.n_markers + 6
     S = np.zeros((N, N))
-    for i in range(0, Hd.shape[0], chunk):
+    for i in range(0, s.shape[0], chunk):
         c = slice(i, i + chunk)
         Jq, w = _q_jacobian(
             obs, params, noise, xi[c], ds_lin[c], None if x is None else x[c], wp[c], None if wx is None else wx[c]
@@ -184,11 +185,11 @@ def reduced_matrix(obs: Observation, params: Params, noise: Noise, picked: list,
         WJt = Jt * w[..., None]
         S += _theta_gram(obs, Jt, WJt)
         Bt = np.swapaxes(Jq, 1, 2) @ WJt  # (b, n, Nθ)
-        for ix in obs.sparsity.blocks:  # Bᵀ H⁻¹ B block by block, on the entries of θ the block's joints see
+        for ix, Hb in zip(Hd.index, Hd.blocks, strict=True):  # Bᵀ H⁻¹ B block by block, on the θ it sees
             Bb = Bt[:, ix]
             cols = np.flatnonzero(np.any(Bb != 0.0, axis=(0, 1)))
             Bb = Bb[:, :, cols]
-            X = np.linalg.solve(Hd[c][:, ix[:, None], ix], Bb)
+            X = np.linalg.solve(Hb[c], Bb)
             S[np.ix_(cols, cols)] -= Bb.reshape(-1, len(cols)).T @ X.reshape(-1, len(cols))
     return S
 
@@ -222,7 +223,7 @@ def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: sli
     the reduced matrix needs of its frames t ≡ 0 (mod stride)."""
     H, g, _, (s, Rl, pl), red, ex = normal_equations(obs, params, noise, q, sl, want_red, st)
     Hd = damped(H, lam[sl], inplace=True)
-    u = block_solve(Hd, g, obs.sparsity.blocks)  # H⁻¹ g
+    u = block_solve(Hd, g)  # H⁻¹ g
     v = _times_q(obs, params, noise, ex, u)
     rhs = _theta_transpose_times(obs, params, noise, s, Rl, pl, v)
     k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)

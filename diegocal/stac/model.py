@@ -74,11 +74,15 @@ class Sparsity:
     lin_cols : (c,) joints that move the linear pots' anchors relative to each other
     blocks : index arrays of the joints in each independent block (connected components of the
         pattern): the normal matrix is block diagonal, each block is solved on its own
+    pot_local, lin_local : where the pots' entries (per kind, then the linear pots' lin_cols x
+        lin_cols) lie in the blocks: per block, (which of the entries, their flat indices in it)
     """
 
     pot_flat: dict
     lin_cols: np.ndarray
     blocks: tuple
+    pot_local: dict
+    lin_local: tuple
 
 
 @dataclass(frozen=True)
@@ -190,7 +194,9 @@ class Observation(Observability):
             pattern |= st.pattern
         _, label = connected_components(pattern, directed=False)
         blocks = tuple(np.flatnonzero(label == c) for c in np.unique(label))
-        return Sparsity(pot_flat, lin_cols, blocks)
+        pot_local = {kind: _local(U, blocks, n) for kind, (_, U, _) in pot_flat.items()}
+        lin_local = _local((lin_cols[:, None] * n + lin_cols).ravel(), blocks, n)
+        return Sparsity(pot_flat, lin_cols, blocks, pot_local, lin_local)
 
     @property
     def n_pots(self) -> int:
@@ -377,6 +383,20 @@ class Observation(Observability):
             np.asarray(cal.mocap_R, float),
             np.asarray(cal.mocap_T, float),
         )
+
+
+def _local(U: np.ndarray, blocks: tuple, n: int) -> tuple:
+    """Flat indices U into an n x n matrix split over its diagonal blocks: per block, (the
+    positions in U of its entries, their flat indices in the block); an entry outside every
+    block is none of them (the pattern puts every non-zero entry in one)."""
+    out = []
+    for ix in blocks:
+        pos = np.full(n, -1)
+        pos[ix] = np.arange(len(ix))
+        r, c = pos[U // n], pos[U % n]
+        sel = np.flatnonzero((r >= 0) & (c >= 0))
+        out.append((sel, r[sel] * len(ix) + c[sel]))
+    return tuple(out)
 
 
 def _known(stream, specs, what: str, ignored: dict):

@@ -97,17 +97,46 @@ def frame_cost(obs, params, noise, s, Rl, pl, pots, markers, valid) -> np.ndarra
     return c
 
 
+@dataclass(frozen=True)
+class BlockDiag:
+    """A block-diagonal n x n matrix per frame, as its blocks: ``blocks[i]`` (B, k_i, k_i) on the
+    joints ``index[i]`` (k_i,) (:attr:`~diegocal.stac.model.Sparsity.blocks`); zero between them.
+    The q-phase's JᵀWJ is one: its blocks are formed, damped, solved and inverted on their own."""
+
+    blocks: tuple
+    index: tuple
+    n: int
+
+    def dense(self) -> np.ndarray:
+        """The full matrices (B, n, n)."""
+        out = np.zeros((self.blocks[0].shape[0], self.n, self.n))
+        for ix, h in zip(self.index, self.blocks, strict=True):
+            out[:, ix[:, None], ix] = h
+        return out
+
+    def take(self, k) -> BlockDiag:
+        """The frames ``k`` (an index array)."""
+        return BlockDiag(tuple(h[k] for h in self.blocks), self.index, self.n)
+
+    @staticmethod
+    def concat(parts: list) -> BlockDiag:
+        """The frames of ``parts`` (BlockDiags of the same blocks), one after another."""
+        blocks = tuple(np.concatenate(hs) for hs in zip(*(p.blocks for p in parts), strict=True))
+        return BlockDiag(blocks, parts[0].index, parts[0].n)
+
+
 def normal_equations(
     obs: Observation, params: Params, noise: Noise, q: np.ndarray, sl: slice, want_red: bool = True, st=None
 ):
-    """JᵀWJ (B, n, n), gradient JᵀW r (B, n), per-frame cost (B,), the evaluation at q[sl], the
-    redundancy of each sensor type (dict, summed over the batch; see :func:`redundancy`) and the
-    linearisation with the robust weights (dict, for the joint step).
+    """JᵀWJ (a :class:`BlockDiag` on ``obs.sparsity.blocks``, B frames), gradient JᵀW r (B, n),
+    per-frame cost (B,), the evaluation at q[sl], the redundancy of each sensor type (dict,
+    summed over the batch; see :func:`redundancy`) and the linearisation with the robust weights
+    (dict, for the joint step).
 
     J is eq. 2.22 (pots) and eq. 2.23 (markers), never formed densely: rotary/encoder/tendon pots
     have the constant ∂s/∂q = A, the linear pots' rows are few, and the markers' sums come from
-    the joint twists (:meth:`diegocal.robot.batch.BatchKinematics.points_normal`). ``st``: the
-    :class:`State` at this very q (T frames); its kept linearisation, if any, replaces the
+    the joint twists (:meth:`diegocal.robot.batch.BatchKinematics.points_normal_blocks`). ``st``:
+    the :class:`State` at this very q (T frames); its kept linearisation, if any, replaces the
     forward kinematics.
     """
     q = q[sl]
@@ -117,7 +146,8 @@ def normal_equations(
     s, Rl, pl = lin.s, lin.Rl, lin.pl
     zp, zx, rx, xb = _residuals(params, noise, s, Rl, pl, pots, markers, valid)
     B, n = q.shape
-    parts = {}  # per sensor type: its entries of H, as flat indices (k,) and values (B, k)
+    sp = obs.sparsity
+    parts = {}  # per sensor type: its entries of H, as (Sparsity's place in the blocks, values (B, k))
     wp = np.zeros_like(zp)
     wx = x = None
     if noise.use_markers and obs.n_markers:  # the markers' sums first: H starts from them
@@ -125,39 +155,43 @@ def normal_equations(
         x = xb  # markers in the base frame (eq. 2.11)
         f = (rx.reshape(-1, 3) @ params.R).reshape(rx.shape)
         f *= (wx / noise.sig_x)[..., None]  # w Rᵀ z / σ_x (eq. 2.23 with R)
-        H, g = obs.kin.points_normal(None, x, obs.marker_links, wx / noise.sig_x**2, f, xi=lin.xi)
+        Hb, g = obs.kin.points_normal_blocks(None, x, obs.marker_links, wx / noise.sig_x**2, f, sp.blocks, lin.xi)
         parts[MARKERS] = None  # the rest of H
         c0 = rho(zx, noise.loss, noise.huber).sum(1)
     else:
-        H, g, c0 = np.zeros((B, n, n)), np.zeros((B, n)), np.zeros(B)
+        Hb, g, c0 = tuple(np.zeros((B, len(ix), len(ix))) for ix in sp.blocks), np.zeros((B, n)), np.zeros(B)
     if noise.use_pots and obs.n_pots:
         kp = params.gain / noise.sig_p  # eq. 2.22: ∂z_p/∂q = (gain / σ_p) ∂s/∂q
         wp = np.ones_like(zp)  # pots: Gaussian under every loss (robust.py)
         wz = wp * zp * kp
         g += wz @ obs.A
-        sp = obs.sparsity
-        flat = H.reshape(B, n * n)
-        for kind, (idx, U, outer) in sp.pot_flat.items():
-            parts[kind] = (U, (wp[:, idx] * kp[idx] ** 2) @ outer)
-            flat[:, U] += parts[kind][1]
+        for kind, (idx, _, outer) in sp.pot_flat.items():
+            parts[kind] = (sp.pot_local[kind], (wp[:, idx] * kp[idx] ** 2) @ outer)
         if len(obs.linear):
             Jl = lin.ds_lin * kp[obs.linear, None]
             g[:, sp.lin_cols] += np.einsum("blc,bl->bc", lin.ds_lin, wz[:, obs.linear])
-            U = (sp.lin_cols[:, None] * n + sp.lin_cols).ravel()
-            parts["linear"] = (U, (np.swapaxes(Jl, 1, 2) @ (Jl * wp[:, obs.linear, None])).reshape(B, -1))
-            flat[:, U] += parts["linear"][1]
+            parts["linear"] = (sp.lin_local, (np.swapaxes(Jl, 1, 2) @ (Jl * wp[:, obs.linear, None])).reshape(B, -1))
+        for i, h in enumerate(Hb):
+            flat = h.reshape(B, -1)
+            for where, vals in (p for p in parts.values() if p is not None):
+                sel, loc = where[i]
+                flat[:, loc] += vals[:, sel]
         c0 += 0.5 * (zp * zp).sum(1)
+    H = BlockDiag(Hb, sp.blocks, n)
     extra = {"lin": lin, "wp": wp, "zp": zp, "wx": wx, "rx": rx, "valid": valid, "x": x}
-    return H, g, c0, (s, Rl, pl), redundancy(H, parts, obs.sparsity.blocks) if want_red else {}, extra
+    return H, g, c0, (s, Rl, pl), redundancy(H, parts) if want_red else {}, extra
 
 
-def damped(H: np.ndarray, lam: np.ndarray, inplace: bool = False) -> np.ndarray:
+def damped(H: BlockDiag, lam: np.ndarray, inplace: bool = False) -> BlockDiag:
     """H + λ diag(H) + ε I per frame (Levenberg-Marquardt, with a tiny ridge for joints no
-    sensor sees): H (B, n, n), λ (B,); ``inplace`` overwrites H."""
-    out = H if inplace else H.copy()
-    diag = np.einsum("bii->bi", out)
-    diag += lam[:, None] * diag + 1e-9 * (1.0 + diag.max(1, keepdims=True))
-    return out
+    sensor sees; ε from the largest diagonal entry of the frame's whole H): λ (B,); ``inplace``
+    overwrites H's blocks."""
+    blocks = H.blocks if inplace else tuple(h.copy() for h in H.blocks)
+    diags = [np.einsum("bii->bi", h) for h in blocks]
+    top = np.max([d.max(1) for d in diags], axis=0)[:, None]
+    for diag in diags:
+        diag += lam[:, None] * diag + 1e-9 * (1.0 + top)
+    return H if inplace else BlockDiag(blocks, H.index, H.n)
 
 
 def map_batches(fn, T: int, batch: int, jobs: int = 1) -> list:
@@ -170,25 +204,14 @@ def map_batches(fn, T: int, batch: int, jobs: int = 1) -> list:
     return [fn(sl) for sl in slices]
 
 
-def block_solve(A: np.ndarray, b: np.ndarray, blocks) -> np.ndarray:
-    """A⁻¹ b per frame for block-diagonal A (B, n, n) (blocks: joint index arrays); b (B, n) or
-    (B, n, k)."""
+def block_solve(A: BlockDiag, b: np.ndarray) -> np.ndarray:
+    """A⁻¹ b per frame, block by block; b (B, n) or (B, n, k)."""
     vec = b.ndim == 2
     b = b[..., None] if vec else b
     out = np.zeros(b.shape)
-    for ix in blocks:
-        rows, cols = _block_index(ix)
-        out[:, cols] = np.linalg.solve(A[:, rows, cols], b[:, cols])
+    for ix, a in zip(A.index, A.blocks, strict=True):
+        out[:, ix] = np.linalg.solve(a, b[:, ix])
     return out[..., 0] if vec else out
-
-
-def _block_index(ix: np.ndarray) -> tuple:
-    """Indices that pick the block ``ix`` (k,) of joints out of (B, n, n) and (B, n) arrays: basic
-    slices (a view, no gather) when its joints are consecutive, as in a URDF's depth-first order."""
-    if ix[-1] - ix[0] + 1 == len(ix):
-        sl = slice(int(ix[0]), int(ix[-1]) + 1)
-        return sl, sl
-    return ix[:, None], ix
 
 
 def spd_inverse(A: np.ndarray) -> np.ndarray:
@@ -208,7 +231,7 @@ def spd_inverse(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(Li, 1, 2) @ Li
 
 
-def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
+def redundancy(H: BlockDiag, parts: dict) -> dict:
     """Variance-component redundancy per sensor type: tr(H⁻¹ H_g) summed over frames.
 
     Fitting q_t absorbs n degrees of freedom per frame; the share of type g is the trace of
@@ -216,31 +239,24 @@ def redundancy(H: np.ndarray, parts: dict, blocks=None) -> dict:
     ignores this and collapses to 0 when a type can be fitted exactly (one rotary pot per joint);
     σ_g² = RSS_g / (N_g − tr_g) (Helmert/Förstner variance-component estimation) does not.
 
-    H (B, n, n) = Σ_g H_g; ``parts`` gives each H_g as flat indices into n x n and values (B, k),
+    H = Σ_g H_g; ``parts`` gives each H_g as (per block of H, which of its values and their flat
+    indices in the block: :attr:`~diegocal.stac.model.Sparsity.pot_local`) and values (B, k),
     or None for (at most) one type, whose share is the rest: Σ_g tr(H⁻¹ H_g) = n − ε tr(H⁻¹) with
-    H⁻¹ = (H + ε I)⁻¹. ``blocks``: H is block diagonal on these joint index arrays.
-    Returns {group: Σ_t tr_g}.
+    H⁻¹ = (H + ε I)⁻¹. Returns {group: Σ_t tr_g}.
     """
-    B, n = H.shape[:2]
-    blocks = blocks if blocks is not None else (np.arange(n),)
-    eps = 1e-9 * (1.0 + np.einsum("bii->b", H))
+    B, n = H.blocks[0].shape[0], H.n
+    eps = 1e-9 * (1.0 + sum(np.einsum("bii->b", h) for h in H.blocks))
     out = {g: 0.0 for g, p in parts.items() if p is not None}
     ridge = 0.0  # Σ_t ε_t tr(H_t⁻¹)
-    pos = np.empty(n, dtype=int)
-    for ix in blocks:  # H⁻¹ block by block (it is block diagonal too); never the full (B, n, n)
-        rows, cols = _block_index(ix)
-        Hb = np.array(H[:, rows, cols])
+    for i, h in enumerate(H.blocks):  # H⁻¹ block by block (it is block diagonal too)
+        Hb = h.copy()
         np.einsum("bii->bi", Hb)[...] += eps[:, None]
         Hi = spd_inverse(Hb)
-        k = len(ix)
         ridge += float(eps @ np.einsum("bii->b", Hi))
-        pos[:] = -1
-        pos[ix] = np.arange(k)
-        flat = Hi.reshape(B, k * k)
-        for g, (U, vals) in ((g, p) for g, p in parts.items() if p is not None):
-            r, c = pos[U // n], pos[U % n]
-            inside = r >= 0  # H_g's entries in this block (an entry never straddles two)
-            out[g] += float(np.vdot(flat[:, r[inside] * k + c[inside]], vals[:, inside]))  # H_g, Hi symmetric
+        flat = Hi.reshape(B, -1)
+        for g, (where, vals) in ((g, p) for g, p in parts.items() if p is not None):
+            sel, loc = where[i]  # H_g's entries in this block (an entry never straddles two)
+            out[g] += float(np.vdot(flat[:, loc], vals[:, sel]))  # H_g, Hi symmetric
     for g in (g for g, p in parts.items() if p is None):
         out[g] = B * n - ridge - sum(out.values())
     return out
@@ -252,7 +268,7 @@ def _lm_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl, want_r
     (``st``) the one made here goes into ``base`` (the frames whose step fails keep it). Returns
     the batch's redundancy."""
     H, g, c, _, red, ex = normal_equations(obs, params, noise, q, sl, want_red, st)
-    delta = block_solve(damped(H, lam[sl], inplace=True), g, obs.sparsity.blocks)
+    delta = block_solve(damped(H, lam[sl], inplace=True), g)
     np.clip(q[sl] - delta, obs.lower, obs.upper, out=cand[sl])  # projection onto the joint limits
     c0[sl] = c
     if base is not None:

@@ -55,7 +55,7 @@ def test_profiled_information_and_scores_equal_the_dense_route(tree_robot):
     Jq, w = _dense_q_jacobian(obs, params, noise, res.q, ex["wp"], ex["wx"])
     Jt = _theta_jacobian(obs, params, noise, s, Rl, pl, ex["valid"])
     z = np.concatenate([ex["zp"], ex["rx"].reshape(300, -1)], axis=1)
-    Hd = damped(H, np.zeros(300))
+    Hd = damped(H, np.zeros(300)).dense()
     dense_A, dense_g = 0.0, []
     for t in range(300):
         W = np.diag(w[t])

@@ -85,7 +85,8 @@ def test_sparse_normal_equations_equal_the_dense_jacobian(tree_robot):
     eq. 2.22-2.23 Jacobian (Observation.evaluate), with occlusion and linear pots."""
     obs, params, noise, _ = _setup(tree_robot)
     q = np.random.default_rng(2).normal(0.0, 0.3, (obs.n_frames, tree_robot.n_joints))
-    H, g, _, _, red, ex = normal_equations(obs, params, noise, q, slice(None), want_red=True)
+    Hb, g, _, _, red, ex = normal_equations(obs, params, noise, q, slice(None), want_red=True)
+    H = Hb.dense()  # (its blocks: obs.sparsity.blocks; zero between them, as the dense route says)
     _, ds, _, _, Jx = obs.evaluate(q, params.xyz)
     Jp = ds * (params.gain / noise.sig_p)[None, :, None]
     Jm = np.einsum("ij,bmjn->bmin", params.R, Jx) / noise.sig_x
