@@ -168,9 +168,9 @@ def dynamic_range(obs: Observation) -> dict:
 
 
 def weights(obs: Observation, params: Params, st: State, noise: Noise):
-    """Robust weights for the p-phase: pots (T, P) (all 1: Gaussian), markers (T, M); zero where
-    occluded."""
-    wp = np.ones_like(obs.pots)
+    """Robust weights for the p-phase: pots (T, P) (all 1: Gaussian; a read-only view, no array
+    of ones per call), markers (T, M); zero where occluded."""
+    wp = np.broadcast_to(1.0, obs.pots.shape)
     wx = obs.valid.astype(float)
     if noise.loss != "linear":
         _, zx, _ = residuals(obs, params, noise, st.s, st.Rl, st.pl, obs.pots, obs.markers, obs.valid)
