@@ -159,7 +159,7 @@ def information(
         Hd = damped(H, np.zeros(g.shape[0]), inplace=True)  # the tiny ridge only: joints no sensor sees
         v = block_solve(Hd, g)  # H⁻¹ J_qᵀ W z
         # J_θᵀ W (J_q H⁻¹ J_qᵀ W z − z) per frame: minus the profiled score (its sign is immaterial)
-        scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v))
+        scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v), ex["x"])
         picked.append(pick(Hd, ex, s, Rl, pl, np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)))
     return stride * reduced_matrix(obs, params, noise, picked), scores
 

@@ -65,20 +65,22 @@ def _theta_jacobian(obs: Observation, params: Params, noise: Noise, s, Rl, pl, v
     return J
 
 
-def _theta_transpose_times(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
+def _theta_transpose_times(obs, params, noise, s, Rl, pl, v, xb=None) -> np.ndarray:
     """J_θᵀ v summed over frames (Nθ,) without forming J_θ; v (B, P + 3M), invalid rows zero."""
-    return _theta_rows(obs, params, noise, s, Rl, pl, v).sum(axis=0)
+    return _theta_rows(obs, params, noise, s, Rl, pl, v, xb).sum(axis=0)
 
 
-def _theta_rows(obs, params, noise, s, Rl, pl, v) -> np.ndarray:
-    """J_θ,tᵀ v_t of every frame (B, Nθ) without forming J_θ; v (B, P + 3M), invalid rows zero."""
+def _theta_rows(obs, params, noise, s, Rl, pl, v, xb=None) -> np.ndarray:
+    """J_θ,tᵀ v_t of every frame (B, Nθ) without forming J_θ; v (B, P + 3M), invalid rows zero.
+    ``xb``: the markers in the base frame (B, M, 3) at these poses and θ, when the caller has them
+    (the normal equations' ``x``)."""
     P, M = obs.n_pots, obs.n_markers
     B = v.shape[0]
     vp = v[:, :P] / noise.sig_p
     out = [vp * s, vp]
     if M:
         vx = v[:, P:].reshape(-1, M, 3) / noise.sig_x
-        y = _rotate(base_points(Rl, pl, params.xyz), params.R.T)  # R x_b
+        y = _rotate(base_points(Rl, pl, params.xyz) if xb is None else xb, params.R.T)  # R x_b
         out.append(np.einsum("bmki,bmk->bmi", Rl, _rotate(vx, params.R)).reshape(B, 3 * M))  # (R h_r)ᵀ v
         out.append(cross(y, vx).sum(1))  # (−[y]×)ᵀ v = y × v
         out.append(vx.sum(1))
@@ -225,7 +227,7 @@ def _schur_batch(obs: Observation, params: Params, noise: Noise, q, lam, sl: sli
     Hd = damped(H, lam[sl], inplace=True)
     u = block_solve(Hd, g)  # H⁻¹ g
     v = _times_q(obs, params, noise, ex, u)
-    rhs = _theta_transpose_times(obs, params, noise, s, Rl, pl, v)
+    rhs = _theta_transpose_times(obs, params, noise, s, Rl, pl, v, ex["x"])
     k = np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)
     return rhs, red, pick(Hd, ex, s, Rl, pl, k)
 

@@ -188,9 +188,10 @@ def damped(H: BlockDiag, lam: np.ndarray, inplace: bool = False) -> BlockDiag:
     overwrites H's blocks."""
     blocks = H.blocks if inplace else tuple(h.copy() for h in H.blocks)
     diags = [np.einsum("bii->bi", h) for h in blocks]
-    top = np.max([d.max(1) for d in diags], axis=0)[:, None]
+    ridge = 1e-9 * (1.0 + np.max([d.max(1) for d in diags], axis=0)[:, None])
+    lam = lam[:, None]
     for diag in diags:
-        diag += lam[:, None] * diag + 1e-9 * (1.0 + top)
+        diag += lam * diag + ridge
     return H if inplace else BlockDiag(blocks, H.index, H.n)
 
 
