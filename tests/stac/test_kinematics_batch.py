@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import synth
 
+from diegocal.errors import RobotConfigError
 from diegocal.io import load_yaml, save_yaml
 from diegocal.robot import anchor_points, load_robot, marker_points
 from diegocal.robot.batch import BatchKinematics
@@ -40,6 +41,16 @@ def _check_sums(kin, poses, x, links, J, rng):
     H, g = kin.points_normal(poses, x, links, w, f)
     np.testing.assert_allclose(H, np.einsum("bmcj,bm,bmck->bjk", J, w, J), atol=1e-12)
     np.testing.assert_allclose(g, np.einsum("bmcj,bmc->bj", J, f), atol=1e-12)
+    n = J.shape[-1]  # the same sums as the blocks of coarser partitions (the q-phase's, pots joining groups)
+    for blocks in ((np.arange(n),), (np.arange(0, n, 2), np.arange(1, n, 2))):
+        try:
+            Hb, gb = kin.points_normal_blocks(poses, x, links, w, f, blocks)
+        except RobotConfigError:  # a partition that splits joints that move points in common
+            assert len(blocks) > 1
+            continue
+        np.testing.assert_array_equal(gb, g)
+        for ix, h in zip(blocks, Hb, strict=True):
+            np.testing.assert_allclose(h, H[:, ix[:, None], ix], atol=1e-12)
     np.testing.assert_allclose(kin.points_velocity(poses, x, links, u), np.einsum("bmcj,bj->bmc", J, u), atol=1e-12)
     fJ = np.einsum("bmcj,bmc->bmj", J, f)
     np.testing.assert_allclose(kin.points_project(poses, x, links, f), fJ, atol=1e-12)
