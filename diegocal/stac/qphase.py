@@ -223,13 +223,14 @@ def spd_inverse(A: np.ndarray) -> np.ndarray:
         L = np.linalg.cholesky(A)
     except np.linalg.LinAlgError:
         return np.linalg.inv(A)
-    Li = np.zeros_like(L)  # L⁻¹ by forward substitution, row by row, every frame at once
+    # L⁻¹ by forward substitution, row by row, every frame at once, each row written over L's
+    # (row i of L is last read to make row i of L⁻¹): one array of temporaries less per call
     d = 1.0 / np.einsum("bii->bi", L)
     for i in range(L.shape[1]):
-        r = -(L[:, i : i + 1, :i] @ Li[:, :i, : i + 1])[:, 0]
+        r = -(L[:, i : i + 1, :i] @ L[:, :i, : i + 1])[:, 0]
         r[:, i] += 1.0
-        Li[:, i, : i + 1] = r * d[:, i : i + 1]
-    return np.swapaxes(Li, 1, 2) @ Li
+        L[:, i, : i + 1] = r * d[:, i : i + 1]
+    return np.swapaxes(L, 1, 2) @ L
 
 
 def redundancy(H: BlockDiag, parts: dict) -> dict:
@@ -250,9 +251,13 @@ def redundancy(H: BlockDiag, parts: dict) -> dict:
     out = {g: 0.0 for g, p in parts.items() if p is not None}
     ridge = 0.0  # Σ_t ε_t tr(H_t⁻¹)
     for i, h in enumerate(H.blocks):  # H⁻¹ block by block (it is block diagonal too)
-        Hb = h.copy()
-        np.einsum("bii->bi", Hb)[...] += eps[:, None]
-        Hi = spd_inverse(Hb)
+        diag = np.einsum("bii->bi", h)  # H + ε I in H's own block (no copy), its diagonal put back after
+        kept = diag.copy()
+        diag += eps[:, None]
+        try:
+            Hi = spd_inverse(h)
+        finally:
+            diag[...] = kept
         ridge += float(eps @ np.einsum("bii->b", Hi))
         flat = Hi.reshape(B, -1)
         for g, (where, vals) in ((g, p) for g, p in parts.items() if p is not None):
