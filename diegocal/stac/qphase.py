@@ -313,9 +313,10 @@ def _reusable(out: State | None, st: State | None, T: int) -> bool:
 
 
 #: Frames per forward-kinematics pass over the candidates: the kinematics loops over the joints,
-#: so its cost per frame falls with the batch (diego: a third less at 2,000 frames than at 250),
-#: while the normal equations' arrays stay in cache at ``batch_size``.
-KINEMATICS_BATCH = 2000
+#: so its cost per frame falls with the batch, up to a few hundred frames; past a thousand or so
+#: (diego) its temporaries, megabytes each, are handed back to the system after each pass and
+#: every pass faults in fresh pages. The normal equations' arrays stay in cache at ``batch_size``.
+KINEMATICS_BATCH = 500
 
 
 def kinematics_batch(batch: int) -> int:
