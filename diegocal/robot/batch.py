@@ -390,12 +390,12 @@ class BatchKinematics:
             o, d = np.nonzero(share & nested & (~nested.T | np.tri(self.n, dtype=bool).T))  # one per pair
             C = np.zeros((self.n, self.n))
             C[o, d] = np.where(o == d, 0.5, 1.0) * sj[o] * sj[d]
-            reach = share.astype(float)  # its transitive closure: joints linked through shared points
-            while not np.array_equal(closed := (reach @ reach + reach) > 0, reach > 0):
-                reach = closed.astype(float)
+            from scipy.sparse.csgraph import connected_components  # here: --help never loads it
+
+            _, label = connected_components(share, directed=False)  # joints linked through shared points
             blocks = []
-            for first in np.unique(np.argmax(closed[share.any(axis=0)], axis=1)):  # one per component
-                ix = np.flatnonzero(closed[first])
+            for comp in np.unique(label[share.any(axis=0)]):  # the joints that move no point: none
+                ix = np.flatnonzero(label == comp)
                 if ix[-1] - ix[0] + 1 == len(ix):  # consecutive (a URDF's depth-first order): views
                     sel = slice(int(ix[0]), int(ix[-1]) + 1)
                     blocks.append((sel, (sel, sel), C[sel, sel]))
