@@ -29,6 +29,7 @@ from diegocal.diagnose.types import (
     Residuals,
     Tested,
     UnitDiagnosis,
+    fitted_form,
     pooled,
 )
 from diegocal.terms import Term
@@ -151,7 +152,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             added = {_key(g.term) for g in group} | {_key(best.term)}
             runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]
             new_terms = adapter.terms(new)
-            fitted_term = next((t for t in new_terms if _same(t, chosen.term)), chosen.term)
+            fitted_term = fitted_form(chosen.term, new_terms)
             finding = Finding(fitted_term, "term", before, after, evidence, runners)
             why = _decline(finding, options.min_gain)
             if why:
@@ -485,9 +486,3 @@ def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks,
         "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
     }
     return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (stood.to_dict(),))
-
-
-def _same(a: Term, b: Term) -> bool:
-    """Whether ``a`` is the fitted form of ``b``: one cause on one channel (and partner); its region
-    and shape parameters may have moved in the fit."""
-    return a.cause == b.cause and a.channel == b.channel and a.extra.get("partner") == b.extra.get("partner")

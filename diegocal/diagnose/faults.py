@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from diegocal.causes import CAUSES
-from diegocal.diagnose.types import Finding
+from diegocal.diagnose.types import Finding, fitted_form
 
 
 def heldout_removed(finding: Finding) -> float:
@@ -47,7 +47,7 @@ def write_off(adapter, fitted, res, train, held, options, say, unit: str) -> tup
                 trial[c] = np.asarray(trial.get(c, np.zeros_like(m, bool)), bool) | np.asarray(m, bool)
         new = adapter.fit(terms + (fault.term,), train)
         before, after = adapter.score(fitted, held, trial), adapter.score(new, held, trial)
-        term = fault.term if role != "term" else _fitted(fault.term, adapter.terms(new))
+        term = fault.term if role != "term" else fitted_form(fault.term, adapter.terms(new))
         finding = Finding(term, role, before, after, dict(fault.evidence, channels=list(fault.readings)))
         removed = heldout_removed(finding)
         what = f"{fault.term.cause} on {fault.term.channel}{unit}"
@@ -71,11 +71,6 @@ def write_off(adapter, fitted, res, train, held, options, say, unit: str) -> tup
         if role == "term":  # the model moved: the readings' faults are judged on the new one
             pending = [f for f in faults(fitted, adapter.residuals(fitted)) if f.term.cause not in tried]
     return fitted, terms, exclude, findings, minor
-
-
-def _fitted(term, fitted_terms):
-    """``term`` as the refit left it (its value refined, with standard errors)."""
-    return next((t for t in fitted_terms if (t.cause, t.channel) == (term.cause, term.channel)), term)
 
 
 def _role(term) -> str:

@@ -81,6 +81,14 @@ def column_rows(columns, channel: str, samples):
     return None if x is None else x[samples]
 
 
+def fitted_form(term: Term, fitted_terms) -> Term:
+    """``term`` as a fit of it left it among ``fitted_terms`` (its values refined, with standard
+    errors; its region and shape may have moved): the one of the same cause on the same channel
+    (and partner), or ``term`` itself where the fit has none."""
+    key = (term.cause, term.channel, term.extra.get("partner"))
+    return next((t for t in fitted_terms if (t.cause, t.channel, t.extra.get("partner")) == key), term)
+
+
 @dataclass(frozen=True)
 class Fault:
     """A per-reading data fault (marker outliers, swapped labels): not a regression.
