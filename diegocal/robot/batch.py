@@ -40,6 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse.csgraph import connected_components
 
 from diegocal.errors import RobotConfigError
 from diegocal.robot.model import PointSet, Robot
@@ -390,8 +391,6 @@ class BatchKinematics:
             o, d = np.nonzero(share & nested & (~nested.T | np.tri(self.n, dtype=bool).T))  # one per pair
             C = np.zeros((self.n, self.n))
             C[o, d] = np.where(o == d, 0.5, 1.0) * sj[o] * sj[d]
-            from scipy.sparse.csgraph import connected_components  # here: --help never loads it
-
             _, label = connected_components(share, directed=False)  # joints linked through shared points
             blocks = []
             for comp in np.unique(label[share.any(axis=0)]):  # the joints that move no point: none
