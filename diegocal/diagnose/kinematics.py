@@ -443,9 +443,12 @@ class KinematicsAdapter:
 
     def deleted(self, fitted: KinFit) -> tuple:
         """(pots (T, P) V, markers (T, M, 3) m): each reading minus its prediction by the frame's
-        other sensors with the model as saved (:meth:`score`), computed once per fit."""
+        other sensors with the model as saved (:meth:`score`), computed once per fit. Its q is
+        tracked from the fit's own (the same model and sensors: the same minimum to the tracking's
+        tolerance) rather than from the pots' inversion, which takes many more steps."""
         if fitted.deleted is None:
-            pred = predict(self.log, self.robot, self.calibration(fitted), (OTHERS,), ("pots", "markers"), self.options)
+            cal, both = self.calibration(fitted), ("pots", "markers")
+            pred = predict(self.log, self.robot, cal, (OTHERS,), both, self.options, q_init=fitted.q)
             pots = pred.pots[:, [pred.pot_names.index(n) for n in self.pot_names]]
             markers = pred.markers[:, [pred.marker_names.index(n) for n in self.marker_names]]
             readings = relabelled(self.log.stream("markers").data, self.marker_names, fitted.terms)  # labels as read

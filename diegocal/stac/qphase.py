@@ -335,6 +335,7 @@ def q_step(
     want_red: bool = True,
     st: State | None = None,
     out: State | None = None,
+    trial: np.ndarray | None = None,
 ):
     """One LM step on every frame.
 
@@ -344,13 +345,14 @@ def q_step(
     kinematics at ``q``. ``out``: a State of the same frames that the caller no longer needs
     (the one before ``st``), overwritten with the new one: a State takes kilobytes per frame
     (diego: 5 kB), and fresh pages for it at every step are system time spent on every step.
+    ``trial`` (T,): filled with each frame's cost at its step's candidate, taken or not.
 
     The steps are solved ``batch`` frames at a time; the candidates' forward kinematics runs
     :data:`KINEMATICS_BATCH` frames at a time, and a frame whose step fails to lower its cost
     (λ x 4, keep q) takes back its row of the State at q.
     """
     T = q.shape[0]
-    cand, c0, c1 = np.empty_like(q), np.empty(T), np.empty(T)
+    cand, c0, c1 = np.empty_like(q), np.empty(T), np.empty(T) if trial is None else trial
     base = _blank(obs, T) if st is None or st.xi is None else None  # the linearisation at q
     reds = map_batches(
         lambda sl: _lm_batch(obs, params, noise, q, lam, sl, want_red, st, cand, c0, base), T, batch, jobs
@@ -422,23 +424,27 @@ def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
     return np.array([sigma[k] for k in obs.kinds], dtype=float)
 
 
-#: A frame is tracked once an accepted LM step lowers its cost by at most this share of it (or its
-#: steps keep failing): the cost is then within about that share of its minimum.
+#: A frame is tracked once an accepted LM step lowers its cost by at most this share of it, or a
+#: failed one would have raised it by at most this share (or its steps keep failing): the cost is
+#: then within about that share of its minimum.
 TRACK_TOL = 1e-8
 
 
 def track(obs: Observation, params: Params, noise: Noise, q, max_steps: int, batch: int = 250, jobs: int = 1):
     """LM steps (:func:`q_step`) from q (T, n) until every frame is tracked (:data:`TRACK_TOL`) or
     ``max_steps``: (q, the State at q). A frame's steps keep being accepted long after it has
-    converged (the cost still falls by rounding), so λ alone never says it is done."""
+    converged (the cost still falls by rounding), so λ alone never says it is done; and from a
+    converged q (a fit's) its steps fail by rounding, so λ would take many steps to say it."""
     lam, cost = np.full(q.shape[0], 1e-2), np.full(q.shape[0], np.inf)
     tracked = np.zeros(q.shape[0], dtype=bool)
+    trial = np.empty(q.shape[0])  # each step's cost at its candidate, taken or not
     st = spare = None  # spare: the State before st, whose arrays the next step overwrites
     for _ in range(max_steps):
-        q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, want_red=False, out=spare)
+        q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, want_red=False, out=spare, trial=trial)
         spare, st = st, new
-        accepted = new_lam < lam  # a failed step says nothing
-        tracked |= (new_lam >= 1e3) | (accepted & np.isfinite(cost) & (cost - c <= TRACK_TOL * cost))
+        accepted = new_lam < lam
+        done = np.where(accepted, np.isfinite(cost) & (cost - c <= TRACK_TOL * cost), trial - c <= TRACK_TOL * c)
+        tracked |= (new_lam >= 1e3) | done
         lam, cost = new_lam, c
         if np.all(tracked):
             break

@@ -36,3 +36,22 @@ def test_tracking_stops_when_every_frame_has_converged(tree_robot, monkeypatch):
     np.testing.assert_allclose(stop, full, rtol=1e-7)
     start = _cost(obs, params, noise, q0)
     assert np.all(stop < start)  # the frames were far from converged at q0
+
+
+def test_tracking_from_a_converged_q_stops_at_once(tree_robot, monkeypatch):
+    """From a fit's own q (a diagnosis scores its fit from there) the steps fail by rounding: a
+    failed step that would have raised the cost by at most the tolerance says the frame is done,
+    instead of λ rising x4 per failure until it reads as stuck (eleven steps on diego)."""
+    log = synth.simulate(tree_robot, 40, seed=5, occlusion=0.3)
+    obs = Observation(log, tree_robot)
+    params = obs.params_from(Calibration.from_dict(log.truth.params))
+    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    q0 = np.clip(log.truth.signals["q"].data + 0.1, obs.lower, obs.upper)
+    q_fit, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
+
+    steps = []
+    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: steps.append(1) or q_step(*a, **k))
+    q_again, _ = track(obs, params, noise, q_fit, max_steps=40, batch=7)
+    monkeypatch.undo()
+    assert len(steps) <= 2
+    np.testing.assert_allclose(_cost(obs, params, noise, q_again), _cost(obs, params, noise, q_fit), rtol=1e-7)
