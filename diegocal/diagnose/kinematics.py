@@ -69,11 +69,17 @@ BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
 #: largest of 30 s at 4.8-5.3 σ against 5.6 σ). A practical margin over Diego San's largest, not
 #: a derived level. Ghosts and reflections are centimetres off (tens of σ).
 OUTLIER_SIGMAS = 7.0
-#: GN refinements of the continuous terms after each STAC fit of an extended model.
-REFINE = 1
-#: Further refinements while a clock shift still moves by more than CLOCK_TOL of itself: a shift of
-#: many samples is far from its first, linear, estimate (0.18 s after one step for 0.21 s).
-CLOCK_REFINE = 3
+#: GN refinements of the continuous terms after each STAC fit of an extended model: one always,
+#: more while a term still moves by more than REFINE_TOL of its standard error, or a clock shift
+#: by more than CLOCK_TOL of itself. The term's step and STAC's refit of the calibration
+#: alternate, which converges linearly: on a 60-s diego log a pot's cubic coefficient moved by
+#: 0.9, 0.4 and 0.15 of its standard error in the first three steps (truth 0; after one step it
+#: was 1.9 SE from it), and a shift of many samples is far from its first, linear, estimate
+#: (0.18 s after one step for 0.21 s).
+REFINE_MAX = 4
+#: The causes whose parameters a refinement steps (the rest are fitted by STAC or not continuous).
+REFINED = (*POT_CAUSES, "link_offset", "time_offset")
+REFINE_TOL = 0.2
 CLOCK_TOL = 0.02
 #: Clock shifts tried for a time offset (a family, both signs), s: a shift of several samples
 #: moves the markers by far more than their linearisation at zero predicts (a PID-driven joint
@@ -131,10 +137,10 @@ class KinematicsAdapter:
         fitted = self.fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
-        for i in range(REFINE + CLOCK_REFINE):
-            if not any(t.cause in (*POT_CAUSES, "link_offset", "time_offset") for t in terms):
+        for i in range(REFINE_MAX):
+            if not any(t.cause in REFINED for t in terms):
                 break
-            if i >= REFINE and not _clock_moved(terms, fitted.terms):
+            if i > 0 and not _moved(terms, fitted.terms):
                 break
             terms = fitted.terms
             fitted = self.fit_once(self._refine(fitted), train, fitted)
@@ -488,6 +494,19 @@ def _seeded(robot, cal: Calibration):
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
     return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
+
+
+def _moved(before, after) -> bool:
+    """Whether a refinement moved a term (:data:`REFINE_MAX`): a clock shift by more than its
+    tolerance, another refined term's parameter by more than REFINE_TOL of its standard error."""
+    old = {(t.cause, t.channel): t for t in before}
+    for t in after:
+        was = old.get((t.cause, t.channel))
+        if t.cause == "time_offset" or t.cause not in REFINED or was is None or was.values.shape != t.values.shape:
+            continue
+        if np.any(np.abs(t.values - was.values) > REFINE_TOL * t.stderrs):  # a NaN error: not moved
+            return True
+    return _clock_moved(before, after)
 
 
 def _clock_moved(before, after) -> bool:
