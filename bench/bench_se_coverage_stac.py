@@ -20,7 +20,8 @@ split), on logs that hide the term's cause: a clock shift (``seconds``; both gen
 slipped marker (``dx, dy, dz`` from its slip time; both generators: the offsim slip slides over
 0.2-0.5 s and the term's time is the middle of the slide) and a pot's quadratic transfer
 (``c2, c3``; the project's simulator, whose curve is the term's: c2 = its departure at the ends of
-the term's range, c3 = 0). The term's structure (cause, channel, slip time) is the truth's, so
+the term's range through the model's fitted gain, which takes the curve's part linear in the
+reading, c3 = 0). The term's structure (cause, channel, slip time) is the truth's, so
 the count is of the standard errors, not of the naming.
 
     .venv/bin/python bench/bench_se_coverage_stac.py --seeds 50 --robot icub
@@ -126,16 +127,14 @@ def term_one(task) -> dict:
     adapter = KinematicsAdapter(log, robot)
     train = split_blocks(log.n_samples, 10).mask("train")
     start = time.process_time()
-    term = adapter.fit((make_term(cause, ch, region=region),), train).terms[0]
+    fitted = adapter.fit((make_term(cause, ch, region=region),), train)
+    term = fitted.terms[0]
     if cause == "time_offset":
         truth = [v["seconds"]]
     elif cause == "marker_slip":
         truth = v["dxyz"]
-    else:
-        from diegocal.stac.calibration import Calibration
-
-        cal = Calibration.from_dict(log.truth.params)
-        g = cal.gain[cal.pot_names.index(ch)]
+    else:  # the model's gain: the curve's part linear in the reading is the gain's, not the term's
+        g = fitted.cal.gain[fitted.cal.pot_names.index(ch)]
         truth = [v["c2"] * (term.extra["half"] / g) ** 2, 0.0]
     z = (term.values - np.asarray(truth, float)) / term.stderrs
     return {"generator": generator, "cause": cause, "seed": seed, "z": z, "seconds": time.process_time() - start}
