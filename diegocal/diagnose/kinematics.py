@@ -41,9 +41,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
-from diegocal.diagnose.kinematics_clock import clock_fault, clock_tol, far_clock
+from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
+from diegocal.diagnose.kinematics_refine import REFINE_MAX, REFINED, moved
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
 from diegocal.diagnose.types import Candidate, Fault, Residuals
@@ -69,19 +70,6 @@ BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
 #: largest of 30 s at 4.8-5.3 σ against 5.6 σ). A practical margin over Diego San's largest, not
 #: a derived level. Ghosts and reflections are centimetres off (tens of σ).
 OUTLIER_SIGMAS = 7.0
-#: GN refinements of the continuous terms after each STAC fit of an extended model: one always,
-#: more while a term still moves by more than REFINE_TOL of its standard error, or a clock shift
-#: by more than CLOCK_TOL of itself. The term's step and STAC's refit of the calibration
-#: alternate, which converges linearly: on a 60-s diego log a pot's cubic coefficient moved by
-#: 0.9, 0.4 and 0.15 of its standard error in the first three steps (truth 0; after one step it
-#: was 1.9 SE from it), and a shift of many samples is far from its first, linear, estimate
-#: (0.18 s after one step for 0.21 s); on 30-s iCub logs half the clock shifts took a fifth step
-#: to come within 2 SE of the truth.
-REFINE_MAX = 6
-#: The causes whose parameters a refinement steps (the rest are fitted by STAC or not continuous).
-REFINED = (*POT_CAUSES, "link_offset", "time_offset")
-REFINE_TOL = 0.2
-CLOCK_TOL = 0.02
 #: Clock shifts tried for a time offset (a family, both signs), s: a shift of several samples
 #: moves the markers by far more than their linearisation at zero predicts (a PID-driven joint
 #: turns through a radian in a quarter second), so each variant is the change of the predicted
@@ -141,7 +129,7 @@ class KinematicsAdapter:
         for i in range(REFINE_MAX):
             if not any(t.cause in REFINED for t in terms):
                 break
-            if i > 0 and not _moved(terms, fitted.terms):
+            if i > 0 and not moved(terms, fitted.terms, TIME_SHIFTS[-1]):
                 break
             terms = fitted.terms
             fitted = self.fit_once(self._refine(fitted), train, fitted)
@@ -495,26 +483,6 @@ def _seeded(robot, cal: Calibration):
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
     return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
-
-
-def _moved(before, after) -> bool:
-    """Whether a refinement moved a term (:data:`REFINE_MAX`): a clock shift by more than its
-    tolerance, another refined term's parameter by more than REFINE_TOL of its standard error."""
-    old = {(t.cause, t.channel): t for t in before}
-    for t in after:
-        was = old.get((t.cause, t.channel))
-        if t.cause == "time_offset" or t.cause not in REFINED or was is None or was.values.shape != t.values.shape:
-            continue
-        if np.any(np.abs(t.values - was.values) > REFINE_TOL * t.stderrs):  # a NaN error: not moved
-            return True
-    return _clock_moved(before, after)
-
-
-def _clock_moved(before, after) -> bool:
-    """Whether a time offset moved by more than its tolerance (:func:`clock_tol`) between two fits."""
-    a = {t.channel: float(t.values[0]) for t in before if t.cause == "time_offset"}
-    b = {t.channel: float(t.values[0]) for t in after if t.cause == "time_offset"}
-    return any(abs(b[c] - a[c]) > clock_tol(b[c], CLOCK_TOL, TIME_SHIFTS[-1]) for c in b if c in a)
 
 
 def _pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from diegocal.diagnose import DiagnoseOptions, diagnose
-from diegocal.diagnose.kinematics import REFINE_TOL, _moved
+from diegocal.diagnose.kinematics_refine import REFINE_TOL, moved
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
@@ -22,20 +22,26 @@ def _curve(c2, c3, se=(0.002, 0.003)):
 def test_a_term_that_moved_by_more_than_the_tolerance_of_its_error_is_refined_again():
     before = (_curve(0.050, -0.0050),)
     step = 1.5 * REFINE_TOL * 0.003  # c3 moves by 1.5 x the tolerance of its standard error
-    assert _moved(before, (_curve(0.050, -0.0050 + step),))
-    assert not _moved(before, (_curve(0.050, -0.0050 + step / 3.0),))
+    assert moved(before, (_curve(0.050, -0.0050 + step),), 0.5)
+    assert not moved(before, (_curve(0.050, -0.0050 + step / 3.0),), 0.5)
 
 
 def test_a_parameter_without_a_standard_error_does_not_keep_the_refinement_going():
     before = (_curve(0.050, -0.0050, se=(math.nan, math.nan)),)
-    assert not _moved(before, (_curve(0.060, 0.0050, se=(math.nan, math.nan)),))
+    assert not moved(before, (_curve(0.060, 0.0050, se=(math.nan, math.nan)),), 0.5)
+
+
+def test_a_clock_shift_moves_by_its_own_tolerance():
+    shift = make_term("time_offset", "markers", [0.200], stderr=[1e-5])
+    assert moved((shift,), (shift.with_values([0.210], [1e-5]),), 0.5)  # 5 % of itself
+    assert not moved((shift,), (shift.with_values([0.2001], [1e-5]),), 0.5)  # 10 SE, 0.05 %
 
 
 def test_a_term_new_to_the_model_is_not_a_move():
     offset = make_term("link_offset", "r_knee", [0.001, 0.0, 0.0], stderr=[1e-4] * 3)
-    assert not _moved((), (offset,))
-    moved = offset.with_values(np.array([0.002, 0.0, 0.0]), np.full(3, 1e-4))
-    assert _moved((offset,), (moved,))
+    assert not moved((), (offset,), 0.5)
+    shifted = offset.with_values(np.array([0.002, 0.0, 0.0]), np.full(3, 1e-4))
+    assert moved((offset,), (shifted,), 0.5)
 
 
 @pytest.mark.slow

@@ -1,0 +1,43 @@
+"""When a found kinematic term's refinement stops (:meth:`KinematicsAdapter.fit
+<diegocal.diagnose.kinematics.KinematicsAdapter.fit>`): Gauss-Newton steps on its parameters
+alternate with STAC's refit of the calibration, one always, more while the term still moves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diegocal.diagnose.kinematics_clock import clock_tol
+from diegocal.stac.terms import POT_CAUSES
+
+#: Refinements at most: one always, more while a term still moves by more than REFINE_TOL of its
+#: standard error, or a clock shift by more than CLOCK_TOL of itself. The term's step and STAC's
+#: refit alternate, which converges linearly: on a 60-s diego log a pot's cubic coefficient moved
+#: by 0.9, 0.4 and 0.15 of its standard error in the first three steps (truth 0; after one step it
+#: was 1.9 SE from it), and a shift of many samples is far from its first, linear, estimate (0.18 s
+#: after one step for 0.21 s); on 30-s iCub logs half the clock shifts took a fifth step to come
+#: within 2 SE of the truth.
+REFINE_MAX = 6
+REFINE_TOL = 0.2
+CLOCK_TOL = 0.02
+#: The causes whose parameters a refinement steps (the rest are fitted by STAC or not continuous).
+REFINED = (*POT_CAUSES, "link_offset", "time_offset")
+
+
+def moved(before, after, beyond: float) -> bool:
+    """Whether a refinement moved a term from ``before`` to ``after``: a clock shift by more than
+    its tolerance (:func:`~diegocal.diagnose.kinematics_clock.clock_tol`; ``beyond``: the largest
+    shift the candidates try), another refined term's parameter by more than REFINE_TOL of its
+    standard error (a NaN error: not moved). A term new to ``after`` is no move."""
+    old = {(t.cause, t.channel): t for t in before}
+    for t in after:
+        was = old.get((t.cause, t.channel))
+        if was is None or t.cause not in REFINED or was.values.shape != t.values.shape:
+            continue
+        if t.cause == "time_offset":
+            shift = float(t.values[0])
+            if abs(shift - float(was.values[0])) > clock_tol(shift, CLOCK_TOL, beyond):
+                return True
+        elif np.any(np.abs(t.values - was.values) > REFINE_TOL * t.stderrs):
+            return True
+    return False
