@@ -44,6 +44,16 @@ class StacResult:
 
 
 @dataclass(frozen=True)
+class WarmStart:
+    """Where a fit of nearly the same model ended, for STAC to start from instead of the nominal θ
+    and its coarse stage: its calibration (θ and σ per sensor type) and q (T, n) rad on the log's
+    frames (a diagnosis refits its extended model after each small step of a term)."""
+
+    calibration: Calibration
+    q: np.ndarray
+
+
+@dataclass(frozen=True)
 class StacOptions:
     """Options shared by the calibration methods (each method reads the ones it uses).
 

@@ -86,7 +86,7 @@ from diegocal.stac.qphase import (
     resolvable,
     rho,
 )
-from diegocal.stac.result import IterationRecord, StacOptions, StacResult
+from diegocal.stac.result import IterationRecord, StacOptions, StacResult, WarmStart
 from diegocal.stac.robust import LOSSES, REDESCENDING
 from diegocal.stac.schedules import Anderson, BfgsSchedule
 from diegocal.stac.static import static_poses
@@ -243,7 +243,7 @@ def _aitken(history: list) -> dict:
     return out
 
 
-def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> StacResult:
+def calibrate(log: Log, robot: Robot, options: StacOptions | None = None, start: WarmStart | None = None) -> StacResult:
     """STAC (thesis §2.2-2.3): calibrate pots, markers and the mocap frame; track q.
 
     Parameters
@@ -251,6 +251,8 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
     log : Log with ``pots`` (T, P) V and ``markers`` (T, M, 3) m (NaN where occluded)
     robot : Robot; names in the log must be in its sensors.yaml
     options : StacOptions (schedule, loss, max_iterations, tolerance, jobs, batch_size, ...)
+    start : WarmStart, optional: the alternation starts there (under the linear loss, with a σ for
+        every sensor type of the log) instead of from the nominal θ through the coarse stage
 
     Returns
     -------
@@ -263,10 +265,10 @@ def calibrate(log: Log, robot: Robot, options: StacOptions | None = None) -> Sta
     # threads only add synchronisation (diego, 25,000 frames, loaded 2-core machine: 42 s of CPU
     # instead of 15); --jobs runs batches in parallel instead
     with threadpool_limits(limits=1, user_api="blas"):
-        return _calibrate(log, robot, options)
+        return _calibrate(log, robot, options, start)
 
 
-def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
+def _calibrate(log: Log, robot: Robot, options: StacOptions, start: WarmStart | None = None) -> StacResult:
     t0 = time.perf_counter()
     base = Observation(log, robot)
     base.check_observable()
@@ -275,7 +277,8 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
     def refit(obs: Observation):
         return _robust_fit(obs, options, t0, history)
 
-    obs, fine = refit(base)
+    warm = _warm(base, start, options, t0, history)
+    obs, fine = (base, warm) if warm is not None else refit(base)
     poses = static_poses(log) if options.check_poses else None
     if poses is not None:  # static poses filed with another pose's markers (poses.py)
         obs, fine = write_off_foreign_poses(base, obs, fine, poses, refit, options)
@@ -294,6 +297,18 @@ def _calibrate(log: Log, robot: Robot, options: StacOptions) -> StacResult:
         stderr={"method": "block_sandwich", "blocks": int(cov.blocks), "block_s": round(block_s, 3)},
     )
     return StacResult(cal, q, tuple(history))
+
+
+def _warm(obs: Observation, start: WarmStart | None, options: StacOptions, t0: float, history: list) -> _Stage | None:
+    """The alternation from a warm start (σ re-estimated from its first iteration on); None where
+    none fits: another loss than the linear, q not of every frame, a sensor type without its σ."""
+    if start is None or options.loss != "linear" or np.shape(start.q) != (obs.n_frames, obs.robot.n_joints):
+        return None
+    sigma = {g: float(start.calibration.sigma_by_group.get(g, np.nan)) for g in obs.groups}
+    if not np.all(np.isfinite(list(sigma.values()))):
+        return None
+    q = np.clip(np.asarray(start.q, float), obs.lower, obs.upper)
+    return _alternate(obs, obs.params_from(start.calibration), q, sigma, options, t0, history)
 
 
 #: Passes of "write off the markers of gross frames and fit again" (robust losses only).
