@@ -44,12 +44,12 @@ from diegocal.diagnose import geometry
 from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
-from diegocal.diagnose.kinematics_refine import REFINE_MAX, REFINED, moved
+from diegocal.diagnose.kinematics_refine import REFINED, refined
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
-from diegocal.io import Log, make_stream, save_yaml
+from diegocal.io import Log, save_yaml
 from diegocal.lstsq import TallLstsq
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.predict import OTHERS, predict
@@ -126,13 +126,8 @@ class KinematicsAdapter:
         fitted = self.fit_once(terms, train, base)
         if not terms:
             self._baseline = fitted
-        for i in range(REFINE_MAX):
-            if not any(t.cause in REFINED for t in terms):
-                break
-            if i > 0 and not moved(terms, fitted.terms, TIME_SHIFTS[-1]):
-                break
-            terms = fitted.terms
-            fitted = self.fit_once(self._refine(fitted), train, fitted, warm=True)
+        if any(t.cause in REFINED for t in terms):
+            fitted = refined(self, fitted, train, TIME_SHIFTS[-1])
         return fitted
 
     def _own(self, term: Term, train) -> Term:
@@ -144,7 +139,7 @@ class KinematicsAdapter:
             return replace(term, extra={k: v for k, v in term.extra.items() if k != "span"})
         return term
 
-    def fit_once(self, terms, train, previous: KinFit | None = None, options=None, warm: bool = False) -> KinFit:
+    def fit_once(self, terms, train, previous=None, options=None, warm: bool = False, track=None) -> KinFit:
         """STAC on the training frames of the log mapped into ``terms``, then q tracked on every
         frame (from ``previous``'s q: the pot terms act on its model readings).
 
@@ -153,7 +148,8 @@ class KinematicsAdapter:
         plus the slip): from the link origins it can end in a degenerate optimum (a pot type's σ
         collapsed to 0, tendons 3 x their noise) once a marker is split. ``options``: STAC's, default
         the adapter's. ``warm``: STAC starts at ``previous``'s calibration and q (the same terms, a
-        step apart: two iterations instead of twenty on diego)."""
+        step apart: two iterations instead of twenty on diego). ``track``: the frames q is tracked
+        on (:meth:`_track`; None: all)."""
         robot, options = self.robot, options or self.options
         if previous is not None:
             robot, options = _seeded(robot, previous.cal), replace(options, marker_seed="nominal")
@@ -162,12 +158,7 @@ class KinematicsAdapter:
         model_pots = None if previous is None else previous.pots
         applied = apply_terms(terms, self.log, robot, model_pots)
         idx = np.flatnonzero(train)
-        sub = Log(
-            applied.log.time[idx],
-            {k: make_stream(s.names, s.data[idx]) for k, s in applied.log.streams.items()},
-            robot=applied.log.robot,
-            rate_hz=applied.log.rate_hz,
-        )
+        sub = applied.log.take(idx)
         if chain:  # stac --geometry on the training poses, its geometry then composed into the robot
             cal, chain = geometry.fit_chain(sub, applied.robot, options, self.poses[idx])
             applied = apply_terms(terms + geometry.per_joint(chain), self.log, robot, model_pots)
@@ -175,10 +166,23 @@ class KinematicsAdapter:
             start = WarmStart(previous.cal, previous.q[idx]) if warm and previous is not None else None
             cal = calibrate(sub, applied.robot, options, start).calibration
         terms = tuple(self._slip_value(t, cal) for t in terms) + ((chain,) if chain else ())
-        q0 = None if previous is None else previous.q
+        q, pots, markers = self._track(applied, cal, previous, track)
+        return KinFit(terms, cal, applied, q, pots, markers, train.copy())
+
+    def _track(self, applied: Applied, cal: Calibration, previous: KinFit | None, frames=None) -> tuple:
+        """q (T, n), pots (T, P) and markers (T, M', 3) of the model ``applied`` with ``cal``,
+        tracked from ``previous``'s q on the frames ``frames`` (T,) bool (None: every frame; the
+        others keep ``previous``'s, which must be of the same mapped terms)."""
         both = ("pots", "markers")
-        pred = predict(applied.log, applied.robot, cal, both, both, self.options, q_init=q0)
-        return KinFit(terms, cal, applied, pred.q, pred.pots, pred.markers, train.copy())
+        if frames is None or previous is None:
+            q0 = None if previous is None else previous.q
+            pred = predict(applied.log, applied.robot, cal, both, both, self.options, q_init=q0)
+            return pred.q, pred.pots, pred.markers
+        idx = np.flatnonzero(frames)
+        pred = predict(applied.log.take(idx), applied.robot, cal, both, both, self.options, q_init=previous.q[idx])
+        q, pots, markers = previous.q.copy(), previous.pots.copy(), previous.markers.copy()
+        q[idx], pots[idx], markers[idx] = pred.q, pred.pots, pred.markers
+        return q, pots, markers
 
     @staticmethod
     def _slip_value(term: Term, cal: Calibration) -> Term:
@@ -190,13 +194,13 @@ class KinematicsAdapter:
         # the two positions are estimated from disjoint frames: their errors nearly independent
         return term.with_values(cal.marker_xyz[k] - cal.marker_xyz[i], np.hypot(se[k], se[i]))
 
-    def _refine(self, fitted: KinFit) -> tuple:
+    def refine_step(self, fitted: KinFit) -> tuple:
         """One Gauss-Newton step on every continuous term at once (their projected columns,
         weighted least squares on the training frames), its normal equations a block of frames at a
         time (:meth:`Sweep.design`; the least squares by :class:`~diegocal.lstsq.TallLstsq`, each
         frame's share of AᵀWA and AᵀWr kept for the standard errors: (T, k, k), k the terms'
         parameters)."""
-        sweep = Sweep(fitted, self)
+        sweep = Sweep(fitted, self, train_only=True)
         cols, blocks, at = [], [], 0
         for i, t in enumerate(fitted.terms):
             c = self._term_columns(sweep, fitted, t)

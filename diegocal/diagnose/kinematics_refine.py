@@ -1,4 +1,4 @@
-"""When a found kinematic term's refinement stops (:meth:`KinematicsAdapter.fit
+"""A found kinematic term refined (:meth:`KinematicsAdapter.fit
 <diegocal.diagnose.kinematics.KinematicsAdapter.fit>`): Gauss-Newton steps on its parameters
 alternate with STAC's refit of the calibration, one always, more while the term still moves.
 """
@@ -41,3 +41,18 @@ def moved(before, after, beyond: float) -> bool:
         elif np.any(np.abs(t.values - was.values) > REFINE_TOL * t.stderrs):
             return True
     return False
+
+
+def refined(adapter, fitted, train: np.ndarray, beyond: float):
+    """``fitted`` (the adapter's fit of its terms, tracked on every frame) after its refinements
+    (:meth:`KinematicsAdapter.refine_step <diegocal.diagnose.kinematics.KinematicsAdapter.refine_step>`,
+    each a Gauss-Newton step and a warm-started STAC refit): whether a step is the last is known
+    from the step alone (:func:`moved`), so the others track q on the training frames only, which is
+    all the next step reads. ``beyond``: :func:`moved`'s."""
+    for k in range(1, REFINE_MAX + 1):
+        step = adapter.refine_step(fitted)
+        last = k == REFINE_MAX or (k > 1 and not moved(fitted.terms, step, beyond))
+        fitted = adapter.fit_once(step, train, fitted, warm=True, track=None if last else train)
+        if last:
+            break
+    return fitted

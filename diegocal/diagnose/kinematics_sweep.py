@@ -53,9 +53,11 @@ class Columns:
 class Sweep:
     """The linearisation at a fit (:class:`Linearised`), a block of frames at a time (module
     docstring): the columns of many terms in one sweep of three passes (:meth:`channels`,
-    :meth:`design`)."""
+    :meth:`design`). ``train_only``: only the blocks that hold training frames, all that a
+    Gauss-Newton step's :meth:`design` reads (every sum it takes is over the training frames); not
+    for :meth:`channels`, which writes every frame's columns."""
 
-    def __init__(self, fitted, adapter):
+    def __init__(self, fitted, adapter, train_only: bool = False):
         a = fitted.applied
         self.fitted, self.adapter = fitted, adapter
         self.obs = Observation(a.log, a.robot, need=(), needed_by="diagnose")
@@ -64,6 +66,9 @@ class Sweep:
         self.sigma_p = pot_sigmas(self.obs, self.sigma)  # the pots' σ as weighed (P,)
         self.T, self.P = fitted.q.shape[0], self.obs.n_pots
         self.R = self.P + 3 * self.obs.n_markers
+        slices = frame_slices(self.T, SWEEP_FRAMES)
+        self.train_only = train_only
+        self.slices = [sl for sl in slices if fitted.train[sl].any()] if train_only else slices
         self._cal_pinv: np.ndarray | None = None
         self._pot_gram: np.ndarray | None = None  # (2P, 2P) of every pot's projected gain and bias
         self._pot_pinv: dict = {}
@@ -74,7 +79,7 @@ class Sweep:
 
     def blocks(self):
         """Each block's :class:`Linearised`, in turn."""
-        for sl in frame_slices(self.T, SWEEP_FRAMES):
+        for sl in self.slices:
             yield self._block(sl)  # the caller's block is the only one alive while the next is made
 
     def _block(self, sl: slice) -> Linearised:
@@ -124,7 +129,7 @@ class Sweep:
     # ------------------------------------------------------------------ the three passes
     def _passes(self, n: int) -> None:
         """Progress over the next ``n`` passes, with the time left (a long log's take minutes)."""
-        blocks = len(frame_slices(self.T, SWEEP_FRAMES))
+        blocks = len(self.slices)
         what = f"candidate columns, {n} passes over blocks of {SWEEP_FRAMES} frames"
         self._tick = ticker(self.progress, n * blocks, what)
 
@@ -156,7 +161,7 @@ class Sweep:
             return made
 
         last = len(cols) - 1
-        for lin, items in in_order([producer(sl) for sl in frame_slices(self.T, SWEEP_FRAMES)], self.jobs):
+        for lin, items in in_order([producer(sl) for sl in self.slices], self.jobs):
             if items is None:
                 block(lin)
             else:
@@ -286,6 +291,8 @@ class Sweep:
         than CHANNEL_SHARE of its largest channel's weighted energy left out; None for a set that
         is zero everywhere (the calibration takes the term up entirely) and for a family's variant
         that ``families`` ranks below the best (never written). ``see``: :meth:`_maps`."""
+        if self.train_only:
+            raise ValueError("a sweep of the training blocks only cannot write every frame's columns")
         self._passes(3)
         betas, raw = self._fits(cols)
         maps, energy = self._maps(cols, betas, raw, see, families)

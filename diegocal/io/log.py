@@ -159,12 +159,16 @@ class Log:
 
     def slice(self, start: int, stop: int) -> Log:
         """Samples ``start:stop`` of every stream (truth signals included)."""
-        cut = {k: Stream(s.names, s.data[start:stop]) for k, s in self.streams.items()}
+        return self.take(slice(start, stop))
+
+    def take(self, idx) -> Log:
+        """Samples ``idx`` (a slice or an index array) of every stream (truth signals included)."""
+        cut = {k: Stream(s.names, s.data[idx]) for k, s in self.streams.items()}
         truth = self.truth
         if truth is not None:
-            sig = {k: Stream(s.names, s.data[start:stop]) for k, s in truth.signals.items()}
+            sig = {k: Stream(s.names, s.data[idx]) for k, s in truth.signals.items()}
             truth = replace(truth, signals=sig)
-        return replace(self, time=self.time[start:stop], streams=cut, truth=truth)
+        return replace(self, time=self.time[idx], streams=cut, truth=truth)
 
 
 def split_index(log: Log, at: float, unit: str) -> int:

@@ -3,16 +3,30 @@ alternate with STAC's refit of the calibration, which converges linearly; one st
 cubic coefficient several standard errors from the truth on diego logs."""
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
 
-from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics, kinematics_sweep
+from diegocal.diagnose.kinematics import KinematicsAdapter
 from diegocal.diagnose.kinematics_refine import REFINE_TOL, moved
+from diegocal.diagnose.kinematics_sweep import Sweep
+from diegocal.evaluate import split_blocks
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.sim.effects import parse_effect
 from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
 from diegocal.terms import make_term
+
+
+@pytest.fixture(scope="module")
+def curved():
+    """A 20-s finger log whose dip pot reads a curve of its transmission, the adapter and the
+    training frames (ten contiguous blocks, the engine's split)."""
+    robot = load_robot(resolve_robot_dir("finger", None))
+    opts = KinematicsOptions(duration=20.0, effects=(parse_effect("sensor_nonlinearity:dip"),))
+    log = simulate_kinematics(robot, opts, np.random.default_rng(3))
+    return KinematicsAdapter(log, robot), split_blocks(log.n_samples, 10).mask("train")
 
 
 def _curve(c2, c3, se=(0.002, 0.003)):
@@ -56,3 +70,51 @@ def test_a_pots_curve_is_refined_to_the_truth_on_a_diego_log():
     truth = log.truth.effects[0]
     term = next(f.term for f in found if f.cause == "sensor_nonlinearity" and f.channel == truth["channel"])
     assert abs(term.value("c3")) <= 2.0 * term.stderrs[term.names.index("c3")]
+
+
+def test_a_step_reads_the_training_blocks_only(curved, monkeypatch):
+    """A Gauss-Newton step's sums are all over the training frames: sweeping only the blocks that
+    hold them gives the same step and the same standard errors as sweeping every block."""
+    adapter, train = curved
+    monkeypatch.setattr(kinematics_sweep, "SWEEP_FRAMES", 37)  # blocks inside the held-out ones
+    fitted = adapter.fit_once((adapter._own(make_term("sensor_nonlinearity", "dip", [0.0, 0.0]), train),), train)
+    swept = []
+
+    def sweep(fitted, adapter, train_only=False, every=False):
+        s = Sweep(fitted, adapter, train_only=train_only and not every)
+        swept.append(len(s.slices))
+        return s
+
+    monkeypatch.setattr(kinematics, "Sweep", sweep)
+    got = adapter.refine_step(fitted)
+    monkeypatch.setattr(kinematics, "Sweep", partial(sweep, every=True))
+    want = adapter.refine_step(fitted)
+    assert swept[0] < swept[1]  # the held-out blocks skipped
+    np.testing.assert_allclose(got[0].values, want[0].values, rtol=1e-10)
+    np.testing.assert_allclose(got[0].stderrs, want[0].stderrs, rtol=1e-10)
+    assert np.all(got[0].values != 0.0)
+
+
+def test_refinements_track_the_training_frames_and_the_last_one_every_frame(curved, monkeypatch):
+    """Whether a step is the last is known from the step: the fits before it track q on the
+    training frames only (all the next step reads), the last on every frame, where q ends where
+    tracking the final model would leave it (not where the first fit left the held-out frames)."""
+    adapter, train = curved
+    sizes, made, real = [], [], kinematics.predict
+
+    def predict(log, *args, **kwargs):
+        sizes.append(log.n_samples)
+        made.append(real(log, *args, **kwargs))
+        return made[-1]
+
+    monkeypatch.setattr(kinematics, "predict", predict)
+    fitted = adapter.fit((make_term("sensor_nonlinearity", "dip", [0.0, 0.0]),), train)
+    T = train.size
+    assert len(sizes) >= 3  # the first fit, a refinement on the training frames at least, the last
+    assert sizes[0] == sizes[-1] == T
+    assert sizes[1:-1] == [int(train.sum())] * (len(sizes) - 2)
+    both = ("pots", "markers")
+    again = real(fitted.applied.log, fitted.applied.robot, fitted.cal, both, both, adapter.options, q_init=fitted.q)
+    held = ~train
+    assert np.abs(made[0].q[held] - fitted.q[held]).max() > 1e-3  # the refinements moved q there
+    np.testing.assert_allclose(again.q[held], fitted.q[held], atol=1e-5)
