@@ -1,8 +1,8 @@
 """The kinematics diagnosis's columns a block of frames at a time (issue #33: long logs): a
 :class:`Sweep` makes many terms' columns from the linearisation at a fit
 (:class:`~diegocal.diagnose.kinematics_lin.Linearised`) in three passes over blocks of
-SWEEP_FRAMES frames (the calibration-fit sums, the checks on the cleaned columns, the kept
-channels written in float32), so that the whole log's Jacobians and inverse normal matrices are
+SWEEP_FRAMES frames (the calibration-fit sums, on the blocks with training frames only; the checks
+on the cleaned columns; the kept channels written in float32), so that the whole log's Jacobians and inverse normal matrices are
 never held: only sums of size k×k or k0×k outlive a block.
 """
 
@@ -68,7 +68,8 @@ class Sweep:
         self.R = self.P + 3 * self.obs.n_markers
         slices = frame_slices(self.T, SWEEP_FRAMES)
         self.train_only = train_only
-        self.slices = [sl for sl in slices if fitted.train[sl].any()] if train_only else slices
+        self.trained = [sl for sl in slices if fitted.train[sl].any()]  # the blocks a fit's sums read
+        self.slices = self.trained if train_only else slices
         self._cal_pinv: np.ndarray | None = None
         self._pot_gram: np.ndarray | None = None  # (2P, 2P) of every pot's projected gain and bias
         self._pot_pinv: dict = {}
@@ -129,18 +130,19 @@ class Sweep:
     # ------------------------------------------------------------------ the three passes
     def _passes(self, n: int) -> None:
         """Progress over the next ``n`` passes, with the time left (a long log's take minutes)."""
-        blocks = len(self.slices)
+        blocks = len(self.trained) + (n - 1) * len(self.slices)  # the first pass: the fit's sums
         what = f"candidate columns, {n} passes over blocks of {SWEEP_FRAMES} frames"
-        self._tick = ticker(self.progress, n * blocks, what)
+        self._tick = ticker(self.progress, blocks, what)
 
-    def _each(self, cols: list[Columns], betas, maps, see, block=None) -> None:
+    def _each(self, cols: list[Columns], betas, maps, see, block=None, slices=None) -> None:
         """For each block (``block(lin)`` first, when given) and each of ``cols`` in turn: its
         projected columns on the block with their fit ``betas`` taken out and ``maps`` applied
         (None: not), handed to ``see(lin, [(i, columns), ...])`` a group of sets at a time, in
         order. The columns of several sets are projected together, PROJECT_COLUMNS at a time: one
         product with each frame's J for all of them (six times cheaper per column than one at a
         time). With ``jobs`` > 1 the next blocks' columns are made in threads while ``see`` reads
-        this one's (:func:`~diegocal.parallel.in_order`: the same calls in the same order)."""
+        this one's (:func:`~diegocal.parallel.in_order`: the same calls in the same order).
+        ``slices``: the blocks (default: the sweep's)."""
         if not cols and block is None:
             return
 
@@ -161,7 +163,7 @@ class Sweep:
             return made
 
         last = len(cols) - 1
-        for lin, items in in_order([producer(sl) for sl in self.slices], self.jobs):
+        for lin, items in in_order([producer(sl) for sl in slices or self.slices], self.jobs):
             if items is None:
                 block(lin)
             else:
@@ -193,9 +195,10 @@ class Sweep:
         return items
 
     def _fits(self, cols: list[Columns]) -> tuple[list, list]:
-        """Pass 1: each column set's fit by its span on the training frames (β (k_span, k)) and the
-        Gram matrix of its columns there (k, k); the calibration's and the pots' Gram matrices
-        (sums over the blocks) on the first sweep that needs them."""
+        """Pass 1, over the blocks that hold training frames: each column set's fit by its span on
+        the training frames (β (k_span, k)) and the Gram matrix of its columns there (k, k); the
+        calibration's and the pots' Gram matrices (sums over the blocks) on the first sweep that
+        needs them."""
         n = len(cols)
         b, raw = [None] * n, [None] * n
         need_cal = self._cal_pinv is None and any(c.span == CALIBRATION for c in cols)
@@ -234,6 +237,7 @@ class Sweep:
             None,
             lambda lin, items: add(lin, [(fitted[j], C) for j, C in items]),
             block,
+            self.trained,
         )
         if need_cal:
             self._cal_pinv = np.linalg.pinv(0.5 * (G + G.T), rcond=1e-10, hermitian=True)
