@@ -93,7 +93,9 @@ def in_order(producers: list, jobs: int = 1, depth: int = 2):
         except BaseException as exc:  # handed to the consumer, raised there
             put(k, (exc, None))
 
-    with ThreadPoolExecutor(max_workers=min(int(jobs), len(producers))) as pool:
+    # one BLAS thread each: BLAS's own threads on top of these oversubscribe the cores, and with
+    # several callers at once its reductions split differently from run to run (not reproducible)
+    with one_blas_thread(), ThreadPoolExecutor(max_workers=min(int(jobs), len(producers))) as pool:
         for k in range(len(producers)):
             pool.submit(work, k)
         try:

@@ -74,3 +74,21 @@ def test_a_consumer_that_stops_leaves_the_producers_not_yet_started_unmade():
     with lock:
         blocks = {k for k, _ in made}
     assert len(blocks) <= 6  # a few producers ahead at most, not all 40
+
+
+def test_producers_in_threads_use_one_blas_thread_each():
+    """BLAS's own threads under several producers oversubscribe the cores, and its reductions then
+    split differently from run to run: a diagnosis with --jobs 2 was not reproducible."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    def producer():
+        yield blas_threads()
+
+    with threadpool_limits(limits=2, user_api="blas"):  # the suite runs with one (conftest)
+        assert set(blas_threads()) == {2}
+        seen = list(in_order([producer, producer, producer], jobs=2))
+        assert set(blas_threads()) == {2}  # the caller's limit back after the loop
+    assert len(seen) == 3 and all(set(n) == {1} for n in seen)
