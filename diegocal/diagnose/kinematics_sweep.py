@@ -2,8 +2,8 @@
 :class:`Sweep` makes many terms' columns from the linearisation at a fit
 (:class:`~diegocal.diagnose.kinematics_lin.Linearised`) in three passes over blocks of
 SWEEP_FRAMES frames (the calibration-fit sums, on the blocks with training frames only; the checks
-on the cleaned columns; the kept channels written in float32), so that the whole log's Jacobians and inverse normal matrices are
-never held: only sums of size k×k or k0×k outlive a block.
+on the cleaned columns; the kept channels written in float32), so that the whole log's Jacobians
+and inverse normal matrices are never held: only sums of size k×k or k0×k outlive a block.
 """
 
 from __future__ import annotations
