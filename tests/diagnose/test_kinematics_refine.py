@@ -10,7 +10,7 @@ import pytest
 
 from diegocal.diagnose import DiagnoseOptions, diagnose, kinematics, kinematics_sweep
 from diegocal.diagnose.kinematics import KinematicsAdapter
-from diegocal.diagnose.kinematics_refine import REFINE_TOL, moved
+from diegocal.diagnose.kinematics_refine import REFINE_TOL, jumped, moved
 from diegocal.diagnose.kinematics_sweep import Sweep
 from diegocal.evaluate import split_blocks
 from diegocal.robot import load_robot, resolve_robot_dir
@@ -45,10 +45,24 @@ def test_a_parameter_without_a_standard_error_does_not_keep_the_refinement_going
     assert not moved(before, (_curve(0.060, 0.0050, se=(math.nan, math.nan)),), 0.5)
 
 
-def test_a_clock_shift_moves_by_its_own_tolerance():
+def test_a_clock_shift_stops_within_its_own_tolerance_and_its_standard_error():
+    """A shift's refinement goes on while it moves by 2 % of itself, or by 0.2 of its standard
+    error: a 30-s iCub log's 0.060-s shift stopped after a step of 3.6 SE, 2.1 SE short."""
     shift = make_term("time_offset", "markers", [0.200], stderr=[1e-5])
     assert moved((shift,), (shift.with_values([0.210], [1e-5]),), 0.5)  # 5 % of itself
-    assert not moved((shift,), (shift.with_values([0.2001], [1e-5]),), 0.5)  # 10 SE, 0.05 %
+    assert moved((shift,), (shift.with_values([0.2001], [1e-5]),), 0.5)  # 10 SE, 0.05 %
+    assert not moved((shift,), (shift.with_values([0.200001], [1e-5]),), 0.5)  # 0.1 SE
+    loose = shift.with_values([0.200], [1.0])
+    assert moved((loose,), (loose.with_values([0.210], [1.0]),), 0.5)  # 5 %, 0.01 SE
+
+
+def test_a_clock_shift_that_moved_a_sample_or_more_jumped():
+    """STAC is started where the fit before ended (warm) unless the step moved the markers' clock
+    by a sample or more."""
+    shift = make_term("time_offset", "markers", [0.045], stderr=[1e-4])
+    assert jumped((shift,), (shift.with_values([0.057], [1e-4]),), 0.01)
+    assert not jumped((shift,), (shift.with_values([0.0591], [1e-4]),), 0.02)
+    assert not jumped((_curve(0.05, -0.005),), (_curve(0.5, -0.5),), 0.01)  # not a clock
 
 
 def test_a_term_new_to_the_model_is_not_a_move():
