@@ -194,9 +194,10 @@ class Sweep:
             items.append((i, C if maps is None or maps[i] is None else C @ maps[i]))
         return items
 
-    def _fits(self, cols: list[Columns]) -> tuple[list, list]:
+    def _fits(self, cols: list[Columns]) -> tuple[list, list, list]:
         """Pass 1, over the blocks that hold training frames: each column set's fit by its span on
-        the training frames (β (k_span, k)) and the Gram matrix of its columns there (k, k); the
+        the training frames (β (k_span, k)), the Gram matrix of its columns there (k, k) and their
+        products with the span (b, (k_span, k): β = G⁺ b, G the span's Gram matrix); the
         calibration's and the pots' Gram matrices (sums over the blocks) on the first sweep that
         needs them."""
         n = len(cols)
@@ -243,7 +244,8 @@ class Sweep:
             self._cal_pinv = np.linalg.pinv(0.5 * (G + G.T), rcond=1e-10, hermitian=True)
         if need_pot:
             self._pot_gram = Gp
-        return [None if b[i] is None else self._span_pinv(c.span) @ b[i] for i, c in enumerate(cols)], raw
+        betas = [None if b[i] is None else self._span_pinv(c.span) @ b[i] for i, c in enumerate(cols)]
+        return betas, raw, b
 
     def _span_pinv(self, span) -> np.ndarray:
         if span == CALIBRATION:
@@ -298,7 +300,7 @@ class Sweep:
         if self.train_only:
             raise ValueError("a sweep of the training blocks only cannot write every frame's columns")
         self._passes(3)
-        betas, raw = self._fits(cols)
+        betas, raw, _ = self._fits(cols)
         maps, energy = self._maps(cols, betas, raw, see, families)
         P, T = self.P, self.T
         out, where = [], []  # where: per set, (channel, mapped rows, [(slip rows, first frame)])
@@ -334,10 +336,13 @@ class Sweep:
     def design(self, cols: list[Columns], see) -> None:
         """The columns of every set side by side on each block (B, R, Σk), fitted out and mapped as
         :meth:`channels` would keep them, handed to ``see(lin, columns)`` (a Gauss-Newton step's
-        normal equations, a block at a time)."""
-        self._passes(3)
-        betas, raw = self._fits(cols)
-        maps, _ = self._maps(cols, betas, raw)
+        normal equations, a block at a time). Two passes: the Gram matrix of the columns with their
+        fit β = G⁺ b taken out, which :meth:`_maps` sums in a pass of its own, is raw − bᵀ G⁺ b
+        (G⁺ G G⁺ = G⁺), all on the training frames; its cancellation turns the kept directions by
+        about 1e-8, far below a step's tolerance."""
+        self._passes(2)
+        betas, raw, b = self._fits(cols)
+        maps = [None if g is None else identifying(g - bi.T @ be, g) for g, bi, be in zip(raw, b, betas, strict=True)]
         held: list = []
 
         def gather(lin, items):

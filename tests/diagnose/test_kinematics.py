@@ -307,6 +307,27 @@ def test_a_sweep_block_by_block_equals_the_whole_log(baseline, monkeypatch):
             np.testing.assert_allclose(x, rows, atol=1e-6 * np.abs(want).max())
 
 
+def test_a_steps_design_in_two_passes_equals_the_whole_log(baseline, monkeypatch):
+    """A Gauss-Newton step's columns (:meth:`Sweep.design`: the fits' sums, then the columns, the
+    identifiable directions from raw − bᵀ G⁺ b instead of a pass of their own) equal every frame's
+    linearisation at once on the training frames: mcp_abd's offset, which the calibration takes up
+    entirely, zero."""
+    adapter, fitted, _ = baseline
+    monkeypatch.setattr(kinematics_sweep, "SWEEP_FRAMES", 37)
+    lin = whole_log(fitted, adapter)
+    sweep = Sweep(fitted, adapter, train_only=True)
+    joints = sweep.observed_joints()
+    cols = [Columns(lambda b, j=j: b.link_offset_basis(j)) for j in joints]
+    got = np.zeros((sweep.T, lin.R, 3 * len(joints)))
+    sweep.design(cols, lambda b, C: got.__setitem__(b.frames, C))
+    want = np.concatenate([lin.beyond_calibration(lin.project(lin.link_offset_basis(j))) for j in joints], axis=-1)
+    train = fitted.train
+    abd = 3 * joints.index("mcp_abd")
+    assert not np.any(got[:, :, abd : abd + 3])
+    # raw − bᵀ G⁺ b cancels to ~1e-9 of raw: the kept directions turn by ~1e-8 (a step's tolerance: 0.2 SE)
+    np.testing.assert_allclose(got[train], want[train], atol=1e-6 * np.abs(want).max())
+
+
 def test_a_sweep_in_threads_equals_one_thread(baseline, monkeypatch):
     """``--jobs 2``: the next blocks' columns made in threads while this block's are read give the
     same numbers, bit for bit (the same calls in the same order), in every pass."""
