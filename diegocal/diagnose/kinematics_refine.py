@@ -59,9 +59,9 @@ def jumped(before, after, period: float) -> bool:
 def refined(adapter, fitted, train: np.ndarray, beyond: float):
     """``fitted`` (the adapter's fit of its terms, tracked on every frame) after its refinements
     (:meth:`KinematicsAdapter.refine_step <diegocal.diagnose.kinematics.KinematicsAdapter.refine_step>`,
-    each a Gauss-Newton step and a warm-started STAC refit): whether a step is the last is known
-    from the step alone (:func:`moved`), so the others track q on the training frames only, which is
-    all the next step reads. ``beyond``: :func:`moved`'s."""
+    each a Gauss-Newton step and a STAC refit, warm-started unless the step :func:`jumped`):
+    whether a step is the last is known from the step alone (:func:`moved`), so the others track q
+    on the training frames only, which is all the next step reads. ``beyond``: :func:`moved`'s."""
     period = float(np.median(np.diff(adapter.time))) if adapter.time.size > 1 else 0.0
     for k in range(1, REFINE_MAX + 1):
         step = adapter.refine_step(fitted)

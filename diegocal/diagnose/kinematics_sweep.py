@@ -163,7 +163,7 @@ class Sweep:
             return made
 
         last = len(cols) - 1
-        for lin, items in in_order([producer(sl) for sl in slices or self.slices], self.jobs):
+        for lin, items in in_order([producer(sl) for sl in (self.slices if slices is None else slices)], self.jobs):
             if items is None:
                 block(lin)
             else:
