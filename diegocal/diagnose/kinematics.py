@@ -45,7 +45,7 @@ from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
 from diegocal.diagnose.kinematics_refine import REFINED, refined
-from diegocal.diagnose.kinematics_slip import FromSample, SlipScan
+from diegocal.diagnose.kinematics_slip import FromSample, SlipScan, slip_value
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
@@ -165,7 +165,7 @@ class KinematicsAdapter:
         else:
             start = WarmStart(previous.cal, previous.q[idx]) if warm and previous is not None else None
             cal = calibrate(sub, applied.robot, options, start).calibration
-        terms = tuple(self._slip_value(t, cal) for t in terms) + ((chain,) if chain else ())
+        terms = tuple(slip_value(t, cal, self.robot) for t in terms) + ((chain,) if chain else ())
         q, pots, markers = self._track(applied, cal, previous, track)
         return KinFit(terms, cal, applied, q, pots, markers, train.copy())
 
@@ -183,16 +183,6 @@ class KinematicsAdapter:
         q, pots, markers = previous.q.copy(), previous.pots.copy(), previous.markers.copy()
         q[idx], pots[idx], markers[idx] = pred.q, pred.pots, pred.markers
         return q, pots, markers
-
-    @staticmethod
-    def _slip_value(term: Term, cal: Calibration) -> Term:
-        """A slip's value is the fitted position of its second marker minus the first's."""
-        if term.cause != "marker_slip":
-            return term
-        i, k = cal.marker_names.index(term.channel), cal.marker_names.index(term.channel + SLIP)
-        se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full(cal.marker_xyz.shape, np.nan)
-        # the two positions are estimated from disjoint frames: their errors nearly independent
-        return term.with_values(cal.marker_xyz[k] - cal.marker_xyz[i], np.hypot(se[k], se[i]))
 
     def refine_step(self, fitted: KinFit) -> tuple:
         """One Gauss-Newton step on every continuous term at once (their projected columns,

@@ -4,7 +4,12 @@ columns from the change on, made only for the rows the engine reads."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+
+from diegocal.robot.gauges import gauge_axes
+from diegocal.stac.terms import SLIP
 
 
 class FromSample:
@@ -88,3 +93,35 @@ def gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
     """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares
     fit of those columns removes."""
     return np.einsum("ki,ki->k", b, np.einsum("kij,kj->ki", np.linalg.pinv(G, hermitian=True), b))
+
+
+def slip_value(term, cal, robot):
+    """A slip's value: the fitted position of its second marker minus the first's (``cal``'s), with
+    ``extra.gauge`` (:func:`slip_gauge`) when the marker is placed in a leaf gauge of ``robot``."""
+    if term.cause != "marker_slip":
+        return term
+    i, k = cal.marker_names.index(term.channel), cal.marker_names.index(term.channel + SLIP)
+    se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full(cal.marker_xyz.shape, np.nan)
+    # the two positions are estimated from disjoint frames: their errors nearly independent
+    d, s = cal.marker_xyz[k] - cal.marker_xyz[i], np.hypot(se[k], se[i])
+    term = term.with_values(d, s)
+    bound = gauge_axes(robot, [g["joint"] for g in cal.gauges if g.get("kind") == "leaf"])
+    if term.channel not in bound:
+        return term
+    return replace(term, extra=term.extra | {"gauge": slip_gauge(*bound[term.channel], d, s)})
+
+
+def slip_gauge(joint: str, axis: np.ndarray, d: np.ndarray, se: np.ndarray) -> dict:
+    """What the data fix of a slip ``d`` ± ``se`` (3,) whose direction about ``joint``'s axis
+    (a unit vector in the marker's link frame) is the fit's gauge: its length and its component
+    along the axis, each with its standard error to first order (the coordinates' errors taken as
+    independent, as their ± are)."""
+    length = float(np.linalg.norm(d))
+    along = float(axis @ d)
+    se_length = float(np.sqrt(np.sum((d / length) ** 2 * se**2))) if length > 0 else float("nan")
+    return {
+        "joint": joint,
+        "axis": [round(float(a), 6) for a in axis],
+        "length": {"value": length, "stderr": se_length, "unit": "m"},
+        "along_axis": {"value": along, "stderr": float(np.sqrt(np.sum(axis**2 * se**2))), "unit": "m"},
+    }

@@ -59,7 +59,7 @@ def write_text(path, text: str) -> None:
 # ----------------------------------------------------------------------------- YAML
 def to_plain(obj, nan_as_none: bool = False):
     """numpy scalars/arrays -> plain Python, recursively, so YAML stays readable; with
-    ``nan_as_none`` a non-finite float becomes None (YAML's null: "not known")."""
+    ``nan_as_none`` a NaN becomes None (YAML's null: "not known"; an infinite bound stays .inf)."""
     if isinstance(obj, dict):
         return {str(k): to_plain(v, nan_as_none) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -68,7 +68,7 @@ def to_plain(obj, nan_as_none: bool = False):
         return to_plain(obj.tolist(), nan_as_none)
     if isinstance(obj, np.generic):
         obj = obj.item()
-    if nan_as_none and isinstance(obj, float) and not math.isfinite(obj):
+    if nan_as_none and isinstance(obj, float) and math.isnan(obj):
         return None
     return obj
 

@@ -67,7 +67,8 @@ def sentence(f: dict) -> str:
     what = PHRASES.get(f["cause"], f["cause"].replace("_", " "))
     r = f.get("region")
     if r:
-        what += f" ({r['variable']} from {r['low']:.3g} to {r['high']:.3g})"
+        end = "on" if r["high"] == float("inf") else f"to {r['high']:.3g}"
+        what += f" ({r['variable']} from {r['low']:.3g} {end})"
     g = f.get("gain") or {}
     unit = f.get("unit") or ""
     if g.get("reduction") is not None:
@@ -91,7 +92,18 @@ def sentence(f: dict) -> str:
             f" The data cannot tell it from the same cause on {', '.join(twins)} (each fits the validation "
             f"data the same to within {TWIN * 100:g} % of what it removes)."
         )
-    return f"{f['channel']}: {what}{gain}.{params}{_stand_in_text(f)}"
+    return f"{f['channel']}: {what}{gain}.{params}{_gauge_text(f)}{_stand_in_text(f)}"
+
+
+def _gauge_text(f: dict) -> str:
+    """What the data fix of a slipped marker's move whose direction is the fit's gauge (``extra.gauge``)."""
+    if not (g := (f.get("extra") or {}).get("gauge")):
+        return ""
+    pair = (g["length"], g["along_axis"])
+    length, along = (f"{_value_text(v['value'], v['stderr'])} ± {v['stderr']:.2g} m" for v in pair)
+    return (f" Its direction about joint {g['joint']}'s axis is the calibration's convention for that joint's zero, "
+            f"not the data's, and so are the components above: the data fix its length, {length}, and its "
+            f"component along the axis, {along}.")
 
 
 def _stand_in_text(f: dict) -> str:
@@ -230,7 +242,7 @@ def plot_evidence(f: dict, ax=None):
         ax.plot(x, m, "o-", color=color, ms=3, lw=1, label=label)
     r = f.get("region")
     if r and r.get("variable") == ev.get("variable"):
-        ax.axvspan(r["low"], r["high"], color=COLORS["truth"], alpha=0.12, label=REGION)
+        ax.axvspan(r["low"], min(r["high"], ax.get_xlim()[1]), color=COLORS["truth"], alpha=0.12, label=REGION)
     ax.axhline(0.0, color="0.5", lw=0.6, label=ZERO)
     counts = (curves.get("before") or {}).get("count") or []
     variable = str(ev.get("variable", ""))
@@ -271,7 +283,8 @@ def runners_table(f: dict) -> tuple[list[Column], list[list]]:
     rows = []
     for r in f.get("runners_up") or []:
         region = r.get("region")
-        where = r["channel"] + (f" [{region['low']:.3g}..{region['high']:.3g}]" if region else "")
+        high = np.inf if region and region["high"] is None else (region or {}).get("high")  # null: open (older files)
+        where = r["channel"] + (f" [{region['low']:.3g}..{high:.3g}]" if region else "")
         score = [f"{100 * r['validation_gain']:.1f}", f"{r['t']:.1f}", f"{r['threshold_t']:.1f}"]
         rows.append([r["cause"], where, *score, _significant(r)])
     return columns, rows

@@ -98,3 +98,30 @@ def gauge_joints(robot: Robot) -> tuple[str, ...]:
         if leaf or root:
             out.append(robot.joint_names[k - 1])
     return tuple(out)
+
+
+def gauge_axes(robot: Robot, joints) -> dict[str, tuple[str, np.ndarray]]:
+    """Markers placed in a revolute leaf gauge: marker name -> (joint, its axis in the marker's
+    link frame, a unit vector), for the leaf-gauge joints ``joints`` (names).
+
+    A fit that fixes such a joint's zero places the markers of its far-side link turned about its
+    axis by whatever offset that leaves (d -> Rot(a, -δ) d): of a difference of two of their
+    positions (a slipped marker's move) only the length and the component along ``a`` are the
+    data's. A prismatic joint's gauge shifts them along its axis, which no difference sees."""
+    model, kin = robot.model, BatchKinematics(robot)
+    base_joint = model.frames[robot.base_frame].parentJoint
+    out = {}
+    for name in joints:
+        k = robot.joint_names.index(name) + 1
+        if kin.prismatic[k - 1]:
+            continue
+        axis = kin.local_axis[k - 1]
+        far_side = k
+        if _upstream(model, k, base_joint):  # the gauge turns the parent link's markers
+            far_side, axis = model.parents[k], kin.place_R[k - 1] @ axis
+        for m in robot.sensors.markers:
+            frame = model.frames[robot.frame_id(m.link)]
+            if frame.parentJoint == far_side:
+                a = np.asarray(frame.placement.rotation).T @ axis
+                out[m.name] = (name, a / np.linalg.norm(a))
+    return out

@@ -588,3 +588,22 @@ def test_a_swap_with_a_marker_the_cameras_lost_is_found(finger):
     swaps = [f for f in adapter.faults(fitted, adapter.residuals(fitted)) if f.term.cause == "swapped_labels"]
     assert [{f.term.channel, f.term.extra["partner"]} for f in swaps] == [{a, b}]
     assert len(set(swaps[0].term.extra["frames"]) & set(frames)) >= 0.9 * len(frames)
+
+
+def test_a_slip_in_a_gauge_says_what_the_data_fix_of_it(finger):
+    """m4 rides on the distal link, whose zero (dip's) the calibration fixes by convention: its
+    slip's components are placed turned about dip's axis (here x 13 standard errors from the
+    truth), so the term carries ``extra.gauge``: the length and the component along the axis,
+    which that turn leaves alone, and which cover the truth."""
+    log = _log(finger, 2, ("marker_slip:m4",), duration=20.0)
+    v = log.truth.effects[0]["values"]
+    t0 = v["time"] + 0.5 * v.get("transition_s", 0.0)
+    region = Region("time", float(log.time[np.searchsorted(log.time, t0)]), np.inf)
+    adapter = KinematicsAdapter(log.without_truth(), finger)
+    term = adapter.fit((make_term("marker_slip", "m4", region=region),), split_blocks(log.n_samples, 10).mask("train")).terms[0]
+    truth = np.array(v["dxyz"])
+    assert np.abs((term.values - truth) / term.stderrs).max() > 5  # the components: in the gauge
+    g = term.extra["gauge"]
+    assert g["joint"] == "dip" and np.allclose(g["axis"], [0.0, 1.0, 0.0])
+    assert abs(g["length"]["value"] - np.linalg.norm(truth)) < 3 * g["length"]["stderr"]
+    assert abs(g["along_axis"]["value"] - truth[1]) < 3 * g["along_axis"]["stderr"]

@@ -22,6 +22,7 @@ from diegocal.report.layout import Column, table_sheets, text_width
 from diegocal.report.logs import plot_stream
 from diegocal.report.pdf import Document
 from diegocal.report.registry import section_for
+from diegocal.terms import Region, make_term
 from tests.report.checks import check_pages, front_pages, page_texts
 from tests.report.conftest import cli
 
@@ -393,3 +394,41 @@ def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
     assert "cannot tell it from the same cause on l_knee" in text
     assert f"within {TWIN * 100:g} % of what it removes" in text
     assert "cannot tell" not in sentence({**f, "evidence": {}})
+
+
+def test_a_slip_in_a_gauge_says_which_of_its_numbers_the_data_fix():
+    from diegocal.report.diagnose import sentence
+
+    f = {
+        "cause": "marker_slip",
+        "channel": "m4",
+        "region": {"variable": "time", "low": 9.5, "high": float("inf")},
+        "parameters": {k: {"value": 0.01, "stderr": 0.0003, "unit": "m"} for k in ("dx", "dy", "dz")},
+        "gain": {"reduction": 0.6, "rmse_before": 0.004, "rmse_after": 0.0016},
+        "unit": "m",
+        "extra": {"gauge": {"joint": "dip", "axis": [0, 1, 0], "length": {"value": 0.01732, "stderr": 0.0003},
+                            "along_axis": {"value": 0.01, "stderr": 0.0003}}},
+    }
+    text = sentence(f)
+    assert "(time from 9.5 on)" in text
+    assert "about joint dip's axis is the calibration's convention" in text
+    assert "its length, 0.01732 ± 0.0003 m" in text and "along the axis, 0.01000 ± 0.0003 m" in text
+    assert "convention" not in sentence({**f, "extra": {}})
+
+
+def test_a_runner_up_with_an_open_region_is_listed():
+    """A slip's region runs to the end of the log: written .inf (a NaN alone is written null), read
+    as open also from files that wrote it null; the report lists it rather than stopping."""
+    from diegocal.diagnose.output import finding_dict
+    from diegocal.report.diagnose import runners_table
+
+    runner = {"cause": "marker_slip", "channel": "m1", "region": {"variable": "time", "low": 10.65, "high": np.inf},
+              "validation_gain": 0.004, "t": 2.6, "threshold_t": 3.6, "significant": False}
+    f = SimpleNamespace(term=make_term("marker_slip", "m4", region=Region("time", 12.4, np.inf)), kind="term",
+                        evidence={"t": np.nan}, runners_up=(runner,), gain=dict)
+    d = finding_dict(f, {})
+    assert d["region"]["high"] == np.inf and d["runners_up"][0]["region"]["high"] == np.inf
+    assert d["evidence"]["t"] is None
+    for high in (np.inf, None):
+        _, rows = runners_table({"runners_up": [{**runner, "region": {**runner["region"], "high": high}}]})
+        assert rows[0][1] == "m1 [10.7..inf]"

@@ -126,3 +126,32 @@ def test_gauge_is_the_leaf_rotation(bundled, sample_q):
             direction[col["xyz"] + 3 * m : col["xyz"] + 3 * m + 3] = -np.cross(axis, marker.xyz)
     assert np.abs(J @ direction).max() < 1e-10
     assert np.abs(direction).max() > 0.1
+
+
+@pytest.mark.parametrize("name", ["diego", "finger"])
+def test_gauge_axes_give_each_leaf_gauges_null_direction(name, bundled, sample_q):
+    """:func:`gauge_axes`' axis is the one the leaf gauge turns its markers about: δq_k with its
+    pots' bias shifts and those markers turned by −δ about that axis (through the joint's origin,
+    in their link frame) changes no observation, for every revolute leaf gauge of the robot."""
+    from diegocal.robot.gauges import gauge_axes
+
+    robot = bundled(name)
+    q = sample_q(robot, np.random.default_rng(7), 5)
+    J, col = calibration_jacobian(robot, q)
+    n, T = robot.n_joints, len(q)
+    bound = gauge_axes(robot, gauge_joints(robot))
+    assert {joint for joint, _ in bound.values()} == EXPECTED_GAUGES[name] - {"mcp_abd"}  # mcp_abd: a root gauge
+    for joint in {joint for joint, _ in bound.values()}:
+        k = robot.joint_index(joint)
+        direction = np.zeros(J.shape[1])
+        direction[[t * n + k for t in range(T)]] = 1.0
+        for i, p in enumerate(robot.sensors.pots):
+            r = p.moment_arms.get(joint, 0.0) if p.kind == "tendon" else float(p.joint == joint)
+            direction[col["bias"] + i] = -p.gain * r
+        for m, marker in enumerate(robot.sensors.markers):
+            if bound.get(marker.name, ("",))[0] == joint:
+                place = robot.model.frames[robot.frame_id(marker.link)].placement
+                origin = -place.rotation.T @ place.translation  # the joint's origin in the link frame
+                axis = bound[marker.name][1]
+                direction[col["xyz"] + 3 * m : col["xyz"] + 3 * m + 3] = -np.cross(axis, marker.xyz - origin)
+        assert np.abs(J @ direction).max() < 1e-9, joint
