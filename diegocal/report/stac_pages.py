@@ -187,6 +187,13 @@ def abstract(path: Path, context) -> list[str]:
             "(a gauge: an offset of the joint is absorbed exactly by the markers on its link), so their standard "
             "errors are not given"
         )
+    turned = gauge_markers(cal)
+    if turned:
+        wrong.append(
+            f"the positions of {', '.join(turned)} are placed turned about their joint's axis by whatever error that "
+            "nominal bias leaves: their distance from the axis and their place along it are the data's, their "
+            "angle about it is the convention's, and their ± hold in it"
+        )
     if not cal.fit.converged:
         wrong.append("the fit did not converge: raise --max-iterations")
     if ev.note:
@@ -304,6 +311,12 @@ def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
     return columns, rows, notes
 
 
+def gauge_markers(cal) -> dict:
+    """{marker: joint} of the markers a leaf gauge turns with its joint's zero (calib.yaml's
+    ``gauges[].markers``)."""
+    return {m: g["joint"] for g in getattr(cal, "gauges", ()) or () for m in g.get("markers") or ()}
+
+
 def marker_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
     nominal = {m.name: np.asarray(m.xyz, float) for m in robot.sensors.markers} if robot is not None else {}
     se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full_like(cal.marker_xyz, np.nan)
@@ -315,17 +328,22 @@ def marker_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
         Column("z", "mm"),
         Column("± SE (largest axis)", "mm"),
         Column("moved from the seed", "mm"),
+        Column("note", align="left"),
     ]
-    rows = []
+    rows, turned = [], gauge_markers(cal)
     for i, n in enumerate(cal.marker_names):
         xyz = cal.marker_xyz[i]
         moved = MM * np.linalg.norm(xyz - nominal[n]) if n in nominal else None
         s = np.nanmax(se[i]) if np.isfinite(se[i]).any() else np.nan
         shift = "–" if moved is None else f"{moved:.1f}"
-        rows.append([n, cal.marker_links[i], *(f"{MM * v:.1f}" for v in xyz), _se(MM * s, 2), shift])
+        note = f"gauge: {turned[n]}" if n in turned else ""
+        rows.append([n, cal.marker_links[i], *(f"{MM * v:.1f}" for v in xyz), _se(MM * s, 2), shift, note])
     notes = [
         "Marker positions in their link's frame (thesis eq. 2.10's d_i). 'Moved from the seed': distance from the "
-        "position sensors.yaml gives, the calibration's starting point."
+        "position sensors.yaml gives, the calibration's starting point. 'gauge: J': the marker rides on the link "
+        "of joint J, whose zero the markers cannot fix: its angle about J's axis follows the pot bias held at "
+        "nominal, and its ± hold in that convention (its distance from the axis and its place along it are the "
+        "data's)."
     ]
     return columns, rows, notes
 

@@ -112,8 +112,9 @@ class Observability:
         return fixed
 
     def _gauge_records(self, marker_joints: np.ndarray) -> tuple:
-        """({joint, pot, kind, reason}, ...) for calib.yaml's ``gauges`` (pot None when no pot
-        with an estimated bias reads the joint: its tracked angle's zero is then arbitrary)."""
+        """({joint, pot, kind, reason[, markers]}, ...) for calib.yaml's ``gauges`` (pot None when no
+        pot with an estimated bias reads the joint: its tracked angle's zero is then arbitrary; a
+        leaf gauge's ``markers``: those placed turned about its axis with its zero's convention)."""
         out = []
         for k, kind in self._gauge_kinds(marker_joints).items():
             joint = self.robot.joint_names[k]
@@ -140,6 +141,8 @@ class Observability:
                 why += f"; pot {self.pot_specs[j].name}'s bias keeps its nominal value"
             pot = None if j is None else self.pot_specs[j].name
             out.append({"joint": joint, "pot": pot, "kind": kind, "reason": why})
+            if kind == "leaf":
+                out[-1]["markers"] = [self.marker_names[i] for i in np.flatnonzero(self.kin._anc[marker_joints, k])]
         return tuple(out)
 
     def gauge_joints(self) -> set[str]:

@@ -19,8 +19,9 @@ import erd  # noqa: E402
 from diegocal.cli import app  # noqa: E402
 from diegocal.io import load_log, load_yaml  # noqa: E402
 from diegocal.report.registry import ReportContext  # noqa: E402
-from diegocal.report.stac_pages import abstract, pot_table  # noqa: E402
+from diegocal.report.stac_pages import abstract, marker_table, pot_table  # noqa: E402
 from diegocal.robot import load_robot  # noqa: E402
+from diegocal.robot.gauges import gauge_axes  # noqa: E402
 from diegocal.stac.calibration import Calibration  # noqa: E402
 from diegocal.stac.model import Observation  # noqa: E402
 
@@ -93,6 +94,17 @@ def test_icub_half_markers_calibrates_what_the_data_determine(icub_run):
     for joint, g in gauges.items():
         assert g["kind"] in ("leaf", "root") and joint in g["reason"]
         assert cal.bias[cal.pot_names.index(g["pot"])] == nominal[g["pot"]].bias
+    # a leaf gauge's markers are turned about its axis: their distance from it and place along it are the data's
+    turned = {m: g["joint"] for g in cal.gauges for m in g.get("markers", ())}
+    assert set(turned) == {m for m, free in zip(cal.marker_names, obs.gauge_free_markers(), strict=True) if not free}
+    axes = gauge_axes(robot, set(turned.values()))
+    for m in turned:
+        i, (_, a) = cal.marker_names.index(m), axes[m]
+        place = robot.model.frames[robot.frame_id(cal.marker_links[i])].placement
+        origin = -place.rotation.T @ place.translation
+        fit, true = (x - origin for x in (cal.marker_xyz[i], truth.marker_xyz[i]))
+        radius = np.linalg.norm(np.cross(a, fit)) - np.linalg.norm(np.cross(a, true))
+        assert abs(a @ fit - a @ true) < 0.003 and abs(radius) < 0.003, (m, np.linalg.norm(fit - true))
 
 
 def test_icub_coverage_is_said_once_in_the_summary_and_the_report(icub_run):
@@ -109,3 +121,7 @@ def test_icub_coverage_is_said_once_in_the_summary_and_the_report(icub_run):
     notes = {r[0]: r[-1] for r in rows}
     assert notes["neck_yaw_pot"] == "nominal: unobservable"
     assert {notes[g["pot"]] for g in data["gauges"]} == {"bias nominal: gauge"}
+    turned = {m: g["joint"] for g in data["gauges"] for m in g.get("markers", ())}
+    _, rows, _ = marker_table(Calibration.from_dict(data), None)
+    assert turned and {r[0]: r[-1] for r in rows if r[-1]} == {m: f"gauge: {j}" for m, j in turned.items()}
+    assert f"the positions of {', '.join(turned)} are placed turned about their joint's axis" in opening
