@@ -34,6 +34,9 @@ from diegocal.io.files import to_plain
 
 #: The one spelling of a standard error in every file (layout 1 also wrote ``std`` and ``_se``).
 STDERR = "stderr"
+#: Estimates that correlate at least this much are written next to each other (a parameter's
+#: ``correlated: {other: ρ}``, calib.yaml and pneumatic.yaml).
+CORRELATED = 0.9
 
 
 @dataclass(frozen=True)

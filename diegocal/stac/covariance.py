@@ -34,14 +34,13 @@ import numpy as np
 from diegocal.stac.joint_step import _theta_rows, _times_q, free_mask, pick, reduced_matrix
 from diegocal.stac.model import Observation, Params, State
 from diegocal.stac.qphase import Noise, block_solve, damped, normal_equations
+from diegocal.terms import CORRELATED
 
 #: Contiguous blocks of frames the sandwich's meat is summed over (fewer on short logs: a block is
 #: at least MIN_BLOCK frames). 40 blocks of a 30-s log at 100 Hz are 0.75 s each, many times the
 #: correlation time of the tracking residuals (tens of ms).
 BLOCKS = 40
 MIN_BLOCK = 10
-#: Parameters whose estimates correlate at least this much are listed next to each other.
-CORRELATED = 0.9
 
 
 @dataclass(frozen=True)

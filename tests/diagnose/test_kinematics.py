@@ -600,7 +600,8 @@ def test_a_slip_in_a_gauge_says_what_the_data_fix_of_it(finger):
     t0 = v["time"] + 0.5 * v.get("transition_s", 0.0)
     region = Region("time", float(log.time[np.searchsorted(log.time, t0)]), np.inf)
     adapter = KinematicsAdapter(log.without_truth(), finger)
-    term = adapter.fit((make_term("marker_slip", "m4", region=region),), split_blocks(log.n_samples, 10).mask("train")).terms[0]
+    train = split_blocks(log.n_samples, 10).mask("train")
+    term = adapter.fit((make_term("marker_slip", "m4", region=region),), train).terms[0]
     truth = np.array(v["dxyz"])
     assert np.abs((term.values - truth) / term.stderrs).max() > 5  # the components: in the gauge
     g = term.extra["gauge"]

@@ -119,6 +119,18 @@ def test_predict_runs_the_extended_model_with_its_terms(delay_and_offset, robot,
     ext = result.save_extended(tmp_path / "log.extended.pneumatic.yaml", {"command": "test", "log": str(path)})
     model = load_model(ext)
     causes = {n: [t.cause for t in ch.params.terms] for n, ch in model.chambers.items()}
+    # estimates that trade off (|ρ| ≥ 0.9) are written next to each other, both ways, the same ρ
+    from diegocal.io import load_yaml
+
+    pairs = {}
+    for name, ch in load_yaml(ext)["chambers"].items():
+        for term in ch["baseline"] + ch.get("terms", []):
+            for p, v in term["parameters"].items():
+                pairs.update({(name, p, other): rho for other, rho in (v.get("correlated") or {}).items()})
+    assert pairs and all(abs(rho) >= 0.9 and pairs[(n, b, a)] == rho for (n, a, b), rho in pairs.items())
+    delay = next(t for t in model.chambers["elbow.flex"].params.terms if t.cause == "valve_delay")
+    held = abs(delay.extra["correlation"]["sensor_lag.lag_s"]) >= 0.9  # the same figure in the delay's extra
+    assert (("elbow.flex", "delay_s", "lag_s") in pairs) == held
     assert "valve_delay" in causes["elbow.flex"] and "pressure_offset" in causes["shoulder.ext"]
     out = tmp_path / "pred.h5"
     r = CliRunner().invoke(app, ["predict", str(ext), str(path), "-o", str(out), "-q"])
