@@ -257,3 +257,31 @@ def term_from_dict(d: dict, where: str = "term", domain: str | None = None) -> T
 def _plain(v) -> float | None:
     v = float(v)
     return None if not math.isfinite(v) else v
+
+
+def correlated_pairs(cov, labels, threshold: float = CORRELATED) -> list[tuple[str, str, float]]:
+    """(label a, label b, ρ) of the estimates whose correlation (from the covariance ``cov``,
+    labelled ``labels``) is at least ``threshold`` in size; a NaN or zero variance: none."""
+    cov = np.asarray(cov, float)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out = []
+    for i, j in zip(*np.triu_indices(len(labels), 1), strict=True):
+        if sd[i] > 0 and sd[j] > 0:
+            rho = cov[i, j] / (sd[i] * sd[j])
+            if abs(rho) >= threshold:  # (NaN: never)
+                out.append((labels[i], labels[j], float(rho)))
+    return out
+
+
+def write_correlated(terms: list, pairs) -> None:
+    """Each parameter of the term mappings ``terms`` (:meth:`Term.to_dict`) that trades off gets
+    ``correlated: {CHANNEL.NAME: ρ}`` (an added key: readers that do not know it read the value as
+    before); ``pairs``: (label, label, ρ) with labels CHANNEL.NAME."""
+    by: dict = {}
+    for a, b, rho in pairs:
+        by.setdefault(a, {})[b] = round(float(rho), 3)
+        by.setdefault(b, {})[a] = round(float(rho), 3)
+    for d in terms:
+        for name, p in (d.get("parameters") or {}).items():
+            if f"{d['channel']}.{name}" in by:
+                p["correlated"] = by[f"{d['channel']}.{name}"]

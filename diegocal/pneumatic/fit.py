@@ -33,7 +33,7 @@ from diegocal.pneumatic.data import ChamberData
 from diegocal.pneumatic.model import ChamberModel
 from diegocal.pneumatic.params import ChamberParams
 from diegocal.pneumatic.predict import drift
-from diegocal.terms import CORRELATED
+from diegocal.terms import correlated_pairs, write_correlated
 
 
 @dataclass(frozen=True)
@@ -92,25 +92,11 @@ class ChamberFit:
         c = self.covariance
         return float(c[i, j] / np.sqrt(c[i, i] * c[j, j])) if c[i, i] > 0 and c[j, j] > 0 else float("nan")
 
-    def correlated(self, threshold: float = CORRELATED) -> dict:
-        """{parameter: {other: ρ}} of the estimates that trade off (|ρ| ≥ ``threshold``: a valve
-        delay against a sensor lag), which pneumatic.yaml writes next to their standard errors."""
-        names = list(self.params.names())
-        out: dict = {}
-        for i, j in zip(*np.triu_indices(len(names), 1), strict=True):
-            rho = self.correlation(names[i], names[j])
-            if abs(rho) >= threshold:  # (NaN: not identified, never listed)
-                out.setdefault(names[i], {})[names[j]] = round(rho, 3)
-                out.setdefault(names[j], {})[names[i]] = round(rho, 3)
-        return out
-
     def to_dict(self) -> dict:
         out = self.params.to_dict(self.name)
-        pairs = self.correlated() if self.covariance is not None else {}
-        for term in out["baseline"] + out.get("terms", []):  # as calib.yaml writes STAC's
-            for name, p in term["parameters"].items():
-                if name in pairs:
-                    p["correlated"] = pairs[name]
+        if self.covariance is not None:  # estimates that trade off, as calib.yaml writes STAC's
+            labels = [f"{self.name}.{n}" for n in self.params.names()]
+            write_correlated(out["baseline"] + out.get("terms", []), correlated_pairs(self.covariance, labels))
         out.update(
             cost=self.cost,
             rmse=self.rmse,

@@ -39,7 +39,7 @@ from diegocal.sgp.gp import Hyperparameters, per_output
 from diegocal.sgp.guard_options import Stages
 from diegocal.sgp.model import DynamicsModel, SGPOptions
 from diegocal.sgp.terms import FRICTION_CAUSE
-from diegocal.terms import make_term, read_parameter, term_from_dict
+from diegocal.terms import correlated_pairs, make_term, read_parameter, term_from_dict, write_correlated
 
 FORMAT = "diegocal-sgp"
 VERSION = 1
@@ -89,7 +89,7 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "nmse_in_sample": {j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)},
         "hyperparameters": model.hyperparameters_,
         "layout": LAYOUT,
-        "baseline": None if par is None else [t.to_dict() for t in baseline_terms(model)],
+        "baseline": None if par is None else _baseline_dicts(model),
         "options": model.options.to_dict(),
         "meta": dict(meta or {}),
     }
@@ -106,6 +106,19 @@ INERTIAL_UNITS = {"m": "kg", "mc": "kg·m", "I": "kg·m²"}
 PRISMATIC_FRICTION_UNITS = {"viscous": "N·s/m", "coulomb": "N"}
 #: Layout 1's friction column tags.
 _LEGACY_FRICTION = {"fv": "viscous", "fc": "coulomb"}
+
+
+def _baseline_dicts(model) -> list[dict]:
+    """:func:`baseline_terms` as sgp.yaml writes them, with the base parameters that trade off
+    (``correlated``, as calib.yaml writes STAC's)."""
+    par, n = model.parametric_, model.base_.n_base
+    labels = []
+    for name in par.names[:n]:
+        kind, joint = _friction_of(name)
+        labels.append(f"{model.robot.name}.{name}" if kind is None else f"{joint}.{kind}")
+    out = [t.to_dict() for t in baseline_terms(model)]
+    write_correlated(out, correlated_pairs(np.asarray(par.cov, float)[:n, :n], labels))
+    return out
 
 
 def baseline_terms(model) -> list:

@@ -54,7 +54,7 @@ from scipy.spatial.transform import Rotation
 from diegocal.errors import InputFileError
 from diegocal.io.bundle import HEADER_KEYS, LAYOUT
 from diegocal.robot import Robot
-from diegocal.terms import Term, make_term, term_from_dict
+from diegocal.terms import Term, make_term, term_from_dict, write_correlated
 
 #: The units of a pot's (gain, bias) by its kind (an encoder's gain is fixed at 1; its reading is
 #: the joint's own coordinate, rad, or m on a prismatic joint).
@@ -222,7 +222,7 @@ class Calibration:
             },
         }
         if self.correlations:
-            _write_correlations(out["baseline"], self.correlations)
+            write_correlated(out["baseline"], self.correlations)
         if self.stderr:
             out["stderr"] = dict(self.stderr)
         if self.sigma_by_group:
@@ -329,19 +329,6 @@ def _baseline_v1(data: dict) -> dict:
         "mocap_R": np.array(mocap.get("R", np.eye(3)), dtype=float).reshape(3, 3),
         "mocap_T": np.array(mocap.get("T", [0.0, 0.0, 0.0]), dtype=float).reshape(3),
     }
-
-
-def _write_correlations(baseline: list, pairs) -> None:
-    """Each parameter that trades off gets ``correlated: {<label>: ρ}`` in its {value, stderr,
-    unit} mapping (an added key: readers that do not know it read the value as before)."""
-    by: dict = {}
-    for a, b, rho in pairs:
-        by.setdefault(a, {})[b] = round(float(rho), 3)
-        by.setdefault(b, {})[a] = round(float(rho), 3)
-    for d in baseline:
-        for name, p in (d.get("parameters") or {}).items():
-            if f"{d['channel']}.{name}" in by:
-                p["correlated"] = by[f"{d['channel']}.{name}"]
 
 
 def _read_correlations(items) -> tuple:

@@ -123,14 +123,14 @@ def test_predict_runs_the_extended_model_with_its_terms(delay_and_offset, robot,
     from diegocal.io import load_yaml
 
     pairs = {}
-    for name, ch in load_yaml(ext)["chambers"].items():
+    for ch in load_yaml(ext)["chambers"].values():
         for term in ch["baseline"] + ch.get("terms", []):
             for p, v in term["parameters"].items():
-                pairs.update({(name, p, other): rho for other, rho in (v.get("correlated") or {}).items()})
-    assert pairs and all(abs(rho) >= 0.9 and pairs[(n, b, a)] == rho for (n, a, b), rho in pairs.items())
+                pairs.update({(f"{term['channel']}.{p}", b): rho for b, rho in (v.get("correlated") or {}).items()})
+    assert pairs and all(abs(rho) >= 0.9 and pairs[(b, a)] == rho for (a, b), rho in pairs.items())
     delay = next(t for t in model.chambers["elbow.flex"].params.terms if t.cause == "valve_delay")
     held = abs(delay.extra["correlation"]["sensor_lag.lag_s"]) >= 0.9  # the same figure in the delay's extra
-    assert (("elbow.flex", "delay_s", "lag_s") in pairs) == held
+    assert (("elbow.flex.delay_s", "elbow.flex.lag_s") in pairs) == held
     assert "valve_delay" in causes["elbow.flex"] and "pressure_offset" in causes["shoulder.ext"]
     out = tmp_path / "pred.h5"
     r = CliRunner().invoke(app, ["predict", str(ext), str(path), "-o", str(out), "-q"])

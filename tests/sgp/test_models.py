@@ -204,3 +204,26 @@ def test_an_edited_guard_validation_entry_is_left_out_on_load(fitted, tmp_path):
     back = load_model(path)
     assert "guard_validation" not in back.hyperparameters_[joint]
     assert back.hyperparameters_[joint]["guard_choice"] == model.hyperparameters_[joint]["guard_choice"]
+
+
+def test_base_parameters_that_trade_off_are_written_next_to_each_other(fitted, tmp_path, monkeypatch):
+    """sgp.yaml writes ``correlated: {CHANNEL.NAME: ρ}`` beside each baseline parameter whose
+    estimate correlates with another's by 0.9 or more (here one rigid-body parameter and one
+    joint's viscous friction, their covariance set so), both ways, and nothing else."""
+    model = fitted("pr")
+    par = model.parametric_
+    names = list(par.names)
+    i = next(k for k, n in enumerate(names[: model.base_.n_base]) if "friction" not in n)
+    j = next(k for k, n in enumerate(names[: model.base_.n_base]) if n.startswith("viscous_friction:"))
+    cov = np.diag(np.diag(par.cov))
+    cov[i, j] = cov[j, i] = -0.95 * np.sqrt(cov[i, i] * cov[j, j])
+    monkeypatch.setattr(type(model), "parametric_", property(lambda _: replace(par, cov=cov)))
+    save_model(model, tmp_path / "m.sgp")
+    written = {}
+    for term in load_yaml(tmp_path / "m.sgp" / "sgp.yaml")["baseline"]:
+        for name, p in term["parameters"].items():
+            if "correlated" in p:
+                written[f"{term['channel']}.{name}"] = p["correlated"]
+    joint = names[j].partition(":")[2].partition(".")[0]
+    rigid = f"{model.robot.name}.{names[i]}"
+    assert written == {rigid: {f"{joint}.viscous": -0.95}, f"{joint}.viscous": {rigid: -0.95}}
