@@ -41,6 +41,7 @@ class PneumaticArgs:
     fd_jacobian: bool
     steady_state: Path | None
     quiet: bool
+    allow_unconverged: bool = False
 
     def __post_init__(self):
         if self.all_chambers == bool(self.chamber):
@@ -89,6 +90,30 @@ def run_pneumatic(args: PneumaticArgs, command: str = "diegocal pneumatic-fit", 
     return PneumaticRun(model.fits_, model.skipped_, args.out)
 
 
+#: What to do about a chamber whose fit stopped at its evaluation budget.
+UNCONVERGED_HINT = "try more --starts or check the chamber's data, or pass --allow-unconverged to accept it"
+
+
+def unconverged(converged: dict) -> str | None:
+    """In words, the chambers (name -> converged) whose least squares stopped at its evaluation
+    budget before its tolerance; None when every one converged."""
+    names = [n for n, ok in converged.items() if not ok]
+    if not names:
+        return None
+    return f"the fit of chamber(s) {', '.join(names)} stopped at its evaluation budget before it converged"
+
+
+def written_verdict(args: PneumaticArgs) -> str | None:
+    """:func:`unconverged` of the pneumatic.yaml a run wrote (batch's check of a job's output)."""
+    if args.allow_unconverged:
+        return None
+    from diegocal.io import load_yaml
+
+    chambers = load_yaml(args.out).get("chambers") or {}
+    why = unconverged({n: bool(c.get("converged", True)) for n, c in chambers.items()})
+    return None if why is None else f"{why} (converged: false in {args.out}); {UNCONVERGED_HINT}"
+
+
 @app.command("pneumatic-fit")
 @cli_errors
 def pneumatic_fit(
@@ -129,6 +154,14 @@ def pneumatic_fit(
         typer.Option("--steady-state", help="Locked-cylinder sweep log, kept for the report (Fig. 4.10)."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
+    allow_unconverged: Annotated[
+        bool,
+        typer.Option(
+            "--allow-unconverged",
+            help="Exit 0 when a chamber's fit stops at its evaluation budget (it is written with converged: "
+            "false and a warning either way; without this flag the exit status is 1).",
+        ),
+    ] = False,
 ) -> None:
     """Fit the 9-parameter valve-chamber model (thesis §4.5.3) by next-step least squares."""
     args = PneumaticArgs(**ctx.params)
@@ -148,6 +181,11 @@ def pneumatic_fit(
         ("written", str(done.output)),
     ]
     summary("pneumatic-fit", rows, quiet=args.quiet)
+    why = unconverged({n: f.converged for n, f in done.fits.items()})
+    if why is not None:
+        warn(f"{why}; written with converged: false" + ("" if args.allow_unconverged else f"; {UNCONVERGED_HINT}"))
+        if not args.allow_unconverged:
+            raise typer.Exit(1)
 
 
 @app.command("pneumatic-merge")

@@ -68,6 +68,8 @@ class ChamberFit:
     start_params : (starts, 9) parameters reached from every start
     covariance : (P, P) cluster-robust covariance of c1..c9 and the extra terms' parameters (the
         order of ``params.full_vector()``), NaN where a direction is not identified
+    converged : the kept start's least squares ended at its tolerance (False: at its evaluation
+        budget, ``FitOptions.max_nfev``)
     """
 
     name: str
@@ -81,6 +83,7 @@ class ChamberFit:
     start_costs: tuple = ()
     start_params: np.ndarray | None = None
     covariance: np.ndarray | None = field(default=None, repr=False)
+    converged: bool = True
 
     def correlation(self, a: str, b: str) -> float:
         """The correlation of the estimates of parameters ``a`` and ``b`` (names of c1..c9 or of the
@@ -94,6 +97,7 @@ class ChamberFit:
 
     def to_dict(self) -> dict:
         out = self.params.to_dict(self.name)
+        out["converged"] = bool(self.converged)
         if self.covariance is not None:  # estimates that trade off, as calib.yaml writes STAC's
             labels = [f"{self.name}.{n}" for n in self.params.names()]
             write_correlated(out["baseline"] + out.get("terms", []), correlated_pairs(self.covariance, labels))
@@ -325,6 +329,7 @@ def _fit_chamber(data, options, terms=(), rows=None, start=None, weights=None, f
         start_costs=tuple(float(r.cost) for r in runs),
         start_params=np.array([full(r.x) for r in runs]),
         covariance=cov,
+        converged=bool(best.status > 0),  # 0: the evaluation budget ran out; -1: the solver failed
     )
 
 
