@@ -83,7 +83,10 @@ COMMANDS = {
         _fit("kinematics", CLI + "stac_cmd", "StacArgs", "run_stac", "written_verdict"),
         _fit("dynamics", CLI + "sgp_cmd", "SgpArgs", "run_sgp"),
         _fit("pneumatics", CLI + "pneumatic_cmd", "PneumaticArgs", "run_pneumatic", "written_verdict"),
-        CommandSpec("diagnose", ".{domain}.diagnosis.yaml", CLI + "diagnose_cmd", "DiagnoseArgs", "run_diagnose"),
+        CommandSpec(
+            "diagnose", ".{domain}.diagnosis.yaml", CLI + "diagnose_cmd", "DiagnoseArgs", "run_diagnose",
+            verdict="written_verdict",
+        ),
         CommandSpec("predict", ".prediction.h5", CLI + "predict_cmd", "PredictArgs", "run_predict"),
     )
 }

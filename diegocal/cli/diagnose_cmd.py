@@ -13,7 +13,16 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, command_line, default_output, errors, output_path, split_words, summary
+from diegocal.cli.common import (
+    cli_errors,
+    command_line,
+    default_output,
+    errors,
+    output_path,
+    split_words,
+    summary,
+    warn,
+)
 from diegocal.domains import DOMAIN_NAMES
 from diegocal.domains import domain as domain_record
 from diegocal.errors import MissingStreamError
@@ -74,6 +83,7 @@ class DiagnoseArgs:
     blocks: int
     jobs: int
     quiet: bool
+    allow_unconverged: bool = False
 
     def options(self, progress=None) -> DiagnoseOptions:
         """The library's options (its ``domain`` is set per domain by :func:`diegocal.api.diagnose`)."""
@@ -127,6 +137,30 @@ def run_diagnose(args: DiagnoseArgs, command: str = "diegocal diagnose", progres
         result.save(out, args.log, command, extended)
         done.append(Diagnosed(domain, load_yaml(out), out, extended))
     return done
+
+
+#: What to do about a diagnosis whose fits stopped at a cap.
+UNCONVERGED_HINT = "its figures are not at their fits' tolerance; pass --allow-unconverged to accept it"
+
+
+def unconverged(done: Diagnosed) -> str | None:
+    """In words, what the written diagnosis says stopped at a cap before its tolerance; None when
+    every kept fit converged."""
+    if done.mapping.get("converged", True):
+        return None
+    why = "; ".join(done.mapping.get("unconverged") or ["a fit stopped before it converged"])
+    return f"{done.domain} diagnosis: {why} (converged: false in {done.output})"
+
+
+def written_verdict(args: DiagnoseArgs) -> str | None:
+    """:func:`unconverged` of the diagnosis.yaml a run wrote (batch's check of a job's output)."""
+    if args.allow_unconverged or args.domain is None:
+        return None
+    from diegocal.io import load_yaml
+
+    out, extended = output_paths(args.log, args.output, args.domain, False)
+    why = unconverged(Diagnosed(args.domain, load_yaml(out), out, extended))
+    return None if why is None else f"{why}; {UNCONVERGED_HINT}"
 
 
 #: What `--jobs` spreads, by domain.
@@ -192,6 +226,14 @@ def diagnose_cmd(
     ] = 10,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help=JOBS_HELP)] = 1,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
+    allow_unconverged: Annotated[
+        bool,
+        typer.Option(
+            "--allow-unconverged",
+            help="Exit 0 when a kept fit stops at a cap before its tolerance (STAC's iterations, a found term's "
+            "refinement, a chamber's budget): written with converged: false and a warning either way.",
+        ),
+    ] = False,
 ) -> None:
     """Show what the model gets wrong, name the cause, extend the model and measure the gain on
     held-out blocks of the log."""
@@ -203,6 +245,11 @@ def diagnose_cmd(
     done = run_diagnose(args, command_line("diegocal diagnose"), None if args.quiet else progress)
     rows = [row for d in done for row in _summary_rows(d)]
     summary(f"diagnose {Path(args.log).name}", rows, quiet=args.quiet)
+    late = [why for d in done if (why := unconverged(d)) is not None]
+    for why in late:
+        warn(why + ("" if args.allow_unconverged else f"; {UNCONVERGED_HINT}"))
+    if late and not args.allow_unconverged:
+        raise typer.Exit(1)
 
 
 def _summary_rows(done: Diagnosed) -> list:

@@ -81,6 +81,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     unit = f" {adapter.unit_name}" if getattr(adapter, "unit_name", "") else ""
     say(f"fitting the baseline{unit} on {int(train.sum())} training samples")
     fitted = baseline = adapter.fit((), train)
+    late = getattr(adapter, "unconverged", lambda _: ())  # what a fit left at a cap, in words
+    unconverged = dict.fromkeys(f"baseline: {why}" for why in late(baseline))
     res = adapter.residuals(fitted)
     weights = channel_weights(res, train)
     if hasattr(adapter, "selection_weights"):  # an adapter that proposes each family's best variant ranks them so
@@ -91,6 +93,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     say(f"Show step{unit}: {len(res.channels)} channels")
     shown_tests = show(res, weights, train, val, shown, length, options, time)
     fitted, terms, exclude, findings, minor = write_off(adapter, fitted, res, train, held, options, say, unit)
+    if fitted is not baseline:
+        unconverged.update(dict.fromkeys(f"with the faults written off: {why}" for why in late(fitted)))
     if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
         adapter.selection_exclude = exclude
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
@@ -161,6 +165,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 continue
             findings.append(finding)
             fitted, terms = new, new_terms
+            unconverged.update(dict.fromkeys(f"with {fitted_term.label}: {why}" for why in late(new)))
             say(f"found {chosen.term.cause} on {chosen.term.channel}{unit} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
@@ -229,6 +234,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         exclude,
         dict(res.units),
         tuple(minor),
+        tuple(unconverged),
     )
 
 

@@ -90,6 +90,7 @@ class KinFit:
     markers: np.ndarray
     train: np.ndarray = field(repr=False)
     deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) residuals of --from others
+    unconverged: tuple = ()  # what in this fit stopped at a cap before its tolerance, in words
 
 
 class KinematicsAdapter:
@@ -130,6 +131,10 @@ class KinematicsAdapter:
             fitted = refined(self, fitted, train, TIME_SHIFTS[-1])
         return fitted
 
+    @staticmethod
+    def unconverged(fitted: KinFit) -> tuple:
+        return fitted.unconverged
+
     def _own(self, term: Term, train) -> Term:
         """A term as this adapter builds it (engine copies keep ``extra``; YAML ones too)."""
         if term.cause in POT_CAUSES and not term.extra:
@@ -167,7 +172,8 @@ class KinematicsAdapter:
             cal = calibrate(sub, applied.robot, options, start).calibration
         terms = tuple(slip_value(t, cal, self.robot) for t in terms) + ((chain,) if chain else ())
         q, pots, markers = self._track(applied, cal, previous, track)
-        return KinFit(terms, cal, applied, q, pots, markers, train.copy())
+        late = () if cal.fit.converged else (f"STAC stopped after {cal.fit.iterations} iteration(s), unconverged",)
+        return KinFit(terms, cal, applied, q, pots, markers, train.copy(), unconverged=late)
 
     def _track(self, applied: Applied, cal: Calibration, previous: KinFit | None, frames=None) -> tuple:
         """q (T, n), pots (T, P) and markers (T, M', 3) of the model ``applied`` with ``cal``,

@@ -65,9 +65,27 @@ def refined(adapter, fitted, train: np.ndarray, beyond: float):
     period = float(np.median(np.diff(adapter.time))) if adapter.time.size > 1 else 0.0
     for k in range(1, REFINE_MAX + 1):
         step = adapter.refine_step(fitted)
-        last = k == REFINE_MAX or (k > 1 and not moved(fitted.terms, step, beyond))
+        still = moved(fitted.terms, step, beyond)
+        last = k == REFINE_MAX or (k > 1 and not still)
         warm = not jumped(fitted.terms, step, period)
+        before = fitted.terms
         fitted = adapter.fit_once(step, train, fitted, warm=warm, track=None if last else train)
         if last:
             break
+    if still:  # the cap, not the tolerance, ended it
+        fitted.unconverged += (stopped(before, step),)
     return fitted
+
+
+def stopped(before, after) -> str:
+    """In words, a refinement that the cap ended while its last step still moved a term."""
+    old = {(t.cause, t.channel): t for t in before}
+    moves = [
+        f"{t.label} by {np.max(np.abs(t.values - old[(t.cause, t.channel)].values) / t.stderrs):.2g} SE"
+        for t in after
+        if t.cause in REFINED and (t.cause, t.channel) in old and np.all(t.stderrs > 0)
+    ]
+    return (
+        f"the found terms' refinement stopped at its cap of {REFINE_MAX} step(s) while its last step still moved "
+        f"{', '.join(moves) or 'a term'} (more than {REFINE_TOL:g} SE): their values and ± are not at the fixed point"
+    )

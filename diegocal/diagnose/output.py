@@ -24,6 +24,8 @@
     blocks: {train: [[t0, t1], ...], validation: [...], heldout: [...]}   # seconds
     options: {alpha: 0.01, min_gain: 0.05, max_rounds: 6, n_blocks: 10}
     residual_tests: {channel: {correlation_time_s, change_point: {p, time}, variables: {...}}}
+    converged: true            # false: a kept fit stopped at a cap before its tolerance
+    unconverged: []            # which, in words (STAC's iterations, a term's refinement, a chamber's budget)
 
 Pneumatics has one unit per chamber: ``baseline`` and ``extended`` hold every chamber's held-out
 RMSE, and each finding names its chamber as its channel.
@@ -114,6 +116,8 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
         "blocks": diag.blocks.to_dict(diag.time),
         "options": {"alpha": o.alpha, "min_gain": o.min_gain, "max_rounds": o.max_rounds, "n_blocks": o.n_blocks},
         "residual_tests": _clean({(f"{u.unit}/{c}" if u.unit else c): v for u in units for c, v in u.show.items()}),
+        "converged": not any(u.unconverged for u in units),
+        "unconverged": [f"{u.unit}: {why}" if u.unit else why for u in units for why in u.unconverged],
     }
 
 

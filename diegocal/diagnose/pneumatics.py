@@ -282,6 +282,12 @@ class PneumaticAdapter:
     def faults(self, fitted, residuals) -> list:
         return []
 
+    @staticmethod
+    def unconverged(fitted: PneumaticFit) -> tuple:
+        if fitted.fit.converged:
+            return ()
+        return ("the chamber's least squares stopped at its evaluation budget before its tolerance",)
+
     def terms(self, fitted: PneumaticFit):
         """The terms diagnose found (the baseline's ``sensor_lag`` and ``flow_saturation`` are not)."""
         return tuple(t for t in fitted.params.terms if t.cause not in BASELINE_EXTRA)

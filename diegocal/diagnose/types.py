@@ -268,6 +268,7 @@ class UnitDiagnosis:
     exclude: dict = field(repr=False, default_factory=dict)
     units: dict = field(default_factory=dict)  # channel -> unit ("V", "m", "N·m", "kPa")
     minor_faults: tuple[Finding, ...] = ()  # detected, writing-off removed under min_gain (evidence.written_off)
+    unconverged: tuple[str, ...] = ()  # the baseline's and the kept fits' stops at a cap, in words
 
 
 def pooled(score: Score, channels) -> float:

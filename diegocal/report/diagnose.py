@@ -54,12 +54,8 @@ def recognise(path: Path) -> bool:
 def describe(path: Path) -> dict:
     d = load_yaml(path)
     robot = d.get("robot") or {}
-    return {
-        "domain": d.get("domain"),
-        "log": d.get("log"),
-        "robot": robot.get("name") if isinstance(robot, dict) else robot,
-        "findings": len(d.get("findings") or []),
-    }
+    name = robot.get("name") if isinstance(robot, dict) else robot
+    return {"domain": d.get("domain"), "log": d.get("log"), "robot": name, "findings": len(d.get("findings") or [])}
 
 
 def sentence(f: dict) -> str:
@@ -72,9 +68,8 @@ def sentence(f: dict) -> str:
     g = f.get("gain") or {}
     unit = f.get("unit") or ""
     if g.get("reduction") is not None:
-        how = "adding it to the model explains"
-        if f["cause"] == "unexplained":
-            how = "the extended model's non-parametric part absorbs"
+        absorbs = f["cause"] == "unexplained"
+        how = "the extended model's non-parametric part absorbs" if absorbs else "adding it to the model explains"
         gain = (
             f"; {how} {g['reduction']:.0%} of the held-out error "
             f"(RMSE {g['rmse_before']:.3g} → {g['rmse_after']:.3g} {unit})"
@@ -209,6 +204,9 @@ def summary_lines(d: dict) -> list[str]:
             f"{f'{-red:+.1%}' if red is not None else 'nothing measurable'}, under what a finding must remove"
             + ("; written off all the same." if f.get("written_off") else "; left in the data.")
         )
+    late = [] if d.get("converged", True) else d.get("unconverged") or ["a fit stopped before it converged"]
+    if late:
+        out.append(f"Not converged: {'; '.join(late)}; the figures above are not at that fit's tolerance.")
     return out
 
 

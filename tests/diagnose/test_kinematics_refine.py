@@ -132,3 +132,22 @@ def test_refinements_track_the_training_frames_and_the_last_one_every_frame(curv
     held = ~train
     assert np.abs(made[0].q[held] - fitted.q[held]).max() > 1e-3  # the refinements moved q there
     np.testing.assert_allclose(again.q[held], fitted.q[held], atol=1e-5)
+
+
+def test_a_refinement_the_cap_ends_while_it_moves_says_so(curved, monkeypatch):
+    """With the cap at one step (the first always moves the term from the candidate's linear
+    estimate) the fit says in words that the cap ended it (diagnose writes converged: false); with
+    the default cap it stops at the tolerance, here after its second step, and says nothing."""
+    from diegocal.diagnose import kinematics_refine
+
+    adapter, train = curved
+    term = make_term("sensor_nonlinearity", "dip")
+    assert adapter.fit((term,), train).unconverged == ()
+    steps = []
+    refine = KinematicsAdapter.refine_step
+    monkeypatch.setattr(KinematicsAdapter, "refine_step", lambda self, f: steps.append(f.terms) or refine(self, f))
+    monkeypatch.setattr(kinematics_refine, "REFINE_MAX", 1)
+    fitted = adapter.fit((term,), train)
+    assert len(steps) == 1 and moved(steps[0], fitted.terms, 0.5)  # the step moved it
+    (why,) = fitted.unconverged
+    assert "refinement stopped at its cap of 1 step(s)" in why and "sensor_nonlinearity:dip by" in why
