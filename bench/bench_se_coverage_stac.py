@@ -195,6 +195,7 @@ def main(argv=None) -> int:
     ap.add_argument("--generator", action="append", choices=GENERATORS, help="default: both")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--terms", action="store_true", help="the diagnosed terms' parameters (module docstring)")
+    ap.add_argument("--cause", action="append", help="with --terms: only these causes (default: every one)")
     ap.add_argument("--quick", action="store_true", help="3 seeds of 10-s UR5 logs (a smoke run)")
     args = ap.parse_args(argv)
     if args.quick:
@@ -207,8 +208,8 @@ def main(argv=None) -> int:
               f"load {os.getloadavg()[0]:.1f}")
         t0 = time.perf_counter()
         if args.terms:
-            tasks = [(g, c, robot_dir, args.seed + i, args.duration) for g, c in TERM_CASES if g in generators
-                     for i in range(args.seeds)]
+            tasks = [(g, c, robot_dir, args.seed + i, args.duration) for g, c in TERM_CASES
+                     if g in generators and c in (args.cause or (c,)) for i in range(args.seeds)]
             rows = _map(term_one, tasks, args.jobs)
             print(term_table(rows))
         else:

@@ -108,20 +108,20 @@ def slip_value(term, cal, robot):
     bound = gauge_axes(robot, [g["joint"] for g in cal.gauges if g.get("kind") == "leaf"])
     if term.channel not in bound:
         return term
-    return replace(term, extra=term.extra | {"gauge": slip_gauge(*bound[term.channel], d, s)})
+    cov = np.diag(s**2) if cal.marker_xyz_cov is None else cal.marker_xyz_cov[k] + cal.marker_xyz_cov[i]
+    return replace(term, extra=term.extra | {"gauge": slip_gauge(*bound[term.channel], d, cov)})
 
 
-def slip_gauge(joint: str, axis: np.ndarray, d: np.ndarray, se: np.ndarray) -> dict:
-    """What the data fix of a slip ``d`` ± ``se`` (3,) whose direction about ``joint``'s axis
-    (a unit vector in the marker's link frame) is the fit's gauge: its length and its component
-    along the axis, each with its standard error to first order (the coordinates' errors taken as
-    independent, as their ± are)."""
+def slip_gauge(joint: str, axis: np.ndarray, d: np.ndarray, cov: np.ndarray) -> dict:
+    """What the data fix of a slip ``d`` (3,), covariance ``cov`` (3, 3), whose direction about
+    ``joint``'s axis (a unit vector in the marker's link frame) is the fit's gauge: its length and
+    its component along the axis, each with its standard error to first order (the full
+    covariance: the coordinates' errors lie mostly along the turn, which changes neither)."""
     length = float(np.linalg.norm(d))
-    along = float(axis @ d)
-    se_length = float(np.sqrt(np.sum((d / length) ** 2 * se**2))) if length > 0 else float("nan")
+    u = d / length if length > 0 else np.full(3, np.nan)
     return {
         "joint": joint,
         "axis": [round(float(a), 6) for a in axis],
-        "length": {"value": length, "stderr": se_length, "unit": "m"},
-        "along_axis": {"value": along, "stderr": float(np.sqrt(np.sum(axis**2 * se**2))), "unit": "m"},
+        "length": {"value": length, "stderr": float(np.sqrt(u @ cov @ u)), "unit": "m"},
+        "along_axis": {"value": float(axis @ d), "stderr": float(np.sqrt(axis @ cov @ axis)), "unit": "m"},
     }

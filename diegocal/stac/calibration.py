@@ -104,7 +104,8 @@ class Calibration:
     gain_se, bias_se : (P,) standard errors (NaN when not estimated)
     marker_names, marker_links : (M,)
     marker_xyz : (M, 3) marker positions in their link frames, m
-    marker_xyz_se : (M, 3) standard errors, m
+    marker_xyz_se : (M, 3) standard errors, m; marker_xyz_cov : (M, 3, 3) each marker's covariance, m²
+        (in memory only: a function of a marker's coordinates needs it; None when not estimated)
     mocap_R : (3, 3) rotation from base link to mocap frame; mocap_T : (3,) translation, m
     sigma_pots, sigma_markers : noise standard deviations (V, m), §2.3.5
     method : 'stac' | 'classical' | 'ekf' | 'nominal'
@@ -139,6 +140,7 @@ class Calibration:
     gain_se: np.ndarray | None = None
     bias_se: np.ndarray | None = None
     marker_xyz_se: np.ndarray | None = None
+    marker_xyz_cov: np.ndarray | None = field(default=None, repr=False, compare=False)
     sigma_pots: float = float("nan")
     sigma_markers: float = float("nan")
     fit: FitInfo = field(default_factory=FitInfo)

@@ -73,11 +73,17 @@ class Covariance:
         return np.clip(c, -1.0, 1.0)
 
     def se(self) -> dict:
-        """``{"gain", "bias" (P,), "xyz" (M, 3)}``, NaN for the entries held fixed."""
+        """``{"gain", "bias" (P,), "xyz" (M, 3), "xyz_cov" (M, 3, 3)}``, NaN for the entries held
+        fixed (a marker's 3 × 3 block: what a function of its coordinates, a slip's length, needs)."""
         P, M = self.n_pots, self.n_markers
         sd = np.full(self.free.size, np.nan)
         sd[self.free] = np.sqrt(np.diag(self.reported))
-        return {"gain": sd[:P], "bias": sd[P : 2 * P], "xyz": sd[2 * P : 2 * P + 3 * M].reshape(M, 3)}
+        cov = np.full((self.free.size, self.free.size), np.nan)
+        cov[np.ix_(self.free, self.free)] = self.reported
+        at = 2 * P + 3 * np.arange(M)[:, None] + np.arange(3)  # (M, 3) θ indices of each marker's d
+        blocks = cov[at[:, :, None], at[:, None, :]]  # (M, 3, 3) each marker's covariance
+        xyz = sd[2 * P : 2 * P + 3 * M].reshape(M, 3)
+        return {"gain": sd[:P], "bias": sd[P : 2 * P], "xyz": xyz, "xyz_cov": blocks}
 
     def correlations(self, labels, threshold: float = CORRELATED) -> list[tuple[str, str, float]]:
         """(label a, label b, ρ) of the free gains, biases and marker coordinates whose estimates

@@ -334,7 +334,7 @@ class Observation(Observability):
         nom = Calibration.nominal(self.robot)
         gain, bias, xyz = nom.gain.copy(), nom.bias.copy(), nom.marker_xyz.copy()
         gse, bse = np.full(len(gain), np.nan), np.full(len(gain), np.nan)
-        xse = np.full(xyz.shape, np.nan)
+        xse, xcov = np.full(xyz.shape, np.nan), np.full((*xyz.shape, 3), np.nan)
         gain[self.pot_index], bias[self.pot_index], xyz[self.marker_index] = (
             params.gain,
             params.bias,
@@ -346,6 +346,8 @@ class Observation(Observability):
                 se["bias"],
                 se["xyz"],
             )
+            if "xyz_cov" in se:
+                xcov[self.marker_index] = se["xyz_cov"]
         pots_sigma = [sigma[k] for k in self.groups if k != MARKERS]
         cal = replace(
             nom,
@@ -355,6 +357,7 @@ class Observation(Observability):
             gain_se=gse,
             bias_se=bse,
             marker_xyz_se=xse,
+            marker_xyz_cov=xcov,
             mocap_R=params.R,
             mocap_T=params.T,
             method=method,
