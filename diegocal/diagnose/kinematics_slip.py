@@ -101,27 +101,43 @@ def slip_value(term, cal, robot):
     if term.cause != "marker_slip":
         return term
     i, k = cal.marker_names.index(term.channel), cal.marker_names.index(term.channel + SLIP)
-    se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full(cal.marker_xyz.shape, np.nan)
-    # the two positions are estimated from disjoint frames: their errors nearly independent
-    d, s = cal.marker_xyz[k] - cal.marker_xyz[i], np.hypot(se[k], se[i])
-    term = term.with_values(d, s)
+    d = cal.marker_xyz[k] - cal.marker_xyz[i]
+    cov = move_covariance(cal, i, k)
+    term = term.with_values(d, [stderr(cov, e) for e in np.eye(3)])
     bound = gauge_axes(robot, [g["joint"] for g in cal.gauges if g.get("kind") == "leaf"])
     if term.channel not in bound:
         return term
-    cov = np.diag(s**2) if cal.marker_xyz_cov is None else cal.marker_xyz_cov[k] + cal.marker_xyz_cov[i]
     return replace(term, extra=term.extra | {"gauge": slip_gauge(*bound[term.channel], d, cov)})
 
 
+def move_covariance(cal, i: int, k: int) -> np.ndarray:
+    """(2, 3, 3) covariance of marker k's position minus marker i's, reported and model-based:
+    both blocks less their cross blocks (the two are fitted from disjoint frames but share the
+    calibration and the link's pose errors, which the difference cancels); without
+    ``marker_xyz_cov``, their standard errors taken as independent."""
+    if cal.marker_xyz_cov is None:
+        se = cal.marker_xyz_se if cal.marker_xyz_se is not None else np.full(cal.marker_xyz.shape, np.nan)
+        return np.stack([np.diag(se[k] ** 2 + se[i] ** 2)] * 2)
+    c = cal.marker_xyz_cov
+    a, b = slice(3 * i, 3 * i + 3), slice(3 * k, 3 * k + 3)
+    return c[:, b, b] + c[:, a, a] - c[:, b, a] - c[:, a, b]
+
+
+def stderr(cov: np.ndarray, v: np.ndarray) -> float:
+    """The standard error of v·x for ``cov`` (2, 3, 3) of x: the larger of the reported and the
+    model-based (as STAC floors each parameter's)."""
+    return float(np.sqrt(max(v @ cov[0] @ v, v @ cov[1] @ v)))
+
+
 def slip_gauge(joint: str, axis: np.ndarray, d: np.ndarray, cov: np.ndarray) -> dict:
-    """What the data fix of a slip ``d`` (3,), covariance ``cov`` (3, 3), whose direction about
-    ``joint``'s axis (a unit vector in the marker's link frame) is the fit's gauge: its length and
-    its component along the axis, each with its standard error to first order (the full
-    covariance: the coordinates' errors lie mostly along the turn, which changes neither)."""
+    """What the data fix of a slip ``d`` (3,), covariance ``cov`` (2, 3, 3) (:func:`stderr`), whose
+    direction about ``joint``'s axis (a unit vector in the marker's link frame) is the fit's gauge:
+    its length and its component along the axis, each with its standard error to first order."""
     length = float(np.linalg.norm(d))
     u = d / length if length > 0 else np.full(3, np.nan)
     return {
         "joint": joint,
         "axis": [round(float(a), 6) for a in axis],
-        "length": {"value": length, "stderr": float(np.sqrt(u @ cov @ u)), "unit": "m"},
-        "along_axis": {"value": float(axis @ d), "stderr": float(np.sqrt(axis @ cov @ axis)), "unit": "m"},
+        "length": {"value": length, "stderr": stderr(cov, u), "unit": "m"},
+        "along_axis": {"value": float(axis @ d), "stderr": stderr(cov, axis), "unit": "m"},
     }

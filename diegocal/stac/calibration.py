@@ -104,8 +104,9 @@ class Calibration:
     gain_se, bias_se : (P,) standard errors (NaN when not estimated)
     marker_names, marker_links : (M,)
     marker_xyz : (M, 3) marker positions in their link frames, m
-    marker_xyz_se : (M, 3) standard errors, m; marker_xyz_cov : (M, 3, 3) each marker's covariance, m²
-        (in memory only: a function of a marker's coordinates needs it; None when not estimated)
+    marker_xyz_se : (M, 3) standard errors, m; marker_xyz_cov : (2, 3M, 3M) the coordinates'
+        covariance, m², reported (block sandwich) and model-based (in memory only: a function of
+        them, a slip's move, needs it; None when not estimated)
     mocap_R : (3, 3) rotation from base link to mocap frame; mocap_T : (3,) translation, m
     sigma_pots, sigma_markers : noise standard deviations (V, m), §2.3.5
     method : 'stac' | 'classical' | 'ekf' | 'nominal'

@@ -73,17 +73,17 @@ class Covariance:
         return np.clip(c, -1.0, 1.0)
 
     def se(self) -> dict:
-        """``{"gain", "bias" (P,), "xyz" (M, 3), "xyz_cov" (M, 3, 3)}``, NaN for the entries held
-        fixed (a marker's 3 × 3 block: what a function of its coordinates, a slip's length, needs)."""
+        """``{"gain", "bias" (P,), "xyz" (M, 3), "xyz_cov" (2, 3M, 3M)}``, NaN for the entries held
+        fixed; ``xyz_cov``: the markers' coordinates' covariance, reported and model-based (what a
+        function of them, a slip's move from one marker to another, needs: its ± is floored at the
+        model-based one, as each parameter's is)."""
         P, M = self.n_pots, self.n_markers
         sd = np.full(self.free.size, np.nan)
         sd[self.free] = np.sqrt(np.diag(self.reported))
-        cov = np.full((self.free.size, self.free.size), np.nan)
-        cov[np.ix_(self.free, self.free)] = self.reported
-        at = 2 * P + 3 * np.arange(M)[:, None] + np.arange(3)  # (M, 3) θ indices of each marker's d
-        blocks = cov[at[:, :, None], at[:, None, :]]  # (M, 3, 3) each marker's covariance
-        xyz = sd[2 * P : 2 * P + 3 * M].reshape(M, 3)
-        return {"gain": sd[:P], "bias": sd[P : 2 * P], "xyz": xyz, "xyz_cov": blocks}
+        xyz = slice(2 * P, 2 * P + 3 * M)
+        cov = np.full((2, self.free.size, self.free.size), np.nan)
+        cov[np.ix_((0, 1), self.free, self.free)] = self.reported, self.model
+        return {"gain": sd[:P], "bias": sd[P : 2 * P], "xyz": sd[xyz].reshape(M, 3), "xyz_cov": cov[:, xyz, xyz]}
 
     def correlations(self, labels, threshold: float = CORRELATED) -> list[tuple[str, str, float]]:
         """(label a, label b, ρ) of the free gains, biases and marker coordinates whose estimates

@@ -334,7 +334,7 @@ class Observation(Observability):
         nom = Calibration.nominal(self.robot)
         gain, bias, xyz = nom.gain.copy(), nom.bias.copy(), nom.marker_xyz.copy()
         gse, bse = np.full(len(gain), np.nan), np.full(len(gain), np.nan)
-        xse, xcov = np.full(xyz.shape, np.nan), np.full((*xyz.shape, 3), np.nan)
+        xse, xcov = np.full(xyz.shape, np.nan), np.full((2, xyz.size, xyz.size), np.nan)
         gain[self.pot_index], bias[self.pot_index], xyz[self.marker_index] = (
             params.gain,
             params.bias,
@@ -347,7 +347,8 @@ class Observation(Observability):
                 se["xyz"],
             )
             if "xyz_cov" in se:
-                xcov[self.marker_index] = se["xyz_cov"]
+                at = (3 * np.asarray(self.marker_index)[:, None] + np.arange(3)).ravel()
+                xcov[np.ix_((0, 1), at, at)] = se["xyz_cov"]
         pots_sigma = [sigma[k] for k in self.groups if k != MARKERS]
         cal = replace(
             nom,

@@ -613,13 +613,14 @@ def test_a_slip_in_a_gauge_says_what_the_data_fix_of_it(finger):
 def test_a_gauge_slips_length_and_along_axis_errors_come_from_the_full_covariance():
     """An error that lies along the turn about the axis (perpendicular to the move and the axis)
     changes neither the length nor the component along the axis: their ± are then zero, where
-    the coordinates' ± taken apart would give them the turn's size."""
+    the coordinates' ± taken apart would give them the turn's size; never below the model-based
+    covariance's (the second)."""
     from diegocal.diagnose.kinematics_slip import slip_gauge
 
     axis, d = np.array([0.0, 1.0, 0.0]), np.array([0.01, 0.0, 0.0])
     turn = np.cross(axis, d) / np.linalg.norm(d)  # (0, 0, -1)
-    g = slip_gauge("dip", axis, d, 1e-6 * np.outer(turn, turn))
+    g = slip_gauge("dip", axis, d, np.stack([1e-6 * np.outer(turn, turn)] * 2))
     assert g["length"]["value"] == pytest.approx(0.01) and g["length"]["stderr"] < 1e-12
     assert g["along_axis"]["stderr"] < 1e-12
-    g = slip_gauge("dip", axis, d, 1e-6 * np.eye(3))
+    g = slip_gauge("dip", axis, d, np.stack([1e-6 * np.outer(turn, turn), 1e-6 * np.eye(3)]))
     assert g["length"]["stderr"] == pytest.approx(1e-3) and g["along_axis"]["stderr"] == pytest.approx(1e-3)
