@@ -14,6 +14,7 @@ diagnosis.yaml stands for the extended model it names. The model file is only re
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +41,7 @@ class PredictOptions:
     jobs : kinematics: threads of the joint-angle tracking
     seed : the predictions are deterministic; recorded for the record
     source : what made the prediction (command, model, log, created), stored in the written log
+    progress : kinematics: callable(text) told how far the joint-angle tracking is (None: silent)
     """
 
     sources: tuple[str, ...] = ("pots",)
@@ -48,6 +50,7 @@ class PredictOptions:
     jobs: int = 1
     seed: int = 0
     source: dict | None = None
+    progress: Callable[[str], None] | None = None
 
 
 @dataclass(frozen=True)
@@ -122,7 +125,7 @@ def _kinematics(path: Path, log: Log, options: PredictOptions) -> Prediction:
     cal = Calibration.from_dict(bundle.data, source=str(path))
     robot = robot_for_model(bundle.robot, options.robot, log, path)
     pred = stac_predict(log, robot, cal, options.sources, options.targets,
-                        StacOptions(jobs=options.jobs, seed=options.seed))
+                        StacOptions(jobs=options.jobs, seed=options.seed), progress=options.progress)
     streams = {"q": make_stream(robot.joint_names, pred.q)}
     if pred.pot_names:
         streams["pots"] = make_stream(pred.pot_names, pred.pots)

@@ -16,6 +16,7 @@ from diegocal.cli.common import (
     comma_list,
     command_line,
     default_output,
+    errors,
     log_output,
     split_words,
     summary,
@@ -46,9 +47,9 @@ class PredictArgs:
         return self.output or default_output(self.log, ".prediction.h5")
 
 
-def run_predict(args: PredictArgs, command: str = "diegocal predict") -> Prediction:
+def run_predict(args: PredictArgs, command: str = "diegocal predict", progress=None) -> Prediction:
     """Predict the log with the model (:func:`diegocal.predict.predict`) and write the prediction
-    log. Raises DiegocalError; prints nothing."""
+    log. Raises DiegocalError; prints nothing (``progress(text)``: how far a long tracking is)."""
     # the library is imported when the command runs, so that `--help` answers at once
     from datetime import UTC, datetime
 
@@ -62,7 +63,8 @@ def run_predict(args: PredictArgs, command: str = "diegocal predict") -> Predict
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     options = PredictOptions(
-        split_words(args.sensors_from), split_words(args.sensors_to), args.robot, args.jobs, args.seed, source
+        split_words(args.sensors_from), split_words(args.sensors_to), args.robot, args.jobs, args.seed, source,
+        progress,
     )
     result = predict(args.model, args.log, options)
     save_log(result.log, args.out)
@@ -115,12 +117,16 @@ def predict(
     jobs: Annotated[
         int, typer.Option("--jobs", "-j", min=1, help="Threads for the joint-angle tracking of STAC models.")
     ] = 1,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (the predictions are deterministic).")] = 0,
 ) -> None:
     """Predict a held-out log with a fitted model and report the error (the model file is only read)."""
     args = PredictArgs(**ctx.params)
-    result = run_predict(args, command_line("diegocal predict"))
+
+    def progress(text: str) -> None:
+        errors.print(f"[dim]predict:[/] {text}", highlight=False)
+
+    result = run_predict(args, command_line("diegocal predict"), None if args.quiet else progress)
     for text in result.warnings:
         warn(text)
     written = ("prediction", *([""] * (len(result.columns) - 2)), str(args.out))

@@ -79,12 +79,14 @@ def predict(
     options: StacOptions | None = None,
     max_steps: int = 40,
     q_init: np.ndarray | None = None,
+    progress=None,
 ) -> Prediction:
     """Track q from ``sources`` with the calibration fixed; predict ``targets`` (thesis §2.7.2).
 
     ``q_init`` (T, n) rad: joint angles to start the tracking from (a previous fit's), instead of
     the pots' inversion. ``sources`` ``("others",)``: q is tracked from every sensor and each
     reading is predicted from the others (:mod:`diegocal.stac.loo`), NaN where they cannot.
+    ``progress(text)``: told how far the tracking is (:func:`~diegocal.stac.qphase.track`).
 
     A calibration with extra terms (``calibration.terms``, found by ``diegocal diagnose``) is
     honoured through :func:`diegocal.stac.terms.apply_terms`: the model runs on the log mapped into
@@ -95,12 +97,12 @@ def predict(
     if calibration.terms:
         applied = apply_terms(calibration.terms, log, robot)
         cal = with_slip_markers(replace(calibration, terms=()), applied, calibration.terms)
-        pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, q_init)
+        pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, q_init, progress)
         model_pots = None
         if any(t.cause in POT_CAUSES for t in calibration.terms):  # of the model's s
             model_pots = pred.full_pots
             applied = apply_terms(calibration.terms, log, robot, model_pots)
-            pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, pred.q)
+            pred = predict(applied.log, applied.robot, cal, sources, targets, options, max_steps, pred.q, progress)
         markers = to_log_markers(applied, pred.marker_names, pred.markers) if pred.marker_names else pred.markers
         pots = pots_with_terms(calibration.terms, log, pred.pot_names, pred.pots, model_pots)
         return replace(pred, pots=pots, markers=markers, marker_names=applied.marker_names)
@@ -129,7 +131,7 @@ def predict(
         q = initial_q(obs, params, options, use=np.isin(obs.kinds, list(src)))
     else:
         q = np.tile(robot.neutral(), (obs.n_frames, 1))
-    q, st = track(obs, params, noise, q, max_steps, options.batch_size, options.jobs)
+    q, st = track(obs, params, noise, q, max_steps, options.batch_size, options.jobs, progress)
     pots = params.gain * st.s + params.bias
     xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
     markers = xb @ params.R.T + params.T

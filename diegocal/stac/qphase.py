@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from diegocal.progress import Eta, duration
 from diegocal.stac import robust
 from diegocal.stac.loo import frame_slices
 from diegocal.stac.model import MARKERS, Observation, Params, State
@@ -430,16 +431,21 @@ def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
 TRACK_TOL = 1e-8
 
 
-def track(obs: Observation, params: Params, noise: Noise, q, max_steps: int, batch: int = 250, jobs: int = 1):
+def track(
+    obs: Observation, params: Params, noise: Noise, q, max_steps: int, batch: int = 250, jobs: int = 1, progress=None
+):
     """LM steps (:func:`q_step`) from q (T, n) until every frame is tracked (:data:`TRACK_TOL`) or
     ``max_steps``: (q, the State at q). A frame's steps keep being accepted long after it has
     converged (the cost still falls by rounding), so λ alone never says it is done; and from a
-    converged q (a fit's) its steps fail by rounding, so λ would take many steps to say it."""
+    converged q (a fit's) its steps fail by rounding, so λ would take many steps to say it.
+    ``progress(text)``: told every few seconds how many frames are tracked, with the most time
+    left (every step takes about as long, and there are at most ``max_steps``)."""
     lam, cost = np.full(q.shape[0], 1e-2), np.full(q.shape[0], np.inf)
     tracked = np.zeros(q.shape[0], dtype=bool)
     trial = np.empty(q.shape[0])  # each step's cost at its candidate, taken or not
     st = spare = None  # spare: the State before st, whose arrays the next step overwrites
-    for _ in range(max_steps):
+    eta = Eta(max_steps)
+    for k in range(1, max_steps + 1):
         q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, want_red=False, out=spare, trial=trial)
         spare, st = st, new
         accepted = new_lam < lam
@@ -448,4 +454,8 @@ def track(obs: Observation, params: Params, noise: Noise, q, max_steps: int, bat
         lam, cost = new_lam, c
         if np.all(tracked):
             break
+        if progress is not None and eta.due(k):
+            left = duration(eta.left(k))
+            progress(f"tracking q: step {k}, {int(tracked.sum()):,}/{tracked.size:,} frames tracked, "
+                     f"{duration(eta.elapsed())} so far, at most {left} left")
     return q, st

@@ -55,3 +55,24 @@ def test_tracking_from_a_converged_q_stops_at_once(tree_robot, monkeypatch):
     monkeypatch.undo()
     assert len(steps) <= 2
     np.testing.assert_allclose(_cost(obs, params, noise, q_again), _cost(obs, params, noise, q_fit), rtol=1e-7)
+
+
+def test_tracking_says_how_far_it_is_with_the_most_time_left(tree_robot, monkeypatch):
+    """``progress`` is told, step by step (here every step: the report interval set to 0), how many
+    frames are tracked and the most time left (every step takes about as long, and there are at
+    most ``max_steps``); the same q with or without it."""
+    from diegocal.progress import Eta
+
+    log = synth.simulate(tree_robot, 40, seed=5, occlusion=0.3)
+    obs = Observation(log, tree_robot)
+    params = obs.params_from(Calibration.from_dict(log.truth.params))
+    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    q0 = np.clip(log.truth.signals["q"].data + 0.2, obs.lower, obs.upper)
+    quiet, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
+    monkeypatch.setattr(qphase, "Eta", lambda total: Eta(total, every=0.0))
+    lines = []
+    told, _ = track(obs, params, noise, q0, max_steps=40, batch=7, progress=lines.append)
+    np.testing.assert_array_equal(told, quiet)
+    assert lines and lines[0].startswith("tracking q: step 1, ") and "at most" in lines[-1], lines
+    counts = [int(line.split(", ")[1].split("/")[0].replace(",", "")) for line in lines]
+    assert counts == sorted(counts) and counts[-1] < obs.n_frames  # the last step's line is not written
