@@ -10,16 +10,20 @@ from diegocal.stac.model import Observation
 from diegocal.stac.qphase import Noise, q_step, track
 
 
+def _case(robot):
+    """A 40-frame log, its Observation, the true calibration's Params and a noise model."""
+    log = synth.simulate(robot, 40, seed=5, occlusion=0.3)
+    obs = Observation(log, robot)
+    return log, obs, obs.params_from(Calibration.from_dict(log.truth.params)), Noise(np.full(obs.n_pots, 0.01), 0.002)
+
+
 def _cost(obs, params, noise, q):
     lam = np.full(obs.n_frames, 1e7)  # a step this damped barely moves: its cost at q is returned
     return q_step(obs, params, noise, q, lam, want_red=False)[3]
 
 
 def test_tracking_stops_when_every_frame_has_converged(tree_robot, monkeypatch):
-    log = synth.simulate(tree_robot, 40, seed=5, occlusion=0.3)
-    obs = Observation(log, tree_robot)
-    params = obs.params_from(Calibration.from_dict(log.truth.params))
-    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    log, obs, params, noise = _case(tree_robot)
     q0 = log.truth.signals["q"].data + np.random.default_rng(4).normal(0.0, 0.2, (obs.n_frames, tree_robot.n_joints))
     q0 = np.clip(q0, obs.lower, obs.upper)
 
@@ -42,10 +46,7 @@ def test_tracking_from_a_converged_q_stops_at_once(tree_robot, monkeypatch):
     """From a fit's own q (a diagnosis scores its fit from there) the steps fail by rounding: a
     failed step that would have raised the cost by at most the tolerance says the frame is done,
     instead of λ rising x4 per failure until it reads as stuck (eleven steps on diego)."""
-    log = synth.simulate(tree_robot, 40, seed=5, occlusion=0.3)
-    obs = Observation(log, tree_robot)
-    params = obs.params_from(Calibration.from_dict(log.truth.params))
-    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    log, obs, params, noise = _case(tree_robot)
     q0 = np.clip(log.truth.signals["q"].data + 0.1, obs.lower, obs.upper)
     q_fit, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
 
@@ -63,10 +64,7 @@ def test_tracking_says_how_far_it_is_with_the_most_time_left(tree_robot, monkeyp
     most ``max_steps``); the same q with or without it."""
     from diegocal.progress import Eta
 
-    log = synth.simulate(tree_robot, 40, seed=5, occlusion=0.3)
-    obs = Observation(log, tree_robot)
-    params = obs.params_from(Calibration.from_dict(log.truth.params))
-    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    log, obs, params, noise = _case(tree_robot)
     q0 = np.clip(log.truth.signals["q"].data + 0.2, obs.lower, obs.upper)
     quiet, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
     monkeypatch.setattr(qphase, "Eta", lambda total: Eta(total, every=0.0))
