@@ -469,6 +469,7 @@ class KinematicsAdapter:
             marker_links=tuple(cal.marker_links[i] for i in keep),
             marker_xyz=cal.marker_xyz[keep],
             marker_xyz_se=se,
+            marker_xyz_cov=None,  # of the split markers
             terms=geometry.expand(fitted.terms),
         )
 

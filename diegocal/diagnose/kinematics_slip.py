@@ -105,8 +105,8 @@ def slip_value(term, cal, robot):
     cov = move_covariance(cal, i, k)
     term = term.with_values(d, [stderr(cov, e) for e in np.eye(3)])
     bound = gauge_axes(robot, [g["joint"] for g in cal.gauges if g.get("kind") == "leaf"])
-    if term.channel not in bound:
-        return term
+    if term.channel not in bound:  # (an earlier fit's gauge, if any, no longer holds)
+        return replace(term, extra={k: v for k, v in term.extra.items() if k != "gauge"})
     return replace(term, extra=term.extra | {"gauge": slip_gauge(*bound[term.channel], d, cov)})
 
 

@@ -387,6 +387,7 @@ def _calibration(cal, lay, state, stderr, var_m, geometry: bool = True) -> Calib
         bias_se=bias_se,
         marker_xyz=state.markers,
         marker_xyz_se=stderr[6 : 6 + 3 * M].reshape(M, 3),
+        marker_xyz_cov=None,  # STAC's, before the geometry: not this fit's
         mocap_R=state.R,
         mocap_T=state.T,
         sigma_markers=float(np.sqrt(var_m)),

@@ -239,6 +239,7 @@ def with_slip_markers(cal, applied: Applied, terms):
         marker_links=tuple(links),
         marker_xyz=np.vstack(xyz),
         marker_xyz_se=np.vstack(se),
+        marker_xyz_cov=None,  # of the markers before the split
     )
 
 
