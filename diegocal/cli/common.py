@@ -28,6 +28,17 @@ def warn(message: str) -> None:
     errors.print(f"[yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
 
 
+def refuse_unconverged(whys, allow: bool, hint: str) -> None:
+    """A warning line per fit that stopped at a cap (``whys``, in words; its output is written
+    with converged: false), then exit 1 unless ``allow`` (``--allow-unconverged``), whose ``hint``
+    each line then ends with."""
+    whys = list(whys)
+    for why in whys:
+        warn(why if allow else f"{why}; {hint}")
+    if whys and not allow:
+        raise typer.Exit(1)
+
+
 #: Where this thread's library warnings go while :func:`collected_warnings` is active.
 _sink = threading.local()
 

@@ -19,9 +19,9 @@ from diegocal.cli.common import (
     default_output,
     errors,
     output_path,
+    refuse_unconverged,
     split_words,
     summary,
-    warn,
 )
 from diegocal.domains import DOMAIN_NAMES
 from diegocal.domains import domain as domain_record
@@ -246,10 +246,7 @@ def diagnose_cmd(
     rows = [row for d in done for row in _summary_rows(d)]
     summary(f"diagnose {Path(args.log).name}", rows, quiet=args.quiet)
     late = [why for d in done if (why := unconverged(d)) is not None]
-    for why in late:
-        warn(why + ("" if args.allow_unconverged else f"; {UNCONVERGED_HINT}"))
-    if late and not args.allow_unconverged:
-        raise typer.Exit(1)
+    refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 
 
 def _summary_rows(done: Diagnosed) -> list:

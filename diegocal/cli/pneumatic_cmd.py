@@ -20,6 +20,7 @@ from diegocal.cli.common import (
     log_output,
     output_path,
     positive,
+    refuse_unconverged,
     summary,
     warn,
 )
@@ -182,10 +183,8 @@ def pneumatic_fit(
     ]
     summary("pneumatic-fit", rows, quiet=args.quiet)
     why = unconverged({n: f.converged for n, f in done.fits.items()})
-    if why is not None:
-        warn(f"{why}; written with converged: false" + ("" if args.allow_unconverged else f"; {UNCONVERGED_HINT}"))
-        if not args.allow_unconverged:
-            raise typer.Exit(1)
+    late = () if why is None else (f"{why}; written with converged: false",)
+    refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 
 
 @app.command("pneumatic-merge")

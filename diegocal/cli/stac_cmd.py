@@ -26,6 +26,7 @@ from diegocal.cli.common import (
     log_output,
     output_path,
     progress_enabled,
+    refuse_unconverged,
     summary,
     warn,
 )
@@ -293,11 +294,8 @@ def stac(
         warn(line)
     _summary(done, args)
     why = unconverged(done.calibration)
-    if why is not None:
-        hint = "" if args.allow_unconverged else f"; {UNCONVERGED_HINT}"
-        warn(f"{why}; it is written with converged: false{hint}")
-        if not args.allow_unconverged:
-            raise typer.Exit(1)
+    late = () if why is None else (f"{why}; it is written with converged: false",)
+    refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 
 
 def _summary(done: StacRun, args: StacArgs) -> None:

@@ -29,11 +29,7 @@ def moved(before, after, beyond: float) -> bool:
     by more than REFINE_TOL of its standard error (a NaN error: not moved), a clock shift also by
     more than its tolerance (:func:`~diegocal.diagnose.kinematics_clock.clock_tol`; ``beyond``: the
     largest shift the candidates try). A term new to ``after`` is no move."""
-    old = {(t.cause, t.channel): t for t in before}
-    for t in after:
-        was = old.get((t.cause, t.channel))
-        if was is None or t.cause not in REFINED or was.values.shape != t.values.shape:
-            continue
+    for was, t in _steps(before, after):
         if t.cause == "time_offset":
             shift = float(t.values[0])
             if abs(shift - float(was.values[0])) > clock_tol(shift, CLOCK_TOL, beyond):
@@ -41,6 +37,15 @@ def moved(before, after, beyond: float) -> bool:
         if np.any(np.abs(t.values - was.values) > REFINE_TOL * t.stderrs):
             return True
     return False
+
+
+def _steps(before, after):
+    """(the term before, after) of each refined term a step moved (new terms left out)."""
+    old = {(t.cause, t.channel): t for t in before}
+    for t in after:
+        was = old.get((t.cause, t.channel))
+        if was is not None and t.cause in REFINED and was.values.shape == t.values.shape:
+            yield was, t
 
 
 def jumped(before, after, period: float) -> bool:
@@ -79,11 +84,10 @@ def refined(adapter, fitted, train: np.ndarray, beyond: float):
 
 def stopped(before, after) -> str:
     """In words, a refinement that the cap ended while its last step still moved a term."""
-    old = {(t.cause, t.channel): t for t in before}
     moves = [
-        f"{t.label} by {np.max(np.abs(t.values - old[(t.cause, t.channel)].values) / t.stderrs):.2g} SE"
-        for t in after
-        if t.cause in REFINED and (t.cause, t.channel) in old and np.all(t.stderrs > 0)
+        f"{t.label} by {np.max(np.abs(t.values - was.values) / t.stderrs):.2g} SE"
+        for was, t in _steps(before, after)
+        if np.all(t.stderrs > 0)
     ]
     return (
         f"the found terms' refinement stopped at its cap of {REFINE_MAX} step(s) while its last step still moved "

@@ -108,9 +108,11 @@ def gauge_axes(robot: Robot, joints) -> dict[str, tuple[str, np.ndarray]]:
     axis by whatever offset that leaves (d -> Rot(a, -δ) d): of a difference of two of their
     positions (a slipped marker's move) only the length and the component along ``a`` are the
     data's. A prismatic joint's gauge shifts them along its axis, which no difference sees."""
+    out: dict = {}
+    if not joints:
+        return out
     model, kin = robot.model, BatchKinematics(robot)
     base_joint = model.frames[robot.base_frame].parentJoint
-    out = {}
     for name in joints:
         k = robot.joint_names.index(name) + 1
         if kin.prismatic[k - 1]:

@@ -34,7 +34,7 @@ import numpy as np
 from diegocal.stac.joint_step import _theta_rows, _times_q, free_mask, pick, reduced_matrix
 from diegocal.stac.model import Observation, Params, State
 from diegocal.stac.qphase import Noise, block_solve, damped, normal_equations
-from diegocal.terms import CORRELATED
+from diegocal.terms import CORRELATED, correlated_pairs
 
 #: Contiguous blocks of frames the sandwich's meat is summed over (fewer on short logs: a block is
 #: at least MIN_BLOCK frames). 40 blocks of a 30-s log at 100 Hz are 0.75 s each, many times the
@@ -91,13 +91,7 @@ class Covariance:
         P, M = self.n_pots, self.n_markers
         idx = np.flatnonzero(self.free)
         keep = idx < 2 * P + 3 * M
-        c = self.correlation()[np.ix_(keep, keep)]
-        names = [labels[i] for i in idx[keep]]
-        out = []
-        for a, b in zip(*np.triu_indices(c.shape[0], 1), strict=True):
-            if abs(c[a, b]) >= threshold:
-                out.append((names[a], names[b], float(c[a, b])))
-        return out
+        return correlated_pairs(self.correlation()[np.ix_(keep, keep)], [labels[i] for i in idx[keep]], threshold)
 
 
 def covariance(
