@@ -59,6 +59,17 @@ def thread_map(fn: Callable, items: Iterable, jobs: int = 1) -> list:
         return list(pool.map(fn, items))
 
 
+def thread_imap(fn: Callable, items: Iterable, jobs: int = 1):
+    """:func:`thread_map` as a generator: each result in order as soon as it (and those before it)
+    is done, so that the caller can report progress while the rest run."""
+    items = list(items)
+    if jobs <= 1 or len(items) <= 1:
+        yield from (fn(x) for x in items)
+        return
+    with ThreadPoolExecutor(max_workers=min(int(jobs), len(items))) as pool:
+        yield from pool.map(fn, items)
+
+
 def in_order(producers: list, jobs: int = 1, depth: int = 2):
     """The items of each generator function of ``producers`` in turn (all of the first's, then the
     second's, ...), made in ``jobs`` threads when jobs > 1: while the caller consumes one

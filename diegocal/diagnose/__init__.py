@@ -56,7 +56,8 @@ class DiagnoseOptions:
         "nominal" (the URDF's inertias are the model; only friction is fitted, so an unmodelled
         payload is a model error that can be named)
     chambers : pneumatics: the chambers to diagnose (() = all)
-    jobs : independent units (chambers) diagnosed in parallel processes
+    jobs : independent units (chambers) diagnosed in parallel processes; a log of one unit uses
+        them as threads within it (its adapter's work and its candidates' fits)
     seed : seeds anything random (none of the defaults is)
     progress : optional callable(str)
     """
@@ -80,6 +81,7 @@ class DiagnoseOptions:
             max_rounds=self.max_rounds,
             n_units=n_units,
             progress=self.progress,
+            jobs=self.jobs if n_units == 1 else 1,
         )
 
 

@@ -24,7 +24,7 @@ from diegocal.diagnose.kinematics_lin import (
     row_gram,
     weighted_gram,
 )
-from diegocal.diagnose.spill import Spill
+from diegocal.diagnose.spill import BlockStore, Spill
 from diegocal.parallel import in_order
 from diegocal.progress import ticker
 from diegocal.stac.loo import batch_projection, frame_slices, pot_sigmas, sigma_of
@@ -77,6 +77,10 @@ class Sweep:
         self.progress = getattr(adapter, "progress", None)  # told how far the three passes are
         self._tick = lambda: None
         self._sharing: dict = {}
+        # each block's linearisation as made on the first pass over it: the next passes read it
+        # back (a few milliseconds) instead of making it again (the forward kinematics, the
+        # Jacobians and an n x n inverse per frame: a sixth of a pass)
+        self.kept = BlockStore(self.T)
 
     def blocks(self):
         """Each block's :class:`Linearised`, in turn."""
@@ -84,22 +88,15 @@ class Sweep:
             yield self._block(sl)  # the caller's block is the only one alive while the next is made
 
     def _block(self, sl: slice) -> Linearised:
-        """The :class:`Linearised` of the frames ``sl``."""
-        f = batch_projection(self.obs, self.params, self.sigma, self.fitted.q, sl, solve=False)
-        return Linearised(
-            self.adapter,
-            self.fitted,
-            self.obs,
-            self.params,
-            f.J,
-            np.linalg.inv(f.H),  # (JᵀWJ + D)⁻¹, as frame_projection's K solves with it
-            f.w,
-            f.s,
-            f.Rl,
-            f.sigma_p,
-            f.D,
-            start=sl.start,
-        )
+        """The :class:`Linearised` of the frames ``sl``, made on the first pass that reads it and
+        read back from :attr:`kept` on the others."""
+        got = self.kept.get(sl)
+        if got is None:
+            f = batch_projection(self.obs, self.params, self.sigma, self.fitted.q, sl, solve=False)
+            # (JᵀWJ + D)⁻¹, as frame_projection's K solves with it
+            got = {"J": f.J, "Hi": np.linalg.inv(f.H), "w": f.w, "s": f.s, "Rl": f.Rl, "D": f.D}
+            self.kept.put(sl, got)
+        return Linearised(self.adapter, self.fitted, self.obs, self.params, sigma_p=self.sigma_p, start=sl.start, **got)
 
     def mapped_index(self, name: str) -> int:
         return self.obs.marker_names.index(name)

@@ -21,6 +21,7 @@ import numpy as np
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
 from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested, column_rows
 from diegocal.lstsq import TallLstsq
+from diegocal.parallel import thread_imap, thread_map
 from diegocal.progress import Eta
 from diegocal.terms import Parameter, Term
 
@@ -77,12 +78,17 @@ class _Stack:
         x = column_rows(cols, c, sub)
         return np.zeros((n, k)) if x is None else (np.asarray(x, float) * self.weights[c]).reshape(n, k)
 
-    def predicted(self, cand: Candidate, coef: np.ndarray, channels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(r, A @ coef, sample index) over the finite rows of ``channels``, in :meth:`pieces`' order."""
-        parts = [(r, A @ coef, s) for r, A, s in self.pieces(cand, channels)]
-        if not parts:
-            return np.zeros(0), np.zeros(0), np.zeros(0, int)
-        return tuple(np.concatenate(x) for x in zip(*parts, strict=True))
+    def predicted(self, cand: Candidate, coef: np.ndarray, channels) -> dict:
+        """{channel: (r, A @ coef, sample index)} over the finite rows of each of ``channels``, in
+        :meth:`pieces`' order."""
+        return {c: _joined([(r, A @ coef, s) for r, A, s in self.pieces(cand, (c,))]) for c in channels}
+
+
+def _joined(parts: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(r, a, sample index) triples, one after another."""
+    if not parts:
+        return np.zeros(0), np.zeros(0), np.zeros(0, int)
+    return tuple(np.concatenate(x) for x in zip(*parts, strict=True))
 
 
 def channel_weights(res: Residuals, train: np.ndarray) -> dict:
@@ -111,43 +117,44 @@ def _fit(cand: Candidate, stack: _Stack, channels) -> _Fit | None:
     """Least squares of the residual on the candidate's columns, a piece of rows at a time
     (:class:`~diegocal.lstsq.TallLstsq`: lstsq's solution and rank cutoff, to rounding)."""
     ls, rr = TallLstsq(cand.n_params + _refit_width(cand)), 0.0
-    for r, A, _ in stack.pieces(cand, channels):
+    # each sample's rows (channels, axes) summed, residual and columns: its summed error after the
+    # fit is r_sum − A_sum coef, without a second pass over the rows
+    r_sum, A_sum, seen = np.zeros(stack.length), np.zeros((stack.length, ls.p)), np.zeros(stack.length, bool)
+    for r, A, samp in stack.pieces(cand, channels):
         ls.add(A, r)
         rr += float(r @ r)
+        np.add.at(r_sum, samp, r)
+        np.add.at(A_sum, samp, A)
+        seen[samp] = True
     if ls.rows <= ls.p + 2:
         return None
     coef, ee = ls.solve()
     dof = max(ls.rows - ls.p, 1)
     # correlated residuals: the variance of a sum is inflated by the correlation time
-    e_sum, seen = np.zeros(stack.length), np.zeros(stack.length, bool)
-    for r, A, samp in stack.pieces(cand, channels):
-        np.add.at(e_sum, samp, r - A @ coef)  # a sample's rows (channels, axes) summed
-        seen[samp] = True
-    tau = autocorrelation_time(e_sum[seen])  # per sample, in order
+    tau = autocorrelation_time((r_sum - A_sum @ coef)[seen])  # per sample, in order
     s2 = ee / dof * max(tau, 1.0)
     cov = np.linalg.pinv(ls.gram()) * s2
     k = cand.n_params
     return _Fit(coef, np.sqrt(np.maximum(np.diag(cov)[:k], 0.0)), rr - ee)
 
 
-def _test(cand: Candidate, fit: _Fit, stack: _Stack, channels, validation: np.ndarray):
-    r, a, samp = stack.predicted(cand, fit.coef, channels)
-    return out_of_sample_test(r, a, samp, validation)
+def _test(predicted: dict, validation: np.ndarray):
+    """The out-of-sample test on every channel's rows (:meth:`_Stack.predicted`) together."""
+    return out_of_sample_test(*_joined(list(predicted.values())), validation)
 
 
-def _channel_gains(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[list[float], list[float]]:
-    """Per channel of ``channels``: the fraction of its validation error the fitted correction
-    removes, and the correction's energy there."""
+def _channel_gains(predicted: dict) -> tuple[list[float], list[float]]:
+    """Per channel of ``predicted`` (:meth:`_Stack.predicted`): the fraction of its validation
+    error the fitted correction removes, and the correction's energy there."""
     gains, energy = [], []
-    for c in channels:
-        r, a, _ = stack.predicted(cand, fit.coef, (c,))
+    for r, a, _ in predicted.values():
         before = float(r @ r)
         gains.append(1.0 - float((r - a) @ (r - a)) / before if before > 0 else 0.0)
         energy.append(float(a @ a))
     return gains, energy
 
 
-def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[float | None, tuple | None, float | None]:
+def _own_gain(cand: Candidate, predicted: dict) -> tuple[float | None, tuple | None, float | None]:
     """Fraction of the validation error of the candidate's own channel (its term's channel, when
     the fitted correction acts on it more than on any other) that the correction removes; None
     when it has none (a joint's link offset seen mostly by markers, whatever a pot of the same
@@ -155,7 +162,8 @@ def _own_gain(cand: Candidate, fit: _Fit, stack: _Stack, channels) -> tuple[floa
     names no channel it acts on (a payload on a link): the channel it is judged on. Third: the
     gain on its own channel whatever acts most (a pot's curve moves the tracked joint, so its
     markers too): what a flexible model of that channel is weighed against."""
-    gains, energy = _channel_gains(cand, fit, stack, channels)
+    channels = list(predicted)
+    gains, energy = _channel_gains(predicted)
     i = int(np.argmax(energy))
     own = cand.term.channel
     if own not in cand.columns or own not in channels:
@@ -182,15 +190,16 @@ def evaluate_candidates(
     exclude: dict | None = None,
 ) -> list[Tested]:
     """Fit every candidate on the ``train`` samples (one variant per family: the best training
-    fit), test it on the ``validation`` samples, Bonferroni over the families (and units)."""
+    fit), test it on the ``validation`` samples, Bonferroni over the families (and units); the
+    candidates are independent, fitted and tested in ``options.jobs`` threads (same results)."""
     exclude = exclude or {}
     tr = _Stack(res, weights, np.flatnonzero(train), exclude)
     va = _Stack(res, weights, np.flatnonzero(validation), exclude)
     best: dict[str, tuple[Candidate, _Fit]] = {}
     eta = Eta(len(candidates))  # a long round says how far it is, with the time left
-    for i, cand in enumerate(candidates):
+    fits = thread_imap(lambda c: _fit(c, tr, _candidate_channels(c)), candidates, options.jobs)
+    for i, (cand, fit) in enumerate(zip(candidates, fits, strict=True)):
         key = cand.family or f"#{i}"
-        fit = _fit(cand, tr, _candidate_channels(cand))
         if options.progress is not None and eta.due(i + 1):
             options.progress(f"candidate terms fitted: {eta.text(i + 1)}")
         if fit is None:
@@ -198,19 +207,22 @@ def evaluate_candidates(
         if key not in best or fit.train_gain > best[key][1].train_gain:
             best[key] = (cand, fit)
     n_tests = max(len(best), 1) * max(options.n_units, 1)
-    out = []
-    for cand, fit in best.values():
+
+    def judged(pair: tuple[Candidate, _Fit]) -> Tested:
+        cand, fit = pair
         chans = _candidate_channels(cand)
-        test = _test(cand, fit, va, chans, validation)
+        predicted = va.predicted(cand, fit.coef, chans)  # one pass over the validation rows
+        test = _test(predicted, validation)
         thr = critical_t(options.alpha, n_tests, test.df)
         k = cand.n_params
         term = cand.term.with_linear_values(fit.coef[:k], fit.se)
-        own, strongest, on_own = _own_gain(cand, fit, va, chans) if len(chans) > 1 else (None, None, None)
+        own, strongest, on_own = _own_gain(cand, predicted) if len(chans) > 1 else (None, None, None)
         gain = test.gain if own is None else max(own, test.gain)
         sig = bool(test.t > thr and gain >= options.min_gain)
-        out.append(
-            Tested(term, tuple(cand.columns), test, thr, sig, k, cand, None if own is None else gain, strongest, on_own)
-        )
+        own_gain = None if own is None else gain
+        return Tested(term, tuple(cand.columns), test, thr, sig, k, cand, own_gain, strongest, on_own)
+
+    out = thread_map(judged, best.values(), options.jobs)
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import threading
 
 import numpy as np
 
@@ -96,6 +97,40 @@ class DiskArray:
 
     def __reduce__(self):  # sent to another process as the array it holds (the file stays here)
         return (np.asarray, (np.asarray(self),))
+
+
+class BlockStore:
+    """Named arrays of blocks of frames (T rows each), kept in a :class:`Spill` as made so that a
+    later pass reads them back instead of making them again; a block is read only once all of it
+    is written (producers in threads write different blocks). A store that cannot write (no room)
+    keeps nothing more, and its caller makes the blocks again: it is a saving, never a need."""
+
+    def __init__(self, T: int):
+        self.T, self._arrays, self._done, self._lock = T, None, set(), threading.Lock()
+        self._spill: Spill | None = None
+        self.working = True
+
+    def get(self, sl: slice) -> dict | None:
+        """The arrays of the block ``sl`` when it was kept, else None."""
+        if sl.start not in self._done:
+            return None
+        return {k: a.span(sl.start, sl.stop) for k, a in self._arrays.items()}
+
+    def put(self, sl: slice, arrays: dict) -> None:
+        """Keep the block ``sl``'s ``arrays`` ({name: (B, ...)})."""
+        if not self.working:
+            return
+        try:
+            with self._lock:
+                if self._arrays is None:
+                    self._spill = Spill()
+                    self._arrays = {k: self._spill.array((self.T, *a.shape[1:]), a.dtype) for k, a in arrays.items()}
+            for k, a in arrays.items():
+                self._arrays[k].write(sl.start, a)
+        except (OSError, ScratchSpaceError):
+            self.working = False
+            return
+        self._done.add(sl.start)
 
 
 def _no_room(exc: OSError) -> ScratchSpaceError:

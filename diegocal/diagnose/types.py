@@ -156,6 +156,8 @@ class EngineOptions:
     n_units : independent units diagnosed for the same log (chambers): alpha is shared among them
     n_bins : bins of a state variable in the Show step and the ``unexplained`` test
     progress : optional callable(str) told what the engine is doing
+    jobs : threads fitting and testing a round's candidates (one unit's: the units of a log are
+        spread over processes instead)
     """
 
     alpha: float = 0.01
@@ -165,6 +167,7 @@ class EngineOptions:
     n_units: int = 1
     n_bins: int = 10
     progress: Callable[[str], None] | None = None
+    jobs: int = 1
 
 
 @dataclass(frozen=True)

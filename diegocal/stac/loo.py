@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from diegocal.parallel import one_blas_thread, thread_map
 from diegocal.stac.model import MARKERS, Observation
 
 #: Frames per batch when the Jacobians are evaluated: a batch's J and K are 2 x BATCH x R x n
@@ -126,16 +127,20 @@ def batch_projection(
     return FrameProjection(J, None, w, s, Rl, sigma_p, D, H)
 
 
-def deleted_from_others(obs: Observation, params, sigma: dict, q: np.ndarray, r: np.ndarray):
+def deleted_from_others(obs: Observation, params, sigma: dict, q: np.ndarray, r: np.ndarray, jobs: int = 1):
     """:func:`deleted_residuals` of the residuals r (T, R) at joint angles q (T, n), a BATCH of
-    frames at a time: the same numbers as ``deleted_residuals(frame_projection(...), r, P)``
-    without holding every frame's J and K (what ``predict --from others`` needs on a long log)."""
+    frames at a time, in ``jobs`` threads: the same numbers as ``deleted_residuals(
+    frame_projection(...), r, P)`` without holding every frame's J and K (what ``predict --from
+    others`` needs on a long log)."""
     T, P = obs.n_frames, obs.n_pots
     rp = np.empty((T, P))
     rm = np.empty((T, obs.n_markers, 3))
-    for sl, part in frame_batches(obs, params, sigma, q):
-        rp[sl], rm[sl] = deleted_residuals(part, r[sl], P)
-        del part  # before the next batch is made
+
+    def batch(sl: slice) -> None:
+        rp[sl], rm[sl] = deleted_residuals(batch_projection(obs, params, sigma, q, sl), r[sl], P)
+
+    with one_blas_thread():
+        thread_map(batch, frame_slices(T, BATCH), jobs)
     return rp, rm
 
 

@@ -106,6 +106,18 @@ class State:
             return None
         return Linearisation(self.s[sl], self.Rl[sl], self.pl[sl], self.xi[:, sl], self.ds_lin[sl])
 
+    def take(self, frames: np.ndarray) -> State:
+        """The frames ``frames`` (an index array), linearisation included: a copy."""
+        xi = None if self.xi is None else self.xi[:, frames]
+        ds_lin = None if self.ds_lin is None else self.ds_lin[frames]
+        return State(self.s[frames], self.Rl[frames], self.pl[frames], xi, ds_lin)
+
+    def put(self, frames: np.ndarray, other: State) -> None:
+        """Frames ``frames`` (an index array) set to ``other``'s (a State of those frames), in place."""
+        self.s[frames], self.Rl[frames], self.pl[frames] = other.s, other.Rl, other.pl
+        if self.xi is not None:
+            self.xi[:, frames], self.ds_lin[frames] = other.xi, other.ds_lin
+
 
 class Observation(Observability):
     """A log's pot and marker data bound to a robot (what it determines: :class:`Observability`).

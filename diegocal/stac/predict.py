@@ -138,7 +138,7 @@ def predict(
     full_pots = pots
     if OTHERS in sources:  # each reading from the others: reading − its deleted residual
         r = np.concatenate([obs.pots - pots, (obs.markers - markers).reshape(obs.n_frames, -1)], axis=1)
-        rp, rm = deleted_from_others(obs, params, sig, q, r)
+        rp, rm = deleted_from_others(obs, params, sig, q, r, options.jobs)
         pots, markers = obs.pots - rp, obs.markers - rm
     mae = {}
     for g in sorted(tgt):

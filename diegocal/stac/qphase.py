@@ -431,27 +431,46 @@ def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
 TRACK_TOL = 1e-8
 
 
+#: Once no more than this share of the frames is left to track, the steps are taken on those
+#: frames alone (the others keep their q and State): a few slow frames no longer cost a step on all.
+TRACK_SUBSET = 0.5
+
+
 def track(
     obs: Observation, params: Params, noise: Noise, q, max_steps: int, batch: int = 250, jobs: int = 1, progress=None
 ):
     """LM steps (:func:`q_step`) from q (T, n) until every frame is tracked (:data:`TRACK_TOL`) or
     ``max_steps``: (q, the State at q). A frame's steps keep being accepted long after it has
     converged (the cost still falls by rounding), so λ alone never says it is done; and from a
-    converged q (a fit's) its steps fail by rounding, so λ would take many steps to say it.
+    converged q (a fit's) its steps fail by rounding, so λ would take many steps to say it. A
+    tracked frame is left where it is (:data:`TRACK_SUBSET`).
     ``progress(text)``: told every few seconds how many frames are tracked, with the most time
     left (every step takes about as long, and there are at most ``max_steps``)."""
-    lam, cost = np.full(q.shape[0], 1e-2), np.full(q.shape[0], np.inf)
-    tracked = np.zeros(q.shape[0], dtype=bool)
-    trial = np.empty(q.shape[0])  # each step's cost at its candidate, taken or not
+    T = q.shape[0]
+    lam, cost = np.full(T, 1e-2), np.full(T, np.inf)
+    tracked = np.zeros(T, dtype=bool)
+    trial = np.empty(T)  # each step's cost at its candidate, taken or not
     st = spare = None  # spare: the State before st, whose arrays the next step overwrites
     eta = Eta(max_steps)
     for k in range(1, max_steps + 1):
-        q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, want_red=False, out=spare, trial=trial)
-        spare, st = st, new
-        accepted = new_lam < lam
-        done = np.where(accepted, np.isfinite(cost) & (cost - c <= TRACK_TOL * cost), trial - c <= TRACK_TOL * c)
-        tracked |= (new_lam >= 1e3) | done
-        lam, cost = new_lam, c
+        todo = np.flatnonzero(~tracked)
+        if st is None or len(todo) > TRACK_SUBSET * T:  # a step on every frame
+            at = slice(None)
+            q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, False, st, spare, trial)
+            spare, st = st, new
+            tried = trial
+        else:  # on the untracked frames only
+            at, tried = todo, np.empty(len(todo))
+            q_at, new_lam, new, c, _ = q_step(
+                obs.subset(todo), params, noise, q[todo], lam[todo], batch, jobs, False, st.take(todo), trial=tried
+            )
+            q[todo] = q_at
+            st.put(todo, new)
+        accepted = new_lam < lam[at]
+        was = cost[at]
+        done = np.where(accepted, np.isfinite(was) & (was - c <= TRACK_TOL * was), tried - c <= TRACK_TOL * c)
+        tracked[at] |= (new_lam >= 1e3) | done
+        lam[at], cost[at] = new_lam, c
         if np.all(tracked):
             break
         if progress is not None and eta.due(k):

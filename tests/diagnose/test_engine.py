@@ -98,6 +98,17 @@ def test_one_standard_error_rule_prefers_the_simpler_term():
     causes = {t.term.cause for t in tested if t.significant}
     assert {"square", "poly"} <= causes
     assert choose(tested, blocks.mask("validation")).term.cause == "square"
+    threads = evaluate_candidates(
+        ad.candidates(fitted, res, train),
+        res,
+        {c: 1.0 for c in res.channels},
+        train,
+        blocks.mask("validation"),
+        EngineOptions(jobs=2),
+    )  # the candidates fitted and tested in two threads: the same results in the same order
+    assert [(t.term.cause, t.term.channel, t.test.t, t.significant) for t in threads] == [
+        (t.term.cause, t.term.channel, t.test.t, t.significant) for t in tested
+    ]
 
 
 def test_a_tested_candidate_keeps_its_errors_on_the_validation_samples_only():

@@ -204,7 +204,8 @@ def test_deleted_residuals_are_leave_one_sensor_out_refits(baseline, monkeypatch
 def test_deleted_residuals_a_batch_at_a_time_equal_the_whole_log(baseline, monkeypatch):
     """``predict --from others`` takes the deleted residuals a batch of frames at a time
     (:func:`~diegocal.stac.loo.deleted_from_others`, no frame's J and K held past its batch): the
-    same numbers as every frame's projection at once, with batches that do not divide the log."""
+    same numbers as every frame's projection at once, with batches that do not divide the log,
+    and the same bits with the batches in two threads."""
     adapter, fitted, _ = baseline
     lin = whole_log(fitted, adapter)
     r = np.random.default_rng(1).normal(0.0, 0.01, (lin.T, lin.R))
@@ -215,10 +216,29 @@ def test_deleted_residuals_a_batch_at_a_time_equal_the_whole_log(baseline, monke
     got = loo.deleted_from_others(lin.obs, lin.params, sigma, fitted.q, r)
     for g, w in zip(got, want, strict=True):
         np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-15)
+    threads = loo.deleted_from_others(lin.obs, lin.params, sigma, fitted.q, r, jobs=2)  # batches in threads
+    for g, t in zip(got, threads, strict=True):
+        np.testing.assert_array_equal(t, g)
     proj = loo.frame_projection(lin.obs, lin.params, sigma, fitted.q)  # filled batch by batch
     np.testing.assert_allclose(proj.J, lin.J, rtol=0, atol=0)
     K = lin.K  # from the linearisation's (JᵀWJ + D)⁻¹
     np.testing.assert_allclose(proj.K, K, rtol=1e-9, atol=1e-9 * np.abs(K).max())
+
+
+def test_a_sweep_makes_each_block_once_and_reads_it_back_on_the_next_passes(baseline, monkeypatch):
+    """The forward kinematics, Jacobians and inverses of a block are made on the first pass over it
+    only; the next passes read the very numbers back (:class:`~diegocal.diagnose.spill.BlockStore`)."""
+    adapter, fitted, _ = baseline
+    made = []
+    project = kinematics_sweep.batch_projection
+    monkeypatch.setattr(kinematics_sweep, "batch_projection", lambda *a, **k: made.append(1) or project(*a, **k))
+    sweep = Sweep(fitted, adapter)
+    first = [(b.J, b.Hi, b.w) for b in sweep.blocks()]
+    again = [(b.J, b.Hi, b.w) for b in sweep.blocks()]
+    assert len(made) == len(sweep.slices) > 1
+    for a, b in zip(first, again, strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
 
 
 def test_calibration_span_from_its_structure_equals_the_dense_basis(baseline):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from diegocal.diagnose.kinematics_lin import running_median
-from diegocal.diagnose.spill import Spill
+from diegocal.diagnose.spill import BlockStore, Spill
 from diegocal.errors import ScratchSpaceError
 
 
@@ -60,3 +60,22 @@ def test_a_full_disk_is_one_error_that_says_where_and_what_to_change(monkeypatch
     monkeypatch.setattr(os, "pwrite", full)
     with pytest.raises(ScratchSpaceError, match="No space left on device; set TMPDIR to a folder with room"):
         a.write(0, np.zeros((10, 2)))
+
+
+def test_a_block_store_gives_back_the_blocks_kept_and_nothing_once_the_disk_is_full(monkeypatch):
+    """The sweep's linearisations kept between passes (:class:`BlockStore`): a kept block reads
+    back bit for bit, one never kept reads None (the caller makes it), and a full disk turns the
+    store off instead of failing the diagnosis."""
+    rng = np.random.default_rng(2)
+    J, w = rng.normal(size=(1000, 5, 3)), rng.normal(size=(1000, 5))
+    store = BlockStore(1000)
+    for start in (0, 500):
+        sl = slice(start, start + 250)
+        store.put(sl, {"J": J[sl], "w": w[sl]})
+    got = store.get(slice(500, 750))
+    assert np.array_equal(got["J"], J[500:750]) and np.array_equal(got["w"], w[500:750])
+    assert store.get(slice(250, 500)) is None
+    monkeypatch.setattr(os, "pwrite", lambda *a: (_ for _ in ()).throw(OSError(errno.ENOSPC, "full")))
+    store.put(slice(250, 500), {"J": J[250:500], "w": w[250:500]})
+    assert not store.working and store.get(slice(250, 500)) is None
+    assert np.array_equal(store.get(slice(0, 250))["J"], J[:250])  # what was kept stays readable

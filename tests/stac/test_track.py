@@ -74,3 +74,22 @@ def test_tracking_says_how_far_it_is_with_the_most_time_left(tree_robot, monkeyp
     assert lines and lines[0].startswith("tracking q: step 1, ") and "at most" in lines[-1], lines
     counts = [int(line.split(", ")[1].split("/")[0].replace(",", "")) for line in lines]
     assert counts == sorted(counts) and counts[-1] < obs.n_frames  # the last step's line is not written
+
+
+def test_tracked_frames_are_left_where_they_are(tree_robot, monkeypatch):
+    """Once at most half the frames are left, the steps are taken on those alone; the State
+    returned is the one at the returned q on every frame (the stepped ones written back)."""
+    log, obs, params, noise = _case(tree_robot)
+    q0 = np.clip(log.truth.signals["q"].data + 0.2, obs.lower, obs.upper)
+    frames = []
+    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: frames.append(a[0].n_frames) or q_step(*a, **k))
+    q, st = track(obs, params, noise, q0, max_steps=40, batch=7)
+    monkeypatch.undo()
+    assert frames[0] == obs.n_frames and min(frames) <= obs.n_frames // 2, frames
+    assert frames == sorted(frames, reverse=True)  # the tracked frames stay tracked
+    at = obs.state(q)
+    for k in ("s", "Rl", "pl"):
+        np.testing.assert_allclose(getattr(st, k), getattr(at, k), rtol=0, atol=1e-12)
+    monkeypatch.setattr(qphase, "TRACK_SUBSET", 0.0)  # every step on every frame
+    q_every, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
+    np.testing.assert_allclose(_cost(obs, params, noise, q), _cost(obs, params, noise, q_every), rtol=1e-7)
