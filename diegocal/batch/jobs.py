@@ -81,7 +81,7 @@ COMMANDS = {
     spec.name: spec
     for spec in (
         _fit("kinematics", CLI + "stac_cmd", "StacArgs", "run_stac", "written_verdict"),
-        _fit("dynamics", CLI + "sgp_cmd", "SgpArgs", "run_sgp"),
+        _fit("dynamics", CLI + "sgp_cmd", "SgpArgs", "run_sgp", "written_verdict"),
         _fit("pneumatics", CLI + "pneumatic_cmd", "PneumaticArgs", "run_pneumatic", "written_verdict"),
         CommandSpec(
             "diagnose", ".{domain}.diagnosis.yaml", CLI + "diagnose_cmd", "DiagnoseArgs", "run_diagnose",

@@ -33,6 +33,7 @@ from diegocal.cli.common import (
     errors,
     output_path,
     progress_enabled,
+    refuse_unconverged,
     split_words,
     summary,
 )
@@ -98,6 +99,8 @@ class SgpArgs:
     jobs: int
     output: Path | None
     quiet: bool
+    max_iterations: int = 200
+    allow_unconverged: bool = False
 
     def __post_init__(self):
         if self.joint_region and not self.region:
@@ -124,6 +127,7 @@ class SgpArgs:
             guard=self.guard,
             gp_inputs=split_words(self.gp_inputs) if self.gp_inputs is not None else None,
             min_noise=self.min_noise,
+            maxiter=self.max_iterations,
         )
         joint_region = self.region if self.joint_region is None else self.joint_region
         if not (self.region and joint_region):
@@ -146,6 +150,31 @@ def run_sgp(args: SgpArgs, command: str = "diegocal sgp-fit", progress=None) -> 
     meta = {"robot": str(robot.directory or robot.name), "created": datetime.now(UTC).isoformat(timespec="seconds")}
     fitted.save(args.out, log=args.log, command=command, meta=meta)
     return fitted.model_
+
+
+#: What to do about hyperparameter runs stopped by their iteration cap.
+UNCONVERGED_HINT = "raise --max-iterations, or pass --allow-unconverged to accept it"
+
+
+def unconverged(summary: dict) -> str | None:
+    """In words, why a fit (its sgp.yaml ``summary``) did not converge; None when it did."""
+    if summary.get("converged", True):
+        return None
+    runs = summary.get("ml2_runs") or {}
+    return (
+        f"ML-II: {runs.get('stopped_at_cap', '?')} of {runs.get('runs', '?')} hyperparameter runs stopped at "
+        f"their iteration cap ({(summary.get('options') or {}).get('maxiter', '?')}) before their tolerance"
+    )
+
+
+def written_verdict(args: SgpArgs) -> str | None:
+    """:func:`unconverged` of the sgp.yaml a run wrote (batch's check of a job's output)."""
+    if args.allow_unconverged:
+        return None
+    from diegocal.sgp.store import load_summary
+
+    why = unconverged(load_summary(args.out))
+    return None if why is None else f"{why} (converged: false in {args.out}/sgp.yaml); {UNCONVERGED_HINT}"
 
 
 @app.command("sgp-fit")
@@ -245,6 +274,17 @@ def sgp_fit(
         ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no summary table.")] = False,
+    max_iterations: Annotated[
+        int, typer.Option("--max-iterations", min=1, help="L-BFGS-B iterations per hyperparameter run (ML-II).")
+    ] = 200,
+    allow_unconverged: Annotated[
+        bool,
+        typer.Option(
+            "--allow-unconverged",
+            help="Exit 0 when a hyperparameter run stops at --max-iterations before its tolerance (the model "
+            "is written with converged: false either way).",
+        ),
+    ] = False,
 ) -> None:
     """Fit a torque model: parametric (rigid body + friction) part, GP part and hyperparameters."""
     args = SgpArgs(**ctx.params)
@@ -269,6 +309,11 @@ def sgp_fit(
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
     summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
+    from diegocal.sgp.store import load_summary
+
+    why = unconverged(load_summary(out))
+    late = () if why is None else (f"{why}; written with converged: false",)
+    refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 
 
 def _guard_text(entry: dict) -> str:

@@ -114,6 +114,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         self.jobs = max(1, int(jobs))
         self.progress = progress
         self.region_inputs = None if region_inputs is None else tuple(region_inputs)
+        self._runs: list = []  # the last fit's L-BFGS-B runs (MLStarts._ran)
 
     def _say(self, stage: str, done: int, total: int) -> None:
         if self.progress is not None:
@@ -362,6 +363,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         (σ_z at its floor, σ_w and σ_v as PR learns them; SGP → PR for that output) and, with
         ``guard.release_capped``, against the hyperparameters with the capped inputs released.
         """
+        self._runs = []  # each L-BFGS-B run: whether its iteration cap stopped it (converged_)
         idx = self._hyper_subset(len(Us), rng)
         hp0, resid = self._initial(Us[idx], Y[idx], Fs[idx])
         sizes = [0 if k is None else k.n_params for k in self.kernels]

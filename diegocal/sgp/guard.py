@@ -157,6 +157,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
             bounds=bounds[head],
             options={"maxiter": self.maxiter, "ftol": FTOL},
         )
+        self._ran(res)
         out[head] = res.x if np.isfinite(res.fun) and res.fun < 1e24 else start
         for _, k, names in self._slots():
             for i, name in enumerate(names):
@@ -208,6 +209,7 @@ class GuardCandidates(RegionScan, NestedConfirmation):
                 masked = tuple(t if i == j else np.zeros(0) for i, t in enumerate(start.theta))
                 one = Hyperparameters(start.log_sigma_w, start.log_sigma_v, masked)
             hp = est.learn(U, res, F, start=one)
+            self._ran_in(est)
             if j == outputs[0] and start is None:
                 log_sigma_w, log_sigma_v = hp.log_sigma_w, hp.log_sigma_v.copy()
             log_sigma_v[j], theta[j] = hp.log_sigma_v[j], capped_above(est.kernels[j], hp.theta[j], est, U, res[:, j])

@@ -174,8 +174,29 @@ class MLStarts:
             bounds=bounds,
             options={"maxiter": maxiter, "ftol": FTOL},
         )
+        self._ran(res)
         ok = np.isfinite(res.fun) and res.fun < 1e24
         return (float(res.fun), res.x) if ok else None
+
+    def _ran(self, res) -> None:
+        """Count an L-BFGS-B run of this fit, and whether its iteration cap stopped it before its
+        tolerance (:attr:`converged_`; list.append is atomic: runs in threads)."""
+        self._runs.append(bool(res.status == 1))
+
+    def _ran_in(self, other) -> None:
+        """Count the runs of another estimator's fit (a residual GP's) as this fit's."""
+        self._runs.extend(other._runs)
+
+    @property
+    def converged_(self) -> bool:
+        """Whether every ML-II run of the last fit stopped at its tolerance, none at the iteration
+        cap (``maxiter``): a start cut short might have ended better than the one kept."""
+        return not any(self._runs)
+
+    @property
+    def ml2_runs_(self) -> tuple[int, int]:
+        """(L-BFGS-B runs of the last fit, those its iteration cap stopped)."""
+        return len(self._runs), int(sum(self._runs))
 
     def _run_starts(self, starts, bounds, sizes, resid, data, stage: str) -> list:
         """``_optimise`` from each of ``starts`` on ``data``, in ``jobs`` threads (LAPACK drops the
