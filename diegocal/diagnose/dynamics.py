@@ -442,6 +442,16 @@ class DynamicsAdapter:
     def terms(self, fitted: DynamicsFit):
         return tuple(fitted.terms)
 
+    @staticmethod
+    def unconverged(fitted: DynamicsFit) -> tuple:
+        """What the fit left at a cap, in words: ML-II runs its iteration cap stopped (none for
+        a fit without hyperparameters to learn)."""
+        gp = getattr(fitted.model, "gp_", None)
+        if gp is None or gp.converged_:
+            return ()
+        runs, capped = gp.ml2_runs_
+        return (f"ML-II: {capped} of {runs} hyperparameter runs stopped at their iteration cap before their tolerance",)
+
     def describe(self, fitted: DynamicsFit) -> str:
         base = ("nominal_rigid_body" if self.inertia == "nominal" else "rigid_body") + "".join(
             f"+{k}" for k in self.friction

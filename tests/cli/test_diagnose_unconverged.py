@@ -67,3 +67,22 @@ def test_batch_counts_an_unconverged_diagnosis_failed(curved, tmp_path, monkeypa
     job = plan_batch("diagnose", curved, BatchOptions(output_dir=tmp_path, extra=("--domain", "kinematics"))).jobs[0]
     outcome = run_job(job, job_args(job))
     assert outcome.failed and f"kinematics diagnosis: baseline: {stopped}" in outcome.message, outcome.message
+
+
+def test_a_dynamics_baseline_whose_ml2_stops_at_its_cap_is_said(tmp_path, monkeypatch):
+    """The dynamics baseline (PR: σ_w and σ_v by ML-II) with its L-BFGS-B cut to one iteration:
+    the diagnosis says so; with the default cap it converges."""
+    from dataclasses import replace
+
+    from diegocal.diagnose import DiagnoseOptions, diagnose
+    from diegocal.diagnose.dynamics import DynamicsAdapter
+    from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+
+    robot = load_robot(resolve_robot_dir("pendulum", None))
+    log = simulate_dynamics(robot, DynamicsOptions(duration=6.0), np.random.default_rng(2))
+    options = DiagnoseOptions(domain="dynamics", max_rounds=1)
+    assert diagnose(log, robot, options).units[0].unconverged == ()
+    made = DynamicsAdapter._options
+    monkeypatch.setattr(DynamicsAdapter, "_options", lambda self, kind="pr": replace(made(self, kind), maxiter=1))
+    late = diagnose(log, robot, options).units[0].unconverged
+    assert late and late[0].startswith("baseline: ML-II: ") and "stopped at their iteration cap" in late[0], late
