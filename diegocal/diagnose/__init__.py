@@ -158,7 +158,8 @@ def diagnose(log, robot, options: DiagnoseOptions | None = None) -> Diagnosis:
 
     BLAS runs on one thread: the diagnosis is many small least-squares problems, where threads
     only contend (a 60-s UR5 log: 6.6 s against 17.8 s with the default threads on 2 cores);
-    ``options.jobs`` spreads independent units over processes instead.
+    ``options.jobs`` spreads independent units over processes instead, or, with one unit, its
+    work over threads.
     """
     with one_blas_thread():
         return _diagnose(log, robot, options or DiagnoseOptions())

@@ -446,10 +446,9 @@ class DynamicsAdapter:
     def unconverged(fitted: DynamicsFit) -> tuple:
         """What the fit left at a cap, in words: ML-II runs its iteration cap stopped (none for
         a fit without hyperparameters to learn)."""
-        gp = getattr(fitted.model, "gp_", None)
-        if gp is None or gp.converged_:
+        if fitted.model is None or fitted.model.converged_ is not False:
             return ()
-        runs, capped = gp.ml2_runs_
+        runs, capped = fitted.model.ml2_runs_
         return (f"ML-II: {capped} of {runs} hyperparameter runs stopped at their iteration cap before their tolerance",)
 
     def describe(self, fitted: DynamicsFit) -> str:

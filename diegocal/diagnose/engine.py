@@ -218,6 +218,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             for f in findings
         ]
         fitted = absorbed
+        unconverged.update(dict.fromkeys(f"with the non-parametric part: {why}" for why in late(absorbed)))
 
     baseline_score = adapter.score(baseline, held, exclude)
     extended_score = adapter.score(fitted, held, exclude)

@@ -30,6 +30,10 @@ from diegocal.terms import Parameter, Term
 #: of one channel at a time (a flexible model of a 10-min log at 1 kHz has ~100 columns on 420,000
 #: training samples: 340 MB whole, and lstsq copied it), never for all of them.
 PIECE = 20000
+#: A fit's per-sample sums of its columns (one pass over its rows) are held up to this many floats
+#: (32 MB); a wider candidate on a longer log (a flexible model of a 10-min log at 1 kHz: ~100
+#: columns on 480,000 samples) makes a second pass over its rows instead.
+ONE_PASS_FLOATS = 4_000_000
 
 
 class _Stack:
@@ -118,20 +122,31 @@ def _fit(cand: Candidate, stack: _Stack, channels) -> _Fit | None:
     (:class:`~diegocal.lstsq.TallLstsq`: lstsq's solution and rank cutoff, to rounding)."""
     ls, rr = TallLstsq(cand.n_params + _refit_width(cand)), 0.0
     # each sample's rows (channels, axes) summed, residual and columns: its summed error after the
-    # fit is r_sum − A_sum coef, without a second pass over the rows
-    r_sum, A_sum, seen = np.zeros(stack.length), np.zeros((stack.length, ls.p)), np.zeros(stack.length, bool)
+    # fit is r_sum − A_sum coef without a second pass over the rows, where A_sum is small enough
+    n = stack.samples.size
+    one_pass = n * ls.p <= ONE_PASS_FLOATS
+    r_sum, seen = np.zeros(n), np.zeros(n, bool)
+    A_sum = np.zeros((n, ls.p)) if one_pass else None
     for r, A, samp in stack.pieces(cand, channels):
         ls.add(A, r)
         rr += float(r @ r)
-        np.add.at(r_sum, samp, r)
-        np.add.at(A_sum, samp, A)
-        seen[samp] = True
+        at = np.searchsorted(stack.samples, samp)
+        seen[at] = True
+        if one_pass:
+            np.add.at(r_sum, at, r)
+            np.add.at(A_sum, at, A)
     if ls.rows <= ls.p + 2:
         return None
     coef, ee = ls.solve()
     dof = max(ls.rows - ls.p, 1)
+    if one_pass:
+        e_sum = r_sum - A_sum @ coef
+    else:
+        e_sum = r_sum  # zeros
+        for r, A, samp in stack.pieces(cand, channels):
+            np.add.at(e_sum, np.searchsorted(stack.samples, samp), r - A @ coef)
     # correlated residuals: the variance of a sum is inflated by the correlation time
-    tau = autocorrelation_time((r_sum - A_sum @ coef)[seen])  # per sample, in order
+    tau = autocorrelation_time(e_sum[seen])  # per sample, in order
     s2 = ee / dof * max(tau, 1.0)
     cov = np.linalg.pinv(ls.gram()) * s2
     k = cand.n_params

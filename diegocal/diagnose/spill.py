@@ -14,6 +14,7 @@ memory it can take back.
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import threading
 
@@ -110,27 +111,43 @@ class BlockStore:
         self._spill: Spill | None = None
         self.working = True
 
+    def _start(self, arrays: dict) -> None:
+        """Lay out the arrays for T frames, if the disk has room for them twice over (the
+        candidate columns, which the diagnosis needs, go to the same folder)."""
+        size = sum(self.T * a[0].nbytes for a in arrays.values())
+        if shutil.disk_usage(tempfile.gettempdir()).free < 2 * size:
+            raise OSError("not room enough for the block store beside the candidate columns")
+        self._spill = Spill()
+        self._arrays = {k: self._spill.array((self.T, *a.shape[1:]), a.dtype) for k, a in arrays.items()}
+
+    def _stop(self) -> None:
+        """Keep nothing more, and give the file's space back."""
+        self.working, self._arrays, self._done = False, None, set()
+        if self._spill is not None:
+            self._spill._file.close()
+            self._spill = None
+
     def get(self, sl: slice) -> dict | None:
         """The arrays of the block ``sl`` when it was kept, else None."""
-        if sl.start not in self._done:
-            return None
-        return {k: a.span(sl.start, sl.stop) for k, a in self._arrays.items()}
+        with self._lock:  # (a failed write elsewhere closes the file: not while it is read)
+            if sl.start not in self._done:
+                return None
+            return {k: a.span(sl.start, sl.stop) for k, a in self._arrays.items()}
 
     def put(self, sl: slice, arrays: dict) -> None:
         """Keep the block ``sl``'s ``arrays`` ({name: (B, ...)})."""
-        if not self.working:
-            return
-        try:
-            with self._lock:
+        with self._lock:
+            if not self.working:
+                return
+            try:
                 if self._arrays is None:
-                    self._spill = Spill()
-                    self._arrays = {k: self._spill.array((self.T, *a.shape[1:]), a.dtype) for k, a in arrays.items()}
-            for k, a in arrays.items():
-                self._arrays[k].write(sl.start, a)
-        except (OSError, ScratchSpaceError):
-            self.working = False
-            return
-        self._done.add(sl.start)
+                    self._start(arrays)
+                for k, a in arrays.items():
+                    self._arrays[k].write(sl.start, a)
+            except (OSError, ScratchSpaceError):
+                self._stop()
+                return
+            self._done.add(sl.start)
 
 
 def _no_room(exc: OSError) -> ScratchSpaceError:

@@ -341,6 +341,20 @@ class DynamicsModel:
         }.get(self.options.kind)
 
     @property
+    def ml2_runs_(self) -> tuple[int, int]:
+        """(ML-II's L-BFGS-B runs of the fit, those its iteration cap stopped): every estimator's
+        (PRGP: the PR stage's and the GP's)."""
+        parts = [e.ml2_runs_ for e in (getattr(self, "pr_", None), getattr(self, "gp_", None)) if e is not None]
+        return sum(p[0] for p in parts), sum(p[1] for p in parts)
+
+    @property
+    def converged_(self) -> bool | None:
+        """Whether no ML-II run of the fit stopped at its iteration cap; None when none ran (a
+        restored fit)."""
+        runs, capped = self.ml2_runs_
+        return None if runs == 0 else capped == 0
+
+    @property
     def parametric_(self) -> ParametricEstimate | None:
         est = self._param_est
         if est is None:

@@ -188,15 +188,18 @@ class MLStarts:
         self._runs.extend(other._runs)
 
     @property
-    def converged_(self) -> bool:
+    def converged_(self) -> bool | None:
         """Whether every ML-II run of the last fit stopped at its tolerance, none at the iteration
-        cap (``maxiter``): a start cut short might have ended better than the one kept."""
-        return not any(self._runs)
+        cap (``maxiter``): a start cut short might have ended better than the one kept. None when
+        no ML-II ran (hyperparameters given: a restored fit)."""
+        runs = getattr(self, "_runs", ())
+        return None if not runs else not any(runs)
 
     @property
     def ml2_runs_(self) -> tuple[int, int]:
         """(L-BFGS-B runs of the last fit, those its iteration cap stopped)."""
-        return len(self._runs), int(sum(self._runs))
+        runs = getattr(self, "_runs", ())
+        return len(runs), int(sum(runs))
 
     def _run_starts(self, starts, bounds, sizes, resid, data, stage: str) -> list:
         """``_optimise`` from each of ``starts`` on ``data``, in ``jobs`` threads (LAPACK drops the

@@ -86,9 +86,6 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "n_inducing": None if est.inducing_ is None else int(sum(len(z) for z in est.inducing_ if z is not None)),
         "gp_inputs": [model.input_names[d] for d in model.gp_dims] if model.options.kind != "pr" else [],
         "log_likelihood": float(est.log_likelihood_),
-        # ML-II: every L-BFGS-B run (starts, the guard's refits and stages) at its tolerance
-        "converged": bool(est.converged_),
-        "ml2_runs": dict(zip(("runs", "stopped_at_cap"), est.ml2_runs_, strict=True)),
         "nmse_in_sample": {j: float(v) for j, v in zip(model.joint_names, model.nmse_in_sample_, strict=True)},
         "hyperparameters": model.hyperparameters_,
         "layout": LAYOUT,
@@ -96,6 +93,10 @@ def summary_dict(model, meta: dict | None = None) -> dict:
         "options": model.options.to_dict(),
         "meta": dict(meta or {}),
     }
+    if model.converged_ is not None:  # ML-II ran: every L-BFGS-B run (starts, the guard's refits
+        # and stages, PRGP's PR stage) at its tolerance, or how many its iteration cap stopped
+        out["converged"] = model.converged_
+        out["ml2_runs"] = dict(zip(("runs", "stopped_at_cap"), model.ml2_runs_, strict=True))
     terms = getattr(model, "terms", ())
     if terms:
         out["terms"] = [t.to_dict() for t in model.fitted_terms()]

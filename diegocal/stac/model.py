@@ -218,8 +218,9 @@ class Observation(Observability):
     def n_markers(self) -> int:
         return len(self.marker_index)
 
-    def subset(self, frames: slice) -> Observation:
-        """The same sensors and robot on a subset of the frames (shares everything but the data)."""
+    def subset(self, frames: slice | np.ndarray) -> Observation:
+        """The same sensors and robot on a subset of the frames (a slice, or an index array: a
+        copy), sharing everything but the data."""
         sub = copy.copy(self)
         sub.pots, sub.markers, sub.valid = self.pots[frames], self.markers[frames], self.valid[frames]
         sub.n_frames = sub.pots.shape[0]

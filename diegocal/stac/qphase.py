@@ -459,8 +459,8 @@ def track(
             q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, False, st, spare, trial)
             spare, st = st, new
             tried = trial
-        else:  # on the untracked frames only
-            at, tried = todo, np.empty(len(todo))
+        else:  # on the untracked frames only (the spare State is no longer needed: let it go)
+            at, tried, spare = todo, np.empty(len(todo)), None
             q_at, new_lam, new, c, _ = q_step(
                 obs.subset(todo), params, noise, q[todo], lam[todo], batch, jobs, False, st.take(todo), trial=tried
             )

@@ -111,6 +111,30 @@ def test_one_standard_error_rule_prefers_the_simpler_term():
     ]
 
 
+
+def test_a_wide_candidate_s_fit_takes_a_second_pass_with_the_same_standard_errors(monkeypatch):
+    """A fit inflates its standard errors by the correlation time of its summed errors per sample:
+    from per-sample sums held in one pass, or, past ONE_PASS_FLOATS, from a second pass over the
+    rows (what a flexible model of a long log needs): the same numbers to rounding."""
+    import diegocal.diagnose.selection as selection
+
+    t, x, y = make_data(5, effects=[("quadratic", "c0", 0.4)])
+    ad = ToyAdapter(t, x, y)
+    blocks = split_blocks(len(t))
+    train = blocks.mask("train")
+    fitted = ad.fit((), train)
+    res = ad.residuals(fitted)
+    args = ({c: 1.0 for c in res.channels}, train, blocks.mask("validation"), EngineOptions())
+    one = evaluate_candidates(ad.candidates(fitted, res, train), res, *args)
+    monkeypatch.setattr(selection, "ONE_PASS_FLOATS", 0)
+    two = evaluate_candidates(ad.candidates(fitted, res, train), res, *args)
+    assert len(one) == len(two) > 1
+    for a, b in zip(one, two, strict=True):
+        assert (a.term.cause, a.term.channel) == (b.term.cause, b.term.channel)
+        np.testing.assert_allclose([p.stderr for p in a.term.parameters], [p.stderr for p in b.term.parameters],
+                                   rtol=1e-9)
+
+
 def test_a_tested_candidate_keeps_its_errors_on_the_validation_samples_only():
     """Every tested candidate keeps its per-sample errors for the one-SE rule: on the validation
     samples only (a fifth of a long log, not all of it), with the same paired comparison."""

@@ -7,7 +7,9 @@ from __future__ import annotations
 import errno
 import os
 import pickle
+import shutil
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -64,8 +66,9 @@ def test_a_full_disk_is_one_error_that_says_where_and_what_to_change(monkeypatch
 
 def test_a_block_store_gives_back_the_blocks_kept_and_nothing_once_the_disk_is_full(monkeypatch):
     """The sweep's linearisations kept between passes (:class:`BlockStore`): a kept block reads
-    back bit for bit, one never kept reads None (the caller makes it), and a full disk turns the
-    store off instead of failing the diagnosis."""
+    back bit for bit, one never kept reads None (the caller makes it), and a full disk, or one
+    without room for the store beside the candidate columns, turns the store off (its file given
+    back) instead of failing the diagnosis."""
     rng = np.random.default_rng(2)
     J, w = rng.normal(size=(1000, 5, 3)), rng.normal(size=(1000, 5))
     store = BlockStore(1000)
@@ -78,4 +81,9 @@ def test_a_block_store_gives_back_the_blocks_kept_and_nothing_once_the_disk_is_f
     monkeypatch.setattr(os, "pwrite", lambda *a: (_ for _ in ()).throw(OSError(errno.ENOSPC, "full")))
     store.put(slice(250, 500), {"J": J[250:500], "w": w[250:500]})
     assert not store.working and store.get(slice(250, 500)) is None
-    assert np.array_equal(store.get(slice(0, 250))["J"], J[:250])  # what was kept stays readable
+    assert store.get(slice(0, 250)) is None  # the file given back: the caller makes the blocks again
+    monkeypatch.undo()
+    small = BlockStore(1000)  # a disk without room for the store twice over: nothing kept, no error
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: SimpleNamespace(free=J.nbytes + w.nbytes))
+    small.put(slice(0, 250), {"J": J[:250], "w": w[:250]})
+    assert not small.working and small.get(slice(0, 250)) is None

@@ -55,3 +55,21 @@ def test_batch_counts_an_unconverged_fit_failed(log_path, arm2_dir, tmp_path):
     job = plan_batch("sgp-fit", log_path, options).jobs[0]
     outcome = run_job(job, job_args(job))
     assert not outcome.failed, outcome.message
+
+
+def test_prgp_counts_its_pr_stage_too(arm2, simulate, tmp_path):
+    """PRGP learns PR's hyperparameters, then the GP's on its residual: both stages' runs count;
+    a model restored from its files ran none and says nothing."""
+    from diegocal.api import SGP
+    from diegocal.sgp import SGPOptions
+    from diegocal.sgp.store import load_model
+
+    log, _ = simulate(arm2, T=120, seed=0)
+    fitted = SGP(SGPOptions(kind="prgp")).fit(log, arm2)
+    model = fitted.model_
+    pr, gp = model.pr_.ml2_runs_, model.gp_.ml2_runs_
+    assert pr[0] > 0 and gp[0] > 0 and model.ml2_runs_ == (pr[0] + gp[0], pr[1] + gp[1])
+    assert model.converged_ is True
+    fitted.save(tmp_path / "m.sgp")
+    assert load_yaml(tmp_path / "m.sgp" / "sgp.yaml")["ml2_runs"]["runs"] == pr[0] + gp[0]
+    assert load_model(tmp_path / "m.sgp").converged_ is None
