@@ -350,10 +350,8 @@ def run_job(job: Job, args=None) -> Outcome:
     """Run one job in this process (``args``: :func:`job_args`, parsed here when None); never raises
     (a failure is an Outcome carrying the exception's message). An up-to-date job is not run, but
     its output is checked as a fresh one is."""
-    from diegocal.allocator import reuse_freed_memory
     from diegocal.cli.common import collected_warnings, error_message
 
-    reuse_freed_memory()  # a worker's process is the command's, as `diegocal COMMAND` sets it
     if job.problem:
         return Outcome(job, "failed", 0.0, job.problem)
     spec = COMMANDS[job.command]

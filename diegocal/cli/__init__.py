@@ -7,7 +7,6 @@ Each command's module is imported when that command runs (:data:`diegocal.cli.ap
 import os
 import sys
 
-from diegocal.allocator import reuse_freed_memory
 from diegocal.cli.app import COMMANDS, app
 
 __all__ = ["COMMANDS", "app", "main"]
@@ -15,7 +14,6 @@ __all__ = ["COMMANDS", "app", "main"]
 
 def main() -> None:
     """Console-script entry point; a last guard so no traceback ever reaches the user."""
-    reuse_freed_memory()
     try:
         app()
     except Exception as exc:  # noqa: BLE001
