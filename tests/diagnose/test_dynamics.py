@@ -321,6 +321,22 @@ def with_bump(robot, seed, duration=30.0):
     return log.with_streams(tau=make_stream(log.stream("tau").names, tau)), robot.joint_names[j]
 
 
+def test_the_absorbing_sgp_s_convergence_is_said(arm3, monkeypatch):
+    """The non-parametric fit that absorbs what stays unexplained is a kept fit too: what it left
+    at a cap (here made to say so) is in the diagnosis's ``unconverged``, the baseline's not."""
+    from diegocal.diagnose.dynamics import DynamicsAdapter
+
+    monkeypatch.setattr(
+        DynamicsAdapter,
+        "unconverged",
+        staticmethod(lambda fitted: ("stopped",) if fitted.model.options.kind == "sgp" else ()),
+    )
+    log, joint = with_bump(arm3, seed=0)
+    unit = diagnose(log, arm3, DiagnoseOptions(domain="dynamics")).units[0]
+    assert [f.channel for f in unit.findings if f.kind == "unexplained"] == [joint]
+    assert unit.unconverged == ("with the non-parametric part: stopped",)
+
+
 def test_cli_unexplained_structure_is_absorbed_by_the_sgp(arm3, tmp_path):
     """A bump no term expresses: reported ``unexplained`` on its joint; the extended model is an
     SGP whose GP absorbs it (held-out RMSE on the joint at the noise, against 5-9 × for the

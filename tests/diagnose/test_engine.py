@@ -78,38 +78,29 @@ def test_the_out_of_sample_test_holds_its_level_on_correlated_noise(rho):
     assert hits / n <= 0.16
 
 
-def test_one_standard_error_rule_prefers_the_simpler_term():
-    """A pure x² on c0: 'square' (1 parameter) and 'poly' (x², x³) fit equally well; the simpler
-    wins."""
+def _square_tested(options=None):
+    """A pure x² on c0: every candidate tested, with the validation mask."""
     t, x, y = make_data(5, effects=[("quadratic", "c0", 0.4)])
     ad = ToyAdapter(t, x, y)
     blocks = split_blocks(len(t))
-    train = blocks.mask("train")
+    train, val = blocks.mask("train"), blocks.mask("validation")
     fitted = ad.fit((), train)
     res = ad.residuals(fitted)
-    tested = evaluate_candidates(
-        ad.candidates(fitted, res, train),
-        res,
-        {c: 1.0 for c in res.channels},
-        train,
-        blocks.mask("validation"),
-        EngineOptions(),
-    )
+    cands = ad.candidates(fitted, res, train)
+    return evaluate_candidates(cands, res, {c: 1.0 for c in res.channels}, train, val, options or EngineOptions()), val
+
+
+def test_one_standard_error_rule_prefers_the_simpler_term():
+    """A pure x² on c0: 'square' (1 parameter) and 'poly' (x², x³) fit equally well; the simpler
+    wins."""
+    tested, val = _square_tested()
     causes = {t.term.cause for t in tested if t.significant}
     assert {"square", "poly"} <= causes
-    assert choose(tested, blocks.mask("validation")).term.cause == "square"
-    threads = evaluate_candidates(
-        ad.candidates(fitted, res, train),
-        res,
-        {c: 1.0 for c in res.channels},
-        train,
-        blocks.mask("validation"),
-        EngineOptions(jobs=2),
-    )  # the candidates fitted and tested in two threads: the same results in the same order
+    assert choose(tested, val).term.cause == "square"
+    threads, _ = _square_tested(EngineOptions(jobs=2))  # fitted and tested in two threads
     assert [(t.term.cause, t.term.channel, t.test.t, t.significant) for t in threads] == [
         (t.term.cause, t.term.channel, t.test.t, t.significant) for t in tested
     ]
-
 
 
 def test_a_wide_candidate_s_fit_takes_a_second_pass_with_the_same_standard_errors(monkeypatch):
@@ -118,16 +109,9 @@ def test_a_wide_candidate_s_fit_takes_a_second_pass_with_the_same_standard_error
     rows (what a flexible model of a long log needs): the same numbers to rounding."""
     import diegocal.diagnose.selection as selection
 
-    t, x, y = make_data(5, effects=[("quadratic", "c0", 0.4)])
-    ad = ToyAdapter(t, x, y)
-    blocks = split_blocks(len(t))
-    train = blocks.mask("train")
-    fitted = ad.fit((), train)
-    res = ad.residuals(fitted)
-    args = ({c: 1.0 for c in res.channels}, train, blocks.mask("validation"), EngineOptions())
-    one = evaluate_candidates(ad.candidates(fitted, res, train), res, *args)
+    one, _ = _square_tested()
     monkeypatch.setattr(selection, "ONE_PASS_FLOATS", 0)
-    two = evaluate_candidates(ad.candidates(fitted, res, train), res, *args)
+    two, _ = _square_tested()
     assert len(one) == len(two) > 1
     for a, b in zip(one, two, strict=True):
         assert (a.term.cause, a.term.channel) == (b.term.cause, b.term.channel)
