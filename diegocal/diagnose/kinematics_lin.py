@@ -128,11 +128,12 @@ class Linearised:
     def pot_units(self) -> np.ndarray:
         """The projected unit columns of every pot (T, R, P): e_j − J K e_j, made once per block
         (a round's pot candidates all read them)."""
-        if self._U is None:
+        if self._U is None:  # made whole before it is kept: a sweep's producer and consumer share a block
             P = self.P
             KP = self.Hi @ (np.swapaxes(self.J[:, :P], 1, 2) * self.w[:, None, :P])  # K[:, :, :P]
-            self._U = -(self.J @ KP)
-            self._U[:, np.arange(P), np.arange(P)] += 1.0
+            U = -(self.J @ KP)
+            U[:, np.arange(P), np.arange(P)] += 1.0
+            self._U = U
         return self._U
 
     def project_pot(self, j: int) -> np.ndarray:
@@ -142,12 +143,12 @@ class Linearised:
     def pot_span(self, pots) -> np.ndarray:
         """(T, R, 2 len(pots)): the projected gain and bias columns (s_i e_i, e_i projected) of
         ``pots``, in that order (the last set asked for is kept: a pot's candidates come together)."""
-        pots = tuple(pots)
-        if self._N is None or self._N[0] != pots:
+        pots, kept = tuple(pots), self._N  # read once: another thread may keep another set meanwhile
+        if kept is None or kept[0] != pots:
             U = self.pot_units()
             cols = [c for i in pots for c in (U[:, :, i] * self.s[:, i, None], U[:, :, i])]
-            self._N = (pots, np.stack(cols, axis=-1))
-        return self._N[1]
+            kept = self._N = (pots, np.stack(cols, axis=-1))
+        return kept[1]
 
     def pot_gram(self) -> np.ndarray:
         """(2P, 2P): the weighted Gram matrix over the training frames of every pot's projected
@@ -287,10 +288,11 @@ class Linearised:
     def _gram(self) -> np.ndarray:
         """(S F)ᵀ W (S F) over the training frames (k0, k0) (:meth:`_gram_part`), its
         pseudo-inverse kept beside it."""
-        if self._cal_gram is None:
+        if self._cal_gram is None:  # the inverse kept first: a reader that sees the Gram matrix uses both
             G = self._gram_part()
-            self._cal_gram = 0.5 * (G + G.T)
-            self._cal_pinv = np.linalg.pinv(self._cal_gram, rcond=1e-10, hermitian=True)
+            G = 0.5 * (G + G.T)
+            self._cal_pinv = np.linalg.pinv(G, rcond=1e-10, hermitian=True)
+            self._cal_gram = G
         return self._cal_gram
 
     def _gram_part(self) -> np.ndarray:
