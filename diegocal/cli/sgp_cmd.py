@@ -158,13 +158,13 @@ UNCONVERGED_HINT = "raise --max-iterations, or pass --allow-unconverged to accep
 
 def unconverged(summary: dict) -> str | None:
     """In words, why a fit (its sgp.yaml ``summary``) did not converge; None when it did."""
+    from diegocal.sgp.store import ml2_unconverged
+
     if summary.get("converged", True):
         return None
     runs = summary.get("ml2_runs") or {}
-    return (
-        f"ML-II: {runs.get('stopped_at_cap', '?')} of {runs.get('runs', '?')} hyperparameter runs stopped at "
-        f"their iteration cap ({(summary.get('options') or {}).get('maxiter', '?')}) before their tolerance"
-    )
+    cap = (summary.get("options") or {}).get("maxiter", "?")
+    return ml2_unconverged(runs.get("runs", "?"), runs.get("stopped_at_cap", "?"), cap)
 
 
 def written_verdict(args: SgpArgs) -> str | None:

@@ -84,7 +84,7 @@ from diegocal.sgp.model import (
     torque_array,
 )
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
-from diegocal.sgp.store import save_model
+from diegocal.sgp.store import ml2_unconverged, save_model
 from diegocal.sgp.terms import Context, dynamics_terms, is_filter, lag_filter, proposals, term_columns
 
 UNIT = "N·m"
@@ -448,8 +448,7 @@ class DynamicsAdapter:
         a fit without hyperparameters to learn)."""
         if fitted.model is None or fitted.model.converged_ is not False:
             return ()
-        runs, capped = fitted.model.ml2_runs_
-        return (f"ML-II: {capped} of {runs} hyperparameter runs stopped at their iteration cap before their tolerance",)
+        return (ml2_unconverged(*fitted.model.ml2_runs_, fitted.model.options.maxiter),)
 
     def describe(self, fitted: DynamicsFit) -> str:
         base = ("nominal_rigid_body" if self.inertia == "nominal" else "rigid_body") + "".join(

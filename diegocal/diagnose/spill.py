@@ -37,6 +37,10 @@ class Spill:
         self.fd = self._file.fileno()
         self._end = 0
 
+    def close(self) -> None:
+        """Give the file's space back (its arrays can no longer be read)."""
+        self._file.close()
+
     def array(self, shape: tuple, dtype) -> DiskArray:
         """A new (uninitialised) array of ``shape`` in the file: rows written by :meth:`DiskArray.write`."""
         out = DiskArray(self, self._end, tuple(int(n) for n in shape), np.dtype(dtype))
@@ -124,7 +128,7 @@ class BlockStore:
         """Keep nothing more, and give the file's space back."""
         self.working, self._arrays, self._done = False, None, set()
         if self._spill is not None:
-            self._spill._file.close()
+            self._spill.close()
             self._spill = None
 
     def get(self, sl: slice) -> dict | None:

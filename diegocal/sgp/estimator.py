@@ -363,7 +363,7 @@ class SemiParametricGP(GuardCandidates, MLStarts):
         (σ_z at its floor, σ_w and σ_v as PR learns them; SGP → PR for that output) and, with
         ``guard.release_capped``, against the hyperparameters with the capped inputs released.
         """
-        self._runs = []  # each L-BFGS-B run: whether its iteration cap stopped it (converged_)
+        self._runs = []  # each L-BFGS-B run: whether its iteration cap stopped it (ml2_runs_)
         idx = self._hyper_subset(len(Us), rng)
         hp0, resid = self._initial(Us[idx], Y[idx], Fs[idx])
         sizes = [0 if k is None else k.n_params for k in self.kernels]

@@ -180,7 +180,7 @@ class MLStarts:
 
     def _ran(self, res) -> None:
         """Count an L-BFGS-B run of this fit, and whether its iteration cap stopped it before its
-        tolerance (:attr:`converged_`; list.append is atomic: runs in threads)."""
+        tolerance (:attr:`ml2_runs_`; list.append is atomic: runs in threads)."""
         self._runs.append(bool(res.status == 1))
 
     def _ran_in(self, other) -> None:
@@ -188,16 +188,10 @@ class MLStarts:
         self._runs.extend(other._runs)
 
     @property
-    def converged_(self) -> bool | None:
-        """Whether every ML-II run of the last fit stopped at its tolerance, none at the iteration
-        cap (``maxiter``): a start cut short might have ended better than the one kept. None when
-        no ML-II ran (hyperparameters given: a restored fit)."""
-        runs = getattr(self, "_runs", ())
-        return None if not runs else not any(runs)
-
-    @property
     def ml2_runs_(self) -> tuple[int, int]:
-        """(L-BFGS-B runs of the last fit, those its iteration cap stopped)."""
+        """(L-BFGS-B runs of the last fit, those its iteration cap stopped before its tolerance: a
+        start cut short might have ended better than the one kept; none when hyperparameters were
+        given, a restored fit)."""
         runs = getattr(self, "_runs", ())
         return len(runs), int(sum(runs))
 

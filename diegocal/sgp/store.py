@@ -70,6 +70,13 @@ def _unpack_hyper(prefix: str, arrays) -> tuple[Hyperparameters | None, list | n
     return hp, (ind if any(z is not None for z in ind) else None)
 
 
+def ml2_unconverged(runs: int, capped: int, cap) -> str:
+    """In words: ``capped`` of ``runs`` ML-II runs stopped at their iteration cap ``cap``."""
+    return (
+        f"ML-II: {capped} of {runs} hyperparameter runs stopped at their iteration cap ({cap}) before their tolerance"
+    )
+
+
 def summary_dict(model, meta: dict | None = None) -> dict:
     """The content of sgp.yaml."""
     par = model.parametric_
