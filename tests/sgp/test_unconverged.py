@@ -73,3 +73,11 @@ def test_prgp_counts_its_pr_stage_too(arm2, simulate, tmp_path):
     fitted.save(tmp_path / "m.sgp")
     assert load_yaml(tmp_path / "m.sgp" / "sgp.yaml")["ml2_runs"]["runs"] == pr[0] + gp[0]
     assert load_model(tmp_path / "m.sgp").converged_ is None
+
+
+def test_a_cap_below_one_iteration_is_a_usage_error(log_path, arm2_dir, tmp_path):
+    from diegocal.cli.testing import one_line_error
+
+    r = _fit(log_path, arm2_dir, tmp_path / "a.sgp", "--max-iterations", "0")
+    assert r.exit_code == 2 and "--max-iterations" in one_line_error(r), r.output
+    assert not (tmp_path / "a.sgp").exists()
