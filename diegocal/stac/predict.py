@@ -19,7 +19,7 @@ from diegocal.errors import FitError
 from diegocal.io import Log
 from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.loo import deleted_from_others
+from diegocal.stac.loo import deleted_from_others, frame_slices
 from diegocal.stac.model import MARKERS, Observation
 from diegocal.stac.qphase import Noise, track
 from diegocal.stac.result import StacOptions
@@ -31,6 +31,11 @@ from diegocal.stac.terms import POT_CAUSES, apply_terms, pot_columns, to_log_mar
 SENSOR_TYPES = ("markers", "pots", "rotary", "linear", "tendon", "encoder")
 OTHERS = "others"
 SOURCE_TYPES = (*SENSOR_TYPES, OTHERS)
+
+#: Frames tracked at a time: q at a fixed calibration is a per-frame problem, and tracking a long
+#: log in parts keeps only one part's forward kinematics (kilobytes per frame) in memory. A log
+#: of at most this many frames is tracked whole.
+TRACK_FRAMES = 20_000
 
 
 @dataclass(frozen=True)
@@ -131,10 +136,7 @@ def predict(
         q = initial_q(obs, params, options, use=np.isin(obs.kinds, list(src)))
     else:
         q = np.tile(robot.neutral(), (obs.n_frames, 1))
-    q, st = track(obs, params, noise, q, max_steps, options.batch_size, options.jobs, progress)
-    pots = params.gain * st.s + params.bias
-    xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
-    markers = xb @ params.R.T + params.T
+    q, pots, markers = _tracked(obs, params, noise, q, max_steps, options, progress)
     full_pots = pots
     if OTHERS in sources:  # each reading from the others: reading − its deleted residual
         r = np.concatenate([obs.pots - pots, (obs.markers - markers).reshape(obs.n_frames, -1)], axis=1)
@@ -159,6 +161,30 @@ def predict(
         mae,
         full_pots,
     )
+
+
+def _tracked(obs: Observation, params, noise: Noise, q: np.ndarray, max_steps: int, options: StacOptions, progress):
+    """q tracked from ``q`` (:func:`~diegocal.stac.qphase.track`) TRACK_FRAMES at a time, and the
+    pots (T, P) and markers (T, M, 3) the calibration predicts at it."""
+    T = obs.n_frames
+    parts = frame_slices(T, TRACK_FRAMES)
+    pots, markers = np.empty((T, obs.n_pots)), np.empty((T, obs.n_markers, 3))
+    q = np.array(q, float, copy=True)
+    for i, sl in enumerate(parts):
+        part, told = (obs, progress) if len(parts) == 1 else (obs.subset(sl), _part_progress(progress, i, len(parts)))
+        q[sl], st = track(part, params, noise, q[sl], max_steps, options.batch_size, options.jobs, told)
+        pots[sl] = params.gain * st.s + params.bias
+        xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
+        markers[sl] = xb @ params.R.T + params.T
+        del st
+    return q, pots, markers
+
+
+def _part_progress(progress, i: int, n: int):
+    """``progress`` with the part of the log it is told about named first."""
+    if progress is None:
+        return None
+    return lambda text: progress(f"part {i + 1} of {n}: {text}")
 
 
 def pots_with_terms(terms, log: Log, names, pots: np.ndarray, model_pots: np.ndarray | None) -> np.ndarray:

@@ -93,3 +93,29 @@ def test_tracked_frames_are_left_where_they_are(tree_robot, monkeypatch):
     monkeypatch.setattr(qphase, "TRACK_SUBSET", 0.0)  # every step on every frame
     q_every, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
     np.testing.assert_allclose(_cost(obs, params, noise, q), _cost(obs, params, noise, q_every), rtol=1e-7)
+
+
+def test_a_long_log_is_tracked_in_parts(tree_robot, monkeypatch):
+    """``predict`` tracks TRACK_FRAMES frames at a time (a long log's forward kinematics is held
+    for one part only): the frames' costs and the predicted readings are those of tracking the log
+    whole, and progress names the part."""
+    import importlib
+
+    from diegocal.progress import Eta
+
+    predict_mod = importlib.import_module("diegocal.stac.predict")  # the package exports its function
+
+    log, obs, params, noise = _case(tree_robot)
+    cal = Calibration.from_dict(log.truth.params)
+    whole = predict_mod.predict(log, tree_robot, cal, ("others",))
+    sizes, lines = [], []
+    monkeypatch.setattr(predict_mod, "TRACK_FRAMES", 15)
+    monkeypatch.setattr(qphase, "Eta", lambda total: Eta(total, every=0.0))
+    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: sizes.append(a[0].n_frames) or q_step(*a, **k))
+    parts = predict_mod.predict(log, tree_robot, cal, ("others",), progress=lines.append)
+    monkeypatch.undo()
+    assert max(sizes) == 15 and obs.n_frames == 40, sizes
+    assert lines[0].startswith("part 1 of 3: tracking q: step 1, ") and any(x.startswith("part 3 of 3: ") for x in lines)
+    np.testing.assert_allclose(parts.q, whole.q, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(parts.markers, whole.markers, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(parts.pots, whole.pots, rtol=0, atol=1e-7)
