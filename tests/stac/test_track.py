@@ -115,7 +115,8 @@ def test_a_long_log_is_tracked_in_parts(tree_robot, monkeypatch):
     parts = predict_mod.predict(log, tree_robot, cal, ("others",), progress=lines.append)
     monkeypatch.undo()
     assert max(sizes) == 15 and obs.n_frames == 40, sizes
-    assert lines[0].startswith("part 1 of 3: tracking q: step 1, ") and any(x.startswith("part 3 of 3: ") for x in lines)
+    assert lines[0].startswith("part 1 of 3: tracking q: step 1, ")
+    assert any(x.startswith("part 3 of 3: ") for x in lines)
     np.testing.assert_allclose(parts.q, whole.q, rtol=0, atol=1e-6)
     np.testing.assert_allclose(parts.markers, whole.markers, rtol=0, atol=1e-7)
     np.testing.assert_allclose(parts.pots, whole.pots, rtol=0, atol=1e-7)
