@@ -17,7 +17,7 @@ import numpy as np
 
 from diegocal.diagnose.evidence import curves, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
-from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates
+from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates, simplest
 from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, region_of, show
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
@@ -293,6 +293,8 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
             group = _members(best, res, weights, train, val, options, exclude)
+            if len(group) == 1 and simplest(group[0], tested, val) is not group[0]:
+                group = []  # its evidence is one channel's, where a simpler cause does as well
             if group:
                 return best, group, tested
             tested = [t for t in tested if t is not best]
