@@ -289,7 +289,8 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
     best and the other channels of its cause (no terms when nothing is significant). A best term
     that its channel's state explains far better stands in for structure of another shape: its
     channel goes to ``stand_ins`` (left unexplained) and the next best is chosen. A common cause
-    whose channels have no evidence of their own is dropped."""
+    whose channels have no evidence of their own is dropped, and so is one whose evidence is one
+    channel's where a simpler cause does as well (:func:`~.selection.simplest`)."""
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
             group = _members(best, res, weights, train, val, options, exclude)

@@ -7,8 +7,9 @@ test); a candidate's columns are fitted by least squares with standard errors in
 residual's correlation time, the best variant of each family on the training rows is tested out of
 sample (:func:`~diegocal.diagnose.stats.out_of_sample_test`) against a Bonferroni threshold over the
 families and units (:func:`evaluate_candidates`), and :func:`choose` applies the one-standard-error
-rule among the significant ones. The data types (:class:`~diegocal.diagnose.engine.Candidate`,
-:class:`~diegocal.diagnose.engine.Tested`) and the loop that calls this live in :mod:`.engine`.
+rule and practical significance (SIMPLER_SHARE) among the significant ones. The data types
+(:class:`~diegocal.diagnose.engine.Candidate`, :class:`~diegocal.diagnose.engine.Tested`) and the
+loop that calls this live in :mod:`.engine`.
 """
 
 from __future__ import annotations
@@ -335,7 +336,8 @@ def simplest(best: Tested, tested: list[Tested], validation: np.ndarray) -> Test
     for t in tested:
         if t is best or not t.significant or t.n_params >= best.n_params or set(t.channels) != set(best.channels):
             continue
-        if t.test.sse_after - best.test.sse_after <= SIMPLER_SHARE * removed:
+        same_rows = np.isclose(t.test.sse_before, best.test.sse_before)  # its errors comparable
+        if same_rows and t.test.sse_after - best.test.sse_after <= SIMPLER_SHARE * removed:
             simpler.append(t)
             continue
         mean, se, n = paired_difference(t.test.after, best.test.after, validation, best.test.length)

@@ -33,8 +33,8 @@ OTHERS = "others"
 SOURCE_TYPES = (*SENSOR_TYPES, OTHERS)
 
 #: Frames tracked at a time: q at a fixed calibration is a per-frame problem, and tracking a long
-#: log in parts keeps only one part's forward kinematics (kilobytes per frame) in memory. A log
-#: of at most this many frames is tracked whole.
+#: log in parts (its start from the pots included) keeps only one part's forward kinematics
+#: (kilobytes per frame) in memory. A log of at most this many frames is tracked whole.
 TRACK_FRAMES = 20_000
 
 
@@ -130,13 +130,16 @@ def predict(
         use_pots=bool(src - {MARKERS}),
         use_markers=MARKERS in src,
     )
-    if q_init is not None:
-        q = np.clip(np.asarray(q_init, float), obs.lower, obs.upper)
-    elif noise.use_pots:
-        q = initial_q(obs, params, options, use=np.isin(obs.kinds, list(src)))
-    else:
-        q = np.tile(robot.neutral(), (obs.n_frames, 1))
-    q, pots, markers = _tracked(obs, params, noise, q, max_steps, options, progress)
+    use = np.isin(obs.kinds, list(src))
+
+    def start(part: Observation, sl: slice) -> np.ndarray:  # q to track a part's frames from
+        if q_init is not None:
+            return np.clip(np.asarray(q_init[sl], float), part.lower, part.upper)
+        if noise.use_pots:
+            return initial_q(part, params, options, use=use)
+        return np.tile(robot.neutral(), (part.n_frames, 1))
+
+    q, pots, markers = _tracked(obs, params, noise, start, max_steps, options, progress)
     full_pots = pots
     if OTHERS in sources:  # each reading from the others: reading − its deleted residual
         r = np.concatenate([obs.pots - pots, (obs.markers - markers).reshape(obs.n_frames, -1)], axis=1)
@@ -163,16 +166,18 @@ def predict(
     )
 
 
-def _tracked(obs: Observation, params, noise: Noise, q: np.ndarray, max_steps: int, options: StacOptions, progress):
-    """q tracked from ``q`` (:func:`~diegocal.stac.qphase.track`) TRACK_FRAMES at a time, and the
-    pots (T, P) and markers (T, M, 3) the calibration predicts at it."""
+def _tracked(obs: Observation, params, noise: Noise, start, max_steps: int, options: StacOptions, progress):
+    """q tracked (:func:`~diegocal.stac.qphase.track`) TRACK_FRAMES at a time, each part from
+    ``start(part, frames)`` (its Observation and slice: the pots' inversion steps on the part
+    too), and the pots (T, P) and markers (T, M, 3) the calibration predicts at it. Progress is
+    told per part, its time left the part's."""
     T = obs.n_frames
     parts = frame_slices(T, TRACK_FRAMES)
+    q = np.empty((T, obs.robot.n_joints))
     pots, markers = np.empty((T, obs.n_pots)), np.empty((T, obs.n_markers, 3))
-    q = np.array(q, float, copy=True)
     for i, sl in enumerate(parts):
         part, told = (obs, progress) if len(parts) == 1 else (obs.subset(sl), _part_progress(progress, i, len(parts)))
-        q[sl], st = track(part, params, noise, q[sl], max_steps, options.batch_size, options.jobs, told)
+        q[sl], st = track(part, params, noise, start(part, sl), max_steps, options.batch_size, options.jobs, told)
         pots[sl] = params.gain * st.s + params.bias
         xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
         markers[sl] = xb @ params.R.T + params.T

@@ -97,8 +97,8 @@ def test_tracked_frames_are_left_where_they_are(tree_robot, monkeypatch):
 
 def test_a_long_log_is_tracked_in_parts(tree_robot, monkeypatch):
     """``predict`` tracks TRACK_FRAMES frames at a time (a long log's forward kinematics is held
-    for one part only): the frames' costs and the predicted readings are those of tracking the log
-    whole, and progress names the part."""
+    for one part only): q and the readings predicted from the others are those of tracking the log
+    whole, to the tracking's tolerance, and progress names the part."""
     import importlib
 
     from diegocal.progress import Eta
@@ -113,10 +113,12 @@ def test_a_long_log_is_tracked_in_parts(tree_robot, monkeypatch):
     monkeypatch.setattr(qphase, "Eta", lambda total: Eta(total, every=0.0))
     monkeypatch.setattr(qphase, "q_step", lambda *a, **k: sizes.append(a[0].n_frames) or q_step(*a, **k))
     parts = predict_mod.predict(log, tree_robot, cal, ("others",), progress=lines.append)
+    again = predict_mod.predict(log, tree_robot, cal, ("others",), q_init=whole.q)  # each part from its own q
     monkeypatch.undo()
     assert max(sizes) == 15 and obs.n_frames == 40, sizes
     assert lines[0].startswith("part 1 of 3: tracking q: step 1, ")
     assert any(x.startswith("part 3 of 3: ") for x in lines)
     np.testing.assert_allclose(parts.q, whole.q, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(again.q, whole.q, rtol=0, atol=1e-6)
     np.testing.assert_allclose(parts.markers, whole.markers, rtol=0, atol=1e-7)
     np.testing.assert_allclose(parts.pots, whole.pots, rtol=0, atol=1e-7)
