@@ -206,12 +206,14 @@ def evaluate_candidates(
     exclude: dict | None = None,
 ) -> list[Tested]:
     """Fit every candidate on the ``train`` samples (one variant per family: the best training
-    fit), test it on the ``validation`` samples, Bonferroni over the families (and units); the
-    candidates are independent, fitted and tested in ``options.jobs`` threads (same results)."""
+    fit, or every variant that ties with it exactly, which the training data cannot tell apart: a
+    friction region open to the joint's limit and the same one closed at the data's end), test it
+    on the ``validation`` samples, Bonferroni over the families (and units); the candidates are
+    independent, fitted and tested in ``options.jobs`` threads (same results)."""
     exclude = exclude or {}
     tr = _Stack(res, weights, np.flatnonzero(train), exclude)
     va = _Stack(res, weights, np.flatnonzero(validation), exclude)
-    best: dict[str, tuple[Candidate, _Fit]] = {}
+    best: dict[str, list[tuple[Candidate, _Fit]]] = {}
     eta = Eta(len(candidates))  # a long round says how far it is, with the time left
     fits = thread_imap(lambda c: _fit(c, tr, _candidate_channels(c)), candidates, options.jobs)
     for i, (cand, fit) in enumerate(zip(candidates, fits, strict=True)):
@@ -220,8 +222,10 @@ def evaluate_candidates(
             options.progress(f"candidate terms fitted: {eta.text(i + 1)}")
         if fit is None:
             continue
-        if key not in best or fit.train_gain > best[key][1].train_gain:
-            best[key] = (cand, fit)
+        if key not in best or fit.train_gain > best[key][0][1].train_gain:
+            best[key] = [(cand, fit)]
+        elif fit.train_gain == best[key][0][1].train_gain:
+            best[key].append((cand, fit))
     n_tests = max(len(best), 1) * max(options.n_units, 1)
 
     def judged(pair: tuple[Candidate, _Fit]) -> Tested:
@@ -238,7 +242,7 @@ def evaluate_candidates(
         own_gain = None if own is None else gain
         return Tested(term, tuple(cand.columns), test, thr, sig, k, cand, own_gain, strongest, on_own)
 
-    out = thread_map(judged, best.values(), options.jobs)
+    out = thread_map(judged, [pair for tied in best.values() for pair in tied], options.jobs)
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 

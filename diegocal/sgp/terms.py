@@ -343,19 +343,24 @@ def _stribeck_scales(cause: str, ctx: Context) -> list[Proposal]:
 def _regions(cause: str, ctx: Context) -> list[Proposal]:
     """position_friction variants: the REGION_KEEP windows of q_j's training range whose two
     columns explain the most of the joint's training residual (exact least squares per window,
-    from cumulative sums). A window that reaches an end of the training range is open to the
-    joint's limit there: friction that starts inside the data goes on beyond it."""
+    from cumulative sums). A window that reaches an end of the training range comes twice: open
+    to the joint's limit there (friction that starts inside the data goes on beyond it) and closed
+    at the data's end (it stops there). The training data cannot tell the two apart (their columns
+    are equal on every training sample): the selection tests both and the validation data decide."""
     out = []
     for j in ctx.joints:
         if (cause, j) in ctx.have:
             continue
         ok = ctx.train & np.isfinite(ctx.residual[j])
         x, v, r = ctx.column(ctx.q, j, ok), ctx.column(ctx.qd, j, ok), ctx.residual[j][ok]
+        i = ctx.robot.joint_index(j)
         for low, high in _best_windows(x, v, r):
-            i = ctx.robot.joint_index(j)
-            low = min(low, float(ctx.robot.lower[i])) if low <= x.min() else low
-            high = max(high, float(ctx.robot.upper[i])) if high >= x.max() else high
-            out.append(Proposal(make_term(cause, j, region=Region(f"q.{j}", low, high)), f"position_friction:{j}"))
+            wide = (
+                min(low, float(ctx.robot.lower[i])) if low <= x.min() else low,
+                max(high, float(ctx.robot.upper[i])) if high >= x.max() else high,
+            )
+            for lo, hi in dict.fromkeys([wide, (low, high)]):  # open first; closed when it differs
+                out.append(Proposal(make_term(cause, j, region=Region(f"q.{j}", lo, hi)), f"position_friction:{j}"))
     return out
 
 

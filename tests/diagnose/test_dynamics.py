@@ -141,6 +141,25 @@ def test_a_coulomb_friction_is_not_named_by_a_position_friction_over_most_of_the
     assert abs(top.term.values[0] - 0.0452634) < 2 * top.term.stderrs[0], top.term
 
 
+def test_a_friction_region_that_ends_where_the_training_data_end_is_closed_when_validation_says_so(arm3):
+    """A position friction on joint2 over −0.77..−0.23 rad (the naming bench's seed 3227015462):
+    the training blocks' lowest angle, −0.73 rad, is the region's lower edge, and the validation
+    blocks go lower, where there is no friction. The region open to the joint's limit and the one
+    closed at the data's end fit the training data alike; both are tested, and the closed one is
+    named (the open one cost the validation blocks 26 % and was no finding)."""
+    region = (-0.7660298694994456, -0.22768221503689823)
+    opts = DynamicsOptions(duration=30.0, effects=("position_friction:joint2=0.0526335",), noise=NOISE,
+                           regions={"joint2": region})
+    log = simulate_dynamics(arm3, opts, np.random.default_rng(3227015462))
+    d = run(log, arm3)
+    top = assert_named(d, "position_friction", "joint2")
+    assert top.term.region.low > arm3.lower[1] + 1.0, top.term.region  # closed, not open to the limit
+    assert abs(top.term.region.low - region[0]) < 0.05 and abs(top.term.region.high - region[1]) < 0.05
+    assert top.gain()["reduction"] > 0.5, top.gain()
+    values, ses = top.term.values, top.term.stderrs
+    assert np.all(np.abs(values - [0.0526335, 0.02598211]) < 2 * ses), (values, ses)
+
+
 @pytest.mark.parametrize(
     "name,cause,seed",
     [
