@@ -327,7 +327,7 @@ def choose(tested: list[Tested], validation: np.ndarray) -> Tested | None:
     sig = [t for t in tested if t.significant]
     if not sig:
         return None
-    return simplest(max(sig, key=lambda t: t.test.sse_before - t.test.sse_after), sig, validation)
+    return simplest(max(sig, key=lambda t: t.test.sse_before - t.test.sse_after), tested, validation)
 
 
 def simplest(best: Tested, tested: list[Tested], validation: np.ndarray) -> Tested:

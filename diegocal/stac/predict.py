@@ -181,7 +181,7 @@ def _tracked(obs: Observation, params, noise: Noise, start, max_steps: int, opti
         pots[sl] = params.gain * st.s + params.bias
         xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
         markers[sl] = xb @ params.R.T + params.T
-        del st
+        del st  # let this part's States go before the next part's are made
     return q, pots, markers
 
 

@@ -76,6 +76,7 @@ def test_prgp_counts_its_pr_stage_too(arm2, simulate, tmp_path):
 
 
 def test_a_cap_below_one_iteration_is_a_usage_error(log_path, arm2_dir, tmp_path):
+    """``--max-iterations 0``: one usage-error line, exit 2, nothing written."""
     from diegocal.cli.testing import one_line_error
 
     r = _fit(log_path, arm2_dir, tmp_path / "a.sgp", "--max-iterations", "0")
