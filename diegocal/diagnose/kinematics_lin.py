@@ -265,8 +265,8 @@ class Linearised:
         out = np.empty((self.T, self.R, k))
         out[:, :P] = self.s[..., None] * beta[0 : 2 * P : 2][None] + beta[1 : 2 * P : 2][None]
         c = 2 * P + 3 * M
-        xm = np.einsum("tmil,mlk->tmik", self.RRl, beta[2 * P : c].reshape(M, 3, k)) + beta[c : c + 3][None, None]
-        xm -= np.einsum("tmij,jk->tmik", self.x_skew, beta[c + 3 : c + 6])  # ω × x = −[x]× ω
+        xm = self.RRl @ beta[2 * P : c].reshape(M, 3, k) + beta[c : c + 3][None, None]
+        xm -= (self.x_skew.reshape(-1, 3) @ beta[c + 3 : c + 6]).reshape(xm.shape)  # ω × x = −[x]× ω
         out[:, P:] = xm.reshape(self.T, 3 * M, k)
         return out
 

@@ -172,17 +172,24 @@ class Sweep:
     def _items(self, lin: Linearised, cols, pending, betas, maps) -> list:
         """:meth:`_each`'s [(index, columns)] for the sets ``pending`` [(index, columns as made)]
         of one block."""
-        raw = [i for i, _ in pending if not cols[i].projected]
         made = dict(pending)
-        if raw:
-            done = _finite(lin.project(np.concatenate([made[i] for i in raw], axis=-1)))
+        raw = [i for i, _ in pending if not cols[i].projected]
+        if raw:  # one projection for every raw set, its fit taken out first: S C − S F β = S (C − F β)
+            C = np.concatenate([made[i] for i in raw], axis=-1)
+            at = np.cumsum([0] + [made[i].shape[-1] for i in raw])
+            cal = [n for n, i in enumerate(raw) if betas[i] is not None and cols[i].span == CALIBRATION]
+            if cal:  # F β of every set at once (the makers' columns are finite)
+                beta = np.zeros((betas[raw[cal[0]]].shape[0], C.shape[-1]))
+                for n in cal:
+                    beta[:, at[n] : at[n + 1]] = betas[raw[n]]
+                C -= lin._calibration_apply(beta)
+            done = _finite(lin.project(C))
             made.update(zip(raw, _split(done, [made[i] for i in raw]), strict=True))
-        made.update((i, _finite(made[i])) for i, _ in pending if cols[i].projected)
-        cal = [i for i, _ in pending if betas[i] is not None and cols[i].span == CALIBRATION]
-        if cal:  # S F β of every set at once
-            fits = lin.project(lin._calibration_apply(np.concatenate([betas[i] for i in cal], axis=-1)))
-            for i, f in zip(cal, _split(fits, [betas[i] for i in cal]), strict=True):
-                made[i] = made[i] - f
+        for i, _ in pending:
+            if cols[i].projected:
+                made[i] = _finite(made[i])
+                if betas[i] is not None and cols[i].span == CALIBRATION:  # S F β of a set made projected
+                    made[i] = made[i] - lin.project(lin._calibration_apply(betas[i]))
         items = []
         for i, _ in pending:
             C = made.pop(i)
@@ -264,15 +271,17 @@ class Sweep:
 
         def add(lin, items):
             root = np.sqrt(lin.w)
+            train = lin.train
+            wt = lin.w * train[:, None] if train.any() else None  # None: no training frame, no sum on them
             for i, C in items:
                 rg = row_gram(C, root)
                 rows[i] = rg if rows[i] is None else rows[i] + rg
                 nonzero[i] = nonzero[i] or bool(np.any(C))
-                if kept[i] is not None:
-                    kept[i] += weighted_gram(C, lin.w * lin.train[:, None])
+                if kept[i] is not None and wt is not None:
+                    kept[i] += weighted_gram(C, wt)
                 if see is not None:
                     see(lin, i, C)
-                if families is not None and families.ranked(i):
+                if families is not None and families.ranked(i) and wt is not None:
                     families.add(lin, i, C)
 
         self._each(cols, betas, None, add)
