@@ -74,7 +74,7 @@ class SlipScan:
         self._r: tuple | None = None  # (block start, its residual rows and training weights)
 
     def add(self, lin, i: int, cols: np.ndarray) -> None:
-        if i < self.first:
+        if i < self.first or not lin.train.any():  # G and b are sums over training frames only
             return
         if self._r is None or self._r[0] != lin.start:
             r = lin.residual_rows()
@@ -82,8 +82,9 @@ class SlipScan:
             self._r = (lin.start, np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * lin.train[:, None])
         _, r, w = self._r
         Cw = cols * w[..., None]
-        self.G[i - self.first, lin.frames] = np.einsum("trk,trl->tkl", Cw, cols)
-        self.b[i - self.first, lin.frames] = np.einsum("trk,tr->tk", Cw, r)
+        Cw = np.swapaxes(Cw, 1, 2)  # (T, 3, R): per-frame products by matmul, not einsum (ten times faster)
+        self.G[i - self.first, lin.frames] = Cw @ cols
+        self.b[i - self.first, lin.frames] = (Cw @ r[..., None])[..., 0]
 
     def samples(self, m: int, train: np.ndarray) -> list[int]:
         return change_times(train, self.G[m], self.b[m])
