@@ -12,6 +12,7 @@ step :mod:`.show`, the statistics :mod:`.stats`.
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -99,6 +100,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         adapter.selection_exclude = exclude
     stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
+    spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
     for _ in range(options.max_rounds):
         # the last round's columns go before this round's are built (a tested candidate's columns
         # are views of its round's whole block: one kept Tested keeps all of them)
@@ -115,7 +117,10 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             )
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
-        best, group, tested = _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit)
+        neighbours = None if spill is None else partial(spill, fitted, train)
+        best, group, tested = _choose_group(
+            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours
+        )
         group = [g for g in group if _key(g.term) not in declined]
         candidates = commons = None  # what follows needs the tested terms, not their columns:
         best, group, tested = _without_columns(best, group, tested)  # the refits run without them
@@ -284,13 +289,15 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
     return (new if kept else fitted), out
 
 
-def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit) -> tuple:
+def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None) -> tuple:
     """(the best candidate, the terms this round adds, the candidates left in the running): the
     best and the other channels of its cause (no terms when nothing is significant). A best term
     that its channel's state explains far better stands in for structure of another shape: its
-    channel goes to ``stand_ins`` (left unexplained) and the next best is chosen. A common cause
-    whose channels have no evidence of their own is dropped, and so is one whose evidence is one
-    channel's where a simpler cause does as well (:func:`~.selection.simplest`)."""
+    channel goes to ``stand_ins`` (left unexplained) and the next best is chosen; so does the
+    channel of a neighbour whose own flexible curve explains more than the term (:func:`_spilled`;
+    ``neighbours(term, channels)``: the adapter's ``spill_candidates``). A common cause whose channels
+    have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
+    simpler cause does as well (:func:`~.selection.simplest`)."""
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
             group = _members(best, res, weights, train, val, options, exclude)
@@ -300,13 +307,18 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
                 return best, group, tested
             tested = [t for t in tested if t is not best]
             continue
+        own = _own(best)
         flex = _outshone(best, res, weights, train, val, options, exclude)
+        why = "its state does"
+        if flex is None and neighbours is not None:
+            flex = _spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
+            if flex is not None:
+                own, why = flex.term.channel, f"a curve of {flex.term.channel}'s own reading does"
         if flex is None:
             return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
-        own = _own(best)
         stand_ins[own] = (replace(best, candidate=None), replace(flex, candidate=None))  # no columns kept
-        say(f"{best.term.cause} on {own}{unit} explains less than its state does: left unexplained")
-        tested = [t for t in tested if own not in t.channels]
+        say(f"{best.term.cause} on {best.term.channel}{unit} explains less than {why}: {own} left unexplained")
+        tested = [t for t in tested if t is not best and own not in t.channels]
     return None, [], tested
 
 
@@ -475,6 +487,19 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
     else:  # over all its channels, or on its own (the flexible model's) where that is larger
         gain = max(best.test.gain, best.own_gain if best.own_gain is not None else -np.inf)
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
+
+
+def _spilled(best: Tested, curves, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
+    """The flexible curve of one of ``best``'s other channels (``curves``: candidates, tested
+    together) that is significant and explains more of the validation error than ``best`` does
+    (None: none does). A sensor misbehaving in a shape no cause names is then misread by the model
+    as an error of a shared state (q), and a named term of a neighbour that reads the same state
+    explains a part of it: the structure is that sensor's, and it is ``unexplained``."""
+    if best.candidate.members or not curves:
+        return None
+    tested = [t for t in evaluate_candidates(curves, res, weights, train, val, options, exclude) if t.significant]
+    top = max(tested, key=lambda t: t.gain, default=None)
+    return top if top is not None and top.gain > best.gain else None
 
 
 def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude) -> Finding:

@@ -42,6 +42,7 @@ from scipy.stats import chi2
 
 from diegocal.diagnose import geometry
 from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
+from diegocal.diagnose.kinematics_curves import curve_candidates, pot_block
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import running_median, step_errors
 from diegocal.diagnose.kinematics_refine import REFINED, refined
@@ -273,7 +274,7 @@ class KinematicsAdapter:
         if term.cause in POT_CAUSES:
             j = self.pot_names.index(term.channel)
             f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])  # (T, k): a dead band runs along the log
-            return Columns(partial(_pot_block, j=j, f=f), span=j, projected=True)
+            return Columns(partial(pot_block, j=j, f=f), span=j, projected=True)
         if term.cause == "link_offset":
             return Columns(partial(_link_block, joint=term.channel))
         if term.cause == "time_offset":
@@ -335,6 +336,13 @@ class KinematicsAdapter:
         for i, name in enumerate(slips):
             out += self._slip_family(name, next(chans) or {}, scan.samples(i, train))
         return out
+
+    def spill_candidates(self, fitted: KinFit, train, term: Term, channels) -> list[Candidate]:
+        """For a pot term, the flexible curves of the pots on its chain and among ``channels``
+        (:mod:`~diegocal.diagnose.kinematics_curves`): does a neighbour's own reading explain more?"""
+        if term.cause not in POT_CAUSES or term.channel not in self.pot_names:
+            return []
+        return curve_candidates(self, fitted, np.asarray(train, bool), term.channel, channels)
 
     def _slip_family(self, name: str, refit: dict, samples: list[int]) -> list[Candidate]:
         """A marker's slip candidates: a family over change times (:func:`slip_samples`: the best
@@ -486,11 +494,6 @@ def _seeded(robot, cal: Calibration):
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
     return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
-
-
-def _pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:
-    """A pot term's columns on a block: pot j's projected unit column times ∂p̂/∂θ ``f`` (T, k)."""
-    return lin.project_pot(j)[..., None] * f[lin.frames][:, None, :]
 
 
 def _link_block(lin, joint: str) -> np.ndarray:

@@ -33,3 +33,38 @@ def test_a_worn_pot_track_is_unexplained_on_its_pot_not_a_transfer_curve():
     assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", channel)]
     region = d.findings[0].term.region
     assert region.variable == f"p.{channel}"
+
+
+def test_a_runout_misread_as_the_next_pots_backlash_is_unexplained_on_its_own_pot():
+    """Gear runout on mcp_abd (8.9 × the noise, five periods over its range): the tracking moves
+    part of it to dip, where a backlash removed 22 % of the validation error and was named. A
+    curve of mcp_abd's own reading removes more, so mcp_abd is ``unexplained`` and nothing is named;
+    the finding says which term stood in."""
+    log, robot, channel, _ = add_shape("runout", 20262130)
+    assert channel == "mcp_abd"
+    d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
+    assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", "mcp_abd")]
+    assert d.findings[0].evidence["stand_in"]["term"] == "backlash:dip"
+
+
+def test_a_pots_neighbours_are_the_pots_on_a_chain_through_its_joints():
+    """The curves offered beside a pot term: every pot of the finger (one chain), and on Diego San
+    beside the left elbow's the torso's and the left arm's pots, none of a leg or the other arm."""
+    from diegocal.diagnose.kinematics_curves import chain_pots
+    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.stac.model import Observation
+
+    def neighbours(robot_name, pot, seed=1):
+        from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
+        robot = load_robot(resolve_robot_dir(robot_name, None))
+        log = simulate_kinematics(robot, KinematicsOptions(duration=1.0), np.random.default_rng(seed))
+        obs = Observation(log, robot, need=(), needed_by="test")
+        return {obs.pot_names[i] for i in chain_pots(obs, obs.pot_names.index(pot))}, set(obs.pot_names)
+
+    near, pots = neighbours("finger", "dip")
+    assert near == pots - {"dip"}
+    near, _ = neighbours("diego", "l_elbow")
+    arm = {"l_clavicle", "l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_wrist_yaw", "l_wrist_pitch"}
+    assert {"torso_yaw", "chest_pitch", *arm} <= near
+    assert not any(p.startswith("r_") or "hip" in p or "knee" in p for p in near), near
