@@ -294,7 +294,7 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
     best and the other channels of its cause (no terms when nothing is significant). A best term
     that its channel's state explains far better stands in for structure of another shape: its
     channel goes to ``stand_ins`` (left unexplained) and the next best is chosen; so does the
-    channel of a neighbour whose own flexible curve explains more than the term (:func:`_spilled`;
+    channel of a neighbour whose own flexible model explains more than the term (:func:`_spilled`;
     ``neighbours(term, channels)``: the adapter's ``spill_candidates``). A common cause whose channels
     have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
     simpler cause does as well (:func:`~.selection.simplest`)."""
@@ -313,7 +313,7 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
         if flex is None and neighbours is not None:
             flex = _spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
             if flex is not None:
-                own, why = flex.term.channel, f"a curve of {flex.term.channel}'s own reading does"
+                own, why = flex.term.channel, f"a flexible model of {flex.term.channel} does"
         if flex is None:
             return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
         stand_ins[own] = (replace(best, candidate=None), replace(flex, candidate=None))  # no columns kept
@@ -490,7 +490,7 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
 
 
 def _spilled(best: Tested, curves, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
-    """The flexible curve of one of ``best``'s other channels (``curves``: candidates, tested
+    """The flexible model of one of ``best``'s other channels (``curves``: candidates, tested
     together) that is significant and explains more of the validation error than ``best`` does
     (None: none does). A sensor misbehaving in a shape no cause names is then misread by the model
     as an error of a shared state (q), and a named term of a neighbour that reads the same state

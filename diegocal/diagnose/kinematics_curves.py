@@ -1,13 +1,14 @@
-"""Flexible transfer curves of the pots (issue #31, item 1: a wrong name is worse than
-``unexplained``). A pot read through a gear with runout, or one that picks up another pot's
-signal, is misread by STAC as a q error: tracked jointly with the pots that read the same chain, the
-error moves to its neighbours, where a named cause of theirs (a backlash on the next pot) explains
-part of it. The engine then asks whether a curve of a neighbour's own reading explains more
+"""Flexible models of the pots (issue #31, item 1: a wrong name is worse than ``unexplained``).
+A pot read through a gear with runout, or one that picks up another pot's signal, is misread by
+STAC as a q error: tracked jointly with the pots that read the same chain, the error moves to its
+neighbours, where a named cause of theirs (a backlash on the next pot) explains part of it. The
+engine then asks whether a flexible model of a neighbour explains more
 (:meth:`KinematicsAdapter.spill_candidates <diegocal.diagnose.kinematics.KinematicsAdapter.spill_candidates>`):
-a piecewise-linear function of that pot's model reading with CURVE_KNOTS knots at the quantiles of
-its training readings, linearised like any pot term (projected out of q and of the pots' gains and
-biases, :class:`~diegocal.diagnose.kinematics_sweep.Sweep`). Its term is ``unexplained``: the
-curve is a shape, never a cause.
+its *curve*, a piecewise-linear function of its model reading with CURVE_KNOTS knots at the
+quantiles of its training readings, and its *mixing row*, a linear function of the angles of the
+joints on its chain. Each is linearised like any pot term (projected out of q and of the pots'
+gains and biases, :class:`~diegocal.diagnose.kinematics_sweep.Sweep`); its term is
+``unexplained``: a shape, never a cause.
 """
 
 from __future__ import annotations
@@ -38,41 +39,68 @@ def hat_basis(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
 
 
 def curve_candidates(adapter, fitted, train: np.ndarray, own: str, channels=()) -> list[Candidate]:
-    """The flexible curve (module docstring) of each pot other than ``own`` that reads a joint on a
-    chain through one ``own`` reads (:func:`chain_pots`) or is among ``channels``, as Candidates
-    made in one sweep; none for a pot whose training readings take fewer than three distinct values
-    or whose curve the calibration takes up entirely."""
+    """The flexible models (module docstring) of each pot other than ``own`` that reads a joint on
+    a chain through one ``own`` reads (:func:`chain_pots`) or is among ``channels``, as Candidates
+    made in one sweep: its curve (none when its training readings take fewer than three distinct
+    values) and its mixing row (none for a pot on no chain); none that the calibration takes up
+    entirely."""
     sweep = Sweep(fitted, adapter)
-    names = sweep.obs.pot_names
-    pots = set(chain_pots(sweep.obs, names.index(own))) | {names.index(c) for c in channels if c in names}
+    obs, names = sweep.obs, sweep.obs.pot_names
+    pots = set(chain_pots(obs, names.index(own))) | {names.index(c) for c in channels if c in names}
     terms, cols = [], []
     for i in sorted(pots - {names.index(own)}):
         j = adapter.pot_names.index(names[i])
-        x = np.asarray(fitted.pots[:, j], float)
-        seen = x[train & np.isfinite(x)]
-        knots = np.unique(np.quantile(seen, np.linspace(0.0, 1.0, CURVE_KNOTS))) if seen.size else seen
-        if knots.size < 3:
-            continue
-        params = tuple(Parameter(f"f{k}") for k in range(knots.size))
-        terms.append(Term("unexplained", names[i], params, None, {"knots": [float(v) for v in knots]}))
-        cols.append(Columns(partial(pot_block, j=j, f=hat_basis(x, knots)), span=j, projected=True))
+        for term, f in (_curve(names[i], fitted.pots[:, j], train), _mixing(obs, i, fitted.q, train)):
+            if term is not None:
+                terms.append(term)
+                cols.append(Columns(partial(pot_block, j=j, f=f), span=j, projected=True))
     if not cols:
         return []
     made = sweep.channels(cols)
     return [Candidate(t, c) for t, c in zip(terms, made, strict=True) if c is not None]
 
 
+def _curve(name: str, x: np.ndarray, train: np.ndarray) -> tuple:
+    """(term, ∂p̂/∂θ (T, K)) of a pot's curve: hat functions of its model reading ``x`` on knots at
+    the quantiles of its training readings; (None, None) for fewer than three distinct knots."""
+    x = np.asarray(x, float)
+    seen = x[train & np.isfinite(x)]
+    knots = np.unique(np.quantile(seen, np.linspace(0.0, 1.0, CURVE_KNOTS))) if seen.size else seen
+    if knots.size < 3:
+        return None, None
+    params = tuple(Parameter(f"f{k}") for k in range(knots.size))
+    return Term("unexplained", name, params, None, {"knots": [float(v) for v in knots]}), hat_basis(x, knots)
+
+
+def _mixing(obs, i: int, q: np.ndarray, train: np.ndarray) -> tuple:
+    """(term, ∂p̂/∂θ (T, n')) of pot i's mixing row: its reading plus a linear function of the
+    angles of the joints on a chain through its own (their training means taken out): another
+    pot's signal picked up (crosstalk on a shared ground), a tendon's moment arms off; (None,
+    None) for a pot that reads no joint directly."""
+    joints = _near_joints(obs, i)
+    if not joints.any():
+        return None, None
+    idx = np.flatnonzero(joints)
+    names = [obs.robot.joint_names[k] for k in idx]
+    params = tuple(Parameter(f"q.{n}") for n in names)
+    f = q[:, idx] - np.nanmean(q[np.asarray(train, bool)][:, idx], axis=0)
+    return Term("unexplained", obs.pot_names[i], params, None, {"mixing": names}), np.nan_to_num(f)
+
+
 def chain_pots(obs, own: int) -> list[int]:
     """The pots (mapped order) that read a joint on a chain through one pot ``own`` reads (that
     joint, an ancestor or a descendant of it): those whose readings the tracking of q trades with
     own's. None for a pot that reads no joint directly (a linear pot)."""
-    anc = obs.kin._anc[1:]  # (n, n): joint k is joint j or one of its ancestors
-    related = anc | anc.T
+    near = _near_joints(obs, own)
     A = np.asarray(obs.A) != 0
-    if not A[own].any():
-        return []
-    near = related[:, A[own]].any(axis=1)
     return [i for i in range(A.shape[0]) if i != own and (A[i] & near).any()]
+
+
+def _near_joints(obs, i: int) -> np.ndarray:
+    """(n,) bool: the joints on a chain through a joint pot i reads (none for a linear pot)."""
+    anc = obs.kin._anc[1:]  # (n, n): joint k is joint j or one of its ancestors
+    A = np.asarray(obs.A) != 0
+    return (anc | anc.T)[:, A[i]].any(axis=1)
 
 
 def pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:

@@ -47,6 +47,17 @@ def test_a_runout_misread_as_the_next_pots_backlash_is_unexplained_on_its_own_po
     assert d.findings[0].evidence["stand_in"]["term"] == "backlash:dip"
 
 
+def test_crosstalk_misread_as_the_next_pots_backlash_is_unexplained_on_the_pot_that_picks_it_up():
+    """mcp_abd picks up another pot's signal (4.6 × the noise): a backlash on dip removed 12 % of
+    the validation error; mcp_abd's mixing row (its reading plus a linear function of the chain's
+    joint angles) removes 87 %, so mcp_abd is ``unexplained``."""
+    log, robot, channel, _ = add_shape("crosstalk", 20264146)
+    assert channel == "mcp_abd"
+    d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
+    assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", "mcp_abd")]
+    assert d.findings[0].evidence["stand_in"]["term"] == "backlash:dip"
+
+
 def test_a_pots_neighbours_are_the_pots_on_a_chain_through_its_joints():
     """The curves offered beside a pot term: every pot of the finger (one chain), and on Diego San
     beside the left elbow's the torso's and the left arm's pots, none of a leg or the other arm."""
