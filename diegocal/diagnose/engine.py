@@ -111,10 +111,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         say(f"testing {len(candidates)} candidate terms{unit}")
         tested = evaluate_candidates(candidates, res, weights, train, val, options, exclude)
         commons = common_candidates(tested)
-        if commons:  # the winners again beside the common causes: one family-wise rate for all
-            tested = evaluate_candidates(
-                [t.candidate for t in tested] + commons, res, weights, train, val, options, exclude
-            )
+        if commons:  # the common causes beside the winners: one family-wise rate for all
+            tested = evaluate_candidates(commons, res, weights, train, val, options, exclude, alongside=tested)
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         neighbours = None if spill is None else partial(spill, fitted, train)
@@ -174,6 +172,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             say(f"found {chosen.term.cause} on {chosen.term.channel}{unit} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
+    getattr(adapter, "release", lambda: None)()  # and what the adapter kept for its rounds
     # what remains: the channels whose best term was a stand-in, then significant binned
     # structure that no candidate explained
     res = adapter.residuals(fitted)

@@ -44,7 +44,7 @@ from diegocal.diagnose import geometry
 from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_curves import curve_candidates, pot_block
 from diegocal.diagnose.kinematics_families import FamilyRanks
-from diegocal.diagnose.kinematics_lin import running_median, step_errors
+from diegocal.diagnose.kinematics_lin import Linearised, running_median, step_errors
 from diegocal.diagnose.kinematics_refine import REFINED, refined
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan, slip_value
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
@@ -114,6 +114,7 @@ class KinematicsAdapter:
         self.marker_names = tuple(self.log.stream("markers").names)
         self.time = np.asarray(self.log.time, float)
         self._baseline: KinFit | None = None
+        self._sweep: Sweep | None = None  # the round's: its blocks' linearisations, read again by spill_candidates
         self.joint_of_pot = {p.name: p.joint for p in robot.sensors.pots if p.kind in ("rotary", "encoder")}
         self.poses = static_poses(self.log)  # (T,) int on a static-pose log: link geometry is a candidate
         if self.poses is not None:  # foreign poses are a fault the diagnosis writes off, not the fits
@@ -122,6 +123,7 @@ class KinematicsAdapter:
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train) -> KinFit:
         train = np.asarray(train, bool)
+        self.release()  # the round is over
         terms = tuple(self._own(t, train) for t in terms)
         base = self._baseline if self._baseline is not None and np.array_equal(self._baseline.train, train) else None
         base = None if far_clock(terms, TIME_SHIFTS[-1]) else base  # the baseline's markers fit the other clock
@@ -276,7 +278,7 @@ class KinematicsAdapter:
             f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])  # (T, k): a dead band runs along the log
             return Columns(partial(pot_block, j=j, f=f), span=j, projected=True)
         if term.cause == "link_offset":
-            return Columns(partial(_link_block, joint=term.channel))
+            return Columns(partial(Linearised.link_offset_basis, joint=term.channel))
         if term.cause == "time_offset":
             return Columns(partial(_clock_block, markers=fitted.markers, time=self.time, span=term.extra.get("span")))
         return None
@@ -284,7 +286,7 @@ class KinematicsAdapter:
     def candidates(self, fitted: KinFit, residuals: Residuals, train) -> list[Candidate]:
         """The round's candidates (module docstring), their columns made in one :class:`Sweep`."""
         train = np.asarray(train, bool)
-        sweep = Sweep(fitted, self)
+        sweep = self._sweep = Sweep(fitted, self)
         have = {(t.cause, t.channel) for t in fitted.terms}
         sigma_p = sweep.sigma_p
         made = []  # (term, family, Columns) in the order offered, or a candidate made whole
@@ -318,7 +320,7 @@ class KinematicsAdapter:
         slips = [n for n in self.marker_names if ("marker_slip", n) not in have]
         cols = [m[2] for m in made if isinstance(m, tuple)]
         first = len(cols)
-        cols += [Columns(partial(_marker_block, m=sweep.mapped_index(n)), span=None) for n in slips]
+        cols += [Columns(partial(Linearised.marker_basis, m=sweep.mapped_index(n)), span=None) for n in slips]
         scan = SlipScan(sweep.T, slips, first)
         families = None
         if self.selection_weights is not None:
@@ -342,7 +344,12 @@ class KinematicsAdapter:
         (:mod:`~diegocal.diagnose.kinematics_curves`): does a neighbour's own reading explain more?"""
         if term.cause not in POT_CAUSES or term.channel not in self.pot_names:
             return []
-        return curve_candidates(self, fitted, np.asarray(train, bool), term.channel, channels)
+        sweep = self._sweep if self._sweep is not None and self._sweep.fitted is fitted else Sweep(fitted, self)
+        return curve_candidates(sweep, fitted, np.asarray(train, bool), term.channel, channels)
+
+    def release(self) -> None:
+        """Let the round's sweep go (its blocks' file): the engine's rounds are over."""
+        self._sweep = None
 
     def _slip_family(self, name: str, refit: dict, samples: list[int]) -> list[Candidate]:
         """A marker's slip candidates: a family over change times (:func:`slip_samples`: the best
@@ -494,14 +501,6 @@ def _seeded(robot, cal: Calibration):
     xyz = dict(zip(cal.marker_names, cal.marker_xyz, strict=True))
     markers = tuple(replace(m, xyz=np.array(xyz.get(m.name, m.xyz), float)) for m in robot.sensors.markers)
     return robot.with_model(robot.model, replace(robot.sensors, markers=markers))
-
-
-def _link_block(lin, joint: str) -> np.ndarray:
-    return lin.link_offset_basis(joint)
-
-
-def _marker_block(lin, m: int) -> np.ndarray:
-    return lin.marker_basis(m)
 
 
 def _clock_block(lin, markers: np.ndarray, time: np.ndarray, span) -> np.ndarray:

@@ -38,14 +38,13 @@ def hat_basis(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return F
 
 
-def curve_candidates(adapter, fitted, train: np.ndarray, own: str, channels=()) -> list[Candidate]:
+def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, own: str, channels=()) -> list[Candidate]:
     """The flexible models (module docstring) of each pot other than ``own`` that reads a joint on
     a chain through one ``own`` reads (:func:`chain_pots`) or is among ``channels``, as Candidates
     made in one sweep: its curve (none when its training readings take fewer than three distinct
     values) and its mixing row (none for a pot on no chain); none that the calibration takes up
-    entirely."""
-    sweep = Sweep(fitted, adapter)
-    obs, names = sweep.obs, sweep.obs.pot_names
+    entirely. ``sweep``: the linearisation at ``fitted`` (the round's, whose blocks are kept)."""
+    adapter, obs, names = sweep.adapter, sweep.obs, sweep.obs.pot_names
     pots = set(chain_pots(obs, names.index(own))) | {names.index(c) for c in channels if c in names}
     terms, cols = [], []
     for i in sorted(pots - {names.index(own)}):

@@ -15,7 +15,7 @@ loop that calls this live in :mod:`.engine`.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -204,12 +204,15 @@ def evaluate_candidates(
     validation: np.ndarray,
     options: EngineOptions,
     exclude: dict | None = None,
+    alongside: list[Tested] = (),
 ) -> list[Tested]:
     """Fit every candidate on the ``train`` samples (one variant per family: the best training
     fit, or every variant that ties with it exactly, which the training data cannot tell apart: a
     friction region open to the joint's limit and the same one closed at the data's end), test it
     on the ``validation`` samples, Bonferroni over the families (and units); the candidates are
-    independent, fitted and tested in ``options.jobs`` threads (same results)."""
+    independent, fitted and tested in ``options.jobs`` threads (same results). ``alongside``:
+    candidates tested already on the same samples, whose families join the count (their fits and
+    tests stand; their thresholds are those of the larger count), returned with the new ones."""
     exclude = exclude or {}
     tr = _Stack(res, weights, np.flatnonzero(train), exclude)
     va = _Stack(res, weights, np.flatnonzero(validation), exclude)
@@ -226,7 +229,8 @@ def evaluate_candidates(
             best[key] = [(cand, fit)]
         elif fit.train_gain == best[key][0][1].train_gain:
             best[key].append((cand, fit))
-    n_tests = max(len(best), 1) * max(options.n_units, 1)
+    before = {t.candidate.family or f"#before{i}" for i, t in enumerate(alongside)}
+    n_tests = max(len(before | set(best)), 1) * max(options.n_units, 1)
 
     def judged(pair: tuple[Candidate, _Fit]) -> Tested:
         cand, fit = pair
@@ -242,7 +246,13 @@ def evaluate_candidates(
         own_gain = None if own is None else gain
         return Tested(term, tuple(cand.columns), test, thr, sig, k, cand, own_gain, strongest, on_own)
 
-    out = thread_map(judged, [pair for tied in best.values() for pair in tied], options.jobs)
+    def rejudged(t: Tested) -> Tested:
+        thr = critical_t(options.alpha, n_tests, t.test.df)
+        gain = t.test.gain if t.own_gain is None else t.own_gain
+        return replace(t, threshold=thr, significant=bool(t.test.t > thr and gain >= options.min_gain))
+
+    out = [rejudged(t) for t in alongside]
+    out += thread_map(judged, [pair for tied in best.values() for pair in tied], options.jobs)
     out.sort(key=lambda t: -(t.test.sse_before - t.test.sse_after))
     return out
 
