@@ -340,12 +340,12 @@ class KinematicsAdapter:
         return out
 
     def spill_candidates(self, fitted: KinFit, train, term: Term, channels) -> list[Candidate]:
-        """For a pot term, the flexible curves of the pots on its chain and among ``channels``
-        (:mod:`~diegocal.diagnose.kinematics_curves`): does a neighbour's own reading explain more?"""
-        if term.cause not in POT_CAUSES or term.channel not in self.pot_names:
+        """For a pot term, a link offset or a marker's slip, the flexible models of the pots near it
+        and among ``channels`` (:mod:`~diegocal.diagnose.kinematics_curves`): does a pot explain more?"""
+        if term.cause not in (*POT_CAUSES, "link_offset", "marker_slip"):
             return []
         sweep = self._sweep if self._sweep is not None and self._sweep.fitted is fitted else Sweep(fitted, self)
-        return curve_candidates(sweep, fitted, np.asarray(train, bool), term.channel, channels)
+        return curve_candidates(sweep, fitted, np.asarray(train, bool), term, channels)
 
     def release(self) -> None:
         """Let the round's sweep go (its blocks' file): the engine's rounds are over."""

@@ -38,20 +38,20 @@ def hat_basis(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return F
 
 
-def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, own: str, channels=()) -> list[Candidate]:
-    """The flexible models (module docstring) of each pot other than ``own`` that reads a joint on
-    a chain through one ``own`` reads (:func:`chain_pots`) or is among ``channels``, as Candidates
-    made in one sweep: its curve (none when its training readings take fewer than three distinct
-    values) and its mixing row (none for a pot on no chain); none that the calibration takes up
-    entirely. ``sweep``: the linearisation at ``fitted`` (the round's, whose blocks are kept)."""
+def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, term: Term, channels=()) -> list[Candidate]:
+    """The flexible models (module docstring) of each pot near ``term`` (:func:`neighbour_pots`)
+    or among ``channels``, its own pot left out, as Candidates made in one sweep: its curve (none
+    when its training readings take fewer than three distinct values) and its mixing row (none for
+    a pot on no chain); none that the calibration takes up entirely. ``sweep``: the linearisation
+    at ``fitted`` (the round's, whose blocks are kept)."""
     adapter, obs, names = sweep.adapter, sweep.obs, sweep.obs.pot_names
-    pots = set(chain_pots(obs, names.index(own))) | {names.index(c) for c in channels if c in names}
+    pots = set(neighbour_pots(obs, adapter.robot, term)) | {names.index(c) for c in channels if c in names}
     terms, cols = [], []
-    for i in sorted(pots - {names.index(own)}):
+    for i in sorted(pots - {_own(obs, term)}):
         j = adapter.pot_names.index(names[i])
-        for term, f in (_curve(names[i], fitted.pots[:, j], train), _mixing(obs, i, fitted.q, train)):
-            if term is not None:
-                terms.append(term)
+        for made, f in (_curve(names[i], fitted.pots[:, j], train), _mixing(obs, i, fitted.q, train)):
+            if made is not None:
+                terms.append(made)
                 cols.append(Columns(partial(pot_block, j=j, f=f), span=j, projected=True))
     if not cols:
         return []
@@ -86,13 +86,30 @@ def _mixing(obs, i: int, q: np.ndarray, train: np.ndarray) -> tuple:
     return Term("unexplained", obs.pot_names[i], params, None, {"mixing": names}), np.nan_to_num(f)
 
 
-def chain_pots(obs, own: int) -> list[int]:
-    """The pots (mapped order) that read a joint on a chain through one pot ``own`` reads (that
-    joint, an ancestor or a descendant of it): those whose readings the tracking of q trades with
-    own's. None for a pot that reads no joint directly (a linear pot)."""
-    near = _near_joints(obs, own)
+def neighbour_pots(obs, robot, term: Term) -> list[int]:
+    """The pots (mapped order) whose readings the tracking of q trades with ``term``'s effect: for
+    a pot term, the other pots that read a joint on a chain through one its pot reads (that joint,
+    an ancestor or a descendant of it; none for a linear pot); for a link offset, those on a chain
+    through its joint; for a marker's slip, those that read a joint moving the marker."""
+    anc = obs.kin._anc[1:]  # (n, n): joint k is joint j or one of its ancestors
     A = np.asarray(obs.A) != 0
+    own = _own(obs, term)
+    if term.cause == "link_offset":
+        near = (anc | anc.T)[:, robot.joint_index(term.channel)]
+    elif term.cause == "marker_slip":
+        links, _, _ = obs.kin.link_info(obs.marker_links)
+        near = obs.kin._anc[links[obs.marker_names.index(term.channel)]]
+    elif own is not None:
+        near = _near_joints(obs, own)
+    else:
+        return []
     return [i for i in range(A.shape[0]) if i != own and (A[i] & near).any()]
+
+
+def _own(obs, term: Term) -> int | None:
+    """The pot (mapped order) a pot term acts on; None for a term on a joint or a marker."""
+    on_joint_or_marker = term.cause in ("link_offset", "marker_slip")
+    return None if on_joint_or_marker or term.channel not in obs.pot_names else obs.pot_names.index(term.channel)
 
 
 def _near_joints(obs, i: int) -> np.ndarray:

@@ -58,24 +58,29 @@ def test_crosstalk_misread_as_the_next_pots_backlash_is_unexplained_on_the_pot_t
     assert d.findings[0].evidence["stand_in"]["term"] == "backlash:dip"
 
 
-def test_a_pots_neighbours_are_the_pots_on_a_chain_through_its_joints():
-    """The curves offered beside a pot term: every pot of the finger (one chain), and on Diego San
-    beside the left elbow's the torso's and the left arm's pots, none of a leg or the other arm."""
-    from diegocal.diagnose.kinematics_curves import chain_pots
+def test_a_terms_neighbours_are_the_pots_on_a_chain_through_its_joints():
+    """The pots whose flexible models are offered beside a term: beside a pot's, every other pot of
+    the finger (one chain), and on Diego San beside the left elbow's the torso's and the left arm's
+    pots, none of a leg or the other arm; beside a link offset of the left knee, the left leg's."""
+    from diegocal.diagnose.kinematics_curves import neighbour_pots
     from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
     from diegocal.stac.model import Observation
+    from diegocal.terms import Term
 
-    def neighbours(robot_name, pot, seed=1):
-        from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
-
+    def neighbours(robot_name, cause, channel):
         robot = load_robot(resolve_robot_dir(robot_name, None))
-        log = simulate_kinematics(robot, KinematicsOptions(duration=1.0), np.random.default_rng(seed))
+        log = simulate_kinematics(robot, KinematicsOptions(duration=1.0), np.random.default_rng(1))
         obs = Observation(log, robot, need=(), needed_by="test")
-        return {obs.pot_names[i] for i in chain_pots(obs, obs.pot_names.index(pot))}, set(obs.pot_names)
+        near = neighbour_pots(obs, robot, Term(cause, channel, ()))
+        return {obs.pot_names[i] for i in near}, set(obs.pot_names)
 
-    near, pots = neighbours("finger", "dip")
+    near, pots = neighbours("finger", "backlash", "dip")
     assert near == pots - {"dip"}
-    near, _ = neighbours("diego", "l_elbow")
+    near, _ = neighbours("diego", "backlash", "l_elbow")
     arm = {"l_clavicle", "l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_wrist_yaw", "l_wrist_pitch"}
     assert {"torso_yaw", "chest_pitch", *arm} <= near
     assert not any(p.startswith("r_") or "hip" in p or "knee" in p for p in near), near
+    near, _ = neighbours("diego", "link_offset", "l_knee")
+    assert {"l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_toe"} <= near
+    assert not any(p.startswith("r_") or "elbow" in p for p in near), near
