@@ -315,7 +315,7 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
                 own, why = flex.term.channel, f"a flexible model of {flex.term.channel} does"
         if flex is None:
             return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
-        stand_ins[own] = (replace(best, candidate=None), replace(flex, candidate=None))  # no columns kept
+        stand_ins.setdefault(own, (replace(best, candidate=None), replace(flex, candidate=None)))  # no columns kept
         say(f"{best.term.cause} on {best.term.channel}{unit} explains less than {why}: {own} left unexplained")
         tested = [t for t in tested if t is not best and own not in t.channels]
     return None, [], tested
@@ -489,16 +489,22 @@ def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, ex
 
 
 def _spilled(best: Tested, curves, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
-    """The flexible model of one of ``best``'s other channels (``curves``: candidates, tested
-    together) that is significant and explains more of the validation error than ``best`` does
-    (None: none does). A sensor misbehaving in a shape no cause names is then misread by the model
-    as an error of a shared state (q), and a named term of a neighbour that reads the same state
-    explains a part of it: the structure is that sensor's, and it is ``unexplained``."""
+    """The flexible model of a sensor near ``best`` (``curves``: candidates, tested together) that
+    is significant and removes more of the weighted validation error than ``best`` does (the
+    measure :func:`choose` ranks by, comparable across channels; None: none does). A sensor
+    misbehaving in a shape no cause names is then misread by the model as an error of a shared
+    state (q), and a named term of a neighbour that reads the same state explains a part of it:
+    the structure is that sensor's, and it is ``unexplained``."""
     if best.candidate.members or not curves:
         return None
     tested = [t for t in evaluate_candidates(curves, res, weights, train, val, options, exclude) if t.significant]
-    top = max(tested, key=lambda t: t.gain, default=None)
-    return top if top is not None and top.gain > best.gain else None
+    top = max(tested, key=_removed, default=None)
+    return top if top is not None and _removed(top) > _removed(best) else None
+
+
+def _removed(t: Tested) -> float:
+    """The weighted validation error a tested candidate removes."""
+    return t.test.sse_before - t.test.sse_after
 
 
 def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude) -> Finding:

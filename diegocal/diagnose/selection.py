@@ -248,8 +248,7 @@ def evaluate_candidates(
 
     def rejudged(t: Tested) -> Tested:
         thr = critical_t(options.alpha, n_tests, t.test.df)
-        gain = t.test.gain if t.own_gain is None else t.own_gain
-        return replace(t, threshold=thr, significant=bool(t.test.t > thr and gain >= options.min_gain))
+        return replace(t, threshold=thr, significant=bool(t.test.t > thr and t.gain >= options.min_gain))
 
     out = [rejudged(t) for t in alongside]
     out += thread_map(judged, [pair for tied in best.values() for pair in tied], options.jobs)

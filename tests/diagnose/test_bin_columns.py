@@ -111,3 +111,44 @@ def test_a_common_cause_joins_its_members_columns_when_read():
     np.testing.assert_array_equal(cols["a"], expected)
     rows = np.flatnonzero(train)
     np.testing.assert_array_equal(cols.rows("a", rows), expected[rows])
+
+
+def test_common_causes_tested_beside_the_winners_equal_testing_all_again():
+    """``evaluate_candidates(commons, alongside=tested)`` keeps the winners' fits and tests and
+    gives them the thresholds of the larger family count: the same as fitting them all again. The
+    candidates include a term named on one channel that acts more on another (its own-channel gain
+    differs from its gain over all) and effects near ``min_gain``."""
+    from dataclasses import replace
+
+    from diegocal.diagnose.selection import common_candidates, evaluate_candidates
+    from diegocal.diagnose.types import Candidate, EngineOptions
+    from diegocal.terms import Parameter, Term
+
+    rng = np.random.default_rng(11)
+    T = 600
+    chans = ("a", "b", "c", "d")
+    x = {c: rng.normal(size=(T, 2)) for c in chans}
+    size = {"a": 0.6, "b": 0.25, "c": 0.12, "d": 0.05}
+    y = {c: size[c] * (x[c] @ [1.0, -0.5]) + 0.3 * rng.normal(size=T) for c in chans}
+    z = rng.normal(size=T)
+    y["m"] = 0.4 * z + 0.3 * rng.normal(size=T)
+    y["a"] = y["a"] + 0.05 * z
+    res = Residuals(y, dict.fromkeys(y, "N·m"))
+    cands = [Candidate(Term("spring", c, (Parameter("k1"), Parameter("k2"))), {c: x[c]}) for c in chans]
+    cands.append(Candidate(Term("payload", "a", (Parameter("m"),)), {"a": 0.05 * z[:, None], "m": 0.4 * z[:, None]}))
+    train, val = np.arange(T) % 3 == 0, np.arange(T) % 3 == 1
+    weights = dict.fromkeys(y, 1.0)
+    for min_gain in (0.02, 0.05, 0.2):
+        options = replace(EngineOptions(), min_gain=min_gain)
+        tested = evaluate_candidates(cands, res, weights, train, val, options)
+        commons = common_candidates(tested)
+        assert commons
+        again = evaluate_candidates([t.candidate for t in tested] + commons, res, weights, train, val, options)
+        beside = evaluate_candidates(commons, res, weights, train, val, options, alongside=tested)
+        assert [t.term.label for t in beside] == [t.term.label for t in again]
+        for b, a in zip(beside, again, strict=True):
+            assert (b.threshold, b.significant, b.gain, b.channel_gain, b.own_gain) == (
+                a.threshold, a.significant, a.gain, a.channel_gain, a.own_gain
+            )
+            np.testing.assert_array_equal(b.term.values, a.term.values)
+        assert any(t.own_gain is not None and t.own_gain != t.gain for t in again)

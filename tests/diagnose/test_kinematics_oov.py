@@ -5,6 +5,7 @@ simulator, added to a clean finger session."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from diegocal.diagnose import DiagnoseOptions, diagnose
 from experiments.kinematics_oov import MARKER_NOISE, POT_NOISE, add_shape, clean_session
@@ -35,23 +36,19 @@ def test_a_worn_pot_track_is_unexplained_on_its_pot_not_a_transfer_curve():
     assert region.variable == f"p.{channel}"
 
 
-def test_a_runout_misread_as_the_next_pots_backlash_is_unexplained_on_its_own_pot():
-    """Gear runout on mcp_abd (8.9 × the noise, five periods over its range): the tracking moves
-    part of it to dip, where a backlash removed 22 % of the validation error and was named. A
-    curve of mcp_abd's own reading removes more, so mcp_abd is ``unexplained`` and nothing is named;
-    the finding says which term stood in."""
-    log, robot, channel, _ = add_shape("runout", 20262130)
-    assert channel == "mcp_abd"
-    d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
-    assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", "mcp_abd")]
-    assert d.findings[0].evidence["stand_in"]["term"] == "backlash:dip"
-
-
-def test_crosstalk_misread_as_the_next_pots_backlash_is_unexplained_on_the_pot_that_picks_it_up():
-    """mcp_abd picks up another pot's signal (4.6 × the noise): a backlash on dip removed 12 % of
-    the validation error; mcp_abd's mixing row (its reading plus a linear function of the chain's
-    joint angles) removes 87 %, so mcp_abd is ``unexplained``."""
-    log, robot, channel, _ = add_shape("crosstalk", 20264146)
+@pytest.mark.parametrize(
+    "shape, seed",
+    [
+        ("runout", 20262130),  # five periods, 8.9 × the noise: mcp_abd's curve removes 54 %
+        ("crosstalk", 20264146),  # 4.6 × the noise: mcp_abd's mixing row removes 87 %
+    ],
+)
+def test_a_fault_misread_as_the_next_pots_backlash_is_unexplained_on_the_faulty_pot(shape, seed):
+    """A runout on mcp_abd, or another pot's signal picked up by it: the tracking moves part of it
+    to dip, where a backlash removed 22 % (12 %) of the validation error and was named. A flexible
+    model of mcp_abd (its curve; its mixing row, its reading plus a linear function of the chain's
+    joint angles) removes more, so mcp_abd is ``unexplained``; the finding says which term stood in."""
+    log, robot, channel, _ = add_shape(shape, seed)
     assert channel == "mcp_abd"
     d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
     assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", "mcp_abd")]
