@@ -18,6 +18,7 @@ from functools import partial
 import numpy as np
 
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
+from diegocal.diagnose.stats import quantile_edges
 from diegocal.diagnose.types import Candidate
 from diegocal.terms import Parameter, Term
 
@@ -63,8 +64,7 @@ def _curve(name: str, x: np.ndarray, train: np.ndarray) -> tuple:
     """(term, ∂p̂/∂θ (T, K)) of a pot's curve: hat functions of its model reading ``x`` on knots at
     the quantiles of its training readings; (None, None) for fewer than three distinct knots."""
     x = np.asarray(x, float)
-    seen = x[train & np.isfinite(x)]
-    knots = np.unique(np.quantile(seen, np.linspace(0.0, 1.0, CURVE_KNOTS))) if seen.size else seen
+    knots = quantile_edges(x[train], CURVE_KNOTS - 1)
     if knots.size < 3:
         return None, None
     params = tuple(Parameter(f"f{k}") for k in range(knots.size))
@@ -91,11 +91,10 @@ def neighbour_pots(obs, robot, term: Term) -> list[int]:
     a pot term, the other pots that read a joint on a chain through one its pot reads (that joint,
     an ancestor or a descendant of it; none for a linear pot); for a link offset, those on a chain
     through its joint; for a marker's slip, those that read a joint moving the marker."""
-    anc = obs.kin._anc[1:]  # (n, n): joint k is joint j or one of its ancestors
     A = np.asarray(obs.A) != 0
     own = _own(obs, term)
     if term.cause == "link_offset":
-        near = (anc | anc.T)[:, robot.joint_index(term.channel)]
+        near = _chain(obs, np.arange(A.shape[1]) == robot.joint_index(term.channel))
     elif term.cause == "marker_slip":
         links, _, _ = obs.kin.link_info(obs.marker_links)
         near = obs.kin._anc[links[obs.marker_names.index(term.channel)]]
@@ -114,9 +113,14 @@ def _own(obs, term: Term) -> int | None:
 
 def _near_joints(obs, i: int) -> np.ndarray:
     """(n,) bool: the joints on a chain through a joint pot i reads (none for a linear pot)."""
+    return _chain(obs, np.asarray(obs.A)[i] != 0)
+
+
+def _chain(obs, joints: np.ndarray) -> np.ndarray:
+    """(n,) bool: the joints on a chain through one of ``joints`` (n,) bool: it, an ancestor or a
+    descendant of it."""
     anc = obs.kin._anc[1:]  # (n, n): joint k is joint j or one of its ancestors
-    A = np.asarray(obs.A) != 0
-    return (anc | anc.T)[:, A[i]].any(axis=1)
+    return (anc | anc.T)[:, joints].any(axis=1)
 
 
 def pot_block(lin, j: int, f: np.ndarray) -> np.ndarray:

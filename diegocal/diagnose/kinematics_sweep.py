@@ -49,6 +49,10 @@ class Columns:
     span: object = CALIBRATION
     projected: bool = False
 
+    def __post_init__(self):
+        if self.projected and self.span == CALIBRATION:  # its fit is taken out before the projection
+            raise ValueError("columns made projected are fitted out of a pot's span, not the calibration's")
+
 
 class Sweep:
     """The linearisation at a fit (:class:`Linearised`), a block of frames at a time (module
@@ -185,11 +189,7 @@ class Sweep:
                 C -= lin._calibration_apply(beta)
             done = _finite(lin.project(C))
             made.update(zip(raw, _split(done, [made[i] for i in raw]), strict=True))
-        for i, _ in pending:
-            if cols[i].projected:
-                made[i] = _finite(made[i])
-                if betas[i] is not None and cols[i].span == CALIBRATION:  # S F β of a set made projected
-                    made[i] = made[i] - lin.project(lin._calibration_apply(betas[i]))
+        made.update((i, _finite(made[i])) for i, _ in pending if cols[i].projected)
         items = []
         for i, _ in pending:
             C = made.pop(i)
