@@ -22,9 +22,7 @@ Candidates (:mod:`diegocal.pneumatic.terms`):
   (a large leak as a droop). A second, independent generator (experiments/pneumatic_generator.py)
   showed the shapes at fault, not the baseline: a restricted supply line, which sags deeply while
   a chamber fills and not once it is full, is missed by the lasting sag and named by the flow
-  shape; an orifice fits both simulators' leaks better than ``-leak (p - P_r)``. Its line feeds
-  the valve through a hose, whose sag follows the flow about a tick late: the orifice shape is also
-  offered with part of each step's sag taken at the previous command (:data:`HOSE_LAGS`);
+  shape; an orifice fits both simulators' leaks better than ``-leak (p - P_r)``;
 - ``valve_delay``: a family over d = 1..D samples (D = MAX_DELAY_S), the exact difference
   (p̂(u_{t-d}) - p̂(u_t)) / (d h - lag), whose coefficient is the delay added to the sensors' lag,
   re-fitted jointly with the columns ∂p̂/∂c of the current model's parameters. The term the engine
@@ -390,11 +388,6 @@ def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray, floor=None) -> b
     return bool(ok and (floor is None or (np.abs(coef) >= floor).all()))
 
 
-#: The shares of a step's supply sag taken at the previous command (a hose behind the line, ``lag``
-#: in :func:`diegocal.pneumatic.terms._supply_droop`): the orifice shape's variants. On the second
-#: generator's restricted lines they remove 40-67 % of the validation next-step error where the
-#: sag at the step's own command removes 18-24 % (shoulder.ext, elbow.ext), best at 0.5-0.9.
-HOSE_LAGS = (0.25, 0.5, 0.75)
 #: The candidates other than the delay, as (cause, extra): a leak through an orifice or linear in
 #: p - P_r; a supply sag that lasts, or through a line resistance that is linear or an orifice (the
 #: shapes of a cause share a family: the engine tests the one that fits the training rows better);
@@ -407,15 +400,13 @@ SHAPES = (
     ("supply_droop", {}),
     ("supply_droop", {"shape": "flow"}),
     ("supply_droop", {"shape": "orifice"}),
-    *(("supply_droop", {"shape": "orifice", "lag": a}) for a in HOSE_LAGS),
     ("pressure_offset", {}),
 )
 
 
 def _key(terms) -> frozenset:
-    """The causes and shapes (with a hose's lag) of ``terms`` (a candidate's full fit is cached
-    under it)."""
-    return frozenset((t.cause, t.extra.get("shape"), t.extra.get("lag")) for t in terms)
+    """The causes and shapes of ``terms`` (a candidate's full fit is cached under it)."""
+    return frozenset((t.cause, t.extra.get("shape")) for t in terms)
 
 
 def _value(params, cause: str, default: float = 0.0) -> float:

@@ -61,8 +61,7 @@ class ChamberModel:
     extra : the extra terms as given
     names : parameter names, c1..c9 then the extra terms' (the packed vector's order)
     specs : (P,) their :class:`~diegocal.pneumatic.terms.ParamSpec`
-    has_delay : whether the model reads lagged commands (:meth:`n_lags`): a delay, or a term that
-        reads the previous command's valve (``reads_prev``: a supply sag through a hose)
+    has_delay : whether the model reads lagged commands (:meth:`n_lags`)
     delay_at : positions of the delays in the packed vector (``sensor_lag``, ``valve_delay``): the
         valve holds the command for their sum late (a valve delay seen through the sensors' lag)
     """
@@ -81,16 +80,13 @@ class ChamberModel:
         self.index = {n: i for i, n in enumerate(self.names)}
         self.has_flow = any(T.part(t).stage == 5 for t in extra)
         self.offset_at = self.index.get("offset")
+        self.has_delay = any(T.part(t).delay for t in extra)
         self.delay_at = [self.index[t.parameters[0].name] for t in extra if T.part(t).delay]
-        self.reads_prev = any(t.extra.get("lag") for t in extra)
-        self.has_delay = bool(self.delay_at) or self.reads_prev
 
     def n_lags(self, h: float) -> int:
-        """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay or a
-        term that reads the previous command."""
+        """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay."""
         longest = T.MAX_DELAY_S + T.MAX_SENSOR_LAG_S
-        delayed = int(np.ceil(longest / h - 1e-9)) + 1 if self.delay_at else 0
-        return delayed + int(self.reads_prev)
+        return int(np.ceil(longest / h - 1e-9)) + 1 if self.has_delay else 0
 
     @property
     def n_params(self) -> int:
@@ -110,20 +106,13 @@ class ChamberModel:
                 x[self.index[p.name]] = p.value
         return x
 
-    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian=True, u_prev=None) -> ModelTerms:
+    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian=True) -> ModelTerms:
         """s and r of eq. (4.10) with every term added and the flows folded in (module doc of
         :mod:`~diegocal.pneumatic.terms`) for the command ``u`` the valve holds; ``p`` the model's
-        pressure (the reading minus any offset); ``u_prev`` the command before it (read by a term
-        that ``reads_prev``; None: a steady command, ``u``)."""
+        pressure (the reading minus any offset)."""
         x = np.asarray(x, float)
         shape = np.broadcast(u, v, vd).shape
         ev = T.Evaluation(x, self.index, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=shape)
-        if self.reads_prev:  # the valve's own parts (stages below 4) at the previous command
-            u_prev = u if u_prev is None else u_prev
-            ev.prev = T.Evaluation(x, self.index, p, u_prev, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=shape)
-            for term in self.terms:
-                if 0 < T.part(term).stage < 4:
-                    T.part(term).add(term, ev.prev)
         for term in self.terms:
             T.part(term).add(term, ev)
         r = ev.num / ev.den  # (4.10e)
@@ -153,11 +142,10 @@ class ChamberModel:
             s, r, r_p = s2, r2, rc_p + ev.beta_p
         return ModelTerms(s, r, ds, dr, s_p, r_p)
 
-    def _exact_step(self, x, p, u, v, vd, h, consts, jacobian, u_prev=None):
-        """One exact step (4.7) with the command ``u`` held (``u_prev`` before it): p_next,
-        d p_next / d x (or None), d p_next / d p, and s and max(r, 0) (for the derivative in the
-        step's length)."""
-        t = self.evaluate(x, p, u, v, vd, h, *consts, jacobian=jacobian, u_prev=u_prev)
+    def _exact_step(self, x, p, u, v, vd, h, consts, jacobian):
+        """One exact step (4.7) with the command ``u`` held: p_next, d p_next / d x (or None),
+        d p_next / d p, and s and max(r, 0) (for the derivative in the step's length)."""
+        t = self.evaluate(x, p, u, v, vd, h, *consts, jacobian=jacobian)
         r = np.maximum(t.r, 0.0)
         e = np.exp(-r * h)
         p_next = t.s + (p - t.s) * e
@@ -186,23 +174,18 @@ class ChamberModel:
         consts = (c_b, c_s, c_gamma)
         offset = 0.0 if self.offset_at is None else float(x[self.offset_at])
         pm = p if self.offset_at is None else p - offset  # the sensor reads p + offset
-        if self.has_delay and u_lags is None:
-            raise ValueError("a model with a valve delay or a hose needs the lagged commands (u_lags)")
-        if not self.delay_at:
-            prev = u_lags[..., 1] if self.reads_prev else None
-            p_next, jac, dp, _, _ = self._exact_step(x, pm, u, v, vd, h, consts, jacobian, prev)
+        if not self.has_delay:
+            p_next, jac, dp, _, _ = self._exact_step(x, pm, u, v, vd, h, consts, jacobian)
         else:
-            last = u_lags.shape[-1] - 1 - int(self.reads_prev)  # the oldest command a piece may hold
-            D = np.clip(sum(x[i] for i in self.delay_at) / h, 0.0, last - 1e-9)
+            if u_lags is None:
+                raise ValueError("a model with a valve delay needs the lagged commands (u_lags)")
+            D = np.clip(sum(x[i] for i in self.delay_at) / h, 0.0, u_lags.shape[-1] - 1 - 1e-9)
             n = np.floor(D).astype(int)
             f = D - n
-            lagged = lambda k: np.take_along_axis(u_lags, n[..., None] + k, axis=-1)[..., 0]  # noqa: E731
-            old, new = lagged(1), lagged(0)  # held first, f h; then (1 - f) h
-            old_prev, new_prev = (lagged(2), old) if self.reads_prev else (None, None)
-            p_mid, j1, dp1, s1, r1 = self._exact_step(x, pm, old, v, vd, f * h, consts, jacobian, old_prev)
-            p_next, j2, dp2, s2, r2 = self._exact_step(
-                x, p_mid, new, v, vd, (1.0 - f) * h, consts, jacobian, new_prev
-            )
+            old = np.take_along_axis(u_lags, n[..., None] + 1, axis=-1)[..., 0]  # held first, f h
+            new = np.take_along_axis(u_lags, n[..., None], axis=-1)[..., 0]  # then (1 - f) h
+            p_mid, j1, dp1, s1, r1 = self._exact_step(x, pm, old, v, vd, f * h, consts, jacobian)
+            p_next, j2, dp2, s2, r2 = self._exact_step(x, p_mid, new, v, vd, (1.0 - f) * h, consts, jacobian)
             dp = dp2 * dp1
             if jacobian:
                 jac = j2 + dp2[..., None] * j1

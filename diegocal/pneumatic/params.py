@@ -163,7 +163,6 @@ class ChamberParams:
             if not isinstance(extra, list):
                 raise InputFileError(f"{where}: 'terms' must be a list of terms")
             terms = tuple(term_from_dict(t, f"{where}: term {i + 1}", "pneumatics") for i, t in enumerate(extra))
-            terms = chamber_terms(terms)
             return cls(
                 vals,
                 float(raw["c_b"]),

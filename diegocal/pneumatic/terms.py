@@ -71,8 +71,7 @@ class Evaluation:
     state, ``num``/``dnum`` and ``den``/``dden`` the rate's numerator and denominator, ``g``/``dg``
     the valve sigmoid, ``alpha``/``beta`` the flows added to ``pdot`` as ``alpha - beta p`` (None
     until a term adds one), ``s_p`` d s / d p (None: 0), ``factor``/``factor_p``/``dfactor`` a
-    factor of the valve's rate num/den, its derivative in p and in x (None: 1); ``prev`` the
-    valve's parts (g, n) at the previous command, for a term that reads it (None: not evaluated).
+    factor of the valve's rate num/den, its derivative in p and in x (None: 1).
     """
 
     x: np.ndarray
@@ -105,7 +104,6 @@ class Evaluation:
     factor: np.ndarray | None = None
     factor_p: np.ndarray | None = None
     dfactor: np.ndarray | None = None
-    prev: Evaluation | None = None
     shape: tuple = field(default=())
 
     def value(self, name: str) -> float:
@@ -310,13 +308,6 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
       divide it as their conductances. c_s w is about 1 at one volt beyond c1, so ``droop`` keeps
       its meaning and unit.
 
-    ``extra: {lag: a}`` (flow and orifice shapes): the line feeds the valve through a hose, whose
-    pressure sags over a tick or two as the valve draws and recovers after it closes: the sag of a
-    step is ``1 - a`` of the series form at the step's command and ``a`` of it at the previous
-    command (the gap at the step's pressure). On the second generator the hose's tick-averaged sag
-    follows the supply flow about a tick late (its fit on the flow now and a tick before explains
-    R² 0.75-0.86 of it, on the flow now alone 0.3-0.4).
-
     A sag proportional to the flow drawn without the series form (P_c' = P_c - k f n (P_c - p)) was
     tried first on the project's simulator: it fitted worse than a pressure offset.
     """
@@ -330,41 +321,25 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
             ev.ds = ev.ds - 0.5 * c * ev.dg
             ev.ds[..., at] -= f
         return
-    gap = ev.supply - ev.p
-    power = 2.0 if shape == "orifice" else 1.0
-    q, dq = _series_share(c, ev, ev, power)
-    lag = float(term.extra.get("lag", 0.0))
-    if lag:  # the hose: part of the sag is the previous command's (ChamberModel.evaluate's ``prev``)
-        q_prev, dq_prev = _series_share(c, ev.prev, ev, power)
-        q = (1.0 - lag) * q + lag * q_prev
-        dq = None if dq is None else (1.0 - lag) * dq + lag * dq_prev
-    sag = q * gap
-    ev.s = ev.s - f * sag
-    ev.s_p = f * q if ev.s_p is None else ev.s_p + f * q  # d s / d p
-    if ev.jacobian:
-        ev.ds = ev.ds - (0.5 * sag)[..., None] * ev.dg - (f * gap)[..., None] * dq
-
-
-def _series_share(c: float, port: Evaluation, ev: Evaluation, power: float):
-    """q = x / (1 + x), the share of the supply's gap that a series restriction of size ``c`` takes
-    (``_supply_droop``'s flow and orifice shapes), with the valve's port as ``port`` has it (its g
-    and n: ``ev`` itself, or its previous command's), and dq/dx (N, P) (None unless
-    ``ev.jacobian``)."""
     c7 = ev.value("c7")
-    f = 0.5 * (1.0 + port.g)
-    w = f * port.num / (c7 * ev.c_s)  # the port's conductance over the line's, per unit of droop
+    gap = ev.supply - ev.p
+    w = f * ev.num / (c7 * ev.c_s)  # the port's conductance over the line's, per unit of droop
+    power = 2.0 if shape == "orifice" else 1.0
     weight = (w * ev.c_s) ** (power - 1.0)  # orifice: the port's opening (about 1 at 1 V beyond c1)
     wp = w * weight  # x per unit of droop
     x = np.maximum(c * wp, 0.0)
     q = x / (1.0 + x)
-    if not ev.jacobian:
-        return q, None
     dq = np.where(c * wp > 0.0, 1.0 / (1.0 + x) ** 2, 0.0)
-    dw = (0.5 * port.dg * port.num[..., None] + f[..., None] * port.dnum) / (c7 * ev.c_s)
-    dw[..., ev.index["c7"]] -= w / c7
-    dqx = (dq * c * power * weight)[..., None] * dw
-    dqx[..., ev.index["droop"]] += dq * wp
-    return q, dqx
+    sag = q * gap
+    ev.s = ev.s - f * sag
+    ev.s_p = f * q if ev.s_p is None else ev.s_p + f * q  # d s / d p
+    if ev.jacobian:
+        dw = (0.5 * ev.dg * ev.num[..., None] + f[..., None] * ev.dnum) / (c7 * ev.c_s)
+        dw[..., ev.index["c7"]] -= w / c7
+        dwp = (power * weight)[..., None] * dw
+        ds = -(0.5 * sag)[..., None] * ev.dg - (f * dq * gap)[..., None] * (c * dwp)
+        ds[..., at] -= f * dq * gap * wp
+        ev.ds = ev.ds + ds
 
 
 def _pressure_offset(term: Term, ev: Evaluation) -> None:
@@ -441,18 +416,8 @@ def baseline_terms(channel: str = "", values: dict | None = None) -> tuple[Term,
 
 
 def chamber_terms(terms) -> tuple[Term, ...]:
-    """``terms`` as a tuple, each checked to be a valve-chamber term (:func:`part`), a hose's lag a
-    share between 0 and 1 on a series-shaped supply sag."""
+    """``terms`` as a tuple, each checked to be a valve-chamber term (:func:`part`)."""
     terms = tuple(terms)
     for t in terms:
         part(t)
-        lag = t.extra.get("lag")
-        if lag is None:
-            continue
-        series = t.cause == "supply_droop" and t.extra.get("shape") in ("flow", "orifice")
-        if not series or isinstance(lag, bool) or not isinstance(lag, int | float) or not 0.0 <= lag <= 1.0:
-            raise InputFileError(
-                f"{t.cause}:{t.channel}: extra lag {lag!r} must be a number from 0 to 1 on a supply_droop "
-                "of shape flow or orifice"
-            )
     return terms

@@ -110,13 +110,6 @@ def test_params_with_terms_round_trip_through_yaml_mapping():
         ChamberParams.from_dict({**raw, "terms": [{"cause": "valve_stiction", "channel": "x"}]})
     with pytest.raises(ValueError, match="one term per cause"):
         ChamberModel(_extra(("chamber_leak", "chamber_leak")))
-    # a hose's lag is read back with its droop, and a lag that is no share is refused in one line
-    hose = {"cause": "supply_droop", "channel": "x", "parameters": {"droop": {"value": 40.0}},
-            "extra": {"shape": "orifice", "lag": 0.5}}
-    assert ChamberParams.from_dict({**raw, "terms": [hose]}).terms[0].extra["lag"] == 0.5
-    for bad in ({"shape": "orifice", "lag": 1.5}, {"shape": "orifice", "lag": "a tick"}, {"lag": 0.5}):
-        with pytest.raises(InputFileError, match="extra lag"):
-            ChamberParams.from_dict({**raw, "terms": [{**hose, "extra": bad}]})
 
 
 def test_steady_state_with_offset_and_leak():
@@ -187,23 +180,10 @@ SHAPED = (
 
 
 ORIFICE_DROOP = make_term("supply_droop", "c", {"droop": 40.0}, extra={"shape": "orifice"})
-HOSE_DROOP = make_term("supply_droop", "c", {"droop": 40.0}, extra={"shape": "orifice", "lag": 0.5})
-DELAY = make_term("valve_delay", "c", {"delay_s": 0.023})
 
 
 @pytest.mark.parametrize(
-    "terms",
-    [
-        SHAPED[:1],
-        SHAPED[1:2],
-        SHAPED[:2] + SHAPED[3:],
-        SHAPED,
-        (ORIFICE_DROOP,),
-        (ORIFICE_DROOP, SHAPED[3]),
-        (HOSE_DROOP,),
-        (HOSE_DROOP, SHAPED[3]),
-        (HOSE_DROOP, DELAY),
-    ],
+    "terms", [SHAPED[:1], SHAPED[1:2], SHAPED[:2] + SHAPED[3:], SHAPED, (ORIFICE_DROOP,), (ORIFICE_DROOP, SHAPED[3])]
 )
 def test_jacobian_of_the_orifice_leak_and_the_flow_droop_matches_finite_differences(rng, terms):
     # their flows depend on the pressure at the step's start: the offset's column reads that too
@@ -264,21 +244,3 @@ def test_an_orifice_droop_divides_the_drop_as_the_squares_of_the_areas(rng):
     w = [sag("orifice", d)[:2] / sag("flow", d)[:2] for d in (1e-4, 2e-4)]
     assert w[0] == pytest.approx(w[1], rel=1e-3) and 0.0 < w[0][0] < w[0][1]
     assert sag("orifice", 1e-4)[2] == pytest.approx(0.0, abs=1e-9)
-
-
-def test_a_hose_droop_mixes_the_sag_at_the_step_s_command_and_at_the_one_before(rng):
-    # lag a: (1 - a) of the series form's sag at the step's command, a at the previous command's
-    p, u, v, vd, h, lags = _samples(rng)
-    x = np.concatenate([X, [40.0]])
-
-    def s(lag, u_prev):
-        model = ChamberModel((make_term("supply_droop", "c", {"droop": 40.0}, extra={"shape": "orifice", "lag": lag}),))
-        return model.evaluate(x, p, u, v, vd, h, *CONSTS, jacobian=False, u_prev=u_prev).s
-
-    static = ChamberModel((ORIFICE_DROOP,)).evaluate(x, p, u, v, vd, h, *CONSTS, jacobian=False).s
-    np.testing.assert_allclose(s(0.5, u), static)  # a steady command: the orifice shape
-    before = s(1.0, lags[:, 1])
-    assert np.abs(before - static).max() > 1.0
-    np.testing.assert_allclose(s(0.3, lags[:, 1]), 0.7 * static + 0.3 * before)
-    assert ChamberModel((HOSE_DROOP,)).n_lags(0.01) == 1
-    assert ChamberModel((HOSE_DROOP, DELAY)).n_lags(0.01) == ChamberModel((DELAY,)).n_lags(0.01) + 1
