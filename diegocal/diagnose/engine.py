@@ -19,7 +19,8 @@ import numpy as np
 from diegocal.diagnose.evidence import curves, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
 from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates, simplest
-from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, region_of, show
+from diegocal.diagnose.show import binned_candidate, region_of, show
+from diegocal.diagnose.stand_ins import declined_rival, outshone, own_channel, spilled, stand_in_finding
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
     Adapter,
@@ -98,7 +99,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         unconverged.update(dict.fromkeys(f"with the faults written off: {why}" for why in late(fitted)))
     if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
         adapter.selection_exclude = exclude
-    stand_ins: dict = {}  # channel -> (the term that stood in, the flexible model's test)
+    stand_ins: dict = {}  # channel -> (the term that stood in, the test that beat it, why it was declined)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
     for _ in range(options.max_rounds):
@@ -117,7 +118,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         neighbours = None if spill is None else partial(spill, fitted, train)
         best, group, tested = _choose_group(
-            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours
+            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined
         )
         group = [g for g in group if _key(g.term) not in declined]
         candidates = commons = None  # what follows needs the tested terms, not their columns:
@@ -176,9 +177,11 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     # what remains: the channels whose best term was a stand-in, then significant binned
     # structure that no candidate explained
     res = adapter.residuals(fitted)
-    for channel, (stood, flex) in stand_ins.items():
+    for channel, (stood, flex, declined_why) in stand_ins.items():
         masks = (train, val, shown)
-        findings.append(_stand_in_finding(channel, stood, flex, res, weights, masks, length, options, exclude))
+        findings.append(
+            stand_in_finding(channel, stood, flex, res, weights, masks, length, options, exclude, declined_why)
+        )
     generic = [
         binned_candidate(res, c, v, train, options.n_bins)
         for c in res.channels
@@ -288,13 +291,16 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
     return (new if kept else fitted), out
 
 
-def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None) -> tuple:
+def _choose_group(
+    tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=()
+) -> tuple:
     """(the best candidate, the terms this round adds, the candidates left in the running): the
     best and the other channels of its cause (no terms when nothing is significant). A best term
     that its channel's state explains far better stands in for structure of another shape: its
     channel goes to ``stand_ins`` (left unexplained) and the next best is chosen; so does the
-    channel of a neighbour whose own flexible model explains more than the term (:func:`_spilled`;
-    ``neighbours(term, channels)``: the adapter's ``spill_candidates``). A common cause whose channels
+    channel of a neighbour whose own flexible model explains more than the term (:func:`~.stand_ins.spilled`;
+    ``neighbours(term, channels)``: the adapter's ``spill_candidates``), and that of a term a declined
+    one (``declined``) explained better (:func:`~.stand_ins.declined_rival`). A common cause whose channels
     have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
     simpler cause does as well (:func:`~.selection.simplest`)."""
     while (best := choose(tested, val)) is not None:
@@ -306,25 +312,24 @@ def _choose_group(tested, res, weights, train, val, options, exclude, stand_ins,
                 return best, group, tested
             tested = [t for t in tested if t is not best]
             continue
-        own = _own(best)
-        flex = _outshone(best, res, weights, train, val, options, exclude)
-        why = "its state does"
+        own = own_channel(best)
+        flex = outshone(best, res, weights, train, val, options, exclude)
+        why, declined_why = "its state does", None
         if flex is None and neighbours is not None:
-            flex = _spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
+            flex = spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
             if flex is not None:
                 own, why = flex.term.channel, f"a flexible model of {flex.term.channel} does"
+        if flex is None and (flex := declined_rival(best, tested, declined)) is not None:
+            why, declined_why = f"{flex.term.cause} (declined) did", declined[_key(flex.term)]
         if flex is None:
             return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
-        stand_ins.setdefault(own, (replace(best, candidate=None), replace(flex, candidate=None)))  # no columns kept
+        stand_in = (replace(best, candidate=None), replace(flex, candidate=None), declined_why)  # no columns kept
+        stand_ins.setdefault(own, stand_in)
         say(f"{best.term.cause} on {best.term.channel}{unit} explains less than {why}: {own} left unexplained")
         tested = [t for t in tested if t is not best and own not in t.channels]
     return None, [], tested
 
 
-#: A named term must explain at least this share of what the most flexible model of its channel's
-#: own state explains on the validation rows (:func:`~diegocal.diagnose.show.flexible_candidate`);
-#: less, and it is a stand-in for structure of another shape: the channel is ``unexplained``.
-STAND_IN_SHARE = 0.5
 #: A channel of a common cause (one cause tested on several channels at once) is added only with
 #: at least this t of its own (about a 5 % two-sided level for one test).
 MEMBER_T = 2.0
@@ -339,7 +344,7 @@ def _common(best: Tested, tested, res, weights, train, val, options, exclude) ->
     for t in tested:
         if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
             continue
-        if _outshone(t, res, weights, train, val, options, exclude) is not None:
+        if outshone(t, res, weights, train, val, options, exclude) is not None:
             continue
         out.append(t)
         used |= set(t.channels)
@@ -355,7 +360,7 @@ def _members(best: Tested, res, weights, train, val, options, exclude) -> list[T
     for t in best.candidate.members:
         if t.test.t < MEMBER_T or t.gain < options.min_gain:  # carried by the others, not its own evidence
             continue
-        if _outshone(t, res, weights, train, val, options, exclude) is not None:
+        if outshone(t, res, weights, train, val, options, exclude) is not None:
             continue
         out.append(t)
     return out
@@ -461,68 +466,3 @@ def _without_columns(best, group, tested) -> tuple:
         return bare[id(t)]
 
     return (None if best is None else strip(best)), [strip(g) for g in group], [strip(t) for t in tested]
-
-
-def _own(t: Tested) -> str:
-    """The channel a tested term is judged on: its own when it acts there, else the one it acts on
-    most (a payload: the joint its weight loads most), else its first."""
-    if t.term.channel in t.channels:
-        return t.term.channel
-    return t.strongest[0] if t.strongest else t.channels[0]
-
-
-def _outshone(best: Tested, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
-    """The flexible model's test on ``best``'s channel when it is significant and ``best`` explains
-    less than STAND_IN_SHARE of what it explains (None otherwise: the term may be named)."""
-    own = _own(best)
-    cand = flexible_candidate(res, own, train, options.n_bins)
-    if cand is None:
-        return None
-    (flex,) = evaluate_candidates([cand], res, weights, train, val, options, exclude) or (None,)
-    if flex is None or flex.test.t <= flex.threshold or flex.test.gain < options.unexplained_min_gain:
-        return None  # no structure worth an ``unexplained`` finding beside the term
-    if best.strongest:  # judged on the channel it acts on most (_own): its gain there
-        gain = best.strongest[1]
-    else:  # over all its channels, or on its own (the flexible model's) where that is larger
-        gain = max(best.test.gain, best.own_gain if best.own_gain is not None else -np.inf)
-    return flex if gain < STAND_IN_SHARE * flex.test.gain else None
-
-
-def _spilled(best: Tested, curves, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
-    """The flexible model of a sensor near ``best`` (``curves``: candidates, tested together) that
-    is significant and removes more of the weighted validation error than ``best`` does (the
-    measure :func:`choose` ranks by, comparable across channels; None: none does). A sensor
-    misbehaving in a shape no cause names is then misread by the model as an error of a shared
-    state (q), and a named term of a neighbour that reads the same state explains a part of it:
-    the structure is that sensor's, and it is ``unexplained``."""
-    if best.candidate.members or not curves:
-        return None
-    tested = [t for t in evaluate_candidates(curves, res, weights, train, val, options, exclude) if t.significant]
-    top = max(tested, key=_removed, default=None)
-    return top if top is not None and _removed(top) > _removed(best) else None
-
-
-def _removed(t: Tested) -> float:
-    """The weighted validation error a tested candidate removes."""
-    return t.test.sse_before - t.test.sse_after
-
-
-def _stand_in_finding(channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude) -> Finding:
-    """``unexplained`` on a channel whose best term was a stand-in: its evidence names the term that
-    stood in and both validation gains; the variable shown is the one whose binned test explains most."""
-    train, val, shown = masks
-    variables = list(flexible_variables(res, channel))
-    single = [binned_candidate(res, channel, v, train, options.n_bins) for v in variables]
-    tested = evaluate_candidates(single, res, weights, train, val, options, exclude)
-    variable = max(tested, key=lambda t: t.test.gain).term.region.variable if tested else variables[0]
-    region = next((region_of(t) for t in tested if t.term.region.variable == variable), None)
-    evidence = {
-        "channels": [channel],
-        "validation_gain": float(flex.test.gain),
-        "t": float(flex.test.t),
-        "threshold_t": float(flex.threshold),
-        "variable": variable,
-        "stand_in": {"term": stood.term.label, "validation_gain": float(stood.gain)},
-        "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
-    }
-    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (stood.to_dict(),))

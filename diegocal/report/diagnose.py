@@ -103,17 +103,17 @@ def _gauge_text(f: dict) -> str:
 
 def _stand_in_text(f: dict) -> str:
     """Why an ``unexplained`` finding names no cause although a term was significant: the term
-    explained far less than a flexible function of the channel's own state (a stand-in)."""
+    explained far less than a flexible function of the channel's own state, or less than a term
+    declined on it (a stand-in)."""
     ev = f.get("evidence") or {}
-    stood = ev.get("stand_in")
-    if not stood:
+    if not (stood := ev.get("stand_in")):
         return ""
-    return (
-        f" The best term of the vocabulary, {stood['term']}, explains {stood['validation_gain']:.0%} of the "
-        f"validation error where a flexible function of {f['channel']}'s own state explains "
-        f"{ev.get('validation_gain', float('nan')):.0%}: it would stand in for structure of another shape, so "
-        "no cause is named."
-    )
+    gain, declined = ev.get("validation_gain", float("nan")), ev.get("declined")
+    beaten = (f"{declined['term']} explained {gain:.0%} and was declined ({declined['why']}): it would stand in "
+              "for what that term fits" if declined else f"a flexible function of {f['channel']}'s own state "
+              f"explains {gain:.0%}: it would stand in for structure of another shape")
+    return (f" The best term of the vocabulary, {stood['term']}, explains {stood['validation_gain']:.0%} of the "
+            f"validation error where {beaten}, so no cause is named.")
 
 
 def _stderr(v: dict):

@@ -432,3 +432,22 @@ def test_a_runner_up_with_an_open_region_is_listed():
     for high in (np.inf, None):
         _, rows = runners_table({"runners_up": [{**runner, "region": {**runner["region"], "high": high}}]})
         assert rows[0][1] == "m1 [10.7..inf]"
+
+
+def test_a_stand_in_says_what_beat_it_a_flexible_model_or_a_declined_term():
+    from diegocal.report.diagnose import _stand_in_text
+
+    flexible = {"channel": "dip", "evidence": {"validation_gain": 0.8, "stand_in": {"term": "backlash:dip",
+                                                                                    "validation_gain": 0.2}}}
+    assert "a flexible function of dip's own state explains 80%" in _stand_in_text(flexible)
+    declined = {
+        "channel": "shoulder.ext",
+        "evidence": {
+            "validation_gain": 0.74,
+            "stand_in": {"term": "supply_droop:shoulder.ext", "validation_gain": 0.48},
+            "declined": {"term": "pressure_offset:shoulder.ext", "why": "the held-out error rose by 0.8% with it"},
+        },
+    }
+    text = _stand_in_text(declined)
+    assert "pressure_offset:shoulder.ext explained 74% and was declined (the held-out error rose" in text
+    assert "flexible" not in text and "48%" in text

@@ -1,0 +1,111 @@
+"""Stand-ins: a term that the engine would name while something else explains its channel's
+structure better (:func:`~diegocal.diagnose.engine.run_unit`'s choice of a round's best). Its
+channel is then ``unexplained``, with the term named as the stand-in: a flexible model of the
+channel's own state explains far more (:func:`outshone`), a flexible model of a neighbouring sensor
+explains more (:func:`spilled`), or a named term of the channel explained more on the validation
+rows but was declined, its extension not confirmed on the held-out rows (:func:`declined_rival`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diegocal.diagnose.evidence import curves
+from diegocal.diagnose.selection import evaluate_candidates
+from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, region_of
+from diegocal.diagnose.types import EngineOptions, Finding, Tested
+from diegocal.terms import Term
+
+#: A named term must explain at least this share of what the most flexible model of its channel's
+#: own state explains on the validation rows (:func:`~diegocal.diagnose.show.flexible_candidate`);
+#: less, and it is a stand-in for structure of another shape: the channel is ``unexplained``.
+STAND_IN_SHARE = 0.5
+
+
+def own_channel(t: Tested) -> str:
+    """The channel a tested term is judged on: its own when it acts there, else the one it acts on
+    most (a payload: the joint its weight loads most), else its first."""
+    if t.term.channel in t.channels:
+        return t.term.channel
+    return t.strongest[0] if t.strongest else t.channels[0]
+
+
+def outshone(best: Tested, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
+    """The flexible model's test on ``best``'s channel when it is significant and ``best`` explains
+    less than STAND_IN_SHARE of what it explains (None otherwise: the term may be named)."""
+    own = own_channel(best)
+    cand = flexible_candidate(res, own, train, options.n_bins)
+    if cand is None:
+        return None
+    (flex,) = evaluate_candidates([cand], res, weights, train, val, options, exclude) or (None,)
+    if flex is None or flex.test.t <= flex.threshold or flex.test.gain < options.unexplained_min_gain:
+        return None  # no structure worth an ``unexplained`` finding beside the term
+    if best.strongest:  # judged on the channel it acts on most (_own): its gain there
+        gain = best.strongest[1]
+    else:  # over all its channels, or on its own (the flexible model's) where that is larger
+        gain = max(best.test.gain, best.own_gain if best.own_gain is not None else -np.inf)
+    return flex if gain < STAND_IN_SHARE * flex.test.gain else None
+
+
+def spilled(best: Tested, models, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:
+    """The flexible model of a sensor near ``best`` (``models``: candidates, tested together) that
+    is significant and removes more of the weighted validation error than ``best`` does (the
+    measure :func:`choose` ranks by, comparable across channels; None: none does). A sensor
+    misbehaving in a shape no cause names is then misread by the model as an error of a shared
+    state (q), and a named term of a neighbour that reads the same state explains a part of it:
+    the structure is that sensor's, and it is ``unexplained``."""
+    if best.candidate.members or not models:
+        return None
+    tested = [t for t in evaluate_candidates(models, res, weights, train, val, options, exclude) if t.significant]
+    top = max(tested, key=removed, default=None)
+    return top if top is not None and removed(top) > removed(best) else None
+
+
+def declined_rival(best: Tested, tested, declined: dict) -> Tested | None:
+    """The declined term (``declined``: (cause, channel) keys) judged on ``best``'s channel and the
+    same validation error that removes more of it than ``best`` (None: none does). Its extension was not
+    confirmed on the held-out rows, and ``best``, a weaker fit of the same structure, would name a
+    cause the data do not single out (a sensor offset declined, then a supply sag that a constant
+    offset partly mimics named in its place)."""
+    own = own_channel(best)
+    rivals = [
+        t
+        for t in tested
+        if (t.term.cause, t.term.channel) in declined
+        and t is not best
+        and own_channel(t) == own
+        and np.isclose(t.test.sse_before, best.test.sse_before)  # the same validation rows and channels
+    ]
+    top = max(rivals, key=removed, default=None)
+    return top if top is not None and removed(top) > removed(best) else None
+
+
+def removed(t: Tested) -> float:
+    """The weighted validation error a tested candidate removes."""
+    return t.test.sse_before - t.test.sse_after
+
+
+def stand_in_finding(
+    channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude, declined_why=None
+) -> Finding:
+    """``unexplained`` on a channel whose best term was a stand-in: its evidence names the term that
+    stood in and both validation gains (``flex``: the flexible model, or the declined term that
+    explained more, with ``declined_why``, in ``evidence.declined``); the variable shown is the one
+    whose binned test explains most."""
+    train, val, shown = masks
+    variables = list(flexible_variables(res, channel))
+    single = [binned_candidate(res, channel, v, train, options.n_bins) for v in variables]
+    tested = evaluate_candidates(single, res, weights, train, val, options, exclude)
+    variable = max(tested, key=lambda t: t.test.gain).term.region.variable if tested else variables[0]
+    region = next((region_of(t) for t in tested if t.term.region.variable == variable), None)
+    evidence = {
+        "channels": [channel],
+        "validation_gain": float(flex.test.gain),
+        "t": float(flex.test.t),
+        "threshold_t": float(flex.threshold),
+        "variable": variable,
+        "stand_in": {"term": stood.term.label, "validation_gain": float(stood.gain)},
+        **({"declined": {"term": flex.term.label, "why": declined_why}} if declined_why is not None else {}),
+        "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
+    }
+    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (stood.to_dict(),))
