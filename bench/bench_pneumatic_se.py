@@ -11,11 +11,15 @@ Two kinds of logs, ``--seeds`` of each:
   simulator, cached through bench_pneumatic_offsim) with a valve delay of 40-50 ms on one chamber,
   fitted as ``diagnose`` fits the term (its adapter, the training blocks): the share of valve
   delays within 2 SE of the simulator's, the median |error| / SE, and the median correlation
-  between the delay and the sensor lag.
+  between the delay and the sensor lag;
+- offset (``--part offset``): the same with a pressure-sensor offset of 9-13 kPa (either sign on
+  the independent generator, positive on the project's, whose ``--effect`` takes positive sizes),
+  the term started at its resolution as ``diagnose`` starts it.
 
 A share of 0.90-0.98 is the goal (0.95 for exact standard errors and an unbiased estimate).
 
     .venv/bin/python bench/bench_pneumatic_se.py --seeds 50 --jobs 2 --cache /tmp/offsim
+    .venv/bin/python bench/bench_pneumatic_se.py --seeds 50 --jobs 2 --cache /tmp/offsim --part offset
     .venv/bin/python bench/bench_pneumatic_se.py --quick
 """
 
@@ -87,9 +91,10 @@ def parametric_one(task):
 
 
 def thin_plate_one(task):
-    """One thin-plate log with a valve delay: (truth, estimate, SE, correlation with the lag)."""
+    """One thin-plate log with a valve delay or a sensor offset: (generator, truth, estimate, SE,
+    correlation with the sensor lag (NaN for an offset))."""
     case, log = task
-    from diegocal.diagnose.pneumatics import PneumaticAdapter
+    from diegocal.diagnose.pneumatics import PneumaticAdapter, _floor
     from diegocal.evaluate import split_blocks
     from diegocal.pneumatic import chamber_data
     from diegocal.robot import load_robot
@@ -100,10 +105,16 @@ def thin_plate_one(task):
     adapter = PneumaticAdapter(chamber_data(log.without_truth(), robot.sensors, case.chamber), vs)
     train = split_blocks(log.n_samples, 10).mask("train")
     adapter.fit((), train)
-    fit = adapter.fit((make_term("valve_delay", case.chamber),), train)
-    term = next(t for t in fit.params.terms if t.cause == "valve_delay")
-    truth = next(e["values"]["delay_s"] for e in log.truth.effects)
-    corr = fit.fit.correlation("delay_s", "lag_s") if hasattr(fit.fit, "correlation") else float("nan")
+    values = {}
+    if case.cause == "pressure_offset":  # started at its resolution, as diagnose starts it
+        span = adapter.data.supply - adapter.data.room
+        values = {"offset": float(_floor(make_term("pressure_offset", case.chamber), span)[0])}
+    fit = adapter.fit((make_term(case.cause, case.chamber, values),), train)
+    term = next(t for t in fit.params.terms if t.cause == case.cause)
+    effect = next(e["values"] for e in log.truth.effects)
+    truth = effect["delay_s"] if case.cause == "valve_delay" else effect.get("offset", effect.get("size"))
+    delayed = case.cause == "valve_delay" and hasattr(fit.fit, "correlation")
+    corr = fit.fit.correlation("delay_s", "lag_s") if delayed else float("nan")
     return case.generator, float(truth), float(term.values[0]), float(term.parameters[0].stderr), corr
 
 
@@ -113,7 +124,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=5)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--cache", type=Path, default=None)
-    ap.add_argument("--part", choices=("parametric", "thin-plate", "both"), default="both")
+    ap.add_argument("--part", choices=("parametric", "thin-plate", "both", "offset"), default="both")
     ap.add_argument("--quick", action="store_true", help="3 seeds, 20-s logs, 5 sub-steps")
     args = ap.parse_args(argv)
     n = 3 if args.quick else args.seeds
@@ -133,37 +144,53 @@ def main(argv=None) -> int:
         print("| share | " + " | ".join(f"{s:.2f}" for s in share) + " |")
         print(f"all c1..c9 together: {np.mean(np.abs(z) <= 2.0):.3f}; median |z| {np.median(np.abs(z)):.2f}")
     if args.part in ("thin-plate", "both"):
-        settings = offsim.Settings(duration, 5 if args.quick else 20)
-        chambers = gen.load_chambers().names
-        rng = np.random.default_rng([args.seed, 77])
-        cases = []
-        for g in offsim.GENERATORS:
-            for i in range(n):
-                # project: one group (one chamber and size) per ten logs, simulated together
-                grp = i // 10
-                if g == "offsim" or i % 10 == 0:
-                    chamber, size = chambers[int(rng.integers(len(chambers)))], float(rng.uniform(0.040, 0.050))
-                cases.append(offsim.Case(g, "valve_delay", chamber, size, args.seed * 1000 + i, 20_000 + grp))
-        logs = offsim.make_logs(cases, settings, args.cache, None, jobs=args.jobs)
-        rows = offsim._map(thin_plate_one, list(zip(cases, logs, strict=True)), args.jobs)
+        rows = _thin_plate(args, n, duration, "valve_delay", (0.040, 0.050))
         print("thin-plate logs, valve delay 40-50 ms, fitted as diagnose fits it:")
-        print(
-            "| generator | logs | within 2 SE | median |error| ms | median SE ms | median |error|/SE "
-            "| corr(delay, lag) |"
-        )
-        print("|---|---|---|---|---|---|---|")
-        for g in offsim.GENERATORS:
-            r = np.array([x[1:] for x in rows if x[0] == g], float)
-            if not r.size:
-                continue
-            err, se = r[:, 1] - r[:, 0], r[:, 2]
-            print(
-                f"| {g} | {len(r)} | {np.mean(np.abs(err) <= 2 * se):.2f} | {1e3 * np.median(np.abs(err)):.2f} | "
-                f"{1e3 * np.median(se):.3f} | {np.median(np.abs(err) / se):.1f} | {np.nanmedian(r[:, 3]):.2f} |"
-            )
-            print(f"  {g}: mean error {1e3 * np.mean(err):+.2f} ms, sd {1e3 * np.std(err):.2f} ms")
+        _table(rows, 1e3, "ms", "| corr(delay, lag) |")
+    if args.part == "offset":
+        rows = _thin_plate(args, n, duration, "pressure_offset", (9.0, 13.0))
+        print("thin-plate logs, pressure offset 9-13 kPa, fitted as diagnose fits it:")
+        _table(rows, 1.0, "kPa", "|")
     print(f"{time.perf_counter() - t0:.0f} s wall, --jobs {args.jobs}, load {os.getloadavg()[0]:.1f}")
     return 0
+
+
+def _thin_plate(args, n, duration, cause, sizes) -> list:
+    """``n`` logs of each generator with ``cause`` (size drawn from ``sizes``) on one chamber, fitted."""
+    settings = offsim.Settings(duration, 5 if args.quick else 20)
+    chambers = gen.load_chambers().names
+    rng = np.random.default_rng([args.seed, 77] if cause == "valve_delay" else [args.seed, 78])
+    base = 1000 if cause == "valve_delay" else 3000
+    cases = []
+    for g in offsim.GENERATORS:
+        for i in range(n):
+            # project: one group (one chamber and size) per ten logs, simulated together
+            grp = i // 10
+            if g == "offsim" or i % 10 == 0:
+                chamber, size = chambers[int(rng.integers(len(chambers)))], float(rng.uniform(*sizes))
+                if cause == "pressure_offset" and g == "offsim":
+                    size *= float(rng.choice([-1.0, 1.0]))
+            group = (20_000 if cause == "valve_delay" else 30_000) + grp
+            cases.append(offsim.Case(g, cause, chamber, size, args.seed * base + i, group))
+    logs = offsim.make_logs(cases, settings, args.cache, None, jobs=args.jobs)
+    return offsim._map(thin_plate_one, list(zip(cases, logs, strict=True)), args.jobs)
+
+
+def _table(rows, scale: float, unit: str, last: str) -> None:
+    """Per generator: the share within 2 SE, median |error|, SE and |error|/SE (and the last column)."""
+    print(f"| generator | logs | within 2 SE | median |error| {unit} | median SE {unit} | median |error|/SE {last}")
+    print("|---|---|---|---|---|---|" + ("---|" if last != "|" else ""))
+    for g in offsim.GENERATORS:
+        r = np.array([x[1:] for x in rows if x[0] == g], float)
+        if not r.size:
+            continue
+        err, se = r[:, 1] - r[:, 0], r[:, 2]
+        corr = f" {np.nanmedian(r[:, 3]):.2f} |" if last != "|" else ""
+        print(
+            f"| {g} | {len(r)} | {np.mean(np.abs(err) <= 2 * se):.2f} | {scale * np.median(np.abs(err)):.3g} | "
+            f"{scale * np.median(se):.3g} | {np.median(np.abs(err) / se):.1f} |{corr}"
+        )
+        print(f"  {g}: mean error {scale * np.mean(err):+.3g} {unit}, sd {scale * np.std(err):.3g} {unit}")
 
 
 if __name__ == "__main__":
