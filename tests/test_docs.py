@@ -61,9 +61,16 @@ def commands(block: str) -> list[list[str]]:
 
 
 def _workdir(tmp_path: Path) -> Path:
-    """A folder where the docs' relative paths resolve: sample_data, robots, docs linked in."""
-    for name in ("sample_data", "robots", "docs"):
+    """A folder where the docs' relative paths resolve: robots and docs linked in, sample_data's
+    folders made and its files linked (a command's default output beside its log, ``sgp-fit
+    sample_data/real/tx40.h5``, lands here, not in the repository)."""
+    for name in ("robots", "docs"):
         (tmp_path / name).symlink_to(ROOT / name)
+    for path in (ROOT / "sample_data").rglob("*"):
+        if path.is_file():
+            link = tmp_path / path.relative_to(ROOT)
+            link.parent.mkdir(parents=True, exist_ok=True)
+            link.symlink_to(path)
     (tmp_path / "out").mkdir()
     return tmp_path
 
