@@ -305,7 +305,7 @@ def _choose_group(
     simpler cause does as well (:func:`~.selection.simplest`)."""
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
-            group = _members(best, res, weights, train, val, options, exclude)
+            group = _members(best, tested, declined, res, weights, train, val, options, exclude)
             if len(group) == 1 and simplest(group[0], tested, val) is not group[0]:
                 group = []  # its evidence is one channel's, where a simpler cause does as well
             if group:
@@ -322,7 +322,8 @@ def _choose_group(
         if flex is None and (flex := declined_rival(best, tested, declined)) is not None:
             why, declined_why = f"{flex.term.cause} (declined) did", declined[_key(flex.term)]
         if flex is None:
-            return best, [best, *_common(best, tested, res, weights, train, val, options, exclude)], tested
+            commons = _common(best, tested, declined, res, weights, train, val, options, exclude)
+            return best, [best, *commons], tested
         stand_in = (replace(best, candidate=None), replace(flex, candidate=None), declined_why)  # no columns kept
         stand_ins.setdefault(own, stand_in)
         say(f"{best.term.cause} on {best.term.channel}{unit} explains less than {why}: {own} left unexplained")
@@ -335,14 +336,17 @@ def _choose_group(
 MEMBER_T = 2.0
 
 
-def _common(best: Tested, tested, res, weights, train, val, options, exclude) -> list[Tested]:
+def _common(best: Tested, tested, declined, res, weights, train, val, options, exclude) -> list[Tested]:
     """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
     (friction's shape on every joint at once): one cause, added in the same round rather than a
-    round per channel; each passes the stand-in test of its own channel (one that fails is left to
-    a later round, where the best term of its channel is judged: it is not that channel's best)."""
+    round per channel; each passes the stand-in tests of its own channel, against its flexible
+    model and a declined term there (one that fails is left to a later round, where the best term
+    of its channel is judged: it is not that channel's best)."""
     out, used = [], set(best.channels)
     for t in tested:
         if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
+            continue
+        if declined_rival(t, tested, declined) is not None:
             continue
         if outshone(t, res, weights, train, val, options, exclude) is not None:
             continue
@@ -351,14 +355,16 @@ def _common(best: Tested, tested, res, weights, train, val, options, exclude) ->
     return out
 
 
-def _members(best: Tested, res, weights, train, val, options, exclude) -> list[Tested]:
+def _members(best: Tested, tested, declined, res, weights, train, val, options, exclude) -> list[Tested]:
     """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
     their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
-    test holds the family-wise rate, not each channel's) and pass the stand-in test of their own
-    channel."""
+    test holds the family-wise rate, not each channel's) and pass the stand-in tests of their own
+    channel (``_common``'s)."""
     out = []
     for t in best.candidate.members:
         if t.test.t < MEMBER_T or t.gain < options.min_gain:  # carried by the others, not its own evidence
+            continue
+        if declined_rival(t, tested, declined) is not None:
             continue
         if outshone(t, res, weights, train, val, options, exclude) is not None:
             continue

@@ -295,3 +295,22 @@ def test_a_term_weaker_than_a_declined_one_on_its_channel_stands_in_for_it():
     assert declined_rival(droop, [droop, leak, elsewhere], {**declined, ("chamber_leak", "c"): "rose"}) is None
     assert declined_rival(offset, [droop, offset], {("supply_droop", "c"): "rose"}) is None
     assert declined_rival(droop, [droop, wider], {("backlash", "c"): "rose"}) is None
+
+
+def test_a_common_cause_leaves_out_a_channel_where_a_declined_term_explains_more(monkeypatch):
+    """The same cause added on other channels in one round (friction on every joint) is held to
+    the declined-rival test of each channel, as the round's best is."""
+    from diegocal.diagnose import engine
+
+    monkeypatch.setattr(engine, "outshone", lambda *args: None)  # no flexible model beats any of them
+
+    def tested(cause, channel, sse_after):
+        test = SimpleNamespace(sse_before=100.0, sse_after=sse_after)
+        term = Term(cause, channel, ())
+        return SimpleNamespace(term=term, channels=(channel,), test=test, strongest=None, significant=True)
+
+    best, other = tested("viscous_friction", "j1", 40.0), tested("viscous_friction", "j2", 60.0)
+    lag = tested("torque_lag", "j2", 30.0)
+    args = (None, None, None, None, EngineOptions(), {})
+    assert engine._common(best, [best, other, lag], {}, *args) == [other]
+    assert engine._common(best, [best, other, lag], {("torque_lag", "j2"): "rose held out"}, *args) == []
