@@ -346,9 +346,7 @@ def _common(best: Tested, tested, declined, res, weights, train, val, options, e
     for t in tested:
         if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
             continue
-        if declined_rival(t, tested, declined) is not None:
-            continue
-        if outshone(t, res, weights, train, val, options, exclude) is not None:
+        if _stands_in(t, tested, declined, res, weights, train, val, options, exclude):
             continue
         out.append(t)
         used |= set(t.channels)
@@ -359,17 +357,23 @@ def _members(best: Tested, tested, declined, res, weights, train, val, options, 
     """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
     their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
     test holds the family-wise rate, not each channel's) and pass the stand-in tests of their own
-    channel (``_common``'s)."""
+    channel (:func:`_stands_in`)."""
     out = []
     for t in best.candidate.members:
         if t.test.t < MEMBER_T or t.gain < options.min_gain:  # carried by the others, not its own evidence
             continue
-        if declined_rival(t, tested, declined) is not None:
-            continue
-        if outshone(t, res, weights, train, val, options, exclude) is not None:
+        if _stands_in(t, tested, declined, res, weights, train, val, options, exclude):
             continue
         out.append(t)
     return out
+
+
+def _stands_in(t: Tested, tested, declined, res, weights, train, val, options, exclude) -> bool:
+    """Whether a channel's term added beside a round's best fails a stand-in test of its channel:
+    a declined term there explained more, or its flexible model far more."""
+    if declined_rival(t, tested, declined) is not None:
+        return True
+    return outshone(t, res, weights, train, val, options, exclude) is not None
 
 
 def _key(term: Term) -> tuple[str, str]:
