@@ -94,7 +94,7 @@ def thin_plate_one(task):
     """One thin-plate log with a valve delay or a sensor offset: (generator, truth, estimate, SE,
     correlation with the sensor lag (NaN for an offset))."""
     case, log = task
-    from diegocal.diagnose.pneumatics import PneumaticAdapter, _floor
+    from diegocal.diagnose.pneumatics import PneumaticAdapter
     from diegocal.evaluate import split_blocks
     from diegocal.pneumatic import chamber_data
     from diegocal.robot import load_robot
@@ -104,12 +104,11 @@ def thin_plate_one(task):
     vs = {c.name: c.volume_sensor for c in robot.sensors.chambers}[case.chamber]
     adapter = PneumaticAdapter(chamber_data(log.without_truth(), robot.sensors, case.chamber), vs)
     train = split_blocks(log.n_samples, 10).mask("train")
-    adapter.fit((), train)
-    values = {}
-    if case.cause == "pressure_offset":  # started at its resolution, as diagnose starts it
-        span = adapter.data.supply - adapter.data.room
-        values = {"offset": float(_floor(make_term("pressure_offset", case.chamber), span)[0])}
-    fit = adapter.fit((make_term(case.cause, case.chamber, values),), train)
+    base = adapter.fit((), train)
+    if case.cause == "pressure_offset":  # as diagnose fits the candidate
+        fit = adapter.trial(base, case.cause, {}, train)
+    else:
+        fit = adapter.fit((make_term(case.cause, case.chamber),), train)
     term = next(t for t in fit.params.terms if t.cause == case.cause)
     effect = next(e["values"] for e in log.truth.effects)
     truth = effect["delay_s"] if case.cause == "valve_delay" else effect.get("offset", effect.get("size"))
@@ -159,8 +158,8 @@ def _thin_plate(args, n, duration, cause, sizes) -> list:
     """``n`` logs of each generator with ``cause`` (size drawn from ``sizes``) on one chamber, fitted."""
     settings = offsim.Settings(duration, 5 if args.quick else 20)
     chambers = gen.load_chambers().names
-    rng = np.random.default_rng([args.seed, 77] if cause == "valve_delay" else [args.seed, 78])
-    base = 1000 if cause == "valve_delay" else 3000
+    stream, base, groups = {"valve_delay": (77, 1000, 20_000), "pressure_offset": (78, 3000, 30_000)}[cause]
+    rng = np.random.default_rng([args.seed, stream])
     cases = []
     for g in offsim.GENERATORS:
         for i in range(n):
@@ -170,8 +169,7 @@ def _thin_plate(args, n, duration, cause, sizes) -> list:
                 chamber, size = chambers[int(rng.integers(len(chambers)))], float(rng.uniform(*sizes))
                 if cause == "pressure_offset" and g == "offsim":
                     size *= float(rng.choice([-1.0, 1.0]))
-            group = (20_000 if cause == "valve_delay" else 30_000) + grp
-            cases.append(offsim.Case(g, cause, chamber, size, args.seed * base + i, group))
+            cases.append(offsim.Case(g, cause, chamber, size, args.seed * base + i, groups + grp))
     logs = offsim.make_logs(cases, settings, args.cache, None, jobs=args.jobs)
     return offsim._map(thin_plate_one, list(zip(cases, logs, strict=True)), args.jobs)
 

@@ -227,9 +227,7 @@ class PneumaticAdapter:
         for cause, extra in SHAPES:
             if cause in have or cause == "valve_delay":
                 continue
-            blank = make_term(cause, name, extra=extra)  # started at its resolution, the others where they are
-            start = dict(zip((p.name for p in blank.parameters), _floor(blank, span), strict=True))
-            trial = self.fit(self.terms(fitted) + (make_term(cause, name, start, extra=extra),), train)
+            trial = self.trial(fitted, cause, extra, train)
             term = next(t for t in trial.params.terms if t.cause == cause)
             if not (np.abs(term.values) >= _floor(term, span)).all():
                 continue  # below the resolution (FLOORS): the model's own error at that size
@@ -242,6 +240,14 @@ class PneumaticAdapter:
             rows = np.asarray(train, bool) & ok
             out += [c for c in self._delay_family(params, ok) if _physical(c, r, rows, _floor(c.term, span))]
         return out
+
+    def trial(self, fitted: PneumaticFit, cause: str, extra: dict, train) -> PneumaticFit:
+        """The model ``fitted`` refitted with ``cause`` (``extra``: its shape), the term started at
+        its resolution (:data:`FLOORS`), the other parameters where they are: how a candidate is
+        fitted."""
+        blank = make_term(cause, self.unit_name, extra=extra)
+        start = dict(zip(blank.names, _floor(blank, self.data.supply - self.data.room), strict=True))
+        return self.fit(self.terms(fitted) + (make_term(cause, self.unit_name, start, extra=extra),), train)
 
     def _delay_family(self, params, ok) -> list[Candidate]:
         """Variants d = 1..D samples: the model with its command lag replaced by a delay of d
