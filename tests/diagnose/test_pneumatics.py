@@ -76,6 +76,9 @@ def test_pressure_offset_is_named_with_its_size(delay_and_offset):
     _, result = delay_and_offset
     top = assert_named(result, "shoulder.ext", "pressure_offset")
     assert top.term.values[0] == pytest.approx(5.0, abs=1.5)
+    # its ± carries the model's own error in an offset (MODEL_OFFSET of P_c - P_r), written beside it
+    offset, se, model = top.term.values[0], top.term.parameters[0].stderr, top.term.extra["model_error"]
+    assert abs(offset - 5.0) <= 2.0 * se and model <= se < 1.2 * model, (offset, se, model)
 
 
 def test_supply_droop_is_named(droop_and_leak):
