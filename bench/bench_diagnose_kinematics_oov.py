@@ -56,12 +56,13 @@ def run_one(task) -> dict:
     }
 
 
-def table(rows) -> str:
+def table(rows, shapes=SHAPES, size: str = "size / noise") -> str:
+    """Per shape: logs misnamed, `unexplained` on the channel, acceptable names, nothing; the sizes."""
     out = [
-        "| shape | logs | misnamed | `unexplained` on its channel | acceptable name | nothing | size / noise |",
+        f"| shape | logs | misnamed | `unexplained` on its channel | acceptable name | nothing | {size} |",
         "|---|---|---|---|---|---|---|",
     ]
-    for shape in SHAPES:
+    for shape in shapes:
         r = [x for x in rows if x["shape"] == shape]
         if not r:
             continue
@@ -69,12 +70,27 @@ def table(rows) -> str:
         out.append(
             f"| {shape} | {n} | {sum(x['misnamed'] for x in r)}/{n} | {sum(x['unexplained'] for x in r)}/{n} | "
             f"{sum(x['named_ok'] for x in r)}/{n} | {sum(not x['findings'] for x in r)}/{n} | "
-            f"{min(x['ratio'] for x in r):.1f}-{max(x['ratio'] for x in r):.1f} |"
+            f"{min(x['ratio'] for x in r):.3g} to {max(x['ratio'] for x in r):.3g} |"
         )
     n = len(rows)
     good = n - sum(x["misnamed"] for x in rows)
     out.append(f"| **all** | {n} | **{good / max(n, 1):.0%} not misnamed** (goal ≥ 90 %) | | | | |")
     return "\n".join(out)
+
+
+def run(run_one, tasks, jobs: int, verbose: bool) -> list:
+    """``run_one`` over ``tasks`` in ``jobs`` processes, a line per log with ``verbose``."""
+    with ProcessPoolExecutor(jobs) as pool:
+        rows = []
+        for row in pool.map(run_one, tasks):
+            rows.append(row)
+            if verbose:
+                print(
+                    f"{row['shape']:11s} {row['channel']:11s} {row['ratio']:.3g} seed {row['seed']}: "
+                    f"{row['findings'] or 'nothing'}{'  MISNAMED' if row['misnamed'] else ''}",
+                    flush=True,
+                )
+    return rows
 
 
 def main(argv=None) -> int:
@@ -89,16 +105,7 @@ def main(argv=None) -> int:
     print(f"seed {seed}; load {os.getloadavg()[0]:.1f}", flush=True)
     tasks = [(shape, seed + 1000 * k + n) for k, shape in enumerate(args.shape or SHAPES) for n in range(args.logs)]
     start = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as pool:
-        rows = []
-        for row in pool.map(run_one, tasks):
-            rows.append(row)
-            if args.verbose:
-                print(
-                    f"{row['shape']:11s} {row['channel']:11s} x{row['ratio']:.1f} seed {row['seed']}: "
-                    f"{row['findings'] or 'nothing'}{'  MISNAMED' if row['misnamed'] else ''}",
-                    flush=True,
-                )
+    rows = run(run_one, tasks, args.jobs, args.verbose)
     print(table(rows))
     print(f"{time.perf_counter() - start:.0f} s wall, median {np.median([r['seconds'] for r in rows]):.1f} s per log; "
           f"load {os.getloadavg()[0]:.1f}")

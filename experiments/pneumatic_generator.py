@@ -33,7 +33,10 @@ ranges of :data:`SIZES`):
 - ``supply_droop`` (m²): the chamber's valve draws from a hose of ``HOSE_VOLUME`` fed through a
   supply-line orifice of that area (a kinked tube, a clogged filter); the hose pressure sags
   while the valve draws, and recovers when it stops (without the effect the line is ideal);
-- ``pressure_offset`` (kPa): the pressure sensor reads ``size`` high (low when negative).
+- ``pressure_offset`` (kPa): the pressure sensor reads ``size`` high (low when negative);
+- ``valve_play`` (V), outside ``diagnose``'s vocabulary (:data:`OTHER_CAUSES`): the valve's spool
+  sticks until the command has moved half of ``size`` past it (play, as a gear's backlash), so
+  the valve sees a command that lags the logged one by up to ``size / 2`` on every reversal.
 
 The robot's valves are hardware: drawn from ``hardware_seed``, the same in every session; the
 session (paths, commands, noise, the effect's chamber and size when drawn) from ``seed``. The
@@ -67,6 +70,8 @@ X_LAMINAR = 0.995  # p_d/p_u above which Ψ is continued linearly to 0
 HOSE_VOLUME = 1.0e-5  # m³, the supply hose a restricted line feeds (half a metre of 5 mm tube)
 GAMMA = 1.0 + 1.0 / np.sqrt(2.0)  # ROS2's γ
 CAUSES = ("valve_delay", "chamber_leak", "supply_droop", "pressure_offset")
+#: Effects the generator makes that no cause of ``diagnose`` names (experiments/pneumatic_oov.py).
+OTHER_CAUSES = ("valve_play",)
 #: The ranges effect sizes are drawn from, in each cause's unit (module docstring).
 SIZES = {
     "valve_delay": (0.040, 0.050),  # s
@@ -302,6 +307,17 @@ def _commands(ch: Chambers, n_ticks: int, rng: np.random.Generator) -> np.ndarra
     return 5.0 + 2.0 * np.tanh(0.4 * z)
 
 
+def play(u: np.ndarray, width: float) -> np.ndarray:
+    """The command (T,) a spool with play ``width`` follows: it moves only when ``u`` pushes it
+    from more than ``width / 2`` away (a backlash operator)."""
+    out = np.empty_like(u)
+    y = float(u[0])
+    for k, x in enumerate(u):
+        y = min(max(y, x - 0.5 * width), x + 0.5 * width)
+        out[k] = y
+    return out
+
+
 # ----------------------------------------------------------------------------- integration
 @dataclass
 class _Batch:
@@ -401,6 +417,7 @@ def generate_many(options_list, robot_dir=ROBOT_DIR) -> list[Log]:
         noise = np.random.default_rng([o.seed, 0x0015E])
         valves = hardware(C, o.hardware_seed)
         leak, line, delay = np.zeros(C), np.zeros(C), np.zeros(C, int)
+        seen = u.copy()  # the command the valves see
         for e in o.effects:
             i = ch.names.index(e.chamber)
             if e.cause == "valve_delay":
@@ -409,6 +426,8 @@ def generate_many(options_list, robot_dir=ROBOT_DIR) -> list[Log]:
                 leak[i] += e.size
             elif e.cause == "supply_droop":
                 line[i] = e.size
+            elif e.cause == "valve_play":
+                seen[:, i] = play(u[:, i], e.size)
             elif e.cause != "pressure_offset":
                 raise ValueError(f"unknown effect {e.cause!r}")
         for k, v in (("leak", leak), ("line", line), ("delay", delay)):
@@ -417,7 +436,7 @@ def generate_many(options_list, robot_dir=ROBOT_DIR) -> list[Log]:
             cols[k].append(getattr(valves, k))
         qs, qds = q(t_sub), qd(t_sub)
         vol, rate = ch.volume(qs, qds)
-        u_all.append(u)
+        u_all.append(seen)
         vol_all.append(vol)
         rate_all.append(rate)
         sessions.append((o, qs, u, noise, valves, delay))
@@ -456,7 +475,7 @@ def _log(ch: Chambers, o: GeneratorOptions, qs, u, noise, valves: Valves, delay,
     for e in o.effects:
         i = ch.names.index(e.chamber)
         values = {"size": e.size, "unit": {"valve_delay": "s", "chamber_leak": "m2", "supply_droop": "m2",
-                                           "pressure_offset": "kPa"}[e.cause]}
+                                           "pressure_offset": "kPa", "valve_play": "V"}[e.cause]}
         if e.cause == "valve_delay":
             values["delay_s"] = float(delay[i])
         if e.cause == "supply_droop":
