@@ -6,8 +6,9 @@ Each log is a 60-s session of the independent thin-plate generator (the four-cha
 bench_pneumatic_offsim) with one shape of :mod:`experiments.pneumatic_oov` on one chamber: a
 pressure sensor's span error, its zero drifting over the session, a sensor lagging through a
 first-order filter, a valve's spool with play. A log is *misnamed* when any finding names a cause
-other than ``unexplained`` (no cause of the vocabulary names these shapes); *unexplained* counts
-the logs with an ``unexplained`` finding on the affected chamber. Goal: ≥ 90 % not misnamed. The
+other than ``unexplained``, except a lasting ``supply_droop`` on a span error's chamber that says
+the span error it equals (:func:`acceptable`); *unexplained* counts the logs with an
+``unexplained`` finding on the affected chamber. Goal: ≥ 90 % not misnamed. The
 shapes are built from the generator's ``/truth``; the diagnosis never sees it.
 
     python bench/bench_pneumatic_oov.py --logs 6 --jobs 2 --verbose
@@ -43,17 +44,25 @@ def run_one(task) -> dict:
     start = time.perf_counter()
     result = diagnose(log.without_truth(), load_robot(gen.ROBOT_DIR), DiagnoseOptions(domain="pneumatics"))
     found = [(f.cause, f.channel) for f in result.findings]
+    named_ok = [acceptable(shape, chamber, f) for f in result.findings]
     return {
         "shape": shape,
         "seed": seed,
         "channel": chamber,
         "ratio": size,
         "findings": found,
-        "misnamed": any(c != "unexplained" for c, _ in found),
+        "misnamed": any(c != "unexplained" and not ok for (c, _), ok in zip(found, named_ok, strict=True)),
         "unexplained": ("unexplained", chamber) in found,
-        "named_ok": False,
+        "named_ok": any(named_ok),
         "seconds": time.perf_counter() - start,
     }
+
+
+def acceptable(shape: str, chamber: str, finding) -> bool:
+    """A finding that names ``shape`` on its chamber: a lasting supply sag written with the span
+    error it equals (``extra.span_error``: to eq. 4.10 the two are one model) for a span error."""
+    return (shape == "span_error" and finding.cause == "supply_droop" and finding.channel == chamber
+            and "span_error" in finding.term.extra)
 
 
 def main(argv=None) -> int:

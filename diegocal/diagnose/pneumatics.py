@@ -30,6 +30,10 @@ Candidates (:mod:`diegocal.pneumatic.terms`):
   :data:`SENSOR_LAG` (the data cannot tell the two apart); the lag's uncertainty is added to the
   delay's standard error and their correlation written into the term's ``extra``.
 
+A lasting sag Δ is, to eq. (4.10), a pressure sensor reading 1 - Δ / (P_c - P_r) of its span
+(the same model exactly): the term carries that span error (``extra.span_error``) and the report
+says the data cannot tell the two apart.
+
 Standard errors are the fit's cluster-robust ones (:func:`diegocal.pneumatic.fit.covariance`); a pressure
 offset's carries the model's own error in it as well (:data:`MODEL_OFFSET`).
 
@@ -143,8 +147,11 @@ class PneumaticAdapter:
         fit = fit_chamber(self.data, self.options, terms=terms, rows=train, start=start, fixed=fixed)
         if delayed:
             fit = _with_sensor_lag(fit, SENSOR_LAG[1] * step)
+        span = self.data.supply - self.data.room
         if fit.covariance is not None and any(t.cause == "pressure_offset" for t in terms):
-            fit = _with_model_error(fit, self.data.supply - self.data.room)
+            fit = _with_model_error(fit, span)
+        if any(t.cause == "supply_droop" and not t.extra.get("shape") for t in terms):
+            fit = replace(fit, params=_with_span_error(fit.params, span))
         out = PneumaticFit(fit, train.copy())
         if base is None and not found:
             self._baseline = out
@@ -382,9 +389,23 @@ def _with_covariance(fit, cov: np.ndarray, cause: str, extra: dict):
     """``fit`` with the covariance ``cov`` (its standard errors rewritten) and ``extra`` added to
     the ``cause`` term's."""
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    params = fit.params.from_vector(fit.params.full_vector(), se)
-    terms = tuple(replace(t, extra={**t.extra, **extra}) if t.cause == cause else t for t in params.terms)
-    return replace(fit, params=params.with_terms(terms), covariance=cov)
+    params = _with_extra(fit.params.from_vector(fit.params.full_vector(), se), cause, extra)
+    return replace(fit, params=params, covariance=cov)
+
+
+def _with_extra(params, cause: str, extra: dict):
+    """Chamber parameters ``params`` with ``extra`` added to the ``cause`` term's."""
+    return params.with_terms(tuple(replace(t, extra={**t.extra, **extra}) if t.cause == cause else t
+                                   for t in params.terms))
+
+
+def _with_span_error(params, span: float):
+    """A lasting supply sag Δ written with the pressure sensor's span error it equals, −Δ / ``span``
+    (``extra.span_error``): to eq. (4.10) the two are one model. A sensor reading
+    P_r + (1 + k)(p - P_r) sees the valve's target s moved by k (s - P_r) = k span f + k c4 v̇ (f the
+    supply's share), which a sag Δ = -k span and c4 (1 + k) make exactly; the rate r is unchanged."""
+    droop = _value(params, "supply_droop")
+    return _with_extra(params, "supply_droop", {"span_error": round(-droop / span, 6)})
 
 
 def _floor(term, span: float) -> np.ndarray:

@@ -17,6 +17,7 @@ import numpy as np
 
 from diegocal.diagnose.engine import TWIN
 from diegocal.io import load_yaml
+from diegocal.report.finding_notes import notes, stderr_of, value_text
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new, save_page
@@ -87,47 +88,7 @@ def sentence(f: dict) -> str:
             f" The data cannot tell it from the same cause on {', '.join(twins)} (each fits the validation "
             f"data the same to within {TWIN * 100:g} % of what it removes)."
         )
-    return f"{f['channel']}: {what}{gain}.{params}{_gauge_text(f)}{_stand_in_text(f)}"
-
-
-def _gauge_text(f: dict) -> str:
-    """What the data fix of a slipped marker's move whose direction is the fit's gauge (``extra.gauge``)."""
-    if not (g := (f.get("extra") or {}).get("gauge")):
-        return ""
-    pair = (g["length"], g["along_axis"])
-    length, along = (f"{_value_text(v['value'], v['stderr'])} ± {v['stderr']:.2g} m" for v in pair)
-    return (f" Its direction about joint {g['joint']}'s axis is the calibration's convention for that joint's zero, "
-            f"not the data's, and so are the components above: the data fix its length, {length}, and its "
-            f"component along the axis, {along}.")
-
-
-def _stand_in_text(f: dict) -> str:
-    """Why an ``unexplained`` finding names no cause although a term was significant: the term
-    explained far less than a flexible function of the channel's own state, or less than a term
-    declined on it (a stand-in)."""
-    ev = f.get("evidence") or {}
-    if not (stood := ev.get("stand_in")):
-        return ""
-    gain, declined = ev.get("validation_gain", float("nan")), ev.get("declined")
-    beaten = (f"{declined['term']} explained {gain:.0%} and was declined ({declined['why']}): it would stand in "
-              "for what that term fits" if declined else f"a flexible function of {f['channel']}'s own state "
-              f"explains {gain:.0%}: it would stand in for structure of another shape")
-    return (f" The best term of the vocabulary, {stood['term']}, explains {stood['validation_gain']:.0%} of the "
-            f"validation error where {beaten}, so no cause is named.")
-
-
-def _stderr(v: dict):
-    """A parameter's standard error: ``stderr`` (file layout 2) or ``std`` (layout 1)."""
-    return v.get("stderr", v.get("std"))
-
-
-def _value_text(value: float, se) -> str:
-    """A fitted value to the digits its standard error gives it (two of the SE's): a 1-s clock
-    shift of −0.99963 ± 0.00027 s is not "−1 ± 0.00027"; three significant digits without one."""
-    if se is None or not np.isfinite(se) or se <= 0:
-        return f"{value:.3g}"
-    decimals = int(min(max(1 - np.floor(np.log10(se)), 0), 10))
-    return f"{value:.{decimals}f}"
+    return f"{f['channel']}: {what}{gain}.{params}{notes(f)}"
 
 
 def _parameters_text(f: dict) -> str:
@@ -136,15 +97,15 @@ def _parameters_text(f: dict) -> str:
         return ""
     hidden = 0
     if len(p) > 4:  # a payload's ten inertial parameters: the identified ones (with a standard error)
-        hidden = sum(_stderr(v) is None for v in p.values())
-        p = dict(list({k: v for k, v in p.items() if _stderr(v) is not None}.items())[:4])
+        hidden = sum(stderr_of(v) is None for v in p.values())
+        p = dict(list({k: v for k, v in p.items() if stderr_of(v) is not None}.items())[:4])
     parts = []
     for name, v in p.items():
         if v.get("value") is None:
             continue
-        s = f"{name} = {_value_text(v['value'], _stderr(v))}"
-        if _stderr(v) is not None:
-            s += f" ± {_stderr(v):.2g}"
+        s = f"{name} = {value_text(v['value'], stderr_of(v))}"
+        if stderr_of(v) is not None:
+            s += f" ± {stderr_of(v):.2g}"
         parts.append(s + (f" {v['unit']}" if v.get("unit") else ""))
     if hidden:
         parts.append(f"{hidden} parameter(s) not identified by these data")

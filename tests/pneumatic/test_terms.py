@@ -93,6 +93,21 @@ def test_each_term_moves_the_prediction_the_way_its_physics_says(rng):
                                base + 3.0)
 
 
+def test_a_lasting_supply_sag_is_a_pressure_sensor_s_span_error(rng):
+    # a sensor reading P_r + (1 + k)(p - P_r): the baseline's step on the true pressure, read by it,
+    # is the step on the readings of the model with a lasting sag -k (P_c - P_r) and c4 (1 + k)
+    c_b, c_s, _ = CONSTS
+    room, k = c_b - c_s, -0.012
+    p, u, v, vd, h, lags = _samples(rng)
+    truth = step_vector(X, p, u, v, vd, h, *CONSTS, jacobian=False)[0]
+    read = lambda x: room + (1.0 + k) * (x - room)  # noqa: E731
+    x = X.copy()
+    x[NAMES.index("c4")] *= 1.0 + k
+    model = ChamberModel(_extra(("supply_droop",)))
+    sagged = model.step(np.append(x, -k * 2.0 * c_s), read(p), u, v, vd, h, *CONSTS, lags, False)[0]
+    np.testing.assert_allclose(sagged, read(truth), rtol=1e-12, atol=1e-9)
+
+
 def test_params_with_terms_round_trip_through_yaml_mapping():
     c = ChamberParams.nominal(620.0, 100.0).from_vector(X).with_terms(_extra(chamber="elbow.ext"))
     assert c.full_vector().size == 13

@@ -435,11 +435,11 @@ def test_a_runner_up_with_an_open_region_is_listed():
 
 
 def test_a_stand_in_says_what_beat_it_a_flexible_model_or_a_declined_term():
-    from diegocal.report.diagnose import _stand_in_text
+    from diegocal.report.finding_notes import stand_in_text
 
     flexible = {"channel": "dip", "evidence": {"validation_gain": 0.8, "stand_in": {"term": "backlash:dip",
                                                                                     "validation_gain": 0.2}}}
-    assert "a flexible function of dip's own state explains 80%" in _stand_in_text(flexible)
+    assert "a flexible function of dip's own state explains 80%" in stand_in_text(flexible)
     declined = {
         "channel": "shoulder.ext",
         "evidence": {
@@ -448,6 +448,18 @@ def test_a_stand_in_says_what_beat_it_a_flexible_model_or_a_declined_term():
             "declined": {"term": "pressure_offset:shoulder.ext", "why": "the held-out error rose by 0.8% with it"},
         },
     }
-    text = _stand_in_text(declined)
+    text = stand_in_text(declined)
     assert "pressure_offset:shoulder.ext explained 74% and was declined (the held-out error rose" in text
     assert "flexible" not in text and "48%" in text
+
+
+def test_a_lasting_supply_sag_says_it_is_also_a_sensor_span_error():
+    from diegocal.report.diagnose import sentence
+
+    f = {"cause": "supply_droop", "channel": "elbow.ext", "kind": "term", "extra": {"span_error": -0.0104},
+         "parameters": {"droop": {"value": 5.42, "stderr": 0.08, "unit": "kPa"}}, "evidence": {}}
+    text = sentence(f)
+    assert "droop = 5.420 ± 0.08 kPa" in text
+    assert "a pressure sensor reading 1.04% of its span low: the data cannot tell the two apart" in text
+    orifice = {**f, "extra": {"shape": "orifice"}}  # a sag through a restriction has no such twin
+    assert "span" not in sentence(orifice)

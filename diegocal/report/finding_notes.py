@@ -1,0 +1,62 @@
+"""The sentences a diagnosis report adds to a finding beyond its cause, gain and parameters: what
+the data fix of a slipped marker, why no cause is named where a term stood in, what else the same
+model is (a lasting supply sag is a pressure sensor's span error), and how values are printed."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def notes(f: dict) -> str:
+    """Every note of finding ``f`` (a diagnosis.yaml finding), each a sentence or more, in order."""
+    return gauge_text(f) + stand_in_text(f) + span_error_text(f)
+
+
+def span_error_text(f: dict) -> str:
+    """What a lasting supply sag also is to the chamber model (``extra.span_error``)."""
+    k = (f.get("extra") or {}).get("span_error")
+    if k is None or f.get("cause") != "supply_droop":
+        return ""
+    return (f" To the chamber model this sag is the same as a pressure sensor reading {abs(k):.2%} of its span "
+            f"{'low' if k < 0 else 'high'}: the data cannot tell the two apart (a gauge on the supply, or the "
+            "sensor checked against one, can).")
+
+
+def gauge_text(f: dict) -> str:
+    """What the data fix of a slipped marker's move whose direction is the fit's gauge (``extra.gauge``)."""
+    if not (g := (f.get("extra") or {}).get("gauge")):
+        return ""
+    pair = (g["length"], g["along_axis"])
+    length, along = (f"{value_text(v['value'], v['stderr'])} ± {v['stderr']:.2g} m" for v in pair)
+    return (f" Its direction about joint {g['joint']}'s axis is the calibration's convention for that joint's zero, "
+            f"not the data's, and so are the components above: the data fix its length, {length}, and its "
+            f"component along the axis, {along}.")
+
+
+def stand_in_text(f: dict) -> str:
+    """Why an ``unexplained`` finding names no cause although a term was significant: the term
+    explained far less than a flexible function of the channel's own state, or less than a term
+    declined on it (a stand-in)."""
+    ev = f.get("evidence") or {}
+    if not (stood := ev.get("stand_in")):
+        return ""
+    gain, declined = ev.get("validation_gain", float("nan")), ev.get("declined")
+    beaten = (f"{declined['term']} explained {gain:.0%} and was declined ({declined['why']}): it would stand in "
+              "for what that term fits" if declined else f"a flexible function of {f['channel']}'s own state "
+              f"explains {gain:.0%}: it would stand in for structure of another shape")
+    return (f" The best term of the vocabulary, {stood['term']}, explains {stood['validation_gain']:.0%} of the "
+            f"validation error where {beaten}, so no cause is named.")
+
+
+def stderr_of(v: dict):
+    """A parameter's standard error: ``stderr`` (file layout 2) or ``std`` (layout 1)."""
+    return v.get("stderr", v.get("std"))
+
+
+def value_text(value: float, se) -> str:
+    """A fitted value to the digits its standard error gives it (two of the SE's): a 1-s clock
+    shift of −0.99963 ± 0.00027 s is not "−1 ± 0.00027"; three significant digits without one."""
+    if se is None or not np.isfinite(se) or se <= 0:
+        return f"{value:.3g}"
+    decimals = int(min(max(1 - np.floor(np.log10(se)), 0), 10))
+    return f"{value:.{decimals}f}"
