@@ -35,11 +35,13 @@ A lasting sag Δ is, to eq. (4.10), a pressure sensor reading 1 - Δ / (P_c - P_
 says the data cannot tell the two apart.
 
 Standard errors are the fit's cluster-robust ones (:func:`diegocal.pneumatic.fit.covariance`); a pressure
-offset's carries the model's own error in it as well (:data:`MODEL_OFFSET`).
+offset's carries the model's own error in it as well (:data:`~diegocal.diagnose.pneumatics_terms.MODEL_OFFSET`).
 
 A candidate smaller than its resolution (:data:`FLOORS`: about twice what the 9-parameter model's
 own error puts into that term on clean simulated chambers) or outside its bounds is not offered:
-the model cannot tell it from its own error. A term the engine selects is the refitted model (the
+the model cannot tell it from its own error. Nor is an offset whose fits on the earlier and the
+later half of the training samples disagree (:data:`DRIFT_Z`): a zero that drifts over the session
+is no constant offset. A term the engine selects is the refitted model (the
 delay's from the best whole-sample delay). A leak orifice no larger than the valve's own
 room-port leakage (the simulator's former default, 0.08e-6 m²) is, to eq. (4.10), just another
 valve: a constant area beside the room port shifts the valve's centre and leakage, which c1 and
@@ -67,6 +69,7 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.causes import MAX_DELAY_S, MAX_SENSOR_LAG_S, causes_of
+from diegocal.diagnose.pneumatics_terms import MODEL_OFFSET, with_model_error, with_sensor_lag, with_span_error
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import DiegocalError
 from diegocal.evaluate import Score, score
@@ -146,12 +149,12 @@ class PneumaticAdapter:
         fixed = ("lag_s",) if delayed else ()
         fit = fit_chamber(self.data, self.options, terms=terms, rows=train, start=start, fixed=fixed)
         if delayed:
-            fit = _with_sensor_lag(fit, SENSOR_LAG[1] * step)
+            fit = with_sensor_lag(fit, SENSOR_LAG[1] * step)
         span = self.data.supply - self.data.room
         if fit.covariance is not None and any(t.cause == "pressure_offset" for t in terms):
-            fit = _with_model_error(fit, span)
+            fit = with_model_error(fit, span)
         if any(t.cause == "supply_droop" and not t.extra.get("shape") for t in terms):
-            fit = replace(fit, params=_with_span_error(fit.params, span))
+            fit = replace(fit, params=with_span_error(fit.params, span))
         out = PneumaticFit(fit, train.copy())
         if base is None and not found:
             self._baseline = out
@@ -241,6 +244,8 @@ class PneumaticAdapter:
             term = next(t for t in trial.params.terms if t.cause == cause)
             if not (np.abs(term.values) >= _floor(term, span)).all():
                 continue  # below the resolution (FLOORS): the model's own error at that size
+            if cause == "pressure_offset" and self._drifts(fitted, train):
+                continue  # not constant over the session: no sensor offset (DRIFT_Z)
             self._trials[_key(self.terms(trial))] = trial
             col = _pad(next_step(trial.params, self.data)) - now
             col[~ok] = np.nan
@@ -250,6 +255,23 @@ class PneumaticAdapter:
             rows = np.asarray(train, bool) & ok
             out += [c for c in self._delay_family(params, ok) if _physical(c, r, rows, _floor(c.term, span))]
         return out
+
+    def _drifts(self, fitted: PneumaticFit, train) -> bool:
+        """Whether offsets fitted on the earlier and the later half of the training samples differ
+        by more than :data:`DRIFT_Z` sampling errors: a zero that drifts, for which a constant
+        offset would stand in (the model's own error in an offset, the same in both halves, is
+        taken out of their ±)."""
+        train = np.asarray(train, bool)
+        rows = np.flatnonzero(train)
+        late = np.arange(train.size) >= rows[rows.size // 2]
+        model = MODEL_OFFSET * (self.data.supply - self.data.room)
+        halves = []
+        for part in (train & ~late, train & late):
+            term = next(t for t in self.trial(fitted, "pressure_offset", {}, part).params.terms
+                        if t.cause == "pressure_offset")
+            halves.append((float(term.values[0]), np.sqrt(max(term.parameters[0].stderr ** 2 - model**2, 0.0))))
+        (a, se_a), (b, se_b) = halves
+        return abs(b - a) > DRIFT_Z * np.hypot(se_a, se_b)
 
     def trial(self, fitted: PneumaticFit, cause: str, extra: dict, train) -> PneumaticFit:
         """The model ``fitted`` refitted with ``cause`` (``extra``: its shape), the term started at
@@ -343,13 +365,12 @@ FLOORS = {
     "delay_s": 0.005,
 }
 
-#: The 9-parameter model's own error in a pressure offset, as a fraction of P_c - P_r: the RMS of
-#: the offset the model refitted with the term finds on clean chambers (the project's thin-plate
-#: simulator, diego, three 60-s logs of 76 chambers: 0.68-0.70 kPa at P_c - P_r = 520 kPa, mean
-#: +0.48, at most 2.2). How much of the model's error an offset takes up depends on the chamber
-#: and the session's path, which the fit's within-session standard error cannot see (it covered
-#: the truth 0.50 / 0.36 of the time on two generators); it is added to the offset's variance.
-MODEL_OFFSET = 0.0013
+#: Offsets of the earlier and the later half of the training samples further apart than this many
+#: sampling errors are a drifting zero, not an offset (``PneumaticAdapter._drifts``). On 130
+#: 60-s logs of both thin-plate generators with a true offset of 9-13 kPa, |z| was at most 3.5
+#: (median 0.2, 5-95 % −2.0..1.7); zeros drifting linearly by 2.8-6.1 kPa over the session gave
+#: 3.9-10.9 (a throw-away run, docs/results.md).
+DRIFT_Z = 4.0
 
 #: The sensors' lag beside a valve delay, in sample steps: (value, standard error). The data cannot
 #: tell a valve delay from the lag of the readings (both delay the command's effect on them), so
@@ -359,53 +380,6 @@ MODEL_OFFSET = 0.0013
 #: than noise, is added to the delay's standard error. bench/bench_pneumatic_se.py measures the
 #: coverage on logs other than those it was measured on.
 SENSOR_LAG = (0.36, 0.10)
-
-
-def _with_sensor_lag(fit, se_lag: float):
-    """``fit`` with the held sensor lag's standard error ``se_lag`` (s) added to the valve delay's
-    (whose estimate is the delay beyond that lag: their correlation is negative), the lag's set to
-    it, and their correlation written into the valve delay's ``extra``."""
-    names = list(fit.params.names())
-    i, j = names.index("delay_s"), names.index("lag_s")
-    cov = np.array(fit.covariance, float)
-    cov[i, i] += se_lag**2
-    cov[j, j] = se_lag**2
-    cov[i, j] = cov[j, i] = -(se_lag**2)
-    corr = float(cov[i, j] / np.sqrt(cov[i, i] * cov[j, j]))
-    return _with_covariance(fit, cov, "valve_delay", {"correlation": {"sensor_lag.lag_s": round(corr, 4)}})
-
-
-def _with_model_error(fit, span: float):
-    """``fit`` with the model's own error in a pressure offset (:data:`MODEL_OFFSET` of ``span`` =
-    P_c - P_r) added to the offset's variance and written into its ``extra`` (``model_error``)."""
-    sd = MODEL_OFFSET * span
-    cov = np.array(fit.covariance, float)
-    i = list(fit.params.names()).index("offset")
-    cov[i, i] += sd**2
-    return _with_covariance(fit, cov, "pressure_offset", {"model_error": round(sd, 4)})
-
-
-def _with_covariance(fit, cov: np.ndarray, cause: str, extra: dict):
-    """``fit`` with the covariance ``cov`` (its standard errors rewritten) and ``extra`` added to
-    the ``cause`` term's."""
-    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    params = _with_extra(fit.params.from_vector(fit.params.full_vector(), se), cause, extra)
-    return replace(fit, params=params, covariance=cov)
-
-
-def _with_extra(params, cause: str, extra: dict):
-    """Chamber parameters ``params`` with ``extra`` added to the ``cause`` term's."""
-    return params.with_terms(tuple(replace(t, extra={**t.extra, **extra}) if t.cause == cause else t
-                                   for t in params.terms))
-
-
-def _with_span_error(params, span: float):
-    """A lasting supply sag Δ written with the pressure sensor's span error it equals, −Δ / ``span``
-    (``extra.span_error``): to eq. (4.10) the two are one model. A sensor reading
-    P_r + (1 + k)(p - P_r) sees the valve's target s moved by k (s - P_r) = k span f + k c4 v̇ (f the
-    supply's share), which a sag Δ = -k span and c4 (1 + k) make exactly; the rate r is unchanged."""
-    droop = _value(params, "supply_droop")
-    return _with_extra(params, "supply_droop", {"span_error": round(-droop / span, 6)})
 
 
 def _floor(term, span: float) -> np.ndarray:
