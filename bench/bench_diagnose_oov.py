@@ -55,6 +55,7 @@ ACCEPTABLE = {
     "drifting_friction": set(),
     "load_friction": {"load_friction"},
     "hose": set(),
+    "drifting_offset": set(),
 }
 
 

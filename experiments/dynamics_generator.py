@@ -17,7 +17,8 @@ of a given fraction of each joint's torque spread. ``hidden`` effects, one per l
   friction above Coulomb decaying with speed), ``cogging`` (a torque periodic in the joint angle),
   ``drifting_friction`` (Coulomb friction that grows over the session, as a gearbox warms),
   ``load_friction`` (friction in proportion to the joint's load torque), ``hose`` (a torque on one
-  joint from another joint's angle: a cable or hose pulled by the next link).
+  joint from another joint's angle: a cable or hose pulled by the next link), ``drifting_offset``
+  (the torque sensor's zero drifting linearly over the session, as its electronics warm).
 
 A second *session* of the same robot is the same ``robot_seed`` (friction and hidden effect's
 parameters) with another ``seed`` (trajectory and noise). Logs carry ``/truth``: the effect, its
@@ -41,7 +42,7 @@ URDFS = {
     "panda": "panda_description/urdf/panda.urdf",
 }
 IN_VOCABULARY = ("position_friction", "payload", "spring", "torque_offset")
-OUT_OF_VOCABULARY = ("stribeck", "cogging", "drifting_friction", "load_friction", "hose")
+OUT_OF_VOCABULARY = ("stribeck", "cogging", "drifting_friction", "load_friction", "hose", "drifting_offset")
 
 
 def urdf(name: str) -> Path:
@@ -131,6 +132,9 @@ def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau) -> 
     if name == "drifting_friction":
         out[:, j] = (time - time[0]) / (time[-1] - time[0]) * np.tanh(qd[:, j] / 0.02)
         return out, {"shape": "grows linearly over the session"}
+    if name == "drifting_offset":
+        out[:, j] = (time - time[0]) / (time[-1] - time[0])
+        return out, {"shape": "grows linearly over the session from 0"}
     if name == "load_friction":
         out[:, j] = np.abs(base_tau[:, j]) * np.tanh(qd[:, j] / 0.02)
         return out, {"shape": "|load| tanh(qd/0.02)"}
