@@ -93,23 +93,30 @@ def run(run_one, tasks, jobs: int, verbose: bool) -> list:
     return rows
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def bench_main(argv, doc: str, shapes, run_one, size: str) -> int:
+    """An out-of-vocabulary bench's command line: ``--logs`` per shape of ``shapes``, each log
+    judged by ``run_one((shape, seed))``; the table (:func:`table`, ``size``: its last column)."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--logs", type=int, default=6, help="logs per shape")
     parser.add_argument("--seed", type=int, default=None, help="first seed (default: fresh, printed)")
-    parser.add_argument("--shape", action="append", choices=SHAPES, help="default: all")
+    parser.add_argument("--shape", action="append", choices=shapes, help="default: all")
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--verbose", action="store_true", help="one line per log")
     args = parser.parse_args(argv)
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2**31)
     print(f"seed {seed}; load {os.getloadavg()[0]:.1f}", flush=True)
-    tasks = [(shape, seed + 1000 * k + n) for k, shape in enumerate(args.shape or SHAPES) for n in range(args.logs)]
+    chosen = args.shape or shapes
+    tasks = [(shape, seed + 1000 * k + n) for k, shape in enumerate(chosen) for n in range(args.logs)]
     start = time.perf_counter()
     rows = run(run_one, tasks, args.jobs, args.verbose)
-    print(table(rows))
+    print(table(rows, chosen, size))
     print(f"{time.perf_counter() - start:.0f} s wall, median {np.median([r['seconds'] for r in rows]):.1f} s per log; "
           f"load {os.getloadavg()[0]:.1f}")
     return 0
+
+
+def main(argv=None) -> int:
+    return bench_main(argv, __doc__, SHAPES, run_one, "size / noise")
 
 
 if __name__ == "__main__":

@@ -16,19 +16,15 @@ shapes are built from the generator's ``/truth``; the diagnosis never sees it.
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_diagnose_kinematics_oov import run, table  # noqa: E402
+from bench_diagnose_kinematics_oov import bench_main  # noqa: E402
 
 from experiments import pneumatic_generator as gen  # noqa: E402
 from experiments.pneumatic_oov import SHAPES, add_shape  # noqa: E402
@@ -66,22 +62,7 @@ def acceptable(shape: str, chamber: str, finding) -> bool:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--logs", type=int, default=6, help="logs per shape")
-    parser.add_argument("--seed", type=int, default=None, help="first seed (default: fresh, printed)")
-    parser.add_argument("--shape", action="append", choices=SHAPES, help="default: all")
-    parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--verbose", action="store_true", help="one line per log")
-    args = parser.parse_args(argv)
-    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy % 2**31)
-    print(f"seed {seed}; load {os.getloadavg()[0]:.1f}", flush=True)
-    tasks = [(shape, seed + 1000 * k + n) for k, shape in enumerate(args.shape or SHAPES) for n in range(args.logs)]
-    start = time.perf_counter()
-    rows = run(run_one, tasks, args.jobs, args.verbose)
-    print(table(rows, args.shape or SHAPES, "size (k - 1, kPa, s, V)"))
-    print(f"{time.perf_counter() - start:.0f} s wall, median {np.median([r['seconds'] for r in rows]):.1f} s per log; "
-          f"load {os.getloadavg()[0]:.1f}")
-    return 0
+    return bench_main(argv, __doc__, SHAPES, run_one, "size (k - 1, kPa, s, V)")
 
 
 if __name__ == "__main__":
