@@ -150,3 +150,23 @@ def test_predict_runs_the_extended_model_with_its_terms(delay_and_offset, robot,
     base = next(u for u in result.units if u.unit == "elbow.flex")
     # the extended model predicts this log about as well as the diagnosis measured on held-out blocks
     assert err_ext < 0.5 * base.baseline_score.rmse[0]
+
+
+def test_an_offset_whose_halves_cannot_be_fitted_is_judged_as_before(robot, monkeypatch):
+    # the drift test fits the offset on each half of the training samples; where a half cannot be
+    # fitted, it cannot tell, and the offset is offered as it would be without the test
+    from diegocal.diagnose.pneumatics import adapters
+    from diegocal.errors import FitError
+    from diegocal.evaluate import split_blocks
+
+    log = simulate(robot, 4, "pressure_offset:shoulder.ext=5")
+    (adapter,) = adapters(log, robot, DiagnoseOptions(domain="pneumatics", chambers=("shoulder.ext",)))
+    train = split_blocks(log.n_samples, 10).mask("train")
+    base = adapter.fit((), train)
+    assert adapter._drifts(base, train) is False  # a constant offset's halves agree
+
+    def fail(*args, **kwargs):
+        raise FitError("too few samples")
+
+    monkeypatch.setattr(adapter, "trial", fail)
+    assert adapter._drifts(base, train) is False
