@@ -11,8 +11,9 @@ which never sees them:
 - ``slow_sensor``: the reading lags the pressure through a first-order filter, time constant
   30-60 ms (a sensor at the end of a long thin tube), where the vocabulary's lag is at most a tick
   and its delay the valve's;
-- ``valve_play``: the valve's spool sticks until the command has moved 0.15-0.35 V past it (the
-  generator's ``valve_play``): the opening lags the logged command on every reversal.
+- ``valve_play``: the valve's spool has 0.15-0.35 V of play (the generator's ``valve_play``): it
+  follows the command half the play behind and, on a reversal, holds until the command has come
+  back the whole play; the opening lags the logged command.
 
 The sensor faults change the noise-free reading (``/truth/signals/reading``) and keep the log's
 own noise; the play is physics (the generator integrates the valve's command through it). Sizes:

@@ -31,8 +31,9 @@ Candidates (:mod:`diegocal.pneumatic.terms`):
   delay's standard error and their correlation written into the term's ``extra``.
 
 A lasting sag Δ is, to eq. (4.10), a pressure sensor reading 1 - Δ / (P_c - P_r) of its span
-(the same model exactly): the term carries that span error (``extra.span_error``) and the report
-says the data cannot tell the two apart.
+(the same model, c4 and the flow saturation rescaled; exact unless an orifice leak is beside it):
+the term carries that span error (``extra.span_error``) and the report says the data cannot tell
+the two apart.
 
 Standard errors are the fit's cluster-robust ones (:func:`diegocal.pneumatic.fit.covariance`); a pressure
 offset's carries the model's own error in it as well (:data:`~diegocal.diagnose.pneumatics_terms.MODEL_OFFSET`).
@@ -123,7 +124,9 @@ class PneumaticAdapter:
         self._trials: dict = {}  # causes -> the full fit with them (on the baseline's training rows)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, terms, train) -> PneumaticFit:
+    def fit(self, terms, train, start_from: PneumaticFit | None = None) -> PneumaticFit:
+        """The chamber model with ``terms`` fitted on the ``train`` steps, started from the baseline
+        fitted on the same rows (or from ``start_from`` where there is none: rows of another split)."""
         train = np.asarray(train, bool)
         terms = [replace(t, channel=self.unit_name) for t in chamber_terms(terms)]
         terms = [t for t in terms if t.cause not in BASELINE_EXTRA]
@@ -132,18 +135,19 @@ class PneumaticAdapter:
         if base is not None and key in self._trials:  # a candidate's full fit (``candidates``)
             return self._trials[key]
         found = bool(terms)
+        ref = base if base is not None else start_from
         delayed = any(t.cause == "valve_delay" for t in terms)
         step = float(np.median(self.data.h))
         if delayed:  # the sensors' lag beside a valve delay: held at the tick average's (module doc)
             lag = SENSOR_LAG[0] * step
         else:  # the sampling's own lag (module doc)
-            lag = _lag(base.params) if base is not None else 0.5 * MAX_SENSOR_LAG_S
+            lag = _lag(ref.params) if ref is not None else 0.5 * MAX_SENSOR_LAG_S
         terms.append(make_term("sensor_lag", self.unit_name, {"lag_s": lag}))
         if SATURATION:  # the ports' flow saturation (module doc)
-            sat = _value(base.params, "flow_saturation", 1.0) if base is not None else 1.0
+            sat = _value(ref.params, "flow_saturation", 1.0) if ref is not None else 1.0
             terms.append(make_term("flow_saturation", self.unit_name, {"sat": sat}))
         terms = tuple(terms)
-        start = None if base is None else base.params
+        start = None if ref is None else ref.params
         if start is not None:
             terms = self._start_delay(terms, start, train)
         fixed = ("lag_s",) if delayed else ()
@@ -156,7 +160,7 @@ class PneumaticAdapter:
         if any(t.cause == "supply_droop" and not t.extra.get("shape") for t in terms):
             fit = replace(fit, params=with_span_error(fit.params, span))
         out = PneumaticFit(fit, train.copy())
-        if base is None and not found:
+        if base is None and not found and start_from is None:
             self._baseline = out
         return out
 
@@ -263,26 +267,29 @@ class PneumaticAdapter:
         taken out of their ±)."""
         train = np.asarray(train, bool)
         rows = np.flatnonzero(train)
+        if rows.size < 2 or self._baseline is None:
+            return False
         late = np.arange(train.size) >= rows[rows.size // 2]
-        model = MODEL_OFFSET * (self.data.supply - self.data.room)
+        span = self.data.supply - self.data.room
+        model = MODEL_OFFSET * span
         halves = []
         for part in (train & ~late, train & late):
             try:
-                fit = self.trial(fitted, "pressure_offset", {}, part)
+                fit = self.trial(fitted, "pressure_offset", {}, part, start_from=self._baseline)
             except FitError:  # too few samples in a half to fit: the test cannot tell
                 return False
             term = next(t for t in fit.params.terms if t.cause == "pressure_offset")
             halves.append((float(term.values[0]), np.sqrt(max(term.parameters[0].stderr ** 2 - model**2, 0.0))))
         (a, se_a), (b, se_b) = halves
-        return bool(abs(b - a) > DRIFT_Z * np.hypot(se_a, se_b))
+        return bool(abs(b - a) > DRIFT_Z * np.hypot(np.hypot(se_a, se_b), DRIFT_FLOOR * span))
 
-    def trial(self, fitted: PneumaticFit, cause: str, extra: dict, train) -> PneumaticFit:
+    def trial(self, fitted: PneumaticFit, cause: str, extra: dict, train, start_from=None) -> PneumaticFit:
         """The model ``fitted`` refitted with ``cause`` (``extra``: its shape), the term started at
         its resolution (:data:`FLOORS`), the other parameters where they are: how a candidate is
         fitted."""
         blank = make_term(cause, self.unit_name, extra=extra)
         start = dict(zip(blank.names, _floor(blank, self.data.supply - self.data.room), strict=True))
-        return self.fit(self.terms(fitted) + (make_term(cause, self.unit_name, start, extra=extra),), train)
+        return self.fit(self.terms(fitted) + (make_term(cause, self.unit_name, start, extra=extra),), train, start_from)
 
     def _delay_family(self, params, ok) -> list[Candidate]:
         """Variants d = 1..D samples: the model with its command lag replaced by a delay of d
@@ -369,11 +376,14 @@ FLOORS = {
 }
 
 #: Offsets of the earlier and the later half of the training samples further apart than this many
-#: sampling errors are a drifting zero, not an offset (``PneumaticAdapter._drifts``). On 130
-#: 60-s logs of both thin-plate generators with a true offset of 9-13 kPa, |z| was at most 3.5
-#: (median 0.2, 5-95 % −2.0..1.7); zeros drifting linearly by 2.8-6.1 kPa over the session gave
-#: 3.9-10.9 (a throw-away run, docs/results.md).
+#: errors are a drifting zero, not an offset (``PneumaticAdapter._drifts``): their sampling errors
+#: and :data:`DRIFT_FLOOR` of P_c - P_r for the part of the model's own error that differs between
+#: the halves, which does not shrink with the log's length. On 130 60-s logs of both thin-plate
+#: generators with a true offset of 9-13 kPa the halves were at most 0.79 kPa apart, |z| on the
+#: sampling errors alone at most 3.5 (5-95 %: -2.3..1.8); zeros drifting linearly by 2.8-6.1 kPa
+#: over the session were 1.0-3.3 kPa apart, z 3.9-10.9 (a throw-away run, docs/results.md).
 DRIFT_Z = 4.0
+DRIFT_FLOOR = 0.0004
 
 #: The sensors' lag beside a valve delay, in sample steps: (value, standard error). The data cannot
 #: tell a valve delay from the lag of the readings (both delay the command's effect on them), so

@@ -59,6 +59,8 @@ def with_span_error(params, span: float):
     """A lasting supply sag Δ written with the pressure sensor's span error it equals, −Δ / ``span``
     (``extra.span_error``): to eq. (4.10) the two are one model. A sensor reading
     P_r + (1 + k)(p - P_r) sees the valve's target s moved by k (s - P_r) = k span f + k c4 v̇ (f the
-    supply's share), which a sag Δ = -k span and c4 (1 + k) make exactly; the rate r is unchanged."""
+    supply's share), which a sag Δ = -k span and c4 (1 + k) make exactly; the rate r is unchanged but
+    for the ports' flow saturation, which sat / (1 + k) keeps. Exact for the baseline and every term
+    but an orifice-shaped leak, whose flow depends on the pressure itself."""
     droop = next(float(t.values[0]) for t in params.terms if t.cause == "supply_droop")
     return _with_extra(params, "supply_droop", {"span_error": round(-droop / span, 6)})

@@ -14,8 +14,9 @@ def notes(f: dict) -> str:
 
 def span_error_text(f: dict) -> str:
     """What a lasting supply sag also is to the chamber model (``extra.span_error``)."""
-    k = (f.get("extra") or {}).get("span_error")
-    if k is None or f.get("cause") != "supply_droop":
+    extra = f.get("extra") or {}
+    k = extra.get("span_error")
+    if k is None or f.get("cause") != "supply_droop" or extra.get("shape"):
         return ""
     return (f" To the chamber model this sag is the same as a pressure sensor reading {abs(k):.2%} of its span "
             f"{'low' if k < 0 else 'high'}: the data cannot tell the two apart (a gauge on the supply, or the "

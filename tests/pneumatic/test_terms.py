@@ -94,17 +94,20 @@ def test_each_term_moves_the_prediction_the_way_its_physics_says(rng):
 
 
 def test_a_lasting_supply_sag_is_a_pressure_sensor_s_span_error(rng):
-    # a sensor reading P_r + (1 + k)(p - P_r): the baseline's step on the true pressure, read by it,
-    # is the step on the readings of the model with a lasting sag -k (P_c - P_r) and c4 (1 + k)
+    # a sensor reading P_r + (1 + k)(p - P_r): the model's step on the true pressure, read by it, is
+    # the step on the readings of the model with a lasting sag -k (P_c - P_r), c4 (1 + k) and the
+    # ports' flow saturation sat / (1 + k) (the companion diagnose always fits)
     c_b, c_s, _ = CONSTS
-    room, k = c_b - c_s, -0.012
+    room, k, sat = c_b - c_s, -0.012, 0.7
     p, u, v, vd, h, lags = _samples(rng)
-    truth = step_vector(X, p, u, v, vd, h, *CONSTS, jacobian=False)[0]
+    plain = ChamberModel(_extra(("flow_saturation",)))
+    truth = plain.step(np.append(X, sat), p, u, v, vd, h, *CONSTS, lags, False)[0]
     read = lambda x: room + (1.0 + k) * (x - room)  # noqa: E731
-    x = X.copy()
-    x[NAMES.index("c4")] *= 1.0 + k
-    model = ChamberModel(_extra(("supply_droop",)))
-    sagged = model.step(np.append(x, -k * 2.0 * c_s), read(p), u, v, vd, h, *CONSTS, lags, False)[0]
+    model = ChamberModel(_extra(("flow_saturation", "supply_droop")))
+    values = {**dict(zip(NAMES, X, strict=True)), "sat": sat / (1.0 + k), "droop": -k * 2.0 * c_s}
+    values["c4"] *= 1.0 + k
+    x = np.array([values[n] for n in model.names])
+    sagged = model.step(x, read(p), u, v, vd, h, *CONSTS, lags, False)[0]
     np.testing.assert_allclose(sagged, read(truth), rtol=1e-12, atol=1e-9)
 
 

@@ -463,3 +463,4 @@ def test_a_lasting_supply_sag_says_it_is_also_a_sensor_span_error():
     assert "a pressure sensor reading 1.04% of its span low: the data cannot tell the two apart" in text
     orifice = {**f, "extra": {"shape": "orifice"}}  # a sag through a restriction has no such twin
     assert "span" not in sentence(orifice)
+    assert "span" not in sentence({**f, "extra": {"shape": "orifice", "span_error": -0.0104}})  # an edited file
