@@ -35,8 +35,8 @@ ranges of :data:`SIZES`):
   while the valve draws, and recovers when it stops (without the effect the line is ideal);
 - ``pressure_offset`` (kPa): the pressure sensor reads ``size`` high (low when negative);
 - ``valve_play`` (V), outside ``diagnose``'s vocabulary (:data:`OTHER_CAUSES`): the valve's spool
-  sticks until the command has moved half of ``size`` past it (play, as a gear's backlash), so
-  the valve sees a command that lags the logged one by up to ``size / 2`` on every reversal.
+  has ``size`` of play (as a gear's backlash, :func:`play`): it follows the command ``size / 2``
+  behind and, on a reversal, holds until the command has come back the whole ``size``.
 
 The robot's valves are hardware: drawn from ``hardware_seed``, the same in every session; the
 session (paths, commands, noise, the effect's chamber and size when drawn) from ``seed``. The

@@ -39,8 +39,8 @@ def add_shape(shape: str, seed: int, chamber: str | None = None, duration: float
     """A session of the generator with ``shape`` on one chamber (drawn unless given): (log, chamber,
     size), the size in the shape's unit (k - 1, kPa, s or V)."""
     rng = np.random.default_rng([seed, 0x00F])
-    names = gen.load_chambers().names
-    chamber = chamber or names[int(rng.integers(len(names)))]
+    chambers = gen.load_chambers()
+    chamber = chamber or chambers.names[int(rng.integers(len(chambers.names)))]
     ratio = rng.uniform(4.0, 10.0)
     sign = rng.choice((-1.0, 1.0))
     options = replace(SESSION, seed=seed, duration=duration or SESSION.duration)
@@ -53,7 +53,7 @@ def add_shape(shape: str, seed: int, chamber: str | None = None, duration: float
     reading = log.truth.signals["reading"].data[:, i]
     noise = options.pressure_noise
     if shape == "span_error":
-        room = gen.load_chambers().room[i] / gen.KPA
+        room = chambers.room[i] / gen.KPA
         dev = reading - room
         size = sign * ratio * noise / np.sqrt(np.mean(dev**2))
         new = reading + size * dev

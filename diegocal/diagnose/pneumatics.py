@@ -261,10 +261,10 @@ class PneumaticAdapter:
         return out
 
     def _drifts(self, fitted: PneumaticFit, train) -> bool:
-        """Whether offsets fitted on the earlier and the later half of the training samples differ
-        by more than :data:`DRIFT_Z` sampling errors: a zero that drifts, for which a constant
-        offset would stand in (the model's own error in an offset, the same in both halves, is
-        taken out of their ±)."""
+        """Whether offsets fitted on the earlier and the later half of the training samples (started
+        from the baseline) differ by more than :data:`DRIFT_Z` times their sampling errors and
+        :data:`DRIFT_FLOOR`: a zero that drifts, for which a constant offset would stand in (the
+        model's own error in an offset, mostly shared by the halves, is taken out of their ±)."""
         train = np.asarray(train, bool)
         rows = np.flatnonzero(train)
         if rows.size < 2 or self._baseline is None:
