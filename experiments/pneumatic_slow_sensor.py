@@ -28,23 +28,22 @@ sys.path.insert(0, str(ROOT / "bench"))
 from diegocal.diagnose import DiagnoseOptions  # noqa: E402
 from diegocal.diagnose.pneumatics import PneumaticAdapter, adapters  # noqa: E402
 from diegocal.pneumatic.predict import predict_with_resets, reset_starts  # noqa: E402
+from diegocal.sgp.terms import lag_filter  # noqa: E402
 from diegocal.terms import make_term  # noqa: E402
 
 TAUS_S = (0.02, 0.03, 0.045, 0.065, 0.09)
 
 
-def through_filter(p: np.ndarray, y: np.ndarray, starts: np.ndarray, h: np.ndarray, tau: float) -> np.ndarray:
+def through_filter(p: np.ndarray, y: np.ndarray, starts: np.ndarray, time: np.ndarray, tau: float) -> np.ndarray:
     """The reading of a first-order filter (time constant ``tau``) of the pressure ``p`` (T,),
-    piecewise linear between samples, started at the measured ``y`` at each reset ``starts``."""
-    out, a = np.empty_like(p), np.exp(-h / tau)
-    reset = np.zeros(p.size, bool)
-    reset[starts] = reset[0] = True
-    for t in range(p.size):
-        if reset[t]:
-            out[t] = y[t]
-            continue
-        k = (p[t] - p[t - 1]) / h[t - 1]
-        out[t] = p[t] - k * tau + (out[t - 1] - p[t - 1] + k * tau) * a[t - 1]
+    piecewise linear between samples, started at the measured ``y`` at each reset ``starts``: the
+    filter started at rest (:func:`~diegocal.sgp.terms.lag_filter`) plus the decay of the reading's
+    gap to the pressure at the reset."""
+    out = np.empty_like(p)
+    edges = np.append(np.union1d([0], starts), p.size)
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        decay = np.exp(-(time[a:b] - time[a]) / tau)
+        out[a:b] = lag_filter(p[a:b], time[a:b], tau) + (y[a] - p[a]) * decay
     return out
 
 
@@ -68,12 +67,12 @@ def ratios(log, robot, chamber: str) -> dict:
     terms["delay"] = make_term("valve_delay", chamber, {"delay_s": 0.03})
     for name, term in terms.items():
         out[name] = rmse(predict_with_resets(adapter.fit((term,), train).params, data))
-    h, starts = np.diff(data.time), reset_starts(data)
+    starts = reset_starts(data)
     for tau in TAUS_S:
         inverted = replace(data, p=y + tau * np.gradient(y, data.time))
         fit = PneumaticAdapter(inverted, adapter.volume_sensor).fit((), train)
         pressure = predict_with_resets(fit.params, inverted)
-        out[f"filter {tau * 1e3:.0f} ms"] = rmse(through_filter(pressure, y, starts, h, tau))
+        out[f"filter {tau * 1e3:.0f} ms"] = rmse(through_filter(pressure, y, starts, data.time, tau))
     base = out["baseline"]
     return {k: v / base for k, v in out.items()} | {"baseline kPa": base}
 
