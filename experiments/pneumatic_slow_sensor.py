@@ -7,7 +7,8 @@ predictions reset to the measurement every 2 s, as ``diagnose`` scores) of the b
 baseline with a ``supply_droop`` of each shape and with a ``valve_delay``, and of a filtered-sensor
 model for τ on a grid: the baseline fitted on the filter-inverted pressure y + τ ẏ (ẏ a central
 difference), its open-loop pressure passed through the filter from each reset (the reading's exact
-answer to a ramp), each as a ratio to the baseline's. An experiment, not part of the diagnosis:
+answer to a ramp), each as a ratio to the baseline's. The experiment that led to the diagnosis's
+rival (diegocal/diagnose/pneumatics_filter.py, which picks τ on the training rows instead):
 
     python experiments/pneumatic_slow_sensor.py slow 777 778
     python experiments/pneumatic_slow_sensor.py supply_droop 2685631677
@@ -27,24 +28,9 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from diegocal.diagnose import DiagnoseOptions  # noqa: E402
 from diegocal.diagnose.pneumatics import PneumaticAdapter, adapters  # noqa: E402
+from diegocal.diagnose.pneumatics_filter import FILTER_TAUS_S, through_filter  # noqa: E402
 from diegocal.pneumatic.predict import predict_with_resets, reset_starts  # noqa: E402
-from diegocal.sgp.terms import lag_filter  # noqa: E402
 from diegocal.terms import make_term  # noqa: E402
-
-TAUS_S = (0.02, 0.03, 0.045, 0.065, 0.09)
-
-
-def through_filter(p: np.ndarray, y: np.ndarray, starts: np.ndarray, time: np.ndarray, tau: float) -> np.ndarray:
-    """The reading of a first-order filter (time constant ``tau``) of the pressure ``p`` (T,),
-    piecewise linear between samples, started at the measured ``y`` at each reset ``starts``: the
-    filter started at rest (:func:`~diegocal.sgp.terms.lag_filter`) plus the decay of the reading's
-    gap to the pressure at the reset."""
-    out = np.empty_like(p)
-    edges = np.append(np.union1d([0], starts), p.size)
-    for a, b in zip(edges[:-1], edges[1:], strict=True):
-        decay = np.exp(-(time[a:b] - time[a]) / tau)
-        out[a:b] = lag_filter(p[a:b], time[a:b], tau) + (y[a] - p[a]) * decay
-    return out
 
 
 def ratios(log, robot, chamber: str) -> dict:
@@ -68,7 +54,7 @@ def ratios(log, robot, chamber: str) -> dict:
     for name, term in terms.items():
         out[name] = rmse(predict_with_resets(adapter.fit((term,), train).params, data))
     starts = reset_starts(data)
-    for tau in TAUS_S:
+    for tau in FILTER_TAUS_S:
         inverted = replace(data, p=y + tau * np.gradient(y, data.time))
         fit = PneumaticAdapter(inverted, adapter.volume_sensor).fit((), train)
         pressure = predict_with_resets(fit.params, inverted)

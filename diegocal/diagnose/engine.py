@@ -102,6 +102,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     stand_ins: dict = {}  # channel -> (the term that stood in, the test that beat it, why it was declined)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
+    rival = getattr(adapter, "shape_rival", None)  # a model of another shape, judged on the adapter's own score
     for _ in range(options.max_rounds):
         # the last round's columns go before this round's are built (a tested candidate's columns
         # are views of its round's whole block: one kept Tested keeps all of them)
@@ -117,8 +118,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         neighbours = None if spill is None else partial(spill, fitted, train)
+        shape = None if rival is None else partial(rival, fitted, train, val, options, exclude)
         best, group, tested = _choose_group(
-            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined
+            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined, shape
         )
         group = [g for g in group if _key(g.term) not in declined]
         candidates = commons = None  # what follows needs the tested terms, not their columns:
@@ -177,11 +179,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     # what remains: the channels whose best term was a stand-in, then significant binned
     # structure that no candidate explained
     res = adapter.residuals(fitted)
-    for channel, (stood, flex, declined_why) in stand_ins.items():
+    for channel, (stood, flex, why) in stand_ins.items():
         masks = (train, val, shown)
-        findings.append(
-            stand_in_finding(channel, stood, flex, res, weights, masks, length, options, exclude, declined_why)
-        )
+        findings.append(stand_in_finding(channel, stood, flex, res, weights, masks, length, options, exclude, why))
     generic = [
         binned_candidate(res, c, v, train, options.n_bins)
         for c in res.channels
@@ -292,15 +292,18 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
 
 
 def _choose_group(
-    tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=()
+    tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=(), shape=None
 ) -> tuple:
     """(the best candidate, the terms this round adds, the candidates left in the running): the
     best and the other channels of its cause (no terms when nothing is significant). A best term
     that its channel's state explains far better stands in for structure of another shape: its
     channel goes to ``stand_ins`` (left unexplained) and the next best is chosen; so does the
     channel of a neighbour whose own flexible model explains more than the term (:func:`~.stand_ins.spilled`;
-    ``neighbours(term, channels)``: the adapter's ``spill_candidates``), and that of a term a declined
-    one (``declined``) explained better (:func:`~.stand_ins.declined_rival`). A common cause whose channels
+    ``neighbours(term, channels)``: the adapter's ``spill_candidates``), that of a term a declined
+    one (``declined``) explained better (:func:`~.stand_ins.declined_rival`), and that of a term a
+    model of another shape beats on the adapter's own score (``shape(term)``: the adapter's
+    ``shape_rival``, (the rival as tested, its evidence) or None; a chamber's pressure read through
+    a filter, :mod:`.pneumatics_filter`). A common cause whose channels
     have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
     simpler cause does as well (:func:`~.selection.simplest`)."""
     while (best := choose(tested, val)) is not None:
@@ -314,17 +317,21 @@ def _choose_group(
             continue
         own = own_channel(best)
         flex = outshone(best, res, weights, train, val, options, exclude)
-        why, declined_why = "its state does", None
+        why, evidence = "its state does", None
         if flex is None and neighbours is not None:
             flex = spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
             if flex is not None:
                 own, why = flex.term.channel, f"a flexible model of {flex.term.channel} does"
         if flex is None and (flex := declined_rival(best, tested, declined)) is not None:
-            why, declined_why = f"{flex.term.cause} (declined) did", declined[_key(flex.term)]
+            why = f"{flex.term.cause} (declined) did"
+            evidence = {"declined": {"term": flex.term.label, "why": declined[_key(flex.term)]}}
+        if flex is None and shape is not None and (found := shape(best.term)) is not None:
+            flex, rival = found
+            why, evidence = f"{rival['model']} does", {"rival": rival}
         if flex is None:
             commons = _common(best, tested, declined, res, weights, train, val, options, exclude)
             return best, [best, *commons], tested
-        stand_in = (replace(best, candidate=None), replace(flex, candidate=None), declined_why)  # no columns kept
+        stand_in = (replace(best, candidate=None), replace(flex, candidate=None), evidence)  # no columns kept
         stand_ins.setdefault(own, stand_in)
         say(f"{best.term.cause} on {best.term.channel}{unit} explains less than {why}: {own} left unexplained")
         tested = [t for t in tested if t is not best and own not in t.channels]

@@ -70,6 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from diegocal.causes import MAX_DELAY_S, MAX_SENSOR_LAG_S, causes_of
+from diegocal.diagnose.pneumatics_filter import filter_rival
 from diegocal.diagnose.pneumatics_terms import MODEL_OFFSET, with_model_error, with_sensor_lag, with_span_error
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import DiegocalError, FitError
@@ -326,6 +327,11 @@ class PneumaticAdapter:
         if exclude and self.unit_name in exclude:
             measured[np.asarray(exclude[self.unit_name], bool)] = np.nan
         return score(measured[:, None], fitted._prediction[:, None], (self.unit_name,), unit=UNIT, mask=mask)
+
+    def shape_rival(self, fitted: PneumaticFit, train, val, options, exclude, term):
+        """A pressure sensor read through a filter, against a term about to be named
+        (:func:`~diegocal.diagnose.pneumatics_filter.filter_rival`)."""
+        return filter_rival(self, fitted, train, val, options, exclude, term)
 
     def faults(self, fitted, residuals) -> list:
         return []

@@ -2,8 +2,10 @@
 structure better (:func:`~diegocal.diagnose.engine.run_unit`'s choice of a round's best). Its
 channel is then ``unexplained``, with the term named as the stand-in: a flexible model of the
 channel's own state explains far more (:func:`outshone`), a flexible model of a neighbouring sensor
-explains more (:func:`spilled`), or a named term of the channel explained more on the validation
-rows but was declined, its extension not confirmed on the held-out rows (:func:`declined_rival`).
+explains more (:func:`spilled`), a named term of the channel explained more on the validation
+rows but was declined, its extension not confirmed on the held-out rows (:func:`declined_rival`),
+or a model of another shape that no cause names explains more of what the adapter scores (a
+chamber's pressure read through a filter: :mod:`~diegocal.diagnose.pneumatics_filter`).
 """
 
 from __future__ import annotations
@@ -86,12 +88,13 @@ def removed(t: Tested) -> float:
 
 
 def stand_in_finding(
-    channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude, declined_why=None
+    channel, stood: Tested, flex: Tested, res, weights, masks, length, options, exclude, why: dict | None = None
 ) -> Finding:
     """``unexplained`` on a channel whose best term was a stand-in: its evidence names the term that
-    stood in and both validation gains (``flex``: the flexible model, or the declined term that
-    explained more, with ``declined_why``, in ``evidence.declined``); the variable shown is the one
-    whose binned test explains most."""
+    stood in and both validation gains (``flex``: the flexible model, the declined term that
+    explained more, or a model of another shape that did; ``why``: the evidence of the last two,
+    ``declined`` {term, why} or ``rival`` {model, ...}); the variable shown is the one whose binned
+    test explains most."""
     train, val, shown = masks
     variables = list(flexible_variables(res, channel))
     single = [binned_candidate(res, channel, v, train, options.n_bins) for v in variables]
@@ -105,7 +108,7 @@ def stand_in_finding(
         "threshold_t": float(flex.threshold),
         "variable": variable,
         "stand_in": {"term": stood.term.label, "validation_gain": float(stood.gain)},
-        **({"declined": {"term": flex.term.label, "why": declined_why}} if declined_why is not None else {}),
+        **(why or {}),
         "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
     }
     return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (stood.to_dict(),))

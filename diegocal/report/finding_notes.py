@@ -42,6 +42,11 @@ def stand_in_text(f: dict) -> str:
     if not (stood := ev.get("stand_in")):
         return ""
     gain, declined = ev.get("validation_gain", float("nan")), ev.get("declined")
+    if rival := ev.get("rival"):
+        return (f" The best term of the vocabulary, {stood['term']}, removes "
+                f"{rival['term_open_loop_validation_gain']:.0%} of the open-loop validation error where "
+                f"{rival['model']}, a shape no cause names, removes {rival['open_loop_validation_gain']:.0%}: "
+                "it would stand in for it, so no cause is named.")
     beaten = (f"{declined['term']} explained {gain:.0%} and was declined ({declined['why']}): it would stand in "
               "for what that term fits" if declined else f"a flexible function of {f['channel']}'s own state "
               f"explains {gain:.0%}: it would stand in for structure of another shape")

@@ -297,6 +297,35 @@ def test_a_term_weaker_than_a_declined_one_on_its_channel_stands_in_for_it():
     assert declined_rival(droop, [droop, wider], {("backlash", "c"): "rose"}) is None
 
 
+def test_a_term_that_a_model_of_another_shape_beats_on_the_adapter_s_score_stands_in_for_it():
+    """An adapter's ``shape_rival`` (a chamber's pressure read through a filter) is asked about the
+    term the engine would name; when it returns a rival, the channel is ``unexplained`` with the
+    rival's evidence and the term named as its stand-in; the other channel is named as before."""
+    from diegocal.diagnose.types import Tested
+
+    t, x, y = make_data(3, effects=[("bump", "c0", 0.5), ("quadratic", "c1", 0.4)])
+    asked = []
+
+    class Rivalled(ToyAdapter):
+        def shape_rival(self, fitted, train, val, options, exclude, term):
+            asked.append(term.channel)
+            if term.channel != "c0":
+                return None
+            rows = np.flatnonzero(val)
+            r = self.y[rows, 0] - fitted.a[0] * self.x[rows, 0] - fitted.b[0]
+            test = out_of_sample_test(r, 0.9 * r, rows, val)
+            rival = Tested(Term("unexplained", "c0", ()), ("c0",), test, 3.0, True, 1, None)
+            return rival, {"model": "a toy rival", "open_loop_validation_gain": 0.99}
+
+    d = run_unit(Rivalled(t, x, y), split_blocks(len(t)), EngineOptions())
+    assert {"c0", "c1"} <= set(asked)
+    on = {f.channel: f for f in d.findings}
+    assert on["c0"].kind == "unexplained" and on["c0"].evidence["rival"]["model"] == "a toy rival"
+    assert on["c0"].evidence["stand_in"]["term"].startswith("bump")
+    assert on["c0"].evidence["validation_gain"] == pytest.approx(0.99)
+    assert on["c1"].cause in ("square", "poly")
+
+
 def test_a_common_cause_leaves_out_a_channel_where_a_declined_term_explains_more(monkeypatch):
     """The same cause added on other channels in one round (friction on every joint) is held to
     the declined-rival test of each channel, as the round's best is."""

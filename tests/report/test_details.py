@@ -451,6 +451,18 @@ def test_a_stand_in_says_what_beat_it_a_flexible_model_or_a_declined_term():
     text = stand_in_text(declined)
     assert "pressure_offset:shoulder.ext explained 74% and was declined (the held-out error rose" in text
     assert "flexible" not in text and "48%" in text
+    rival = {
+        "channel": "elbow.flex",
+        "evidence": {
+            "validation_gain": 0.79,
+            "stand_in": {"term": "supply_droop:elbow.flex", "validation_gain": 0.31},
+            "rival": {"model": "the pressure read through a first-order filter (τ 45 ms)", "tau_s": 0.045,
+                      "open_loop_validation_gain": 0.79, "term_open_loop_validation_gain": 0.12},
+        },
+    }
+    text = stand_in_text(rival)
+    assert "supply_droop:elbow.flex, removes 12% of the open-loop validation error" in text
+    assert "first-order filter (τ 45 ms), a shape no cause names, removes 79%" in text
 
 
 def test_a_lasting_supply_sag_says_it_is_also_a_sensor_span_error():
