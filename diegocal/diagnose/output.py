@@ -16,6 +16,9 @@
         evidence: {validation_gain, t, threshold_t, variable, curves: {before, after}}
                                # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
                                # + indistinguishable_from: [channel, ...] (the same cause there fits the same)
+                               # + stand_in: {term, validation_gain} (unexplained: the term that stood in),
+                               #   with what beat it: declined: {term, why} or rival: {model, tau_s,
+                               #   open_loop_validation_gain, term_open_loop_validation_gain}
         runners_up: [{cause, channel, region, validation_gain, t, threshold_t, significant}, ...]
     minor_faults:              # flagged by a fault detector; writing them off removed under min_gain
       - {cause: marker_outliers, channel: m2, readings: 14, gain: {...}, written_off: true}
