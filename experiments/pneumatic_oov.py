@@ -35,20 +35,28 @@ PLAY_V = (0.15, 0.35)
 SLOW_S = (0.030, 0.060)
 
 
-def add_shape(shape: str, seed: int, chamber: str | None = None, duration: float | None = None):
+def session(seed: int, duration: float | None = None) -> gen.GeneratorOptions:
+    """The generator's options of the session :func:`add_shape` puts a sensor fault on."""
+    return replace(SESSION, seed=seed, duration=duration or SESSION.duration)
+
+
+def add_shape(shape: str, seed: int, chamber: str | None = None, duration: float | None = None, log=None):
     """A session of the generator with ``shape`` on one chamber (drawn unless given): (log, chamber,
-    size), the size in the shape's unit (k - 1, kPa, s or V)."""
+    size), the size in the shape's unit (k - 1, kPa, s or V). ``log``: the session
+    (:func:`session`) generated already, with others (``generate_many``), for a sensor fault."""
     rng = np.random.default_rng([seed, 0x00F])
     chambers = gen.load_chambers()
     chamber = chamber or chambers.names[int(rng.integers(len(chambers.names)))]
     ratio = rng.uniform(4.0, 10.0)
     sign = rng.choice((-1.0, 1.0))
-    options = replace(SESSION, seed=seed, duration=duration or SESSION.duration)
+    options = session(seed, duration)
     if shape == "valve_play":
+        if log is not None:
+            raise ValueError("valve play is physics: its session is generated with it")
         size = rng.uniform(*PLAY_V)
         log = gen.generate(replace(options, effects=(gen.Effect("valve_play", chamber, size),)))
         return log, chamber, size
-    log = gen.generate(options)
+    log = gen.generate(options) if log is None else log
     i = log.streams["pressure"].names.index(chamber)
     reading = log.truth.signals["reading"].data[:, i]
     noise = options.pressure_noise
