@@ -99,7 +99,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         unconverged.update(dict.fromkeys(f"with the faults written off: {why}" for why in late(fitted)))
     if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
         adapter.selection_exclude = exclude
-    stand_ins: dict = {}  # channel -> (the term that stood in, the test that beat it, why it was declined)
+    stand_ins: dict = {}  # channel -> (the term that stood in, the test that beat it, its evidence or None)
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
     rival = getattr(adapter, "shape_rival", None)  # a model of another shape, judged on the adapter's own score

@@ -127,7 +127,8 @@ class PneumaticAdapter:
     # ------------------------------------------------------------------ fit
     def fit(self, terms, train, start_from: PneumaticFit | None = None) -> PneumaticFit:
         """The chamber model with ``terms`` fitted on the ``train`` steps, started from the baseline
-        fitted on the same rows (or from ``start_from`` where there is none: rows of another split)."""
+        fitted on the same rows (or from ``start_from`` where there is none: rows of another split,
+        or another reading of the chamber, as the filtered-sensor rival's)."""
         train = np.asarray(train, bool)
         terms = [replace(t, channel=self.unit_name) for t in chamber_terms(terms)]
         terms = [t for t in terms if t.cause not in BASELINE_EXTRA]

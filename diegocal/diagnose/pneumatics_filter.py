@@ -11,14 +11,17 @@ diagnose scores a chamber, by the open-loop pressure with resets every 2 s, it c
 (``experiments/pneumatic_slow_sensor.py``, docs/results.md): on slow sensors the filter removes
 far more of the open-loop error than any term, on true sags and delays it removes none.
 
-The rival model: the chamber model fitted on the filter-inverted pressure y + τ ẏ (ẏ a central
-difference), its open-loop pressure passed through the filter from the reading at each reset
-(the reading's exact answer to a ramp between samples), τ from :data:`FILTER_TAUS_S`, the one
-with the least open-loop error on the training blocks. It beats the round's best term when it is
-significant on the validation blocks' open-loop error (the engine's cluster-robust test, the
-correction being its change of the open-loop prediction) and leaves less of that error than the
-model with the term does: the chamber is then ``unexplained`` and the term its stand-in
-(:func:`~diegocal.diagnose.engine.run_unit`).
+The rival model: the chamber model of eq. (4.10) fitted on the filter-inverted pressure y + τ ẏ
+(ẏ a central difference), its open-loop pressure (resets every 2 s, thesis Fig. 4.12) passed
+through the filter from the reading at each reset (the reading's exact answer to a ramp between
+evenly spaced samples), τ from :data:`FILTER_TAUS_S`, the one with the least open-loop error on
+the training blocks. It beats the round's best term when it is significant on the validation
+blocks' open-loop error (the engine's cluster-robust test with the open-loop windows as the
+units, the correction being its change of the open-loop prediction; the gain a flexible model's
+``unexplained`` needs) and leaves less of that error than the model with the term does, on the
+same samples: the chamber is then ``unexplained`` and the term its stand-in
+(:func:`~diegocal.diagnose.engine.run_unit`). The finding's ``validation_gain`` and ``t`` are
+then the open-loop test's.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import numpy as np
 
 from diegocal.diagnose.stats import critical_t, out_of_sample_test
 from diegocal.diagnose.types import EngineOptions, Tested
+from diegocal.errors import FitError
 from diegocal.pneumatic.predict import predict_with_resets, reset_starts
 from diegocal.sgp.terms import lag_filter
 from diegocal.terms import Term
@@ -51,49 +55,60 @@ def through_filter(p: np.ndarray, y: np.ndarray, starts: np.ndarray, time: np.nd
     return out
 
 
-def filtered_readings(adapter, terms, train, start_from) -> tuple[float, np.ndarray]:
+def filtered_readings(adapter, terms, train, start_from) -> tuple[float, np.ndarray] | None:
     """(τ, the open-loop reading (T,)) of the filtered-sensor model of ``adapter``'s chamber with
     ``terms``: the τ of :data:`FILTER_TAUS_S` whose reading is nearest the measured one on the
-    ``train`` samples (module docstring)."""
+    ``train`` samples of the windows that start on one (a window's start is its initial state);
+    None when no τ can be fitted. The central difference reads one sample past a block's edge."""
     data = adapter.data
     y = data.p.astype(float)
     starts = reset_starts(data)
-    best = (np.inf, FILTER_TAUS_S[0], None)
+    rows = np.asarray(train, bool) & np.asarray(train, bool)[starts][windows(data)]
+    best = (np.inf, None, None)
     for tau in FILTER_TAUS_S:
         inverted = replace(data, p=y + tau * np.gradient(y, data.time))
-        fit = type(adapter)(inverted, adapter.volume_sensor, adapter.options).fit(terms, train, start_from)
+        try:
+            fit = type(adapter)(inverted, adapter.volume_sensor, adapter.options).fit(terms, train, start_from)
+        except FitError:  # the inverted pressure's noise is about τ / h times the reading's
+            continue
         reading = through_filter(predict_with_resets(fit.params, inverted), y, starts, data.time, tau)
-        sse = float(np.nansum((reading - y)[np.asarray(train, bool)] ** 2))
+        miss = (reading - y)[rows]
+        sse = float(np.sum(miss**2)) if np.isfinite(miss).all() else np.inf
         if sse < best[0]:
             best = (sse, tau, reading)
-    return best[1], best[2]
+    return None if best[1] is None else best[1:]
 
 
-def open_loop_test(y, now, other, rows: np.ndarray):
-    """The engine's out-of-sample test (:func:`~diegocal.diagnose.stats.out_of_sample_test`) of the
-    open-loop prediction ``other`` against ``now`` on the samples ``rows`` (T,) bool: the residual
-    y - now, the correction other - now."""
-    ok = rows & np.isfinite(y) & np.isfinite(now) & np.isfinite(other)
-    idx = np.flatnonzero(ok)
-    return out_of_sample_test((y - now)[idx], (other - now)[idx], idx, ok)
+def windows(data) -> np.ndarray:
+    """(T,) the index of the open-loop window (:func:`~diegocal.pneumatic.predict.reset_starts`)
+    each sample lies in."""
+    return np.maximum(np.searchsorted(reset_starts(data), np.arange(data.n_samples), side="right") - 1, 0)
 
 
 def filter_rival(adapter, fitted, train, val, options: EngineOptions, exclude, term: Term):
     """(the filtered-sensor rival as a tested candidate, its evidence) when it beats ``term`` on
     the validation blocks' open-loop error (module docstring), else None. ``fitted``: the model
-    the round's candidates were tested against; ``exclude``: readings the selection leaves out."""
+    the round's candidates were tested against; ``exclude``: readings the selection leaves out
+    (of the test; the chamber's fits have no fault detector to leave any out of)."""
     name, data = adapter.unit_name, adapter.data
+    terms, train = adapter.terms(fitted), np.asarray(train, bool)
+    found = filtered_readings(adapter, terms, train, fitted)
+    if found is None:
+        return None
+    tau, reading = found
     y = data.p.astype(float).copy()
     if exclude and name in exclude:
         y[np.asarray(exclude[name], bool)] = np.nan
-    terms = adapter.terms(fitted)
     now = predict_with_resets(fitted.params, data)
-    named = predict_with_resets(adapter.fit(terms + (term,), np.asarray(train, bool)).params, data)
-    tau, reading = filtered_readings(adapter, terms, train, fitted)
-    val = np.asarray(val, bool)
-    rival, with_term = open_loop_test(y, now, reading, val), open_loop_test(y, now, named, val)
+    named = predict_with_resets(adapter.fit(terms + (term,), train).params, data)
+    # both judged on the same samples; a window's error carries through it: the windows are the units
+    rows = np.asarray(val, bool) & np.isfinite(y) & np.isfinite(now) & np.isfinite(reading) & np.isfinite(named)
+    idx = np.flatnonzero(rows)
+    unit = windows(data)[idx]
+    rival = out_of_sample_test((y - now)[idx], (reading - now)[idx], idx, rows, unit)
+    with_term = out_of_sample_test((y - now)[idx], (named - now)[idx], idx, rows, unit)
     threshold = critical_t(options.alpha, options.n_units, rival.df)
-    significant = bool(rival.t > threshold and rival.gain >= options.min_gain)
+    significant = bool(rival.t > threshold and rival.gain >= options.unexplained_min_gain)
     if not (significant and rival.sse_after < with_term.sse_after):
         return None
     model = f"the pressure read through a first-order filter (τ {tau * 1e3:.0f} ms)"

@@ -107,7 +107,9 @@ class OutOfSample:
         return 1.0 - self.sse_after / self.sse_before if self.sse_before > 0 else 0.0
 
 
-def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: np.ndarray) -> OutOfSample:
+def out_of_sample_test(
+    r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: np.ndarray, clusters: np.ndarray | None = None
+) -> OutOfSample:
     """Test whether a correction ``a`` predicts the residual ``r`` on held-back rows.
 
     Parameters
@@ -125,6 +127,10 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     sample per pose, validation runs of a few poses) the floor is what the longest run allows
     (:func:`_floor`); otherwise those runs would give fewer than three sub-blocks and no test at
     all, whatever the error.
+
+    ``clusters``: (N,) labels of the independent units, given where the residual's own correlation
+    time does not say what is independent (an open-loop prediction restarted every 2 s carries its
+    error through each window: the windows are the units).
     """
 
     r, a = np.asarray(r, float), np.asarray(a, float)
@@ -142,10 +148,14 @@ def out_of_sample_test(r: np.ndarray, a: np.ndarray, samples: np.ndarray, mask: 
     u = r - slope * a
     seen = np.zeros(T, bool)
     seen[samples] = True
-    u_by_sample = np.bincount(samples, weights=u, minlength=T)[seen]
-    tau = autocorrelation_time(u_by_sample)
-    length = int(max(floor, min(np.ceil(CORRELATION_TIMES * tau), _longest_sub_block(mask & seen))))
-    _, cl = np.unique(sub_blocks(mask & seen, length)[samples], return_inverse=True)
+    if clusters is None:
+        u_by_sample = np.bincount(samples, weights=u, minlength=T)[seen]
+        tau = autocorrelation_time(u_by_sample)
+        length = int(max(floor, min(np.ceil(CORRELATION_TIMES * tau), _longest_sub_block(mask & seen))))
+        _, cl = np.unique(sub_blocks(mask & seen, length)[samples], return_inverse=True)
+    else:
+        _, cl = np.unique(np.asarray(clusters), return_inverse=True)
+        length = int(round(int(seen.sum()) / (int(cl.max()) + 1)))
     C = int(cl.max()) + 1
     if C < 3:
         return OutOfSample(

@@ -90,6 +90,22 @@ def _square_tested(options=None):
     return evaluate_candidates(cands, res, {c: 1.0 for c in res.channels}, train, val, options or EngineOptions()), val
 
 
+def test_the_out_of_sample_test_counts_given_units_not_sub_blocks():
+    """An open-loop error carries through its 2-s window, whatever its correlation time looks
+    like: given the windows, the test has one degree of freedom per window less one, where the
+    sub-blocks of a residual that looks white give many more."""
+    rng = np.random.default_rng(5)
+    T, n = 2000, 200
+    window = np.arange(T) // n
+    a = rng.normal(size=T)
+    r = 0.2 * a + rng.normal(0, 0.3, T)
+    mask, idx = np.ones(T, bool), np.arange(T)
+    given = out_of_sample_test(r, a, idx, mask, window)
+    assert given.df == T // n - 1
+    assert out_of_sample_test(r, a, idx, mask).df > 3 * given.df
+    assert given.sse_before == pytest.approx(float(r @ r))
+
+
 def test_one_standard_error_rule_prefers_the_simpler_term():
     """A pure x² on c0: 'square' (1 parameter) and 'poly' (x², x³) fit equally well; the simpler
     wins."""
@@ -315,14 +331,15 @@ def test_a_term_that_a_model_of_another_shape_beats_on_the_adapter_s_score_stand
             r = self.y[rows, 0] - fitted.a[0] * self.x[rows, 0] - fitted.b[0]
             test = out_of_sample_test(r, 0.9 * r, rows, val)
             rival = Tested(Term("unexplained", "c0", ()), ("c0",), test, 3.0, True, 1, None)
-            return rival, {"model": "a toy rival", "open_loop_validation_gain": 0.99}
+            return rival, {"model": "a toy rival", "open_loop_validation_gain": 0.5}
 
     d = run_unit(Rivalled(t, x, y), split_blocks(len(t)), EngineOptions())
     assert {"c0", "c1"} <= set(asked)
     on = {f.channel: f for f in d.findings}
     assert on["c0"].kind == "unexplained" and on["c0"].evidence["rival"]["model"] == "a toy rival"
     assert on["c0"].evidence["stand_in"]["term"].startswith("bump")
-    assert on["c0"].evidence["validation_gain"] == pytest.approx(0.99)
+    assert on["c0"].evidence["validation_gain"] == pytest.approx(0.99)  # the rival's test's
+    assert on["c0"].evidence["rival"]["open_loop_validation_gain"] == 0.5
     assert on["c1"].cause in ("square", "poly")
 
 

@@ -48,9 +48,9 @@ def slowed(log, chamber: str, tau: float):
 
 @pytest.fixture(scope="module")
 def clean(tmp_path_factory):
-    """A clean 30-s session of the project's simulator on tests/pneumatic's robot, and the robot."""
+    """A clean 60-s session of the project's simulator on tests/pneumatic's robot, and the robot."""
     robot = load_robot(write_robot(tmp_path_factory.mktemp("filter_robot")))
-    options = PneumaticSimOptions(duration=30.0, substeps=5, seed=7, effects=parse_effects(()))
+    options = PneumaticSimOptions(duration=60.0, substeps=5, seed=7, effects=parse_effects(()))
     return simulate_pneumatics(robot, options), robot
 
 
