@@ -91,6 +91,8 @@ def filter_rival(adapter, fitted, train, val, options: EngineOptions, exclude, t
     the round's candidates were tested against; ``exclude``: readings the selection leaves out
     (of the test; the chamber's fits have no fault detector to leave any out of)."""
     name, data = adapter.unit_name, adapter.data
+    if options.progress is not None:
+        options.progress(f"judging {term.label} against a pressure sensor read through a filter")
     terms, train = adapter.terms(fitted), np.asarray(train, bool)
     found = filtered_readings(adapter, terms, train, fitted)
     if found is None:
