@@ -37,9 +37,9 @@ from diegocal.pneumatic.predict import predict_with_resets, reset_starts
 from diegocal.sgp.terms import lag_filter
 from diegocal.terms import Term
 
-#: Time constants of the filtered-sensor rival, s: above the tick lag the baseline fits (10 ms),
-#: up to about a tenth of a second (the grid's steps are about a factor 1.45).
-FILTER_TAUS_S = (0.02, 0.03, 0.045, 0.065, 0.09)
+#: Time constants of the filtered-sensor rival, s: from one and a half ticks (the baseline fits a
+#: lag of up to a tick) to about a tenth of a second, in steps of a factor 1.3-1.5.
+FILTER_TAUS_S = (0.015, 0.02, 0.03, 0.045, 0.065, 0.09)
 
 
 def through_filter(p: np.ndarray, y: np.ndarray, starts: np.ndarray, time: np.ndarray, tau: float) -> np.ndarray:
