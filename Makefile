@@ -16,12 +16,13 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-# The suite runs on every core (pytest-xdist; a file's tests stay on one worker, which shares its
-# fixtures); TEST_WORKERS=0 runs it in one process.
+# The suite runs on every core, four at most (pytest-xdist; a file's tests stay on one worker,
+# which shares its fixtures); TEST_WORKERS=0 runs it in
+# one process.
 # pytest exits 5 when it collects no test; that is a failure of the suite, say so clearly.
 TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile; rc=$$?; \
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --maxprocesses 4 --dist loadfile; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "no tests were collected"; exit 1; fi; exit $$rc
 
 lint: $(STAMP)
