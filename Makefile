@@ -17,8 +17,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # The suite runs on every core, four at most (pytest-xdist; a file's tests stay on one worker,
-# which shares its fixtures); TEST_WORKERS=0 runs it in
-# one process.
+# which shares its fixtures); TEST_WORKERS=0 runs it in one process.
 # pytest exits 5 when it collects no test; that is a failure of the suite, say so clearly.
 TEST_WORKERS ?= auto
 test: $(STAMP)
