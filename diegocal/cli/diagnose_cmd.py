@@ -278,7 +278,10 @@ def _summary_rows(done: Diagnosed) -> list:
             gain = f"{g['rmse_before']:.3g} → {g['rmse_after']:.3g} {f.get('unit', '')}"
             gain += f" ({red:.0%} less)" if red is not None else ""
         else:
-            gain = f"validation gain {f['evidence'].get('validation_gain', 0):.0%} (not explained by any term)"
+            ev = f["evidence"]
+            stood = f"; {ev['stand_in']['term']} stood in" if ev.get("stand_in") else ""
+            which = "open-loop validation gain" if ev.get("rival") else "validation gain"
+            gain = f"{which} {ev.get('validation_gain', 0):.0%} (not explained by any term{stood})"
         rows.append((f"  {f['cause']} on {where}", gain))
     rows += [("diagnosis", str(out)), ("extended model", str(extended))]
     return rows

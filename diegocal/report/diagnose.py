@@ -79,8 +79,9 @@ def sentence(f: dict) -> str:
         if span:  # a region's edge in a span without training data: where it is, the data do not say
             gain += f", outside {span[0]:.3g}-{span[1]:.3g} s, where no training data place its edge"
     else:
-        vg = (f.get("evidence") or {}).get("validation_gain")
-        gain = f"; it accounts for {vg:.0%} of the validation error" if vg is not None else ""
+        ev = f.get("evidence") or {}
+        vg, which = ev.get("validation_gain"), "open-loop validation" if ev.get("rival") else "validation"
+        gain = f"; it accounts for {vg:.0%} of the {which} error" if vg is not None else ""
     params = _parameters_text(f)
     twins = (f.get("evidence") or {}).get("indistinguishable_from")
     if twins:  # the same cause elsewhere fits the data the same: which one, the log cannot say

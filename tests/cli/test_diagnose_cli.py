@@ -82,3 +82,28 @@ def test_a_log_naming_no_robot_asks_for_one(tmp_path):
     result = runner.invoke(app, ["diagnose", str(path)])
     assert result.exit_code == 1
     assert "--robot" in one_line_error(result)
+
+
+def test_the_summary_says_which_gain_and_what_stood_in_for_an_unexplained_chamber():
+    from types import SimpleNamespace
+
+    from diegocal.cli.diagnose_cmd import _summary_rows
+
+    finding = {
+        "cause": "unexplained",
+        "channel": "elbow.ext",
+        "gain": {},
+        "evidence": {
+            "validation_gain": 0.77,
+            "stand_in": {"term": "supply_droop:elbow.ext", "validation_gain": 0.2},
+            "rival": {"model": "the pressure read through a first-order filter (τ 45 ms)"},
+        },
+    }
+    mapping = {
+        "baseline": {"model": "c1..c9", "heldout_rmse": {"elbow.ext": 15.7}, "units": {"elbow.ext": "kPa"}},
+        "extended": {"heldout_rmse": {"elbow.ext": 15.7}},
+        "findings": [finding],
+    }
+    rows = dict(_summary_rows(SimpleNamespace(domain="pneumatics", mapping=mapping, output="d.yaml", extended="e")))
+    text = rows["  unexplained on elbow.ext"]
+    assert text == "open-loop validation gain 77% (not explained by any term; supply_droop:elbow.ext stood in)"

@@ -463,6 +463,10 @@ def test_a_stand_in_says_what_beat_it_a_flexible_model_or_a_declined_term():
     text = stand_in_text(rival)
     assert "supply_droop:elbow.flex, removes 12% of the open-loop validation error" in text
     assert "first-order filter (τ 45 ms), a shape no cause names, removes 79%" in text
+    from diegocal.report.diagnose import sentence
+
+    assert "it accounts for 79% of the open-loop validation error" in sentence({**rival, "kind": "unexplained",
+                                                                                "cause": "unexplained"})
 
 
 def test_a_lasting_supply_sag_says_it_is_also_a_sensor_span_error():
