@@ -167,12 +167,12 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             why = _decline(finding, options.min_gain)
             if why:
                 declined[_key(chosen.term)] = why
-                say(f"{chosen.term.cause} on {chosen.term.channel}{unit}: {why}; declined")
+                say(f"{chosen.term.cause} on {_where(chosen.term.channel, unit)}: {why}; declined")
                 continue
             findings.append(finding)
             fitted, terms = new, new_terms
             unconverged.update(dict.fromkeys(f"with {fitted_term.label}: {why}" for why in late(new)))
-            say(f"found {chosen.term.cause} on {chosen.term.channel}{unit} (validation gain {chosen.gain:.0%})")
+            say(f"found {chosen.term.cause} on {_where(chosen.term.channel, unit)} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
     getattr(adapter, "release", lambda: None)()  # and what the adapter kept for its rounds
@@ -206,7 +206,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 res, None, t.term.channel, region.variable, shown, length, train, options.n_bins, exclude
             )
             findings.append(Finding(term, "unexplained", None, None, evidence))
-            say(f"unexplained structure on {t.term.channel}{unit} against {region.variable}")
+            say(f"unexplained structure on {_where(t.term.channel, unit)} against {region.variable}")
     absorbed, findings = _absorb(adapter, fitted, findings, (train, val, held), exclude, options, unit)
     if absorbed is not fitted:  # the evidence plots of what it absorbed: before and after
         res_new = adapter.residuals(absorbed)
@@ -333,7 +333,7 @@ def _choose_group(
             return best, [best, *commons], tested
         stand_in = (replace(best, candidate=None), replace(flex, candidate=None), evidence)  # no columns kept
         stand_ins.setdefault(own, stand_in)
-        say(f"{best.term.cause} on {best.term.channel}{unit} explains less than {why}: {own} left unexplained")
+        say(f"{best.term.cause} on {_where(best.term.channel, unit)} explains less than {why}: {own} left unexplained")
         tested = [t for t in tested if t is not best and own not in t.channels]
     return None, [], tested
 
@@ -381,6 +381,12 @@ def _stands_in(t: Tested, tested, declined, res, weights, train, val, options, e
     if declined_rival(t, tested, declined) is not None:
         return True
     return outshone(t, res, weights, train, val, options, exclude) is not None
+
+
+def _where(channel: str, unit: str) -> str:
+    """Where a progress line's term acts: its channel, and the unit (`` name``) when that is not
+    the channel itself (a chamber is both)."""
+    return channel if unit.strip() == channel else f"{channel}{unit}"
 
 
 def _key(term: Term) -> tuple[str, str]:
