@@ -35,6 +35,16 @@ PLAY_V = (0.15, 0.35)
 SLOW_S = (0.030, 0.060)
 
 
+def slow_reading(reading: np.ndarray, time: np.ndarray, tau: float) -> np.ndarray:
+    """``reading`` (T,) seen through a first-order filter of time constant ``tau`` (s), each sample
+    held over the step before it, started at the first reading."""
+    alpha = 1.0 - np.exp(-np.diff(time) / tau)
+    out = reading.copy()
+    for k in range(1, len(out)):
+        out[k] = out[k - 1] + alpha[k - 1] * (reading[k] - out[k - 1])
+    return out
+
+
 def session(seed: int, duration: float | None = None) -> gen.GeneratorOptions:
     """The generator's options of the session :func:`add_shape` puts a sensor fault on."""
     return replace(SESSION, seed=seed, duration=duration or SESSION.duration)
@@ -71,10 +81,7 @@ def add_shape(shape: str, seed: int, chamber: str | None = None, duration: float
         new = reading + size * t
     elif shape == "slow_sensor":
         size = rng.uniform(*SLOW_S)
-        alpha = 1.0 - np.exp(-np.diff(log.time) / size)
-        new = reading.copy()
-        for k in range(1, len(new)):
-            new[k] = new[k - 1] + alpha[k - 1] * (reading[k] - new[k - 1])
+        new = slow_reading(reading, log.time, size)
     else:
         raise ValueError(f"unknown shape {shape!r}; one of {', '.join(SHAPES)}")
     p = log.streams["pressure"].data.copy()

@@ -321,9 +321,14 @@ class PneumaticAdapter:
         return out
 
     # ------------------------------------------------------------------ scores and output
-    def score(self, fitted: PneumaticFit, mask, exclude: dict | None = None) -> Score:
+    def open_loop(self, fitted: PneumaticFit) -> np.ndarray:
+        """(T,) the fit's open-loop pressure, reset every 2 s (thesis Fig. 4.12), made once per fit."""
         if fitted._prediction is None:
             fitted._prediction = predict_with_resets(fitted.params, self.data)
+        return fitted._prediction
+
+    def score(self, fitted: PneumaticFit, mask, exclude: dict | None = None) -> Score:
+        self.open_loop(fitted)
         measured = self.data.p.astype(float).copy()
         if exclude and self.unit_name in exclude:
             measured[np.asarray(exclude[self.unit_name], bool)] = np.nan

@@ -63,7 +63,7 @@ def filtered_readings(adapter, terms, train, start_from) -> tuple[float, np.ndar
     data = adapter.data
     y = data.p.astype(float)
     starts = reset_starts(data)
-    rows = np.asarray(train, bool) & np.asarray(train, bool)[starts][windows(data)]
+    rows = np.asarray(train, bool) & np.asarray(train, bool)[starts][windows(starts, data.n_samples)]
     best = (np.inf, None, None)
     for tau in FILTER_TAUS_S:
         inverted = replace(data, p=y + tau * np.gradient(y, data.time))
@@ -79,10 +79,10 @@ def filtered_readings(adapter, terms, train, start_from) -> tuple[float, np.ndar
     return None if best[1] is None else best[1:]
 
 
-def windows(data) -> np.ndarray:
-    """(T,) the index of the open-loop window (:func:`~diegocal.pneumatic.predict.reset_starts`)
-    each sample lies in."""
-    return np.maximum(np.searchsorted(reset_starts(data), np.arange(data.n_samples), side="right") - 1, 0)
+def windows(starts: np.ndarray, n_samples: int) -> np.ndarray:
+    """(T,) the index of the open-loop window each sample lies in, the windows starting at
+    ``starts`` (:func:`~diegocal.pneumatic.predict.reset_starts`)."""
+    return np.maximum(np.searchsorted(starts, np.arange(n_samples), side="right") - 1, 0)
 
 
 def filter_rival(adapter, fitted, train, val, options: EngineOptions, exclude, term: Term):
@@ -101,12 +101,12 @@ def filter_rival(adapter, fitted, train, val, options: EngineOptions, exclude, t
     y = data.p.astype(float).copy()
     if exclude and name in exclude:
         y[np.asarray(exclude[name], bool)] = np.nan
-    now = predict_with_resets(fitted.params, data)
-    named = predict_with_resets(adapter.fit(terms + (term,), train).params, data)
+    now = adapter.open_loop(fitted)
+    named = adapter.open_loop(adapter.fit(terms + (term,), train))
     # both judged on the same samples; a window's error carries through it: the windows are the units
     rows = np.asarray(val, bool) & np.isfinite(y) & np.isfinite(now) & np.isfinite(reading) & np.isfinite(named)
     idx = np.flatnonzero(rows)
-    unit = windows(data)[idx]
+    unit = windows(reset_starts(data), data.n_samples)[idx]
     rival = out_of_sample_test((y - now)[idx], (reading - now)[idx], idx, rows, unit)
     with_term = out_of_sample_test((y - now)[idx], (named - now)[idx], idx, rows, unit)
     threshold = critical_t(options.alpha, options.n_units, rival.df)

@@ -35,12 +35,11 @@ def test_the_filter_s_reading_answers_a_ramp_exactly_from_each_reset():
 def slowed(log, chamber: str, tau: float):
     """``log`` with ``chamber``'s pressure read through a first-order filter of time constant ``tau``
     (the noise-free pressure filtered, the log's own noise and offset kept)."""
+    from experiments.pneumatic_oov import slow_reading
+
     i = log.streams["pressure"].names.index(chamber)
     true = log.truth.signals["pressure"].data[:, i]
-    alpha = 1.0 - np.exp(-np.diff(log.time) / tau)
-    new = true.copy()
-    for t in range(1, new.size):
-        new[t] = new[t - 1] + alpha[t - 1] * (true[t] - new[t - 1])
+    new = slow_reading(true, log.time, tau)
     p = log.streams["pressure"].data.copy()
     p[:, i] += new - true
     return replace(log, streams={**log.streams, "pressure": replace(log.streams["pressure"], data=p)})
