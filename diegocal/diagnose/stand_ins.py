@@ -111,4 +111,17 @@ def stand_in_finding(
         **(why or {}),
         "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
     }
-    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (stood.to_dict(),))
+    runner = {**stood.to_dict(), "why_not": stood_in_why(channel, flex, why)}
+    return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (runner,))
+
+
+def stood_in_why(channel, flex: Tested, why: dict | None) -> str:
+    """Why the term that stood in was not named, in words, for its row among the runners-up (its
+    scores there are the one-step test's; a rival's open-loop ones are said here)."""
+    why = why or {}
+    if rival := why.get("rival"):
+        return (f"stood in: {rival['model']} removes {rival['open_loop_validation_gain']:.0%} of the open-loop "
+                f"validation error, this term {rival['term_open_loop_validation_gain']:.0%}")
+    if declined := why.get("declined"):
+        return f"stood in: {declined['term']} explained more ({flex.test.gain:.0%}) and was declined"
+    return f"stood in: a flexible function of {channel}'s own state explains {flex.test.gain:.0%}"

@@ -257,6 +257,8 @@ def _significant(r: dict) -> str:
     why = r.get("why_not") or ""
     if why.startswith("tested again"):
         return "yes; next round"
+    if why.startswith("stood in"):
+        return "yes; stood in"
     return "yes; less on its channel" if why else "yes"
 
 
@@ -326,7 +328,8 @@ RUNNERS_NOTE = (
     "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
     "which holds the family-wise false-alarm rate over all candidates; a significant one was not added because the "
     "chosen term explains more of its channel's error (less on its channel) or acts elsewhere and is tested again "
-    "after it (next round)."
+    "after it (next round). Under an unexplained finding the one row is the term that stood in for it (stood in): "
+    "its scores are the one-step test's, and the finding's sentence says what explained more."
 )
 
 

@@ -68,3 +68,5 @@ def test_a_slow_pressure_sensor_is_unexplained_with_its_time_constant(clean):
     assert rival["tau_s"] in (0.03, 0.045, 0.065)  # the grid's steps around 45 ms
     assert rival["open_loop_validation_gain"] > rival["term_open_loop_validation_gain"] + 0.2
     assert f.evidence["stand_in"]["term"].split(":")[0] in ("supply_droop", "valve_delay", "chamber_leak")
+    (runner,) = f.runners_up  # the term that stood in, with what beat it on the open-loop error
+    assert runner["why_not"].startswith("stood in: the pressure read through a first-order filter")

@@ -480,3 +480,28 @@ def test_a_lasting_supply_sag_says_it_is_also_a_sensor_span_error():
     orifice = {**f, "extra": {"shape": "orifice"}}  # a sag through a restriction has no such twin
     assert "span" not in sentence(orifice)
     assert "span" not in sentence({**f, "extra": {"shape": "orifice", "span_error": -0.0104}})  # an edited file
+
+
+def test_the_term_that_stood_in_is_listed_as_such_among_the_runners_up():
+    """Under an unexplained finding its one runner-up is the stand-in: the table says so rather than
+    the generic reason for a significant candidate not added, and the reason names what beat it."""
+    from types import SimpleNamespace as NS
+
+    from diegocal.diagnose.stand_ins import stood_in_why
+    from diegocal.report.diagnose import runners_table
+
+    flex = NS(test=NS(gain=0.79))
+    rival = {"rival": {"model": "the pressure read through a first-order filter (τ 45 ms)",
+                       "open_loop_validation_gain": 0.79, "term_open_loop_validation_gain": 0.19}}
+    why = stood_in_why("elbow.flex", flex, rival)
+    assert why == ("stood in: the pressure read through a first-order filter (τ 45 ms) removes 79% of the "
+                   "open-loop validation error, this term 19%")
+    declined = {"declined": {"term": "pressure_offset:shoulder.ext", "why": "no held-out gain"}}
+    assert stood_in_why("shoulder.ext", flex, declined).startswith("stood in: pressure_offset:shoulder.ext explained")
+    assert stood_in_why("dip", flex, None) == "stood in: a flexible function of dip's own state explains 79%"
+    runner = {"cause": "supply_droop", "channel": "elbow.flex", "region": None, "validation_gain": 0.14, "t": 5.0,
+              "threshold_t": 3.0, "significant": True}
+    _, rows = runners_table({"runners_up": [{**runner, "why_not": why}]})
+    assert rows[0][-1] == "yes; stood in"
+    _, rows = runners_table({"runners_up": [{**runner, "why_not": "supply_droop explains more of the error"}]})
+    assert rows[0][-1] == "yes; less on its channel"
