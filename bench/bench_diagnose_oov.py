@@ -26,6 +26,7 @@ The bench reads ``/truth`` to judge only.
 
     python bench/bench_diagnose_oov.py                   # 10 logs per shape
     python bench/bench_diagnose_oov.py --logs 3 --seed 1
+    python bench/bench_diagnose_oov.py --robot panda --logs 4
 """
 
 from __future__ import annotations
@@ -138,14 +139,15 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="First seed (each log its own).")
     parser.add_argument("--shape", action="append", help="Shapes to run (repeatable); default all.")
     parser.add_argument("--duration", type=float, default=60.0, help="Log length, s.")
+    parser.add_argument("--robot", default="ur5", help="example-robot-data robot (ur5, panda) or a URDF path.")
     parser.add_argument("--verbose", action="store_true", help="One line per log.")
     args = parser.parse_args(argv)
     shapes = args.shape or ["smooth", *OUT_OF_VOCABULARY, *IN_VOCABULARY]
-    print(f"bench_diagnose_oov: UR5, {args.duration:g} s logs, seeds {args.seed}.., load {os.getloadavg()[0]:.1f}")
+    print(f"bench_diagnose_oov: {args.robot}, {args.duration:g} s logs, seeds {args.seed}.., load {os.getloadavg()[0]:.1f}")
     print("| shape | logs | misnamed | unexplained | named | new session: share removed (median / worst) | CPU s |")
     print("|---|---|---|---|---|---|---|")
     for shape in shapes:
-        rows = [run_one(shape, args.seed + i, duration=args.duration) for i in range(args.logs)]
+        rows = [run_one(shape, args.seed + i, args.robot, args.duration) for i in range(args.logs)]
         if args.verbose:
             for r in rows:
                 print(f"    {shape} seed {r['seed']}: {r['findings']} (hidden on {r['channel']})")
