@@ -143,7 +143,8 @@ def main(argv=None) -> int:
     parser.add_argument("--verbose", action="store_true", help="One line per log.")
     args = parser.parse_args(argv)
     shapes = args.shape or ["smooth", *OUT_OF_VOCABULARY, *IN_VOCABULARY]
-    print(f"bench_diagnose_oov: {args.robot}, {args.duration:g} s logs, seeds {args.seed}.., load {os.getloadavg()[0]:.1f}")
+    load = os.getloadavg()[0]
+    print(f"bench_diagnose_oov: {args.robot}, {args.duration:g} s logs, seeds {args.seed}.., load {load:.1f}")
     print("| shape | logs | misnamed | unexplained | named | new session: share removed (median / worst) | CPU s |")
     print("|---|---|---|---|---|---|---|")
     for shape in shapes:

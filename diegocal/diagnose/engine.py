@@ -384,9 +384,9 @@ def _stands_in(t: Tested, tested, declined, res, weights, train, val, options, e
 
 
 def _where(channel: str, unit: str) -> str:
-    """Where a progress line's term acts: its channel, and the unit (`` name``) when that is not
-    the channel itself (a chamber is both)."""
-    return channel if unit.strip() == channel else f"{channel}{unit}"
+    """Where a progress line's term acts: its channel, and the unit (`` name``) in brackets when
+    that is not the channel itself (a chamber is both): "joint_6 (staubli_tx40)"."""
+    return channel if unit.strip() in ("", channel) else f"{channel} ({unit.strip()})"
 
 
 def _key(term: Term) -> tuple[str, str]:

@@ -360,3 +360,12 @@ def test_a_common_cause_leaves_out_a_channel_where_a_declined_term_explains_more
     args = (None, None, None, None, EngineOptions(), {})
     assert engine._common(best, [best, other, lag], {}, *args) == [other]
     assert engine._common(best, [best, other, lag], {("torque_lag", "j2"): "rose held out"}, *args) == []
+
+
+def test_a_progress_line_names_the_unit_in_brackets_after_the_channel():
+    """A robot's joint reads "joint_6 (staubli_tx40)"; a chamber, its own unit, is named once."""
+    from diegocal.diagnose.engine import _where
+
+    assert _where("joint_6", " staubli_tx40") == "joint_6 (staubli_tx40)"
+    assert _where("elbow.flex", " elbow.flex") == "elbow.flex"
+    assert _where("c0", "") == "c0"
