@@ -15,7 +15,7 @@ from rich.markup import escape
 
 from diegocal.cli.app import app
 from diegocal.cli.choices import BATCH_COMMANDS
-from diegocal.cli.common import cli_errors, console, errors, output_path, summary
+from diegocal.cli.common import cli_errors, console, errors, output_folder, output_path, summary
 
 COMMAND_NAMES = BATCH_COMMANDS
 
@@ -49,7 +49,7 @@ def batch(
         typer.Option(
             "-o",
             "--output-dir",
-            callback=output_path,
+            callback=output_folder,
             help="Folder for the outputs (created if its parent exists); by default each output goes beside its log.",
         ),
     ] = None,

@@ -103,9 +103,19 @@ def usage_error(command: str, message: str) -> typer.Exit:
 
 
 def output_path(value):
-    """Callback of every option naming an output (a file, or a directory a command creates): its
-    folder must exist (a command never creates folders: a mistyped path would scatter results);
-    InputFileError otherwise (one line, exit 1), before any work. Takes one path or a tuple of them."""
+    """Callback of every option naming an output (a file, or a directory a command creates): it
+    needs a name (``-o ""`` is a usage error, exit 2) and its folder must exist (a command never
+    creates folders: a mistyped path would scatter results); InputFileError otherwise (one line,
+    exit 1), before any work. Takes one path or a tuple of them."""
+    for path in value if isinstance(value, (tuple, list)) else (value,):
+        if path is not None and not Path(path).name:
+            raise typer.BadParameter(f"{str(path)!r} names no file")
+    return output_folder(value)
+
+
+def output_folder(value):
+    """Callback of an option naming a folder for outputs (``batch -o``): its parent must exist;
+    the current folder (``.``) is one."""
     for path in value if isinstance(value, (tuple, list)) else (value,):
         if path is None:
             continue
@@ -114,6 +124,21 @@ def output_path(value):
             what = "is not a folder" if folder.exists() else "does not exist"
             raise InputFileError(f"{path}: the folder {folder} {what}; create it first")
     return value
+
+
+def distinct_output(outputs, inputs) -> None:
+    """Refuse an output that names one of the command's inputs (OptionError: one line, exit 2),
+    before any work: writing it would replace the log or model it was made from."""
+    for out in outputs:
+        for given in inputs:
+            if out is not None and given is not None and _same_file(Path(out), Path(given)):
+                raise OptionError(f"-o {out} is {given}, an input of the command: name another file")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    if a.exists() and b.exists():
+        return os.path.samefile(a, b)
+    return a.resolve() == b.resolve()
 
 
 def log_output(value):

@@ -17,6 +17,7 @@ from diegocal.cli.common import (
     cli_errors,
     command_line,
     default_output,
+    distinct_output,
     errors,
     output_path,
     refuse_unconverged,
@@ -84,6 +85,11 @@ class DiagnoseArgs:
     jobs: int
     quiet: bool
     allow_unconverged: bool = False
+
+    def __post_init__(self):
+        domains = (self.domain,) if self.domain else DOMAIN_NAMES
+        paths = [output_paths(self.log, self.output, d, several) for d in domains for several in (False, True)]
+        distinct_output([p for pair in paths for p in pair], (self.log,))
 
     def options(self, progress=None) -> DiagnoseOptions:
         """The library's options (its ``domain`` is set per domain by :func:`diegocal.api.diagnose`)."""

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, log_output, positive, summary
+from diegocal.cli.common import cli_errors, distinct_output, log_output, positive, summary
 
 HELP = (
     "Turn motion capture (C3D, TRC, Vicon Nexus and OptiTrack Motive CSV), ROS bags and lab CSVs into one "
@@ -44,12 +44,10 @@ def import_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary table.")] = False,
 ) -> None:
     """Turn C3D motion capture, ROS bags and lab CSVs into one diegocal log on one clock."""
-    from diegocal.errors import LogFormatError
     from diegocal.io import save_log
     from diegocal.io.importers import ImportMap, import_log, load_map
 
-    if any(output.resolve() == Path(s).resolve() for s in sources):
-        raise LogFormatError(f"{output}: the output would overwrite a source file")
+    distinct_output((output,), (*sources, map_file))
     mapping = load_map(map_file) if map_file is not None else ImportMap()
     result = import_log(sources, mapping, rate_hz=rate, robot=robot)
     save_log(result.log, output)

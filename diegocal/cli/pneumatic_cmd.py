@@ -16,6 +16,7 @@ from diegocal.cli.common import (
     cli_errors,
     command_line,
     default_output,
+    distinct_output,
     eta_lines,
     log_output,
     output_path,
@@ -45,6 +46,7 @@ class PneumaticArgs:
     allow_unconverged: bool = False
 
     def __post_init__(self):
+        distinct_output((self.out,), (self.log, self.steady_state))
         if self.all_chambers == bool(self.chamber):
             raise OptionError("name the chambers to fit: --chamber NAME (repeatable) or --all")
 
@@ -201,6 +203,7 @@ def pneumatic_merge(
     from diegocal.io import load_yaml, save_yaml
     from diegocal.pneumatic.files import merge_models
 
+    distinct_output((output,), files)
     merged = merge_models([load_yaml(f) for f in files], files)
     save_yaml(merged, output)
     rows = [("files", len(files)), ("chambers", len(merged["chambers"])), ("written", str(output))]

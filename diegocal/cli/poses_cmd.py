@@ -21,7 +21,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import RobotOfLog, cli_errors, default_output, log_output, summary
+from diegocal.cli.common import RobotOfLog, cli_errors, default_output, distinct_output, log_output, summary
 from diegocal.errors import MissingStreamError
 
 #: Random subsets of the same size the summary compares the choice with.
@@ -41,6 +41,9 @@ class PosesArgs:
     output: Path | None
     seed: int
     quiet: bool
+
+    def __post_init__(self):
+        distinct_output((self.out,), (self.candidates, self.calibration, self.recorded))
 
     @property
     def out(self) -> Path:

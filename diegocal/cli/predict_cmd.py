@@ -16,6 +16,7 @@ from diegocal.cli.common import (
     comma_list,
     command_line,
     default_output,
+    distinct_output,
     errors,
     log_output,
     split_words,
@@ -40,6 +41,9 @@ class PredictArgs:
     jobs: int
     quiet: bool
     seed: int
+
+    def __post_init__(self):
+        distinct_output((self.out,), (self.model, self.log))
 
     @property
     def out(self) -> Path:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from diegocal.cli.app import app
-from diegocal.cli.common import cli_errors, default_output, output_path, summary
+from diegocal.cli.common import cli_errors, default_output, distinct_output, output_path, summary
 
 
 @app.command("report")
@@ -52,10 +52,11 @@ def report(
     from diegocal.report import ReportContext, write_report
     from diegocal.report.pdf import headlines, plan_report
 
+    out = output or default_output(results[0], ".report.pdf")
+    distinct_output((out,), (*results, *(heldout or ())))
     for h in heldout or ():
         if not h.is_file():
             raise InputFileError(f"{h}: no such held-out log")
-    out = output or default_output(results[0], ".report.pdf")
     command = "diegocal " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else "diegocal report"
     context = ReportContext(robot=robot, heldout=tuple(heldout or ()))
     write_report(results, out, context, command=command)

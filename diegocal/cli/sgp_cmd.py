@@ -30,6 +30,7 @@ from diegocal.cli.common import (
     comma_list,
     command_line,
     default_output,
+    distinct_output,
     errors,
     output_path,
     progress_enabled,
@@ -103,6 +104,7 @@ class SgpArgs:
     allow_unconverged: bool = False
 
     def __post_init__(self):
+        distinct_output((self.out,), (self.log,))
         if self.joint_region and not self.region:
             raise OptionError("--joint-region needs --region (the joint GP is cut where the two-stage GP is)")
 

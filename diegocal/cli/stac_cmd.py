@@ -22,6 +22,7 @@ from diegocal.cli.common import (
     cli_errors,
     command_line,
     default_output,
+    distinct_output,
     errors,
     log_output,
     output_path,
@@ -59,6 +60,7 @@ class StacArgs:
     geometry: bool = False
 
     def __post_init__(self):
+        distinct_output((self.out, self.joint_angles), (self.log,))
         if self.cv and self.method != "stac":
             raise OptionError("--cv is for --method stac")
         if self.geometry and self.method != "stac":

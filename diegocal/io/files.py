@@ -238,6 +238,13 @@ def _load_h5(path: Path, nan_ok: bool = False) -> Log:
         f = h5py.File(path, "r")
     except OSError as exc:
         raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
+    try:
+        return _read_h5(f, path, nan_ok)
+    except (OSError, RuntimeError) as exc:  # a damaged file opens, then fails where its bytes are read
+        raise LogFormatError(f"{path}: damaged HDF5 file, it cannot be read ({exc})") from None
+
+
+def _read_h5(f, path: Path, nan_ok: bool) -> Log:
     with f:
         fmt = _attr_str(f.attrs.get("format"))
         if fmt != FORMAT:

@@ -116,6 +116,18 @@ USAGE = [  # exit 2
     ("simulate dynamics -o {tmp}/s.h5 --region theta", "JOINT:LOW:HIGH"),
     ("simulate dynamics -o {tmp}/s.txt --duration 1", ".h5"),
     ("simulate dynamics -o {tmp}/s.h5 --effect nosuch", "not a dynamics effect"),
+    # an output that names an input (it would replace the log or model it is made from)
+    ("stac {tmp}/r.h5 -o {tmp}/r.h5", "an input of the command"),
+    ("stac {tmp}/r.h5 --joint-angles {tmp}/r.h5", "an input of the command"),
+    ("diagnose {tmp}/r.h5 -o {tmp}/r.h5", "an input of the command"),
+    ("pneumatic-fit {tmp}/r.h5 --all -o {tmp}/r.h5", "an input of the command"),
+    ("predict {tmp}/m.yaml {tmp}/r.h5 -o {tmp}/r.h5", "an input of the command"),
+    ("sgp-fit {tmp}/r.h5 -o {tmp}/r.h5", "an input of the command"),
+    ("report {tmp}/d.yaml -o {tmp}/d.yaml", "an input of the command"),
+    ("report {tmp}/d.yaml --heldout {tmp}/r.h5 -o {tmp}/r.h5", "an input of the command"),
+    ("pneumatic-merge {tmp}/a.yaml -o {tmp}/a.yaml", "an input of the command"),
+    ("import {tmp}/a.csv -o {tmp}/a.csv", "an input of the command"),
+    ("stac {tmp}/r.h5 -o .", "names no file"),
 ]
 
 BAD_INPUT = [  # exit 1
@@ -175,3 +187,21 @@ def test_exit_code(tmp_path, line, code, needle):
     assert result.exit_code == code, result.output
     assert message.startswith("error:") and needle in message, message
     assert not missing.exists()
+
+
+@pytest.mark.parametrize("command", [["stac"], ["diagnose"], ["pneumatic-fit", "--all"], ["sgp-fit"]])
+def test_an_output_that_names_the_log_is_refused_and_the_log_kept(tmp_path, command):
+    """-o LOG would have replaced the log with the command's output (exit 0): it is a usage error,
+    given before any work, and the file is as it was."""
+    log = tmp_path / "r.h5"
+    log.write_bytes(b"the log's bytes")
+    result = runner.invoke(app, [command[0], str(log), *command[1:], "-o", str(tmp_path / "." / "r.h5")])
+    assert "an input of the command" in one_line_error(result) and result.exit_code == 2
+    assert log.read_bytes() == b"the log's bytes"
+
+
+def test_an_empty_output_is_a_usage_error_before_any_work(tmp_path):
+    log = tmp_path / "r.h5"
+    log.write_bytes(b"not read")
+    result = runner.invoke(app, ["diagnose", str(log), "-o", ""])
+    assert "names no file" in one_line_error(result) and result.exit_code == 2

@@ -178,7 +178,7 @@ def test_bad_input_is_one_line_exit_1_and_writes_nothing(tmp_path, csv_file, map
 def test_output_must_be_a_log_and_not_a_source(tmp_path, csv_file):
     assert "a log is written as .h5, .hdf5 or .csv" in one_line_error(runner.invoke(app, ["import", str(csv_file),
                                                                                        "-o", str(tmp_path / "o.txt")]))
-    assert "would overwrite a source" in one_line_error(runner.invoke(app, ["import", str(csv_file), "-o",
+    assert "an input of the command" in one_line_error(runner.invoke(app, ["import", str(csv_file), "-o",
                                                                             str(tmp_path / "a.csv")]))
     result = run_ok(["import", csv_file, "-o", tmp_path / "o.csv"])  # a diegocal CSV is fine
     assert "robot" in result.output and load_log(tmp_path / "o.csv").streams["tau"].names == ("j1",)

@@ -124,6 +124,24 @@ def test_not_hdf5_or_csv(tmp_path):
         load_log(path)
 
 
+@pytest.mark.parametrize("where", ["index", "data"])
+def test_a_damaged_hdf5_log_is_one_error_that_names_the_file(tmp_path, where):
+    """A file whose header opens but whose bytes were overwritten (a failed copy, a bad disk) fails
+    where they are read, its index or a compressed stream's data: the error names the file."""
+    rng = np.random.default_rng(0)
+    log = Log(time=np.arange(20000) * 0.01, streams={"tau": make_stream(["a", "b"], rng.normal(size=(20000, 2)))})
+    path = tmp_path / "a.h5"
+    save_log(log, path)
+    size = path.stat().st_size
+    with h5py.File(path, "r") as f:  # a chunk of the stream's data, or a third of the file (its B-tree)
+        at, n = (f["tau/data"].id.get_chunk_info(0).byte_offset, 2000) if where == "data" else (size // 3, size // 3)
+    with open(path, "r+b") as fh:
+        fh.seek(at)
+        fh.write(rng.bytes(n))
+    with pytest.raises(LogFormatError, match=r"a\.h5: damaged HDF5 file, it cannot be read \(.+\)"):
+        load_log(path)
+
+
 def test_wrong_format_and_version(tmp_path):
     save_log(good_log(), tmp_path / "a.h5")
     with h5py.File(tmp_path / "a.h5", "a") as f:
