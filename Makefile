@@ -61,7 +61,7 @@ demo: $(STAMP)
 	@printf '\n== demo %s\n' "4/7 torque model of the 3-link arm (SGP)"
 	$(DIEGOCAL) sgp-fit sample_data/arm3_dynamics.h5 --model sgp -o $(OUT)/arm3.sgp --quiet
 	$(DIEGOCAL) simulate dynamics --robot arm3 --duration 8 --rate 50 --seed 2 --robot-seed 1 --trajectory figure8-horizontal \
-		--effect position_friction:joint3 -o $(OUT)/arm3_heldout.h5 --quiet
+		--effect position_friction:joint3 --region joint3:1.3:1.6 -o $(OUT)/arm3_heldout.h5 --quiet
 	@printf '\n== demo %s\n' "5/7 diagnosis, kinematics: finger with a hidden pot nonlinearity"
 	$(DIEGOCAL) diagnose sample_data/finger_hidden_nonlinearity.h5 -o $(OUT)/kinematics.diagnosis.yaml --quiet
 	@printf '\n== demo %s\n' "6/7 diagnosis, dynamics and pneumatics: hidden friction, hidden valve delay"

@@ -78,6 +78,8 @@ def main(out: Path) -> None:
         "figure8-horizontal",
         "--effect",
         "position_friction:joint3",
+        "--region",
+        "joint3:1.3:1.6",  # inside the range the figure-eight visits (the default region is not)
         "-o",
         str(out / "arm3_dynamics.h5"),
     )
