@@ -163,6 +163,34 @@ def uncertainty_words(coverage: dict) -> str:
     return "the ±2σ band is " + "; ".join(parts)
 
 
+#: A joint whose learnt noise σ_v is this many times the median of the model's other joints: its
+#: ±2σ band covers the data because the model's error is that large there, not because it is right.
+NOISY = 10.0
+
+
+def noisy_joints(hyper: dict) -> dict:
+    """joint -> (its σ_v, the other joints' median σ_v) where σ_v is NOISY times that median or more
+    (a model of three or more joints; torque sensors of one robot are of one kind)."""
+    sigma = {j: float(h["sigma_v"]) for j, h in hyper.items() if isinstance(h, dict) and h.get("sigma_v")}
+    out = {}
+    for j, v in sigma.items():
+        others = [w for k, w in sigma.items() if k != j]
+        if len(others) >= 2 and v >= NOISY * float(np.median(others)) > 0:
+            out[j] = (v, float(np.median(others)))
+    return out
+
+
+def noisy_words(hyper: dict) -> str:
+    """A sentence on each joint whose learnt noise is far above its siblings' ("" when none is)."""
+    return "".join(
+        f" But on {j} the noise the model learnt, σ_v {v:.3g}, is {v / rest:.0f} times the other joints' median "
+        f"({rest:.3g}): its band is wide because the model's error is large there, so it covers the data without "
+        "the model being right; an effect the model lacks is likely (diegocal diagnose names it), unless that "
+        "joint's sensor is that noisy."
+        for j, (v, rest) in noisy_joints(hyper).items()
+    )
+
+
 def model_paragraphs(model: Path, context) -> list[str]:
     """One model in plain words: what was fitted on what and how good it is; what the guard did."""
     s = load_summary(model)
@@ -197,6 +225,7 @@ def model_paragraphs(model: Path, context) -> list[str]:
             )
     else:
         text += " No held-out log was given (diegocal report ... --heldout LOG): in-sample numbers only."
+    text += noisy_words(s.get("hyperparameters") or {})
     out = [text]
     more = []
     hyper = s.get("hyperparameters") or {}

@@ -167,3 +167,19 @@ def test_a_prediction_log_as_heldout_is_scored_against_its_measured_torque(arm2,
     from_prediction = heldout_prediction(model, (str(tmp_path / "p.h5"),))
     np.testing.assert_allclose(from_prediction.score.nmse, from_log.score.nmse, rtol=1e-9)
     assert np.all(from_prediction.score.nmse > 0)
+
+
+def test_a_joint_whose_learnt_noise_dwarfs_its_siblings_is_not_called_right():
+    """The Panda with a position friction on joint 4, fitted without a GP there: σ_v 2.96 N·m where
+    the other joints learnt 0.01. Its band covers the data because it is that wide; the report says
+    so rather than only that the band is about right."""
+    from diegocal.report.sgp_text import noisy_joints, noisy_words
+
+    hyper = {f"j{i}": {"sigma_v": 0.0104 + 0.0002 * i} for i in range(1, 8)}
+    hyper["j4"] = {"sigma_v": 2.96}
+    assert list(noisy_joints(hyper)) == ["j4"]
+    words = noisy_words(hyper)
+    assert "on j4 the noise the model learnt, σ_v 2.96, is 2" in words and "an effect the model lacks" in words
+    hyper["j4"] = {"sigma_v": 0.05}  # five times the others: a noisier sensor is plausible
+    assert noisy_words(hyper) == ""
+    assert noisy_joints({"a": {"sigma_v": 1.0}, "b": {"sigma_v": 0.01}}) == {}  # two joints: no reference
