@@ -61,7 +61,10 @@ class Cause:
     (the rigid body's base parameters depend on the robot). ``region``: "none", "optional" or
     "required". ``extra``: keys a term of this cause must carry in ``extra`` from the start
     (facts its behaviour derives from the data, such as a pot curve's centre, are added when it
-    is fitted); ``partner``: the name of the ``extra`` key that holds another channel.
+    is fitted); ``partner``: the name of the ``extra`` key that holds another channel;
+    ``signed_by``: the variable (on the term's channel) whose sign the evidence residual is
+    multiplied by: friction follows the direction of motion, and its mean residual over an angle the
+    joint crosses both ways averages to nothing.
     """
 
     id: str
@@ -74,6 +77,7 @@ class Cause:
     extra: tuple[str, ...] = ()
     partner: str | None = None
     named_by_model: bool = False
+    signed_by: str | None = None
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -152,7 +156,7 @@ _CAUSES = (
           "viscous friction (a torque proportional to the velocity)"),
     Cause("coulomb_friction", "dynamics", "term", "joint",
           (_p("coulomb", "N·m", "torque that follows the sign of the velocity"),),
-          "Coulomb friction (a torque that follows the sign of the velocity)"),
+          "Coulomb friction (a torque that follows the sign of the velocity)", signed_by="qd"),
     Cause("stribeck_friction", "dynamics", "term", "joint",
           (_p("amplitude", "N·m", "torque at zero velocity beyond Coulomb's (> 0: static friction above "
               "Coulomb, Stribeck; < 0: a smooth, pre-sliding transition through zero velocity)"),
@@ -161,11 +165,11 @@ _CAUSES = (
           "friction's shape near zero velocity (a Stribeck or smooth transition)"),
     Cause("load_friction", "dynamics", "term", "joint",
           (_p("coefficient", "1", "friction torque per unit of the joint's load torque (|τ| sign(qd))"),),
-          "friction that grows with the load the joint carries (a gear under torque)"),
+          "friction that grows with the load the joint carries (a gear under torque)", signed_by="qd"),
     Cause("position_friction", "dynamics", "term", "joint",
           (_p("coulomb", "N·m", "Coulomb level inside the region"),
            _p("viscous", "N·m·s/rad", "viscous coefficient inside the region")),
-          "friction confined to part of the joint's range", region="required"),
+          "friction confined to part of the joint's range", region="required", signed_by="qd"),
     Cause("spring", "dynamics", "term", "joint", (_p("stiffness", "N·m/rad", "torque per radian"),),
           "a spring (a torque proportional to the joint angle)"),
     Cause("torque_offset", "dynamics", "term", "joint", (_p("offset", "N·m", "constant torque"),),

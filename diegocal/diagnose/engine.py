@@ -16,6 +16,7 @@ from functools import partial
 
 import numpy as np
 
+from diegocal.causes import CAUSES
 from diegocal.diagnose.evidence import curves, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
 from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates, simplest
@@ -156,8 +157,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                     else f"added with {best.term.label} in one round: the same cause"
                 )
             if variable is not None:
+                signed_by = getattr(CAUSES.get(chosen.term.cause), "signed_by", None)  # friction: × sign(qd)
                 evidence["curves"] = curves(
-                    res, res_new, chosen.channels[0], variable, shown, length, train, options.n_bins, exclude
+                    res, res_new, chosen.channels[0], variable, shown, length, train, options.n_bins, exclude, signed_by
                 )
             added = {_key(g.term) for g in group} | {_key(best.term)}
             runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]

@@ -26,11 +26,18 @@ def evidence_variable(term: Term, res: Residuals) -> str | None:
     return None
 
 
-def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclude) -> dict:
+def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclude, signed_by=None) -> dict:
     """Residual mean per bin of ``variable`` on the shown (validation + held-out) samples, before
-    and (when ``res_new`` is given) after, with block standard errors: the evidence plot's data."""
+    and (when ``res_new`` is given) after, with block standard errors: the evidence plot's data.
+    ``signed_by`` (a cause's :attr:`~diegocal.causes.Cause.signed_by`, e.g. "qd"): the residual is
+    multiplied by the sign of that variable on ``channel`` (``signed_by`` in the output names it),
+    unless that is the variable binned."""
 
     x = np.asarray(res.variables[variable], float)
+    sign_name = f"{signed_by}.{channel}" if signed_by else None
+    if sign_name not in res.variables or variable == sign_name:
+        sign_name = None
+    sign = np.sign(np.asarray(res.variables[sign_name], float)) if sign_name else 1.0
     edges = quantile_edges(x[train], n_bins)
     cl = sub_blocks(shown, length)
     out = {}
@@ -40,8 +47,10 @@ def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclud
         v = np.array(r.channels[channel], float)
         if exclude and channel in exclude:
             v[np.asarray(exclude[channel], bool)] = np.nan
-        scalar = v if v.ndim == 1 else np.linalg.norm(v, axis=1)
+        scalar = (v if v.ndim == 1 else np.linalg.norm(v, axis=1)) * sign
         out[name] = binned_means(np.where(shown, scalar, np.nan), x, cl, edges, variable).to_dict()
     out["unit"] = res.units.get(channel, "")
     out["channel"] = channel
+    if sign_name:
+        out["signed_by"] = sign_name
     return out

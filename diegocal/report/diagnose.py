@@ -211,10 +211,18 @@ def plot_evidence(f: dict, ax=None):
         f"(bin medians; {sum(counts)} samples in {len(counts)} bins)"
     )
     magnitude = " (magnitude)" if curves.get("before") and _is_norm(f) else ""
-    ax.set_ylabel(f"mean residual{magnitude} [{unit}]")
+    signed = f" × sign({curves['signed_by']})" if curves.get("signed_by") else ""
+    ax.set_ylabel(f"mean residual{magnitude}{signed} [{unit}]")
     ax.set_title(f"{f['cause']} on {f['channel']}: residual on the validation and held-out blocks")
     ax.legend(fontsize=6)
     return ax
+
+
+def _shown_reach(f: dict) -> tuple[float, float] | None:
+    """The lowest and highest bin medians of the evidence curve that hold samples (None: none)."""
+    c = (((f.get("evidence") or {}).get("curves") or {}).get("before")) or {}
+    centres = [x for x, n in zip(c.get("centre") or [], c.get("count") or [], strict=False) if n and x is not None]
+    return (min(centres), max(centres)) if centres else None
 
 
 def _is_norm(f: dict) -> bool:
@@ -305,8 +313,14 @@ def evidence_caption(ax, f: dict) -> str:
     labels): no colour or region is described that the plot does not hold."""
     labels = ax.get_legend_handles_labels()[1]
     drawn = [DRAWN_WORDS[label] for label in DRAWN_WORDS if label in labels]
+    signed = ((f.get("evidence") or {}).get("curves") or {}).get("signed_by")
+    what = (
+        f"Mean residual times the sign of {signed} (the residual in the direction of motion, which friction opposes)"
+        if signed
+        else "Mean residual"
+    )
     text = (
-        "Mean residual on the validation and held-out blocks in bins of the variable that localises the finding "
+        f"{what} on the validation and held-out blocks in bins of the variable that localises the finding "
         "(points at the bin medians): " + "; ".join(drawn) + "."
     )
     if BEFORE in labels or AFTER in labels:
@@ -315,6 +329,14 @@ def evidence_caption(ax, f: dict) -> str:
             "independent). A curve that follows zero within its band has nothing left to explain."
         )
     r = f.get("region")
+    reach = _shown_reach(f)
+    if r and REGION in labels and reach and (r["low"] > reach[1] or (r["high"] or np.inf) < reach[0]):
+        text += (
+            f" The validation and held-out blocks reach {f['evidence']['variable']} from {reach[0]:.3g} to "
+            f"{reach[1]:.3g} only: the region found lies outside them (the training blocks placed it), and what is "
+            "shown is what the extended model changes elsewhere (the baseline had been fitted to absorb the "
+            "structure the region holds)."
+        )
     if r and REGION not in labels:
         text += (
             f" The finding's region ({r.get('variable')} from {r['low']:.3g} to {r['high']:.3g}) is not a range of "

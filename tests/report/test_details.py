@@ -235,6 +235,23 @@ def test_a_caption_describes_what_is_drawn(region, variable, green):
     assert ("is not drawn" in caption) == (region and not green)
 
 
+def test_a_friction_curve_says_it_is_signed_and_a_region_the_shown_blocks_miss():
+    """A curve taken times sign(qd) says so on its axis and in its caption; a region found outside
+    the bins the validation and held-out blocks fill is said to lie outside them."""
+    from diegocal.report.diagnose import evidence_caption
+
+    f = _finding(True)
+    f["evidence"]["curves"]["signed_by"] = "qd.joint3"
+    f["evidence"]["curves"]["before"]["count"] = [100] * 8
+    ax = plot_evidence(f)
+    assert "× sign(qd.joint3)" in ax.get_ylabel()
+    caption = evidence_caption(ax, f)
+    assert caption.startswith("Mean residual times the sign of qd.joint3") and "lies outside them" not in caption
+    f["region"] = {"variable": "q.joint3", "low": 1.7, "high": 2.3}  # beyond the last bin (1.6)
+    caption = evidence_caption(plot_evidence(f), f)
+    assert "reach q.joint3 from 0.2 to 1.6 only: the region found lies outside them" in caption
+
+
 def test_every_diagnosis_caption_matches_its_figure(results, tmp_path):
     """In a report of findings with and without regions, no page speaks of a green region it does
     not draw, and a caption refers to the figure above only when that figure draws the same."""
