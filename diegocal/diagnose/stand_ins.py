@@ -120,8 +120,9 @@ def stood_in_why(channel, flex: Tested, why: dict | None) -> str:
     scores there are the one-step test's; a rival's open-loop ones are said here)."""
     why = why or {}
     if rival := why.get("rival"):
+        term = rival.get("term_open_loop_validation_gain")
         return (f"stood in: {rival['model']} removes {rival['open_loop_validation_gain']:.0%} of the open-loop "
-                f"validation error, this term {rival['term_open_loop_validation_gain']:.0%}")
+                "validation error" + (f", this term {term:.0%}" if term is not None else ""))
     if declined := why.get("declined"):
         return f"stood in: {declined['term']} explained more ({flex.test.gain:.0%}) and was declined"
     return f"stood in: a flexible function of {channel}'s own state explains {flex.test.gain:.0%}"

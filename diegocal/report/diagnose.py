@@ -315,7 +315,7 @@ def evidence_caption(ax, f: dict) -> str:
     drawn = [DRAWN_WORDS[label] for label in DRAWN_WORDS if label in labels]
     signed = ((f.get("evidence") or {}).get("curves") or {}).get("signed_by")
     what = (
-        f"Mean residual times the sign of {signed} (the residual in the direction of motion, which friction opposes)"
+        f"Mean residual times the sign of {signed} (friction opposes the motion)"
         if signed
         else "Mean residual"
     )
@@ -350,8 +350,7 @@ RUNNERS_NOTE = (
     "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
     "which holds the family-wise false-alarm rate over all candidates; a significant one was not added because the "
     "chosen term explains more of its channel's error (less on its channel) or acts elsewhere and is tested again "
-    "after it (next round). Under an unexplained finding the one row is the term that stood in for it (stood in): "
-    "its scores are the one-step test's, and the finding's sentence says what explained more."
+    "after it (next round)."
 )
 
 
@@ -430,6 +429,8 @@ def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool
     if not rows:
         return Drawn([sheet], k + 1, caption, False)
     note = f"Columns as in Finding {after.number}'s table above." if after is not None and after.table else RUNNERS_NOTE
+    if any(str(r.get("why_not", "")).startswith("stood in") for r in f.get("runners_up") or ()):
+        note += " Stood in: the term the finding's sentence names, which something else explained better."
     sheets = table_sheets("Runners-up of this round", columns, rows, sheet=sheet, notes=(note,))
     return Drawn(sheets, k + 1, caption, True)
 

@@ -246,7 +246,8 @@ def test_a_friction_curve_says_it_is_signed_and_a_region_the_shown_blocks_miss()
     ax = plot_evidence(f)
     assert "× sign(qd.joint3)" in ax.get_ylabel()
     caption = evidence_caption(ax, f)
-    assert caption.startswith("Mean residual times the sign of qd.joint3") and "lies outside them" not in caption
+    assert caption.startswith("Mean residual times the sign of qd.joint3 (friction")
+    assert "lies outside them" not in caption
     f["region"] = {"variable": "q.joint3", "low": 1.7, "high": 2.3}  # beyond the last bin (1.6)
     caption = evidence_caption(plot_evidence(f), f)
     assert "reach q.joint3 from 0.2 to 1.6 only: the region found lies outside them" in caption
