@@ -183,6 +183,7 @@ def _dynamics(path: Path, log: Log, options: PredictOptions) -> Prediction:
         streams["tau_measured"] = make_stream(names, measured)
         sc = score(measured, pred.tau, names, std=pred.tau_std)
         rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, sc.nmse, strict=True)]
+        rows += [(f"RMSE {j}", float(e)) for j, e in zip(names, sc.rmse, strict=True)]  # diagnose's measure
         rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, sc.coverage, strict=True)]
         warnings = coverage_warnings(names, sc.coverage)
     out = Log(log.time, streams, robot=log.robot, rate_hz=log.rate_hz, source=options.source)

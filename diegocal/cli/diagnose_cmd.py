@@ -289,5 +289,7 @@ def _summary_rows(done: Diagnosed) -> list:
             which = "open-loop validation gain" if ev.get("rival") else "validation gain"
             gain = f"{which} {ev.get('validation_gain', 0):.0%} (not explained by any term{stood})"
         rows.append((f"  {f['cause']} on {where}", gain))
+    late = unconverged(done)
+    rows.append(("converged", "yes: every kept fit to its tolerance" if late is None else "no: see the warning below"))
     rows += [("diagnosis", str(out)), ("extended model", str(extended))]
     return rows

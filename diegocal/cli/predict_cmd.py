@@ -122,7 +122,14 @@ def predict(
         int, typer.Option("--jobs", "-j", min=1, help="Threads for the joint-angle tracking of STAC models.")
     ] = 1,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress and no summary table.")] = False,
-    seed: Annotated[int, typer.Option("--seed", help="Random seed (the predictions are deterministic).")] = 0,
+    seed: Annotated[
+        int,
+        typer.Option(
+            "--seed",
+            help="Recorded in the prediction's header; the predictions do not depend on it (scripts may pass "
+            "one --seed to every command).",
+        ),
+    ] = 0,
 ) -> None:
     """Predict a held-out log with a fitted model and report the error (the model file is only read)."""
     args = PredictArgs(**ctx.params)

@@ -310,10 +310,11 @@ def sgp_fit(
     ]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
-    summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
     from diegocal.sgp.store import load_summary
 
     why = unconverged(load_summary(out))
+    rows.append(("converged", "yes: every likelihood optimisation to its tolerance" if why is None else f"no: {why}"))
+    summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
     late = () if why is None else (f"{why}; written with converged: false",)
     refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 

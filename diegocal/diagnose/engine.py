@@ -93,7 +93,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     length = cluster_length([np.asarray(r, float)[train] for r in res.channels.values()])
     shown = val | held
     time = res.variables.get("time")
-    say(f"Show step{unit}: {len(res.channels)} channels")
+    say(f"residuals of the baseline{unit}: {len(res.channels)} channels, each against its state")
     shown_tests = show(res, weights, train, val, shown, length, options, time)
     fitted, terms, exclude, findings, minor = write_off(adapter, fitted, res, train, held, options, say, unit)
     if fitted is not baseline:

@@ -50,9 +50,10 @@ FRICTION_LEAVES = {"viscous_friction": "fv", "coulomb_friction": "fc"}
 PARAMETER_NOTE = (
     "Base parameters (thesis eq. 3.30 reduced by QR with column pivoting): each is the named parameter of the "
     "link that a joint moves plus the combination of the parameters the regressor cannot tell apart from it, so a "
-    "base inertia may be negative. ± SE: one posterior standard deviation. Parameters of terms added by "
-    "diagnose (e.g. friction confined to part of a joint's range) follow the base parameters."
+    "base inertia may be negative. ± SE: one posterior standard deviation."
 )
+#: Said under the table when the model has terms diagnose added.
+ADDED_NOTE = " Then the parameters of the terms diagnose added (e.g. friction confined to part of a joint's range)."
 
 
 def model_kind(summary: dict) -> str:
@@ -184,4 +185,4 @@ def parameter_table(summary: dict, prismatic: frozenset = frozenset()) -> tuple[
         Column("± SE"),
         Column("unit", align="left"),
     ]
-    return columns, rows, [PARAMETER_NOTE]
+    return columns, rows, [PARAMETER_NOTE + (ADDED_NOTE if added else "")]

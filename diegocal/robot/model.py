@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from diegocal.errors import RobotConfigError, UnknownNameError
+from diegocal.errors import OptionError, RobotConfigError, UnknownNameError
 from diegocal.io import load_yaml
 from diegocal.io.log import JOINT_STREAMS
 from diegocal.io.urdf import is_xacro
@@ -416,6 +416,8 @@ def resolve_robot_dir(robot: str | Path | None, log_robot: str | None) -> Path:
     ``robot`` is a directory, a URDF file (or xacro description) or the name of a bundled robot;
     ``None`` means the log's ``robot`` attribute (any of those).
     """
+    if robot is not None and not str(robot).strip():
+        raise OptionError("--robot is empty: give a robot directory, a URDF file or a bundled robot's name")
     if robot is None:
         if not log_robot:
             raise RobotConfigError("the log names no robot: pass --robot DIR")

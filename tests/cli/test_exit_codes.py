@@ -11,6 +11,8 @@ opened. ``{tmp}`` is a fresh folder, ``{text}`` a text file in it; ``{missing}``
 does not exist, and no command may create it.
 """
 
+from pathlib import Path
+
 import pytest
 from typer.testing import CliRunner
 
@@ -198,6 +200,12 @@ def test_an_output_that_names_the_log_is_refused_and_the_log_kept(tmp_path, comm
     result = runner.invoke(app, [command[0], str(log), *command[1:], "-o", str(tmp_path / "." / "r.h5")])
     assert "an input of the command" in one_line_error(result) and result.exit_code == 2
     assert log.read_bytes() == b"the log's bytes"
+
+
+def test_an_empty_robot_is_a_usage_error(tmp_path):
+    log = Path(__file__).resolve().parents[2] / "sample_data" / "arm3_dynamics.h5"
+    result = runner.invoke(app, ["diagnose", str(log), "--robot", "", "-o", str(tmp_path / "d.yaml")])
+    assert "--robot is empty" in one_line_error(result) and result.exit_code == 2
 
 
 def test_an_empty_output_is_a_usage_error_before_any_work(tmp_path):
