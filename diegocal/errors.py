@@ -17,6 +17,10 @@ class LogFormatError(DiegocalError, ValueError):
     """A log file does not follow the diegocal log format (DESIGN.md, version 1)."""
 
 
+class DamagedFileError(LogFormatError):
+    """A log file of the right kind whose bytes cannot be read (overwritten, a failed copy)."""
+
+
 class MissingStreamError(DiegocalError, KeyError):
     """A command needs a stream the log does not have."""
 

@@ -40,7 +40,7 @@ from pathlib import Path
 
 from diegocal.domains import DOMAINS
 from diegocal.domains import domain as domain_record
-from diegocal.errors import DiegocalError, InputFileError, LogFormatError, OptionError
+from diegocal.errors import DamagedFileError, DiegocalError, InputFileError, LogFormatError, OptionError
 
 #: File name endings of logs; anything else in a folder is not looked at.
 LOG_SUFFIXES = (".h5", ".hdf5", ".csv")
@@ -185,7 +185,8 @@ def _streams(path: Path) -> tuple[str, tuple[str, ...] | str]:
         return "log", log_streams(path)
     except DiegocalError as exc:
         reason = str(exc).removeprefix(f"{path}: ")
-        return ("other" if isinstance(exc, LogFormatError) and _readable(path) else "unreadable"), reason
+        other = isinstance(exc, LogFormatError) and not isinstance(exc, DamagedFileError) and _readable(path)
+        return ("other" if other else "unreadable"), reason
 
 
 def _readable(path: Path) -> bool:

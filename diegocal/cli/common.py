@@ -109,7 +109,7 @@ def output_path(value):
     exit 1), before any work. Takes one path or a tuple of them."""
     for path in value if isinstance(value, (tuple, list)) else (value,):
         if path is not None and not Path(path).name:
-            raise typer.BadParameter(f"{str(path)!r} names no file")
+            raise typer.BadParameter("an output needs a file name (empty, or a folder such as '.')")
     return output_folder(value)
 
 
@@ -126,13 +126,17 @@ def output_folder(value):
     return value
 
 
-def distinct_output(outputs, inputs) -> None:
-    """Refuse an output that names one of the command's inputs (OptionError: one line, exit 2),
-    before any work: writing it would replace the log or model it was made from."""
-    for out in outputs:
+def distinct_output(outputs, inputs, apart: bool = False) -> None:
+    """Refuse an output that names one of the command's inputs (the log, a model, a URDF given as
+    --robot; OptionError: one line, exit 2), before any work: writing it would replace the file it
+    is made from. ``apart``: the outputs must name different files too."""
+    outputs = [Path(o) for o in outputs if o is not None]
+    for k, out in enumerate(outputs):
         for given in inputs:
-            if out is not None and given is not None and _same_file(Path(out), Path(given)):
-                raise OptionError(f"-o {out} is {given}, an input of the command: name another file")
+            if given is not None and str(given).strip() and _same_file(out, Path(given)):
+                raise OptionError(f"the output {out} is {given}, an input of the command: name another file")
+        if apart and any(_same_file(out, other) for other in outputs[k + 1 :]):
+            raise OptionError(f"two outputs are one file, {out}: name them apart")
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -89,7 +89,7 @@ class DiagnoseArgs:
     def __post_init__(self):
         domains = (self.domain,) if self.domain else DOMAIN_NAMES
         paths = [output_paths(self.log, self.output, d, several) for d in domains for several in (False, True)]
-        distinct_output([p for pair in paths for p in pair], (self.log,))
+        distinct_output([p for pair in paths for p in pair], (self.log, self.robot))
 
     def options(self, progress=None) -> DiagnoseOptions:
         """The library's options (its ``domain`` is set per domain by :func:`diegocal.api.diagnose`)."""
@@ -290,6 +290,6 @@ def _summary_rows(done: Diagnosed) -> list:
             gain = f"{which} {ev.get('validation_gain', 0):.0%} (not explained by any term{stood})"
         rows.append((f"  {f['cause']} on {where}", gain))
     late = unconverged(done)
-    rows.append(("converged", "yes: every kept fit to its tolerance" if late is None else "no: see the warning below"))
+    rows.append((f"{domain}: converged", "yes: every kept fit to its tolerance" if late is None else "no: see below"))
     rows += [("diagnosis", str(out)), ("extended model", str(extended))]
     return rows

@@ -35,7 +35,7 @@ class PneumaticArgs:
     log: Path
     chamber: list[str] | None
     all_chambers: bool
-    robot: Path | None
+    robot: str | None
     output: Path | None
     jobs: int
     starts: int
@@ -46,7 +46,7 @@ class PneumaticArgs:
     allow_unconverged: bool = False
 
     def __post_init__(self):
-        distinct_output((self.out,), (self.log, self.steady_state))
+        distinct_output((self.out,), (self.log, self.steady_state, self.robot))
         if self.all_chambers == bool(self.chamber):
             raise OptionError("name the chambers to fit: --chamber NAME (repeatable) or --all")
 
@@ -130,7 +130,7 @@ def pneumatic_fit(
         bool, typer.Option("--all", help="Fit every chamber of the robot (instead of --chamber).")
     ] = False,
     robot: Annotated[
-        Path | None,
+        str | None,
         typer.Option(
             "--robot",
             help="Robot directory; by default the robot the log names.",

@@ -43,7 +43,7 @@ class PosesArgs:
     quiet: bool
 
     def __post_init__(self):
-        distinct_output((self.out,), (self.candidates, self.calibration, self.recorded))
+        distinct_output((self.out,), (self.candidates, self.calibration, self.recorded, self.robot))
 
     @property
     def out(self) -> Path:

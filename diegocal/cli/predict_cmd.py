@@ -37,13 +37,13 @@ class PredictArgs:
     output: Path | None
     sensors_from: str
     sensors_to: str
-    robot: Path | None
+    robot: str | None
     jobs: int
     quiet: bool
     seed: int
 
     def __post_init__(self):
-        distinct_output((self.out,), (self.model, self.log))
+        distinct_output((self.out,), (self.model, self.log, self.robot))
 
     @property
     def out(self) -> Path:
@@ -112,7 +112,7 @@ def predict(
         ),
     ] = "markers",
     robot: Annotated[
-        Path | None,
+        str | None,
         typer.Option(
             "--robot",
             help="Robot directory or URDF file; by default the log's robot, else the model's.",

@@ -104,7 +104,7 @@ class SgpArgs:
     allow_unconverged: bool = False
 
     def __post_init__(self):
-        distinct_output((self.out,), (self.log,))
+        distinct_output((self.out,), (self.log, self.robot))
         if self.joint_region and not self.region:
             raise OptionError("--joint-region needs --region (the joint GP is cut where the two-stage GP is)")
 
@@ -313,7 +313,7 @@ def sgp_fit(
     from diegocal.sgp.store import load_summary
 
     why = unconverged(load_summary(out))
-    rows.append(("converged", "yes: every likelihood optimisation to its tolerance" if why is None else f"no: {why}"))
+    rows.append(("converged", "yes: every likelihood fit to its tolerance" if why is None else "no: see below"))
     summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
     late = () if why is None else (f"{why}; written with converged: false",)
     refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)

@@ -60,7 +60,7 @@ class StacArgs:
     geometry: bool = False
 
     def __post_init__(self):
-        distinct_output((self.out, self.joint_angles), (self.log,))
+        distinct_output((self.out, self.joint_angles), (self.log, self.robot), apart=True)
         if self.cv and self.method != "stac":
             raise OptionError("--cv is for --method stac")
         if self.geometry and self.method != "stac":

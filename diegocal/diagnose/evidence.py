@@ -35,9 +35,12 @@ def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclud
 
     x = np.asarray(res.variables[variable], float)
     sign_name = f"{signed_by}.{channel}" if signed_by else None
-    if sign_name not in res.variables or variable == sign_name:
-        sign_name = None
-    sign = np.sign(np.asarray(res.variables[sign_name], float)) if sign_name else 1.0
+    if sign_name not in res.variables or variable.split(".", 1)[0] == signed_by:
+        sign_name = None  # binned by a velocity, the curve shows the sign already
+    sign = 1.0
+    if sign_name:  # at rest the direction is unknown: those samples are left out
+        sign = np.sign(np.asarray(res.variables[sign_name], float))
+        sign[sign == 0] = np.nan
     edges = quantile_edges(x[train], n_bins)
     cl = sub_blocks(shown, length)
     out = {}
@@ -51,6 +54,9 @@ def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclud
         out[name] = binned_means(np.where(shown, scalar, np.nan), x, cl, edges, variable).to_dict()
     out["unit"] = res.units.get(channel, "")
     out["channel"] = channel
+    seen = x[shown & np.isfinite(x)]
+    if seen.size:  # the variable's extent on the samples shown (the bins' medians lie inside it)
+        out["reach"] = [float(seen.min()), float(seen.max())]
     if sign_name:
         out["signed_by"] = sign_name
     return out

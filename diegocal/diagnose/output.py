@@ -13,7 +13,7 @@
         gain: {rmse_before: 0.41, rmse_after: 0.12, reduction: 0.71}     # held-out blocks
         kind: term             # term | fault | unexplained
         unit: N·m
-        evidence: {validation_gain, t, threshold_t, variable, curves: {before, after}}
+        evidence: {validation_gain, t, threshold_t, variable, curves: {before, after, unit, channel, reach, signed_by?}}
                                # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
                                # + indistinguishable_from: [channel, ...] (the same cause there fits the same)
                                # + stand_in: {term, validation_gain} (unexplained: the term that stood in),

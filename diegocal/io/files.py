@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 import yaml
 
-from diegocal.errors import InputFileError, LogFormatError
+from diegocal.errors import DamagedFileError, DiegocalError, InputFileError, LogFormatError
 from diegocal.io.log import FORMAT, VECTOR_STREAMS, VERSION, Log, Stream, Truth, unknown_streams
 
 LOG = logging.getLogger(__name__)
@@ -135,12 +135,13 @@ def log_streams(path) -> tuple[str, ...]:
     with open(path, "rb") as fh:
         head = fh.read(8)
     if head == HDF5_SIGNATURE:
+        f = _open_h5(path)
         try:
-            with h5py.File(path, "r") as f:
+            with f:
                 fmt = _attr_str(f.attrs.get("format"))
                 names = tuple(k for k in f if k not in ("time", "truth"))
-        except OSError as exc:
-            raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
+        except DAMAGE as exc:
+            raise _damaged(path, exc) from None
         if fmt != FORMAT:
             raise LogFormatError(f"{path}: format attribute is {fmt!r}, expected {FORMAT!r}")
         return names
@@ -233,15 +234,29 @@ def _read_stream(group, where: str) -> Stream:
     return Stream(names, data.astype(np.float64, copy=False))
 
 
-def _load_h5(path: Path, nan_ok: bool = False) -> Log:
+#: What h5py raises where a damaged file's bytes are read (its object headers, B-trees, chunks).
+DAMAGE = (OSError, RuntimeError, KeyError, ValueError, TypeError)
+
+
+def _open_h5(path: Path):
     try:
-        f = h5py.File(path, "r")
+        return h5py.File(path, "r")
     except OSError as exc:
         raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
+
+
+def _damaged(path: Path, exc: BaseException) -> DamagedFileError:
+    return DamagedFileError(f"{path}: damaged HDF5 file, it cannot be read ({exc})")
+
+
+def _load_h5(path: Path, nan_ok: bool = False) -> Log:
+    f = _open_h5(path)
     try:
         return _read_h5(f, path, nan_ok)
-    except (OSError, RuntimeError) as exc:  # a damaged file opens, then fails where its bytes are read
-        raise LogFormatError(f"{path}: damaged HDF5 file, it cannot be read ({exc})") from None
+    except DiegocalError:  # the log's own faults (a LogFormatError is a ValueError too)
+        raise
+    except DAMAGE as exc:  # a damaged file opens, then fails where its bytes are read
+        raise _damaged(path, exc) from None
 
 
 def _read_h5(f, path: Path, nan_ok: bool) -> Log:

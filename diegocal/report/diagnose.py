@@ -219,8 +219,12 @@ def plot_evidence(f: dict, ax=None):
 
 
 def _shown_reach(f: dict) -> tuple[float, float] | None:
-    """The lowest and highest bin medians of the evidence curve that hold samples (None: none)."""
-    c = (((f.get("evidence") or {}).get("curves") or {}).get("before")) or {}
+    """The extent of the evidence variable on the samples shown (``curves.reach``; files written
+    before it: the lowest and highest bin medians that hold samples; None: none)."""
+    curves = (f.get("evidence") or {}).get("curves") or {}
+    if curves.get("reach"):
+        return tuple(curves["reach"])
+    c = curves.get("before") or {}
     centres = [x for x, n in zip(c.get("centre") or [], c.get("count") or [], strict=False) if n and x is not None]
     return (min(centres), max(centres)) if centres else None
 
@@ -330,7 +334,8 @@ def evidence_caption(ax, f: dict) -> str:
         )
     r = f.get("region")
     reach = _shown_reach(f)
-    if r and REGION in labels and reach and (r["low"] > reach[1] or (r["high"] or np.inf) < reach[0]):
+    high = np.inf if r is None or r.get("high") is None else r["high"]
+    if r and REGION in labels and reach and (r["low"] > reach[1] or high < reach[0]):
         text += (
             f" The validation and held-out blocks reach {f['evidence']['variable']} from {reach[0]:.3g} to "
             f"{reach[1]:.3g} only: the region found lies outside them (the training blocks placed it), and what is "

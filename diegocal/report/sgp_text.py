@@ -184,8 +184,8 @@ def noisy_words(hyper: dict) -> str:
     """A sentence on each joint whose learnt noise is far above its siblings' ("" when none is)."""
     return "".join(
         f" But on {j} the noise the model learnt, σ_v {v:.3g}, is {v / rest:.0f} times the other joints' median "
-        f"({rest:.3g}): its band is wide because the model's error is large there, so it covers the data without "
-        "the model being right; an effect the model lacks is likely (diegocal diagnose names it), unless that "
+        f"({rest:.3g}): the model's error is that large there, and its ±2σ band wide because of it, not because "
+        "the model is right; an effect the model lacks is likely (diegocal diagnose names it), unless that "
         "joint's sensor is that noisy."
         for j, (v, rest) in noisy_joints(hyper).items()
     )

@@ -129,7 +129,9 @@ USAGE = [  # exit 2
     ("report {tmp}/d.yaml --heldout {tmp}/r.h5 -o {tmp}/r.h5", "an input of the command"),
     ("pneumatic-merge {tmp}/a.yaml -o {tmp}/a.yaml", "an input of the command"),
     ("import {tmp}/a.csv -o {tmp}/a.csv", "an input of the command"),
-    ("stac {tmp}/r.h5 -o .", "names no file"),
+    ("stac {tmp}/r.h5 -o .", "needs a file name"),
+    ("stac {tmp}/r.h5 -o {tmp}/c.h5 --joint-angles {tmp}/c.h5", "two outputs are one file"),
+    ("sgp-fit {tmp}/r.h5 --robot {tmp}/arm.urdf -o {tmp}/arm.urdf", "an input of the command"),
 ]
 
 BAD_INPUT = [  # exit 1
@@ -212,4 +214,4 @@ def test_an_empty_output_is_a_usage_error_before_any_work(tmp_path):
     log = tmp_path / "r.h5"
     log.write_bytes(b"not read")
     result = runner.invoke(app, ["diagnose", str(log), "-o", ""])
-    assert "names no file" in one_line_error(result) and result.exit_code == 2
+    assert "needs a file name" in one_line_error(result) and result.exit_code == 2

@@ -33,11 +33,14 @@ def test_a_friction_is_shown_times_the_sign_of_its_velocity():
     assert in_region.any() and np.all(np.abs(mean_plain[in_region]) < 0.1)  # averaged away
     assert np.all(mean_signed[in_region] > 0.4)  # the friction's level
     assert np.all(np.abs(mean_signed[(centre < 0.9) | (centre > 1.5)]) < 0.05)
+    q = res.variables["q.j"][shown]
+    assert signed["reach"] == [q.min(), q.max()]  # the samples' extent, beyond the outer bins' medians
+    assert signed["reach"][0] < centre[0] and signed["reach"][1] > centre[-1]
     binned_by_velocity = curves(res, None, "j", "qd.j", shown, 200, train, 10, None, signed_by="qd")
     assert "signed_by" not in binned_by_velocity  # a velocity's own bins show the sign already
 
 
 def test_the_registry_says_which_causes_follow_the_direction_of_motion():
     signed = {c for c, entry in CAUSES.items() if entry.signed_by}
-    assert {"position_friction", "coulomb_friction", "load_friction"} <= signed
-    assert not {"spring", "torque_offset", "payload", "stribeck_friction"} & signed
+    assert {"position_friction", "coulomb_friction", "load_friction", "viscous_friction", "stribeck_friction"} <= signed
+    assert not {"spring", "torque_offset", "payload", "armature"} & signed

@@ -218,3 +218,24 @@ def test_log_robot_reads_the_header_only(tmp_path, suffix):
     assert log_robot(tmp_path / f"a{suffix}") == "arm3"
     save_log(good_log(), tmp_path / f"b{suffix}")
     assert log_robot(tmp_path / f"b{suffix}") is None
+
+
+def test_damaged_bytes_anywhere_give_one_error_that_names_the_file(tmp_path):
+    """Seeded damage at random places of a small log (object headers, B-trees, chunks, data): reading
+    it, or listing its streams as batch does, fails with the library's error naming the file, never
+    with h5py's own exception (KeyError, RuntimeError, ...)."""
+    from diegocal.errors import DiegocalError
+    from diegocal.io.files import log_streams
+
+    rng = np.random.default_rng(1)
+    log = Log(time=np.arange(3000) * 0.01, streams={"tau": make_stream(["a", "b"], rng.normal(size=(3000, 2)))})
+    save_log(log, tmp_path / "good.h5")
+    data = (tmp_path / "good.h5").read_bytes()
+    for _ in range(60):
+        at, n = int(rng.integers(0, len(data) - 64)), int(rng.integers(1, 64))
+        (tmp_path / "bad.h5").write_bytes(data[:at] + rng.bytes(n) + data[at + n :])
+        for read in (load_log, log_streams):
+            try:
+                read(tmp_path / "bad.h5")
+            except DiegocalError as exc:
+                assert "bad.h5" in str(exc), (at, n, str(exc))

@@ -251,6 +251,10 @@ def test_a_friction_curve_says_it_is_signed_and_a_region_the_shown_blocks_miss()
     f["region"] = {"variable": "q.joint3", "low": 1.7, "high": 2.3}  # beyond the last bin (1.6)
     caption = evidence_caption(plot_evidence(f), f)
     assert "reach q.joint3 from 0.2 to 1.6 only: the region found lies outside them" in caption
+    f["evidence"]["curves"]["reach"] = [0.1, 1.75]  # the samples' extent reaches into it
+    assert "lies outside them" not in evidence_caption(plot_evidence(f), f)
+    f["region"] = {"variable": "q.joint3", "low": -1.0, "high": 0.0}  # below the samples, ending at 0
+    assert "from 0.1 to 1.75 only" in evidence_caption(plot_evidence(f), f)
 
 
 def test_every_diagnosis_caption_matches_its_figure(results, tmp_path):
