@@ -134,9 +134,12 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             scored = held if unplaced is None else held & ~unplaced
             before, after = adapter.score(fitted, scored, exclude), adapter.score(new, scored, exclude)
             res_new = adapter.residuals(new)
-            variable = evidence_variable(chosen.term, res)
+            primary = own_channel(chosen)  # its own channel, else the one it acts on most
+            variable = evidence_variable(chosen.term, res, primary)
             evidence = {
                 "channels": list(chosen.channels),
+                # the gain pools the channels of one unit: volts and metres are not added
+                "gain_channels": [c for c in chosen.channels if res.units.get(c) == res.units.get(primary)],
                 "validation_gain": float(chosen.gain),
                 "own_channel": chosen.channel_gain is not None or len(chosen.channels) == 1,
                 "t": float(chosen.test.t),
@@ -159,7 +162,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             if variable is not None:
                 signed_by = getattr(CAUSES.get(chosen.term.cause), "signed_by", None)  # friction: × sign(qd)
                 evidence["curves"] = curves(
-                    res, res_new, chosen.channels[0], variable, shown, length, train, options.n_bins, exclude, signed_by
+                    res, res_new, primary, variable, shown, length, train, options.n_bins, exclude, signed_by
                 )
             added = {_key(g.term) for g in group} | {_key(best.term)}
             runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]

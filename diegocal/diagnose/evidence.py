@@ -15,11 +15,12 @@ from diegocal.evaluate import sub_blocks
 from diegocal.terms import Term
 
 
-def evidence_variable(term: Term, res: Residuals) -> str | None:
-    """The variable that localises a term: its region's, else its channel's first variable."""
+def evidence_variable(term: Term, res: Residuals, shown: str | None = None) -> str | None:
+    """The variable that localises a term: its region's, else its channel's first variable (or
+    that of ``shown``, the channel its evidence is drawn for)."""
     if term.region is not None and term.region.variable in res.variables:
         return term.region.variable
-    for c in [term.channel, *res.channels]:
+    for c in [term.channel, *([shown] if shown else []), *res.channels]:
         names = res.channel_variables.get(c)
         if names:
             return names[0]

@@ -378,10 +378,22 @@ def step_errors(bread: np.ndarray, scores: np.ndarray) -> np.ndarray:
     of the fit and each frame's score Aᵀ W e (T, k) at the step (e the residual after it; frames
     outside the fit 0), as STAC's own (:func:`diegocal.stac.covariance.block_sandwich`): the
     sandwich over contiguous blocks of frames, at least the model-based (AᵀWA)⁻¹ (the residuals are
-    correlated in time; the frames of one block share their errors)."""
-    inv = np.linalg.pinv(bread, hermitian=True)
+    correlated in time; the frames of one block share their errors). A coefficient with a share
+    in a direction the data do not fix (AᵀWA's eigenvalue under :data:`UNFIXED` of its largest: a
+    link offset along what the markers' own positions absorb) has an infinite standard error: the
+    step leaves it where it was, which the data neither confirm nor refute."""
+    inv = np.linalg.pinv(bread, rcond=UNFIXED, hermitian=True)
     robust, _ = block_sandwich(inv, scores)
-    return standard_errors(inv, robust)
+    se = standard_errors(inv, robust)
+    w, v = np.linalg.eigh(bread)
+    null = w <= UNFIXED * max(float(w.max()), 0.0)
+    se[(v[:, null] ** 2).sum(axis=1) > 1e-6] = np.inf
+    return se
+
+
+#: Below this share of AᵀWA's largest eigenvalue a direction is not fixed by the data (the pseudo-
+#: inverse's cut-off, relative).
+UNFIXED = 1e-12
 
 
 def _skew(x: np.ndarray) -> np.ndarray:

@@ -84,7 +84,7 @@ def finding_dict(f, units: dict) -> dict:
 def _finding_unit(f, units: dict) -> str:
     """The unit of a finding's gain: its channel's where it is scored on it, else the unit of the
     first channel it acts on (a joint's offset seen by markers: m)."""
-    acts_on = f.evidence.get("channels") or [f.term.channel]
+    acts_on = f.evidence.get("gain_channels") or f.evidence.get("channels") or [f.term.channel]
     if f.term.channel in units and f.term.channel in acts_on:
         return units[f.term.channel]
     return units.get(acts_on[0], "")

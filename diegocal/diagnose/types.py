@@ -247,8 +247,9 @@ class Finding:
         own = self.evidence.get("own_channel", True)  # False: it acts mostly elsewhere (a joint's namesake pot)
         if own and self.channel in self.heldout_before.channels and self.channel in acts_on:
             chans = [self.channel]
-        else:
-            chans = [c for c in self.evidence.get("channels", ()) if c in self.heldout_before.channels]
+        else:  # the channels of one unit it acts on (files of older diagnoses: every channel)
+            pool = self.evidence.get("gain_channels") or self.evidence.get("channels", ())
+            chans = [c for c in pool if c in self.heldout_before.channels]
         before = pooled(self.heldout_before, chans)
         after = pooled(self.heldout_after, chans)
         red = 1.0 - after / before if before > 0 and np.isfinite(before) and np.isfinite(after) else float("nan")

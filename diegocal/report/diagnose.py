@@ -100,9 +100,13 @@ def _parameters_text(f: dict) -> str:
     if len(p) > 4:  # a payload's ten inertial parameters: the identified ones (with a standard error)
         hidden = sum(stderr_of(v) is None for v in p.values())
         p = dict(list({k: v for k, v in p.items() if stderr_of(v) is not None}.items())[:4])
-    parts = []
+    parts, unfixed = [], []
+    some_se = any(stderr_of(v) is not None for v in p.values())
     for name, v in p.items():
         if v.get("value") is None:
+            continue
+        if some_se and stderr_of(v) is None:  # beside parameters with one: a direction the data do not fix
+            unfixed.append(name)
             continue
         s = f"{name} = {value_text(v['value'], stderr_of(v))}"
         if stderr_of(v) is not None:
@@ -110,6 +114,8 @@ def _parameters_text(f: dict) -> str:
         parts.append(s + (f" {v['unit']}" if v.get("unit") else ""))
     if hidden:
         parts.append(f"{hidden} parameter(s) not identified by these data")
+    if unfixed:
+        parts.append(f"{', '.join(unfixed)} not fixed by these data (left at the start)")
     return (" Fitted: " + ", ".join(parts) + ".") if parts else ""
 
 
