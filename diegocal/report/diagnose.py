@@ -92,6 +92,13 @@ def sentence(f: dict) -> str:
     return f"{f['channel']}: {what}{gain}.{params}{notes(f)}"
 
 
+def _pressure_unit(unit: str, f: dict) -> str:
+    """A pneumatic parameter's unit with "pu" (the model's pressure unit, that of the log's pressure
+    stream) written as the finding's own unit (kPa)."""
+    pressure = f.get("unit") if f.get("domain") == "pneumatics" or f.get("unit") == "kPa" else None
+    return " ".join(pressure if w == "pu" and pressure else w for w in unit.split(" "))
+
+
 def _parameters_text(f: dict) -> str:
     p = f.get("parameters") or {}
     if not p or f["cause"] == "unexplained":
@@ -111,7 +118,7 @@ def _parameters_text(f: dict) -> str:
         s = f"{name} = {value_text(v['value'], stderr_of(v))}"
         if stderr_of(v) is not None:
             s += f" ± {stderr_of(v):.2g}"
-        parts.append(s + (f" {v['unit']}" if v.get("unit") else ""))
+        parts.append(s + (f" {_pressure_unit(v['unit'], f)}" if v.get("unit") else ""))
     if hidden:
         parts.append(f"{hidden} parameter(s) not identified by these data")
     if unfixed:

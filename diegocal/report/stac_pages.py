@@ -303,12 +303,22 @@ def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
         rows.append([n, kind, *gain, f"{cal.bias[i]:.4f}", _se(bse[i]), note])
     notes = [
         "Reading = gain · (joint angle, rad, or anchor distance / tendon excursion, m) + bias (thesis eq. 2.18-2.20). "
-        "± SE: one standard error from the fit's Fisher information (eq. 2.21). A dash means not estimated: "
+        f"± SE: one standard error, {se_method_words(cal)}. A dash means not estimated: "
         "'bias nominal: gauge' pots read a joint whose zero the markers cannot fix (rotating the markers on the "
         "link absorbs any offset), so the bias keeps its sensors.yaml value; 'nominal: unobservable' pots read "
         "joints no marker moves with, so gain and bias both keep their sensors.yaml values."
     ]
     return columns, rows, notes
+
+
+def se_method_words(cal) -> str:
+    """How the calibration's standard errors were estimated, from calib.yaml's ``stderr`` record."""
+    how = getattr(cal, "stderr", None) or {}
+    if how.get("method") == "block_sandwich":
+        blocks = f" over {how['blocks']} contiguous blocks of frames" if how.get("blocks") else ""
+        return (f"the larger of the model-based one (eq. 2.21's information) and a cluster-robust sandwich{blocks} "
+                "(the residuals are correlated in time)")
+    return "from the fit's Fisher information (eq. 2.21)"
 
 
 def gauge_markers(cal) -> dict:
