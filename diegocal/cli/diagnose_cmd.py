@@ -223,7 +223,8 @@ def diagnose_cmd(
             "--min-gain",
             min=0.0,
             max=0.99,
-            help="Smallest fraction of a channel's validation error a finding must remove.",
+            help="Smallest fraction of the mean squared error a finding must remove, on the validation blocks and "
+            "again on the held-out ones (0.05: a 2.5 % smaller RMSE).",
         ),
     ] = 0.05,
     blocks: Annotated[

@@ -155,6 +155,23 @@ def test_streams_at_different_rates_need_a_clock_and_meet_on_it(tmp_path):
     assert on_a.n_samples == np.count_nonzero((0.0105 + np.arange(900) * 0.001) <= 0.99 + 1e-12)
 
 
+def test_one_clock_written_in_milliseconds_and_in_seconds_is_one_clock(tmp_path):
+    """Two files of one 100-Hz clock, one stamped in ms: after the conversion their stamps differ by
+    rounding only, and they meet on that clock without --rate."""
+    t = np.arange(300) * 0.01
+    a = _csv(tmp_path / "a.csv", ["t", "q.j"], [[round(1000 * x, 3), x] for x in t])
+    b = _csv(tmp_path / "b.csv", ["time", "tau.j"], [[x, -x] for x in t])
+    mapping = parse_map({"sources": {"a": {"file": "a.csv", "time": "t", "time_unit": "ms"}, "b": {"file": "b.csv"}}})
+    log = import_log([a, b], mapping).log
+    assert log.n_samples == 300
+    np.testing.assert_allclose(log.streams["q"].column("j"), t, atol=1e-9)
+    np.testing.assert_allclose(log.streams["tau"].column("j"), -t, atol=1e-9)
+    (tmp_path / "c.csv").write_text("time,tau.j\n" + "".join(f"{x + 0.003},{-x}\n" for x in t))
+    with pytest.raises(MapError, match="different clocks"):  # 3 ms apart: another clock
+        import_log([a, tmp_path / "c.csv"], parse_map({"sources": {"a": {"file": "a.csv", "time": "t",
+                                                                         "time_unit": "ms"}, "c": {"file": "c.csv"}}}))
+
+
 def test_a_gap_is_not_bridged_unless_the_map_allows_it(tmp_path):
     t = np.concatenate([np.arange(50) * 0.01, 1.5 + np.arange(50) * 0.01])  # 1 s without a sample
     path = _csv(tmp_path / "g.csv", ["time", "q.j"], [[x, x] for x in t])

@@ -411,6 +411,15 @@ def _clock(series: list[Series], sources: dict[str, Source], mapping: ImportMap)
     return time, rate, text + f", {mapping.interpolation} interpolation" + kept
 
 
+def _same_stamps(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two tables' time stamps are one clock: equal within a thousandth of a sample period
+    (a column in ms and one in s differ by the conversion's rounding)."""
+    if a.shape != b.shape:
+        return False
+    step = float(np.median(np.diff(b))) if b.size > 1 else 0.0
+    return bool(np.allclose(a, b, rtol=0.0, atol=1e-3 * abs(step)))
+
+
 @dataclass(frozen=True)
 class _ClockTable:
     time: np.ndarray
@@ -434,7 +443,7 @@ def _clock_table(series: list[Series], sources: dict[str, Source], clock: Clock 
         src = sources[first.source]
         t = src.table(first.table)
         return _ClockTable(t.time, t.rate_hz, _label(src, t))
-    if all(s.time.shape == first.time.shape and np.array_equal(s.time, first.time) for s in series):
+    if all(_same_stamps(s.time, first.time) for s in series):
         return _ClockTable(first.time, first.rate_hz, first.origin)
     rates = ", ".join(f"{s.stream} {_rate_text(s.time)}" for s in series)
     raise MapError(f"the streams have different clocks ({rates}): choose one with --rate HZ or `clock:` "
