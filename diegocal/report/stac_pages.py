@@ -296,8 +296,12 @@ def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
         Column("note", align="left"),
     ]
     rows = []
+    gauge_joints = {g.get("joint") for g in getattr(cal, "gauges", ()) or ()} - {None}
+    spans = {p.name: set(p.joints) for p in robot.sensors.pots} if robot is not None else {}
     for i, n in enumerate(cal.pot_names):
         note = "nominal: unobservable" if n in unobservable else "bias nominal: gauge" if n in gauges else ""
+        if not note and len(spans.get(n, ())) > 1 and spans[n] & gauge_joints:
+            note = f"bias in {', '.join(sorted(spans[n] & gauge_joints))}'s zero"
         kind = kinds.get(n, "")
         gain = [f"{cal.gain[i]:.5g}", _se(gse[i]), GAIN_UNIT.get(kind, "V per unit")]
         rows.append([n, kind, *gain, f"{cal.bias[i]:.4f}", _se(bse[i]), note])
@@ -306,7 +310,9 @@ def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
         f"± SE: one standard error, {se_method_words(cal)}. A dash means not estimated: "
         "'bias nominal: gauge' pots read a joint whose zero the markers cannot fix (rotating the markers on the "
         "link absorbs any offset), so the bias keeps its sensors.yaml value; 'nominal: unobservable' pots read "
-        "joints no marker moves with, so gain and bias both keep their sensors.yaml values."
+        "joints no marker moves with, so gain and bias both keep their sensors.yaml values. 'bias in J's zero': a "
+        "tendon over the gauge joint J reads J's angle too, so its bias holds J's nominal zero (compare it with "
+        "another calibration of the same convention only)."
     ]
     return columns, rows, notes
 
