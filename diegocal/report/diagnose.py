@@ -17,7 +17,7 @@ import numpy as np
 
 from diegocal.diagnose.engine import TWIN
 from diegocal.io import load_yaml
-from diegocal.report.finding_notes import notes, stderr_of, value_text
+from diegocal.report.finding_notes import notes, parameters_text
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new, save_page
@@ -82,7 +82,7 @@ def sentence(f: dict) -> str:
         ev = f.get("evidence") or {}
         vg, which = ev.get("validation_gain"), "open-loop validation" if ev.get("rival") else "validation"
         gain = f"; it accounts for {vg:.0%} of the {which} error" if vg is not None else ""
-    params = _parameters_text(f)
+    params = parameters_text(f)
     twins = (f.get("evidence") or {}).get("indistinguishable_from")
     if twins:  # the same cause elsewhere fits the data the same: which one, the log cannot say
         params += (
@@ -90,40 +90,6 @@ def sentence(f: dict) -> str:
             f"data the same to within {TWIN * 100:g} % of what it removes)."
         )
     return f"{f['channel']}: {what}{gain}.{params}{notes(f)}"
-
-
-def _pressure_unit(unit: str, f: dict) -> str:
-    """A pneumatic parameter's unit with "pu" (the model's pressure unit, that of the log's pressure
-    stream) written as the finding's own unit (kPa)."""
-    pressure = f.get("unit") if f.get("domain") == "pneumatics" or f.get("unit") == "kPa" else None
-    return " ".join(pressure if w == "pu" and pressure else w for w in unit.split(" "))
-
-
-def _parameters_text(f: dict) -> str:
-    p = f.get("parameters") or {}
-    if not p or f["cause"] == "unexplained":
-        return ""
-    hidden = 0
-    if len(p) > 4:  # a payload's ten inertial parameters: the identified ones (with a standard error)
-        hidden = sum(stderr_of(v) is None for v in p.values())
-        p = dict(list({k: v for k, v in p.items() if stderr_of(v) is not None}.items())[:4])
-    parts, unfixed = [], []
-    some_se = any(stderr_of(v) is not None for v in p.values())
-    for name, v in p.items():
-        if v.get("value") is None:
-            continue
-        if some_se and stderr_of(v) is None:  # beside parameters with one: a direction the data do not fix
-            unfixed.append(name)
-            continue
-        s = f"{name} = {value_text(v['value'], stderr_of(v))}"
-        if stderr_of(v) is not None:
-            s += f" ± {stderr_of(v):.2g}"
-        parts.append(s + (f" {_pressure_unit(v['unit'], f)}" if v.get("unit") else ""))
-    if hidden:
-        parts.append(f"{hidden} parameter(s) not identified by these data")
-    if unfixed:
-        parts.append(f"{', '.join(unfixed)} not fixed by these data (left at the start)")
-    return (" Fitted: " + ", ".join(parts) + ".") if parts else ""
 
 
 def pooled_rmse(d: dict) -> dict:

@@ -66,3 +66,38 @@ def value_text(value: float, se) -> str:
         return f"{value:.3g}"
     decimals = int(min(max(1 - np.floor(np.log10(se)), 0), 10))
     return f"{value:.{decimals}f}"
+
+
+def _pressure_unit(unit: str, f: dict) -> str:
+    """A pneumatic parameter's unit with "pu" (the model's pressure unit, that of the log's pressure
+    stream) written as the finding's own unit (kPa)."""
+    pressure = f.get("unit") if f.get("domain") == "pneumatics" or f.get("unit") == "kPa" else None
+    return " ".join(pressure if w == "pu" and pressure else w for w in unit.split(" "))
+
+
+def parameters_text(f: dict) -> str:
+    """A finding's fitted parameters in words, each to the digits its standard error gives it."""
+    p = f.get("parameters") or {}
+    if not p or f["cause"] == "unexplained":
+        return ""
+    hidden = 0
+    if len(p) > 4:  # a payload's ten inertial parameters: the identified ones (with a standard error)
+        hidden = sum(stderr_of(v) is None for v in p.values())
+        p = dict(list({k: v for k, v in p.items() if stderr_of(v) is not None}.items())[:4])
+    parts, unfixed = [], []
+    some_se = any(stderr_of(v) is not None for v in p.values())
+    for name, v in p.items():
+        if v.get("value") is None:
+            continue
+        if some_se and stderr_of(v) is None:  # beside parameters with one: a direction the data do not fix
+            unfixed.append(name)
+            continue
+        s = f"{name} = {value_text(v['value'], stderr_of(v))}"
+        if stderr_of(v) is not None:
+            s += f" ± {stderr_of(v):.2g}"
+        parts.append(s + (f" {_pressure_unit(v['unit'], f)}" if v.get("unit") else ""))
+    if hidden:
+        parts.append(f"{hidden} parameter(s) not identified by these data")
+    if unfixed:
+        parts.append(f"{', '.join(unfixed)} not fixed by these data (left at the start)")
+    return (" Fitted: " + ", ".join(parts) + ".") if parts else ""

@@ -103,11 +103,11 @@ def test_a_finding_without_curves_says_so_instead_of_an_empty_plot(diagnosis, tm
 
 
 def test_a_fitted_value_has_the_digits_its_standard_error_gives_it():
-    from diegocal.report.diagnose import _parameters_text
+    from diegocal.report.finding_notes import parameters_text
 
     def text(value, se):
         seconds = {"value": value, "stderr": se, "unit": "s"}
-        return _parameters_text({"cause": "time_offset", "parameters": {"seconds": seconds}})
+        return parameters_text({"cause": "time_offset", "parameters": {"seconds": seconds}})
 
     assert text(-0.999627869784981, 0.00027) == " Fitted: seconds = -0.99963 ± 0.00027 s."  # was "-1 ± 0.00027"
     assert text(0.0452634, 0.0007) == " Fitted: seconds = 0.04526 ± 0.0007 s."
