@@ -527,3 +527,22 @@ def test_the_term_that_stood_in_is_listed_as_such_among_the_runners_up():
     assert rows[0][-1] == "yes; stood in"
     _, rows = runners_table({"runners_up": [{**runner, "why_not": "supply_droop explains more of the error"}]})
     assert rows[0][-1] == "yes; less on its channel"
+
+
+def test_only_chambers_beyond_the_thesis_bound_are_still_open(results, tmp_path):
+    """The pneumatic abstract's "Still open" names the chambers whose 2-s drift is 4 % or more of
+    Pc − Pr, with their drift, and says nothing of drift when every chamber is under it."""
+    from diegocal.report.pneumatic import abstract
+    from diegocal.report.registry import ReportContext
+
+    model = load_yaml(results["air.pneumatic.yaml"])
+    names = list(model["chambers"])
+    for k, name in enumerate(names):
+        model["chambers"][name]["drift_2s"] = 0.01 + 0.001 * k
+    save_yaml(model, tmp_path / "calm.pneumatic.yaml")
+    text = " ".join(abstract(tmp_path / "calm.pneumatic.yaml", ReportContext()))
+    assert "drift beyond" not in text
+    model["chambers"][names[0]]["drift_2s"] = 0.073
+    save_yaml(model, tmp_path / "one.pneumatic.yaml")
+    text = " ".join(abstract(tmp_path / "one.pneumatic.yaml", ReportContext()))
+    assert f"Still open: the chambers that drift beyond 4 % are {names[0]} (7.3 %)" in text
