@@ -160,9 +160,12 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                     else f"added with {best.term.label} in one round: the same cause"
                 )
             if variable is not None:
-                signed_by = getattr(CAUSES.get(chosen.term.cause), "signed_by", None)  # friction: × sign(qd)
+                entry = CAUSES.get(chosen.term.cause)
+                signed_by = entry.signed_by if entry is not None else None  # friction: × sign(qd)
+                ex = chosen.term.extra
+                partner = (ex["partner"], float(ex["ratio"])) if "partner" in ex and "ratio" in ex else None
                 evidence["curves"] = curves(
-                    res, res_new, primary, variable, shown, length, train, options.n_bins, exclude, signed_by
+                    res, res_new, primary, variable, shown, length, train, options.n_bins, exclude, signed_by, partner
                 )
             added = {_key(g.term) for g in group} | {_key(best.term)}
             runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]

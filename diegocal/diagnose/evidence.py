@@ -27,20 +27,32 @@ def evidence_variable(term: Term, res: Residuals, shown: str | None = None) -> s
     return None
 
 
-def curves(res, res_new, channel, variable, shown, length, train, n_bins, exclude, signed_by=None) -> dict:
+def curves(
+    res, res_new, channel, variable, shown, length, train, n_bins, exclude, signed_by=None, partner=None
+) -> dict:
     """Residual mean per bin of ``variable`` on the shown (validation + held-out) samples, before
     and (when ``res_new`` is given) after, with block standard errors: the evidence plot's data.
     ``signed_by`` (a cause's :attr:`~diegocal.causes.Cause.signed_by`, e.g. "qd"): the residual is
     multiplied by the sign of that variable on ``channel`` (``signed_by`` in the output names it),
-    unless that is the variable binned."""
+    unless that is the variable binned; ``partner`` (channel, ratio): of that variable plus ratio
+    times the partner's (a motor that drives two joints)."""
 
     x = np.asarray(res.variables[variable], float)
-    sign_name = f"{signed_by}.{channel}" if signed_by else None
-    if sign_name not in res.variables or variable.split(".", 1)[0] == signed_by:
-        sign_name = None  # binned by a velocity, the curve shows the sign already
+    sign_name, motion = None, None
+    if signed_by and variable.split(".", 1)[0] != signed_by:  # binned by a velocity: the sign shows
+        own = res.variables.get(f"{signed_by}.{channel}")
+        other = res.variables.get(f"{signed_by}.{partner[0]}") if partner else None
+        if own is not None and (partner is None or other is not None):
+            sign_name = f"{signed_by}.{channel}"
+            motion = np.asarray(own, float)
+            if partner:
+                k = abs(partner[1])
+                times = "" if k == 1 else f"{k:g}·"
+                sign_name += f" {'+' if partner[1] >= 0 else '−'} {times}{signed_by}.{partner[0]}"
+                motion = motion + partner[1] * np.asarray(other, float)
     sign = 1.0
-    if sign_name:  # at rest the direction is unknown: those samples are left out
-        sign = np.sign(np.asarray(res.variables[sign_name], float))
+    if motion is not None:  # at rest the direction is unknown: those samples are left out
+        sign = np.sign(motion)
         sign[sign == 0] = np.nan
     edges = quantile_edges(x[train], n_bins)
     cl = sub_blocks(shown, length)

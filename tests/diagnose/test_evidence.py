@@ -44,3 +44,21 @@ def test_the_registry_says_which_causes_follow_the_direction_of_motion():
     signed = {c for c, entry in CAUSES.items() if entry.signed_by}
     assert {"position_friction", "coulomb_friction", "load_friction", "viscous_friction", "stribeck_friction"} <= signed
     assert not {"spring", "torque_offset", "payload", "armature"} & signed
+
+
+def test_a_motor_that_drives_two_joints_is_signed_by_its_own_velocity():
+    """Coupled friction follows the sign of qd_j + ratio · qd_partner (the TX40's wrist motor), not
+    of either joint's velocity alone."""
+    rng = np.random.default_rng(1)
+    t = np.arange(6000) * 0.01
+    q, qp = np.sin(2 * np.pi * t / 7.0), np.sin(2 * np.pi * t / 3.1 + 1.0)
+    qd, qpd = np.gradient(q, t), np.gradient(qp, t)
+    r = 0.5 * np.sign(qd - 2.0 * qpd) + 0.01 * rng.normal(size=t.size)
+    res = Residuals({"j": r}, {"j": "N·m"}, {"time": t, "q.j": q, "qd.j": qd, "qd.p": qpd})
+    shown = np.arange(t.size) >= 3000
+    motor = curves(res, None, "j", "q.j", shown, 200, ~shown, 10, None, signed_by="qd", partner=("p", -2.0))
+    alone = curves(res, None, "j", "q.j", shown, 200, ~shown, 10, None, signed_by="qd")
+    assert motor["signed_by"] == "qd.j − 2·qd.p"
+    assert np.all(np.array(motor["before"]["mean"], float) > 0.45)
+    assert np.mean(np.array(alone["before"]["mean"], float)) < 0.4  # its own velocity's sign explains less
+    assert CAUSES["coupled_friction"].signed_by == "qd"
