@@ -19,13 +19,15 @@ from diegocal.io.files import log_robot, log_streams
 
 def robot_matches(robot: dict | str | None, log_robot_name: str | None) -> bool:
     """Whether a log whose robot attribute is ``log_robot_name`` is of ``robot`` (a bundle's robot
-    record, :attr:`diegocal.io.bundle.Bundle.robot`, or a name): its name or directory; any log
-    when either is unknown."""
+    record, :attr:`diegocal.io.bundle.Bundle.robot`, or a name): its name (the URDF's), its
+    directory or that directory's name (a bundled robot: the log says ``tx40``, the URDF
+    ``staubli_tx40``); any log when either is unknown."""
     rec = robot if isinstance(robot, dict) else {"name": robot, "dir": None}
     known = {str(v) for v in (rec.get("name"), rec.get("dir")) if v}
     if not known or log_robot_name is None:
         return True
-    return log_robot_name in known or Path(log_robot_name).name == rec.get("name")
+    folder = {Path(rec["dir"]).name, Path(rec["dir"]).stem} if rec.get("dir") else set()
+    return log_robot_name in known or Path(log_robot_name).name in {rec.get("name"), *folder}
 
 
 def robot_words(robot: dict | str | None) -> str:

@@ -61,3 +61,14 @@ def test_each_held_out_log_finds_its_model(results, tmp_path):
     assert r.exit_code == 0, r.output
     with pytest.raises(InputFileError, match="a log of robot pendulum"):
         write_report(found[:1], tmp_path / "x.pdf", ReportContext(heldout=(results["swing_heldout.h5"],)))
+
+
+def test_a_bundled_robot_matches_its_logs_by_folder_name_or_urdf_name():
+    """The TX40's URDF calls it staubli_tx40, its folder and its logs tx40: a model of it is scored
+    on its held-out log; another robot's log is not."""
+    from diegocal.report.registry import robot_matches
+
+    record = {"name": "staubli_tx40", "dir": "/somewhere/robots/tx40"}
+    assert robot_matches(record, "tx40") and robot_matches(record, "staubli_tx40")
+    assert robot_matches(record, "/somewhere/robots/tx40")
+    assert not robot_matches(record, "tiago")
