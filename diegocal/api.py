@@ -115,6 +115,7 @@ class Stac:
     options: object = None
 
     def fit(self, log, robot=None) -> Stac:
+        """Calibrate on ``log`` (a Log or a file; ``robot``: by default the log's); returns self."""
         log, robot, self.log_path_ = _log_and_robot(log, robot)
         result = calibrate(log, robot, self.method, self.options)
         self.calibration_, self.q_, self.robot_ = result.calibration, result.q, robot
@@ -147,6 +148,7 @@ class SGP:
     options: object = None
 
     def fit(self, log, robot=None, progress=None) -> SGP:
+        """Fit the torque model to ``log`` (a Log or a file; ``robot``: by default the log's); returns self."""
         from diegocal.sgp.model import SGPOptions, fit_dynamics
 
         log, robot, self.log_path_ = _log_and_robot(log, robot)
@@ -173,7 +175,7 @@ class SGP:
 class Pneumatic:
     """The 9-parameter valve-chamber model (thesis ch. 4), one fit per chamber.
 
-    ``chambers``: names (empty: every chamber of sensors.yaml the log lets us fit); ``options``:
+    ``chambers``: names, or one name (empty: every chamber of sensors.yaml the log lets us fit); ``options``:
     :class:`~diegocal.pneumatic.fit.FitOptions`. Learnt: ``fits_`` (chamber -> its fit),
     ``skipped_`` (chamber -> why it was not fitted), ``robot_``."""
 
@@ -183,18 +185,20 @@ class Pneumatic:
     _batch: object = field(default=None, repr=False)
 
     def fit(self, log, robot=None, progress=None) -> Pneumatic:
+        """Fit each chamber to ``log`` (a Log or a file; ``robot``: by default the log's); returns self."""
         from diegocal.errors import DiegocalError
         from diegocal.pneumatic.data import chamber_data
         from diegocal.pneumatic.fit import FitOptions, fit_chambers
 
         log, robot, self.log_path_ = _log_and_robot(log, robot)
-        names = tuple(self.chambers) or robot.sensors.chamber_names
+        asked = (self.chambers,) if isinstance(self.chambers, str) else tuple(self.chambers)  # one name, or several
+        names = asked or robot.sensors.chamber_names
         datasets, skipped = [], {}
         for name in names:
             try:
                 datasets.append(chamber_data(log, robot.sensors, name))
             except DiegocalError as exc:
-                if self.chambers:
+                if asked:
                     raise
                 skipped[name] = str(exc)
         batch = fit_chambers(datasets, self.options or FitOptions(), jobs=self.jobs, progress=progress)

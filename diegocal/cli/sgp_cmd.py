@@ -313,7 +313,7 @@ def sgp_fit(
     from diegocal.sgp.store import load_summary
 
     why = unconverged(load_summary(out))
-    rows.append(("converged", "yes: every likelihood fit to its tolerance" if why is None else "no: see below"))
+    rows.append(("converged", "yes: every fit to its tolerance" if why is None else "no: see below"))
     summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
     late = () if why is None else (f"{why}; written with converged: false",)
     refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)

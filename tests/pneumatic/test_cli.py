@@ -174,3 +174,15 @@ def test_merge_and_simulate_errors_are_one_line(files, robot_dir, tmp_path):
         )
     )
     assert "'wild' is not one of" in msg
+
+
+def test_the_library_takes_one_chamber_by_its_name():
+    """``Pneumatic(chambers="r_elbow.flex")`` fits that chamber (a string was read as its letters:
+    "chamber 'r' is not in sensors.yaml")."""
+    from pathlib import Path
+
+    import diegocal.api as dc
+
+    log = Path(__file__).resolve().parents[2] / "sample_data" / "diego_pneumatics.h5"
+    fitted = dc.Pneumatic(chambers="r_elbow.flex").fit(log)
+    assert list(fitted.fits_) == ["r_elbow.flex"]
