@@ -391,7 +391,8 @@ class DynamicsAdapter:
                 variables[f"{s}.{j}"] = x[:, i]
         order = {j: (f"q.{j}", f"qd.{j}", f"qdd.{j}") for j in self.joints}
         context = {j: tuple(f"q.{k}" for k in self.robot.joint_names if k != j) for j in self.joints}
-        return Residuals(channels, dict.fromkeys(self.joints, UNIT), variables, order, context)
+        units = {j: "N" if j in self.robot.prismatic_joints else UNIT for j in self.joints}  # a force on a slide
+        return Residuals(channels, units, variables, order, context)
 
     def candidates(self, fitted: DynamicsFit, residuals: Residuals, train) -> list[Candidate]:
         """Every cause the model lacks, as its behaviour proposes it (:func:`diegocal.sgp.terms.

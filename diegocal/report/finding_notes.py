@@ -75,6 +75,18 @@ def _pressure_unit(unit: str, f: dict) -> str:
     return " ".join(pressure if w == "pu" and pressure else w for w in unit.split(" "))
 
 
+def _at_bound(f: dict, name: str, v: dict) -> str:
+    """Words for a parameter that ends at the upper bound of its search (the registry's): the data
+    want more than the cause takes, so its fit stands in for something it does not describe."""
+    from diegocal.causes import CAUSES
+
+    entry = CAUSES.get(f.get("cause", ""))
+    spec = next((p for p in entry.parameters if p.name == name), None) if entry else None
+    if spec is None or not np.isfinite(spec.upper) or spec.upper <= 0 or v["value"] < spec.upper * (1 - 1e-3):
+        return ""
+    return f" (the end of its search, {spec.upper:g}: the data want more, which this cause does not describe)"
+
+
 def parameters_text(f: dict) -> str:
     """A finding's fitted parameters in words, each to the digits its standard error gives it."""
     p = f.get("parameters") or {}
@@ -95,7 +107,7 @@ def parameters_text(f: dict) -> str:
         s = f"{name} = {value_text(v['value'], stderr_of(v))}"
         if stderr_of(v) is not None:
             s += f" ± {stderr_of(v):.2g}"
-        parts.append(s + (f" {_pressure_unit(v['unit'], f)}" if v.get("unit") else ""))
+        parts.append(s + (f" {_pressure_unit(v['unit'], f)}" if v.get("unit") else "") + _at_bound(f, name, v))
     if hidden:
         parts.append(f"{hidden} parameter(s) not identified by these data")
     if unfixed:

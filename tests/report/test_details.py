@@ -546,3 +546,14 @@ def test_only_chambers_beyond_the_thesis_bound_are_still_open(results, tmp_path)
     save_yaml(model, tmp_path / "one.pneumatic.yaml")
     text = " ".join(abstract(tmp_path / "one.pneumatic.yaml", ReportContext()))
     assert f"Still open: the chambers that drift beyond 4 % are {names[0]} (7.3 %)" in text
+
+
+def test_a_parameter_at_the_end_of_its_search_is_said_to_be_there():
+    """TIAGo's torso lift gave torque_lag = 0.49995 s, the upper bound of the lag's search: the
+    report says the data want more, not only the value."""
+    from diegocal.report.finding_notes import parameters_text
+
+    f = {"cause": "torque_lag", "parameters": {"lag": {"value": 0.49995, "stderr": 0.028, "unit": "s"}}}
+    assert "the end of its search, 0.5: the data want more" in parameters_text(f)
+    f["parameters"]["lag"]["value"] = 0.012
+    assert "end of its search" not in parameters_text(f)
