@@ -186,7 +186,7 @@ def plot_evidence(f: dict, ax=None):
     counts = (curves.get("before") or {}).get("count") or []
     variable = str(ev.get("variable", ""))
     ax.set_xlabel(
-        f"{variable} [{variable_unit(variable, f.get('domain', ''))}]  "
+        f"{variable} [{variable_unit(variable, f.get('domain', ''), _slides(f))}]  "
         f"(bin medians; {sum(counts)} samples in {len(counts)} bins)"
     )
     magnitude = " (magnitude)" if curves.get("before") and _is_norm(f) else ""
@@ -212,11 +212,19 @@ def _is_norm(f: dict) -> bool:
     return f.get("unit") == "m"
 
 
-def variable_unit(variable: str, domain: str) -> str:
-    """The unit of an evidence variable ("q.joint3" rad, "p.fds" V, "du.r_elbow.flex" V per step)."""
-    head = variable.split(".", 1)[0]
+def _slides(f: dict) -> set:
+    """The finding's joint when it is prismatic (its effort in N): its coordinate is in m."""
+    return {f.get("channel")} if f.get("unit") == "N" else set()
+
+
+def variable_unit(variable: str, domain: str, slides=frozenset()) -> str:
+    """The unit of an evidence variable ("q.joint3" rad, "p.fds" V, "du.r_elbow.flex" V per step);
+    ``slides``: prismatic joints, whose q is in m."""
+    head, _, joint = variable.partition(".")
     if head == "p":
         return "kPa" if domain == "pneumatics" else "V"
+    if joint in slides and head in ("q", "qd", "qdd"):
+        return {"q": "m", "qd": "m/s", "qdd": "m/s²"}[head]
     units = {"time": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s²", "u": "V", "du": "V per step", "v": "V"}
     return units.get(head, "V/s" if head == "vd" else "?")
 
