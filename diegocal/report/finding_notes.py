@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from diegocal.causes import CAUSES
+
 
 def notes(f: dict) -> str:
     """Every note of finding ``f`` (a diagnosis.yaml finding), each a sentence or more, in order."""
@@ -78,8 +80,6 @@ def _pressure_unit(unit: str, f: dict) -> str:
 def _at_bound(f: dict, name: str, v: dict) -> str:
     """Words for a parameter that ends at the upper bound of its search (the registry's): the data
     want more than the cause takes, so its fit stands in for something it does not describe."""
-    from diegocal.causes import CAUSES
-
     entry = CAUSES.get(f.get("cause", ""))
     spec = next((p for p in entry.parameters if p.name == name), None) if entry else None
     if spec is None or not np.isfinite(spec.upper) or spec.upper <= 0 or v["value"] < spec.upper * (1 - 1e-3):
