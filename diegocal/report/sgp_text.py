@@ -191,6 +191,19 @@ def noisy_words(hyper: dict) -> str:
     )
 
 
+def worse_than_mean_words(nmse_in_sample: dict) -> str:
+    """A sentence on the joints a model fits worse than their mean torque on its own training data
+    (in-sample nMSE 1 or more; "" when none does)."""
+    worse = [j for j, v in nmse_in_sample.items() if v is not None and v >= 1.0]
+    if not worse:
+        return ""
+    return (
+        f" On {', '.join(worse)} the model does worse than the mean torque on its own training data: the "
+        "parameters it shares with the other joints, fitted to all at once, do not describe that joint's "
+        "measured effort (how it is measured, or a model of its own, is the next thing to look at)."
+    )
+
+
 def model_paragraphs(model: Path, context) -> list[str]:
     """One model in plain words: what was fitted on what and how good it is; what the guard did."""
     s = load_summary(model)
@@ -204,6 +217,7 @@ def model_paragraphs(model: Path, context) -> list[str]:
         "In-sample nMSE (squared error over the torque's variance: 0 is perfect, 1 no better than the mean "
         "torque): " + _joint_list(joints) + "."
     )
+    text += worse_than_mean_words(joints)
     held = heldout(model, context)
     if held is not None:
         scores = {j: held.of(j) for j in joints if held.of(j) is not None}
