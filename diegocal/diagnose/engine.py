@@ -454,7 +454,16 @@ def _decline(finding: Finding, min_gain: float) -> str:
     coefficients are all within DETERMINED_Z standard errors of 0 (unknown standard errors
     excepted), the held-out error rose when it was added, or it removed under ``min_gain`` of the
     held-out mean squared error: the bar its validation gain cleared, and a fault's (a pot's
-    drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out)."""
+    drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out); or a
+    parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
+    0.5 s), where the data want more than the cause describes: it would stand in for something
+    else."""
+    entry = CAUSES.get(finding.term.cause)
+    specs = {s.name: s for s in entry.parameters} if entry is not None else {}
+    for p in finding.term.parameters:
+        spec = specs.get(p.name)
+        if spec is not None and np.isfinite(spec.upper) and spec.upper > 0 and p.value >= spec.upper * (1 - 1e-3):
+            return f"its {p.name} ends at the end of its search ({spec.upper:g} {spec.unit}): the data want more"
     coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
     if coef and all(abs(v) < DETERMINED_Z * se for v, se in coef):
         return f"the data do not determine it (every coefficient within {DETERMINED_Z:g} standard errors of 0)"

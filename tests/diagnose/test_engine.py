@@ -369,3 +369,17 @@ def test_a_progress_line_names_the_unit_in_brackets_after_the_channel():
     assert _where("joint_6", " staubli_tx40") == "joint_6 (staubli_tx40)"
     assert _where("elbow.flex", " elbow.flex") == "elbow.flex"
     assert _where("c0", "") == "c0"
+
+
+def test_a_term_whose_parameter_ends_at_the_end_of_its_search_is_declined():
+    """TIAGo's torso lift (first half) gave torque_lag 0.49995 s, the lag's search ending at 0.5 s:
+    the data want more than a sensor's lag, and the term would stand in for it. It is declined,
+    with why; a lag inside the search is judged as before."""
+    from diegocal.diagnose.engine import _decline
+    from diegocal.diagnose.types import Finding
+    from diegocal.terms import make_term
+
+    at_end = Finding(make_term("torque_lag", "torso", {"lag": 0.49995}), "term", None, None)
+    assert _decline(at_end, 0.05) == "its lag ends at the end of its search (0.5 s): the data want more"
+    inside = Finding(make_term("torque_lag", "torso", {"lag": 0.2}, stderr={"lag": 0.5}), "term", None, None)
+    assert "end of its search" not in _decline(inside, 0.05)
