@@ -251,6 +251,17 @@ def cause(name: str) -> Cause:
         raise UnknownNameError(f"unknown cause {name!r}{hint}") from None
 
 
+def search_end(name: str, parameter: str, value: float) -> ParamSpec | None:
+    """The spec of cause ``name``'s ``parameter`` when ``value`` ends at the upper end of its search
+    (within 0.1 % of a finite, positive upper bound: a torque sensor's lag of 0.5 s), where the data
+    want more than the cause describes; None otherwise (or for a name the registry does not hold)."""
+    entry = CAUSES.get(name)
+    spec = next((p for p in entry.parameters if p.name == parameter), None) if entry is not None else None
+    if spec is None or not math.isfinite(spec.upper) or spec.upper <= 0 or value < spec.upper * (1 - 1e-3):
+        return None
+    return spec
+
+
 def causes_of(domain: str, *roles: str) -> tuple[str, ...]:
     """The ids of ``domain``'s causes with one of ``roles`` (every role when none is given), in
     registry order."""

@@ -16,8 +16,8 @@ from functools import partial
 
 import numpy as np
 
-from diegocal.causes import CAUSES
-from diegocal.diagnose.evidence import curves, evidence_variable
+from diegocal.causes import search_end
+from diegocal.diagnose.evidence import curves, direction, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
 from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates, simplest
 from diegocal.diagnose.show import binned_candidate, region_of, show
@@ -160,10 +160,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                     else f"added with {best.term.label} in one round: the same cause"
                 )
             if variable is not None:
-                entry = CAUSES.get(chosen.term.cause)
-                signed_by = entry.signed_by if entry is not None else None  # friction: × sign(qd)
-                ex = chosen.term.extra
-                partner = (ex["partner"], float(ex["ratio"])) if "partner" in ex and "ratio" in ex else None
+                signed_by, partner = direction(chosen.term)  # friction: the residual times sign(qd)
                 evidence["curves"] = curves(
                     res, res_new, primary, variable, shown, length, train, options.n_bins, exclude, signed_by, partner
                 )
@@ -458,11 +455,8 @@ def _decline(finding: Finding, min_gain: float) -> str:
     parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
     0.5 s), where the data want more than the cause describes: it would stand in for something
     else."""
-    entry = CAUSES.get(finding.term.cause)
-    specs = {s.name: s for s in entry.parameters} if entry is not None else {}
     for p in finding.term.parameters:
-        spec = specs.get(p.name)
-        if spec is not None and np.isfinite(spec.upper) and spec.upper > 0 and p.value >= spec.upper * (1 - 1e-3):
+        if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
             return f"its {p.name} ends at the end of its search ({spec.upper:g} {spec.unit}): the data want more"
     coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
     if coef and all(abs(v) < DETERMINED_Z * se for v, se in coef):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from diegocal.causes import CAUSES
 from diegocal.diagnose.stats import binned_means, quantile_edges
 from diegocal.diagnose.types import Residuals
 from diegocal.evaluate import sub_blocks
@@ -25,6 +26,18 @@ def evidence_variable(term: Term, res: Residuals, shown: str | None = None) -> s
         if names:
             return names[0]
     return None
+
+
+def direction(term: Term) -> tuple[str | None, tuple[str, float] | None]:
+    """(signed_by, partner) of a term's evidence curve (:func:`curves`): the registry's
+    ``signed_by`` (friction: the residual times sign(qd)), and for a cause with a partner channel and
+    a ratio (a motor that drives two joints) that channel and the ratio; (None, None) otherwise."""
+    entry = CAUSES.get(term.cause)
+    if entry is None or entry.signed_by is None:
+        return None, None
+    key = entry.partner
+    partner = (term.extra[key], float(term.extra["ratio"])) if key in term.extra and "ratio" in term.extra else None
+    return entry.signed_by, partner
 
 
 def curves(

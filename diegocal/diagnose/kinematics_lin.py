@@ -382,12 +382,12 @@ def step_errors(bread: np.ndarray, scores: np.ndarray) -> np.ndarray:
     in a direction the data do not fix (AᵀWA's eigenvalue under :data:`UNFIXED` of its largest: a
     link offset along what the markers' own positions absorb) has an infinite standard error: the
     step leaves it where it was, which the data neither confirm nor refute."""
-    inv = np.linalg.pinv(bread, rcond=UNFIXED, hermitian=True)
+    w, v = np.linalg.eigh(bread)
+    fixed = w > UNFIXED * max(float(w.max()), 0.0)
+    inv = (v[:, fixed] / w[fixed]) @ v[:, fixed].T  # the pseudo-inverse, over the directions the data fix
     robust, _ = block_sandwich(inv, scores)
     se = standard_errors(inv, robust)
-    w, v = np.linalg.eigh(bread)
-    null = w <= UNFIXED * max(float(w.max()), 0.0)
-    se[(v[:, null] ** 2).sum(axis=1) > 1e-6] = np.inf
+    se[(v[:, ~fixed] ** 2).sum(axis=1) > 1e-6] = np.inf
     return se
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from diegocal.causes import CAUSES
+from diegocal.causes import search_end
 
 
 def notes(f: dict) -> str:
@@ -80,9 +80,8 @@ def _pressure_unit(unit: str, f: dict) -> str:
 def _at_bound(f: dict, name: str, v: dict) -> str:
     """Words for a parameter that ends at the upper bound of its search (the registry's): the data
     want more than the cause takes, so its fit stands in for something it does not describe."""
-    entry = CAUSES.get(f.get("cause", ""))
-    spec = next((p for p in entry.parameters if p.name == name), None) if entry else None
-    if spec is None or not np.isfinite(spec.upper) or spec.upper <= 0 or v["value"] < spec.upper * (1 - 1e-3):
+    spec = search_end(f.get("cause", ""), name, v["value"])
+    if spec is None:
         return ""
     return f" (the end of its search, {spec.upper:g}: the data want more, which this cause does not describe)"
 
