@@ -33,6 +33,10 @@ def simulate_kinematics_cmd(
     duration: Annotated[float, typer.Option(help="Session length, s (thesis: 250 s).")] = 250.0,
     rate: Annotated[float, typer.Option(help="Sample rate of pots and markers, Hz.")] = 100.0,
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
+    robot_seed: Annotated[int | None, typer.Option(
+        "--robot-seed", help="Record the robot of the session simulated with this --seed (its calibration, "
+        "mocap frame and effects), with this session's own motion and noise: held-out logs of one robot. "
+        "Default: --seed.")] = None,
     effect: Annotated[list[str] | None, typer.Option(
         "--effect", metavar="NAME[:CHANNEL][=SIZE]",
         help="Kinematic effect to inject (repeatable); SIZE, when given, is "
@@ -75,7 +79,7 @@ def simulate_kinematics_cmd(
         duration=duration, rate_hz=rate, effects=effects, directions=dict(map(parse_direction, direction or ())),
         occlusion=occlusion,
         occlusion_run=occlusion_run, gain_error=gain_error, bias_error=bias_error,
-        marker_offset=marker_offset, pot_noise=pot_noise, marker_noise=marker_noise).check()
+        marker_offset=marker_offset, pot_noise=pot_noise, marker_noise=marker_noise, robot_seed=robot_seed).check()
     model = load_robot(resolve_robot_dir(robot, None))
     log = simulate_kinematics(model, options, np.random.default_rng(seed))
     save_log(log, output)

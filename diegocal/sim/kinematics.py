@@ -78,6 +78,10 @@ class KinematicsOptions:
     directions : joint -> (3,) direction of that joint's ``link_offset`` in its parent joint's
         frame (normalised here; e.g. the joint's URDF origin: the link is longer or shorter);
         a joint not named gets a random direction
+    robot_seed : int or None, the seed whose robot this session records: its true calibration
+        and mocap frame, and its effects drawn as that session draws them (a slip or a label swap
+        at the same share of the run), with this session's own motion, noise and occlusions;
+        None: this session's own seed
     """
 
     duration: float = 250.0
@@ -92,6 +96,7 @@ class KinematicsOptions:
     marker_noise: float = 0.002
     hold: tuple[float, float] = (0.5, 3.0)
     directions: dict = field(default_factory=dict)
+    robot_seed: int | None = None
 
     @property
     def n_samples(self) -> int:
@@ -329,10 +334,18 @@ def simulate_kinematics(robot: Robot, options: KinematicsOptions, rng: np.random
     q, qd = q_ext[pad : pad + T], qd_ext[pad : pad + T]
     fast = offset_robot(robot, {})
     s_nominal = pot_transmission(fast, q) if sensors.pots else np.zeros((T, 0))
-    truth = draw_truth(robot, options, s_nominal, q, truth_rng)
+    q_robot, s_robot, effect_seed = q, s_nominal, int(seeds[5])
+    if options.robot_seed is not None:  # another session's robot: drawn from that session's run
+        robot_seeds = np.random.default_rng(options.robot_seed).integers(0, 2**62, size=6)
+        q_other, _ = pid_trajectory(lower, upper, T + 2 * pad, rate, np.random.default_rng(robot_seeds[0]),
+                                    options.hold)
+        q_robot = q_other[pad : pad + T]
+        s_robot = pot_transmission(fast, q_robot) if sensors.pots else np.zeros((T, 0))
+        truth_rng, effect_seed = np.random.default_rng(robot_seeds[1]), int(robot_seeds[5])
+    truth = draw_truth(robot, options, s_robot, q_robot, truth_rng)
     swaps = any(e.name == "swapped_labels" for e in options.effects)
-    x_nominal = marker_positions(fast, q, truth) if swaps and sensors.markers else None
-    plan = plan_effects(robot, options, s_nominal, q, truth.gain, int(seeds[5]), x_nominal)
+    x_nominal = marker_positions(fast, q_robot, truth) if swaps and sensors.markers else None
+    plan = plan_effects(robot, options, s_robot, q_robot, truth.gain, effect_seed, x_nominal)
     gen = offset_robot(robot, plan.joint_offsets)
 
     streams = {}

@@ -94,6 +94,20 @@ def test_same_seed_same_file_other_seed_other_data(robot, base, tmp_path):
     np.testing.assert_array_equal(back.streams["markers"].data, base.streams["markers"].data)
 
 
+def test_robot_seed_records_that_sessions_robot_with_its_own_motion(robot, base):
+    """--robot-seed: the calibration, mocap frame and effects of the seed's session; the motion
+    and noise of this one (held-out sessions of one robot); its own seed gives its own log."""
+    effects = ["sensor_nonlinearity", "marker_slip"]
+    own = simulate(robot, seed=7, effects=effects)
+    same = simulate(robot, seed=7, effects=effects, robot_seed=7)
+    np.testing.assert_array_equal(same.streams["pots"].data, own.streams["pots"].data)
+    other = simulate(robot, seed=8, effects=effects, robot_seed=7)
+    assert other.truth.params == own.truth.params
+    assert other.truth.effects == own.truth.effects
+    assert not np.allclose(other.truth.signals["q"].data, own.truth.signals["q"].data)
+    assert simulate(robot, seed=8, effects=effects).truth.params != own.truth.params
+
+
 # ----------------------------------------------------------------------------- occlusion
 def test_occlusion_runs_hit_the_target_fraction():
     mask = occlusion_mask(200_000, 8, 0.1, 50.0, np.random.default_rng(0))
