@@ -41,7 +41,9 @@ class ParamSpec:
     """One parameter of a cause: name, unit, bounds, start value, meaning (and where its bounds
     come from, ``note``). ``shape``: not the coefficient of a regressor column but a parameter of
     the column's shape (a velocity scale), held while the linear ones are fitted and searched
-    between its bounds by the fit that adds the term."""
+    between its bounds by the fit that adds the term. ``nonnegative``: what it measures cannot be
+    negative (a friction, a dead band, an inertia, a mass), though a linear fit may make it so: a
+    value significantly below 0 says the term stands in for something else (:func:`unphysical`)."""
 
     name: str
     unit: str
@@ -51,6 +53,7 @@ class ParamSpec:
     meaning: str = ""
     note: str = ""
     shape: bool = False
+    nonnegative: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,8 +92,13 @@ class Cause:
         return self.role in ("term", "fault")
 
 
-def _p(name, unit, meaning, lower=-INF, upper=INF, start=0.0, note="", shape=False) -> ParamSpec:
-    return ParamSpec(name, unit, lower, upper, start, meaning, note, shape)
+def _p(name, unit, meaning, lower=-INF, upper=INF, start=0.0, note="", shape=False, nonnegative=False) -> ParamSpec:
+    return ParamSpec(name, unit, lower, upper, start, meaning, note, shape, nonnegative)
+
+
+def _positive(name, unit, meaning) -> ParamSpec:
+    """A coefficient that cannot be negative (:attr:`ParamSpec.nonnegative`), fitted without bounds."""
+    return _p(name, unit, meaning, nonnegative=True)
 
 
 _XYZ = tuple(_p(a, "m", f"displacement along {a[1]}") for a in ("dx", "dy", "dz"))
@@ -138,7 +146,7 @@ _CAUSES = (
           (_p("c2", "V", "quadratic departure at the ends of the range"),
            _p("c3", "V", "cubic departure at the ends of the range")),
           "the pot's transfer curve is not linear"),
-    Cause("backlash", "kinematics", "term", "pot", (_p("half_width", "V", "half the dead band"),),
+    Cause("backlash", "kinematics", "term", "pot", (_positive("half_width", "V", "half the dead band"),),
           "the pot lags by a dead band that depends on the direction of motion"),
     Cause("time_offset", "kinematics", "term", "markers", (_p("seconds", "s", "mocap clock shift"),),
           "the mocap and pot clocks are shifted"),
@@ -152,10 +160,10 @@ _CAUSES = (
     Cause("rigid_body", "dynamics", "baseline", "robot", (),
           "the rigid body's base inertial parameters (eq. 3.30)", named_by_model=True),
     Cause("viscous_friction", "dynamics", "term", "joint",
-          (_p("viscous", "N·m·s/rad", "torque per unit velocity"),),
+          (_positive("viscous", "N·m·s/rad", "torque per unit velocity"),),
           "viscous friction (a torque proportional to the velocity)", signed_by="qd"),
     Cause("coulomb_friction", "dynamics", "term", "joint",
-          (_p("coulomb", "N·m", "torque that follows the sign of the velocity"),),
+          (_positive("coulomb", "N·m", "torque that follows the sign of the velocity"),),
           "Coulomb friction (a torque that follows the sign of the velocity)", signed_by="qd"),
     Cause("stribeck_friction", "dynamics", "term", "joint",
           (_p("amplitude", "N·m", "torque at zero velocity beyond Coulomb's (> 0: static friction above "
@@ -164,25 +172,25 @@ _CAUSES = (
               shape=True)),
           "friction's shape near zero velocity (a Stribeck or smooth transition)", signed_by="qd"),
     Cause("load_friction", "dynamics", "term", "joint",
-          (_p("coefficient", "1", "friction torque per unit of the joint's load torque (|τ| sign(qd))"),),
+          (_positive("coefficient", "1", "friction torque per unit of the joint's load torque (|τ| sign(qd))"),),
           "friction that grows with the load the joint carries (a gear under torque)", signed_by="qd"),
     Cause("position_friction", "dynamics", "term", "joint",
-          (_p("coulomb", "N·m", "Coulomb level inside the region"),
-           _p("viscous", "N·m·s/rad", "viscous coefficient inside the region")),
+          (_positive("coulomb", "N·m", "Coulomb level inside the region"),
+           _positive("viscous", "N·m·s/rad", "viscous coefficient inside the region")),
           "friction confined to part of the joint's range", region="required", signed_by="qd"),
     Cause("spring", "dynamics", "term", "joint", (_p("stiffness", "N·m/rad", "torque per radian"),),
           "a spring (a torque proportional to the joint angle)"),
     Cause("torque_offset", "dynamics", "term", "joint", (_p("offset", "N·m", "constant torque"),),
           "a constant offset of the torque sensor"),
-    Cause("armature", "dynamics", "term", "joint", (_p("inertia", "kg·m²", "reflected rotor inertia"),),
+    Cause("armature", "dynamics", "term", "joint", (_positive("inertia", "kg·m²", "reflected rotor inertia"),),
           "rotor inertia (a torque proportional to the acceleration)"),
     Cause("coupled_friction", "dynamics", "term", "joint",
-          (_p("coulomb", "N·m", "Coulomb level of the shared motor"),
-           _p("viscous", "N·m·s/rad", "viscous coefficient of the shared motor")),
+          (_positive("coulomb", "N·m", "Coulomb level of the shared motor"),
+           _positive("viscous", "N·m·s/rad", "viscous coefficient of the shared motor")),
           "friction of a motor that drives both joints", extra=("partner", "ratio"), partner="partner",
           signed_by="qd"),
     Cause("payload", "dynamics", "term", "link",
-          (_p("mass", "kg", "mass"), _p("mc_x", "kg·m", "first moment"), _p("mc_y", "kg·m", "first moment"),
+          (_positive("mass", "kg", "mass"), _p("mc_x", "kg·m", "first moment"), _p("mc_y", "kg·m", "first moment"),
            _p("mc_z", "kg·m", "first moment"), _p("I_xx", "kg·m²", "second moment"),
            _p("I_xy", "kg·m²", "second moment"), _p("I_yy", "kg·m²", "second moment"),
            _p("I_xz", "kg·m²", "second moment"), _p("I_yz", "kg·m²", "second moment"),
@@ -260,6 +268,18 @@ def search_end(name: str, parameter: str, value: float) -> ParamSpec | None:
     if spec is None or not math.isfinite(spec.upper) or spec.upper <= 0 or value < spec.upper * (1 - 1e-3):
         return None
     return spec
+
+
+def unphysical(name: str, parameter: str, value: float, stderr: float, z: float) -> ParamSpec | None:
+    """The spec of cause ``name``'s ``parameter`` when it cannot be negative (:attr:`ParamSpec.
+    nonnegative`) and ``value`` lies more than ``z`` standard errors below 0 (below 0 at all where
+    the standard error is unknown); None otherwise (or for a name the registry does not hold)."""
+    entry = CAUSES.get(name)
+    spec = next((p for p in entry.parameters if p.name == parameter), None) if entry is not None else None
+    if spec is None or not spec.nonnegative:
+        return None
+    margin = z * stderr if math.isfinite(stderr) and stderr > 0 else 0.0
+    return spec if value < -margin else None
 
 
 def causes_of(domain: str, *roles: str) -> tuple[str, ...]:

@@ -256,8 +256,18 @@ def diagnose_cmd(
     refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 
 
+def _none(mapping: dict) -> str:
+    """The findings row of a diagnosis without findings: "nothing significant" only where no term
+    was declined and no residual shifts in time."""
+    from diegocal.diagnose.output import shifting_channels
+
+    if mapping.get("declined") or shifting_channels(mapping):
+        return "none named (see below)"
+    return "none (nothing significant)"
+
+
 def _summary_rows(done: Diagnosed) -> list:
-    from diegocal.diagnose.output import pooled_heldout_rmse
+    from diegocal.diagnose.output import pooled_heldout_rmse, shifting_channels
 
     domain, mapping, out, extended = done.domain, done.mapping, done.output, done.extended
     base = mapping["baseline"]
@@ -272,7 +282,7 @@ def _summary_rows(done: Diagnosed) -> list:
     rows = [
         (f"{domain}: baseline", base["model"]),
         *held,
-        ("findings", str(len(mapping["findings"])) if mapping["findings"] else "none (nothing significant)"),
+        ("findings", str(len(mapping["findings"])) if mapping["findings"] else _none(mapping)),
     ]
     for f in mapping["findings"]:
         where = f"{f['channel']}"
@@ -283,13 +293,19 @@ def _summary_rows(done: Diagnosed) -> list:
         if g.get("rmse_before") is not None and g.get("rmse_after") is not None:
             red = g.get("reduction")
             gain = f"{g['rmse_before']:.3g} → {g['rmse_after']:.3g} {f.get('unit', '')}"
-            gain += f" ({red:.0%} less)" if red is not None else ""
+            gain += "" if red is None else f" ({red:.0%} less)" if red >= 0 else f" ({-red:.0%} more)"
         else:
             ev = f["evidence"]
             stood = f"; {ev['stand_in']['term']} stood in" if ev.get("stand_in") else ""
             which = "open-loop validation gain" if ev.get("rival") else "validation gain"
             gain = f"{which} {ev.get('validation_gain', 0):.0%} (not explained by any term{stood})"
         rows.append((f"  {f['cause']} on {where}", gain))
+    rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in mapping.get("declined") or []]
+    rows += [
+        (f"  residual shifts in time on {channel}", f"CUSUM p {p:.1g}" + (f" at {t:.3g} s" if t is not None else "")
+         + ": structure no term names")
+        for channel, p, t in shifting_channels(mapping)
+    ]
     late = unconverged(done)
     rows.append((f"{domain}: converged", "yes: every kept fit to its tolerance" if late is None else "no: see below"))
     rows += [("diagnosis", str(out)), ("extended model", str(extended))]

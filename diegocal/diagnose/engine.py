@@ -16,7 +16,7 @@ from functools import partial
 
 import numpy as np
 
-from diegocal.causes import search_end
+from diegocal.causes import search_end, unphysical
 from diegocal.diagnose.evidence import curves, direction, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
 from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates, simplest
@@ -248,6 +248,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         dict(res.units),
         tuple(minor),
         tuple(unconverged),
+        tuple({"cause": cause, "channel": channel, "why": why} for (cause, channel), why in declined.items()),
     )
 
 
@@ -453,11 +454,14 @@ def _decline(finding: Finding, min_gain: float) -> str:
     held-out mean squared error: the bar its validation gain cleared, and a fault's (a pot's
     drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out); or a
     parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
-    0.5 s), where the data want more than the cause describes: it would stand in for something
-    else."""
+    0.5 s), where the data want more than the cause describes, or one that cannot be negative (a
+    friction, a dead band) is significantly so: it would stand in for something else."""
     for p in finding.term.parameters:
         if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
             return f"its {p.name} ends at the end of its search ({spec.upper:g} {spec.unit}): the data want more"
+        if (spec := unphysical(finding.term.cause, p.name, p.value, p.stderr, DETERMINED_Z)) is not None:
+            return (f"its {p.name} is negative ({p.value:.3g} ± {p.stderr:.2g} {spec.unit}), which "
+                    f"{finding.term.cause} cannot be: it stands in for something else")
     coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
     if coef and all(abs(v) < DETERMINED_Z * se for v, se in coef):
         return f"the data do not determine it (every coefficient within {DETERMINED_Z:g} standard errors of 0)"

@@ -27,6 +27,7 @@
     blocks: {train: [[t0, t1], ...], validation: [...], heldout: [...]}   # seconds
     options: {alpha: 0.01, min_gain: 0.05, max_rounds: 6, n_blocks: 10}
     residual_tests: {channel: {correlation_time_s, change_point: {p, time}, variables: {...}}}
+    declined: [{cause, channel, why}]  # significant on validation, not added (why in words)
     converged: true            # false: a kept fit stopped at a cap before its tolerance
     unconverged: []            # which, in words (STAC's iterations, a term's refinement, a chamber's budget)
 
@@ -119,6 +120,7 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
         "blocks": diag.blocks.to_dict(diag.time),
         "options": {"alpha": o.alpha, "min_gain": o.min_gain, "max_rounds": o.max_rounds, "n_blocks": o.n_blocks},
         "residual_tests": _clean({(f"{u.unit}/{c}" if u.unit else c): v for u in units for c, v in u.show.items()}),
+        "declined": [dict(d) for u in units for d in u.declined],
         "converged": not any(u.unconverged for u in units),
         "unconverged": [f"{u.unit}: {why}" if u.unit else why for u in units for why in u.unconverged],
     }
@@ -153,3 +155,22 @@ def pooled_heldout_rmse(diagnosis: dict) -> dict[str, tuple[float, float]]:
         return float(np.sqrt(np.mean(np.square(x)))) if x else float("nan")
 
     return {u: (pooled(base, u), pooled(ext, u)) for u in dict.fromkeys(units.values() or [base.get("unit", "")])}
+
+
+def shifting_channels(diagnosis: dict) -> list[tuple[str, float, float | None]]:
+    """(channel, p, time s) of the channels, no finding's, whose baseline residual's mean shifts over
+    the session (the CUSUM test of ``residual_tests``, p under the diagnosis's ``alpha`` shared by
+    the channels tested): structure in time that no term names (a drift, or an effect that part of
+    the session's motion excites), most significant first."""
+    tests = diagnosis.get("residual_tests") or {}
+    alpha = float((diagnosis.get("options") or {}).get("alpha", 0.01))
+    named = {f.get("channel") for f in diagnosis.get("findings") or []}
+    out = []
+    for key, entry in tests.items():
+        cp = (entry or {}).get("change_point") or {}
+        p = cp.get("p")
+        if p is None or p >= alpha / max(len(tests), 1) or key in named or key.rsplit("/", 1)[-1] in named:
+            continue
+        out.append((key, float(p), cp.get("time")))
+    return sorted(out, key=lambda x: x[1])
+

@@ -273,6 +273,7 @@ class UnitDiagnosis:
     units: dict = field(default_factory=dict)  # channel -> unit ("V", "m", "N·m", "kPa")
     minor_faults: tuple[Finding, ...] = ()  # detected, writing-off removed under min_gain (evidence.written_off)
     unconverged: tuple[str, ...] = ()  # the baseline's and the kept fits' stops at a cap, in words
+    declined: tuple[dict, ...] = ()  # significant terms not added: {cause, channel, why}, why in words
 
 
 def pooled(score: Score, channels) -> float:

@@ -16,6 +16,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from diegocal.diagnose.engine import TWIN
+from diegocal.diagnose.output import shifting_channels
 from diegocal.io import load_yaml
 from diegocal.report.finding_notes import notes, parameters_text
 from diegocal.report.layout import Column, Sheet, table_sheets
@@ -70,11 +71,10 @@ def sentence(f: dict) -> str:
     unit = f.get("unit") or ""
     if g.get("reduction") is not None:
         absorbs = f["cause"] == "unexplained"
-        how = "the extended model's non-parametric part absorbs" if absorbs else "adding it to the model explains"
-        gain = (
-            f"; {how} {g['reduction']:.0%} of the held-out error "
-            f"(RMSE {g['rmse_before']:.3g} → {g['rmse_after']:.3g} {unit})"
-        )
+        how = "the extended model's non-parametric part" if absorbs else "adding it to the model"
+        red = g["reduction"]
+        moves = f"lowers the held-out RMSE by {red:.0%}" if red >= 0 else f"raises the held-out RMSE by {-red:.0%}"
+        gain = f"; {how} {moves} ({g['rmse_before']:.3g} → {g['rmse_after']:.3g} {unit})"
         span = (f.get("evidence") or {}).get("heldout_leaves_out")
         if span:  # a region's edge in a span without training data: where it is, the data do not say
             gain += f", outside {span[0]:.3g}-{span[1]:.3g} s, where no training data place its edge"
@@ -124,19 +124,29 @@ def summary_lines(d: dict) -> list[str]:
         f"measured on {held:.1f} s of held-out blocks used for nothing else (contiguous blocks in time, interleaved).",
     ]
     pooled = "; ".join(f"{b:.4g} → {e:.4g} {u}" for u, (b, e) in pooled_rmse(d).items())
-    if not findings:
+    declined, shifting = d.get("declined") or [], shifting_channels(d)
+    if not findings and not declined and not shifting:
         out.append(
-            "Nothing significant: no term of the vocabulary and no binned structure improves the validation "
-            f"error beyond chance (family-wise false-alarm rate {d['options']['alpha']:g}) and by at least "
-            f"{d['options']['min_gain']:.0%}. The baseline is as good as this log can tell "
+            "Nothing significant: no term of the vocabulary and no binned structure against the channels' "
+            f"states improves the validation error beyond chance (family-wise false-alarm rate "
+            f"{d['options']['alpha']:g}) and by at least {d['options']['min_gain']:.0%}, and no channel's "
+            f"residual shifts in time. The baseline is as good as these tests can tell "
             f"(held-out RMSE over all channels {pooled})."
         )
+    elif not findings:
+        out.append(f"No cause named (held-out RMSE over all channels {pooled}); what the tests did see is below.")
     else:
         out.append(
             f"{len(findings)} finding(s), most important first. Held-out RMSE over all channels, baseline → "
             f"extended model ({ext['model']}): {pooled}."
         )
         out += [f"{k + 1}. " + sentence(f) for k, f in enumerate(findings)]
+    out += [f"Declined: {x['cause']} on {x['channel']}, significant on validation, but {x['why']}." for x in declined]
+    out += [
+        f"The residual of {channel} shifts in time (CUSUM test p {p:.1g}{f', at {t:.3g} s' if t is not None else ''}): "
+        "structure no term names, a drift or an effect that part of the session's motion excites."
+        for channel, p, t in shifting
+    ]
     for f in d.get("minor_faults") or []:
         red = (f.get("gain") or {}).get("reduction")
         out.append(
@@ -356,7 +366,9 @@ def headline(path: Path, context=None) -> str:
     findings = d.get("findings") or []
     log = Path(str(d.get("log") or "")).name
     if not findings:
-        return f"{d['domain']} ({log}): nothing significant"
+        seen = len(d.get("declined") or []) + len(shifting_channels(d))
+        return f"{d['domain']} ({log}): " + (f"no cause named ({seen} sign(s) of structure)" if seen else
+                                             "nothing significant")
     parts = []
     for f in findings:
         g = f.get("gain") or {}

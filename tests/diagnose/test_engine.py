@@ -383,3 +383,25 @@ def test_a_term_whose_parameter_ends_at_the_end_of_its_search_is_declined():
     assert _decline(at_end, 0.05) == "its lag ends at the end of its search (0.5 s): the data want more"
     inside = Finding(make_term("torque_lag", "torso", {"lag": 0.2}, stderr={"lag": 0.5}), "term", None, None)
     assert "end of its search" not in _decline(inside, 0.05)
+
+
+def test_a_term_that_wants_a_negative_friction_or_dead_band_is_declined():
+    """A user trial's cogging (0.15 sin(12 q)) was named coupled_friction with Coulomb -0.048 ±
+    0.003 N·m, a pot's hysteresis backlash with half-width -0.0105 V: quantities that cannot be
+    negative. Such a term stands in for something else and is declined, with why; a negative
+    value within two standard errors of 0, and a signed cause (a spring), are judged as before."""
+    from diegocal.diagnose.engine import _decline
+    from diegocal.diagnose.types import Finding
+    from diegocal.terms import make_term
+
+    def decline(cause, values, stderr, extra=None):
+        return _decline(Finding(make_term(cause, "j", values, extra=extra, stderr=stderr), "term", None, None), 0.05)
+
+    why = decline("coupled_friction", {"coulomb": -0.0484, "viscous": 0.01}, {"coulomb": 0.0027, "viscous": 0.002},
+                  {"partner": "k", "ratio": -0.5})
+    assert why.startswith("its coulomb is negative (-0.0484 ± 0.0027 N·m), which coupled_friction cannot be")
+    assert decline("backlash", {"half_width": -0.0105}, {"half_width": 0.0004}).startswith("its half_width is negative")
+    assert "negative" not in decline("backlash", {"half_width": -0.0005}, {"half_width": 0.0004})
+    assert "negative" not in decline("spring", {"stiffness": -2.0}, {"stiffness": 0.1})
+    assert "negative" not in decline("stribeck_friction", {"amplitude": -1.0, "velocity_scale": 0.02},
+                                     {"amplitude": 0.1, "velocity_scale": 0.001})

@@ -401,6 +401,36 @@ def test_a_minor_fault_is_said_but_is_no_finding():
     assert "by -0.0%" in text and "written off all the same" in text
 
 
+def test_no_cause_named_is_not_nothing_significant_when_a_term_was_declined_or_a_residual_shifts():
+    """A user trial's pot whose gain drifted (CUSUM p 1e-29 on pot3) and a cogging whose best terms
+    wanted a negative friction both printed "nothing significant ... as good as this log can tell".
+    The words now say what was seen; a clean diagnosis keeps its sentence."""
+    from diegocal.diagnose.output import shifting_channels
+    from diegocal.report.diagnose import summary_lines
+
+    tests = {f"pot{k}": {"change_point": {"p": 0.02, "time": 3.0}} for k in range(18)}
+    d = {
+        "domain": "kinematics",
+        "baseline": {"model": "stac", "heldout_rmse": {"pot3": 0.02}, "unit": "V"},
+        "extended": {"model": "stac", "heldout_rmse": {"pot3": 0.02}, "unit": "V"},
+        "findings": [],
+        "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
+        "options": {"alpha": 0.01, "min_gain": 0.05},
+        "residual_tests": tests,
+    }
+    assert shifting_channels(d) == [] and "Nothing significant" in " ".join(summary_lines(d))
+    tests["pot3"] = {"change_point": {"p": 1.2e-29, "time": 21.3}}
+    text = " ".join(summary_lines(d))
+    assert shifting_channels(d) == [("pot3", 1.2e-29, 21.3)]
+    assert "Nothing significant" not in text
+    assert "The residual of pot3 shifts in time (CUSUM test p 1e-29, at 21.3 s)" in text
+    assert shifting_channels({**d, "findings": [{"channel": "pot3"}]}) == []  # a finding there says it
+    tests["pot3"] = {"change_point": {"p": 0.02, "time": 3.0}}
+    d["declined"] = [{"cause": "armature", "channel": "joint3", "why": "its inertia is negative"}]
+    text = " ".join(summary_lines(d))
+    assert "Nothing significant" not in text and "Declined: armature on joint3" in text
+
+
 def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
     from diegocal.diagnose.engine import TWIN
     from diegocal.report.diagnose import sentence
