@@ -299,6 +299,8 @@ def _summary_rows(done: Diagnosed) -> list:
             stood = f"; {ev['stand_in']['term']} stood in" if ev.get("stand_in") else ""
             which = "open-loop validation gain" if ev.get("rival") else "validation gain"
             gain = f"{which} {ev.get('validation_gain', 0):.0%} (not explained by any term{stood})"
+        rivals = (f.get("evidence") or {}).get("indistinguishable_causes")
+        gain += f"; the data cannot tell it from {', '.join(rivals)}" if rivals else ""
         rows.append((f"  {f['cause']} on {where}", gain))
     rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in mapping.get("declined") or []]
     rows += [

@@ -149,6 +149,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             twins = indistinguishable(chosen, tested)
             if twins:
                 evidence["indistinguishable_from"] = twins
+            if rivals := rival_causes(chosen, tested):
+                evidence["indistinguishable_causes"] = rivals
             if unplaced is not None and (held & unplaced).any():
                 edges = time[np.flatnonzero(unplaced)[[0, -1]]]
                 evidence["heldout_leaves_out"] = [float(edges[0]), float(edges[1])]
@@ -424,6 +426,25 @@ def indistinguishable(chosen: Tested, tested) -> list[str]:
     ]
 
 
+def rival_causes(chosen: Tested, tested) -> list[str]:
+    """The significant terms of other causes, acting on the same residual channels, that fit the
+    validation data as well as ``chosen`` to within TWIN of what it removes (a torque offset and a
+    spring on a joint whose angle never nears the spring's rest): the data cannot tell which cause
+    it is, and the finding says so."""
+    removed = chosen.test.sse_before - chosen.test.sse_after
+    if not removed > 0:
+        return []
+    return [
+        t.term.label
+        for t in tested
+        if t.significant
+        and t.term.cause != chosen.term.cause
+        and set(t.channels) == set(chosen.channels)
+        and np.isclose(t.test.sse_before, chosen.test.sse_before)
+        and abs(t.test.sse_after - chosen.test.sse_after) <= TWIN * removed
+    ]
+
+
 #: A fitted coefficient is determined by the data when it is at least this many standard errors
 #: from 0 (about a 5 % two-sided level).
 DETERMINED_Z = 2.0
@@ -481,7 +502,10 @@ def _runner_up(t: Tested, best: Tested, declined: dict) -> dict:
     if _key(t.term) in declined:
         out["why_not"] = declined[_key(t.term)]
     elif t.significant:
-        if set(t.channels) & set(best.channels):
+        if t.term.label in rival_causes(best, [t]):
+            out["why_not"] = (f"the data cannot tell it from {best.term.cause} (the same validation fit to within "
+                              f"{TWIN:.0%} of what {best.term.cause} removes)")
+        elif set(t.channels) & set(best.channels):
             out["why_not"] = (
                 f"{best.term.cause} explains more of the validation error of "
                 f"{', '.join(sorted(set(t.channels) & set(best.channels)))}"

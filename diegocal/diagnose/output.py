@@ -16,6 +16,7 @@
         evidence: {validation_gain, t, threshold_t, variable, curves: {before, after, unit, channel, reach, signed_by?}}
                                # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
                                # + indistinguishable_from: [channel, ...] (the same cause there fits the same)
+                               # + indistinguishable_causes: [cause:channel, ...] (another cause fits the same)
                                # + stand_in: {term, validation_gain} (unexplained: the term that stood in),
                                #   with what beat it: declined: {term, why} or rival: {model, tau_s,
                                #   open_loop_validation_gain, term_open_loop_validation_gain}

@@ -89,6 +89,12 @@ def sentence(f: dict) -> str:
             f" The data cannot tell it from the same cause on {', '.join(twins)} (each fits the validation "
             f"data the same to within {TWIN * 100:g} % of what it removes)."
         )
+    rivals = (f.get("evidence") or {}).get("indistinguishable_causes")
+    if rivals:  # another cause fits the data the same: which one, the log cannot say
+        params += (
+            f" The data cannot tell it from {', '.join(rivals)} (each fits the validation data the same to "
+            f"within {TWIN * 100:g} % of what it removes): either may be the cause."
+        )
     return f"{f['channel']}: {what}{gain}.{params}{notes(f)}"
 
 

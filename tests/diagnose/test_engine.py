@@ -405,3 +405,20 @@ def test_a_term_that_wants_a_negative_friction_or_dead_band_is_declined():
     assert "negative" not in decline("spring", {"stiffness": -2.0}, {"stiffness": 0.1})
     assert "negative" not in decline("stribeck_friction", {"amplitude": -1.0, "velocity_scale": 0.02},
                                      {"amplitude": 0.1, "velocity_scale": 0.001})
+
+
+def test_another_cause_that_fits_the_same_is_named_beside_the_finding():
+    """A user trial's torque offset on a joint that never nears 0 rad was named a spring, the offset
+    fitting the validation data the same (0.3776 against 0.3776): the finding names the offset as
+    a cause the data cannot tell from it. A rival that removes clearly less, or acts elsewhere, is not."""
+    from diegocal.diagnose.engine import rival_causes
+
+    def tested(cause, channel, sse_after, significant=True):
+        test = SimpleNamespace(sse_before=100.0, sse_after=sse_after)
+        return SimpleNamespace(term=Term(cause, channel, ()), channels=(channel,), test=test,
+                               significant=significant)
+
+    spring = tested("spring", "joint2", 62.24)
+    offset, lag = tested("torque_offset", "joint2", 62.30), tested("torque_lag", "joint2", 70.0)
+    elsewhere, weak = tested("torque_offset", "joint3", 62.24), tested("armature", "joint2", 62.24, False)
+    assert rival_causes(spring, [spring, offset, lag, elsewhere, weak]) == ["torque_offset:joint2"]

@@ -446,6 +446,8 @@ def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
     assert "cannot tell it from the same cause on l_knee" in text
     assert f"within {TWIN * 100:g} % of what it removes" in text
     assert "cannot tell" not in sentence({**f, "evidence": {}})
+    other = sentence({**f, "evidence": {"indistinguishable_causes": ["marker_slip:m2"]}})
+    assert "The data cannot tell it from marker_slip:m2" in other and "either may be the cause" in other
 
 
 def test_a_slip_in_a_gauge_says_which_of_its_numbers_the_data_fix():
