@@ -299,7 +299,9 @@ def _summary_rows(done: Diagnosed) -> list:
             stood = f"; {ev['stand_in']['term']} stood in" if ev.get("stand_in") else ""
             which = "open-loop validation gain" if ev.get("rival") else "validation gain"
             gain = f"{which} {ev.get('validation_gain', 0):.0%} (not explained by any term{stood})"
-        rivals = (f.get("evidence") or {}).get("indistinguishable_causes")
+        ev = f.get("evidence") or {}
+        twins = [f"{f['cause']}:{c}" for c in ev.get("indistinguishable_from", [])]
+        rivals = ev.get("indistinguishable_causes", []) + twins
         gain += f"; the data cannot tell it from {', '.join(rivals)}" if rivals else ""
         rows.append((f"  {f['cause']} on {where}", gain))
     rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in mapping.get("declined") or []]

@@ -61,10 +61,12 @@ class Stream:
     ----------
     names : tuple of str, length K
     data : ndarray of shape (T, K), or (T, K, 3) for markers; float64, unit per stream (DESIGN.md)
+    label : the stream's name in its log ("tau"), for messages ("" where not known)
     """
 
     names: tuple[str, ...]
     data: np.ndarray
+    label: str = field(default="", compare=False)
 
     def column(self, name: str) -> np.ndarray:
         """Samples of one channel: shape (T,) or (T, 3)."""
@@ -74,12 +76,13 @@ class Stream:
         try:
             return self.names.index(name)
         except ValueError:
-            raise UnknownNameError(f"no channel {name!r} in stream (has {_preview(self.names)})") from None
+            where = f"the log's {self.label!r} stream" if self.label else "stream"
+            raise UnknownNameError(f"no channel {name!r} in {where} (has {_preview(self.names)})") from None
 
     def select(self, names) -> Stream:
         """A stream with only the named channels, in the given order."""
         idx = [self.index(n) for n in names]
-        return Stream(tuple(names), self.data[:, idx])
+        return Stream(tuple(names), self.data[:, idx], self.label)
 
 
 @dataclass(frozen=True)
@@ -148,7 +151,8 @@ class Log:
             match = close_match(name, self.streams)
             hint = f" — did you mean {match!r}?" if match else ""
             raise MissingStreamError(f"log has no '{name}' stream{who}; it has: {have}{hint}")
-        return self.streams[name]
+        found = self.streams[name]
+        return found if found.label else replace(found, label=name)
 
     def with_streams(self, **streams: Stream) -> Log:
         """A copy with streams added or replaced."""

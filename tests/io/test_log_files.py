@@ -239,3 +239,12 @@ def test_damaged_bytes_anywhere_give_one_error_that_names_the_file(tmp_path):
                 read(tmp_path / "bad.h5")
             except DiegocalError as exc:
                 assert "bad.h5" in str(exc), (at, n, str(exc))
+
+
+def test_a_missing_channel_names_the_stream_it_is_missing_from():
+    """A user's `joint1` against a log of j1.. read "no channel 'joint1' in stream": which one?"""
+    from diegocal.errors import UnknownNameError
+
+    log = Log(time=np.arange(3) * 0.01, streams={"tau": make_stream(["j1", "j2"], np.zeros((3, 2)))})
+    with pytest.raises(UnknownNameError, match="no channel 'joint1' in the log's 'tau' stream \\(has j1, j2\\)"):
+        log.stream("tau").select(["joint1"])
