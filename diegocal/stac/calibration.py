@@ -60,6 +60,17 @@ from diegocal.terms import Term, make_term, term_from_dict, write_correlated
 #: the joint's own coordinate, rad, or m on a prismatic joint).
 POT_UNITS = {"rotary": ("V/rad", "V"), "linear": ("V/m", "V"), "tendon": ("V/m", "V"), "encoder": ("1", "rad")}
 
+#: The unit of each sensor type's readings, and so of its residuals and noise σ: a pot's bias unit
+#: (:data:`POT_UNITS`; an encoder reads rad, the others V), a marker's position m.
+READING_UNITS = {**{kind: units[1] for kind, units in POT_UNITS.items()}, "markers": "m"}
+
+#: What a calibration did with a pot's gain or bias (:meth:`Calibration.pot_roles`): estimated by the
+#: fit; fixed by design (an encoder's gain is 1: it reads its joint's own coordinate plus a bias); a
+#: gauge (a bias held at nominal because no marker can fix its joint's zero: ``gauges``); unobservable
+#: (gain and bias nominal: no marker moves with the joint, or no channel: ``unobservable``); or
+#: nominal for no recorded reason (a nominal calibration, or a method without standard errors).
+POT_ROLES = ("estimated", "design", "gauge", "unobservable", "nominal")
+
 #: Why calib.yaml's ``rejected`` frames were written off (robust losses; stac/robust.py).
 REJECTED_REASON = (
     "their pots disagree, far beyond their noise (chi-square tail 1e-6), with the joint angles their "
@@ -100,7 +111,7 @@ class Calibration:
     Attributes
     ----------
     pot_names : (P,) names, in the robot's sensors.yaml order
-    gain, bias : (P,) pot gain [V/rad or V/m] and bias [V]
+    gain, bias : (P,) pot gain [V/rad or V/m; 1 for an encoder] and bias [V; rad for an encoder]
     gain_se, bias_se : (P,) standard errors (NaN when not estimated)
     marker_names, marker_links : (M,)
     marker_xyz : (M, 3) marker positions in their link frames, m
@@ -108,9 +119,11 @@ class Calibration:
         covariance, m², reported (block sandwich) and model-based (in memory only: a function of
         them, a slip's move, needs it; None when not estimated)
     mocap_R : (3, 3) rotation from base link to mocap frame; mocap_T : (3,) translation, m
-    sigma_pots, sigma_markers : noise standard deviations (V, m), §2.3.5
+    sigma_pots, sigma_markers : noise standard deviations, §2.3.5: the pots' is the RMS of the
+        per-type σ (V, but pooled with rad when the robot has encoders: read ``sigma_by_group``), m
     method : 'stac' | 'classical' | 'ekf' | 'nominal'
-    sigma_by_group : noise level per sensor type (rotary, linear, tendon, encoder, markers)
+    sigma_by_group : noise level per sensor type (rotary, linear, tendon, encoder, markers), each in
+        its type's unit (:data:`READING_UNITS`: V, rad for encoders, m)
     history : per-iteration records as dicts {iteration, cost, sigma_pots, sigma_markers, seconds}
     meta : {log, robot, command, created}, where a legacy calibration came from
     terms : extra terms of the observation model (:mod:`diegocal.stac.terms`), () for STAC's own
@@ -186,6 +199,33 @@ class Calibration:
         held = {u.get("pot") for u in self.unobservable}
         fitted = np.isfinite(gse) | np.isfinite(bse)
         return tuple(n for n, ok in zip(self.pot_names, fitted, strict=True) if ok and n not in held)
+
+    def pot_roles(self, kinds: dict | None = None) -> dict:
+        """{pot: (gain role, bias role)}, each one of :data:`POT_ROLES`, in ``pot_names`` order.
+
+        An encoder's gain is known from ``pot_units`` (gain unit "1") or, for files without units,
+        from ``kinds`` ({pot: sensors.yaml kind}); gauges and unobservable pots from calib.yaml's
+        ``gauges`` and ``unobservable`` lists; an estimate is a finite standard error.
+        """
+        P = len(self.pot_names)
+        gse = self.gain_se if self.gain_se is not None else np.full(P, np.nan)
+        bse = self.bias_se if self.bias_se is not None else np.full(P, np.nan)
+        unobservable = {u.get("pot") for u in self.unobservable}
+        gauges = {g.get("pot") for g in self.gauges}
+        kinds = kinds or {}
+        # a method that gives no standard errors at all (the EKF) still estimated what it did not hold
+        unknown_se = self.method != "nominal" and not (np.isfinite(gse).any() or np.isfinite(bse).any())
+        out = {}
+        for i, n in enumerate(self.pot_names):
+            unit = self.pot_units[i][0] if i < len(self.pot_units) else None
+            design = unit == POT_UNITS["encoder"][0] or (unit is None and kinds.get(n) == "encoder")
+            if n in unobservable:
+                out[n] = ("design" if design else "unobservable", "unobservable")
+                continue
+            gain = "design" if design else "estimated" if np.isfinite(gse[i]) or unknown_se else "nominal"
+            bias = "gauge" if n in gauges else "estimated" if np.isfinite(bse[i]) or unknown_se else "nominal"
+            out[n] = (gain, bias)
+        return out
 
     def baseline_terms(self) -> tuple[Term, ...]:
         """The kinematic baseline as terms: a ``pot_transfer`` per pot, a ``marker_position`` per
