@@ -32,14 +32,14 @@ from diegocal.report.stac_plots import (
     residuals_by_type,
     skeleton,
 )
+from diegocal.report.stac_words import estimated_words, held_words, kinds_of, milli, sigma_words
 from diegocal.report.style import save_page
 from diegocal.robot import load_robot, resolve_robot_dir
-from diegocal.stac.calibration import Calibration
+from diegocal.stac.calibration import POT_UNITS, READING_UNITS, Calibration
 from diegocal.stac.predict import predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.terms import apply_terms
 
-GAIN_UNIT = {"rotary": "V/rad", "linear": "V/m", "tendon": "V/m", "encoder": "1"}
 MM = 1000.0
 #: The streams a held-out log needs: markers predicted from the pots alone.
 HELDOUT_STREAMS = ("pots", "markers")
@@ -142,21 +142,6 @@ def _rms(r) -> float:
     return float(np.sqrt(np.mean(np.square(r)))) if len(r) else float("nan")
 
 
-def held_at_nominal(cal) -> tuple[set, set]:
-    """(pots whose gain and bias stayed nominal, pots whose bias alone did): from calib.yaml's
-    ``unobservable`` and ``gauges`` lists when it has them, else from the missing standard errors."""
-    unobservable = {u["pot"] for u in getattr(cal, "unobservable", ()) or ()}
-    gauges = {g.get("pot") for g in getattr(cal, "gauges", ()) or ()}
-    gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
-    bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
-    for i, n in enumerate(cal.pot_names):
-        if not np.isfinite(gse[i]) and not np.isfinite(bse[i]):
-            unobservable.add(n)
-        elif not np.isfinite(bse[i]):
-            gauges.add(n)
-    return unobservable, gauges - unobservable
-
-
 # ----------------------------------------------------------------------------- words
 def abstract(path: Path, context) -> list[str]:
     """The section's opening in plain words."""
@@ -164,29 +149,21 @@ def abstract(path: Path, context) -> list[str]:
     log = Path(ev.fit_log).name if ev.fit_log else "an unnamed log"
     span = f" ({ev.frames} frames, {ev.duration:.3g} s)" if ev.frames else ""
     conv = "converged" if cal.fit.converged else "stopped before converging"
+    try:
+        robot = _robot(path, context) if not cal.pot_units else None
+    except DiegocalError:
+        robot = None
     text = (
-        f"STAC (thesis ch. 2) calibrated the gain and bias of {len(cal.pot_names)} pots, the positions of "
+        f"STAC (thesis ch. 2) calibrated {len(cal.pot_names)} pots, the positions of "
         f"{len(cal.marker_names)} markers on their links and the mocap frame from {log}{span}; it {conv} after "
-        f"{cal.fit.iterations} iterations ({cal.fit.seconds:.1f} s)."
-    )
+        f"{cal.fit.iterations} iterations ({cal.fit.seconds:.1f} s). {estimated_words(cal, robot)}"
+    ).rstrip()
     if ev.residuals:
         parts = [_residual_words(g, r, u) for g, (r, u) in ev.residuals.items()]
         text += " At the fitted joint angles the residuals are " + ", ".join(parts) + "."
     held = _heldout_words(ev, _bundle(path).data.get("prediction") or [])
     paragraphs = [f"{text} {held}" if held else text]
-    unobservable, gauges = held_at_nominal(cal)
-    wrong = []
-    if unobservable:
-        wrong.append(
-            f"{len(unobservable)} pot(s) ({', '.join(sorted(unobservable))}) keep their nominal gain and bias: "
-            "no marker moves with their joints"
-        )
-    if gauges:
-        wrong.append(
-            f"{len(gauges)} pot bias(es) are held at nominal because the markers cannot fix that joint's zero "
-            "(a gauge: an offset of the joint is absorbed exactly by the markers on its link), so their standard "
-            "errors are not given"
-        )
+    wrong = held_words(cal, robot)
     turned = gauge_markers(cal)
     if turned:
         wrong.append(
@@ -211,16 +188,18 @@ def headline(path: Path, context) -> str:
         text += f"; marker residual {MM * _rms(ev.residuals['markers'][0]):.2f} mm RMS"
     if ev.heldout:
         text += f"; held-out markers from pots {MM * ev.heldout[0][2].get('markers', np.nan):.2f} mm MAE"
-    unobservable, gauges = held_at_nominal(cal)
+    unobservable = [n for n, r in cal.pot_roles().items() if r[1] == "unobservable"]
     if unobservable:
         text += f"; {len(unobservable)} pot(s) unobservable"
     return text
 
 
 def _residual_words(group: str, r, unit: str) -> str:
-    if unit.startswith("m"):
-        return f"{group} {MM * _rms(r):.2f} mm RMS distance ({len(r)} samples)"
-    return f"{group} pots {MM * _rms(r):.2f} mV RMS ({len(r)} samples)"
+    value, shown = milli(_rms(r), unit)
+    if group == "markers":
+        return f"{group} {value:.2f} {shown} RMS distance ({len(r)} samples)"
+    what = "encoders" if group == "encoder" else f"{group} pots"
+    return f"{what} {value:.3g} {shown} RMS ({len(r)} samples)"
 
 
 def _heldout_words(ev: Evaluation, recorded: list) -> str:
@@ -265,15 +244,19 @@ def key_rows(cal, ev: Evaluation) -> list[list]:
         ["iterations", cal.fit.iterations, ""],
         ["converged", "yes" if cal.fit.converged else "no", ""],
     ]
+    unresolved = {u.get("group") for u in cal.sigma_unresolved}
     for g, v in cal.sigma_by_group.items():
-        unit = "mm" if g == "markers" else "mV"
-        rows.append([f"noise σ, {g} (estimated, §2.3.5)", f"{MM * v:.3g}", unit])
+        how = "not resolved: its detection limit" if g in unresolved else "estimated"
+        value, unit = milli(v, READING_UNITS.get(g, "sensor unit"))
+        rows.append([f"noise σ, {g} ({how}, §2.3.5)", f"{value:.3g}", unit])
     for g, (r, unit) in ev.residuals.items():
-        rows.append([f"residual RMS, {g} ({len(r)} samples)", f"{MM * _rms(r):.3g}", "mm" if unit[0] == "m" else "mV"])
+        value, unit = milli(_rms(r), unit)
+        rows.append([f"residual RMS, {g} ({len(r)} samples)", f"{value:.3g}", unit])
     for p, frames, mae in ev.heldout:
         for t, v in mae.items():
             what = f"held-out MAE, {t} from pots: {Path(p).name} ({frames} frames)"
-            rows.append([what, f"{MM * v:.3g}", "mm" if t == "markers" else "mV"])
+            value, unit = milli(v, READING_UNITS.get(t, "sensor unit"))
+            rows.append([what, f"{value:.3g}", unit])
     angle = np.degrees(np.arccos(np.clip((np.trace(cal.mocap_R) - 1) / 2, -1, 1)))
     rows.append(["mocap frame: rotation from the base link", f"{angle:.1f}", "deg"])
     rows.append(["mocap frame: translation", ", ".join(f"{x:.3f}" for x in cal.mocap_T), "m"])
@@ -281,8 +264,8 @@ def key_rows(cal, ev: Evaluation) -> list[list]:
 
 
 def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
-    kinds = {p.name: p.kind for p in robot.sensors.pots} if robot is not None else {}
-    unobservable, gauges = held_at_nominal(cal)
+    kinds = kinds_of(robot)
+    roles = cal.pot_roles(kinds)
     gse = cal.gain_se if cal.gain_se is not None else np.full(len(cal.gain), np.nan)
     bse = cal.bias_se if cal.bias_se is not None else np.full(len(cal.gain), np.nan)
     columns = [
@@ -291,25 +274,32 @@ def pot_table(cal, robot) -> tuple[list[Column], list[list], list[str]]:
         Column("gain"),
         Column("± SE"),
         Column("gain unit", align="left"),
-        Column("bias", "V"),
-        Column("± SE", "V"),
+        Column("bias"),
+        Column("± SE"),
+        Column("bias unit", align="left"),
         Column("note", align="left"),
     ]
     rows = []
-    gauge_joints = {g.get("joint") for g in getattr(cal, "gauges", ()) or ()} - {None}
+    gauge_joints = {g.get("joint") for g in cal.gauges} - {None}
     spans = {p.name: set(p.joints) for p in robot.sensors.pots} if robot is not None else {}
     for i, n in enumerate(cal.pot_names):
-        note = "nominal: unobservable" if n in unobservable else "bias nominal: gauge" if n in gauges else ""
+        gain_role, bias_role = roles[n]
+        note = {"unobservable": "nominal: unobservable", "gauge": "bias nominal: gauge"}.get(bias_role, "")
+        if gain_role == "design":
+            note = "; ".join(x for x in ("gain 1 by design", note) if x)
         if not note and len(spans.get(n, ())) > 1 and spans[n] & gauge_joints:
             note = f"bias in {', '.join(sorted(spans[n] & gauge_joints))}'s zero"
         kind = kinds.get(n, "")
-        gain = [f"{cal.gain[i]:.5g}", _se(gse[i]), GAIN_UNIT.get(kind, "V per unit")]
-        rows.append([n, kind, *gain, f"{cal.bias[i]:.4f}", _se(bse[i]), note])
+        units = cal.pot_units[i] if i < len(cal.pot_units) else POT_UNITS.get(kind, ("V per unit", "V"))
+        gain = [f"{cal.gain[i]:.5g}", _se(gse[i]), units[0]]
+        rows.append([n, kind, *gain, f"{cal.bias[i]:.4f}", _se(bse[i]), units[1], note])
     notes = [
-        "Reading = gain · (joint angle, rad, or anchor distance / tendon excursion, m) + bias (thesis eq. 2.18-2.20). "
+        "Reading = gain · (joint angle, rad, or anchor distance / tendon excursion, m) + bias (thesis eq. 2.18-2.20); "
+        "an encoder reads its joint's own coordinate (rad), so its gain is 1 by design and its bias is in rad. "
         f"± SE: one standard error, {se_method_words(cal)}. A dash means not estimated: "
         "'bias nominal: gauge' pots read a joint whose zero the markers cannot fix (rotating the markers on the "
-        "link absorbs any offset), so the bias keeps its sensors.yaml value; 'nominal: unobservable' pots read "
+        "joint's link, or the mocap frame for a joint turning every marker about an axis fixed in the base, "
+        "absorbs any offset), so the bias keeps its sensors.yaml value; 'nominal: unobservable' pots read "
         "joints no marker moves with, so gain and bias both keep their sensors.yaml values. 'bias in J's zero': a "
         "tendon over the gauge joint J reads J's angle too, so its bias holds J's nominal zero (compare it with "
         "another calibration of the same convention only)."
@@ -407,7 +397,7 @@ def pages(path: Path, pdf, context) -> None:
             "Left: the cost (negative log-likelihood, eq. 2.5) after each outer iteration, shifted so that its "
             "minimum is 1 (log scale); it need not fall monotonically, because re-estimating σ changes the "
             "likelihood itself. Right: the noise level σ of each sensor type, re-estimated every iteration "
-            "(dynamic variance adjustment, §2.3.5): pots in V, markers in m."
+            f"(dynamic variance adjustment, §2.3.5): {sigma_words(cal)}."
         )
     save_page(pdf, sheet.fig)
 
@@ -427,9 +417,10 @@ def pages(path: Path, pdf, context) -> None:
 
 def residual_caption(ev: Evaluation) -> str:
     """What the residual histograms show: the fit log's, and the held-out markers' when drawn."""
+    units = ", ".join(f"{g} in {u}" for g, (_, u) in ev.residuals.items() if g != "markers")
     text = (
-        "Residuals at the fitted joint angles (the fit log): pots, reading minus model, V; markers, distance "
-        "between measured and modelled position, m (occluded samples left out)."
+        f"Residuals at the fitted joint angles (the fit log): pots, reading minus model ({units}); markers, "
+        "distance between measured and modelled position, m (occluded samples left out)."
     )
     if ev.heldout_errors is not None:
         text += (

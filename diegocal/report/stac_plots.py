@@ -11,7 +11,7 @@ import numpy as np
 
 from diegocal.report.style import COLORS, axes_or_new
 from diegocal.robot.batch import BatchKinematics
-from diegocal.stac.calibration import Calibration
+from diegocal.stac.calibration import READING_UNITS, Calibration
 from diegocal.stac.model import MARKERS, Observation
 
 
@@ -29,14 +29,30 @@ def plot_cost(cal: Calibration, ax=None):
     return ax
 
 
+def pot_units_pooled(cal: Calibration) -> dict:
+    """{pot type: unit} of the pot types whose σ ``fit.history``'s ``sigma_pots`` pools (their RMS)."""
+    return {g: READING_UNITS.get(g, "sensor unit") for g in cal.sigma_by_group if g != MARKERS}
+
+
 def plot_sigma(cal: Calibration, ax=None):
-    """Noise levels per sensor type over the iterations (dynamic variance adjustment, §2.3.5)."""
+    """Noise levels per sensor type over the iterations (dynamic variance adjustment, §2.3.5).
+
+    ``fit.history`` keeps the markers' σ and the RMS of the pot types' σ: drawn as one line when
+    every pot type reads in one unit; when they do not (rotary pots in V, encoders in rad) that RMS
+    has no unit, and each type's final σ is drawn at the last iteration instead."""
     ax = axes_or_new(ax)
     it = [h["iteration"] for h in cal.history]
-    for key, label in (("sigma_pots", "pots (V)"), ("sigma_markers", "markers (m)")):
-        ax.semilogy(it, [h.get(key) or np.nan for h in cal.history], label=label)
+    units = pot_units_pooled(cal)
+    one = set(units.values()) if units else {"V"}
+    if len(one) == 1:
+        ax.semilogy(it, [h.get("sigma_pots") or np.nan for h in cal.history], label=f"pots ({one.pop()})")
+    else:
+        for k, (g, unit) in enumerate(units.items()):
+            ax.semilogy(it[-1:], [cal.sigma_by_group[g]], "sd^v"[k % 4], label=f"{g} ({unit}), final")
+    ax.semilogy(it, [h.get("sigma_markers") or np.nan for h in cal.history], label="markers (m)")
+    shown = ", ".join(dict.fromkeys([*units.values(), "m"])) if units else "V, m"
     ax.set_xlabel("iteration")
-    ax.set_ylabel("noise σ [V for pots, m for markers]")
+    ax.set_ylabel(f"noise σ [each type's unit: {shown}]")
     ax.legend()
     ax.set_title("Dynamic variance adjustment (§2.3.5)")
     return ax
@@ -106,7 +122,9 @@ def skeleton(cal: Calibration, robot) -> dict:
 
 
 def residuals_by_type(cal: Calibration, robot, log, q) -> dict:
-    """{type: (residuals, unit)} of the log under the calibration at the tracked q."""
+    """{type: (residuals, unit)} of the log under the calibration at the tracked q: pots reading
+    minus model in their type's unit (:data:`READING_UNITS`: V, rad for encoders), markers the
+    distance between measured and modelled position ("m (distance)")."""
     obs = Observation(log, robot)
     params = obs.params_from(cal)
     st = obs.state(q)
@@ -118,5 +136,5 @@ def residuals_by_type(cal: Calibration, robot, log, q) -> dict:
             d = np.linalg.norm(xb @ params.R.T + params.T - obs.markers, axis=-1)
             out[g] = (d[obs.valid], "m (distance)")
         else:
-            out[g] = (rp[:, obs.kinds == g].ravel(), "V")
+            out[g] = (rp[:, obs.kinds == g].ravel(), READING_UNITS.get(g, "sensor unit"))
     return out
