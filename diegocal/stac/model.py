@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
-from diegocal.errors import UnknownNameError
+from diegocal.errors import LogFormatError, UnknownNameError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
 from diegocal.robot.batch import BatchKinematics
@@ -33,6 +33,9 @@ LOG = logging.getLogger(__name__)
 
 #: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
 MARKERS = "markers"
+#: How many times the span the robot's markers can have the log's markers may spread before the
+#: log is taken for one in mm (:func:`check_marker_scale`): mm read as m are 1000 times too far apart
+SPAN_FACTOR = 10.0
 
 
 @dataclass(frozen=True)
@@ -151,6 +154,8 @@ class Observation(Observability):
             self.marker_index, self.markers = np.zeros(0, dtype=int), np.zeros((T, 0, 3))
         if self.ignored:
             LOG.warning(ignored_line(self.ignored, robot))
+        if len(self.marker_index):
+            check_marker_scale(self.markers, robot, [robot.sensors.markers[i] for i in self.marker_index])
         self.valid = np.isfinite(self.markers).all(axis=-1)  # (T, M)
         self.pot_specs = [robot.sensors.pots[i] for i in self.pot_index]
         self.marker_specs = [robot.sensors.markers[i] for i in self.marker_index]
@@ -433,6 +438,49 @@ def ignored_line(ignored: dict, robot) -> str:
         shown = ", ".join(n + _close(n, specs) for n in names[:6]) + (", ..." if len(names) > 6 else "")
         parts.append(f"{len(names)} log {what} ({shown})")
     return f"ignored {' and '.join(parts)}: not in {robot.name}'s sensors.yaml"
+
+
+def marker_spread(markers: np.ndarray) -> float:
+    """How far the recorded markers (T, M, 3) m (NaN = occluded) lie from their centroid, m: the 90th
+    percentile of their distances from the per-axis median (ghost markers and swapped labels, a few
+    percent of the readings, do not count); 0 with fewer than two readings. A spread, not a
+    position: the mocap frame may lie anywhere."""
+    x = markers[np.isfinite(markers).all(axis=-1)]
+    if len(x) < 2:
+        return 0.0
+    return float(np.quantile(np.linalg.norm(x - np.median(x, axis=0), axis=1), 0.9))
+
+
+def marker_span(robot: Robot, specs) -> float:
+    """An upper bound, m, on the distance between two of the markers ``specs`` over every joint
+    angle: the lengths of the joint placements on the links' chains (a prismatic joint's travel
+    added, inf when it has no limit), plus twice the farthest marker from its joint (its link's
+    offset and its nominal position). The markers' centroid lies within it of each of them."""
+    model, joints, reach = robot.model, set(), 0.0
+    for m in specs:
+        frame = model.frames[robot.frame_id(m.link)]
+        joints.update(j for j in model.supports[frame.parentJoint] if j > 0)
+        reach = max(reach, np.linalg.norm(frame.placement.translation) + np.linalg.norm(m.xyz))
+    span = 2.0 * reach
+    for j in joints:
+        span += np.linalg.norm(model.jointPlacements[j].translation)
+        if model.names[j] in robot.prismatic_joints:
+            span += max(abs(robot.lower[j - 1]), abs(robot.upper[j - 1]))  # inf: no limit, no check
+    return float(span)
+
+
+def check_marker_scale(markers: np.ndarray, robot: Robot, specs) -> None:
+    """Raise LogFormatError when the markers (T, M, 3) spread (:func:`marker_spread`) over
+    :data:`SPAN_FACTOR` times what the robot can span between them (:func:`marker_span`): a log in
+    mm (or cm), which would otherwise fit with a 'converged' calibration of markers metres away."""
+    spread = marker_spread(markers)
+    span = marker_span(robot, specs)
+    if spread > SPAN_FACTOR * span:
+        raise LogFormatError(
+            f"the log's markers spread {spread:.4g} m from their centroid, over {SPAN_FACTOR:g}× what robot "
+            f"{robot.name!r} can span between them ({span:.3g} m at most): markers in mm? the log wants m "
+            "(convert them, or import with the mocap file's unit)"
+        )
 
 
 def _close(name: str, choices) -> str:
