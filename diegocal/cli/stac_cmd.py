@@ -94,7 +94,9 @@ class StacRun:
     """What :func:`run_stac` did: the calibration as written, and what the summary says of it.
 
     robot : the robot it was fitted with; time : (T,) s the log's sample times; pose_cv : the
-    leave-one-pose-out evaluation (``--cv``) or None; warnings : lines for the user."""
+    leave-one-pose-out evaluation (``--cv``) or None; warnings : lines for the user; markers_seen :
+    how many of sensors.yaml's markers the log has a channel of (the others keep their nominal
+    positions)."""
 
     calibration: Calibration
     robot: Robot
@@ -104,6 +106,7 @@ class StacRun:
     pose_cv: PoseCV | None
     warnings: tuple[str, ...]
     geometry: dict | None = None
+    markers_seen: int | None = None
 
 
 def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> StacRun:
@@ -151,8 +154,10 @@ def run_stac(args: StacArgs, command: str = "diegocal stac", progress=None) -> S
     if args.joint_angles is not None:  # only on request: a side file beside the logs would be taken for one
         streams = {"q": make_stream(robot.joint_names, result.q)}
         save_log(Log(data.time, streams, robot=data.robot, rate_hz=data.rate_hz), args.joint_angles)
+    logged = set(data.streams["markers"].names) if data.has("markers") else set()
+    seen = sum(n in logged for n in robot.sensors.marker_names)
     return StacRun(
-        cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out), geometry
+        cal, robot, data.time, args.out, args.joint_angles, pose_cv, _warnings(cal, data.time, args.out), geometry, seen
     )
 
 
@@ -312,7 +317,7 @@ def _summary(done: StacRun, args: StacArgs) -> None:
         ("method", cal.method),
         ("frames", len(done.time)),
         ("pots calibrated" + ("" if g is None else " (geometry fit)"), f"{pots} of {len(cal.pot_names)}"),
-        ("markers", len(cal.marker_names)),
+        ("markers", _markers_seen(done.markers_seen, len(cal.marker_names))),
         ("iterations" + stac, cal.fit.iterations),
         ("converged" + stac, str(cal.fit.converged)),
     ]
@@ -350,6 +355,11 @@ def _summary(done: StacRun, args: StacArgs) -> None:
     summary(f"stac {Path(args.log).name}", rows, quiet=args.quiet)
     if done.pose_cv is not None:
         _pose_table(done.pose_cv, args.quiet)
+
+
+def _markers_seen(seen: int | None, total: int) -> str:
+    """The summary's markers: how many of sensors.yaml's the log has (the others stay nominal)."""
+    return str(total) if seen is None else f"{seen} of {total} seen"
 
 
 def cost_label(method: str, loss: str) -> str | None:

@@ -27,7 +27,7 @@ from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
 from diegocal.robot.batch import BatchKinematics
 from diegocal.stac.calibration import Calibration
-from diegocal.stac.observability import NO_CHANNEL, Observability  # noqa: F401 (NO_CHANNEL: its home)
+from diegocal.stac.observability import NO_CHANNEL, Observability
 
 LOG = logging.getLogger(__name__)
 
@@ -154,6 +154,13 @@ class Observation(Observability):
             self.marker_index, self.markers = np.zeros(0, dtype=int), np.zeros((T, 0, 3))
         if self.ignored:
             LOG.warning(ignored_line(self.ignored, robot))
+        #: markers of sensors.yaml the log's 'markers' stream lacks: kept at their nominal positions
+        self.absent_markers: tuple = ()
+        if log.has("markers"):
+            logged = set(log.streams["markers"].names)
+            self.absent_markers = tuple(n for n in robot.sensors.marker_names if n not in logged)
+        if self.absent_markers:
+            LOG.warning(absent_line(self.absent_markers, log.streams["markers"].names, robot))
         if len(self.marker_index):
             check_marker_scale(self.markers, robot, [robot.sensors.markers[i] for i in self.marker_index])
         self.valid = np.isfinite(self.markers).all(axis=-1)  # (T, M)
@@ -438,6 +445,17 @@ def ignored_line(ignored: dict, robot) -> str:
         shown = ", ".join(n + _close(n, specs) for n in names[:6]) + (", ..." if len(names) > 6 else "")
         parts.append(f"{len(names)} log {what} ({shown})")
     return f"ignored {' and '.join(parts)}: not in {robot.name}'s sensors.yaml"
+
+
+def absent_line(absent, channels, robot) -> str:
+    """One warning line naming the markers of sensors.yaml the log has no channel of (with a close
+    match among the log's ``channels``: a renamed one): they keep their nominal positions, standard
+    error null, as a pot without a channel keeps its gain and bias."""
+    shown = ", ".join(n + _close(n, channels) for n in absent[:6]) + (", ..." if len(absent) > 6 else "")
+    return (
+        f"{len(absent)} marker(s) of {robot.name}'s sensors.yaml not calibrated: {shown} ({NO_CHANNEL}); "
+        "their positions keep their nominal values (standard error null)"
+    )
 
 
 def marker_spread(markers: np.ndarray) -> float:
