@@ -1,15 +1,24 @@
 """The merged table of a batch: one row per job, the numbers that compare sessions side by side.
 
-Each row holds the log, its status (done, up to date, failed), the seconds the run took, the output,
-the failure's reason and the job's warnings, then the numbers read back from the output (one reader
+Each row holds the log, its status (done, up to date, failed, not applicable), the seconds the run
+took, the output (empty when the job wrote none: a failed run, a log not applicable), the failure's
+or the log's reason and the job's warnings, then the numbers read back from the output (one reader
 per command; also for a job failed by what its output says, such as a calibration that did not
 converge):
 
-    stac           iterations, converged, sigma pots [V], sigma markers [m], gain/bias of every pot
+    stac           iterations, converged, the noise σ of each sensor type in its unit (sigma rotary [V],
+                   sigma encoder [rad], sigma markers [m]), every estimated gain and every bias with units
+                   (an encoder's gain, 1 by design, is left out)
     sgp-fit        samples, in-sample nMSE of every joint, log marginal likelihood
     pneumatic-fit  chambers fitted, 2-s drift median / max [% of Pc - Pr], per chamber drift
     diagnose       domain, held-out RMSE of the baseline and the extended model, the findings
-    predict        error of the prediction against the log's own measurement, per stream
+    predict        error of each predicted stream against the log's own measurement, with its unit
+                   (markers mean distance [m], rotary RMSE [V], encoder RMSE [rad], tau RMSE [N·m],
+                   pressure RMSE [kPa]); a stream the prediction was made from (pots for --from pots)
+                   is no prediction and has no column
+
+Logs the command cannot use (another program's file, a log without the streams it needs) are rows
+too, with status "not applicable" and the reason, as the terminal lists them.
 
 The CSV starts with a ``# diegocal-batch command=... source=...`` line so that the report knows
 it and no batch mistakes it for a log. :data:`HEADLINE` names the columns the report shows.
@@ -19,20 +28,24 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from diegocal.batch.jobs import TABLE_HEADER, Outcome, Plan
+from diegocal.domains import domain as domain_record
 from diegocal.errors import DiegocalError
 
+#: The status of a log the command cannot use (the plan's ``not_applicable``).
+NOT_APPLICABLE = "not applicable"
 #: Columns every row has, before the command's numbers.
 BASE_COLUMNS = ("log", "domain", "status", "seconds", "output", "reason", "warnings")
 #: The columns a one-page view (the report) shows per command, besides log, status and reason
 #: (a trailing * matches every column that starts so).
 HEADLINE = {
-    "stac": ("iterations", "converged", "sigma pots [V]", "sigma markers [m]"),
+    "stac": ("iterations", "converged", "sigma *"),
     "sgp-fit": ("samples", "nMSE worst joint", "nMSE mean"),
     "pneumatic-fit": ("chambers", "drift 2 s median [%]", "drift 2 s max [%]", "chambers < 4 %"),
     "diagnose": ("held-out RMSE *", "findings"),
@@ -62,20 +75,22 @@ def _stac(path: Path) -> dict:
     from diegocal.io import load_yaml
 
     d = load_yaml(path)
-    fit, sigma = d.get("fit") or {}, d.get("sigma") or {}
-    row = {
-        "method": d.get("method"),
-        "iterations": fit.get("iterations"),
-        "converged": fit.get("converged"),
-        "sigma pots [V]": sigma.get("pots"),
-        "sigma markers [m]": sigma.get("markers"),
-    }
-    from diegocal.stac.calibration import Calibration
+    from diegocal.stac.calibration import READING_UNITS, Calibration
 
+    fit, sigma = d.get("fit") or {}, d.get("sigma") or {}
+    row = {"method": d.get("method"), "iterations": fit.get("iterations"), "converged": fit.get("converged")}
+    by_group = sigma.get("by_group") or {}
+    if by_group:  # one column per sensor type, in its unit: the pots' pooled σ mixes V and rad
+        row.update({f"sigma {g} [{READING_UNITS.get(g, 'sensor unit')}]": v for g, v in by_group.items()})
+    else:  # files without σ per type
+        row.update({"sigma pots [V]": sigma.get("pots"), "sigma markers [m]": sigma.get("markers")})
     cal = Calibration.from_dict(d, str(path))  # layout 2 or 1
+    roles = cal.pot_roles()
     for i, name in enumerate(cal.pot_names):
-        row[f"gain {name}"] = float(cal.gain[i])
-        row[f"bias {name} [V]"] = float(cal.bias[i])
+        gain_unit, bias_unit = cal.pot_units[i] if cal.pot_units else ("", "V")
+        if roles[name][0] != "design":
+            row[f"gain {name}" + (f" [{gain_unit}]" if gain_unit else "")] = float(cal.gain[i])
+        row[f"bias {name} [{bias_unit}]"] = float(cal.bias[i])
     return row
 
 
@@ -138,54 +153,138 @@ def _predict(path: Path) -> dict:
 READERS = {"stac": _stac, "sgp-fit": _sgp, "pneumatic-fit": _pneumatic, "diagnose": _diagnose, "predict": _predict}
 
 
-def prediction_errors(prediction: Path, log: Path) -> dict:
-    """RMSE of every predicted stream the log also measured (markers: mean distance, m)."""
+#: The streams a model predicts, by domain (the rest of a prediction log, q, qd, qdd, tau_std and the
+#: measured torques, is what the prediction was made from or reports beside it), and their units.
+PREDICTED = {"kinematics": ("markers", "pots"), "dynamics": ("tau",), "pneumatics": ("pressure",)}
+STREAM_UNITS = {"markers": "m", "tau": "N·m", "pressure": "kPa"}
+
+
+@dataclass(frozen=True)
+class Predicted:
+    """What a prediction log predicts, so what its errors are: the model's domain and, for a
+    calibration, the sensor types the joint angles were tracked from (``sources``) and those asked
+    for (``targets``), with each pot's type ({pot: kind}; empty when the robot is not found)."""
+
+    domain: str
+    sources: tuple[str, ...] = ()
+    targets: tuple[str, ...] = ()
+    kinds: dict = field(default_factory=dict)
+
+    def channels(self, stream: str, names) -> dict:
+        """{type: channels} of ``stream`` that were predicted, each type a column of the table."""
+        if stream not in PREDICTED.get(self.domain, ()):
+            return {}
+        if self.domain != "kinematics":
+            return {stream: list(names)}
+        others = "others" in self.sources  # each reading from every other sensor: all are predictions
+        if stream == "markers":
+            asked = "markers" in self.targets and ("markers" not in self.sources or others)
+            return {"markers": list(names)} if asked else {}
+        out = {}
+        for n in names:
+            kind = self.kinds.get(n, "pots")
+            asked = "pots" in self.targets or kind in self.targets
+            given = "pots" in self.sources or kind in self.sources
+            if asked and (others or not given):
+                out.setdefault(kind, []).append(n)
+        return out
+
+
+def predicted(job) -> Predicted | None:
+    """What the predict job's output predicts (None when its model or options cannot be read)."""
+    from diegocal.batch.jobs import job_args
+    from diegocal.io.bundle import load_bundle
+
+    try:
+        args = job_args(job)
+        bundle = load_bundle(args.model)
+        domain = bundle.data.get("domain") if bundle.kind == "diagnosis" else bundle.kind
+        domain = domain_record(domain).name
+    except (DiegocalError, OSError, KeyError, TypeError, ValueError):
+        return None
+    if domain != "kinematics":
+        return Predicted(domain)
+    words = lambda text: tuple(w.strip() for w in (text or "").split(",") if w.strip())  # noqa: E731
+    return Predicted(domain, words(args.sensors_from), words(args.sensors_to), _pot_kinds(bundle.robot, args.robot))
+
+
+def _pot_kinds(record, robot) -> dict:
+    """{pot: kind} of the robot a calibration was fitted on (``robot``: predict's --robot), {} if not found."""
+    from diegocal.io import load_yaml
+    from diegocal.robot import parse_sensors, resolve_robot_dir
+
+    try:
+        rdir = resolve_robot_dir(robot or (record or {}).get("dir") or (record or {}).get("name"), None)
+        sensors = parse_sensors(load_yaml(Path(rdir) / "sensors.yaml"))
+    except (DiegocalError, OSError, TypeError):
+        return {}
+    return {p.name: p.kind for p in sensors.pots}
+
+
+def prediction_errors(prediction: Path, log: Path, what: Predicted | None = None) -> dict:
+    """The error of every predicted stream the log also measured, one column per sensor type with
+    its unit: markers the mean distance (m), the others the RMSE (pots of each type in their unit,
+    :data:`diegocal.stac.calibration.READING_UNITS`). ``what``: what the prediction predicts
+    (:func:`predicted`); None scores every stream a model of the log's domain predicts."""
     from diegocal.io import load_log
+    from diegocal.stac.calibration import READING_UNITS
 
     pred, meas = load_log(prediction), load_log(log)
     row = {}
+    if pred.n_samples != meas.n_samples:
+        return row
     for name, stream in pred.streams.items():
-        if name == "q" or not meas.has(name) or pred.n_samples != meas.n_samples:
+        if not meas.has(name):
             continue
-        common = [n for n in stream.names if n in meas.streams[name].names]
-        if not common:
-            continue
-        p, m = stream.select(common).data, meas.streams[name].select(common).data
-        if name == "markers":
-            row["markers mean distance [m]"] = float(np.nanmean(np.linalg.norm(p - m, axis=-1)))
-        else:
-            row[f"{name} RMSE"] = float(np.sqrt(np.nanmean((p - m) ** 2)))
+        known = [n for n in stream.names if n in meas.streams[name].names]
+        chosen = what.channels(name, known) if what is not None else _every(name, known)
+        for kind, common in chosen.items():
+            p, m = stream.select(common).data, meas.streams[name].select(common).data
+            if name == "markers":
+                row["markers mean distance [m]"] = float(np.nanmean(np.linalg.norm(p - m, axis=-1)))
+            else:
+                unit = STREAM_UNITS.get(name) or READING_UNITS.get(kind, "sensor unit")
+                row[f"{kind} RMSE [{unit}]"] = float(np.sqrt(np.nanmean((p - m) ** 2)))
     return row
 
 
-def rows(outcomes: list[Outcome]) -> list[dict]:
-    """One row per job (see the module docstring)."""
+def _every(name: str, names) -> dict:
+    """What is a prediction when the job's options cannot be read: torques and pressures only (markers
+    and pots may be what a calibration's prediction was made from)."""
+    return {name: list(names)} if names and name in ("tau", "pressure") else {}
+
+
+def rows(outcomes: list[Outcome], not_applicable: dict | None = None) -> list[dict]:
+    """One row per job, then one per log the command cannot use (see the module docstring)."""
     out = []
     for o in outcomes:
         job = o.job
+        wrote = not o.failed or o.judged  # a failed run wrote nothing of its own (what is there is older)
         row = {
             "log": str(job.log),
             "domain": job.domain or "",
             "status": o.status,
             "seconds": round(o.seconds, 2) if o.status == "done" else "",
-            "output": str(job.output),
+            "output": str(job.output) if wrote else "",
             "reason": o.message,
             "warnings": "; ".join(o.warnings),
         }
-        if not o.failed or o.judged:
+        if wrote:
             row.update(metrics(job.command, job.output))
             if job.command == "predict":
                 try:
-                    row.update(prediction_errors(job.output, job.log))
+                    row.update(prediction_errors(job.output, job.log, predicted(job)))
                 except (DiegocalError, OSError):
                     pass
         out.append(row)
+    for path, reason in (not_applicable or {}).items():
+        out.append({"log": str(path), "status": NOT_APPLICABLE, "output": "", "reason": reason})
     return out
 
 
 def table_text(plan: Plan, outcomes: list[Outcome]) -> str:
     """The merged table as CSV text, with its ``# diegocal-batch`` header line."""
-    data = rows(outcomes)
+    data = rows(outcomes, plan.not_applicable)
     columns = list(BASE_COLUMNS)
     for r in data:
         columns += [k for k in r if k not in columns]

@@ -1,16 +1,16 @@
 """Report section for a merged batch table (``COMMAND.batch.csv``; registers itself on import).
 
-One opening paragraph (what ran over which logs, how many succeeded, which failed and why), then
-the table: one row per log with its status and the command's headline numbers; the full set of
-columns is in the CSV.
+One opening paragraph (what ran over which logs, how many succeeded, which failed and why, which
+files it could not use and why), then the table: one row per log with its status and the command's
+headline numbers, the logs it could not use with their reason; the full set of columns is in the CSV.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from diegocal.batch.table import NOT_APPLICABLE, is_table, read_table
 from diegocal.batch.table import headline as headline_columns
-from diegocal.batch.table import is_table, read_table
 from diegocal.report.layout import Column, table_sheets
 from diegocal.report.registry import Section, register_section
 from diegocal.report.style import save_page
@@ -30,7 +30,7 @@ def abstract(path: Path, context=None) -> list[str]:
     fields, _, rows = _read(path)
     command, source = fields.get("command", "?"), fields.get("source", "?")
     count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
-    logs = len({r["log"] for r in rows})
+    logs = len({r["log"] for r in rows if r["status"] != NOT_APPLICABLE})
     text = (
         f"diegocal {command} ran over {logs} log(s) of {source}: {count['done']} run(s) done now, "
         f"{count['up to date']} already up to date (outputs newer than their log, not rerun), "
@@ -40,6 +40,12 @@ def abstract(path: Path, context=None) -> list[str]:
     if failed:
         text += " Failures: " + "; ".join(f"{Path(r['log']).name}: {r['reason']}" for r in failed[:5])
         text += " …" if len(failed) > 5 else "."
+    skipped = [r for r in rows if r["status"] == NOT_APPLICABLE]
+    if skipped:
+        text += " Not run, as not applicable: " + "; ".join(
+            f"{Path(r['log']).name}: {r['reason']}" for r in skipped[:5]
+        )
+        text += " …" if len(skipped) > 5 else "."
     return [text, f"Every column of every output is in {Path(path).name}; this page shows the headline numbers."]
 
 
@@ -56,7 +62,7 @@ def pages(path: Path, pdf, context) -> None:
             )
         shown.insert(0, "held-out RMSE")
     if not shown:  # predict: every error column
-        shown = [c for c in columns if c.endswith(("RMSE", "[m]"))][:5]
+        shown = [c for c in columns if " RMSE [" in c or c.startswith("markers mean distance")][:5]
     cols = [Column("log", align="left")]
     if "domain" in columns:
         cols.append(Column("domain", align="left"))
@@ -67,7 +73,7 @@ def pages(path: Path, pdf, context) -> None:
         else Column(*_name_unit(c), align="right" if _numeric(rows, c) else "left")
         for c in shown
     ]
-    cols.append(Column("failure reason", align="left"))
+    cols.append(Column("reason", align="left"))  # why it failed, or why the command cannot use the file
     table = []
     for r in rows:
         row = [Path(r["log"]).name] + ([r["domain"]] if "domain" in columns else [])
@@ -118,8 +124,10 @@ def _num(text) -> str:
 
 def headline(path: Path, context=None) -> str:
     fields, _, rows = _read(path)
-    count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed")}
-    return f"{fields.get('command', '?')} over {len(rows)} run(s): " + ", ".join(f"{n} {s}" for s, n in count.items())
+    count = {s: sum(r["status"] == s for r in rows) for s in ("done", "up to date", "failed", NOT_APPLICABLE)}
+    runs = len(rows) - count[NOT_APPLICABLE]
+    said = ", ".join(f"{n} {s}" for s, n in count.items() if n or s != NOT_APPLICABLE)
+    return f"{fields.get('command', '?')} over {runs} run(s): {said}"
 
 
 register_section(

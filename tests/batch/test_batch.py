@@ -95,19 +95,20 @@ def test_batch_twice_in_a_row_with_two_jobs(source, tmp_path):
     outputs = [d / "session1.calib.yaml", d / "session2.calib.yaml"]
     stamps = [p.stat().st_mtime_ns for p in outputs]
     fields, columns, rows = read_table(d / "stac.batch.csv")
-    assert fields["command"] == "stac" and [r["status"] for r in rows] == ["done", "done"]
-    assert {"iterations", "sigma markers [m]", "gain fdp"} <= set(columns)
-    assert all(0 < float(r["sigma markers [m]"]) < 0.01 for r in rows)
+    assert fields["command"] == "stac" and [r["status"] for r in rows] == ["done", "done", *["not applicable"] * 2]
+    assert {Path(r["log"]).name for r in rows[2:]} == {"notes.csv", "swing.h5"}  # listed, with why, as on the terminal
+    assert {"iterations", "sigma markers [m]", "sigma tendon [V]", "gain fdp [V/m]"} <= set(columns)
+    assert all(0 < float(r["sigma markers [m]"]) < 0.01 for r in rows[:2])
     assert (d / "stac.batch.pdf").read_bytes().startswith(b"%PDF")
     # outputs beside the logs are not taken for logs; nothing is redone
     second = _batch("stac", d, "--jobs", "2", "--", "--max-iterations", "5", "--allow-unconverged")
     assert second.exit_code == 0, second.output
     assert [p.stat().st_mtime_ns for p in outputs] == stamps
-    assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]] == ["up to date", "up to date"]
+    assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]][:2] == ["up to date", "up to date"]
     # a log newer than its output is redone, as make would
     os.utime(d / "session2.h5", None)
     third = _batch("stac", d, "--", "--max-iterations", "5", "--allow-unconverged")
-    assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]] == ["up to date", "done"], third.output
+    assert [r["status"] for r in read_table(d / "stac.batch.csv")[2]][:2] == ["up to date", "done"], third.output
 
 
 def test_one_failure_does_not_stop_the_others(source, tmp_path):
@@ -201,7 +202,8 @@ def test_make_calibrate_twice(source, tmp_path):
     assert second.returncode == 0, second.stderr
     assert " stac " not in second.stdout.replace("batch stac", "")  # no fit was rerun
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
-    assert [r["status"] for r in read_table(out / "stac.batch.csv")[2]] == ["up to date", "up to date"]
+    statuses = [r["status"] for r in read_table(out / "stac.batch.csv")[2]]
+    assert statuses == ["up to date", "up to date", "not applicable"]  # swing.h5: no pots, no markers
     assert sorted(p.name for p in d.iterdir()) == ["session1.h5", "session2.h5", "swing.h5"]  # nothing beside the logs
 
 
@@ -255,7 +257,8 @@ def test_make_identify_and_pneumatic_models_twice_on_a_mixed_folder(source, tmp_
         again = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
         assert again.returncode == 0, again.stderr
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
-    assert [r["status"] for r in read_table(out / "pneumatic-fit.batch.csv")[2]] == ["up to date"]
+    rows = read_table(out / "pneumatic-fit.batch.csv")[2]
+    assert [r["status"] for r in rows if r["status"] != "not applicable"] == ["up to date"]
 
 
 def test_an_unconverged_calibration_is_a_failure(source, tmp_path):
@@ -291,7 +294,9 @@ def test_a_log_that_cannot_be_read_is_a_failure(source, tmp_path):
     assert rows["session1.h5"]["status"] == "done"
     assert rows["cut.h5"]["status"] == "failed" and "cannot read HDF5 file" in rows["cut.h5"]["reason"]
     assert rows["empty.h5"]["status"] == "failed" and "not a diegocal log" in rows["empty.h5"]["reason"]
-    assert set(rows) == {"session1.h5", "cut.h5", "empty.h5"}  # camera.h5 and notes.csv: not applicable
+    assert rows["cut.h5"]["output"] == rows["empty.h5"]["output"] == ""  # they wrote nothing
+    assert {n for n, x in rows.items() if x["status"] == "not applicable"} == {"camera.h5", "notes.csv"}
+    assert set(rows) == {"session1.h5", "cut.h5", "empty.h5", "camera.h5", "notes.csv"}
     failed = [line for line in r.output.splitlines() if line.startswith("failed:")]
     assert len(failed) == 2 and re.search(r"failed\s+│\s+2", r.output)
     for text in [*failed, *(x["reason"] for x in rows.values())]:
