@@ -48,7 +48,7 @@ from diegocal.sgp.regressor import (
     parameter_names,
     true_parameters,
 )
-from diegocal.sgp.streams import log_arrays, torque_array, warn_unused  # noqa: F401
+from diegocal.sgp.streams import check_angles, log_arrays, torque_array, warn_unused  # noqa: F401
 from diegocal.sgp.terms import apply_lags, dynamics_terms, is_filter, parameter_labels, term_columns
 
 LOG = logging.getLogger(__name__)
@@ -263,8 +263,10 @@ class DynamicsModel:
     @single_threaded
     def fit_arrays(self, q, qd, qdd, tau, state: dict | None = None, time=None) -> DynamicsModel:
         """Fit on q, qd, qdd (T, n) of every joint and tau (T, k) of ``joint_names``; ``state``
-        (:meth:`state`) restores a saved fit, no optimising; ``time`` (T,) s for a torque_lag term."""
+        (:meth:`state`) restores a saved fit, no optimising; ``time`` (T,) s for a torque_lag term.
+        Raises LogFormatError for q far outside the URDF's limits (:func:`check_angles`: degrees)."""
         q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
+        check_angles(self.robot, q, warn=False)  # the callers that read a log warned of small excursions
         self.time_ = None if time is None else np.asarray(time, float)
         if self.time_ is None and any(is_filter(t) for t in self.terms):
             raise MissingStreamError("fitting a model with a torque_lag term needs the samples' time")

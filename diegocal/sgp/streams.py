@@ -6,6 +6,10 @@ sensor and no stream used it when the robot was loaded). Those channels are left
 warning that names them and, for a locked joint, says at what and why it is held (its motion is
 not modelled); they are not an error. A robot joint without a channel is one in q, qd and qdd
 (the regressor needs every joint's motion), and in tau only leaves that joint's torque unfitted.
+
+Angles are checked against the URDF's limits (:func:`check_angles`): revolute joints recorded far
+outside them, and within them read as degrees, are a log in degrees, one error line; any other
+excursion is one warning line.
 """
 
 from __future__ import annotations
@@ -15,10 +19,16 @@ import logging
 
 import numpy as np
 
-from diegocal.errors import MissingStreamError
+from diegocal.errors import LogFormatError, MissingStreamError
 from diegocal.sgp.options import INPUT_STREAMS
 
 LOG = logging.getLogger(__name__)
+#: rad a revolute joint may read past its URDF limits before a warning says so (a sensor zeroed a
+#: little off reads past its hard stop)
+LIMIT_TOLERANCE = 0.01
+#: rad past its limits (at least; else the joint's own range, when larger) that only a log in
+#: degrees explains: 2π, one turn
+GROSS_EXCURSION = 2 * np.pi
 
 
 def unused_channels(log, robot, streams) -> dict[str, list[str]]:
@@ -79,10 +89,52 @@ def torque_array(log, robot, warn: bool = True) -> tuple[np.ndarray, tuple]:
     return s.select(joints).data, joints
 
 
+def check_angles(robot, q: np.ndarray, warn: bool = True) -> None:
+    """Raise LogFormatError when q (T, n) rad (robot joint order; NaN ignored) is a log in degrees: a
+    revolute joint with finite URDF limits reads farther outside them than its own range and
+    :data:`GROSS_EXCURSION`, and every such joint read as degrees lies within them (widened as
+    :class:`~diegocal.stac.model.Observation` widens them: a quarter of the range and 0.3 rad).
+    With ``warn``, one warning line names the joints past their limits by more than
+    :data:`LIMIT_TOLERANCE` otherwise (a joint the simulator let turn past them, too). Continuous and
+    prismatic joints are not checked (a continuous joint turns without end; a prismatic one is in m)."""
+    q = np.asarray(q, float)
+    skip = frozenset(getattr(robot, "continuous", ())) | robot.prismatic_joints
+    gross, past = [], []
+    for i, j in enumerate(robot.joint_names):
+        lo, hi = robot.lower[i], robot.upper[i]
+        x = q[:, i][np.isfinite(q[:, i])]
+        if j in skip or not (np.isfinite(lo) and np.isfinite(hi)) or x.size == 0:
+            continue
+        lo_q, hi_q = x.min(), x.max()
+        excursion = max(lo - lo_q, hi_q - hi)
+        if excursion > max(hi - lo, GROSS_EXCURSION):
+            gross.append((excursion, j, lo_q, hi_q, lo, hi))
+        if excursion > LIMIT_TOLERANCE:
+            past.append(f"{j} [{lo_q:.3g}, {hi_q:.3g}] (limits [{lo:.3g}, {hi:.3g}])")
+    if gross and all(_within_as_degrees(*g[2:]) for g in gross):
+        _, j, lo_q, hi_q, lo, hi = max(gross)
+        more = f" (and {len(gross) - 1} more joint(s))" if len(gross) > 1 else ""
+        raise LogFormatError(
+            f"joint {j!r}: the log's q spans [{lo_q:.4g}, {hi_q:.4g}], far outside its URDF limits "
+            f"[{lo:.3g}, {hi:.3g}] rad{more}: degrees? the log wants rad (qd, qdd in rad/s, rad/s²)"
+        )
+    if warn and past:
+        shown = "; ".join(past[:6]) + ("; ..." if len(past) > 6 else "")
+        LOG.warning(f"q past the URDF limits of robot {robot.name!r} (rad): {shown}")
+
+
+def _within_as_degrees(lo_q: float, hi_q: float, lo: float, hi: float) -> bool:
+    """Whether the span [lo_q, hi_q] read as degrees lies within the limits [lo, hi] rad widened by a
+    quarter of their range and 0.3 rad (the margin :class:`~diegocal.stac.model.Observation` allows)."""
+    margin = 0.25 * (hi - lo) + 0.3
+    return lo - margin <= np.radians(lo_q) and np.radians(hi_q) <= hi + margin
+
+
 def log_arrays(log, robot, need_tau: bool = True, needed_by: str | None = None, warn: bool = True):
     """q, qd, qdd (and tau) of a log in the robot's joint order, (T, n) each; channels that are no
     joint of the robot are left out with one warning (``warn``); one-line errors naming
-    ``needed_by`` (default: "sgp-fit" with tau, "sgp predict" without)."""
+    ``needed_by`` (default: "sgp-fit" with tau, "sgp predict" without), and q checked against the
+    URDF's limits (:func:`check_angles`: degrees are an error, a small excursion a warning)."""
     needed_by = needed_by or ("sgp-fit" if need_tau else "sgp predict")
     names = INPUT_STREAMS + (("tau",) if need_tau else ())
     out = []
@@ -94,4 +146,5 @@ def log_arrays(log, robot, need_tau: bool = True, needed_by: str | None = None, 
         out.append(s.select(robot.joint_names).data)
     if warn:
         warn_unused(log, robot, names)
+    check_angles(robot, out[0])
     return tuple(out)

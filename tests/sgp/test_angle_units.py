@@ -1,0 +1,124 @@
+"""Joint angles in degrees where the log wants rad (user trial: `diagnose --domain dynamics` gave five
+confident findings): where q is read for a robot (:func:`diegocal.sgp.streams.check_angles`, from
+``log_arrays`` and ``DynamicsModel.fit_arrays``) a revolute joint far outside its URDF limits, and
+within them read as degrees, is one error line for sgp-fit, predict and diagnose; a small excursion
+is one warning line; continuous and prismatic joints are not checked; real logs pass."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from diegocal.cli import app
+from diegocal.cli.testing import one_line_error
+from diegocal.errors import LogFormatError
+from diegocal.io import load_log, make_stream, save_log
+from diegocal.robot import load_robot
+from diegocal.robot.resolve import robot_for_log
+from diegocal.sgp.streams import check_angles, log_arrays
+from tests.sgp.conftest import write_robot
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
+HINT = "degrees? the log wants rad"
+runner = CliRunner()
+
+#: a continuous joint, a prismatic one (m) and a revolute one with limits
+MIXED_URDF = """<?xml version="1.0"?>
+<robot name="mixed">
+  <link name="base"/>
+  <link name="a"><inertial><origin xyz="0.1 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+  <link name="b"><inertial><origin xyz="0.1 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+  <link name="c"><inertial><origin xyz="0.1 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="spin" type="continuous"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/></joint>
+  <joint name="slide" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.3" effort="50" velocity="1"/></joint>
+  <joint name="elbow" type="revolute"><parent link="b"/><child link="c"/><axis xyz="0 1 0"/>
+    <limit lower="-2.0" upper="2.0" effort="50" velocity="10"/></joint>
+</robot>
+"""
+
+
+def _degrees(log):
+    """The same log with q, qd, qdd in degrees (tau unchanged)."""
+    s = log.streams
+    return log.with_streams(**{k: make_stream(s[k].names, np.degrees(s[k].data)) for k in ("q", "qd", "qdd")})
+
+
+@pytest.fixture
+def logs(arm2, simulate, tmp_path):
+    good, _ = simulate(arm2, T=120, seed=7)
+    paths = tmp_path / "good.h5", tmp_path / "deg.h5"
+    save_log(good, paths[0])
+    save_log(_degrees(good), paths[1])
+    return paths
+
+
+def test_sgp_fit_refuses_degrees_in_one_line(logs, arm2_dir):
+    _, deg = logs
+    out = deg.with_name("deg.sgp")
+    res = runner.invoke(app, ["sgp-fit", str(deg), "--robot", str(arm2_dir), "-m", "pr", "-o", str(out)])
+    assert res.exit_code == 1
+    line = one_line_error(res)
+    assert HINT in line and ("joint 'shoulder'" in line or "joint 'elbow'" in line)
+    assert "far outside its URDF limits" in line and not out.exists()
+
+
+def test_predict_and_diagnose_refuse_degrees(logs, arm2_dir, tmp_path):
+    good, deg = logs
+    model = tmp_path / "good.sgp"
+    res = runner.invoke(app, ["sgp-fit", str(good), "--robot", str(arm2_dir), "-m", "pr", "-o", str(model), "-q"])
+    assert res.exit_code == 0, res.output
+    assert "URDF limits" not in res.output  # a log in rad: neither error nor warning
+    pred = tmp_path / "pred.h5"
+    res = runner.invoke(app, ["predict", str(model), str(deg), "--robot", str(arm2_dir), "-o", str(pred), "-q"])
+    assert res.exit_code == 1 and HINT in one_line_error(res) and not pred.exists()
+    diag = tmp_path / "deg.diagnosis.yaml"
+    res = runner.invoke(app, ["diagnose", str(deg), "--domain", "dynamics", "--robot", str(arm2_dir), "-o", str(diag)])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert HINT in res.output.strip().splitlines()[-1]
+    assert not diag.exists() and not list(tmp_path.glob("*extended*"))
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory):
+    return load_robot(write_robot(tmp_path_factory.mktemp("mixed"), MIXED_URDF))
+
+
+def test_continuous_and_prismatic_joints_are_not_checked(mixed, caplog):
+    assert mixed.joint_names == ("spin", "slide", "elbow")
+    t = np.linspace(0, 10, 200)
+    q = np.stack([40 * np.sin(t), 30 * (1 + np.sin(t)), 1.5 * np.sin(t)], axis=1)  # turns, and a slide in cm
+    with caplog.at_level(logging.WARNING, logger="diegocal"):
+        check_angles(mixed, q)
+    assert not caplog.records
+    with pytest.raises(LogFormatError, match="joint 'elbow'.*degrees\\? the log wants rad"):
+        check_angles(mixed, np.column_stack([q[:, :2], np.degrees(q[:, 2])]))
+
+
+def test_a_small_excursion_or_one_degrees_do_not_explain_is_a_warning(mixed, caplog):
+    t = np.linspace(0, 10, 200)
+    base = np.column_stack([np.zeros_like(t), np.full_like(t, 0.1), 2.05 * np.sin(t)])  # 0.05 rad past
+    far = base.copy()
+    far[:, 2] = -400 * np.sin(t) ** 2  # a joint let turn 60 times past its stop (-7 rad in degrees, not them)
+    for q in (base, far):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="diegocal"):
+            check_angles(mixed, q)
+        (record,) = caplog.records
+        assert "q past the URDF limits of robot 'mixed'" in record.getMessage() and "elbow" in record.getMessage()
+    check_angles(mixed, base, warn=False)  # DynamicsModel.fit_arrays: its callers warned
+
+
+@pytest.mark.parametrize("name", ["real/tx40.h5", "real/tiago.h5", "arm3_dynamics.h5", "arm3_hidden_friction.h5"])
+def test_real_and_sample_logs_pass_without_a_warning(name, caplog):
+    log = load_log(SAMPLE / name)
+    with caplog.at_level(logging.WARNING, logger="diegocal.sgp"):
+        log_arrays(log, robot_for_log(None, log), need_tau=False, warn=False)
+    assert not caplog.records
