@@ -28,6 +28,7 @@
     blocks: {train: [[t0, t1], ...], validation: [...], heldout: [...]}   # seconds
     options: {alpha: 0.01, min_gain: 0.05, max_rounds: 6, n_blocks: 10}
     residual_tests: {channel: {correlation_time_s, change_point: {p, time}, variables: {...}}}
+                               # + change_point_signed (a joint: the residual times sign(qd), friction's share)
     declined: [{cause, channel, why}]  # significant on validation, not added (why in words)
     converged: true            # false: a kept fit stopped at a cap before its tolerance
     unconverged: []            # which, in words (STAC's iterations, a term's refinement, a chamber's budget)
@@ -166,11 +167,14 @@ def shifting_channels(diagnosis: dict) -> list[tuple[str, float, float | None]]:
     tests = diagnosis.get("residual_tests") or {}
     alpha = float((diagnosis.get("options") or {}).get("alpha", 0.01))
     named = {f.get("channel") for f in diagnosis.get("findings") or []}
+    kinds = ("change_point", "change_point_signed")  # the mean; the residual times sign(qd) (friction)
+    n = sum(k in (entry or {}) for entry in tests.values() for k in kinds) or 1
     out = []
     for key, entry in tests.items():
-        cp = (entry or {}).get("change_point") or {}
+        cps = [(entry or {}).get(k) or {} for k in kinds]
+        cp = min(cps, key=lambda c: c.get("p", 1.0) if c.get("p") is not None else 1.0)
         p = cp.get("p")
-        if p is None or p >= alpha / max(len(tests), 1) or key in named or key.rsplit("/", 1)[-1] in named:
+        if p is None or p >= alpha / n or key in named or key.rsplit("/", 1)[-1] in named:
             continue
         out.append((key, float(p), cp.get("time")))
     return sorted(out, key=lambda x: x[1])

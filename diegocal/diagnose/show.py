@@ -215,11 +215,20 @@ def show(res, weights: dict, train, validation, shown, length: int, options, tim
                 )
             entry["variables"][v] = item
         centred = scalar - np.nanmean(scalar[train]) if np.isfinite(scalar[train]).any() else scalar
-        cp = change_point(np.where(shown | train, centred, np.nan), seen_cl)
-        entry["change_point"] = {
-            "p": float(cp.p),
-            "statistic": round(cp.statistic, 3),
-            "time": None if time is None else float(time[cp.at]),
-        }
+        entry["change_point"] = _change(np.where(shown | train, centred, np.nan), seen_cl, time)
+        velocity = next((v for v in res.channel_variables.get(c, ()) if v.startswith("qd.")), None)
+        if velocity is not None and r.ndim == 1:  # friction's share: the residual times the direction of motion
+            direction = np.sign(np.asarray(res.variables[velocity], float))
+            signed = np.where(direction != 0, r * direction, np.nan)
+            signed -= np.nanmean(signed[train]) if np.isfinite(signed[train]).any() else 0.0
+            entry["change_point_signed"] = _change(np.where(shown | train, signed, np.nan), seen_cl, time)
         out[c] = entry
     return out
+
+
+def _change(r: np.ndarray, clusters: np.ndarray, time) -> dict:
+    """The CUSUM change-point test of ``r`` (:func:`~diegocal.diagnose.stats.change_point`) as
+    diagnosis.yaml holds it: p, the statistic and the time of the largest departure."""
+    cp = change_point(r, clusters)
+    return {"p": float(cp.p), "statistic": round(cp.statistic, 3), "time": None if time is None else float(time[cp.at])}
+

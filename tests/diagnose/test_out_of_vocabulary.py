@@ -84,3 +84,19 @@ def test_a_hose_pulled_by_the_next_joint_is_unexplained_not_a_spring():
     assert found.evidence["variable"].startswith("q.")
     assert found.evidence["variable"] != f"q.{hidden['channel']}"
     assert found.evidence["stand_in"]["validation_gain"] < 0.5 * found.evidence["validation_gain"]
+
+
+def test_friction_that_drifts_over_the_session_is_said_to_shift_in_time():
+    """A friction growing over the session (temperature) is no term of the vocabulary; a user trial
+    got "nothing significant" with its joint's held-out error four times the noise. The residual
+    times the direction of motion shifts in time, and the diagnosis says so on that joint, where a
+    clean session of the same robot says nothing."""
+    from diegocal.diagnose.output import diagnosis_dict, shifting_channels
+
+    drift = Session(duration=30.0, seed=3, robot_seed=3, smooth_scale=0.0, hidden="drifting_friction", size=8)
+    log, d = _diagnose(drift)
+    joint = log.truth.effects[0]["channel"]
+    shifting = [c for c, _, _ in shifting_channels(diagnosis_dict(d))]
+    assert any(c.endswith(joint) for c in shifting), (joint, shifting, [f.cause for f in d.findings])
+    _, clean = _diagnose(Session(duration=30.0, seed=3, robot_seed=3, smooth_scale=0.0))
+    assert shifting_channels(diagnosis_dict(clean)) == []
