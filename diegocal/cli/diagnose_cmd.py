@@ -304,7 +304,8 @@ def _summary_rows(done: Diagnosed) -> list:
         rivals = ev.get("indistinguishable_causes", []) + twins
         gain += f"; the data cannot tell it from {', '.join(rivals)}" if rivals else ""
         rows.append((f"  {f['cause']} on {where}", gain))
-    rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in mapping.get("declined") or []]
+    declined = [] if mapping["findings"] else mapping.get("declined") or []  # with findings: the runners-up
+    rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in declined]
     rows += [
         (f"  residual shifts in time on {channel}", f"CUSUM p {p:.1g}" + (f" at {t:.3g} s" if t is not None else "")
          + ": structure no term names")

@@ -106,7 +106,9 @@ class KinematicsAdapter:
     progress = None  # callable(str), set by the engine: how far a long log's sweeps are
 
     def __init__(self, log: Log, robot, options: StacOptions | None = None):
-        self.log, self.robot = log.without_truth(), robot
+        sensors = robot.sensors  # a log's channels the robot does not name are ignored (STAC warns)
+        log = log.without_truth().keep("markers", [m.name for m in sensors.markers]).keep("pots", sensors.pot_names)
+        self.log, self.robot = log, robot
         self.options = options or StacOptions()
         st = self.log.stream("pots")
         self.pot_names = tuple(st.names)

@@ -160,13 +160,16 @@ def pooled_heldout_rmse(diagnosis: dict) -> dict[str, tuple[float, float]]:
 
 
 def shifting_channels(diagnosis: dict) -> list[tuple[str, float, float | None]]:
-    """(channel, p, time s) of the channels, no finding's, whose baseline residual's mean shifts over
-    the session (the CUSUM test of ``residual_tests``, p under the diagnosis's ``alpha`` shared by
-    the channels tested): structure in time that no term names (a drift, or an effect that part of
-    the session's motion excites), most significant first."""
+    """(channel, p, time s) of the channels whose baseline residual's mean shifts over the session
+    (the CUSUM tests of ``residual_tests``, p under the diagnosis's ``alpha`` shared by the tests),
+    in a diagnosis without findings: structure in time that no term names (a drift, or an effect
+    that part of the session's motion excites), most significant first. A finding changes what the
+    others' residuals hold (a pot's curve moves the tendons' fit), so with one the baseline's tests
+    say nothing of what is left."""
+    if diagnosis.get("findings"):
+        return []
     tests = diagnosis.get("residual_tests") or {}
     alpha = float((diagnosis.get("options") or {}).get("alpha", 0.01))
-    named = {f.get("channel") for f in diagnosis.get("findings") or []}
     kinds = ("change_point", "change_point_signed")  # the mean; the residual times sign(qd) (friction)
     n = sum(k in (entry or {}) for entry in tests.values() for k in kinds) or 1
     out = []
@@ -174,7 +177,7 @@ def shifting_channels(diagnosis: dict) -> list[tuple[str, float, float | None]]:
         cps = [(entry or {}).get(k) or {} for k in kinds]
         cp = min(cps, key=lambda c: c.get("p", 1.0) if c.get("p") is not None else 1.0)
         p = cp.get("p")
-        if p is None or p >= alpha / n or key in named or key.rsplit("/", 1)[-1] in named:
+        if p is None or p >= alpha / n:
             continue
         out.append((key, float(p), cp.get("time")))
     return sorted(out, key=lambda x: x[1])

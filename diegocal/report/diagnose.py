@@ -130,7 +130,7 @@ def summary_lines(d: dict) -> list[str]:
         f"measured on {held:.1f} s of held-out blocks used for nothing else (contiguous blocks in time, interleaved).",
     ]
     pooled = "; ".join(f"{b:.4g} → {e:.4g} {u}" for u, (b, e) in pooled_rmse(d).items())
-    declined, shifting = d.get("declined") or [], shifting_channels(d)
+    declined, shifting = [] if findings else d.get("declined") or [], shifting_channels(d)
     if not findings and not declined and not shifting:
         out.append(
             "Nothing significant: no term of the vocabulary and no binned structure against the channels' "

@@ -644,3 +644,16 @@ def test_a_gauge_slips_length_and_along_axis_errors_come_from_the_full_covarianc
     assert g["along_axis"]["stderr"] < 1e-12
     g = slip_gauge("dip", axis, d, np.stack([1e-6 * np.outer(turn, turn), 1e-6 * np.eye(3)]))
     assert g["length"]["stderr"] == pytest.approx(1e-3) and g["along_axis"]["stderr"] == pytest.approx(1e-3)
+
+
+def test_a_log_marker_the_robot_does_not_name_is_left_out_not_a_crash(finger):
+    """A user trial renamed a marker in the mocap file: STAC ignored it with a warning, but the
+    diagnosis failed with an internal IndexError (its residuals took the log's markers)."""
+    log = _log(finger, 3, duration=5.0)
+    st = log.stream("markers")
+    names = list(st.names)
+    names[1] += "_renamed"
+    log = log.with_streams(markers=Stream(tuple(names), st.data))
+    d = diagnose(log, finger, DiagnoseOptions(domain="kinematics", max_rounds=1))
+    tested = set(d.units[0].show)
+    assert st.names[0] in tested and names[1] not in tested and st.names[1] not in tested
