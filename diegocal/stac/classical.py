@@ -44,6 +44,7 @@ from diegocal.errors import FitError, NumericalError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, marker_points
 from diegocal.stac.calibration import Calibration, FitInfo
+from diegocal.stac.model import check_marker_scale
 from diegocal.stac.pot_inverse import batch_kinematics, joint_angles_from_pots, nonlinear_pots
 from diegocal.stac.regression import MarkerRegression, base_points, levenberg_marquardt
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
@@ -290,6 +291,7 @@ def read_streams(log: Log, robot: Robot, who: str) -> tuple[np.ndarray, np.ndarr
         raise FitError(f"{who} needs at least 2 samples, the log has {pots.shape[0]}")
     if not np.isfinite(markers).any():
         raise FitError(f"{who}: every marker sample is NaN (occluded)")
+    check_marker_scale(markers, robot, robot.sensors.markers)  # a log in mm, as STAC's Observation checks
     return pots, markers
 
 

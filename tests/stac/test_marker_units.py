@@ -49,6 +49,13 @@ def test_markers_in_mm_are_one_error_line(tree_dir, mm_log):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("method", ["classical", "ekf"])
+def test_the_other_methods_refuse_markers_in_mm(tree_dir, mm_log, method):
+    out = mm_log.with_name(f"{method}.calib.yaml")
+    args = ["stac", str(mm_log), "--robot", str(tree_dir), "--method", method, "-o", str(out), "-q"]
+    assert HINT in one_line_error(runner.invoke(app, args)) and not out.exists()
+
+
 def test_predict_and_diagnose_refuse_markers_in_mm(tree_dir, session, mm_log, tmp_path):
     good = tmp_path / "good.h5"
     save_log(session, good)
