@@ -85,6 +85,7 @@ from diegocal.sgp.model import (
 )
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import ml2_unconverged, save_model
+from diegocal.sgp.streams import check_angles
 from diegocal.sgp.terms import Context, dynamics_terms, is_filter, lag_filter, proposals, term_columns
 
 UNIT = "N·m"
@@ -498,6 +499,7 @@ def adapters(log, robot, options) -> list[DynamicsAdapter]:
     """One adapter for the robot: q (qd, qdd from the log, else differentiated), tau of the joints
     that have one (``diegocal.sgp.model.torque_array``)."""
     q = log.stream("q", needed_by="diagnose").select(robot.joint_names).data
+    check_angles(robot, q)  # degrees: one error line; a joint a little past its limits: a warning
     qd = log.stream("qd").select(robot.joint_names).data if log.has("qd") else _derivative(q, log.time)
     qdd = log.stream("qdd").select(robot.joint_names).data if log.has("qdd") else _derivative(qd, log.time)
     tau, joints = torque_array(log, robot)
