@@ -132,7 +132,10 @@ def align_sources(series: list, sources: dict, clock_source: str | None, notes: 
             series = [replace(x, time=x.time + offset) if x.source == name else x for x in series]
             notes.append(f"time_offset: auto for {name}: {est.offset_s:+.6g} s ± {est.se_s:.2g} s "
                          f"({what}, r = {est.r:.2f})")
-        elif est is not None and est.fixed and abs(est.offset_s) > max(AGREE_SAMPLES * period, MARGIN * est.se_s):
+        elif est is not None and est.fixed and abs(est.offset_s) <= max(AGREE_SAMPLES * period, MARGIN * est.se_s):
+            notes.append(f"clocks of {name} and {ref} agree as far as the motion tells: {est.offset_s:+.4g} s ± "
+                         f"{est.se_s:.2g} s ({what}, r = {est.r:.2f})")
+        elif est is not None and est.fixed:
             log.warning("%s and %s: their clocks disagree by %+.4g s ± %.2g s (%s, r = %.2f); set "
                         "`time_offset: %.6g` for source %r in the map, or `time_offset: auto`",
                         sources[name].path.name, sources[ref].path.name, est.offset_s, est.se_s, what, est.r,
