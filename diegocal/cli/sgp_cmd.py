@@ -308,6 +308,13 @@ def sgp_fit(
         for j in fitted.joint_names
         if "n_inducing" in hyper[j]
     ]
+    from diegocal.report.sgp_text import fine_inputs
+
+    rows += [
+        (f"fine GP detail {j}", ", ".join(f"{v:.2g} of {k}'s spread" for k, v in fine.items())
+         + ": this path's detail or a fine effect; check on another session")
+        for j, fine in fine_inputs(hyper).items()
+    ]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
     from diegocal.sgp.store import load_summary

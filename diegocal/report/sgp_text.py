@@ -191,6 +191,34 @@ def noisy_words(hyper: dict) -> str:
     )
 
 
+#: A kept GP whose length-scale in an input is under this share of the input's training std follows
+#: detail finer than most effects of a joint's state: this session's path, or a fine effect (cogging).
+FINE = 0.1
+
+
+def fine_inputs(hyper: dict) -> dict:
+    """joint -> {input: length-scale in training stds} of the joints whose kept GP (the guard's
+    choice not "parametric") varies over less than :data:`FINE` of an input's spread."""
+    out = {}
+    for j, h in hyper.items():
+        if not isinstance(h, dict) or h.get("guard_choice") in (None, "parametric"):
+            continue
+        fine = {k: float(v) for k, v in (h.get("lengthscales_std") or {}).items() if v < FINE}
+        if fine:
+            out[j] = fine
+    return out
+
+
+def fine_words(hyper: dict) -> str:
+    """A sentence on each joint whose kept GP follows fine detail ("" when none does)."""
+    return "".join(
+        f" On {j} the GP kept varies over {', '.join(f'{v:.2g} of {k}' for k, v in fine.items())}'s training "
+        "spread: detail of this session's path, which another motion may not share, or a fine effect (cogging); "
+        "its cross-validated gain comes from blocks of this path: check it on another session (diegocal predict)."
+        for j, fine in fine_inputs(hyper).items()
+    )
+
+
 def worse_than_mean_words(nmse_in_sample: dict) -> str:
     """A sentence on the joints a model fits worse than their mean torque on its own training data
     (in-sample nMSE 1 or more; "" when none does)."""
@@ -239,7 +267,7 @@ def model_paragraphs(model: Path, context) -> list[str]:
             )
     else:
         text += " No held-out log was given (diegocal report ... --heldout LOG): in-sample numbers only."
-    text += noisy_words(s.get("hyperparameters") or {})
+    text += noisy_words(s.get("hyperparameters") or {}) + fine_words(s.get("hyperparameters") or {})
     out = [text]
     more = []
     hyper = s.get("hyperparameters") or {}
