@@ -56,7 +56,8 @@ def import_cmd(
     rows += [(f"stream {stream}", f"{n} channels {origin}; {conversion}")
              for stream, origin, n, conversion in result.streams]
     rows += [("clock", result.clock), ("samples", log.n_samples), ("time", time_span(log.time))]
-    rows += [(f"clock offset {e.other}", f"{e.offset_s:+.4g} s against {e.reference} ({e.signals}, r = {e.r:.2f})")
+    rows += [(f"clock offset {e.other}",
+              f"{e.offset_s:+.4g} s ± {e.se_s:.2g} s against {e.reference} ({e.signals}, r = {e.r:.2f})")
              for e in result.offsets]
     if log.has("markers"):
         import numpy as np
