@@ -403,6 +403,12 @@ def test_a_term_that_wants_a_negative_friction_or_dead_band_is_declined():
     assert decline("backlash", {"half_width": -0.0105}, {"half_width": 0.0004}).startswith("its half_width is negative")
     assert "negative" not in decline("backlash", {"half_width": -0.0005}, {"half_width": 0.0004})
     assert "negative" not in decline("spring", {"stiffness": -2.0}, {"stiffness": 0.1})
+    # a region's friction is beyond the joint's own: less friction there is a negative level (a user
+    # trial's position friction, found on the complement of its true region, came out -0.25 N·m)
+    region = Region("q.j", -2.88, -1.5)
+    assert "negative" not in _decline(Finding(make_term("position_friction", "j", {"coulomb": -0.25, "viscous": 0.1},
+                                                        region=region, stderr={"coulomb": 0.004, "viscous": 0.01}),
+                                              "term", None, None), 0.05)
     assert "negative" not in decline("stribeck_friction", {"amplitude": -1.0, "velocity_scale": 0.02},
                                      {"amplitude": 0.1, "velocity_scale": 0.001})
 
