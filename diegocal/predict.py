@@ -117,7 +117,7 @@ def predict(model, log, options: PredictOptions | None = None) -> Prediction:
 def _kinematics(path: Path, log: Log, options: PredictOptions) -> Prediction:
     """Cross-sensor prediction with a calibration (thesis §2.7.2, Tables 2.1-2.2)."""
     from diegocal.robot.resolve import robot_for_model
-    from diegocal.stac.calibration import Calibration
+    from diegocal.stac.calibration import READING_UNITS, Calibration
     from diegocal.stac.predict import predict as stac_predict
     from diegocal.stac.result import StacOptions
 
@@ -135,15 +135,14 @@ def _kinematics(path: Path, log: Log, options: PredictOptions) -> Prediction:
     for target, mae in pred.mae.items():
         sigma = cal.sigma_by_group.get(target, cal.sigma_markers if target == "markers" else cal.sigma_pots)
         if np.isfinite(sigma) and sigma > 0 and mae > IMPLAUSIBLE * sigma:
-            unit = " m" if target == "markers" else ""
+            unit = f" {READING_UNITS[target]}" if target in READING_UNITS else ""
             warnings.append(
                 f"{target} MAE {mae:.4g}{unit} is {mae / sigma:.0f} times the calibration's own noise "
                 f"({sigma:.3g}{unit}): this log does not look like the session {path.name} was fitted on "
                 "(another robot, mocap frame or marker placement?); hold out part of the same session: "
                 "diegocal split LOG --at 0.8 -o TRAIN HELDOUT"
             )
-    unit = {"markers": "m"}
-    rows = [(f"{t} ({unit.get(t, 'sensor unit')})", pred.mae[t]) for t in pred.targets]
+    rows = [(f"{t} ({READING_UNITS.get(t, 'sensor unit')})", pred.mae[t]) for t in pred.targets]
     asked = "+".join(options.sources)
     used = "+".join(pred.sources)
     sources = asked if set(options.sources) == set(pred.sources) else f"{asked} ({used})"

@@ -310,6 +310,8 @@ def _summary(done: StacRun, args: StacArgs) -> None:
     geometry fit's (calib.yaml's ``geometry``), and STAC's iterations, cost and time are labelled as
     its start's: STAC's σ per sensor type was fitted with the URDF's geometry, whose error it
     absorbs."""
+    from diegocal.stac.calibration import READING_UNITS
+
     cal, g = done.calibration, done.geometry
     stac = "" if g is None else " (STAC, the start)"
     pots = len(cal.calibrated_pots) if g is None else len(g["pots"])
@@ -326,7 +328,7 @@ def _summary(done: StacRun, args: StacArgs) -> None:
         rows.append((label + stac, cal.fit.cost))
     rows.append(("seconds" + stac, cal.fit.seconds))
     if g is None:
-        rows += [(f"σ {k} ({'m' if k == 'markers' else 'sensor unit'})", v) for k, v in cal.sigma_by_group.items()]
+        rows += [(f"σ {k} ({READING_UNITS.get(k, 'sensor unit')})", v) for k, v in cal.sigma_by_group.items()]
     else:
         rows += [
             ("σ markers (m), geometry fit", g["sigma_markers"]),

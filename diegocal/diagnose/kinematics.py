@@ -52,7 +52,7 @@ from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, save_yaml
 from diegocal.lstsq import TallLstsq
-from diegocal.stac.calibration import Calibration
+from diegocal.stac.calibration import READING_UNITS, Calibration
 from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions, WarmStart
 from diegocal.stac.stac import calibrate
@@ -255,7 +255,7 @@ class KinematicsAdapter:
         rm = xm - pred
         channels = {n: rp[:, i] for i, n in enumerate(self.pot_names)}
         channels.update({n: rm[:, i] for i, n in enumerate(self.marker_names)})
-        units = {n: "V" for n in self.pot_names}
+        units = {p.name: READING_UNITS[p.kind] for p in self.robot.sensors.pots if p.name in self.pot_names}
         units.update({n: "m" for n in self.marker_names})
         variables = {"time": self.time}
         variables.update({f"p.{n}": self.raw_pots[:, i] for i, n in enumerate(self.pot_names)})

@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from diegocal.cli import app
-from diegocal.io import load_log
+from diegocal.io import load_log, load_yaml
 from diegocal.io.describe import describe_log
 from diegocal.report.logs import pot_units, stream_table, summary_lines
 from diegocal.report.registry import ReportContext
@@ -116,3 +116,14 @@ def test_a_prediction_log_is_said_to_be_one(arm):
     words = " ".join(summary_lines(describe_log(recorded), recorded.source))
     assert "a recorded log" not in words or "simulated" in words
     assert "the most (" in words  # this one has occlusions: the worst marker is named
+
+
+def test_the_commands_write_an_encoder_in_rad(arm, tmp_path):
+    """stac's summary said "σ encoder (sensor unit)" and diagnose pooled the encoder's rad with
+    the pots' V: each now says rad."""
+    robot, log, calib, _ = arm
+    out = _cli("stac", log, "-o", tmp_path / "again.calib.yaml").output
+    assert "σ encoder (rad)" in out and "σ rotary (V)" in out
+    _cli("diagnose", log, "--domain", "kinematics", "-o", tmp_path / "kin.diagnosis.yaml", "-q")
+    units = load_yaml(tmp_path / "kin.diagnosis.yaml")["baseline"]["units"]
+    assert units["wrist"] == "rad" and units["shoulder"] == "V" and units["h1"] == "m"
