@@ -407,41 +407,33 @@ TWIN = 0.01
 
 
 def indistinguishable(chosen: Tested, tested) -> list[str]:
-    """The channels on which ``chosen``'s cause, acting on the same residual channels, fits the
-    validation data as well to within TWIN of what ``chosen`` removes: (nearly) the same columns,
-    as a joint's offset along the axis of the joint before it is that joint's offset; the data
-    cannot tell which channel it is, and the finding says so."""
+    """The channels on which ``chosen``'s cause fits as well (:func:`_alike`): (nearly) the same
+    columns, as a joint's offset along the axis of the joint before it is that joint's offset; the
+    data cannot tell which channel it is, and the finding says so."""
     ref = next((t for t in tested if _key(t.term) == _key(chosen.term)), chosen)
+    return [t.term.channel for t in _alike(ref, tested)
+            if t.term.cause == ref.term.cause and t.term.channel != ref.term.channel]
+
+
+def rival_causes(chosen: Tested, tested) -> list[str]:
+    """The significant terms of other causes that fit as well as ``chosen`` (:func:`_alike`: a
+    torque offset and a spring on a joint whose angle never nears the spring's rest): the data
+    cannot tell which cause it is, and the finding says so."""
+    return [t.term.label for t in _alike(chosen, tested) if t.significant and t.term.cause != chosen.term.cause]
+
+
+def _alike(ref: Tested, tested) -> list:
+    """The tested candidates that act on ``ref``'s residual channels and fit the validation data as
+    well as it to within TWIN of what it removes."""
     removed = ref.test.sse_before - ref.test.sse_after
     if not removed > 0:
         return []
     return [
-        t.term.channel
+        t
         for t in tested
-        if t.term.cause == ref.term.cause
-        and t.term.channel != ref.term.channel
-        and set(t.channels) == set(ref.channels)
+        if set(t.channels) == set(ref.channels)
         and np.isclose(t.test.sse_before, ref.test.sse_before)
         and abs(t.test.sse_after - ref.test.sse_after) <= TWIN * removed
-    ]
-
-
-def rival_causes(chosen: Tested, tested) -> list[str]:
-    """The significant terms of other causes, acting on the same residual channels, that fit the
-    validation data as well as ``chosen`` to within TWIN of what it removes (a torque offset and a
-    spring on a joint whose angle never nears the spring's rest): the data cannot tell which cause
-    it is, and the finding says so."""
-    removed = chosen.test.sse_before - chosen.test.sse_after
-    if not removed > 0:
-        return []
-    return [
-        t.term.label
-        for t in tested
-        if t.significant
-        and t.term.cause != chosen.term.cause
-        and set(t.channels) == set(chosen.channels)
-        and np.isclose(t.test.sse_before, chosen.test.sse_before)
-        and abs(t.test.sse_after - chosen.test.sse_after) <= TWIN * removed
     ]
 
 
