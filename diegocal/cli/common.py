@@ -44,14 +44,18 @@ _sink = threading.local()
 
 
 class _WarningLines(logging.Handler):
-    """The library's log warnings (``logging.getLogger("diegocal...")``) as ``warning:`` lines, or
-    into the list of :func:`collected_warnings`."""
+    """The library's log warnings (``logging.getLogger("diegocal...")``) as ``warning:`` lines, each
+    once per command (a diagnosis binds its log to the robot more than once), or into the list of
+    :func:`collected_warnings`."""
+
+    said: set = set()  # this command's warnings so far (cli_errors empties it as a command starts)
 
     def emit(self, record: logging.LogRecord) -> None:
         lines = getattr(_sink, "lines", None)
         if lines is not None:
             lines.append(record.getMessage())
-        else:
+        elif record.getMessage() not in self.said:
+            self.said.add(record.getMessage())
             warn(record.getMessage())
 
 
@@ -206,6 +210,7 @@ def cli_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
+        _WarningLines.said.clear()
         try:
             return fn(*args, **kwargs)
         except (typer.Exit, typer.Abort, typer.TyperException):  # exits, and usage errors (exit 2)

@@ -53,6 +53,7 @@ from diegocal.evaluate import Score, score
 from diegocal.io import Log, save_yaml
 from diegocal.lstsq import TallLstsq
 from diegocal.stac.calibration import READING_UNITS, Calibration
+from diegocal.stac.model import known_channels
 from diegocal.stac.predict import OTHERS, predict
 from diegocal.stac.result import StacOptions, WarmStart
 from diegocal.stac.stac import calibrate
@@ -106,9 +107,7 @@ class KinematicsAdapter:
     progress = None  # callable(str), set by the engine: how far a long log's sweeps are
 
     def __init__(self, log: Log, robot, options: StacOptions | None = None):
-        sensors = robot.sensors  # a log's channels the robot does not name are ignored (STAC warns)
-        log = log.without_truth().keep("markers", [m.name for m in sensors.markers]).keep("pots", sensors.pot_names)
-        self.log, self.robot = log, robot
+        self.log, self.robot = known_channels(log.without_truth(), robot), robot  # others ignored, said
         self.options = options or StacOptions()
         st = self.log.stream("pots")
         self.pot_names = tuple(st.names)

@@ -154,15 +154,6 @@ class Log:
         found = self.streams[name]
         return found if found.label else replace(found, label=name)
 
-    def keep(self, stream: str, names) -> Log:
-        """A copy whose ``stream`` has only the channels in ``names`` (in the log's order): the
-        channels a robot's sensors.yaml knows, the others being ignored with a warning elsewhere."""
-        if stream not in self.streams:
-            return self
-        known = set(names)
-        st = self.streams[stream]
-        return self.with_streams(**{stream: st.select([n for n in st.names if n in known])})
-
     def with_streams(self, **streams: Stream) -> Log:
         """A copy with streams added or replaced."""
         return replace(self, streams={**self.streams, **streams})

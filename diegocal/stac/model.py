@@ -437,6 +437,18 @@ def _known(stream, specs, what: str, ignored: dict):
     return stream.select([n for n in stream.names if n in specs])
 
 
+def known_channels(log: Log, robot: Robot) -> Log:
+    """``log`` with only the pots and markers sensors.yaml names, the others said in one warning
+    line (:func:`ignored_line`): what an Observation of it would bind."""
+    ignored: dict = {}
+    for what, specs in (("pots", robot.sensors.pot_names), ("markers", robot.sensors.marker_names)):
+        if log.has(what):
+            log = log.with_streams(**{what: _known(log.stream(what), set(specs), what, ignored)})
+    if ignored:
+        LOG.warning(ignored_line(ignored, robot))
+    return log
+
+
 def ignored_line(ignored: dict, robot) -> str:
     """One line naming the log channels that sensors.yaml does not name (with close matches)."""
     parts = []

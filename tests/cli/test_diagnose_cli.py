@@ -107,3 +107,24 @@ def test_the_summary_says_which_gain_and_what_stood_in_for_an_unexplained_chambe
     rows = dict(_summary_rows(SimpleNamespace(domain="pneumatics", mapping=mapping, output="d.yaml", extended="e")))
     text = rows["  unexplained on elbow.ext"]
     assert text == "open-loop validation gain 77% (not explained by any term; supply_droop:elbow.ext stood in)"
+
+
+def test_a_log_marker_the_robot_does_not_name_is_said_once(tmp_path):
+    """A marker renamed in the mocap file: the diagnosis binds the log to the robot more than once,
+    and each warning line had been printed as often; every line is said once per command."""
+    from diegocal.io import Stream
+    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.sim.kinematics import KinematicsOptions, simulate_kinematics
+
+    finger = load_robot(resolve_robot_dir("finger", None))
+    log = simulate_kinematics(finger, KinematicsOptions(duration=5.0), np.random.default_rng(3))
+    st = log.stream("markers")
+    names = list(st.names)
+    names[1] += "_x"
+    save_log(log.with_streams(markers=Stream(tuple(names), st.data)), tmp_path / "ren.h5")
+    out = tmp_path / "ren.diagnosis.yaml"
+    args = ["diagnose", str(tmp_path / "ren.h5"), "--domain", "kinematics", "-o", str(out), "-q"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert result.output.count(f"ignored 1 log markers ({names[1]})") == 1
+    assert result.output.count(f"not calibrated: {st.names[1]}") == 1
