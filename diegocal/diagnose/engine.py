@@ -463,8 +463,9 @@ def unplaced_span(term: Term, time, train: np.ndarray) -> np.ndarray | None:
 def _decline(finding: Finding, min_gain: float) -> str:
     """Why a significant term is not a finding after all, in words ("" when it is one): its
     coefficients are all within DETERMINED_Z standard errors of 0 (unknown standard errors
-    excepted), the held-out error rose when it was added, or it removed under ``min_gain`` of the
-    held-out mean squared error: the bar its validation gain cleared, and a fault's (a pot's
+    excepted; not judged when one is not fixed alone: a combination of them may be), the
+    held-out error rose when it was added, or it removed under ``min_gain`` of the held-out mean
+    squared error: the bar its validation gain cleared, and a fault's (a pot's
     drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out); or a
     parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
     0.5 s), where the data want more than the cause describes, or one that cannot be negative (a
@@ -476,7 +477,9 @@ def _decline(finding: Finding, min_gain: float) -> str:
             return (f"its {p.name} is negative ({p.value:.3g} ± {p.stderr:.2g} {spec.unit}), which "
                     f"{finding.term.cause} cannot be: it stands in for something else")
     coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
-    if coef and all(abs(v) < DETERMINED_Z * se for v, se in coef):
+    # a coefficient the data do not fix alone (infinite SE) may belong to a combination they do fix
+    unfixed = any(np.isinf(p.stderr) for p in finding.term.linear)
+    if coef and not unfixed and all(abs(v) < DETERMINED_Z * se for v, se in coef):
         return f"the data do not determine it (every coefficient within {DETERMINED_Z:g} standard errors of 0)"
     red = finding.gain().get("reduction", float("nan"))
     if np.isfinite(red) and red < 0:

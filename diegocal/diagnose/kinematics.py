@@ -45,7 +45,7 @@ from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_curves import curve_candidates, pot_block
 from diegocal.diagnose.kinematics_families import FamilyRanks
 from diegocal.diagnose.kinematics_lin import Linearised, running_median, step_errors
-from diegocal.diagnose.kinematics_refine import REFINED, refined
+from diegocal.diagnose.kinematics_refine import REFINED, plausible_start, refined
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan, slip_value
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
 from diegocal.diagnose.types import Candidate, Fault, Residuals
@@ -146,7 +146,7 @@ class KinematicsAdapter:
             return replace(term, extra=pot_extra(term.cause, self.raw_pots[train, j], 0.005))
         if term.cause == "time_offset" and "span" in term.extra:  # a family variant's column only
             return replace(term, extra={k: v for k, v in term.extra.items() if k != "span"})
-        return term
+        return plausible_start(term) if term.cause == "link_offset" else term
 
     def fit_once(self, terms, train, previous=None, options=None, warm: bool = False, track=None) -> KinFit:
         """STAC on the training frames of the log mapped into ``terms``, then q tracked on every

@@ -428,3 +428,31 @@ def test_another_cause_that_fits_the_same_is_named_beside_the_finding():
     offset, lag = tested("torque_offset", "joint2", 62.30), tested("torque_lag", "joint2", 70.0)
     elsewhere, weak = tested("torque_offset", "joint3", 62.24), tested("armature", "joint2", 62.24, False)
     assert rival_causes(spring, [spring, offset, lag, elsewhere, weak]) == ["torque_offset:joint2"]
+
+
+def test_a_link_offset_not_fixed_alone_is_judged_by_its_held_out_gain():
+    """A user trial's Z1 joint 4: dx and dz each not fixed by the data (infinite SE), a combination of
+    them fixed and worth 10 % of the markers' held-out error; dy 0 ± 8e-5. It had been declined as
+    "every coefficient within 2 standard errors of 0" on dy alone."""
+    from diegocal.diagnose.engine import _decline
+    from diegocal.diagnose.types import Finding
+    from diegocal.terms import make_term
+
+    values, se = {"dx": 0.0079, "dy": 1e-5, "dz": 0.0021}, {"dx": np.inf, "dy": 7.7e-5, "dz": np.inf}
+    assert "do not determine" not in _decline(Finding(make_term("link_offset", "joint4", values, stderr=se),
+                                                      "term", None, None), 0.05)
+    fixed = {"dx": 0.002, "dy": 1e-5, "dz": 0.0}, {"dx": 0.002, "dy": 7.7e-5, "dz": 0.001}
+    assert "do not determine" in _decline(Finding(make_term("link_offset", "joint4", fixed[0], stderr=fixed[1]),
+                                                  "term", None, None), 0.05)
+
+
+def test_a_link_offset_starts_its_refinement_at_zero_where_its_linear_estimate_is_far_off():
+    """The same trial's candidate came with dx -1.6 km and dz 6.1 km from its linear test, along the
+    direction the data barely fix; its refinement stayed there (held-out error × 39,000)."""
+    from diegocal.diagnose.kinematics_refine import plausible_start
+    from diegocal.terms import make_term
+
+    far = make_term("link_offset", "joint4", {"dx": -1604.3, "dy": -1e-5, "dz": 6135.9})
+    assert plausible_start(far).values.tolist() == [0.0, -1e-5, 0.0]
+    near = make_term("link_offset", "joint4", {"dx": 0.008, "dy": 0.0, "dz": -0.007})
+    assert plausible_start(near) is near
