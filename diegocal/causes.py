@@ -272,14 +272,14 @@ def search_end(name: str, parameter: str, value: float) -> ParamSpec | None:
 
 def unphysical(name: str, parameter: str, value: float, stderr: float, z: float) -> ParamSpec | None:
     """The spec of cause ``name``'s ``parameter`` when it cannot be negative (:attr:`ParamSpec.
-    nonnegative`) and ``value`` lies more than ``z`` standard errors below 0 (below 0 at all where
-    the standard error is unknown); None otherwise (or for a name the registry does not hold)."""
+    nonnegative`) and ``value`` lies more than ``z`` standard errors below 0; None otherwise, for a
+    value whose standard error is unknown (a payload's mass the torques do not identify: its value
+    means nothing) and for a name the registry does not hold."""
     entry = CAUSES.get(name)
     spec = next((p for p in entry.parameters if p.name == parameter), None) if entry is not None else None
-    if spec is None or not spec.nonnegative:
+    if spec is None or not spec.nonnegative or not (math.isfinite(stderr) and stderr > 0):
         return None
-    margin = z * stderr if math.isfinite(stderr) and stderr > 0 else 0.0
-    return spec if value < -margin else None
+    return spec if value < -z * stderr else None
 
 
 def causes_of(domain: str, *roles: str) -> tuple[str, ...]:

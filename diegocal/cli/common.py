@@ -44,30 +44,34 @@ _sink = threading.local()
 
 
 class _WarningLines(logging.Handler):
-    """The library's log warnings (``logging.getLogger("diegocal...")``) as ``warning:`` lines, each
-    once per command (a diagnosis binds its log to the robot more than once), or into the list of
-    :func:`collected_warnings`."""
-
-    said: set = set()  # this command's warnings so far (cli_errors empties it as a command starts)
+    """The library's log warnings (``logging.getLogger("diegocal...")``) as ``warning:`` lines, or
+    into the list of :func:`collected_warnings`; each once per command or batch job (a diagnosis
+    binds its log to the robot more than once). What this thread has said is ``_sink.said``, set
+    by :func:`cli_errors` and :func:`collected_warnings`; a thread without one says everything."""
 
     def emit(self, record: logging.LogRecord) -> None:
+        text, said = record.getMessage(), getattr(_sink, "said", None)
+        if said is not None:
+            if text in said:
+                return
+            said.add(text)
         lines = getattr(_sink, "lines", None)
         if lines is not None:
-            lines.append(record.getMessage())
-        elif record.getMessage() not in self.said:
-            self.said.add(record.getMessage())
-            warn(record.getMessage())
+            lines.append(text)
+        else:
+            warn(text)
 
 
 @contextlib.contextmanager
 def collected_warnings():
     """Within the block, the library's warnings in this thread are appended to the list it yields
-    instead of printed (a batch job's warnings go with its outcome)."""
-    _sink.lines = lines = []
+    instead of printed (a batch job's warnings go with its outcome), each once."""
+    _sink.lines, saved, _sink.said = (lines := []), getattr(_sink, "said", None), set()
     try:
         yield lines
     finally:
         del _sink.lines
+        _sink.said = saved
 
 
 def _install_warning_handler() -> None:
@@ -210,7 +214,7 @@ def cli_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        _WarningLines.said.clear()
+        _sink.said = set()  # this command's warnings, each said once
         try:
             return fn(*args, **kwargs)
         except (typer.Exit, typer.Abort, typer.TyperException):  # exits, and usage errors (exit 2)
@@ -225,6 +229,8 @@ def cli_errors(fn):
             if os.environ.get("DIEGOCAL_DEBUG"):
                 raise
             raise fail(f"{error_message(exc)} (set DIEGOCAL_DEBUG=1 for a traceback)") from None
+        finally:
+            _sink.said = None  # the library, called after the command, says every warning
 
     return wrapper
 

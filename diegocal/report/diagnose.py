@@ -147,7 +147,7 @@ def summary_lines(d: dict) -> list[str]:
             f"extended model ({ext['model']}): {pooled}."
         )
         out += [f"{k + 1}. " + sentence(f) for k, f in enumerate(findings)]
-    out += [f"Declined: {x['cause']} on {x['channel']}, significant on validation, but {x['why']}." for x in declined]
+    out += [f"Declined: {x['cause']} on {x['channel']}: {x['why']}." for x in declined]
     out += [
         f"The residual of {channel} shifts in time (CUSUM test p {p:.1g}{f', at {t:.3g} s' if t is not None else ''}): "
         "structure no term names, a drift or an effect that part of the session's motion excites."

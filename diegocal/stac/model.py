@@ -160,7 +160,7 @@ class Observation(Observability):
             logged = set(log.streams["markers"].names)
             self.absent_markers = tuple(n for n in robot.sensors.marker_names if n not in logged)
         if self.absent_markers:
-            LOG.warning(absent_line(self.absent_markers, log.streams["markers"].names, robot))
+            LOG.warning(absent_line(self.absent_markers, log.streams["markers"].names, robot, needed_by))
         if len(self.marker_index):
             check_marker_scale(self.markers, robot, [robot.sensors.markers[i] for i in self.marker_index])
         self.valid = np.isfinite(self.markers).all(axis=-1)  # (T, M)
@@ -459,11 +459,12 @@ def ignored_line(ignored: dict, robot) -> str:
     return f"ignored {' and '.join(parts)}: not in {robot.name}'s sensors.yaml"
 
 
-def absent_line(absent, channels, robot) -> str:
-    """One warning line naming the markers of sensors.yaml the log has no channel of (with a close
-    match among the log's ``channels``: a renamed one): they keep their nominal positions, standard
-    error null, as a pot without a channel keeps its gain and bias."""
+def absent_line(absent, channels, robot, needed_by: str = "stac") -> str:
+    """One warning line: the markers of sensors.yaml the log lacks (close matches in ``channels``); a fit
+    keeps them nominal, a prediction (``needed_by``) its calibration's, unscored."""
     shown = ", ".join(n + _close(n, channels) for n in absent[:6]) + (", ..." if len(absent) > 6 else "")
+    if needed_by == "predict":
+        return f"{len(absent)} marker(s) of {robot.name}'s sensors.yaml not in this log: {shown}; not scored"
     return (
         f"{len(absent)} marker(s) of {robot.name}'s sensors.yaml not calibrated: {shown} ({NO_CHANNEL}); "
         "their positions keep their nominal values (standard error null)"

@@ -128,3 +128,23 @@ def test_a_log_marker_the_robot_does_not_name_is_said_once(tmp_path):
     assert result.exit_code == 0, result.output
     assert result.output.count(f"ignored 1 log markers ({names[1]})") == 1
     assert result.output.count(f"not calibrated: {st.names[1]}") == 1
+
+
+def test_a_batch_job_collects_each_warning_once_and_the_library_after_a_command_says_all():
+    """The once-per-command rule holds for a batch job's collected warnings too, and leaves no state
+    behind: library calls after a command (or outside one) say every warning."""
+    import logging
+
+    from diegocal.cli.common import collected_warnings
+
+    log = logging.getLogger("diegocal.test")
+    with collected_warnings() as lines:
+        log.warning("same")
+        log.warning("same")
+        log.warning("other")
+    assert lines == ["same", "other"]
+    result = runner.invoke(app, ["diagnose", "nope.h5"])
+    assert result.exit_code == 1
+    with collected_warnings() as lines:
+        log.warning("same")
+    assert lines == ["same"]

@@ -402,6 +402,8 @@ def test_a_term_that_wants_a_negative_friction_or_dead_band_is_declined():
     assert why.startswith("its coulomb is negative (-0.0484 ± 0.0027 N·m), which coupled_friction cannot be")
     assert decline("backlash", {"half_width": -0.0105}, {"half_width": 0.0004}).startswith("its half_width is negative")
     assert "negative" not in decline("backlash", {"half_width": -0.0005}, {"half_width": 0.0004})
+    # a payload's mass the torques do not identify (NaN standard error) means nothing, whatever its sign
+    assert "negative" not in decline("payload", {"mass": -0.02, "mc_x": 0.1}, {"mass": np.nan, "mc_x": 0.001})
     assert "negative" not in decline("spring", {"stiffness": -2.0}, {"stiffness": 0.1})
     # a region's friction is beyond the joint's own: less friction there is a negative level (a user
     # trial's position friction, found on the complement of its true region, came out -0.25 N·m)

@@ -426,9 +426,10 @@ def test_no_cause_named_is_not_nothing_significant_when_a_term_was_declined_or_a
     assert "The residual of pot3 shifts in time (CUSUM test p 1e-29, at 21.3 s)" in text
     assert shifting_channels({**d, "findings": [{"channel": "pot1"}]}) == []  # a finding changes the others' fit
     tests["pot3"] = {"change_point": {"p": 0.02, "time": 3.0}}
-    d["declined"] = [{"cause": "armature", "channel": "joint3", "why": "its inertia is negative"}]
+    why = "significant on validation, but the held-out error rose by 0.8% with it"  # one of _decline's
+    d["declined"] = [{"cause": "armature", "channel": "joint3", "why": why}]
     text = " ".join(summary_lines(d))
-    assert "Nothing significant" not in text and "Declined: armature on joint3" in text
+    assert "Nothing significant" not in text and f"Declined: armature on joint3: {why}." in text
 
 
 def test_a_finding_the_data_cannot_place_says_where_else_it_fits():

@@ -52,3 +52,13 @@ def test_a_log_with_every_marker_says_all_seen_and_warns_of_none(tree_dir, tree_
     total = len(tree_robot.sensors.markers)
     assert f"markers │ {total} of {total} seen" in " ".join(res.output.split())
     assert "not calibrated" not in res.output
+
+
+def test_predict_says_an_absent_marker_is_not_scored_not_that_it_is_nominal(tree_robot):
+    """A review: `predict` on a log with a marker renamed warned that it "keeps its nominal values";
+    a prediction keeps the calibration's positions and does not score that marker."""
+    from diegocal.stac.model import absent_line
+
+    line = absent_line(("m2",), ("m2_x", "m1"), tree_robot, "predict")
+    assert "not in this log: m2" in line and "not scored" in line and "nominal" not in line
+    assert "keep their nominal values" in absent_line(("m2",), ("m1",), tree_robot)
