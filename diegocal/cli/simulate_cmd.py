@@ -34,9 +34,9 @@ def simulate_kinematics_cmd(
     rate: Annotated[float, typer.Option(help="Sample rate of pots and markers, Hz.")] = 100.0,
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same file.")] = 0,
     robot_seed: Annotated[int | None, typer.Option(
-        "--robot-seed", help="Record the robot of the session simulated with this --seed (its calibration, "
-        "mocap frame and effects), with this session's own motion and noise: held-out logs of one robot. "
-        "Default: --seed.")] = None,
+        "--robot-seed", help="Record the robot of the session simulated with this --seed and the same "
+        "--duration (its calibration, mocap frame and effects), with this session's own motion and noise: "
+        "held-out logs of one robot. Default: --seed.")] = None,
     effect: Annotated[list[str] | None, typer.Option(
         "--effect", metavar="NAME[:CHANNEL][=SIZE]",
         help="Kinematic effect to inject (repeatable); SIZE, when given, is "

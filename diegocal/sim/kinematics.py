@@ -81,7 +81,9 @@ class KinematicsOptions:
     robot_seed : int or None, the seed whose robot this session records: its true calibration
         and mocap frame, and its effects drawn as that session draws them (a slip or a label swap
         at the same share of the run), with this session's own motion, noise and occlusions;
-        None: this session's own seed
+        None: this session's own seed. That session is taken at this one's duration: the biases of
+        linear pots and tendons scale with the run's spread, so a session of another length records
+        them a little differently
     """
 
     duration: float = 250.0

@@ -132,6 +132,9 @@ def align_sources(series: list, sources: dict, clock_source: str | None, notes: 
             series = [replace(x, time=x.time + offset) if x.source == name else x for x in series]
             notes.append(f"time_offset: auto for {name}: {est.offset_s:+.6g} s ± {est.se_s:.2g} s "
                          f"({what}, r = {est.r:.2f})")
+        elif est is not None and est.fixed and not np.isfinite(est.se_s):  # a peak at the end of the shifts
+            notes.append(f"clocks of {name} and {ref} not checked: the motion's best shift, {est.offset_s:+.4g} s, "
+                         f"lies at the end of those searched ({what}); the stated clocks kept")
         elif est is not None and est.fixed and abs(est.offset_s) <= max(AGREE_SAMPLES * period, MARGIN * est.se_s):
             notes.append(f"clocks of {name} and {ref} agree as far as the motion tells: {est.offset_s:+.4g} s ± "
                          f"{est.se_s:.2g} s ({what}, r = {est.r:.2f})")
@@ -140,9 +143,9 @@ def align_sources(series: list, sources: dict, clock_source: str | None, notes: 
                         "`time_offset: %.6g` for source %r in the map, or `time_offset: auto`",
                         sources[name].path.name, sources[ref].path.name, est.offset_s, est.se_s, what, est.r,
                         spec.time_offset + est.offset_s, name)
-        elif est is not None and not est.fixed:
-            log.info("%s and %s: the stated clocks kept; %s", sources[name].path.name, sources[ref].path.name, est.why)
-        if est is not None and est.fixed:
+        elif est is not None and not est.fixed:  # said: the user must know the clocks were not checked
+            notes.append(f"clocks of {name} and {ref} not checked: {est.why}; the stated clocks kept")
+        if est is not None and est.fixed and np.isfinite(est.se_s):
             estimates.append(est)
     return series, estimates
 
