@@ -211,8 +211,11 @@ def fine_inputs(hyper: dict) -> dict:
 
 def fine_words(hyper: dict) -> str:
     """A sentence on each joint whose kept GP follows fine detail ("" when none does)."""
+    def spreads(fine: dict) -> str:
+        return " and ".join(f"{v:.2g} of {k}'s" for k, v in fine.items())
+
     return "".join(
-        f" On {j} the GP kept varies over {', '.join(f'{v:.2g} of {k}' for k, v in fine.items())}'s training "
+        f" On {j} the GP kept varies over {spreads(fine)} training "
         "spread: detail of this session's path, which another motion may not share, or a fine effect (cogging); "
         "its cross-validated gain comes from blocks of this path: check it on another session (diegocal predict)."
         for j, fine in fine_inputs(hyper).items()

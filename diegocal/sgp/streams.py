@@ -146,5 +146,5 @@ def log_arrays(log, robot, need_tau: bool = True, needed_by: str | None = None, 
         out.append(s.select(robot.joint_names).data)
     if warn:
         warn_unused(log, robot, names)
-    check_angles(robot, out[0])
+    check_angles(robot, out[0], warn=warn)
     return tuple(out)
