@@ -146,7 +146,9 @@ _CAUSES = (
           (_p("c2", "V", "quadratic departure at the ends of the range"),
            _p("c3", "V", "cubic departure at the ends of the range")),
           "the pot's transfer curve is not linear"),
-    Cause("backlash", "kinematics", "term", "pot", (_positive("half_width", "V", "half the dead band"),),
+    Cause("backlash", "kinematics", "term", "pot",
+          (_p("half_width", "V", "half the dead band (> 0: the reading lags the link; < 0: it leads it, the pot "
+              "reading the motor's side of the play, or a pot's own hysteresis)"),),
           "the pot lags by a dead band that depends on the direction of motion"),
     Cause("time_offset", "kinematics", "term", "markers", (_p("seconds", "s", "mocap clock shift"),),
           "the mocap and pot clocks are shifted"),

@@ -387,9 +387,9 @@ def test_a_term_whose_parameter_ends_at_the_end_of_its_search_is_declined():
 
 def test_a_term_that_wants_a_negative_friction_or_dead_band_is_declined():
     """A user trial's cogging (0.15 sin(12 q)) was named coupled_friction with Coulomb -0.048 ±
-    0.003 N·m, a pot's hysteresis backlash with half-width -0.0105 V: quantities that cannot be
-    negative. Such a term stands in for something else and is declined, with why; a negative
-    value within two standard errors of 0, and a signed cause (a spring), are judged as before."""
+    0.003 N·m, and an armature -0.033 kg·m²: quantities that cannot be negative. Such a term stands
+    in for something else and is declined, with why; a negative value within two standard errors of
+    0, and a signed cause (a spring), are judged as before."""
     from diegocal.diagnose.engine import _decline
     from diegocal.diagnose.types import Finding
     from diegocal.terms import make_term
@@ -400,8 +400,11 @@ def test_a_term_that_wants_a_negative_friction_or_dead_band_is_declined():
     why = decline("coupled_friction", {"coulomb": -0.0484, "viscous": 0.01}, {"coulomb": 0.0027, "viscous": 0.002},
                   {"partner": "k", "ratio": -0.5})
     assert why.startswith("its coulomb is negative (-0.0484 ± 0.0027 N·m), which coupled_friction cannot be")
-    assert decline("backlash", {"half_width": -0.0105}, {"half_width": 0.0004}).startswith("its half_width is negative")
-    assert "negative" not in decline("backlash", {"half_width": -0.0005}, {"half_width": 0.0004})
+    assert decline("armature", {"inertia": -0.0327}, {"inertia": 0.0016}).startswith("its inertia is negative")
+    assert "negative" not in decline("armature", {"inertia": -0.0005}, {"inertia": 0.0004})
+    # a backlash's reading leads the link where the pot reads the motor's side of the play (the
+    # independent generator's UR5): a negative half-width is a backlash too
+    assert "negative" not in decline("backlash", {"half_width": -0.0105}, {"half_width": 0.0004})
     # a payload's mass the torques do not identify (NaN standard error) means nothing, whatever its sign
     assert "negative" not in decline("payload", {"mass": -0.02, "mc_x": 0.1}, {"mass": np.nan, "mc_x": 0.001})
     assert "negative" not in decline("spring", {"stiffness": -2.0}, {"stiffness": 0.1})
