@@ -193,7 +193,9 @@ class Predicted:
 def predicted(job) -> Predicted | None:
     """What the predict job's output predicts (None when its model or options cannot be read)."""
     from diegocal.batch.jobs import job_args
+    from diegocal.cli.common import split_words
     from diegocal.io.bundle import load_bundle
+    from diegocal.robot.resolve import pot_kinds
 
     try:
         args = job_args(job)
@@ -204,21 +206,9 @@ def predicted(job) -> Predicted | None:
         return None
     if domain != "kinematics":
         return Predicted(domain)
-    words = lambda text: tuple(w.strip() for w in (text or "").split(",") if w.strip())  # noqa: E731
-    return Predicted(domain, words(args.sensors_from), words(args.sensors_to), _pot_kinds(bundle.robot, args.robot))
-
-
-def _pot_kinds(record, robot) -> dict:
-    """{pot: kind} of the robot a calibration was fitted on (``robot``: predict's --robot), {} if not found."""
-    from diegocal.io import load_yaml
-    from diegocal.robot import parse_sensors, resolve_robot_dir
-
-    try:
-        rdir = resolve_robot_dir(robot or (record or {}).get("dir") or (record or {}).get("name"), None)
-        sensors = parse_sensors(load_yaml(Path(rdir) / "sensors.yaml"))
-    except (DiegocalError, OSError, TypeError):
-        return {}
-    return {p.name: p.kind for p in sensors.pots}
+    record = bundle.robot or {}  # the robot the calibration was fitted on, unless predict's --robot
+    kinds = pot_kinds(args.robot or record.get("dir") or record.get("name"))
+    return Predicted(domain, split_words(args.sensors_from), split_words(args.sensors_to), kinds)
 
 
 def prediction_errors(prediction: Path, log: Path, what: Predicted | None = None) -> dict:

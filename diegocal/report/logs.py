@@ -11,14 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from diegocal.errors import DiegocalError
-from diegocal.io import load_log, load_yaml
+from diegocal.io import load_log
 from diegocal.io.describe import LogSummary, describe_log
 from diegocal.io.files import log_robot
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, register_section
 from diegocal.report.style import STREAM_UNITS, axes_or_new, save_page, trace_style
-from diegocal.robot import parse_sensors, resolve_robot_dir
+from diegocal.robot.resolve import pot_kinds
 from diegocal.stac.calibration import READING_UNITS
 
 LOG_SUFFIXES = (".h5", ".hdf5", ".csv")
@@ -71,12 +70,7 @@ def pot_units(log) -> dict:
     sensors.yaml; {} when the robot or its sensors.yaml is not found."""
     if not log.has("pots") or not log.robot:
         return {}
-    try:
-        rdir = resolve_robot_dir(None, log.robot)
-        sensors = parse_sensors(load_yaml(Path(rdir) / "sensors.yaml"))
-    except (DiegocalError, OSError, TypeError):
-        return {}
-    kinds = {p.name: p.kind for p in sensors.pots}
+    kinds = pot_kinds(None, log.robot)
     units = {n: READING_UNITS.get(kinds.get(n, ""), "V") for n in log.streams["pots"].names}
     return {n: u for n, u in units.items() if u != "V"}
 

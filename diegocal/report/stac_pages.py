@@ -32,7 +32,7 @@ from diegocal.report.stac_plots import (
     residuals_by_type,
     skeleton,
 )
-from diegocal.report.stac_words import estimated_words, held_words, kinds_of, milli, sigma_words
+from diegocal.report.stac_words import MM, estimated_words, held_words, kinds_of, milli, sigma_words
 from diegocal.report.style import save_page
 from diegocal.robot import load_robot, resolve_robot_dir
 from diegocal.stac.calibration import POT_UNITS, READING_UNITS, Calibration
@@ -40,7 +40,6 @@ from diegocal.stac.predict import predict
 from diegocal.stac.result import StacOptions
 from diegocal.stac.terms import apply_terms
 
-MM = 1000.0
 #: The streams a held-out log needs: markers predicted from the pots alone.
 HELDOUT_STREAMS = ("pots", "markers")
 

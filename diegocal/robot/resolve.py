@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from diegocal.errors import RobotConfigError
+from diegocal.errors import DiegocalError, RobotConfigError
+from diegocal.io import load_yaml
 from diegocal.io.bundle import same_robot
 from diegocal.robot.model import data_joints, load_robot, resolve_robot_dir
+from diegocal.robot.sensors import parse_sensors
 
 
 def robot_for_log(robot, data):
@@ -50,3 +52,14 @@ def robot_for_model(record: dict, robot, data, model_path):
             f"{record.get('dir')}): its robot.urdf or sensors.yaml differ (hash {record.get('hash', '')[:15]}…)"
         )
     return load_robot(source, joints=data_joints(data))
+
+
+def pot_kinds(robot, log_robot: str | None = None) -> dict:
+    """{pot: sensors.yaml kind} of a robot (``robot`` and ``log_robot`` as :func:`resolve_robot_dir`
+    takes them), read from its sensors.yaml alone; {} when the robot or its sensors.yaml is not found:
+    what a report or a table needs to give each pot its unit without loading the URDF."""
+    try:
+        sensors = parse_sensors(load_yaml(Path(resolve_robot_dir(robot, log_robot)) / "sensors.yaml"))
+    except (DiegocalError, OSError, TypeError):
+        return {}
+    return {p.name: p.kind for p in sensors.pots}
