@@ -256,16 +256,6 @@ def diagnose_cmd(
     refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
 
 
-def _none(mapping: dict) -> str:
-    """The findings row of a diagnosis without findings: "nothing significant" only where no term
-    was declined and no residual shifts in time."""
-    from diegocal.diagnose.output import shifting_channels
-
-    if mapping.get("declined") or shifting_channels(mapping):
-        return "none named (see below)"
-    return "none (nothing significant)"
-
-
 def _summary_rows(done: Diagnosed) -> list:
     from diegocal.diagnose.output import pooled_heldout_rmse, shifting_channels
 
@@ -279,11 +269,11 @@ def _summary_rows(done: Diagnosed) -> list:
         )
         for u, (before, after) in pooled.items()
     ]
-    rows = [
-        (f"{domain}: baseline", base["model"]),
-        *held,
-        ("findings", str(len(mapping["findings"])) if mapping["findings"] else _none(mapping)),
-    ]
+    rows = [(f"{domain}: baseline", base["model"]), *held]
+    declined = [] if mapping["findings"] else mapping.get("declined") or []  # with findings: the runners-up
+    shifting = shifting_channels(mapping)
+    found = "none named (see below)" if declined or shifting else "none (nothing significant)"
+    rows.append(("findings", str(len(mapping["findings"])) if mapping["findings"] else found))
     for f in mapping["findings"]:
         where = f"{f['channel']}"
         if f.get("region"):
@@ -304,12 +294,11 @@ def _summary_rows(done: Diagnosed) -> list:
         rivals = ev.get("indistinguishable_causes", []) + twins
         gain += f"; the data cannot tell it from {', '.join(rivals)}" if rivals else ""
         rows.append((f"  {f['cause']} on {where}", gain))
-    declined = [] if mapping["findings"] else mapping.get("declined") or []  # with findings: the runners-up
     rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in declined]
     rows += [
         (f"  residual shifts in time on {channel}", f"CUSUM p {p:.1g}" + (f" at {t:.3g} s" if t is not None else "")
          + ": structure no term names")
-        for channel, p, t in shifting_channels(mapping)
+        for channel, p, t in shifting
     ]
     late = unconverged(done)
     rows.append((f"{domain}: converged", "yes: every kept fit to its tolerance" if late is None else "no: see below"))

@@ -469,7 +469,7 @@ def _decline(finding: Finding, min_gain: float) -> str:
     drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out); or a
     parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
     0.5 s), where the data want more than the cause describes, or one that cannot be negative (a
-    friction, a dead band) is significantly so: it would stand in for something else."""
+    friction, an inertia, a mass) is significantly so: it would stand in for something else."""
     for p in finding.term.parameters:
         if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
             return f"its {p.name} ends at the end of its search ({spec.upper:g} {spec.unit}): the data want more"

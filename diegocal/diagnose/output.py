@@ -174,11 +174,8 @@ def shifting_channels(diagnosis: dict) -> list[tuple[str, float, float | None]]:
     n = sum(k in (entry or {}) for entry in tests.values() for k in kinds) or 1
     out = []
     for key, entry in tests.items():
-        cps = [(entry or {}).get(k) or {} for k in kinds]
-        cp = min(cps, key=lambda c: c.get("p", 1.0) if c.get("p") is not None else 1.0)
-        p = cp.get("p")
-        if p is None or p >= alpha / n:
-            continue
-        out.append((key, float(p), cp.get("time")))
+        found = [c for k in kinds if (c := (entry or {}).get(k)) and c.get("p") is not None]
+        if found and (least := min(found, key=lambda c: c["p"]))["p"] < alpha / n:
+            out.append((key, float(least["p"]), least.get("time")))
     return sorted(out, key=lambda x: x[1])
 
