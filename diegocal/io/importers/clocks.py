@@ -42,6 +42,7 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.signal import correlate
 
 from diegocal.errors import LogFormatError
 from diegocal.io.importers.mapping import MOCAP_KINDS, MapError
@@ -296,29 +297,29 @@ def _repeat(a: np.ndarray, b: np.ndarray, tau: float, size: int) -> np.ndarray:
     envelopes' autocorrelations at lag d, each over the samples d apart (not shrunk towards 0 at long
     lags) and raised by its standard error sqrt(tau / (N - d)), within [0, 1]; 1 where neither
     envelope has 8 samples d apart."""
-    from scipy.signal import correlate
-
     out = np.full(size, -np.inf)
     for x in (a, b):
-        x = x - x.mean()
         d = np.arange(min(size, x.size - 8))
-        c = correlate(x, x, mode="full", method="fft")[x.size - 1:x.size - 1 + d.size] / (x.size - d)
+        c = _autocovariance(x, d.size - 1) / (x.size - d)
         if d.size and c[0] > 0:
             out[:d.size] = np.maximum(out[:d.size], c / c[0] + np.sqrt(tau / (x.size - d)))
     return np.clip(np.where(np.isfinite(out), out, 1.0), 0.0, 1.0)
+
+
+def _autocovariance(x: np.ndarray, lags: int) -> np.ndarray:
+    """(lags + 1,): sum_t (x_t - x̄)(x_{t+d} - x̄) for d = 0..lags, by FFT."""
+    x = x - x.mean()
+    return correlate(x, x, mode="full", method="fft")[x.size - 1:x.size + max(lags, -1)]
 
 
 def _integral_time(a: np.ndarray, b: np.ndarray) -> float:
     """The envelopes' integral time in samples, 1 + 2 sum_k (1 - k / (L + 1)) rho_a(k) rho_b(k) for k up
     to L, a quarter of the shorter one: Bartlett's variance of a cross-correlation of autocorrelated
     series (Var r = tau / n where they share no motion), with Newey and West's taper."""
-    from scipy.signal import correlate
-
     lags = max(min(a.size, b.size) // 4, 1)
 
     def acf(x):
-        x = x - x.mean()
-        c = correlate(x, x, mode="full", method="fft")[x.size - 1:x.size + lags]
+        c = _autocovariance(x, lags)
         return c / c[0] if c[0] > 0 else np.zeros(lags + 1)
 
     k = np.arange(1, lags + 1)
@@ -329,8 +330,6 @@ def _pearson_by_shift(a: np.ndarray, b: np.ndarray, min_overlap: int):
     """(r, n): Pearson's r of a[j + m] against b[j] over their overlap, for every shift m (index
     m + len(b) - 1), NaN where the overlap is shorter than ``min_overlap``; and the overlap's length.
     Sums over each overlap from cumulative sums, the cross sums by FFT (``scipy.signal.correlate``)."""
-    from scipy.signal import correlate
-
     a, b = a - a.mean(), b - b.mean()  # r does not change; the sums' round-off does
     na, nb = a.size, b.size
     m = np.arange(-(nb - 1), na)
