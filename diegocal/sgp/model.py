@@ -395,12 +395,11 @@ class DynamicsModel:
                     th = th[3:]
                 entry["sigma_z"] = float(np.exp(th[0]))
                 # length-scales back in the input's unit (inputs were standardised)
-                ell = np.exp(th[1 : 1 + len(dims)]) * est.u_std_[dims]
-                entry["lengthscales"] = {self.input_names[d]: float(v) for d, v in zip(dims, ell, strict=True)}
-                # and in units of the input's training std: how fine a detail of this session's path it follows
-                entry["lengthscales_std"] = {
-                    self.input_names[d]: float(v) for d, v in zip(dims, np.exp(th[1 : 1 + len(dims)]), strict=True)
-                }
+                scaled = np.exp(th[1 : 1 + len(dims)])  # in units of the input's training std
+                names = [self.input_names[d] for d in dims]
+                entry["lengthscales"] = dict(zip(names, map(float, scaled * est.u_std_[dims]), strict=True))
+                # how fine a detail of this session's path the GP follows (report: fine GP detail)
+                entry["lengthscales_std"] = dict(zip(names, map(float, scaled), strict=True))
                 if hasattr(est, "selection_"):  # the guard's cross-validated choice (fits only)
                     entry["guard_choice"] = est.selection_[j]
                     scores = getattr(est, "validation_scores_", None)  # a fit's, not a restored model's
