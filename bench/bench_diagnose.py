@@ -74,6 +74,7 @@ CASES = {
             "armature",
             "coupled_friction",
             "torque_lag",
+            "torque_gain",
         ),
     },
     "pneumatics": {
@@ -186,7 +187,8 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
 def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, dict]:
     """``cause:joint=size`` on a random joint (not the first, whose armature and the like are the
     first link's own inertia) with a torque U(3, 10) × the noise (a lag sized so that lag · RMS(dτ/dt)
-    is), and for position_friction a random region, a fifth of the joint's visited range."""
+    is, a gain error so that it times RMS(τ) is), and for position_friction a random region, a fifth
+    of the joint's visited range."""
     from diegocal.sim.dynamics import simulate_dynamics
 
     rng = np.random.default_rng([seed, 1])
@@ -195,9 +197,11 @@ def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, di
     ratio = rng.uniform(3.0, 10.0)
     clean = simulate_dynamics(robot, options, np.random.default_rng(seed))  # the same trajectory
     size = ratio * TORQUE_NOISE
+    tau = clean.truth.signals["tau"].data[:, j]
     if cause == "torque_lag":
-        tau = clean.truth.signals["tau"].data[:, j]
         size /= float(np.sqrt(np.mean(np.gradient(tau, clean.time) ** 2)))
+    elif cause == "torque_gain":  # the gain error times the joint's RMS torque
+        size /= float(np.sqrt(np.mean(tau**2)))
     regions = {}
     if cause == "position_friction":
         lo, hi = np.quantile(clean.stream("q").data[:, j], [0.05, 0.95])

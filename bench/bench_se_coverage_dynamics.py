@@ -51,6 +51,7 @@ COMPARED = {
     "spring": {"stiffness": "stiffness"},
     "armature": {"inertia": "inertia"},
     "torque_lag": {"lag": "lag"},
+    "torque_gain": {"gain_error": "gain_error"},
     "viscous_friction": {"viscous": "viscous"},
     "coulomb_friction": {"coulomb": "coulomb"},
     "position_friction": {"coulomb": "coulomb", "viscous": "viscous"},
@@ -105,6 +106,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=50, help="Logs per family.")
     parser.add_argument("--seed", type=int, default=1000, help="First seed.")
+    parser.add_argument("--cause", action="append", choices=sorted(COMPARED), help="Only these term families "
+                        "(repeatable; default all).")
     parser.add_argument("--robot", default="arm3", help="arm3, or ur5 / panda for the base parameters on the "
                         "independent generator (the term families are then not run).")
     args = parser.parse_args(argv)
@@ -116,7 +119,7 @@ def main(argv=None) -> int:
     counts = [base_coverage(s, args.robot) for s in seeds]
     ok, n = sum(c[0] for c in counts), sum(c[1] for c in counts)
     print(f"| PR base parameters | {len(counts)} | {n} | {ok} | {ok / n:.3f} |")
-    for cause in COMPARED if args.robot == "arm3" else ():
+    for cause in (args.cause or COMPARED) if args.robot == "arm3" else ():
         counts = [c for s in seeds if (c := term_coverage(cause, s)) is not None and c[1]]
         ok, n = sum(c[0] for c in counts), sum(c[1] for c in counts)
         share = f"{ok / n:.3f}" if n else "–"

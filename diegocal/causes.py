@@ -121,6 +121,8 @@ MAX_DELAY_S = 0.1
 MAX_SENSOR_LAG_S = 0.01
 #: The longest torque-sensor time constant a torque_lag may take, s.
 MAX_LAG_S = 0.5
+#: The largest relative gain error a torque_gain may take (a sensor off by half is a fault, not a gain).
+MAX_GAIN_ERROR = 0.5
 
 _CAUSES = (
     # ------------------------------------------------------------------ kinematics (thesis ch. 2)
@@ -200,6 +202,10 @@ _CAUSES = (
           "an unmodelled mass on this link"),
     Cause("torque_lag", "dynamics", "term", "joint", (_p("lag", "s", "time constant", 0.0, MAX_LAG_S),),
           "the measured torque lags the motion"),
+    Cause("torque_gain", "dynamics", "term", "joint",
+          (_p("gain_error", "1", "the sensor's gain error: it reads (1 + gain_error) x the torque",
+              -MAX_GAIN_ERROR, MAX_GAIN_ERROR),),
+          "the torque sensor's gain (or the motor's torque constant) is off"),
     # ------------------------------------------------------------------ pneumatics (thesis ch. 4)
     Cause("valve_steady_state", "pneumatics", "baseline", "chamber", (C1, C2, C3),
           "the valve's steady state, eq. (4.10a-c)"),

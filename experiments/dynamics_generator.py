@@ -12,7 +12,8 @@ of a given fraction of each joint's torque spread. ``hidden`` effects, one per l
 
 - in the vocabulary: ``position_friction`` (Coulomb + viscous inside a window of the joint's
   range), ``payload`` (a point mass on a link: RNEA of a heavier link), ``spring`` (about the
-  joint's mid-range), ``torque_offset``;
+  joint's mid-range), ``torque_offset``, ``torque_gain`` (the joint's sensor reads its torque,
+  friction included, times 1 + the effect's scale);
 - outside it, shapes a real robot has that no term of the vocabulary names: ``stribeck`` (static
   friction above Coulomb decaying with speed), ``cogging`` (a torque periodic in the joint angle),
   ``drifting_friction`` (Coulomb friction that grows over the session, as a gearbox warms),
@@ -41,7 +42,7 @@ URDFS = {
     "ur5": "ur_description/urdf/ur5_joint_limited_robot.urdf",
     "panda": "panda_description/urdf/panda.urdf",
 }
-IN_VOCABULARY = ("position_friction", "payload", "spring", "torque_offset")
+IN_VOCABULARY = ("position_friction", "payload", "spring", "torque_offset", "torque_gain")
 OUT_OF_VOCABULARY = ("stribeck", "cogging", "drifting_friction", "load_friction", "hose", "drifting_offset")
 
 
@@ -101,8 +102,9 @@ def _heavier(model, joint: int, mass: float, lever: np.ndarray):
     return out
 
 
-def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau) -> tuple[np.ndarray, dict]:
-    """The hidden effect's torque (T, n) before sizing, and its parameters (shape only)."""
+def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau, applied) -> tuple[np.ndarray, dict]:
+    """The hidden effect's torque (T, n) before sizing, and its parameters (shape only);
+    ``base_tau`` the rigid body's torque, ``applied`` with friction."""
     T, n = q.shape
     out = np.zeros((T, n))
     lo, hi = q[:, j].min(), q[:, j].max()
@@ -120,6 +122,9 @@ def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau) -> 
         return out, {"rest": float(0.5 * (lo + hi))}
     if name == "torque_offset":
         out[:, j] = 1.0
+        return out, {}
+    if name == "torque_gain":  # sized: the scale is the gain error
+        out[:, j] = applied[:, j]
         return out, {}
     if name == "stribeck":
         vs = rng.uniform(0.03, 0.1)
@@ -166,7 +171,7 @@ def generate(session: Session) -> Log:
     hidden = np.zeros_like(clean)
     if session.hidden:
         j = session.joint if session.joint is not None else int(robot_rng.integers(1, model.nq))
-        shape, params = hidden_torque(session.hidden, model, q, qd, qdd, time, j, robot_rng, base)
+        shape, params = hidden_torque(session.hidden, model, q, qd, qdd, time, j, robot_rng, base, clean)
         rms = np.sqrt(np.mean(shape[:, j] ** 2))
         scale = session.size * noise[j] / rms
         hidden = scale * shape

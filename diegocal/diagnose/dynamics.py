@@ -38,9 +38,9 @@ U(3, 10) × noise, seeds 100-109; named = top finding, moments within 10 % or 4 
 on link5 named on link6: near joint 6's origin the two are nearly one); clean logs (seeds
 200-209) 0 findings in 10 on each robot.
 
-A selected ``torque_lag`` is refitted as the sensor's first-order filter of the model's columns
-(:func:`diegocal.sgp.terms.lag_filter`), its time constant by a bounded 1-D search with the
-linear parameters re-solved at each trial. The extended model is a dynamics bundle: a PR model
+A selected ``torque_lag`` or ``torque_gain`` is refitted as the sensor's filter of the model's
+columns (:data:`diegocal.sgp.terms.FILTERS`: first-order, a gain), its value by a bounded 1-D
+search with the linear parameters re-solved at each trial. The extended model is a dynamics bundle: a PR model
 (``sgp/`` directory, :mod:`diegocal.sgp.store`) whose regressor carries the found terms, fitted on
 the training blocks (``SGPOptions.inertia`` as diagnosed: a nominal one predicts with the URDF's
 rigid body + friction + the terms), which ``diegocal predict`` uses like any other.
@@ -67,7 +67,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from diegocal.causes import MAX_LAG_S
+from diegocal.causes import cause as registry_cause
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
 from diegocal.diagnose.dynamics_system import FamilyRanks, TrainingSystem, feature_chunks, filler, layout, project
 from diegocal.diagnose.types import Candidate, Residuals
@@ -86,7 +86,7 @@ from diegocal.sgp.model import (
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import ml2_unconverged, save_model
 from diegocal.sgp.streams import check_angles
-from diegocal.sgp.terms import Context, dynamics_terms, is_filter, lag_filter, proposals, term_columns
+from diegocal.sgp.terms import Context, dynamics_terms, is_filter, proposals, sensor_filter, term_columns
 
 UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
@@ -174,13 +174,10 @@ class DynamicsAdapter:
     # ------------------------------------------------------------------ fit
     def _offset(self, lags: dict) -> np.ndarray:
         """(T, k): the fixed part of the prediction (the nominal rigid body's torque, zeros for an
-        identified one), through each lagging sensor's filter."""
+        identified one), through each filtering sensor (``lags``: (row, cause) -> value)."""
         if not lags or self.inertia != "nominal":
             return self.tau0
-        out = self.tau0.copy()
-        for r, lag in lags.items():
-            out[:, r] = lag_filter(self.tau0[:, r], self.time, lag)
-        return out
+        return self._lagged(self.tau0, lags)
 
     def _solve(self, A, train, sigma, offset=None):
         """Weighted least squares of tau − offset on A (T, k, P) over the training rows, joint rows
@@ -210,10 +207,11 @@ class DynamicsAdapter:
         training samples as the model it will be saved as: a PR model (thesis §3.3.3,
         :class:`~diegocal.sgp.model.DynamicsModel`), whose predictions on every sample are the
         residuals' and the held-out scores'. A ``torque_lag``'s time constant is searched first
-        (:meth:`_fit_lags`, weighted least squares), then held in the model."""
+        (:meth:`_fit_lags`, weighted least squares), then held in the model; a ``torque_gain``'s
+        gain error the same way."""
         train = np.asarray(train, bool)
         terms = dynamics_terms(terms)
-        lags = {self.row_of[t.channel]: t.value("lag") for t in terms if is_filter(t) and t.channel in self.row_of}
+        lags = {self._key(t): float(t.values[0]) for t in terms if is_filter(t) and t.channel in self.row_of}
         regions = any(t.cause == "position_friction" for t in terms)
         if lags or regions or any(p.shape for t in terms for p in specs(t)):
             sigma = self._joint_sigma(terms, train)  # each joint weighted by its residual std
@@ -221,7 +219,7 @@ class DynamicsAdapter:
                 C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
                 lags = self._fit_lags(np.concatenate([self.F, C], axis=2), lags, train, sigma)
                 terms = tuple(
-                    t.with_values([lags[self.row_of[t.channel]]]) if is_filter(t) and t.channel in self.row_of else t
+                    t.with_values([lags[self._key(t)]]) if is_filter(t) and t.channel in self.row_of else t
                     for t in terms
                 )
             terms = fit_shapes(self, terms, lags, train, sigma)
@@ -237,9 +235,8 @@ class DynamicsAdapter:
         out = []
         for t in model.fitted_terms():
             if is_filter(t):
-                r = self.row_of.get(t.channel)
-                se = None if r is None else [self._lag_se(model, w, r, t.value("lag"), pred, rows)]
-                out.append(t.with_values([t.value("lag")], se))
+                se = None if t.channel not in self.row_of else [self._lag_se(model, w, t, lags, pred, rows, sigma)]
+                out.append(t.with_values(t.values, se))
             elif any(p.shape for p in specs(t)):
                 out.append(with_shape_se(self, t, model, pred, rows))
             else:
@@ -316,38 +313,72 @@ class DynamicsAdapter:
             at += k
         return np.asarray(out, int)
 
-    def _lag_se(self, model, w, r: int, lag: float, pred, train) -> float:
-        """Standard error of a lag (s): the residual std of its joint over the root sum of squares
-        of the prediction's derivative with respect to the lag (central difference), training rows."""
-        A = model.features(self.q, self.qd, self.qdd)  # the columns before the sensor's filter, whole
-        h = max(1e-4, 0.01 * lag)
-        d = (lag_filter(A[:, r], self.time, lag + h) - lag_filter(A[:, r], self.time, max(lag - h, 0.0))) @ w
-        if self.inertia == "nominal":
-            d += lag_filter(self.tau0[:, r], self.time, lag + h) - lag_filter(
-                self.tau0[:, r], self.time, max(lag - h, 0.0)
-            )
-        d /= lag + h - max(lag - h, 0.0)
+    def _key(self, t) -> tuple:
+        """A filter term's key in the fit's ``lags``: (its joint's row, its cause)."""
+        return self.row_of[t.channel], t.cause
+
+    def _lag_se(self, model, w, t, lags: dict, pred, train, sigma) -> float:
+        """Standard error of a filter term's value (a lag, s; a gain error), the linear parameters
+        free: the prediction's derivative with respect to the value (central difference, the
+        joint's other filters held), less its weighted least-squares fit by the model's columns on
+        every joint's training rows (a gain trades off with the inertial parameters), against its
+        joint's residual std; ``sigma`` (k,) the joints' weights (the fit's noise stds)."""
+        A = model.features(self.q, self.qd, self.qdd, sensors=False)  # before the sensors' filters, whole
+        key, v = self._key(t), float(t.values[0])
+        r = key[0]
+        h = max(1e-4, 0.01 * abs(v))
+        lo = max(v - h, specs(t)[0].lower)
+        own = {(0, c): x for (s, c), x in lags.items() if s == r}
+
+        def joint_r(value):  # joint r's prediction with the term at ``value``
+            trial = own | {(0, key[1]): value}
+            out = self._lagged(A[:, r : r + 1], trial)[:, 0] @ w
+            if self.inertia == "nominal":
+                out += self._lagged(self.tau0[:, r : r + 1], trial)[:, 0]
+            return out
+
+        d = (joint_r(v + h) - joint_r(lo)) / (v + h - lo)
         ok = train & np.isfinite(self.tau[:, r])
         e = self.tau[ok, r] - pred[ok, r]
-        den = float(d[ok] @ d[ok])
-        return float(np.sqrt(float(e @ e) / max(ok.sum() - 1, 1) / den)) if den > 0 else float("nan")
+        X = self._lagged(A, lags)
+        P = X.shape[2]
+        gram, xd, dd = np.zeros((P, P)), np.zeros(P), 0.0
+        idx = np.flatnonzero(train)
+        step = max(CHUNK_ROWS // X.shape[1], 1)
+        for i in range(0, idx.size, step):
+            rows = idx[i : i + step]
+            Xw = X[rows] / sigma[None, :, None]
+            good = np.isfinite(self.tau[rows]) & np.isfinite(Xw).all(axis=2)
+            Xw = np.where(good[:, :, None], Xw, 0.0)
+            dw = np.where(good[:, r], d[rows] / sigma[r], 0.0)
+            gram += np.einsum("tkp,tkq->pq", Xw, Xw)
+            xd += Xw[:, r].T @ dw
+            dd += float(dw @ dw)
+        left = dd - float(xd @ np.linalg.pinv(gram) @ xd)
+        if not left > 0:
+            return float("nan")
+        s2 = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2  # the joint's residual variance, weighted
+        return float(np.sqrt(s2 / left))
 
     def _lagged(self, A, lags: dict):
+        """A (T, k, ...) with each filtering sensor applied to its joint's row (``lags``: (row,
+        cause) -> value; a lag and a gain on one joint compose)."""
         if not lags:
             return A
         out = A.copy()
-        for r, lag in lags.items():
-            out[:, r] = lag_filter(A[:, r], self.time, lag)
+        for (r, name), value in lags.items():
+            out[:, r] = sensor_filter(name, out[:, r], self.time, value)
         return out
 
     def _fit_lags(self, A, lags: dict, train, sigma) -> dict:
-        """Each lagging sensor's time constant (s, in [0, MAX_LAG_S]) by bounded 1-D searches of
-        the weighted training error, the linear parameters re-solved at every trial (two sweeps)."""
+        """Each filtering sensor's value (a lag's time constant in [0, MAX_LAG_S] s, a gain error
+        within ±MAX_GAIN_ERROR: the registry's bounds) by bounded 1-D searches of the weighted
+        training error, the linear parameters re-solved at every trial (two sweeps)."""
         lags = dict(lags)
 
-        def cost(r, lag):
+        def cost(key, value):
             trial = dict(lags)
-            trial[r] = lag
+            trial[key] = value
             Aeff = self._lagged(A, trial)
             offset = self._offset(trial)
             w, _ = self._solve(Aeff, train, sigma, offset)
@@ -355,11 +386,15 @@ class DynamicsAdapter:
             return float(np.nansum(e * e))
 
         for _ in range(2 if len(lags) > 1 else 1):
-            for r in list(lags):
+            for key in list(lags):
+                spec = registry_cause(key[1]).parameters[0]
                 res = minimize_scalar(
-                    lambda x, r=r: cost(r, x), bounds=(0.0, MAX_LAG_S), method="bounded", options={"xatol": 1e-4}
+                    lambda x, key=key: cost(key, x),
+                    bounds=(spec.lower, spec.upper),
+                    method="bounded",
+                    options={"xatol": 1e-4},
                 )
-                lags[r] = float(res.x)
+                lags[key] = float(res.x)
         return lags
 
     def _weighted_fit(self, terms, lags: dict, train, sigma) -> tuple:

@@ -34,6 +34,7 @@ PHRASES = {
     "armature": "rotor inertia (a torque proportional to the acceleration)",
     "coupled_friction": "friction of a motor that drives both joints",
     "torque_lag": "the measured torque lags the motion",
+    "torque_gain": "the torque sensor's gain (or the motor's torque constant) is off",
     "link_offset": "the joint's origin differs from the URDF",
     "sensor_nonlinearity": "the pot's transfer curve is not linear",
     "backlash": "the pot lags by a dead band that depends on the direction of motion",

@@ -49,7 +49,14 @@ from diegocal.sgp.regressor import (
     true_parameters,
 )
 from diegocal.sgp.streams import check_angles, log_arrays, torque_array, warn_unused  # noqa: F401
-from diegocal.sgp.terms import apply_lags, dynamics_terms, is_filter, parameter_labels, term_columns
+from diegocal.sgp.terms import (
+    apply_filters,
+    dynamics_terms,
+    is_filter,
+    needs_time,
+    parameter_labels,
+    term_columns,
+)
 
 LOG = logging.getLogger(__name__)
 #: Samples whose prediction is made at once where a fit scores itself (nmse_in_sample_): about
@@ -125,8 +132,9 @@ class DynamicsModel:
 
     ``terms``: extra terms (:mod:`diegocal.sgp.terms`, e.g. found by ``diagnose``) whose columns
     are appended to the base regressor and fitted with W (their values as given are not read),
-    except ``torque_lag``, which filters the columns of its joint with its lag as given (it needs
-    the samples' ``time``). Without terms the model is the one of thesis ch. 3 unchanged.
+    except the sensor causes (``torque_lag``, ``torque_gain``), which filter the columns of their
+    joint with their value as given (a lag needs the samples' ``time``). Without terms the model is
+    the one of thesis ch. 3 unchanged.
     """
 
     def __init__(self, robot, options: SGPOptions, tau_joints=None, terms=(), progress=None):
@@ -150,21 +158,26 @@ class DynamicsModel:
         self.gp_dims = np.array([INPUT_STREAMS.index(s) * n + i for s in gp_streams for i in range(n)])
 
     # ------------------------------------------------------------------ building blocks
-    def features(self, q, qd, qdd, time=None) -> np.ndarray:
+    def features(self, q, qd, qdd, time=None, sensors: bool = True) -> np.ndarray:
         """Base regressor f(u): (T, k, r), the rows of the k fitted joints; with extra terms,
-        (T, k, r + K): their columns appended, ``torque_lag`` applied when ``time`` (T,) s is given
-        (or the states are the training samples); without it, states are no time series (a grid
-        of a report) and the columns are those of the torque before the sensor's lag."""
+        (T, k, r + K): their columns appended, a ``torque_gain`` applied, a ``torque_lag`` when
+        ``time`` (T,) s is given (or the states are the training samples); without it, states are
+        no time series (a grid of a report) and the columns are those of the torque before the
+        sensor's lag. ``sensors`` False: every filter left out (the torque before the sensors)."""
         rows = self.rows if self.joints_without_tau else None
         if not self.terms:
             return base_regressor(self.robot, q, qd, qdd, self.base_, self.options.friction, rows)
         F = self._columns(q, qd, qdd, rows)
-        if any(is_filter(t) for t in self.terms):
-            if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
-                time = self.time_  # the training samples
-            if time is not None:
-                F = apply_lags(self.terms, F, time, {j: r for r, j in enumerate(self.joint_names)})
-        return F
+        return self._filtered(F, q, time) if sensors else F
+
+    def _filtered(self, X, q, time):
+        """X (T, k, P) through the filter terms' sensors (:func:`~diegocal.sgp.terms.apply_filters`;
+        a lag only where the samples' time is known: ``time``, or the training samples' own)."""
+        if not any(is_filter(t) for t in self.terms):
+            return X
+        if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
+            time = self.time_  # the training samples
+        return apply_filters(self.terms, X, time, {j: r for r, j in enumerate(self.joint_names)})
 
     def _columns(self, q, qd, qdd, rows) -> np.ndarray:
         """(T, k, r + K): the base regressor and the terms' columns (per sample, no lag) side by
@@ -183,16 +196,11 @@ class DynamicsModel:
 
     def offset(self, q, qd, qdd, time=None) -> np.ndarray:
         """The fixed part of the prediction, (T, k): the nominal rigid body's torque of the fitted
-        joints (``inertia="nominal"``; a ``torque_lag`` applied as to the columns), else zeros."""
+        joints (``inertia="nominal"``; the filter terms applied as to the columns), else zeros."""
         if self.options.inertia != "nominal":
             return np.zeros((np.shape(q)[0], len(self.joint_names)))
         tau0 = nominal_torque(self.robot, q, qd, qdd)[:, self.rows][:, :, None]
-        if any(is_filter(t) for t in self.terms):
-            if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
-                time = self.time_
-            if time is not None:
-                tau0 = apply_lags(self.terms, tau0, time, {j: r for r, j in enumerate(self.joint_names)})
-        return tau0[:, :, 0]
+        return self._filtered(tau0, q, time)[:, :, 0]
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -268,7 +276,7 @@ class DynamicsModel:
         q, qd, qdd, tau = (np.asarray(x, float) for x in (q, qd, qdd, tau))
         check_angles(self.robot, q, warn=False)  # the callers that read a log warned of small excursions
         self.time_ = None if time is None else np.asarray(time, float)
-        if self.time_ is None and any(is_filter(t) for t in self.terms):
+        if self.time_ is None and any(needs_time(t) for t in self.terms):
             raise MissingStreamError("fitting a model with a torque_lag term needs the samples' time")
         o = self.options
         T = len(q)
@@ -292,7 +300,7 @@ class DynamicsModel:
         self.U_, self.tau_ = U, tau
         tau = tau - self.offset(q, qd, qdd, self.time_)  # nominal inertias: W fits the rest
         st = state or {}
-        if o.kind == "pr" and not any(is_filter(t) for t in self.terms):  # features a chunk at a time
+        if o.kind == "pr" and not any(needs_time(t) for t in self.terms):  # features a chunk at a time
             est = self._estimator("pr", T, False)
             features = lambda rows: self.features(q[rows], qd[rows], qdd[rows])  # noqa: E731
             self.gp_ = est.fit_in_chunks(U, tau, features, st.get("hyper"))
@@ -326,7 +334,7 @@ class DynamicsModel:
         """(T, k) the posterior mean torque at states (T, n) each, PREDICT_SAMPLES at a time, so
         that a long log's features are never built whole (all at once for a model with a
         ``torque_lag``, whose filter runs along the whole series)."""
-        if any(is_filter(t) for t in self.terms):
+        if any(needs_time(t) for t in self.terms):
             return self.predict_arrays(q, qd, qdd, time, variance=False).tau
         out = np.empty((len(q), len(self.joint_names)))
         for i in range(0, len(q), PREDICT_SAMPLES):

@@ -30,6 +30,9 @@ Causes (the registry's domain ``dynamics``; their parameters and units are the r
   first order τ_meas ≈ τ − lag · dτ/dt, the column ``diagnose`` proposes). Not a column: the
   model's columns of joint j are filtered (:func:`lag_filter`; linear in the parameters), so it
   needs the samples' time; the lag is fixed when the linear parameters are fitted.
+- ``torque_gain``: the torque sensor of joint j (or the motor's torque constant, where torque is
+  read from current) reads (1 + gain_error) x the torque. A filter too: the model's columns of
+  joint j are scaled; ``diagnose`` proposes the current prediction of joint j as its column.
 """
 
 from __future__ import annotations
@@ -55,8 +58,9 @@ def friction_column(kind: str, qd: np.ndarray) -> np.ndarray:
 
 
 def is_filter(term: Term) -> bool:
-    """True for ``torque_lag``: it filters the model's columns instead of adding its own."""
-    return term.cause == "torque_lag"
+    """True for the sensor causes (:data:`FILTERS`): they filter the model's columns instead of
+    adding their own."""
+    return term.cause in FILTERS
 
 
 def joints_of(term: Term) -> tuple[str, ...]:
@@ -166,8 +170,8 @@ def _payload(term, m, j, out):
         out[t] = Y[:, 10 * i : 10 * i + 10]
 
 
-#: cause -> the function that fills its columns (the registry's dynamics terms; ``torque_lag`` is
-#: a filter, :func:`apply_lags`).
+#: cause -> the function that fills its columns (the registry's dynamics terms; the sensor causes
+#: are filters, :func:`apply_filters`).
 COLUMNS: dict[str, Callable] = {
     "viscous_friction": _viscous,
     "coulomb_friction": _coulomb,
@@ -191,7 +195,7 @@ def motion_columns(term: Term, m: Motion) -> np.ndarray:
     """:func:`columns` on the samples of ``m``: terms computed on the same samples share what
     they have in common (:class:`Motion`)."""
     if is_filter(term):
-        raise ValueError("torque_lag filters the model's columns; it has none of its own")
+        raise ValueError(f"{term.cause} filters the model's columns; it has none of its own")
     fill = COLUMNS.get(term.cause)
     if fill is None:
         raise InputFileError(f"{term.cause} is not a dynamics term")
@@ -330,6 +334,16 @@ def _lags(cause: str, ctx: Context) -> list[Proposal]:
     return out
 
 
+def _gains(cause: str, ctx: Context) -> list[Proposal]:
+    """A torque sensor's gain error: the change it makes to the prediction per unit of gain error
+    is the prediction itself."""
+    return [
+        Proposal(make_term(cause, j), columns={j: ctx.prediction[j][:, None]})
+        for j in ctx.joints
+        if (cause, j) not in ctx.have
+    ]
+
+
 def _stribeck_scales(cause: str, ctx: Context) -> list[Proposal]:
     """Friction's shape near zero velocity, a family over velocity scales per joint."""
     return [
@@ -439,6 +453,7 @@ PROPOSE: dict[str, Callable] = {
     "spring": _springs,
     "stribeck_friction": _stribeck_scales,
     "torque_lag": _lags,
+    "torque_gain": _gains,
     "position_friction": _regions,
     "coupled_friction": _coupled,
     "payload": _payloads,
@@ -467,15 +482,34 @@ def lag_filter(X: np.ndarray, time: np.ndarray, lag: float) -> np.ndarray:
     return out
 
 
-def apply_lags(terms, F: np.ndarray, time: np.ndarray, joint_rows: dict) -> np.ndarray:
-    """The columns F (T, k, P) with every ``torque_lag`` term applied: row r of joint j through
-    :func:`lag_filter` with the term's lag (the sensor's filter, linear in the parameters).
-    ``joint_rows``: joint -> row."""
-    lags = [t for t in terms if is_filter(t) and t.channel in joint_rows]
-    if not lags:
+def gain_filter(X: np.ndarray, time: np.ndarray, gain_error: float) -> np.ndarray:
+    """A sensor that reads (1 + gain_error) x its input (``time`` unused: the filters' signature)."""
+    return (1.0 + gain_error) * np.asarray(X, float)
+
+
+#: The sensor causes: cause -> filter(X (T, ...), time (T,) s, value) -> what the sensor reads of X
+#: (linear in X, so the model's columns are filtered instead; the term's one parameter is the value).
+FILTERS: dict[str, Callable] = {"torque_lag": lag_filter, "torque_gain": gain_filter}
+
+
+def sensor_filter(cause: str, X: np.ndarray, time: np.ndarray, value: float) -> np.ndarray:
+    """What a joint's sensor with the filter cause ``cause`` at ``value`` reads of X (T, ...)."""
+    return FILTERS[cause](X, time, value)
+
+
+def needs_time(term: Term) -> bool:
+    """True for a filter that runs along the samples' time (``torque_lag``)."""
+    return term.cause == "torque_lag"
+
+
+def apply_filters(terms, F: np.ndarray, time: np.ndarray | None, joint_rows: dict) -> np.ndarray:
+    """The columns F (T, k, P) with every filter term applied (a lag and a gain on one joint
+    compose: both are linear); without ``time`` the lags are left out. ``joint_rows``: joint -> row."""
+    filters = [t for t in terms if is_filter(t) and t.channel in joint_rows and (time is not None or not needs_time(t))]
+    if not filters:
         return F
     out = np.array(F, float, copy=True)
-    for t in lags:
+    for t in filters:
         r = joint_rows[t.channel]
-        out[:, r, :] = lag_filter(F[:, r, :], time, t.value("lag"))
+        out[:, r, :] = sensor_filter(t.cause, out[:, r, :], time, float(t.values[0]))
     return out

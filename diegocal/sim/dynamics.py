@@ -26,11 +26,14 @@ a physical shape of its own (never a candidate term of ``diagnose``):
   the one before it; the one after for the first joint): a smooth Coulomb c·tanh(v / 0.05) plus
   viscous η v on joint j, the same on its partner (ratio 1);
 - ``torque_lag``: joint j's torque sensor is a first-order low-pass filter (time constant lag);
+- ``torque_gain``: joint j's torque sensor reads (1 + gain_error) x the torque (a miscalibrated
+  sensor, a motor's torque constant off where torque is read from current);
 - ``payload``: a point mass on a link (default the last).
 
 SIZE is the effect's magnitude: a torque in N·m (Coulomb level, RMS viscous torque on the reference
 excitation, the spring's torque at half the range, the offset, RMS armature torque), the time
-constant in s for ``torque_lag``, the mass in kg for ``payload``. Without it: scaled to the robot.
+constant in s for ``torque_lag``, the relative gain error for ``torque_gain``, the mass in kg for
+``payload``. Without it: scaled to the robot.
 """
 
 from __future__ import annotations
@@ -75,6 +78,7 @@ JOINT_EFFECTS = (
     "armature",
     "coupled_friction",
     "torque_lag",
+    "torque_gain",
 )
 #: velocity (rad/s) over which the coupled motor's Coulomb friction changes sign (tanh)
 COUPLED_SMOOTHING = 0.05
@@ -137,7 +141,7 @@ class EffectTerm:
         if self.cause == "coupled_friction":
             motor = vj + v["ratio"] * qd[:, int(v["partner_index"])]
             return v["coulomb"] * np.tanh(motor / COUPLED_SMOOTHING) + v["viscous"] * motor
-        # torque_offset (a sensor bias), armature (in the model), torque_lag (the sensor's filter)
+        # torque_offset (a sensor bias), armature (in the model), torque_lag and torque_gain (the sensor)
         return np.zeros_like(qj)
 
 
@@ -177,9 +181,12 @@ class TrueDynamics:
     def sensor(self, tau: np.ndarray, time: np.ndarray) -> np.ndarray:
         """What the torque sensors read of the applied torques (T, n): ``torque_lag`` joints
         through a first-order low-pass filter L·y' + y = τ (exact for a torque linear between
-        samples, so a lag shorter than a sample still delays), + offset."""
+        samples, so a lag shorter than a sample still delays), ``torque_gain`` joints times
+        (1 + gain_error), + offset."""
         out = np.array(tau, float, copy=True)
         for t in self.terms:
+            if t.cause == "torque_gain":
+                out[:, t.j] *= 1.0 + t.record["values"]["gain_error"]
             if t.cause != "torque_lag":
                 continue
             lag = t.record["values"]["lag"]
@@ -311,6 +318,8 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
             }
         elif req.name == "torque_lag":
             values = {"lag": 0.02 if size is None else size}
+        elif req.name == "torque_gain":
+            values = {"gain_error": float(effect_rng.choice([-1.0, 1.0])) * (0.1 if size is None else size)}
         else:  # torque_offset
             values = {"offset": float(effect_rng.choice([-1.0, 1.0])) * (0.1 * s if size is None else size)}
             offset[j] += values["offset"]

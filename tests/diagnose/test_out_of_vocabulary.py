@@ -60,6 +60,17 @@ def test_a_hidden_effect_beside_smooth_friction_is_named_first():
     assert top.term.value("offset") == pytest.approx(log.truth.effects[0]["scale"], rel=0.1)
 
 
+def test_a_torque_sensors_gain_is_named_with_its_error():
+    """The independent generator's sensor reading 4 % high on one joint (friction included) was
+    named a torque offset on the Z1 of a user trial before torque_gain was a cause."""
+    log, d = _diagnose(Session(duration=20.0, seed=1, robot_seed=1, smooth_scale=0.0, hidden="torque_gain"))
+    hidden = log.truth.effects[0]
+    top = d.findings[0]
+    assert (top.cause, top.channel) == ("torque_gain", hidden["channel"]), [(f.cause, f.channel) for f in d.findings]
+    p = top.term.parameters[0]
+    assert abs(p.value - hidden["scale"]) < 2 * p.stderr < 0.1 * hidden["scale"]
+
+
 def test_friction_that_grows_with_the_load_is_named_load_friction():
     """Friction in proportion to the joint's load torque (the generator's |τ| tanh(qd/0.02), beside
     smooth friction on every joint) was named a position friction before load_friction was a cause."""

@@ -15,7 +15,7 @@ from diegocal.sgp import SGPOptions, load_model
 from diegocal.sgp.model import DynamicsModel
 from diegocal.sgp.regressor import full_regressor
 from diegocal.sgp.store import save_model
-from diegocal.sgp.terms import COLUMNS, columns, friction_terms, lag_filter, term_columns
+from diegocal.sgp.terms import COLUMNS, FILTERS, columns, friction_terms, lag_filter, term_columns
 from diegocal.terms import Region, make_term, term_from_dict
 
 
@@ -65,8 +65,8 @@ def test_terms_round_trip_through_yaml_and_refuse_bad_input():
     t = make_term("position_friction", "joint2", {"coulomb": 0.3}, region=Region("q.joint2", 0.2, 0.9))
     back = term_from_dict(t.to_dict())
     assert back == t and back.value("coulomb") == 0.3
-    # every dynamics term of the registry has a behaviour here (torque_lag is a filter)
-    assert set(COLUMNS) | {"torque_lag"} == set(causes_of("dynamics", "term"))
+    # every dynamics term of the registry has a behaviour here (the sensor causes are filters)
+    assert set(COLUMNS) | set(FILTERS) == set(causes_of("dynamics", "term"))
     with pytest.raises(InputFileError, match="not a dynamics term"):
         columns(make_term("backlash", "joint1"), None, np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)))
     with pytest.raises(InputFileError, match="is a kinematics cause"):
@@ -118,6 +118,28 @@ def test_a_model_with_extra_terms_recovers_them_and_predicts_with_a_lag(arm3, tm
     save_model(base, tmp_path / "b.sgp")
     assert "terms" not in (tmp_path / "b.sgp" / "sgp.yaml").read_text()
     assert load_model(tmp_path / "b.sgp").terms == ()
+
+
+def test_a_gain_term_scales_its_joints_columns_with_or_without_time(arm3, tmp_path):
+    time, q, qd, qdd = states(arm3, T=1500, seed=1)
+    base = DynamicsModel(arm3, SGPOptions(kind="pr"))
+    base.fit_arrays(q, qd, qdd, 1e-3 * np.random.default_rng(0).standard_normal((len(q), 3)))
+    tau = base.features(q, qd, qdd) @ np.random.default_rng(2).normal(size=base.base_.n_base)
+    tau[:, 1] *= 1.2  # joint2's sensor reads 20 % high
+    tau += 1e-3 * np.random.default_rng(3).standard_normal(tau.shape)
+    gain = make_term("torque_gain", "joint2", values={"gain_error": 0.2})
+    model = DynamicsModel(arm3, SGPOptions(kind="pr"), terms=(gain,))
+    model.fit_arrays(q, qd, qdd, tau)  # a gain needs no time
+    assert model.fitted_terms()[0].value("gain_error") == 0.2  # held as given
+    assert model.parameter_names == tuple(base.base_.names)  # no columns of its own
+    pred = model.predict_arrays(q, qd, qdd).tau
+    assert np.sqrt(np.mean((pred - tau) ** 2)) < 3e-3
+    np.testing.assert_allclose(model.mean_in_chunks(q, qd, qdd, time), pred, atol=1e-9)
+    save_model(model, tmp_path / "g.sgp", {"log": "x"})
+    np.testing.assert_allclose(load_model(tmp_path / "g.sgp").predict_arrays(q, qd, qdd).tau, pred, atol=1e-9)
+    # the same model without the gain misses joint2 by the gain's share of its torque
+    plain = DynamicsModel(arm3, SGPOptions(kind="pr")).fit_arrays(q, qd, qdd, tau)
+    assert np.sqrt(np.mean((plain.predict_arrays(q, qd, qdd).tau - tau) ** 2)) > 10 * 3e-3
 
 
 def test_a_lag_term_needs_the_samples_time(arm3):
