@@ -236,6 +236,8 @@ class DynamicsAdapter:
         for t in model.fitted_terms():
             if is_filter(t):
                 se = None if t.channel not in self.row_of else [self._lag_se(model, w, t, lags, pred, rows, sigma)]
+                if t.cause == "torque_gain" and self.inertia != "nominal":  # a common scale is the inertias'
+                    t = replace(t, extra={**t.extra, "relative": True})
                 out.append(t.with_values(t.values, se))
             elif any(p.shape for p in specs(t)):
                 out.append(with_shape_se(self, t, model, pred, rows))

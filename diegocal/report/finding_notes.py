@@ -1,6 +1,7 @@
 """The sentences a diagnosis report adds to a finding beyond its cause, gain and parameters: what
-the data fix of a slipped marker, why no cause is named where a term stood in, what else the same
-model is (a lasting supply sag is a pressure sensor's span error), and how values are printed."""
+the data fix of a slipped marker or a torque sensor's gain, why no cause is named where a term
+stood in, what else the same model is (a lasting supply sag is a pressure sensor's span error), and
+how values are printed."""
 
 from __future__ import annotations
 
@@ -11,7 +12,18 @@ from diegocal.causes import search_end
 
 def notes(f: dict) -> str:
     """Every note of finding ``f`` (a diagnosis.yaml finding), each a sentence or more, in order."""
-    return gauge_text(f) + stand_in_text(f) + span_error_text(f)
+    return gauge_text(f) + stand_in_text(f) + span_error_text(f) + relative_gain_text(f)
+
+
+def relative_gain_text(f: dict) -> str:
+    """What the data fix of a torque sensor's gain where the rigid body's inertial parameters are
+    identified (``extra.relative``): a common scale of every joint's torque is theirs, so only the
+    joints' gains against each other."""
+    if not (f.get("extra") or {}).get("relative"):
+        return ""
+    return (f" With the rigid body's inertial parameters identified, a common scale of every joint's torque is "
+            f"theirs: this is {f['channel']}'s gain against the other joints' (gains of the opposite sign on "
+            "every other joint fit the same); `--inertia nominal` or a torque known on one joint fixes it.")
 
 
 def span_error_text(f: dict) -> str:

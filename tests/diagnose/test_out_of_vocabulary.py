@@ -69,6 +69,7 @@ def test_a_torque_sensors_gain_is_named_with_its_error():
     assert (top.cause, top.channel) == ("torque_gain", hidden["channel"]), [(f.cause, f.channel) for f in d.findings]
     p = top.term.parameters[0]
     assert abs(p.value - hidden["scale"]) < 2 * p.stderr < 0.1 * hidden["scale"]
+    assert top.term.extra["relative"]  # the inertias identified: one joint's gain against the others'
 
 
 def test_friction_that_grows_with_the_load_is_named_load_friction():

@@ -113,3 +113,14 @@ def test_a_fitted_value_has_the_digits_its_standard_error_gives_it():
     assert text(0.0452634, 0.0007) == " Fitted: seconds = 0.04526 ± 0.0007 s."
     assert text(1234.5, 30.0) == " Fitted: seconds = 1234 ± 30 s."
     assert text(0.0452634, None) == " Fitted: seconds = 0.0453 s."
+
+
+def test_a_gain_against_identified_inertias_says_it_is_relative():
+    from diegocal.report.diagnose import sentence
+
+    gain = {"value": 0.1005, "stderr": 0.0007, "unit": "1"}
+    f = {"cause": "torque_gain", "channel": "joint2", "parameters": {"gain_error": gain}, "unit": "N·m",
+         "gain": {"rmse_before": 0.265, "rmse_after": 0.103, "reduction": 0.61}}
+    assert "against the other joints'" not in sentence(f)  # against the URDF's inertias: absolute
+    said = sentence(f | {"extra": {"relative": True}})
+    assert "joint2's gain against the other joints'" in said and "--inertia nominal" in said
