@@ -65,9 +65,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
-from diegocal.causes import cause as registry_cause
+from diegocal.diagnose.dynamics_filters import filter_se, fit_filters
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
 from diegocal.diagnose.dynamics_system import FamilyRanks, TrainingSystem, feature_chunks, filler, layout, project
 from diegocal.diagnose.types import Candidate, Residuals
@@ -217,7 +216,7 @@ class DynamicsAdapter:
             sigma = self._joint_sigma(terms, train)  # each joint weighted by its residual std
             if lags:
                 C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
-                lags = self._fit_lags(np.concatenate([self.F, C], axis=2), lags, train, sigma)
+                lags = fit_filters(self, np.concatenate([self.F, C], axis=2), lags, train, sigma)
                 terms = tuple(
                     t.with_values([lags[self._key(t)]]) if is_filter(t) and t.channel in self.row_of else t
                     for t in terms
@@ -235,7 +234,7 @@ class DynamicsAdapter:
         out = []
         for t in model.fitted_terms():
             if is_filter(t):
-                se = None if t.channel not in self.row_of else [self._lag_se(model, w, t, lags, pred, rows, sigma)]
+                se = None if t.channel not in self.row_of else [filter_se(self, model, w, t, lags, pred, rows, sigma)]
                 if t.cause == "torque_gain" and self.inertia != "nominal":  # a common scale is the inertias'
                     t = replace(t, extra={**t.extra, "relative": True})
                 out.append(t.with_values(t.values, se))
@@ -319,49 +318,6 @@ class DynamicsAdapter:
         """A filter term's key in the fit's ``lags``: (its joint's row, its cause)."""
         return self.row_of[t.channel], t.cause
 
-    def _lag_se(self, model, w, t, lags: dict, pred, train, sigma) -> float:
-        """Standard error of a filter term's value (a lag, s; a gain error), the linear parameters
-        free: the prediction's derivative with respect to the value (central difference, the
-        joint's other filters held), less its weighted least-squares fit by the model's columns on
-        every joint's training rows (a gain trades off with the inertial parameters), against its
-        joint's residual std; ``sigma`` (k,) the joints' weights (the fit's noise stds)."""
-        A = model.features(self.q, self.qd, self.qdd, sensors=False)  # before the sensors' filters, whole
-        key, v = self._key(t), float(t.values[0])
-        r = key[0]
-        h = max(1e-4, 0.01 * abs(v))
-        lo = max(v - h, specs(t)[0].lower)
-        own = {(0, c): x for (s, c), x in lags.items() if s == r}
-
-        def joint_r(value):  # joint r's prediction with the term at ``value``
-            trial = own | {(0, key[1]): value}
-            out = self._lagged(A[:, r : r + 1], trial)[:, 0] @ w
-            if self.inertia == "nominal":
-                out += self._lagged(self.tau0[:, r : r + 1], trial)[:, 0]
-            return out
-
-        d = (joint_r(v + h) - joint_r(lo)) / (v + h - lo)
-        ok = train & np.isfinite(self.tau[:, r])
-        e = self.tau[ok, r] - pred[ok, r]
-        X = self._lagged(A, lags)
-        P = X.shape[2]
-        gram, xd, dd = np.zeros((P, P)), np.zeros(P), 0.0
-        idx = np.flatnonzero(train)
-        step = max(CHUNK_ROWS // X.shape[1], 1)
-        for i in range(0, idx.size, step):
-            rows = idx[i : i + step]
-            Xw = X[rows] / sigma[None, :, None]
-            good = np.isfinite(self.tau[rows]) & np.isfinite(Xw).all(axis=2)
-            Xw = np.where(good[:, :, None], Xw, 0.0)
-            dw = np.where(good[:, r], d[rows] / sigma[r], 0.0)
-            gram += np.einsum("tkp,tkq->pq", Xw, Xw)
-            xd += Xw[:, r].T @ dw
-            dd += float(dw @ dw)
-        left = dd - float(xd @ np.linalg.pinv(gram) @ xd)
-        if not left > 0:
-            return float("nan")
-        s2 = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2  # the joint's residual variance, weighted
-        return float(np.sqrt(s2 / left))
-
     def _lagged(self, A, lags: dict):
         """A (T, k, ...) with each filtering sensor applied to its joint's row (``lags``: (row,
         cause) -> value; a lag and a gain on one joint compose)."""
@@ -371,33 +327,6 @@ class DynamicsAdapter:
         for (r, name), value in lags.items():
             out[:, r] = sensor_filter(name, out[:, r], self.time, value)
         return out
-
-    def _fit_lags(self, A, lags: dict, train, sigma) -> dict:
-        """Each filtering sensor's value (a lag's time constant in [0, MAX_LAG_S] s, a gain error
-        within ±MAX_GAIN_ERROR: the registry's bounds) by bounded 1-D searches of the weighted
-        training error, the linear parameters re-solved at every trial (two sweeps)."""
-        lags = dict(lags)
-
-        def cost(key, value):
-            trial = dict(lags)
-            trial[key] = value
-            Aeff = self._lagged(A, trial)
-            offset = self._offset(trial)
-            w, _ = self._solve(Aeff, train, sigma, offset)
-            e = (self.tau[train] - (Aeff @ w + offset)[train]) / sigma
-            return float(np.nansum(e * e))
-
-        for _ in range(2 if len(lags) > 1 else 1):
-            for key in list(lags):
-                spec = registry_cause(key[1]).parameters[0]
-                res = minimize_scalar(
-                    lambda x, key=key: cost(key, x),
-                    bounds=(spec.lower, spec.upper),
-                    method="bounded",
-                    options={"xatol": 1e-4},
-                )
-                lags[key] = float(res.x)
-        return lags
 
     def _weighted_fit(self, terms, lags: dict, train, sigma) -> tuple:
         """(the linear parameters, the weighted training error) of the model with ``terms``, the
