@@ -158,6 +158,7 @@ def _dynamics(path: Path, log: Log, options: PredictOptions) -> Prediction:
     from diegocal.robot import load_robot, resolve_robot_dir
     from diegocal.sgp.model import log_arrays
     from diegocal.sgp.store import load_model
+    from diegocal.sgp.streams import without_clipped
 
     robot = load_robot(resolve_robot_dir(options.robot, log.robot)) if options.robot else None
     model = load_model(path, robot=robot)
@@ -180,7 +181,7 @@ def _dynamics(path: Path, log: Log, options: PredictOptions) -> Prediction:
     if log.has("tau"):
         measured = log.stream("tau").select(names).data
         streams["tau_measured"] = make_stream(names, measured)
-        sc = score(measured, pred.tau, names, std=pred.tau_std)
+        sc = score(without_clipped(measured, names), pred.tau, names, std=pred.tau_std)  # clipped: not scored
         rows += [(f"nMSE {j}", float(e)) for j, e in zip(names, sc.nmse, strict=True)]
         rows += [(f"RMSE {j}", float(e)) for j, e in zip(names, sc.rmse, strict=True)]  # diagnose's measure
         rows += [(f"within ±2σ {j}", float(c)) for j, c in zip(names, sc.coverage, strict=True)]

@@ -9,7 +9,8 @@ not modelled); they are not an error. A robot joint without a channel is one in 
 
 Angles are checked against the URDF's limits (:func:`check_angles`): revolute joints recorded far
 outside them, and within them read as degrees, are a log in degrees, one error line; any other
-excursion is one warning line.
+excursion is one warning line. A torque clipped by a sensor's range or a drive's limit has its
+samples at the limit left out (:func:`without_clipped`).
 """
 
 from __future__ import annotations
@@ -78,6 +79,7 @@ def torque_array(log, robot, warn: bool = True) -> tuple[np.ndarray, tuple]:
     one (e.g. TIAGo's wrists, whose efforts are unusable) is simply absent, so that a model can be
     fitted on the rows of the joints that have a torque; channels that are no joint of the robot
     are left out with a warning (``warn``); a stream with no joint at all is a one-line error.
+    Samples at a clipping limit are NaN, with a warning (:func:`without_clipped`).
     """
     s = log.stream("tau", needed_by="sgp-fit")
     if warn:
@@ -86,7 +88,48 @@ def torque_array(log, robot, warn: bool = True) -> tuple[np.ndarray, tuple]:
     if not joints:
         others = f" (its channels {', '.join(s.names)} are not joints of it)" if s.names else ""
         raise MissingStreamError(f"stream 'tau' has no channel of robot {robot.name!r}: nothing to fit{others}")
-    return s.select(joints).data, joints
+    return without_clipped(s.select(joints).data, joints), joints
+
+
+#: A torque sits at a clipping limit when at least this share of its samples (and CLIP_MIN_SAMPLES)
+#: reads its extreme value exactly, CLIP_RATIO times as many as read the next value in: a sensor's
+#: range or a drive's current limit piles every sample beyond it onto one value, while a quantised
+#: torque's smooth peak (a sine's: 2.4 times) spreads over the levels below.
+CLIP_SHARE = 0.005
+CLIP_MIN_SAMPLES = 10
+CLIP_RATIO = 5.0
+
+
+def clipped_samples(x: np.ndarray) -> np.ndarray:
+    """(T,) bool: the samples of one torque channel that sit at a clipping limit (either end)."""
+    out = np.zeros(x.shape, bool)
+    finite = x[np.isfinite(x)]
+    if finite.size == 0:
+        return out
+    values, counts = np.unique(finite, return_counts=True)
+    need = max(CLIP_MIN_SAMPLES, CLIP_SHARE * finite.size)
+    for end, nxt in ((-1, -2), (0, 1)):
+        if values.size > 1 and counts[end] >= need and counts[end] >= CLIP_RATIO * counts[nxt]:
+            out |= x == values[end]
+    return out
+
+
+def without_clipped(tau: np.ndarray, joints) -> np.ndarray:
+    """``tau`` with the samples at a clipping limit NaN (left out of fits and scores), one warning
+    per joint that has them: a clipped torque is no torque the model could predict."""
+    out = None
+    for k, j in enumerate(joints):
+        bad = clipped_samples(tau[:, k])
+        if bad.any():
+            if out is None:
+                out = np.array(tau, float, copy=True)
+            limits = " and ".join(f"{v:.4g}" for v in np.unique(tau[bad, k]))
+            LOG.warning(
+                f"tau of {j} reads exactly {limits} N·m in {bad.mean():.1%} of the samples: clipped (a sensor's "
+                "range, a drive's current limit)? Those samples are left out"
+            )
+            out[bad, k] = np.nan
+    return tau if out is None else out
 
 
 def check_angles(robot, q: np.ndarray, warn: bool = True) -> None:
