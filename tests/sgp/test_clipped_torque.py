@@ -11,7 +11,11 @@ import pytest
 
 from diegocal.diagnose import DiagnoseOptions, diagnose
 from diegocal.io import Log, make_stream
+from diegocal.predict import predict
 from diegocal.robot.resolve import robot_for_log
+from diegocal.sgp import SGPOptions
+from diegocal.sgp.model import fit_dynamics
+from diegocal.sgp.store import save_model
 from diegocal.sgp.streams import clipped_samples, torque_array
 from experiments.dynamics_generator import Session, generate, urdf
 
@@ -48,3 +52,22 @@ def test_a_clipped_joint_is_left_out_with_a_warning_and_nothing_is_named(caplog)
     assert np.isfinite(np.delete(got, 1, axis=1)).all()
     d = diagnose(clipped, robot, DiagnoseOptions(domain="dynamics"))
     assert not d.findings, [f.term.label for f in d.findings]
+
+
+@pytest.mark.skipif(not urdf("ur5").is_file(), reason="example-robot-data is not installed")
+def test_predict_scores_a_clipped_joint_on_its_other_samples(tmp_path):
+    log = generate(Session(duration=10.0, seed=2, robot_seed=2, smooth_scale=0.0))
+    robot = robot_for_log(None, log)
+    model = fit_dynamics(log, robot, SGPOptions(kind="pr"))
+    save_model(model, tmp_path / "pr.sgp")
+    tau = log.stream("tau")
+    data = tau.data.copy()
+    limit = 0.8 * np.abs(data[:, 1]).max()
+    data[:, 1] = np.clip(data[:, 1], -limit, limit)
+    streams = {k: log.stream(k) for k in ("q", "qd", "qdd")} | {"tau": make_stream(tau.names, data)}
+    p = predict(tmp_path / "pr.sgp", Log(time=log.time, streams=streams, robot=log.robot, rate_hz=log.rate_hz))
+    rows = dict(p.rows)
+    kept = np.abs(data[:, 1]) < limit
+    e = p.log.stream("tau").data[kept, 1] - data[kept, 1]
+    assert rows[f"RMSE {tau.names[1]}"] == pytest.approx(np.sqrt(np.mean(e * e)), rel=1e-9)
+    np.testing.assert_array_equal(p.log.stream("tau_measured").data[:, 1], data[:, 1])  # the log as it was
