@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diegocal.diagnose.dynamics_filters import filter_se, fit_filters
+from diegocal.diagnose.dynamics_filters import filter_ses, fit_filters
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
 from diegocal.diagnose.dynamics_system import FamilyRanks, TrainingSystem, feature_chunks, filler, layout, project
 from diegocal.diagnose.types import Candidate, Residuals
@@ -231,10 +231,12 @@ class DynamicsAdapter:
         sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
         w = model.parametric_.values
         se_nan = self._unidentified(model, rows, terms)
-        out = []
+        out, ses = [], None  # ses: the filter terms' standard errors, made at the first
         for t in model.fitted_terms():
             if is_filter(t):
-                se = None if t.channel not in self.row_of else [filter_se(self, model, w, t, lags, pred, rows, sigma)]
+                if ses is None:
+                    ses = filter_ses(self, model, w, lags, pred, rows, sigma)
+                se = [ses[self._key(t)]] if t.channel in self.row_of else None
                 if t.cause == "torque_gain" and self.inertia != "nominal":  # a common scale is the inertias'
                     t = replace(t, extra={**t.extra, "relative": True})
                 out.append(t.with_values(t.values, se))

@@ -9,7 +9,6 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from diegocal.causes import cause as registry_cause
-from diegocal.diagnose.dynamics_shapes import specs
 from diegocal.lstsq import CHUNK_ROWS
 
 
@@ -41,45 +40,75 @@ def fit_filters(fit, A, lags: dict, train, sigma) -> dict:
     return lags
 
 
-def filter_se(fit, model, w, t, lags: dict, pred, train, sigma) -> float:
-    """Standard error of a filter term's value (a lag, s; a gain error), the linear parameters
-    free: the prediction's derivative with respect to the value (central difference, the
-    joint's other filters held), less its weighted least-squares fit by the model's columns on
-    every joint's training rows (a gain trades off with the inertial parameters), against its
-    joint's residual std; ``sigma`` (k,) the joints' weights (the fit's noise stds)."""
+def filter_ses(fit, model, w, lags: dict, pred, train, sigma) -> dict:
+    """Standard errors of the filter terms' values (a lag, s; a gain error; ``lags``: (row, cause)
+    -> value), marginal over the linear parameters and each other: each value's derivative column
+    (the prediction's central difference, its joint's other filters held) fitted with the model's
+    columns on every joint's training rows, weighted by ``sigma`` (k,) (the fit's noise stds; a
+    gain trades off with the inertial parameters, and gains on several joints with each other),
+    scaled by its joint's residual variance. Returns (row, cause) -> SE."""
     A = model.features(fit.q, fit.qd, fit.qdd, sensors=False)  # before the sensors' filters, whole
-    key, v = fit._key(t), float(t.values[0])
-    r = key[0]
+    X = fit._lagged(A, lags)
+    keys = list(lags)
+    D = np.zeros((X.shape[0], X.shape[1], len(keys)))
+    for f, key in enumerate(keys):
+        D[:, key[0], f] = _derivative(fit, A, w, key, lags)
+    P = X.shape[2] + len(keys)
+    gram = np.zeros((P, P))
+    idx = np.flatnonzero(train)
+    step = max(CHUNK_ROWS // X.shape[1], 1)
+    for i in range(0, idx.size, step):
+        rows = idx[i : i + step]
+        Z = np.concatenate([X[rows], D[rows]], axis=2) / sigma[None, :, None]
+        good = np.isfinite(fit.tau[rows]) & np.isfinite(Z).all(axis=2)
+        Z = np.where(good[:, :, None], Z, 0.0)
+        gram += np.einsum("tkp,tkq->pq", Z, Z)
+    var = _marginal_variances(gram, X.shape[2])
+    out = {}
+    for f, (r, c) in enumerate(keys):
+        ok = train & np.isfinite(fit.tau[:, r])
+        e = fit.tau[ok, r] - pred[ok, r]
+        s2 = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2  # the joint's residual variance, weighted
+        out[(r, c)] = float(np.sqrt(s2 * var[f])) if var[f] > 0 else float("nan")
+    return out
+
+
+#: The filter values' information (the Schur complement of the model's columns) is singular when its
+#: smallest eigenvalue is below this fraction of its largest: gains on every joint with identified
+#: inertias (a common scale is theirs) have a direction the data do not fix.
+SINGULAR = 1e-9
+
+
+def _marginal_variances(gram: np.ndarray, p: int) -> np.ndarray:
+    """(F,) the variances of the last F unknowns of the normal matrix ``gram`` with the first ``p``
+    (the model's columns) free: the inverse of their Schur complement's diagonal, infinite for a
+    value along a direction the data do not fix."""
+    G_xx, G_xd, G_dd = gram[:p, :p], gram[:p, p:], gram[p:, p:]
+    S = G_dd - G_xd.T @ np.linalg.pinv(G_xx) @ G_xd
+    vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
+    top = max(float(vals[-1]), 0.0)
+    fixed = vals > SINGULAR * top
+    if top <= 0:
+        return np.full(S.shape[0], np.inf)
+    var = (vecs[:, fixed] ** 2 / vals[fixed]) @ np.ones(int(fixed.sum()))
+    loose = np.abs(vecs[:, ~fixed]).max(axis=1) > 1e-6 if (~fixed).any() else np.zeros(S.shape[0], bool)
+    return np.where(loose, np.inf, var)
+
+
+def _derivative(fit, A, w, key, lags: dict) -> np.ndarray:
+    """(T,) the derivative of joint ``key[0]``'s prediction with respect to the filter ``key``'s
+    value (central difference within the registry's bounds, the joint's other filters held)."""
+    r, cause = key
+    v = lags[key]
     h = max(1e-4, 0.01 * abs(v))
-    lo = max(v - h, specs(t)[0].lower)
+    lo = max(v - h, registry_cause(cause).parameters[0].lower)
     own = {(0, c): x for (s, c), x in lags.items() if s == r}
 
     def joint_r(value):  # joint r's prediction with the term at ``value``
-        trial = own | {(0, key[1]): value}
+        trial = own | {(0, cause): value}
         out = fit._lagged(A[:, r : r + 1], trial)[:, 0] @ w
         if fit.inertia == "nominal":
             out += fit._lagged(fit.tau0[:, r : r + 1], trial)[:, 0]
         return out
 
-    d = (joint_r(v + h) - joint_r(lo)) / (v + h - lo)
-    ok = train & np.isfinite(fit.tau[:, r])
-    e = fit.tau[ok, r] - pred[ok, r]
-    X = fit._lagged(A, lags)
-    P = X.shape[2]
-    gram, xd, dd = np.zeros((P, P)), np.zeros(P), 0.0
-    idx = np.flatnonzero(train)
-    step = max(CHUNK_ROWS // X.shape[1], 1)
-    for i in range(0, idx.size, step):
-        rows = idx[i : i + step]
-        Xw = X[rows] / sigma[None, :, None]
-        good = np.isfinite(fit.tau[rows]) & np.isfinite(Xw).all(axis=2)
-        Xw = np.where(good[:, :, None], Xw, 0.0)
-        dw = np.where(good[:, r], d[rows] / sigma[r], 0.0)
-        gram += np.einsum("tkp,tkq->pq", Xw, Xw)
-        xd += Xw[:, r].T @ dw
-        dd += float(dw @ dw)
-    left = dd - float(xd @ np.linalg.pinv(gram) @ xd)
-    if not left > 0:
-        return float("nan")
-    s2 = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2  # the joint's residual variance, weighted
-    return float(np.sqrt(s2 / left))
+    return (joint_r(v + h) - joint_r(lo)) / (v + h - lo)

@@ -336,12 +336,13 @@ def _lags(cause: str, ctx: Context) -> list[Proposal]:
 
 def _gains(cause: str, ctx: Context) -> list[Proposal]:
     """A torque sensor's gain error: the change it makes to the prediction per unit of gain error
-    is the prediction itself."""
-    return [
-        Proposal(make_term(cause, j), columns={j: ctx.prediction[j][:, None]})
-        for j in ctx.joints
-        if (cause, j) not in ctx.have
-    ]
+    is the prediction itself. With the inertial parameters identified, a common scale of every
+    joint's torque is theirs: a gain on the last joint without one is not offered (with it the
+    model would be degenerate)."""
+    left = [j for j in ctx.joints if (cause, j) not in ctx.have]
+    if ctx.inertia != "nominal" and len(left) < 2:
+        return []
+    return [Proposal(make_term(cause, j), columns={j: ctx.prediction[j][:, None]}) for j in left]
 
 
 def _stribeck_scales(cause: str, ctx: Context) -> list[Proposal]:
