@@ -40,10 +40,11 @@ on link5 named on link6: near joint 6's origin the two are nearly one); clean lo
 
 A selected ``torque_lag`` or ``torque_gain`` is refitted as the sensor's filter of the model's
 columns (:data:`diegocal.sgp.terms.FILTERS`: first-order, a gain), its value by a bounded 1-D
-search with the linear parameters re-solved at each trial. The extended model is a dynamics bundle: a PR model
-(``sgp/`` directory, :mod:`diegocal.sgp.store`) whose regressor carries the found terms, fitted on
-the training blocks (``SGPOptions.inertia`` as diagnosed: a nominal one predicts with the URDF's
-rigid body + friction + the terms), which ``diegocal predict`` uses like any other.
+search with the linear parameters re-solved at each trial (:mod:`.dynamics_filters`). The
+extended model is a dynamics bundle: a PR model (``sgp/`` directory, :mod:`diegocal.sgp.store`)
+whose regressor carries the found terms, fitted on the training blocks (``SGPOptions.inertia`` as
+diagnosed: a nominal one predicts with the URDF's rigid body + friction + the terms), which
+``diegocal predict`` uses like any other.
 
 Where structure stays ``unexplained``, the extended model is the SGP of thesis ch. 3 instead
 (:meth:`DynamicsAdapter.absorb`): the same parametric part with a GP per joint on (q, qd), the
@@ -205,9 +206,9 @@ class DynamicsAdapter:
         """The baseline (eq. 3.30 with friction, base parameters) with ``terms``, fitted on the
         training samples as the model it will be saved as: a PR model (thesis §3.3.3,
         :class:`~diegocal.sgp.model.DynamicsModel`), whose predictions on every sample are the
-        residuals' and the held-out scores'. A ``torque_lag``'s time constant is searched first
-        (:meth:`_fit_lags`, weighted least squares), then held in the model; a ``torque_gain``'s
-        gain error the same way."""
+        residuals' and the held-out scores'. A ``torque_lag``'s time constant and a
+        ``torque_gain``'s gain error are searched first (:func:`~.dynamics_filters.fit_filters`,
+        weighted least squares), then held in the model."""
         train = np.asarray(train, bool)
         terms = dynamics_terms(terms)
         lags = {self._key(t): float(t.values[0]) for t in terms if is_filter(t) and t.channel in self.row_of}
