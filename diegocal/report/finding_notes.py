@@ -23,7 +23,7 @@ def relative_gain_text(f: dict) -> str:
         return ""
     return (f" With the rigid body's inertial parameters identified, a common scale of every joint's torque is "
             f"theirs: this is {f['channel']}'s gain against the other joints' (gains of the opposite sign on "
-            "every other joint fit the same); `--inertia nominal` or a torque known on one joint fixes it.")
+            "every other joint fit the same); --inertia nominal or a torque known on one joint fixes it.")
 
 
 def span_error_text(f: dict) -> str:
