@@ -103,6 +103,8 @@ def oracle_terms(effect: dict, robot) -> tuple:
         return (make_term(cause, joint, region=Region(f"q.{joint}", effect["low"], upper)),)
     if cause == "payload":
         return (make_term(cause, payload_links(robot)[robot.joint_index(joint)]),)
+    if cause == "torque_gain":  # a filter: held at its true value
+        return (make_term(cause, joint, {"gain_error": effect["scale"]}),)
     raise ValueError(cause)
 
 
