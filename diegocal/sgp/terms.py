@@ -336,7 +336,11 @@ def _lags(cause: str, ctx: Context) -> list[Proposal]:
 
 def _gains(cause: str, ctx: Context) -> list[Proposal]:
     """A torque sensor's gain error: the change it makes to the prediction per unit of gain error
-    is the prediction itself. Offered against identified inertial parameters only: against the
+    is the prediction itself, judged on every joint's residual (zero columns on the others): the
+    fit takes a gain up partly by scaling the inertias, which moves its error onto every joint, and
+    judged on its own joint's alone a gain on the joint the inertias serve most looked best (a
+    drifting offset on the UR5's elbow gave one on its shoulder). Offered against identified
+    inertial parameters only: against the
     URDF's, a gain and an unmodelled mass read alike (an arm3 payload on link3 was named a gain on
     joint2, which removed 99.9 % of that joint's validation error). A common scale of every
     joint's torque is then the inertias', so a gain on the last joint without one is not offered
@@ -344,7 +348,11 @@ def _gains(cause: str, ctx: Context) -> list[Proposal]:
     left = [j for j in ctx.joints if (cause, j) not in ctx.have]
     if ctx.inertia == "nominal" or len(left) < 2:
         return []
-    return [Proposal(make_term(cause, j), columns={j: ctx.prediction[j][:, None]}) for j in left]
+    zero = np.zeros((ctx.q.shape[0], 1))
+    return [
+        Proposal(make_term(cause, j), columns={k: ctx.prediction[j][:, None] if k == j else zero for k in ctx.joints})
+        for j in left
+    ]
 
 
 def _stribeck_scales(cause: str, ctx: Context) -> list[Proposal]:

@@ -426,7 +426,8 @@ def test_unexplained_structure_rate_over_ten_seeds(arm3):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "cause", ["torque_offset", "spring", "armature", "torque_lag", "position_friction", "coupled_friction"]
+    "cause",
+    ["torque_offset", "spring", "armature", "torque_lag", "torque_gain", "position_friction", "coupled_friction"],
 )
 def test_naming_rate_over_ten_seeds(arm3, cause):
     """Ten random draws per cause on 30-s logs (the fast tests use 20 s; a position_friction of 3 ×
@@ -456,8 +457,8 @@ def test_gain_naming_rate_over_ten_seeds(erd_robots):
     """A torque sensor's gain error on a random UR5 joint (gain · RMS τ U(3, 10) × noise, 30-s
     logs): named on its joint with the gain error within 3 SE, 10 of 10 on seeds 100-109. With the
     inertial parameters identified, a common scale of every joint's torque is theirs, so a gain is
-    one joint's against the others': on arm3's three joints one gain in ten (seed 107, joint3's)
-    was named on another joint beside two more gains."""
+    one joint's against the others', and its candidate is judged on every joint's residual: judged
+    on its own joint's, arm3's seed 107 had its joint3 gain named on joint2 beside two more gains."""
     ur5, named = erd_robots["ur5"], 0
     for seed in range(100, 110):
         log, joint, _ = hidden(ur5, "torque_gain", seed, duration=30.0)
