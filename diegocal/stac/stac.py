@@ -70,6 +70,7 @@ from diegocal.robot import Robot
 from diegocal.stac import robust
 from diegocal.stac.calibration import FitInfo, unresolved
 from diegocal.stac.covariance import covariance, theta_labels
+from diegocal.stac.inplace import q_step_in_place, relinearise
 from diegocal.stac.joint_step import theta_step
 from diegocal.stac.model import MARKERS, Observation, Params, State
 from diegocal.stac.poses import write_off_foreign_poses
@@ -411,8 +412,7 @@ def _alternate(
     accel = Anderson(options.anderson) if options.anderson and bfgs is None else None
     cost = total_cost(obs, params, st, noise, sigma)
     mu = 0.0  # Marquardt damping of the joint step (JOINT_DAMPING)
-    spare = None  # a State no longer needed, overwritten by the next q-step (q_step's ``out``)
-    for _ in range(options.max_iterations):
+    for _ in range(options.max_iterations):  # one State of every frame, its q-steps in place (inplace.py)
         noise = _noise(obs, sigma, options)
         red = warm or np.isfinite(prev_fixed)  # the q-phase's degrees of freedom, for σ below
         stepped = False
@@ -420,23 +420,22 @@ def _alternate(
             params_j, _, se_joint = theta_step(
                 obs, params, noise, q, lam, options.batch_size, jobs=options.jobs, damping=mu, st=st
             )
-            q_j, lam_j, st_j, _, used = q_step(
-                obs, params_j, noise, q, lam, options.batch_size, options.jobs, red, st, spare
+            q_j, lam_j, st, _, used = q_step_in_place(
+                obs, params_j, noise, q, lam, st, options.batch_size, options.jobs, red
             )
             try:
-                ph_j = p_phase(obs, st_j, params, *weights(obs, params, st_j, noise))
-                rss_j = _rss(obs, ph_j.params, st_j, options)
-                cost_j = total_cost(obs, ph_j.params, st_j, noise, sigma, rss_j)
+                ph_j = p_phase(obs, st, params, *weights(obs, params, st, noise))
+                rss_j = _rss(obs, ph_j.params, st, options)
+                cost_j = total_cost(obs, ph_j.params, st, noise, sigma, rss_j)
             except NumericalError:  # a step so far off that a redescending loss drops every marker
                 cost_j = np.inf
             if cost_j < cost:
-                spare, st = st, st_j
                 q, lam, ph, cost, rss, stepped = q_j, lam_j, ph_j, cost_j, rss_j, True
                 mu = mu / 10 if mu > JOINT_DAMPING / 10 else 0.0
             else:  # the full step overshot: damp the next one (and alternate plainly this time)
-                spare = st_j  # (a rejected step's State: the plain q-step overwrites it)
+                st = relinearise(obs, q, st, options.batch_size, options.jobs)  # the State at q again
                 mu = max(10 * mu, JOINT_DAMPING)
-            q_j = st_j = None
+            q_j = None
         if not stepped:
             q_old = q
             if bfgs is not None:
@@ -444,10 +443,9 @@ def _alternate(
             else:
                 steps = options.q_steps if options.schedule == "lm-iter" else 30
                 for _ in range(steps):
-                    q, lam, st_new, _, used = q_step(
-                        obs, params, noise, q, lam, options.batch_size, options.jobs, red, st, spare
+                    q, lam, st, _, used = q_step_in_place(
+                        obs, params, noise, q, lam, st, options.batch_size, options.jobs, red
                     )
-                    spare, st = st, st_new
                     if options.schedule == "lm-batch" and np.all(lam >= 1e3):
                         break
             ph = p_phase(obs, st, params, *weights(obs, params, st, noise))
