@@ -108,22 +108,32 @@ def covariance(
     tracked joint angles, ``noise`` the σ per type the fit ended with; ``st``, the State at q,
     lends its kept linearisation (:func:`~diegocal.stac.qphase.normal_equations`)."""
     P, M = obs.n_pots, obs.n_markers
-    A, scores = information(obs, params, noise, q, batch, max_frames, st)
+    # the scores' block sums, not every frame's scores (T, Nθ): 1.2 kB a frame on diego (issue #33)
+    A, sums = information(obs, params, noise, q, batch, max_frames, st, block_length(q.shape[0], blocks))
     free = free_mask(obs)
     Af = 0.5 * (A + A.T)[np.ix_(free, free)]
     Af = Af + 1e-9 * max(np.trace(Af), 1.0) / max(free.sum(), 1) * np.eye(free.sum())
     model = np.linalg.inv(Af)
-    robust, G = block_sandwich(model, scores[:, free], blocks)
+    robust, G = sandwich(model, sums[:, free])
     return Covariance(free, model, robust, G, P, M)
+
+
+def block_length(T: int, blocks: int = BLOCKS) -> int:
+    """Frames per block of the sandwich: T frames cut into ``blocks`` contiguous blocks of at least
+    MIN_BLOCK frames (the last one holds the rest)."""
+    return max(MIN_BLOCK, T // max(blocks, 1))
 
 
 def block_sandwich(bread_inv: np.ndarray, scores: np.ndarray, blocks: int = BLOCKS) -> tuple[np.ndarray, int]:
     """The cluster-robust covariance (k, k) ``G/(G−1) A⁻¹ (Σ_b s_b s_bᵀ) A⁻¹`` and G, for A⁻¹
     ``bread_inv`` (k, k) and per-frame scores (T, k) (rows of frames outside the fit zero), the
-    frames cut into ``blocks`` contiguous blocks of at least MIN_BLOCK frames."""
+    frames cut into ``blocks`` blocks (:func:`block_length`)."""
     T = scores.shape[0]
-    length = max(MIN_BLOCK, T // max(blocks, 1))
-    sums = np.add.reduceat(scores, np.arange(0, T, length), axis=0)
+    return sandwich(bread_inv, np.add.reduceat(scores, np.arange(0, T, block_length(T, blocks)), axis=0))
+
+
+def sandwich(bread_inv: np.ndarray, sums: np.ndarray) -> tuple[np.ndarray, int]:
+    """:func:`block_sandwich` from the scores' block sums s_b (blocks, k); G counts the non-zero ones."""
     G = int(np.count_nonzero(np.any(sums != 0.0, axis=1)))
     meat = sums.T @ sums * (G / max(G - 1, 1))
     robust = bread_inv @ meat @ bread_inv
@@ -144,13 +154,16 @@ def information(
     batch: int = 250,
     max_frames: int = 500,
     st: State | None = None,
+    length: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A (Nθ, Nθ), the information of θ with q profiled out (from every ``stride``-th frame,
-    scaled), and the profiled scores g_t (T, Nθ) of every frame (module docstring; sign: minus)."""
+    scaled), and the profiled scores g_t (T, Nθ) of every frame (module docstring; sign: minus);
+    with ``length``, their sums over blocks of that many frames instead (⌈T / length⌉, Nθ), added
+    a block at a time (:class:`_BlockSums`: the same bits as :func:`block_sandwich`'s)."""
     T = q.shape[0]
     N = 2 * obs.n_pots + 3 * obs.n_markers + 6
     stride = max(1, -(-T // max_frames))
-    scores = np.zeros((T, N))
+    scores = np.zeros((T, N)) if length is None else _BlockSums(T, N, length)
     picked = []  # what A needs of the frames t ≡ 0 (mod stride), summed after the loop
     for start in range(0, T, batch):
         sl = slice(start, min(start + batch, T))
@@ -158,9 +171,43 @@ def information(
         Hd = damped(H, np.zeros(g.shape[0]), inplace=True)  # the tiny ridge only: joints no sensor sees
         v = block_solve(Hd, g)  # H⁻¹ J_qᵀ W z
         # J_θᵀ W (J_q H⁻¹ J_qᵀ W z − z) per frame: minus the profiled score (its sign is immaterial)
-        scores[sl] = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v), ex["x"])
+        rows = _theta_rows(obs, params, noise, s, Rl, pl, _times_q(obs, params, noise, ex, v), ex["x"])
+        if length is None:
+            scores[sl] = rows
+        else:
+            scores.add(rows)
         picked.append(pick(Hd, ex, s, Rl, pl, np.flatnonzero(np.arange(sl.start, sl.stop) % stride == 0)))
-    return stride * reduced_matrix(obs, params, noise, picked), scores
+    return stride * reduced_matrix(obs, params, noise, picked), scores if length is None else scores.done()
+
+
+class _BlockSums:
+    """The scores' sums over blocks of ``length`` frames (blocks, k), made as the frames come in
+    order: each block's rows are held until it is complete, then summed by ``np.add.reduceat`` on
+    them alone (the same bits as over every frame's scores: a segment's sum does not depend on the
+    rows around it). Holds one block and a batch of rows, not every frame's (T, k)."""
+
+    def __init__(self, T: int, k: int, length: int):
+        self.sums, self.length = np.zeros((-(-T // length), k)), length
+        self.held, self.at = np.zeros((0, k)), 0  # rows of the blocks not yet summed, the first one's frame
+
+    def add(self, rows: np.ndarray) -> None:
+        """The next frames' rows (B, k)."""
+        rows = np.concatenate([self.held, rows]) if len(self.held) else rows
+        whole = len(rows) // self.length * self.length
+        self.done(rows[:whole])
+        self.held = rows[whole:].copy()
+
+    def done(self, rows: np.ndarray | None = None) -> np.ndarray:
+        """Sum ``rows`` (whole blocks from the block in hand; default: what is held, the last one,
+        shorter); returns the sums."""
+        rows = self.held if rows is None else rows
+        if len(rows):
+            b = self.at // self.length
+            self.sums[b : b + -(-len(rows) // self.length)] = np.add.reduceat(
+                rows, np.arange(0, len(rows), self.length), axis=0
+            )
+            self.at += len(rows)
+        return self.sums
 
 
 def theta_labels(obs: Observation) -> list[str]:

@@ -67,6 +67,17 @@ def test_profiled_information_and_scores_equal_the_dense_route(tree_robot):
     assert np.allclose(-scores, g, rtol=1e-7, atol=1e-7 * np.abs(g).max())
 
 
+def test_block_sums_as_made_equal_those_of_every_frames_scores(tree_robot):
+    """The scores' block sums added a batch at a time (the blocks straddling batches, the last one
+    short) are the same bits as ``np.add.reduceat`` over every frame's scores."""
+    log, res, obs, params, noise = _fit(tree_robot, 3, n_frames=300)
+    A, scores = information(obs, params, noise, res.q, batch=64, max_frames=100)
+    for length in (7, 10, 64, 100, 300):
+        A2, sums = information(obs, params, noise, res.q, batch=64, max_frames=100, length=length)
+        np.testing.assert_array_equal(A2, A)
+        np.testing.assert_array_equal(sums, np.add.reduceat(scores, np.arange(0, 300, length), axis=0))
+
+
 def test_block_sandwich_covers_the_truth_under_correlated_marker_noise(tree_robot):
     """Marker noise with a 50 ms correlation time (the reconstruction's smoothing at 100 Hz): the
     model-based standard errors (independent frames) cover the truth within 2 SE for little more
