@@ -35,6 +35,7 @@ def q_step_in_place(
     batch: int = 250,
     jobs: int = 1,
     want_red: bool = True,
+    trial: np.ndarray | None = None,
 ):
     """One LM step on every frame, as :func:`~diegocal.stac.qphase.q_step` with ``st`` (the State at
     q (T, n), its linearisation kept) overwritten by the State at the new q (module docstring).
@@ -42,11 +43,12 @@ def q_step_in_place(
     Returns (q (T, n), λ (T,), ``st`` (now at the new q), cost (T,), redundancy {group: Σ tr_g}
     at the old q, empty unless ``want_red``). q and λ are not changed. A State without room for the
     linearisation (Anderson's mix, :func:`~diegocal.stac.stac._alternate`) goes to ``q_step``.
+    ``trial`` (T,): filled with each frame's cost at its step's candidate, taken or not.
     """
     if st is None or st.xi is None:  # (a State without room for the linearisation: Anderson's mix)
-        return q_step(obs, params, noise, q, lam, batch, jobs, want_red, st)
+        return q_step(obs, params, noise, q, lam, batch, jobs, want_red, st, trial=trial)
     T = q.shape[0]
-    cand, c0, c1 = np.empty_like(q), np.empty(T), np.empty(T)
+    cand, c0, c1 = np.empty_like(q), np.empty(T), np.empty(T) if trial is None else trial
     unit = batch * -(-kinematics_batch(batch) // batch)  # whole slices of ``batch`` frames
 
     def step(sl: slice) -> list:

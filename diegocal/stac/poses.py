@@ -35,8 +35,9 @@ from scipy.special import chdtri  # the chi-square isf: no scipy.stats import
 
 from diegocal.errors import DiegocalError
 from diegocal.stac.model import MARKERS, Observation, Params
-from diegocal.stac.qphase import Noise, pot_sigmas, track
+from diegocal.stac.qphase import Noise, pot_sigmas
 from diegocal.stac.result import StacOptions
+from diegocal.stac.track import track
 
 LOG = logging.getLogger(__name__)
 

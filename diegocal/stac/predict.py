@@ -21,10 +21,11 @@ from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.loo import deleted_from_others, frame_slices
 from diegocal.stac.model import MARKERS, Observation
-from diegocal.stac.qphase import Noise, track
+from diegocal.stac.qphase import Noise
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import initial_q
 from diegocal.stac.terms import POT_CAUSES, apply_terms, pot_columns, to_log_markers, with_slip_markers
+from diegocal.stac.track import track
 
 #: accepted sensor-type names: the pot kinds, all pots, and the markers; as a source, ``others``:
 #: each reading from all the other sensors of its frame
@@ -91,7 +92,7 @@ def predict(
     ``q_init`` (T, n) rad: joint angles to start the tracking from (a previous fit's), instead of
     the pots' inversion. ``sources`` ``("others",)``: q is tracked from every sensor and each
     reading is predicted from the others (:mod:`diegocal.stac.loo`), NaN where they cannot.
-    ``progress(text)``: told how far the tracking is (:func:`~diegocal.stac.qphase.track`).
+    ``progress(text)``: told how far the tracking is (:func:`~diegocal.stac.track.track`).
 
     A calibration with extra terms (``calibration.terms``, found by ``diegocal diagnose``) is
     honoured through :func:`diegocal.stac.terms.apply_terms`: the model runs on the log mapped into
@@ -167,7 +168,7 @@ def predict(
 
 
 def _tracked(obs: Observation, params, noise: Noise, start, max_steps: int, options: StacOptions, progress):
-    """q tracked (:func:`~diegocal.stac.qphase.track`) TRACK_FRAMES at a time, each part from
+    """q tracked (:func:`~diegocal.stac.track.track`) TRACK_FRAMES at a time, each part from
     ``start(part, frames)`` (its Observation and slice: the pots' inversion steps on the part
     too), and the pots (T, P) and markers (T, M, 3) the calibration predicts at it. Progress is
     told per part, its time left the part's."""

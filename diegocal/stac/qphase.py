@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from diegocal.progress import Eta, duration
 from diegocal.stac import robust
 from diegocal.stac.loo import frame_slices
 from diegocal.stac.model import MARKERS, Observation, Params, State
@@ -423,58 +422,3 @@ def resolvable(obs: Observation, used: dict) -> dict:
 def pot_sigmas(obs: Observation, sigma: dict) -> np.ndarray:
     """σ of each pot from its type's σ: (P,)."""
     return np.array([sigma[k] for k in obs.kinds], dtype=float)
-
-
-#: A frame is tracked once an accepted LM step lowers its cost by at most this share of it, or a
-#: failed one would have raised it by at most this share (or its steps keep failing): the cost is
-#: then within about that share of its minimum.
-TRACK_TOL = 1e-8
-
-
-#: Once no more than this share of the frames is left to track, the steps are taken on those
-#: frames alone (the others keep their q and State): a few slow frames no longer cost a step on all.
-TRACK_SUBSET = 0.5
-
-
-def track(
-    obs: Observation, params: Params, noise: Noise, q, max_steps: int, batch: int = 250, jobs: int = 1, progress=None
-):
-    """LM steps (:func:`q_step`) from q (T, n) until every frame is tracked (:data:`TRACK_TOL`) or
-    ``max_steps``: (q, the State at q). A frame's steps keep being accepted long after it has
-    converged (the cost still falls by rounding), so λ alone never says it is done; and from a
-    converged q (a fit's) its steps fail by rounding, so λ would take many steps to say it. A
-    tracked frame is left where it is (:data:`TRACK_SUBSET`).
-    ``progress(text)``: told every few seconds how many frames are tracked, with the most time
-    left (every step takes about as long, and there are at most ``max_steps``)."""
-    T = q.shape[0]
-    lam, cost = np.full(T, 1e-2), np.full(T, np.inf)
-    tracked = np.zeros(T, dtype=bool)
-    trial = np.empty(T)  # each step's cost at its candidate, taken or not
-    st = spare = None  # spare: the State before st, whose arrays the next step overwrites
-    eta = Eta(max_steps)
-    for k in range(1, max_steps + 1):
-        todo = np.flatnonzero(~tracked)
-        if st is None or len(todo) > TRACK_SUBSET * T:  # a step on every frame
-            at = slice(None)
-            q, new_lam, new, c, _ = q_step(obs, params, noise, q, lam, batch, jobs, False, st, spare, trial)
-            spare, st = st, new
-            tried = trial
-        else:  # on the untracked frames only (the spare State is no longer needed: let it go)
-            at, tried, spare = todo, np.empty(len(todo)), None
-            q_at, new_lam, new, c, _ = q_step(
-                obs.subset(todo), params, noise, q[todo], lam[todo], batch, jobs, False, st.take(todo), trial=tried
-            )
-            q[todo] = q_at
-            st.put(todo, new)
-        accepted = new_lam < lam[at]
-        was = cost[at]
-        done = np.where(accepted, np.isfinite(was) & (was - c <= TRACK_TOL * was), tried - c <= TRACK_TOL * c)
-        tracked[at] |= (new_lam >= 1e3) | done
-        lam[at], cost[at] = new_lam, c
-        if np.all(tracked):
-            break
-        if progress is not None and eta.due(k):
-            left = duration(eta.left(k))
-            progress(f"tracking q: step {k}, {int(tracked.sum()):,}/{tracked.size:,} frames tracked, "
-                     f"{duration(eta.elapsed())} so far, at most {left} left")
-    return q, st

@@ -4,10 +4,12 @@ accepted long after that (the cost falls by rounding), so a stop on λ alone ran
 import numpy as np
 import synth
 
-import diegocal.stac.qphase as qphase
+import diegocal.stac.track as tracking
 from diegocal.stac.calibration import Calibration
+from diegocal.stac.inplace import q_step_in_place
 from diegocal.stac.model import Observation
-from diegocal.stac.qphase import Noise, q_step, track
+from diegocal.stac.qphase import Noise, q_step
+from diegocal.stac.track import track
 
 
 def _case(robot):
@@ -28,7 +30,7 @@ def test_tracking_stops_when_every_frame_has_converged(tree_robot, monkeypatch):
     q0 = np.clip(q0, obs.lower, obs.upper)
 
     steps = []
-    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: steps.append(1) or q_step(*a, **k))
+    monkeypatch.setattr(tracking, "q_step_in_place", lambda *a, **k: steps.append(1) or q_step_in_place(*a, **k))
     q_stop, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
     monkeypatch.undo()
     assert 2 < len(steps) < 40
@@ -51,7 +53,7 @@ def test_tracking_from_a_converged_q_stops_at_once(tree_robot, monkeypatch):
     q_fit, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
 
     steps = []
-    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: steps.append(1) or q_step(*a, **k))
+    monkeypatch.setattr(tracking, "q_step_in_place", lambda *a, **k: steps.append(1) or q_step_in_place(*a, **k))
     q_again, _ = track(obs, params, noise, q_fit, max_steps=40, batch=7)
     monkeypatch.undo()
     assert len(steps) <= 2
@@ -67,7 +69,7 @@ def test_tracking_says_how_far_it_is_with_the_most_time_left(tree_robot, monkeyp
     log, obs, params, noise = _case(tree_robot)
     q0 = np.clip(log.truth.signals["q"].data + 0.2, obs.lower, obs.upper)
     quiet, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
-    monkeypatch.setattr(qphase, "Eta", lambda total: Eta(total, every=0.0))
+    monkeypatch.setattr(tracking, "Eta", lambda total: Eta(total, every=0.0))
     lines = []
     told, _ = track(obs, params, noise, q0, max_steps=40, batch=7, progress=lines.append)
     np.testing.assert_array_equal(told, quiet)
@@ -82,7 +84,8 @@ def test_tracked_frames_are_left_where_they_are(tree_robot, monkeypatch):
     log, obs, params, noise = _case(tree_robot)
     q0 = np.clip(log.truth.signals["q"].data + 0.2, obs.lower, obs.upper)
     frames = []
-    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: frames.append(a[0].n_frames) or q_step(*a, **k))
+    step = q_step_in_place
+    monkeypatch.setattr(tracking, "q_step_in_place", lambda *a, **k: frames.append(a[0].n_frames) or step(*a, **k))
     q, st = track(obs, params, noise, q0, max_steps=40, batch=7)
     monkeypatch.undo()
     assert frames[0] == obs.n_frames and min(frames) <= obs.n_frames // 2, frames
@@ -90,7 +93,7 @@ def test_tracked_frames_are_left_where_they_are(tree_robot, monkeypatch):
     at = obs.state(q)
     for k in ("s", "Rl", "pl"):
         np.testing.assert_allclose(getattr(st, k), getattr(at, k), rtol=0, atol=1e-12)
-    monkeypatch.setattr(qphase, "TRACK_SUBSET", 0.0)  # every step on every frame
+    monkeypatch.setattr(tracking, "TRACK_SUBSET", 0.0)  # every step on every frame
     q_every, _ = track(obs, params, noise, q0, max_steps=40, batch=7)
     np.testing.assert_allclose(_cost(obs, params, noise, q), _cost(obs, params, noise, q_every), rtol=1e-7)
 
@@ -110,8 +113,9 @@ def test_a_long_log_is_tracked_in_parts(tree_robot, monkeypatch):
     whole = predict_mod.predict(log, tree_robot, cal, ("others",))
     sizes, lines = [], []
     monkeypatch.setattr(predict_mod, "TRACK_FRAMES", 15)
-    monkeypatch.setattr(qphase, "Eta", lambda total: Eta(total, every=0.0))
-    monkeypatch.setattr(qphase, "q_step", lambda *a, **k: sizes.append(a[0].n_frames) or q_step(*a, **k))
+    monkeypatch.setattr(tracking, "Eta", lambda total: Eta(total, every=0.0))
+    step = q_step_in_place
+    monkeypatch.setattr(tracking, "q_step_in_place", lambda *a, **k: sizes.append(a[0].n_frames) or step(*a, **k))
     parts = predict_mod.predict(log, tree_robot, cal, ("others",), progress=lines.append)
     again = predict_mod.predict(log, tree_robot, cal, ("others",), q_init=whole.q)  # each part from its own q
     monkeypatch.undo()
