@@ -322,7 +322,7 @@ class KinematicsAdapter:
         cols = [m[2] for m in made if isinstance(m, tuple)]
         first = len(cols)
         cols += [Columns(partial(Linearised.marker_basis, m=sweep.mapped_index(n)), span=None) for n in slips]
-        scan = SlipScan(sweep.T, slips, first)
+        scan = SlipScan(train, slips, first)
         families = None
         if self.selection_weights is not None:
             names = [m[1] for m in made if isinstance(m, tuple)] + [""] * len(slips)

@@ -47,16 +47,23 @@ def slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndarr
 
 
 def change_times(train: np.ndarray, G: np.ndarray, b: np.ndarray) -> list[int]:
-    """:func:`slip_samples` from each frame's G (T, 3, 3) and b (T, 3)."""
+    """:func:`slip_samples` from each frame's G (T, 3, 3) and b (T, 3), or from the training frames'
+    alone (G (T_train, 3, 3), b (T_train, 3)): the others' are zero, so the prefix sums at the
+    training frames, all the scan reads, are the same either way (to the bit: adding 0 is exact)."""
     T = train.size
+    if not len(G):  # no training frame: no run to scan, no gap between runs
+        return []
+    at = np.flatnonzero(train) if G.shape[0] < T else np.arange(T)  # row of G of each scanned frame
+    row = np.zeros(T, int)
+    row[at] = np.arange(len(at))
     G, b = np.cumsum(G, axis=0), np.cumsum(b, axis=0)  # Σ over frames ≤ t
-    fit = gain(G[:-1], b[:-1]) + gain(G[-1] - G[:-1], b[-1] - b[:-1])  # change at k = 1..T-1
+    fit = gain(G, b) + gain(G[-1] - G, b[-1] - b)  # change after each row's frame
     edges = np.flatnonzero(np.diff(np.concatenate([[0], train.astype(int), [0]])))
     runs = list(zip(edges[0::2], edges[1::2], strict=True))
     out = []
     for i, (a, e) in enumerate(runs):
         if e - a > 2:  # a change after the run's first frame and before its last
-            out.append(int(a + 1 + np.argmax(fit[a : e - 1])))
+            out.append(int(a + 1 + np.argmax(fit[row[a] : row[e - 2] + 1])))
         if i + 1 < len(runs):
             out.append(int((e + runs[i + 1][0]) // 2))
     lo, hi = int(0.05 * T), int(0.95 * T)
@@ -64,13 +71,16 @@ def change_times(train: np.ndarray, G: np.ndarray, b: np.ndarray) -> list[int]:
 
 
 class SlipScan:
-    """Each frame's G and b of :func:`slip_samples` for the markers ``names``, gathered from the
-    projected position columns a :class:`Sweep` hands :meth:`add` (column sets ``first`` on):
-    (T, 3, 3) and (T, 3) per marker, not the (T, R, 3) columns."""
+    """Each training frame's G and b of :func:`slip_samples` for the markers ``names``, gathered from
+    the projected position columns a :class:`Sweep` hands :meth:`add` (column sets ``first`` on):
+    (T_train, 3, 3) and (T_train, 3) per marker, not the (T, R, 3) columns, nor the other frames'
+    (zero: issue #33, 2.3 kB a frame on diego)."""
 
-    def __init__(self, T: int, names, first: int):
+    def __init__(self, train: np.ndarray, names, first: int):
         self.first = first
-        self.G, self.b = np.zeros((len(names), T, 3, 3)), np.zeros((len(names), T, 3))
+        self.row = np.cumsum(train) - 1  # each training frame's row
+        n = int(np.count_nonzero(train))
+        self.G, self.b = np.zeros((len(names), n, 3, 3)), np.zeros((len(names), n, 3))
         self._r: tuple | None = None  # (block start, its residual rows and training weights)
 
     def add(self, lin, i: int, cols: np.ndarray) -> None:
@@ -81,14 +91,15 @@ class SlipScan:
             ok = np.isfinite(r)
             self._r = (lin.start, np.where(ok, r, 0.0), np.where(ok, lin.w, 0.0) * lin.train[:, None])
         _, r, w = self._r
-        Cw = cols * w[..., None]
+        k = np.flatnonzero(lin.train)
+        Cw = cols[k] * w[k, :, None]
         Cw = np.swapaxes(Cw, 1, 2)  # (T, 3, R): per-frame products by matmul, not einsum (ten times faster)
-        self.G[i - self.first, lin.frames] = Cw @ cols
-        self.b[i - self.first, lin.frames] = (Cw @ r[..., None])[..., 0]
+        rows = self.row[lin.start + k]
+        self.G[i - self.first, rows] = Cw @ cols[k]
+        self.b[i - self.first, rows] = (Cw @ r[k, :, None])[..., 0]
 
     def samples(self, m: int, train: np.ndarray) -> list[int]:
         return change_times(train, self.G[m], self.b[m])
-
 
 def gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
     """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares
