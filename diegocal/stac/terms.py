@@ -147,12 +147,22 @@ def slip_sample(term: Term, time: np.ndarray) -> int:
     return int(np.searchsorted(time, term.region.low - 1e-9))
 
 
+def _shared(x: np.ndarray) -> np.ndarray:
+    """A read-only float64 view of ``x``: a mapped log shares the readings no term changes (a copy
+    is made where one does), and a write through it raises instead of changing the log's."""
+    out = np.asarray(x, float).view()
+    out.flags.writeable = False
+    return out
+
+
 def relabelled(markers: np.ndarray, names, terms) -> np.ndarray:
-    """``markers`` (T, M, 3) with the labels of ``swapped_labels`` terms swapped back in their frames."""
-    x = np.array(markers, float)
+    """``markers`` (T, M, 3) with the labels of ``swapped_labels`` terms swapped back in their frames
+    (a copy; without such a term a read-only view, :func:`_shared`)."""
+    x = _shared(markers)
     names = list(names)
     for t in terms:
         if t.cause == "swapped_labels" and t.channel in names and t.extra["partner"] in names:
+            x = np.array(x, float) if not x.flags.writeable else x
             a, b = names.index(t.channel), names.index(t.extra["partner"])
             f = np.asarray(t.extra.get("frames", ()), int)
             x[f, a], x[f, b] = x[f, b].copy(), x[f, a].copy()
@@ -169,12 +179,13 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
     streams = {}
     if log.has("pots"):
         st = log.stream("pots")
-        p = np.array(st.data, float)
         raw = st.data
+        p = _shared(raw)  # copied only where a term maps it (issue #33: a fit's log shares the rest)
         for t in terms:
             if t.cause in POT_CAUSES and t.channel in st.names:
                 j = st.names.index(t.channel)
                 model = None if model_pots is None else model_pots[:, j]
+                p = np.array(p, float) if not p.flags.writeable else p
                 p[:, j] -= pot_columns(t, raw[:, j], model) @ t.values
         streams["pots"] = make_stream(st.names, p)
     names, slips, shift = (), {}, 0.0
@@ -189,11 +200,11 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
     if log.has("markers"):
         st = log.stream("markers")
         names = tuple(st.names)
-        x = np.array(st.data, float)
         specs = {m.name: m for m in robot.sensors.markers}
-        x = relabelled(x, names, terms)  # labelling faults first: they are facts about the raw stream
+        x = relabelled(st.data, names, terms)  # labelling faults first: they are facts about the raw stream
         for t in terms:
             if t.cause == "marker_outliers":
+                x = np.array(x, float) if not x.flags.writeable else x
                 for m, f in (t.extra.get("frames") or {}).items():
                     if m in names:
                         x[np.asarray(f, int), names.index(m)] = np.nan
@@ -205,6 +216,7 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
                 k = slip_sample(t, time)
                 second = np.full((time.size, 1, 3), np.nan)
                 second[k:, 0] = x[k:, m]
+                x = np.array(x, float) if not x.flags.writeable else x
                 x[k:, m] = np.nan
                 spec = specs[t.channel]
                 name = t.channel + SLIP
@@ -212,7 +224,8 @@ def apply_terms(terms, log: Log, robot: Robot, model_pots: np.ndarray | None = N
                 slips[name] = (t.channel, k)
                 cols.append(second)
                 out_names.append(name)
-        streams["markers"] = make_stream(tuple(out_names), np.concatenate(cols, axis=1))
+        cols[0] = x
+        streams["markers"] = make_stream(tuple(out_names), np.concatenate(cols, axis=1) if len(cols) > 1 else x)
     robot2 = offset_robot(robot, offsets, extra, geometry) if (offsets or extra or geometry) else robot
     log2 = replace(log, streams={**log.streams, **streams}, truth=None)
     return Applied(log2, robot2, slips, shift, time, names)
