@@ -245,3 +245,16 @@ def simulate(
 
 def load(directory):
     return load_robot(directory)
+
+
+def q_step_start(robot, frames: int):
+    """A log of ``frames`` frames and a q-step's start on it: (log, Observation, nominal θ, Noise,
+    q0 (the truth perturbed by 0.2 rad, clipped to the limits), λ)."""
+    from diegocal.stac.model import Observation
+    from diegocal.stac.qphase import Noise
+
+    log = simulate(robot, frames, seed=5, occlusion=0.3)
+    obs = Observation(log, robot)
+    q0 = log.truth.signals["q"].data + np.random.default_rng(4).normal(0.0, 0.2, (obs.n_frames, robot.n_joints))
+    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
+    return log, obs, obs.nominal("nominal"), noise, np.clip(q0, obs.lower, obs.upper), np.full(obs.n_frames, 1e-2)

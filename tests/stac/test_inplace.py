@@ -7,21 +7,14 @@ import pytest
 import synth
 
 from diegocal.stac.inplace import q_step_in_place, relinearise
-from diegocal.stac.model import Observation
-from diegocal.stac.qphase import Noise, q_step
+from diegocal.stac.qphase import q_step
 
 FIELDS = ("s", "Rl", "pl", "xi", "ds_lin")
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_in_place_step_equals_q_step(tree_robot, jobs):
-    log = synth.simulate(tree_robot, 1100, seed=5, occlusion=0.3)  # three units of 504 frames
-    obs = Observation(log, tree_robot)
-    params = obs.nominal("nominal")
-    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
-    q0 = log.truth.signals["q"].data + np.random.default_rng(4).normal(0.0, 0.2, (obs.n_frames, tree_robot.n_joints))
-    q0 = np.clip(q0, obs.lower, obs.upper)
-    lam = np.full(obs.n_frames, 1e-2)
+    log, obs, params, noise, q0, lam = synth.q_step_start(tree_robot, 1100)  # three units of 504 frames
     # batch 7 and KINEMATICS_BATCH 500: units of 72 whole slices, the last ones shorter
     st = obs.state(q0, 500, keep=True)
     a = q_step(obs, params, noise, q0, lam, 7, jobs, True, obs.state(q0, 500, keep=True))

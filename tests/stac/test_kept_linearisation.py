@@ -5,18 +5,11 @@ equations formed from it equal those formed from the kinematics."""
 import numpy as np
 import synth
 
-from diegocal.stac.model import Observation
-from diegocal.stac.qphase import Noise, normal_equations, q_step
+from diegocal.stac.qphase import normal_equations, q_step
 
 
 def test_kept_linearisation_equals_a_fresh_one(tree_robot):
-    log = synth.simulate(tree_robot, 6, seed=5, occlusion=0.3)
-    obs = Observation(log, tree_robot)
-    params = obs.nominal("nominal")
-    noise = Noise(np.full(obs.n_pots, 0.01), 0.002)
-    q0 = log.truth.signals["q"].data + np.random.default_rng(4).normal(0.0, 0.2, (obs.n_frames, tree_robot.n_joints))
-    q0 = np.clip(q0, obs.lower, obs.upper)
-    lam = np.full(obs.n_frames, 1e-2)
+    log, obs, params, noise, q0, lam = synth.q_step_start(tree_robot, 6)
     q1, lam1, st1, _, _ = q_step(obs, params, noise, q0, lam, batch=7)
     assert 0 < np.sum(lam1 > lam) < obs.n_frames  # some frames rejected their step, some accepted
     fresh = obs.linearise(q1)
