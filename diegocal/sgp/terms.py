@@ -340,11 +340,10 @@ def _gains(cause: str, ctx: Context) -> list[Proposal]:
     fit takes a gain up partly by scaling the inertias, which moves its error onto every joint, and
     judged on its own joint's alone a gain on the joint the inertias serve most looked best (a
     drifting offset on the UR5's elbow gave one on its shoulder). Offered against identified
-    inertial parameters only: against the
-    URDF's, a gain and an unmodelled mass read alike (an arm3 payload on link3 was named a gain on
-    joint2, which removed 99.9 % of that joint's validation error). A common scale of every
-    joint's torque is then the inertias', so a gain on the last joint without one is not offered
-    (the model would be degenerate)."""
+    inertial parameters only: against the URDF's, a gain and an unmodelled mass read alike (an
+    arm3 payload on link3 was named a gain on joint2, which removed 99.9 % of that joint's
+    validation error). A common scale of every joint's torque is then the inertias', so a gain on
+    the last joint without one is not offered (the model would be degenerate)."""
     left = [j for j in ctx.joints if (cause, j) not in ctx.have]
     if ctx.inertia == "nominal" or len(left) < 2:
         return []
