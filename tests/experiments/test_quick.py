@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
@@ -48,6 +49,7 @@ def test_pendulum_sgp_explains_away_the_friction_bump():
     print({k: (round(c.nmse, 4), round(c.coverage, 2)) for k, c in cells.items()})
 
 
+@pytest.mark.slow
 def test_reaction_wheel_sgp_explains_away_the_missing_friction():
     """§3.4.2, eq. 3.28: the 6-parameter forward model omits viscous friction. PR's motor gain of
     the wheel axis absorbs the friction (biased); the SGP's GP takes the friction, so its gain is

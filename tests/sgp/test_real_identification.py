@@ -76,6 +76,7 @@ def _check_not_worse(sgp, pr, measured):
     assert _rmse(sgp.tau, measured) <= SGP_RMSE_MARGIN * _rmse(pr.tau, measured)
 
 
+@pytest.mark.slow
 def test_sgp_with_a_noise_floor_is_not_worse_than_pr_on_held_out_torques(tx40, pr):
     # σ_v ≥ 0.2 std(τ_j): the low-passed torques are not white-noise observations; with the
     # default floor (1e-4) ML-II can drive σ_v down until the GP interpolates the training run

@@ -342,6 +342,7 @@ def test_joint_hyperparameters_saved_without_region_parameters_load_into_region_
     np.testing.assert_allclose(back.predict(Uq, Fq)[0], saved.predict(Uq, Fq)[0], rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_the_joint_cut_candidate_cuts_where_the_two_stages_lost_and_competes_only_there(fits, monkeypatch):
     """Guard.joint_region: where the cut two stages lose (here made to: every nested score of two
     stages ×10, still 8 times better than PR's: PR's residual has structure), the "cut"

@@ -40,6 +40,7 @@ def test_a_bias_the_friction_puts_in_w_is_inside_the_two_sigma_band(kind, seed):
     assert plain[1] < 0.85, plain
 
 
+@pytest.mark.slow
 def test_two_stages_take_w_s_robust_variance_from_what_both_leave():
     """Run 8 at 500 samples: the guard gives joint 3 two stages, whose GP takes up the friction
     PR leaves; W's robust variance from PR's own residual everywhere would count that bias again
