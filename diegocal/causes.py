@@ -123,6 +123,8 @@ MAX_SENSOR_LAG_S = 0.01
 MAX_LAG_S = 0.5
 #: The largest relative gain error a torque_gain may take (a sensor off by half is a fault, not a gain).
 MAX_GAIN_ERROR = 0.5
+#: The largest half-width a transmission_backlash may take, rad (a play of ±6° is a broken gear, not a backlash).
+MAX_BACKLASH_RAD = 0.1
 
 _CAUSES = (
     # ------------------------------------------------------------------ kinematics (thesis ch. 2)
@@ -206,6 +208,10 @@ _CAUSES = (
           (_p("gain_error", "1", "the sensor's gain error: it reads (1 + gain_error) x the torque",
               -MAX_GAIN_ERROR, MAX_GAIN_ERROR),),
           "the torque sensor's gain (or the motor's torque constant) is off"),
+    Cause("transmission_backlash", "dynamics", "term", "joint",
+          (_p("half_width", "rad", "the play's half-width: the link follows the motor's angle (the log's) "
+              "once the motor has taken up the gap", 0.0, MAX_BACKLASH_RAD),),
+          "the joint's transmission has play: the link lags the motor's angle by up to a half-width"),
     # ------------------------------------------------------------------ pneumatics (thesis ch. 4)
     Cause("valve_steady_state", "pneumatics", "baseline", "chamber", (C1, C2, C3),
           "the valve's steady state, eq. (4.10a-c)"),

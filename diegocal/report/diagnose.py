@@ -35,6 +35,7 @@ PHRASES = {
     "coupled_friction": "friction of a motor that drives both joints",
     "torque_lag": "the measured torque lags the motion",
     "torque_gain": "the torque sensor's gain (or the motor's torque constant) is off",
+    "transmission_backlash": "the joint's transmission has play: the link lags the motor's angle",
     "link_offset": "the joint's origin differs from the URDF",
     "sensor_nonlinearity": "the pot's transfer curve is not linear",
     "backlash": "the pot lags by a dead band that depends on the direction of motion",

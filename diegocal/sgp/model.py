@@ -22,6 +22,7 @@ import numpy as np
 from diegocal.errors import FitError, MissingStreamError, UnknownNameError
 from diegocal.evaluate import nmse  # the one nMSE (thesis §3.4.2), re-exported by diegocal.sgp
 from diegocal.parallel import single_threaded
+from diegocal.sgp.backlash import link_angles
 from diegocal.sgp.estimator import Guard, SemiParametricGP
 from diegocal.sgp.kernels import REGION_OFF, Region, SquaredExponential, Subspace, cut_along
 
@@ -133,7 +134,9 @@ class DynamicsModel:
     ``terms``: extra terms (:mod:`diegocal.sgp.terms`, e.g. found by ``diagnose``) whose columns
     are appended to the base regressor and fitted with W (their values as given are not read),
     except the sensor causes (``torque_lag``, ``torque_gain``), which filter the columns of their
-    joint with their value as given (a lag needs the samples' ``time``). Without terms the model is
+    joint with their value as given (a lag needs the samples' ``time``), and a
+    ``transmission_backlash``, whose play moves the angles every column is evaluated at
+    (:mod:`diegocal.sgp.backlash`; it needs the samples' ``time`` too). Without terms the model is
     the one of thesis ch. 3 unchanged.
     """
 
@@ -163,21 +166,27 @@ class DynamicsModel:
         (T, k, r + K): their columns appended, a ``torque_gain`` applied, a ``torque_lag`` when
         ``time`` (T,) s is given (or the states are the training samples); without it, states are
         no time series (a grid of a report) and the columns are those of the torque before the
-        sensor's lag. ``sensors`` False: every filter left out (the torque before the sensors)."""
+        sensor's lag, at the angles as given (no backlash's play). ``sensors`` False: every sensor's
+        filter left out (the torque before the sensors; a backlash is the link's, and stays)."""
         rows = self.rows if self.joints_without_tau else None
         if not self.terms:
             return base_regressor(self.robot, q, qd, qdd, self.base_, self.options.friction, rows)
-        F = self._columns(q, qd, qdd, rows)
+        time = self._time_of(q, time)
+        F = self._columns(link_angles(self.terms, self.robot, q, time) if time is not None else q, qd, qdd, rows)
         return self._filtered(F, q, time) if sensors else F
+
+    def _time_of(self, q, time):
+        """``time``, or the training samples' own where ``q`` are the training samples; else None."""
+        if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
+            return self.time_
+        return time
 
     def _filtered(self, X, q, time):
         """X (T, k, P) through the filter terms' sensors (:func:`~diegocal.sgp.terms.apply_filters`;
         a lag only where the samples' time is known: ``time``, or the training samples' own)."""
         if not any(is_filter(t) for t in self.terms):
             return X
-        if time is None and getattr(self, "U_", None) is not None and np.array_equal(q, self.U_[:, : q.shape[1]]):
-            time = self.time_  # the training samples
-        return apply_filters(self.terms, X, time, {j: r for r, j in enumerate(self.joint_names)})
+        return apply_filters(self.terms, X, self._time_of(q, time), {j: r for r, j in enumerate(self.joint_names)})
 
     def _columns(self, q, qd, qdd, rows) -> np.ndarray:
         """(T, k, r + K): the base regressor and the terms' columns (per sample, no lag) side by
@@ -199,7 +208,9 @@ class DynamicsModel:
         joints (``inertia="nominal"``; the filter terms applied as to the columns), else zeros."""
         if self.options.inertia != "nominal":
             return np.zeros((np.shape(q)[0], len(self.joint_names)))
-        tau0 = nominal_torque(self.robot, q, qd, qdd)[:, self.rows][:, :, None]
+        at = self._time_of(q, time)
+        link = q if at is None else link_angles(self.terms, self.robot, q, at)
+        tau0 = nominal_torque(self.robot, link, qd, qdd)[:, self.rows][:, :, None]
         return self._filtered(tau0, q, time)[:, :, 0]
 
     @property

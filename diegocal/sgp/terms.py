@@ -33,6 +33,8 @@ Causes (the registry's domain ``dynamics``; their parameters and units are the r
 - ``torque_gain``: the torque sensor of joint j (or the motor's torque constant, where torque is
   read from current) reads (1 + gain_error) x the torque. A filter too: the model's columns of
   joint j are scaled; ``diagnose`` proposes the current prediction of joint j as its column.
+- ``transmission_backlash``: play between joint j's motor and link; an input filter (the angles
+  the columns are evaluated at, :mod:`diegocal.sgp.backlash`), not a sensor's.
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ from scipy.signal import lfilter
 
 from diegocal.causes import causes_of
 from diegocal.errors import InputFileError
+from diegocal.sgp.backlash import backlash_proposals, is_input_filter
+from diegocal.sgp.proposal import Proposal
 from diegocal.terms import Region, Term, make_term
 
 #: The baseline's friction kinds (``SGPOptions.friction``) and the term each one is.
@@ -58,9 +62,9 @@ def friction_column(kind: str, qd: np.ndarray) -> np.ndarray:
 
 
 def is_filter(term: Term) -> bool:
-    """True for the sensor causes (:data:`FILTERS`): they filter the model's columns instead of
-    adding their own."""
-    return term.cause in FILTERS
+    """True for the sensor causes (:data:`FILTERS`) and a backlash: they filter the model's columns
+    (or its angles) instead of adding their own."""
+    return term.cause in FILTERS or is_input_filter(term)
 
 
 def joints_of(term: Term) -> tuple[str, ...]:
@@ -256,7 +260,7 @@ class Context:
     robot; joints : the joints with a torque (the model's rows); q, qd (T, n) every joint;
     time (T,) s; train (T,) bool, the training rows; residual, prediction : joint -> (T,) N·m
     of the current fit; terms : the model's terms; baseline_friction : the baseline's friction
-    kinds; inertia : "identified" | "nominal"
+    kinds; inertia : "identified" | "nominal"; predict : angles (T, n) -> (T, k) the fit's prediction there
     """
 
     robot: object
@@ -270,6 +274,7 @@ class Context:
     terms: tuple
     baseline_friction: tuple
     inertia: str
+    predict: Callable | None = None
 
     @property
     def have(self) -> set:
@@ -279,16 +284,6 @@ class Context:
     def column(self, array: np.ndarray, joint: str, rows=None) -> np.ndarray:
         x = array[:, self.robot.joint_index(joint)]
         return x if rows is None else x[rows]
-
-
-@dataclass(frozen=True)
-class Proposal:
-    """A term ``diagnose`` may add; ``columns`` (joint -> (T, k)) when they are not the term's own
-    (a lag's exact change per second of lag); ``family`` groups the variants of one term."""
-
-    term: Term
-    family: str = ""
-    columns: dict | None = None
 
 
 def proposals(ctx: Context) -> list[Proposal]:
@@ -464,6 +459,7 @@ PROPOSE: dict[str, Callable] = {
     "stribeck_friction": _stribeck_scales,
     "torque_lag": _lags,
     "torque_gain": _gains,
+    "transmission_backlash": backlash_proposals,
     "position_friction": _regions,
     "coupled_friction": _coupled,
     "payload": _payloads,
@@ -508,14 +504,16 @@ def sensor_filter(cause: str, X: np.ndarray, time: np.ndarray, value: float) -> 
 
 
 def needs_time(term: Term) -> bool:
-    """True for a filter that runs along the samples' time (``torque_lag``)."""
-    return term.cause == "torque_lag"
+    """True for a filter that runs along the samples' time (``torque_lag``, a backlash's play)."""
+    return term.cause == "torque_lag" or is_input_filter(term)
 
 
 def apply_filters(terms, F: np.ndarray, time: np.ndarray | None, joint_rows: dict) -> np.ndarray:
     """The columns F (T, k, P) with every filter term applied (a lag and a gain on one joint
     compose: both are linear); without ``time`` the lags are left out. ``joint_rows``: joint -> row."""
-    filters = [t for t in terms if is_filter(t) and t.channel in joint_rows and (time is not None or not needs_time(t))]
+    filters = [
+        t for t in terms if t.cause in FILTERS and t.channel in joint_rows and (time is not None or not needs_time(t))
+    ]
     if not filters:
         return F
     out = np.array(F, float, copy=True)

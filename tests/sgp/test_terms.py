@@ -12,6 +12,7 @@ from diegocal.errors import InputFileError
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sgp import SGPOptions, load_model
+from diegocal.sgp.backlash import CAUSE as BACKLASH
 from diegocal.sgp.model import DynamicsModel
 from diegocal.sgp.regressor import full_regressor
 from diegocal.sgp.store import save_model
@@ -65,8 +66,9 @@ def test_terms_round_trip_through_yaml_and_refuse_bad_input():
     t = make_term("position_friction", "joint2", {"coulomb": 0.3}, region=Region("q.joint2", 0.2, 0.9))
     back = term_from_dict(t.to_dict())
     assert back == t and back.value("coulomb") == 0.3
-    # every dynamics term of the registry has a behaviour here (the sensor causes are filters)
-    assert set(COLUMNS) | set(FILTERS) == set(causes_of("dynamics", "term"))
+    # every dynamics term of the registry has a behaviour here (the sensor causes are filters, a
+    # backlash a filter of the angles)
+    assert set(COLUMNS) | set(FILTERS) | {BACKLASH} == set(causes_of("dynamics", "term"))
     with pytest.raises(InputFileError, match="not a dynamics term"):
         columns(make_term("backlash", "joint1"), None, np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)))
     with pytest.raises(InputFileError, match="is a kinematics cause"):

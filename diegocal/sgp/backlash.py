@@ -1,0 +1,93 @@
+"""``transmission_backlash``: play in a joint's transmission, between the motor (whose encoder the
+log reads) and the link (issue #31: a backlash was named a torque lag).
+
+The link angle is the motor angle through a play (hysteresis) operator of half-width b: the
+link stays where it is until the motor has taken up the gap, then follows it b behind,
+
+.. math:: q^{link}_t = \\min\\bigl(\\max(q^{link}_{t-1},\\ q_t - b),\\ q_t + b\\bigr),
+
+and the rigid body's torque is the link's: eq. (3.30) with the regressor f(q^link, qd, qdd). It
+is an *input* filter: every column of the model that depends on the angles (the rigid body's
+regressor, eq. 3.29-3.30, and every position-dependent term: a spring, a payload, a position
+friction's region) is evaluated at q^link instead of the logged q. The velocity and acceleration
+are kept as logged: the link's equal the motor's while engaged, and differ only across the gap
+(a first-order approximation: the short crossings of the play are left out). Given b the model
+is linear in its parameters as before; b is searched with them re-solved at every trial
+(:mod:`diegocal.diagnose.dynamics_filters`).
+
+The operator runs along the samples in time order, restarted at a gap in time (a step over 1.5 ×
+the median, as :func:`~diegocal.sgp.terms.lag_filter`), each run starting with the link at the
+first sample's angle (centred in the play: which side the gear rests on is not known there).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diegocal.causes import MAX_BACKLASH_RAD
+from diegocal.sgp.proposal import Proposal
+from diegocal.terms import make_term
+
+CAUSE = "transmission_backlash"
+#: transmission_backlash variants ``diagnose`` offers: half-widths, rad (the fit refines it within
+#: the registry's bounds); the column of b is (τ̂(play_b(q_j)) − τ̂(q)) / b, its coefficient ≈ b
+HALF_WIDTH_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, MAX_BACKLASH_RAD)
+
+
+def is_input_filter(term) -> bool:
+    """True for a cause that filters the model's inputs (the angles) rather than its columns."""
+    return term.cause == CAUSE
+
+
+def play(x: np.ndarray, time: np.ndarray | None, half_width: float) -> np.ndarray:
+    """The link angle (T,) rad of a motor angle ``x`` (T,) rad through a play of ``half_width``
+    rad (module docstring), along the samples; ``time`` (T,) s restarts it at a gap (None: one
+    run). A half-width of 0 returns a copy of x."""
+    x = np.asarray(x, float)
+    out = x.copy()
+    if half_width <= 0 or x.size < 2:
+        return out
+    starts = {0}
+    if time is not None:
+        steps = np.diff(np.asarray(time, float))
+        starts |= set((np.flatnonzero(steps > 1.5 * float(np.median(steps))) + 1).tolist())
+    b, xs, y = float(half_width), x.tolist(), 0.0
+    for t, v in enumerate(xs):
+        y = v if t in starts else min(max(y, v - b), v + b)
+        out[t] = y
+    return out
+
+
+def link_angles(terms, robot, q: np.ndarray, time: np.ndarray | None) -> np.ndarray:
+    """q (T, n) rad with each ``transmission_backlash`` term's joint through its play (its
+    ``half_width`` as given); q itself when there is none."""
+    found = [t for t in terms if is_input_filter(t)]
+    if not found:
+        return q
+    out = np.array(q, float, copy=True)
+    for t in found:
+        j = robot.joint_index(t.channel)
+        out[:, j] = play(out[:, j], time, float(t.values[0]))
+    return out
+
+
+def backlash_proposals(cause: str, ctx) -> list:
+    """A transmission backlash on each joint, a family over :data:`HALF_WIDTH_GRID`: the exact
+    change it makes to the current prediction per unit of half-width on *every* joint (a play on
+    joint j moves the link angle of joint j, so the gravity and inertia torques of the joints that
+    carry it too): columns (τ̂(q with q_j → play(q_j, b)) − τ̂(q)) / b. Judged on every joint's
+    residual, as a gain is. ``ctx``: :class:`~diegocal.sgp.terms.Context` with ``predict``."""
+    if ctx.predict is None:
+        return []
+    out = []
+    for j in ctx.joints:
+        if (cause, j) in ctx.have:
+            continue
+        i = ctx.robot.joint_index(j)
+        for b in HALF_WIDTH_GRID:
+            q = np.array(ctx.q, float, copy=True)
+            q[:, i] = play(q[:, i], ctx.time, b)
+            moved = ctx.predict(q)  # (T, k): the fit's prediction at those angles
+            cols = {k: ((moved[:, r] - ctx.prediction[k]) / b)[:, None] for r, k in enumerate(ctx.joints)}
+            out.append(Proposal(make_term(cause, j, {"half_width": b}), f"{cause}:{j}", cols))
+    return out
