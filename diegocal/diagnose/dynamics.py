@@ -39,8 +39,10 @@ on link5 named on link6: near joint 6's origin the two are nearly one); clean lo
 200-209) 0 findings in 10 on each robot.
 
 A selected ``torque_lag`` or ``torque_gain`` is refitted as the sensor's filter of the model's
-columns (:data:`diegocal.sgp.terms.FILTERS`: first-order, a gain), its value by a bounded 1-D
-search with the linear parameters re-solved at each trial (:mod:`.dynamics_filters`). The
+columns (:data:`diegocal.sgp.terms.FILTERS`: first-order, a gain), a ``transmission_backlash`` as
+the play that moves the angles the columns are evaluated at (:mod:`diegocal.sgp.backlash`), its
+value by a bounded 1-D search with the linear parameters re-solved at each trial
+(:mod:`.dynamics_filters`). The
 extended model is a dynamics bundle: a PR model (``sgp/`` directory, :mod:`diegocal.sgp.store`)
 whose regressor carries the found terms, fitted on the training blocks (``SGPOptions.inertia`` as
 diagnosed: a nominal one predicts with the URDF's rigid body + friction + the terms), which
@@ -74,6 +76,8 @@ from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
 from diegocal.lstsq import CHUNK_ROWS, TallLstsq
+from diegocal.sgp.backlash import CAUSE as BACKLASH
+from diegocal.sgp.backlash import play
 from diegocal.sgp.model import (
     INERTIA,
     INPUT_STREAMS,
@@ -86,7 +90,7 @@ from diegocal.sgp.model import (
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import ml2_unconverged, save_model
 from diegocal.sgp.streams import check_angles
-from diegocal.sgp.terms import Context, dynamics_terms, is_filter, proposals, sensor_filter, term_columns
+from diegocal.sgp.terms import FILTERS, Context, dynamics_terms, is_filter, proposals, sensor_filter, term_columns
 
 UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
@@ -174,10 +178,36 @@ class DynamicsAdapter:
     # ------------------------------------------------------------------ fit
     def _offset(self, lags: dict) -> np.ndarray:
         """(T, k): the fixed part of the prediction (the nominal rigid body's torque, zeros for an
-        identified one), through each filtering sensor (``lags``: (row, cause) -> value)."""
+        identified one), at the link angles of a backlash, through each filtering sensor (``lags``:
+        (row, cause) -> value)."""
         if not lags or self.inertia != "nominal":
             return self.tau0
-        return self._lagged(self.tau0, lags)
+        q = self._angles(lags)
+        tau0 = self.tau0 if q is self.q else nominal_torque(self.robot, q, self.qd, self.qdd)[:, self.rows]
+        return self._lagged(tau0, lags)
+
+    def _angles(self, lags: dict) -> np.ndarray:
+        """(T, n): the angles the model's columns are evaluated at: q, each backlash's joint
+        through its play (``lags``: (row, cause) -> value); q itself where there is none."""
+        moved = {r: v for (r, c), v in lags.items() if c == BACKLASH and v > 0}
+        if not moved:
+            return self.q
+        q = self.q.copy()
+        for r, v in moved.items():
+            q[:, self.rows[r]] = play(q[:, self.rows[r]], self.time, v)
+        return q
+
+    def _model_columns(self, terms, lags: dict, plain=None) -> np.ndarray:
+        """(T, k, P): the base regressor and ``terms``' columns at the angles of :meth:`_angles`,
+        through the sensors of ``lags``; ``plain``: those columns at the logged angles, if made."""
+        q = self._angles(lags)
+        if q is not self.q or plain is None:
+            C = term_columns(terms, self.robot, q, self.qd, self.qdd)[:, self.rows]
+            F = self.F
+            if q is not self.q:
+                F = base_regressor(self.robot, q, self.qd, self.qdd, self.base, self.friction, self.rows)
+            plain = np.concatenate([F, C], axis=2)
+        return self._lagged(plain, lags)
 
     def _solve(self, A, train, sigma, offset=None):
         """Weighted least squares of tau − offset on A (T, k, P) over the training rows, joint rows
@@ -216,8 +246,7 @@ class DynamicsAdapter:
         if lags or regions or any(p.shape for t in terms for p in specs(t)):
             sigma = self._joint_sigma(terms, train)  # each joint weighted by its residual std
             if lags:
-                C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
-                lags = fit_filters(self, np.concatenate([self.F, C], axis=2), lags, train, sigma)
+                lags = fit_filters(self, terms, lags, train, sigma)
                 terms = tuple(
                     t.with_values([lags[self._key(t)]]) if is_filter(t) and t.channel in self.row_of else t
                     for t in terms
@@ -323,11 +352,12 @@ class DynamicsAdapter:
 
     def _lagged(self, A, lags: dict):
         """A (T, k, ...) with each filtering sensor applied to its joint's row (``lags``: (row,
-        cause) -> value; a lag and a gain on one joint compose)."""
-        if not lags:
+        cause) -> value; a lag and a gain on one joint compose; a backlash is no sensor's)."""
+        sensors = {k: v for k, v in lags.items() if k[1] in FILTERS}
+        if not sensors:
             return A
         out = A.copy()
-        for (r, name), value in lags.items():
+        for (r, name), value in sensors.items():
             out[:, r] = sensor_filter(name, out[:, r], self.time, value)
         return out
 
@@ -340,8 +370,7 @@ class DynamicsAdapter:
             got = self._system(train).weighted_fit(terms, sigma)
             if got is not None:
                 return got[0], got[1]
-        C = term_columns(terms, self.robot, self.q, self.qd, self.qdd)[:, self.rows]
-        Aeff = self._lagged(np.concatenate([self.F, C], axis=2), lags)
+        Aeff = self._model_columns(terms, lags)
         offset = self._offset(lags)
         w, _ = self._solve(Aeff, train, sigma, offset)
         e = (self.tau[train] - (Aeff @ w + offset)[train]) / sigma
@@ -382,6 +411,7 @@ class DynamicsAdapter:
             tuple(fitted.terms),
             self.friction,
             self.inertia,
+            lambda q: fitted.model.mean_in_chunks(q, self.qd, self.qdd, self.time),  # a backlash's change
         )
         props = proposals(ctx)
         width, slots = layout(self, props)

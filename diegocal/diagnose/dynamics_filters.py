@@ -1,7 +1,8 @@
-"""The sensor causes' fit (``torque_lag``, ``torque_gain``: :data:`diegocal.sgp.terms.FILTERS`):
-each value by a bounded 1-D search with the linear parameters re-solved at every trial, and its
-standard error marginal over them (a gain trades off with the inertial parameters). ``fit`` is the
-:class:`~diegocal.diagnose.dynamics.DynamicsAdapter`; ``lags``: (joint row, cause) -> value."""
+"""The filter causes' fit (the sensors' ``torque_lag``, ``torque_gain``: :data:`diegocal.sgp.terms.
+FILTERS`; a ``transmission_backlash``'s play, a filter of the model's angles: :mod:`diegocal.sgp.
+backlash`): each value by a bounded 1-D search with the linear parameters re-solved at every trial,
+and its standard error marginal over them (a gain trades off with the inertial parameters). ``fit``
+is the :class:`~diegocal.diagnose.dynamics.DynamicsAdapter`; ``lags``: (joint row, cause) -> value."""
 
 from __future__ import annotations
 
@@ -10,18 +11,22 @@ from scipy.optimize import minimize_scalar
 
 from diegocal.causes import cause as registry_cause
 from diegocal.lstsq import CHUNK_ROWS
+from diegocal.sgp.terms import FILTERS
 
 
-def fit_filters(fit, A, lags: dict, train, sigma) -> dict:
-    """Each filtering sensor's value (a lag's time constant in [0, MAX_LAG_S] s, a gain error
-    within ±MAX_GAIN_ERROR: the registry's bounds) by bounded 1-D searches of the weighted
-    training error, the linear parameters re-solved at every trial (two sweeps)."""
+def fit_filters(fit, terms, lags: dict, train, sigma) -> dict:
+    """Each filter's value (a lag's time constant in [0, MAX_LAG_S] s, a gain error within
+    ±MAX_GAIN_ERROR, a backlash's half-width in [0, MAX_BACKLASH_RAD] rad: the registry's bounds)
+    by bounded 1-D searches of the weighted training error of the model with ``terms``, the
+    linear parameters re-solved at every trial (two sweeps); a backlash's trial evaluates the
+    model's columns at its link angles again."""
     lags = dict(lags)
+    plain = fit._model_columns(terms, {})  # the columns at the logged angles
 
     def cost(key, value):
         trial = dict(lags)
         trial[key] = value
-        Aeff = fit._lagged(A, trial)
+        Aeff = fit._model_columns(terms, trial, plain)
         offset = fit._offset(trial)
         w, _ = fit._solve(Aeff, train, sigma, offset)
         e = (fit.tau[train] - (Aeff @ w + offset)[train]) / sigma
@@ -46,13 +51,17 @@ def filter_ses(fit, model, w, lags: dict, pred, train, sigma) -> dict:
     (the prediction's central difference, its joint's other filters held) fitted with the model's
     columns on every joint's training rows, weighted by ``sigma`` (k,) (the fit's noise stds; a
     gain trades off with the inertial parameters, and gains on several joints with each other),
-    scaled by its joint's residual variance. Returns (row, cause) -> SE."""
-    A = model.features(fit.q, fit.qd, fit.qdd, sensors=False)  # before the sensors' filters, whole
+    scaled by its joint's residual variance. A backlash's derivative column is on every joint (its
+    play moves the link angle of the joints that carry it). Returns (row, cause) -> SE."""
+    A = model.features(fit.q, fit.qd, fit.qdd, fit.time, sensors=False)  # before the sensors' filters, whole
     X = fit._lagged(A, lags)
     keys = list(lags)
     D = np.zeros((X.shape[0], X.shape[1], len(keys)))
     for f, key in enumerate(keys):
-        D[:, key[0], f] = _derivative(fit, A, w, key, lags)
+        if key[1] in FILTERS:
+            D[:, key[0], f] = _derivative(fit, A, w, key, lags)
+        else:  # a backlash: every joint's prediction moves
+            D[:, :, f] = _play_derivative(fit, model, w, key, lags)
     P = X.shape[2] + len(keys)
     gram = np.zeros((P, P))
     idx = np.flatnonzero(train)
@@ -112,3 +121,19 @@ def _derivative(fit, A, w, key, lags: dict) -> np.ndarray:
         return out
 
     return (joint_r(v + h) - joint_r(lo)) / (v + h - lo)
+
+
+def _play_derivative(fit, model, w, key, lags: dict) -> np.ndarray:
+    """(T, k) the derivative of every joint's prediction with respect to the backlash ``key``'s
+    half-width (central difference within the registry's bounds, the other filters held): the
+    model's columns evaluated at the link angles of each trial half-width."""
+    v = lags[key]
+    h = max(1e-4, 0.01 * abs(v))
+    lo = max(v - h, registry_cause(key[1]).parameters[0].lower)
+
+    def every_joint(value):  # the prediction with the half-width at ``value``
+        trial = lags | {key: value}
+        A = model.features(fit._angles(trial), fit.qd, fit.qdd, None, sensors=False)  # no time: angles as given
+        return fit._lagged(A, trial) @ w + fit._offset(trial)
+
+    return (every_joint(v + h) - every_joint(lo)) / (v + h - lo)
