@@ -28,12 +28,16 @@ a physical shape of its own (never a candidate term of ``diagnose``):
 - ``torque_lag``: joint j's torque sensor is a first-order low-pass filter (time constant lag);
 - ``torque_gain``: joint j's torque sensor reads (1 + gain_error) x the torque (a miscalibrated
   sensor, a motor's torque constant off where torque is read from current);
+- ``transmission_backlash``: play of half-width b between joint j's motor (q, the encoder's) and
+  its link, which lags it by up to b: ``rnea`` at the links' angles, the motor's velocity and
+  acceleration; friction stays the motor's. Prescribed trajectories only;
 - ``payload``: a point mass on a link (default the last).
 
 SIZE is the effect's magnitude: a torque in N·m (Coulomb level, RMS viscous torque on the reference
 excitation, the spring's torque at half the range, the offset, RMS armature torque), the time
-constant in s for ``torque_lag``, the relative gain error for ``torque_gain``, the mass in kg for
-``payload``. Without it: scaled to the robot.
+constant in s for ``torque_lag``, the relative gain error for ``torque_gain``, the half-width in
+rad for ``transmission_backlash`` (at most the registry's MAX_BACKLASH_RAD), the mass in kg for
+``payload``. Without it: scaled to the robot (a backlash: 0.02 rad).
 """
 
 from __future__ import annotations
@@ -43,11 +47,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
+from diegocal.causes import MAX_BACKLASH_RAD
 from diegocal.errors import NumericalError, RobotConfigError
 from diegocal.io import Log, Truth, make_stream
 from diegocal.io.bundle import LAYOUT
 from diegocal.sgp.regressor import INERTIAL_NAMES
+from diegocal.sim.dynamics_truth import true_friction, true_inertial  # noqa: F401  (importable from here)
 from diegocal.sim.effects import SimOptionError, check_channel, check_effects, effect_record
+from diegocal.sim.kinematic_effects import backlash
 from diegocal.sim.trajectories import (
     excitation,
     figure_eight,
@@ -79,6 +86,7 @@ JOINT_EFFECTS = (
     "coupled_friction",
     "torque_lag",
     "torque_gain",
+    "transmission_backlash",
 )
 #: velocity (rad/s) over which the coupled motor's Coulomb friction changes sign (tanh)
 COUPLED_SMOOTHING = 0.05
@@ -141,7 +149,8 @@ class EffectTerm:
         if self.cause == "coupled_friction":
             motor = vj + v["ratio"] * qd[:, int(v["partner_index"])]
             return v["coulomb"] * np.tanh(motor / COUPLED_SMOOTHING) + v["viscous"] * motor
-        # torque_offset (a sensor bias), armature (in the model), torque_lag and torque_gain (the sensor)
+        # torque_offset (a sensor bias), armature (in the model), torque_lag and torque_gain (the
+        # sensor), transmission_backlash (the link's angle: TrueDynamics.link_angles)
         return np.zeros_like(qj)
 
 
@@ -197,10 +206,21 @@ class TrueDynamics:
                 y[k] = a * (y[k - 1] - x[k - 1] + lag * m) + x[k] - lag * m
         return out + self.offset
 
+    def link_angles(self, q: np.ndarray) -> np.ndarray:
+        """The links' angles (T, n) of a motor trajectory q (T, n): a ``transmission_backlash``
+        joint's through the simulators' play operator (a dead band of twice the half-width,
+        :func:`~diegocal.sim.kinematic_effects.backlash`); the others' are the motor's."""
+        link = np.array(q, float, copy=True)
+        for t in (t for t in self.terms if t.cause == "transmission_backlash"):
+            link[:, t.j] = backlash(q[:, t.j], 2.0 * t.record["values"]["half_width"])
+        return link
+
     def inverse(self, q, qd, qdd) -> np.ndarray:
-        """Applied joint torques (T, n) N·m: ``rnea`` + friction + effects (no sensor offset)."""
+        """Applied joint torques (T, n) N·m of a trajectory: ``rnea`` at the links' angles
+        (:meth:`link_angles`) + friction + effects (no sensor offset)."""
         q, qd, qdd = (np.atleast_2d(np.asarray(a, float)) for a in (q, qd, qdd))
-        rb = np.array([pin.rnea(self.model, self.data, q[t], qd[t], qdd[t]) for t in range(q.shape[0])])
+        link = self.link_angles(q)
+        rb = np.array([pin.rnea(self.model, self.data, link[t], qd[t], qdd[t]) for t in range(q.shape[0])])
         return rb + self.extra_torque(q, qd)
 
     def forward(self, q, qd, tau, smooth: bool = False) -> np.ndarray:
@@ -320,6 +340,10 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
             values = {"lag": 0.02 if size is None else size}
         elif req.name == "torque_gain":
             values = {"gain_error": float(effect_rng.choice([-1.0, 1.0])) * (0.1 if size is None else size)}
+        elif req.name == "transmission_backlash":
+            if size is not None and size > MAX_BACKLASH_RAD:
+                raise SimOptionError(f"effect '{req}': a backlash's half-width is at most {MAX_BACKLASH_RAD} rad")
+            values = {"half_width": 0.02 if size is None else size}
         else:  # torque_offset
             values = {"offset": float(effect_rng.choice([-1.0, 1.0])) * (0.1 * s if size is None else size)}
             offset[j] += values["offset"]
@@ -444,28 +468,6 @@ def _true_baseline(robot, dyn) -> list:
     return [rigid, *friction]
 
 
-def true_friction(params: dict) -> dict:
-    """``{"viscous": {joint: value}, "coulomb": {joint: value}}`` from a simulated log's truth
-    params (layout 2's friction terms; layout 1 wrote these two mappings as they are). For tests
-    and benches that build a second session of the same robot: fitting code never reads /truth."""
-    if "baseline" not in params:
-        return {k: dict(params[k]) for k in ("viscous", "coulomb")}
-    out = {"viscous": {}, "coulomb": {}}
-    for d in params["baseline"]:
-        kind = {"viscous_friction": "viscous", "coulomb_friction": "coulomb"}.get(d["cause"])
-        if kind:
-            out[kind][d["channel"]] = float(d["parameters"][kind]["value"])
-    return out
-
-
-def true_inertial(params: dict) -> dict:
-    """``{joint: [m, mc_x, ..., I_zz]}`` (Pinocchio's order) of a simulated log's truth params."""
-    if "baseline" not in params:
-        return {j: list(v) for j, v in params["inertial"].items()}
-    rigid = next(d for d in params["baseline"] if d["cause"] == "rigid_body")["parameters"]
-    return {j: [float(rigid[f"{j}.{p}"]["value"]) for p in INERTIAL_NAMES] for j in params["joints"]}
-
-
 def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator) -> Log:
     """Simulate a torque log of ``robot`` (streams q, qd, qdd, tau) with ground truth in /truth.
 
@@ -488,6 +490,8 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
         model_rng = np.random.default_rng(options.robot_seed).spawn(3)[0]
     dyn = build_true_dynamics(robot, options, model_rng)
     kind = options.trajectory
+    if kind.startswith("pole-") and any(t.cause == "transmission_backlash" for t in dyn.terms):
+        raise SimOptionError(f"transmission_backlash is simulated on prescribed trajectories, not {kind}")
     if kind == "excitation":
         traj = excitation(robot.lower, robot.upper, time, rng)
     elif kind == "whirl":
