@@ -409,10 +409,11 @@ TWIN = 0.01
 def indistinguishable(chosen: Tested, tested) -> list[str]:
     """The channels on which ``chosen``'s cause fits as well (:func:`_alike`): (nearly) the same
     columns, as a joint's offset along the axis of the joint before it is that joint's offset; the
-    data cannot tell which channel it is, and the finding says so."""
+    data cannot tell which channel it is, and the finding says so. A common candidate that holds
+    the chosen channel (``joint2+joint3``) is no other channel: it fits as well by holding it."""
     ref = next((t for t in tested if _key(t.term) == _key(chosen.term)), chosen)
     return [t.term.channel for t in _alike(ref, tested)
-            if t.term.cause == ref.term.cause and t.term.channel != ref.term.channel]
+            if t.term.cause == ref.term.cause and ref.term.channel not in t.term.channel.split("+")]
 
 
 def rival_causes(chosen: Tested, tested) -> list[str]:
