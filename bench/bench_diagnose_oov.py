@@ -105,6 +105,8 @@ def oracle_terms(effect: dict, robot) -> tuple:
         return (make_term(cause, payload_links(robot)[robot.joint_index(joint)]),)
     if cause == "torque_gain":  # a filter: held at its true value
         return (make_term(cause, joint, {"gain_error": effect["scale"]}),)
+    if cause == "transmission_backlash":  # a filter of the angles: held at its true half-width
+        return (make_term(cause, joint, {"half_width": effect["scale"]}),)
     raise ValueError(cause)
 
 

@@ -13,7 +13,9 @@ of a given fraction of each joint's torque spread. ``hidden`` effects, one per l
 - in the vocabulary: ``position_friction`` (Coulomb + viscous inside a window of the joint's
   range), ``payload`` (a point mass on a link: RNEA of a heavier link), ``spring`` (about the
   joint's mid-range), ``torque_offset``, ``torque_gain`` (the joint's sensor reads its torque,
-  friction included, times 1 + the effect's scale);
+  friction included, times 1 + the effect's scale), ``transmission_backlash`` (play between the
+  joint's motor, whose angle is logged, and its link: RNEA at the link's angle, which stays put
+  until the motor has crossed the gap; the scale is the half-width, rad, at most 0.1);
 - outside it, shapes a real robot has that no term of the vocabulary names: ``stribeck`` (static
   friction above Coulomb decaying with speed), ``cogging`` (a torque periodic in the joint angle),
   ``drifting_friction`` (Coulomb friction that grows over the session, as a gearbox warms),
@@ -42,7 +44,9 @@ URDFS = {
     "ur5": "ur_description/urdf/ur5_joint_limited_robot.urdf",
     "panda": "panda_description/urdf/panda.urdf",
 }
-IN_VOCABULARY = ("position_friction", "payload", "spring", "torque_offset", "torque_gain")
+IN_VOCABULARY = ("position_friction", "payload", "spring", "torque_offset", "torque_gain", "transmission_backlash")
+#: the largest half-width a transmission_backlash is sized to, rad (the registry's bound)
+MAX_HALF_WIDTH = 0.1
 OUT_OF_VOCABULARY = ("stribeck", "cogging", "drifting_friction", "load_friction", "hose", "drifting_offset")
 
 
@@ -95,6 +99,15 @@ def rnea(model, q, qd, qdd) -> np.ndarray:
     return np.array([pin.rnea(model, data, a, b, c) for a, b, c in zip(q, qd, qdd, strict=True)])
 
 
+def link_angle(motor: np.ndarray, half_width: float) -> np.ndarray:
+    """The link's angle (T,) behind a motor's (T,) through a gear's play of ``half_width`` rad:
+    it starts on the motor's first angle and moves only when the motor pushes it, half-width off."""
+    link = np.array(motor, float, copy=True)
+    for k in range(1, link.size):
+        link[k] = np.clip(link[k - 1], motor[k] - half_width, motor[k] + half_width)
+    return link
+
+
 def _heavier(model, joint: int, mass: float, lever: np.ndarray):
     """A copy of ``model`` whose body of ``joint`` carries a point mass at ``lever`` (its frame)."""
     out = model.copy()
@@ -126,6 +139,10 @@ def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau, app
     if name == "torque_gain":  # sized: the scale is the gain error
         out[:, j] = applied[:, j]
         return out, {}
+    if name == "transmission_backlash":  # per rad of a small play; generate() makes it exact at its size
+        moved = q.copy()
+        moved[:, j] = link_angle(q[:, j], 0.01)
+        return (rnea(model, moved, qd, qdd) - base_tau) / 0.01, {}
     if name == "stribeck":
         vs = rng.uniform(0.03, 0.1)
         out[:, j] = np.sign(qd[:, j]) * np.exp(-((qd[:, j] / vs) ** 2))
@@ -175,6 +192,11 @@ def generate(session: Session) -> Log:
         rms = np.sqrt(np.mean(shape[:, j] ** 2))
         scale = session.size * noise[j] / rms
         hidden = scale * shape
+        if session.hidden == "transmission_backlash":  # the scale is the half-width: the link's RNEA
+            scale = min(scale, MAX_HALF_WIDTH)
+            moved = q.copy()
+            moved[:, j] = link_angle(q[:, j], scale)
+            hidden = rnea(model, moved, qd, qdd) - base
         effect = {"cause": session.hidden, "channel": names[j], "scale": float(scale), **params}
     measured = clean + hidden + noise * noise_rng.standard_normal(clean.shape)
     streams = {k: make_stream(names, v) for k, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau", measured))}
