@@ -288,7 +288,7 @@ class DynamicsModel:
         check_angles(self.robot, q, warn=False)  # the callers that read a log warned of small excursions
         self.time_ = None if time is None else np.asarray(time, float)
         if self.time_ is None and any(needs_time(t) for t in self.terms):
-            raise MissingStreamError("fitting a model with a torque_lag term needs the samples' time")
+            raise MissingStreamError("fitting a model with a torque_lag or backlash term needs the samples' time")
         o = self.options
         T = len(q)
         if tau.shape != (T, len(self.joint_names)):
