@@ -64,6 +64,10 @@ def hidden(robot, cause, seed, duration=20.0):
         size = ratio * NOISE / np.sqrt(np.mean(np.gradient(tau, clean.time) ** 2))
     elif cause == "torque_gain":  # sized so that gain_error · RMS(τ) is
         size = ratio * NOISE / np.sqrt(np.mean(clean.truth.signals["tau"].data[:, j] ** 2))
+    elif cause == "transmission_backlash":  # sized by the joint's torque change per rad of a small play
+        small = simulate(robot, [f"{cause}:{joint}=0.005"], seed, duration).truth.signals["tau"].data[:, j]
+        change = np.sqrt(np.mean((small - clean.truth.signals["tau"].data[:, j]) ** 2)) / 0.005
+        size = min(ratio * NOISE / change, 0.1)
     else:
         size = ratio * NOISE
     if cause == "position_friction":
@@ -109,6 +113,7 @@ def assert_named(d, cause, joint, region=None, tol=0.15):
         ("armature", 2),
         ("torque_lag", 3),
         ("torque_gain", 6),
+        ("transmission_backlash", 7),
         ("position_friction", 4),
         ("coupled_friction", 5),
     ],
@@ -427,7 +432,16 @@ def test_unexplained_structure_rate_over_ten_seeds(arm3):
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "cause",
-    ["torque_offset", "spring", "armature", "torque_lag", "torque_gain", "position_friction", "coupled_friction"],
+    [
+        "torque_offset",
+        "spring",
+        "armature",
+        "torque_lag",
+        "torque_gain",
+        "transmission_backlash",
+        "position_friction",
+        "coupled_friction",
+    ],
 )
 def test_naming_rate_over_ten_seeds(arm3, cause):
     """Ten random draws per cause on 30-s logs (the fast tests use 20 s; a position_friction of 3 ×
