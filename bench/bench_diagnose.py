@@ -75,6 +75,7 @@ CASES = {
             "coupled_friction",
             "torque_lag",
             "torque_gain",
+            "transmission_backlash",
         ),
     },
     "pneumatics": {
@@ -187,8 +188,10 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
 def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, dict]:
     """``cause:joint=size`` on a random joint (not the first, whose armature and the like are the
     first link's own inertia) with a torque U(3, 10) × the noise (a lag sized so that lag · RMS(dτ/dt)
-    is, a gain error so that it times RMS(τ) is), and for position_friction a random region, a fifth
+    is, a gain error so that it times RMS(τ) is, a backlash's half-width so that it times the
+    torque a radian of play moves is, at most the registry's), and for position_friction a random region, a fifth
     of the joint's visited range."""
+    from diegocal.causes import MAX_BACKLASH_RAD
     from diegocal.sim.dynamics import simulate_dynamics
 
     rng = np.random.default_rng([seed, 1])
@@ -202,12 +205,31 @@ def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, di
         size /= float(np.sqrt(np.mean(np.gradient(tau, clean.time) ** 2)))
     elif cause == "torque_gain":  # the gain error times the joint's RMS torque
         size /= float(np.sqrt(np.mean(tau**2)))
+    elif cause == "transmission_backlash":  # the half-width times RMS |dτ/dq_j| over the joints
+        size = min(size / _angle_sensitivity(robot, clean, j), MAX_BACKLASH_RAD)
     regions = {}
     if cause == "position_friction":
         lo, hi = np.quantile(clean.stream("q").data[:, j], [0.05, 0.95])
         low = rng.uniform(lo, hi - 0.2 * (hi - lo))
         regions = {joint: (float(low), float(low + 0.2 * (hi - lo)))}
     return f"{cause}:{joint}={size:.6g}", regions
+
+
+def _angle_sensitivity(robot, log, j: int) -> float:
+    """RMS over the samples of |∂τ/∂q_j| (N·m/rad, the norm over the joints) on the log's motion:
+    the torque a play of one radian on joint j moves (a backlash's link sits a half-width behind)."""
+    import pinocchio as pin
+
+    q, qd, qdd = (log.stream(k).select(robot.joint_names).data for k in ("q", "qd", "qdd"))
+    model, data = robot.model, robot.model.createData()
+    step = 1e-4
+    moved = q.copy()
+    moved[:, j] += step
+    d = [
+        (pin.rnea(model, data, a, v, w) - pin.rnea(model, data, b, v, w)) / step
+        for a, b, v, w in zip(moved, q, qd, qdd, strict=True)
+    ]
+    return float(np.sqrt(np.mean(np.sum(np.square(d), axis=1))))
 
 
 def _sized_kinematic_effect(robot, cause: str, seed: int, options) -> str:

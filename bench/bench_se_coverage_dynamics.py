@@ -52,6 +52,7 @@ COMPARED = {
     "armature": {"inertia": "inertia"},
     "torque_lag": {"lag": "lag"},
     "torque_gain": {"gain_error": "gain_error"},
+    "transmission_backlash": {"half_width": "half_width"},
     "viscous_friction": {"viscous": "viscous"},
     "coulomb_friction": {"coulomb": "coulomb"},
     "position_friction": {"coulomb": "coulomb", "viscous": "viscous"},
@@ -106,14 +107,20 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=50, help="Logs per family.")
     parser.add_argument("--seed", type=int, default=1000, help="First seed.")
-    parser.add_argument("--cause", action="append", choices=sorted(COMPARED), help="Only these term families "
-                        "(repeatable; default all).")
-    parser.add_argument("--robot", default="arm3", help="arm3, or ur5 / panda for the base parameters on the "
-                        "independent generator (the term families are then not run).")
+    parser.add_argument(
+        "--cause", action="append", choices=sorted(COMPARED), help="Only these term families (repeatable; default all)."
+    )
+    parser.add_argument(
+        "--robot",
+        default="arm3",
+        help="arm3, or ur5 / panda for the base parameters on the "
+        "independent generator (the term families are then not run).",
+    )
     args = parser.parse_args(argv)
     seeds = range(args.seed, args.seed + args.seeds)
-    print(f"bench_se_coverage_dynamics: {args.robot}, {args.seeds} seeds from {args.seed}, "
-          f"load {os.getloadavg()[0]:.1f}")
+    print(
+        f"bench_se_coverage_dynamics: {args.robot}, {args.seeds} seeds from {args.seed}, load {os.getloadavg()[0]:.1f}"
+    )
     print("| family | logs judged | parameters | within 2 SE | share (goal 0.90-0.98) |")
     print("|---|---|---|---|---|")
     counts = [base_coverage(s, args.robot) for s in seeds]
