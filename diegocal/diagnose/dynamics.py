@@ -77,7 +77,7 @@ from diegocal.errors import FitError
 from diegocal.evaluate import Score, score
 from diegocal.lstsq import CHUNK_ROWS, TallLstsq
 from diegocal.sgp.backlash import CAUSE as BACKLASH
-from diegocal.sgp.backlash import play
+from diegocal.sgp.backlash import AngleSensitivity, play
 from diegocal.sgp.model import (
     INERTIA,
     INPUT_STREAMS,
@@ -411,7 +411,7 @@ class DynamicsAdapter:
             tuple(fitted.terms),
             self.friction,
             self.inertia,
-            lambda q: fitted.model.mean_in_chunks(q, self.qd, self.qdd, self.time),  # a backlash's change
+            AngleSensitivity(self.robot, self.q, self.qd, self.qdd, self.rows),  # a backlash's columns
         )
         props = proposals(ctx)
         width, slots = layout(self, props)

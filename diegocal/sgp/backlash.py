@@ -23,6 +23,7 @@ first sample's angle (centred in the play: which side the gear rests on is not k
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 from diegocal.causes import MAX_BACKLASH_RAD
 from diegocal.sgp.proposal import Proposal
@@ -30,8 +31,8 @@ from diegocal.terms import make_term
 
 CAUSE = "transmission_backlash"
 #: transmission_backlash variants ``diagnose`` offers: half-widths, rad (the fit refines it within
-#: the registry's bounds); the column of b is (τ̂(play_b(q_j)) − τ̂(q)) / b, its coefficient ≈ b
-HALF_WIDTH_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, MAX_BACKLASH_RAD)
+#: the registry's bounds); the column of b is the torque's change per unit of b, its coefficient ≈ b
+HALF_WIDTH_GRID = (0.003, 0.01, 0.03, MAX_BACKLASH_RAD)
 
 
 def is_input_filter(term) -> bool:
@@ -72,22 +73,61 @@ def link_angles(terms, robot, q: np.ndarray, time: np.ndarray | None) -> np.ndar
 
 
 def backlash_proposals(cause: str, ctx) -> list:
-    """A transmission backlash on each joint, a family over :data:`HALF_WIDTH_GRID`: the exact
-    change it makes to the current prediction per unit of half-width on *every* joint (a play on
-    joint j moves the link angle of joint j, so the gravity and inertia torques of the joints that
-    carry it too): columns (τ̂(q with q_j → play(q_j, b)) − τ̂(q)) / b. Judged on every joint's
-    residual, as a gain is. ``ctx``: :class:`~diegocal.sgp.terms.Context` with ``predict``."""
-    if ctx.predict is None:
+    """A transmission backlash on each joint, a family over :data:`HALF_WIDTH_GRID`: its change to
+    the torque per unit of half-width on *every* joint (a play on joint j moves the link angle of
+    joint j, so the gravity and inertia torques of the joints that carry it too), to first order
+    ∂τ/∂q_j · (play_b(q_j) − q_j) / b, ∂τ/∂q_j the rigid body's at the URDF's inertias
+    (``ctx.sensitivity``, :class:`AngleSensitivity`; the fit that adds the term evaluates the
+    model's own columns at the link angles). The columns are made a chunk of rows at a time
+    (:class:`PlayColumn`): a long log's candidates hold a float32 shift per sample, no column.
+    Judged on every joint's residual, as a gain is. ``ctx``: :class:`~diegocal.sgp.terms.Context`."""
+    if ctx.sensitivity is None:
         return []
     out = []
     for j in ctx.joints:
         if (cause, j) in ctx.have:
             continue
         i = ctx.robot.joint_index(j)
+        x = np.asarray(ctx.q[:, i], float)
         for b in HALF_WIDTH_GRID:
-            q = np.array(ctx.q, float, copy=True)
-            q[:, i] = play(q[:, i], ctx.time, b)
-            moved = ctx.predict(q)  # (T, k): the fit's prediction at those angles
-            cols = {k: ((moved[:, r] - ctx.prediction[k]) / b)[:, None] for r, k in enumerate(ctx.joints)}
+            shift = ((play(x, ctx.time, b) - x) / b).astype(np.float32)  # in [-1, 1]
+            cols = {k: PlayColumn(ctx.sensitivity, r, i, shift) for r, k in enumerate(ctx.joints)}
             out.append(Proposal(make_term(cause, j, {"half_width": b}), f"{cause}:{j}", cols))
     return out
+
+
+class AngleSensitivity:
+    """∂τ/∂q (m, k, n) of a motion q, qd, qdd (T, n): the rigid body's at the URDF's inertias
+    (pinocchio's RNEA derivatives), torque rows ``rows``, on the samples asked; the last samples'
+    kept (the candidates' columns are filled one chunk of samples at a time, every candidate's in
+    turn)."""
+
+    def __init__(self, robot, q, qd, qdd, rows):
+        self.model = robot.model
+        self.q, self.qd, self.qdd = q, qd, qdd
+        self.rows = np.asarray(rows, int)
+        self._key, self._value = None, None
+
+    def at(self, idx) -> np.ndarray:
+        idx = np.asarray(idx)
+        idx = np.flatnonzero(idx) if idx.dtype == bool else idx
+        key = (idx.size, int(idx[0]), int(idx[-1]), int(idx.sum())) if idx.size else (0,)
+        if key != self._key:
+            data = self.model.createData()
+            out = np.empty((idx.size, self.rows.size, self.model.nv))
+            for m, t in enumerate(idx):
+                out[m] = pin.computeRNEADerivatives(self.model, data, self.q[t], self.qd[t], self.qdd[t])[0][self.rows]
+            self._key, self._value = key, out
+        return self._value
+
+
+class PlayColumn:
+    """A backlash candidate's column (T, 1) on torque row ``r``: ∂τ_r/∂q_i · shift, made for the
+    rows asked (``column[rows]``); ``shift`` (T,) the play's (play_b(q_i) − q_i) / b."""
+
+    def __init__(self, sensitivity: AngleSensitivity, r: int, i: int, shift: np.ndarray):
+        self.sensitivity, self.r, self.i, self.shift = sensitivity, r, i, shift
+        self.shape = (shift.shape[0], 1)
+
+    def __getitem__(self, rows) -> np.ndarray:
+        return (self.sensitivity.at(rows)[:, self.r, self.i] * self.shift[rows])[:, None]

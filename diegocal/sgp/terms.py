@@ -260,7 +260,7 @@ class Context:
     robot; joints : the joints with a torque (the model's rows); q, qd (T, n) every joint;
     time (T,) s; train (T,) bool, the training rows; residual, prediction : joint -> (T,) N·m
     of the current fit; terms : the model's terms; baseline_friction : the baseline's friction
-    kinds; inertia : "identified" | "nominal"; predict : angles (T, n) -> (T, k) the fit's prediction there
+    kinds; inertia : "identified" | "nominal"; sensitivity : the motion's ∂τ/∂q (a backlash's columns)
     """
 
     robot: object
@@ -274,7 +274,7 @@ class Context:
     terms: tuple
     baseline_friction: tuple
     inertia: str
-    predict: Callable | None = None
+    sensitivity: object = None
 
     @property
     def have(self) -> set:
