@@ -48,14 +48,21 @@ def play(x: np.ndarray, time: np.ndarray | None, half_width: float) -> np.ndarra
     out = x.copy()
     if half_width <= 0 or x.size < 2:
         return out
-    starts = {0}
+    cuts = [0, x.size]
     if time is not None:
         steps = np.diff(np.asarray(time, float))
-        starts |= set((np.flatnonzero(steps > 1.5 * float(np.median(steps))) + 1).tolist())
-    b, xs, y = float(half_width), x.tolist(), 0.0
-    for t, v in enumerate(xs):
-        y = v if t in starts else min(max(y, v - b), v + b)
-        out[t] = y
+        cuts[1:1] = (np.flatnonzero(steps > 1.5 * float(np.median(steps))) + 1).tolist()
+    b = float(half_width)
+    for s, e in zip(cuts[:-1], cuts[1:], strict=True):
+        lows, highs, y = (x[s:e] - b).tolist(), (x[s:e] + b).tolist(), float(x[s])
+        seg = [0.0] * (e - s)
+        for t, (lo, hi) in enumerate(zip(lows, highs, strict=True)):  # the recursion: a plain loop
+            if y < lo:
+                y = lo
+            elif y > hi:
+                y = hi
+            seg[t] = y
+        out[s:e] = seg
     return out
 
 
