@@ -56,7 +56,7 @@ def filter_ses(fit, model, w, lags: dict, pred, train, sigma) -> dict:
     (the prediction's central difference, its joint's other filters held) fitted with the model's
     columns on every joint's training rows, weighted by ``sigma`` (k,) (the fit's noise stds; a
     gain trades off with the inertial parameters, and gains on several joints with each other),
-    scaled by its joint's residual variance. A backlash's derivative column is on every joint (its
+    scaled by the residual variance of the joints it is read from. A backlash's derivative column is on every joint (its
     play moves the link angle of the joints that carry it). Returns (row, cause) -> SE."""
     A = model.features(fit.q, fit.qd, fit.qdd, fit.time, sensors=False)  # before the sensors' filters, whole
     X = fit._lagged(A, lags)
@@ -78,12 +78,18 @@ def filter_ses(fit, model, w, lags: dict, pred, train, sigma) -> dict:
         Z = np.where(good[:, :, None], Z, 0.0)
         gram += np.einsum("tkp,tkq->pq", Z, Z)
     var = _marginal_variances(gram, X.shape[2])
-    out = {}
-    for f, (r, c) in enumerate(keys):
+    s2 = np.zeros(X.shape[1])  # each joint's residual variance, weighted
+    for r in range(X.shape[1]):
         ok = train & np.isfinite(fit.tau[:, r])
         e = fit.tau[ok, r] - pred[ok, r]
-        s2 = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2  # the joint's residual variance, weighted
-        out[(r, c)] = float(np.sqrt(s2 * var[f])) if var[f] > 0 else float("nan")
+        s2[r] = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2
+    out = {}
+    for f, key in enumerate(keys):
+        # the residual variance of the joints the value is read from, weighted by what each tells
+        # of it (a sensor's: its own joint's; a backlash's: every joint its play moves)
+        energy = np.nansum((D[train, :, f] / sigma[None, :]) ** 2, axis=0)
+        scale = float(energy @ s2 / energy.sum()) if energy.sum() > 0 else float(s2[key[0]])
+        out[key] = float(np.sqrt(scale * var[f])) if var[f] > 0 else float("nan")
     return out
 
 
