@@ -32,7 +32,7 @@ import diegocal.pneumatic.params as P
 from diegocal.pneumatic.data import ChamberData
 from diegocal.pneumatic.model import ChamberModel
 from diegocal.pneumatic.params import ChamberParams
-from diegocal.pneumatic.predict import drift
+from diegocal.pneumatic.predict import drift, line_state
 from diegocal.terms import correlated_pairs, write_correlated
 
 
@@ -155,8 +155,15 @@ class _Problem:
         self.consts = (nominal.c_b, nominal.c_s, nominal.c_gamma)
         h = float(np.median(np.diff(data.time)))
         self.lags = data.u_lags(self.model.n_lags(h))[sl] if self.model.has_delay else None
+        self.data, self.nominal, self.fit_rows = data, nominal, rows
         self._x = None
         self._cache = None
+
+    def _line(self, x, jacobian: bool):
+        """The supply hose's sag on the fitted steps (None without a hose), its observer reset at
+        every block edge of the fitted rows (:func:`~diegocal.pneumatic.predict.line_state`)."""
+        line = line_state(self.model, x, self.nominal, self.data, self.fit_rows, jacobian)
+        return None if line is None else line.take(self.rows)
 
     def _eval(self, x, jacobian: bool):
         if (
@@ -166,7 +173,8 @@ class _Problem:
         ):
             return self._cache
         p, u, v, vd, h = self.args
-        out = self.model.step(x, p, u, v, vd, h, *self.consts, self.lags, jacobian=jacobian)
+        line = self._line(x, jacobian)
+        out = self.model.step(x, p, u, v, vd, h, *self.consts, self.lags, jacobian=jacobian, line=line)
         self._x, self._cache = np.array(x), out
         return out
 
@@ -175,7 +183,8 @@ class _Problem:
         return r if self.w is None else self.w * r
 
     def residuals_only(self, x):
-        r = self.model.step(x, *self.args, *self.consts, self.lags, jacobian=False)[0] - self.target
+        line = self._line(x, False)
+        r = self.model.step(x, *self.args, *self.consts, self.lags, jacobian=False, line=line)[0] - self.target
         return r if self.w is None else self.w * r
 
     def jacobian(self, x):

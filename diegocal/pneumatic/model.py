@@ -42,6 +42,24 @@ class ModelTerms:
     r_p: np.ndarray | float = 0.0
 
 
+@dataclass(frozen=True)
+class LineState:
+    """The supply hose's sag Δ = P_c - P_s along N steps (a ``supply_droop`` of shape ``hose``).
+
+    mean : (N,) the sag averaged over each step (pu), what the chamber's exact step reads
+    start : (N,) the sag at each step's start (pu)
+    dmean : (N, P) d mean / d x, or None
+    """
+
+    mean: np.ndarray
+    start: np.ndarray
+    dmean: np.ndarray | None = None
+
+    def take(self, idx) -> LineState:
+        """The steps ``idx`` of the series."""
+        return LineState(self.mean[idx], self.start[idx], None if self.dmean is None else self.dmean[idx])
+
+
 def sigmoid(x):
     """Quadratic sigmoid g(x) = x / sqrt(x² + 1), thesis eq. (4.8)."""
     return x / np.sqrt(x * x + 1.0)
@@ -82,6 +100,7 @@ class ChamberModel:
         self.offset_at = self.index.get("offset")
         self.has_delay = any(T.part(t).delay for t in extra)
         self.delay_at = [self.index[t.parameters[0].name] for t in extra if T.part(t).delay]
+        self.hose = next((t for t in extra if t.cause == "supply_droop" and t.extra.get("shape") == "hose"), None)
 
     def n_lags(self, h: float) -> int:
         """Lagged commands the model reads at sample step ``h`` (s): 0 without a valve delay."""
@@ -106,13 +125,16 @@ class ChamberModel:
                 x[self.index[p.name]] = p.value
         return x
 
-    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian=True) -> ModelTerms:
+    def evaluate(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian=True, line=None) -> ModelTerms:
         """s and r of eq. (4.10) with every term added and the flows folded in (module doc of
         :mod:`~diegocal.pneumatic.terms`) for the command ``u`` the valve holds; ``p`` the model's
-        pressure (the reading minus any offset)."""
+        pressure (the reading minus any offset); ``line`` the supply hose's :class:`LineState` over
+        these steps (None: the hose at its equilibrium)."""
         x = np.asarray(x, float)
         shape = np.broadcast(u, v, vd).shape
         ev = T.Evaluation(x, self.index, p, u, v, vd, h, c_b, c_s, c_gamma, jacobian, shape=shape)
+        if line is not None:
+            ev.line, ev.dline = line.mean, line.dmean if jacobian else None
         for term in self.terms:
             T.part(term).add(term, ev)
         r = ev.num / ev.den  # (4.10e)
@@ -142,10 +164,93 @@ class ChamberModel:
             s, r, r_p = s2, r2, rc_p + ev.beta_p
         return ModelTerms(s, r, ds, dr, s_p, r_p)
 
-    def _exact_step(self, x, p, u, v, vd, h, consts, jacobian):
+    def _hose_load(self, x, p, u, v, vd, h, consts, jacobian):
+        """x (N,) of the hose's ``supply_droop`` (:func:`~diegocal.pneumatic.terms.hose_load`) and
+        d x / d x: the model's terms evaluated up to those that read the baseline's parts."""
+        x = np.asarray(x, float)
+        shape = np.broadcast(u, v, vd).shape
+        ev = T.Evaluation(x, self.index, p, u, v, vd, h, *consts, jacobian, shape=shape)
+        for term in self.terms:
+            if T.part(term).stage >= 4:
+                break
+            T.part(term).add(term, ev)
+        return T.hose_load(self.hose, ev)
+
+    def _line_parts(self, x, p, u, v, vd, h, consts, jacobian):
+        """The hose's step pieces: the equilibrium sag Δ* = (P_c - p) x / (1 + x), the decay e =
+        exp(-λ h) of an exact step (4.7) at the rate λ = (1 + x) / τ, the step's mean weight m =
+        (1 - e) / (λ h), and (with ``jacobian``) their derivatives in x."""
+        tau = max(float(self.hose.extra["tau_s"]), 1e-12)
+        pm = p if self.offset_at is None else p - x[self.offset_at]
+        load, dload = self._hose_load(x, pm, u, v, vd, h, consts, jacobian)
+        gap = consts[0] + consts[1] - pm  # P_c - p
+        lam = (1.0 + load) / tau
+        lh = lam * h
+        e = np.exp(-lh)
+        small = lh < 1e-8
+        m = np.where(small, 1.0 - 0.5 * lh, -np.expm1(-lh) / np.where(small, 1.0, lh))
+        q = load / (1.0 + load)
+        star = gap * q
+        if not jacobian:
+            return star, e, m, None
+        dstar = (gap / (1.0 + load) ** 2)[..., None] * dload
+        if self.offset_at is not None:
+            dstar[..., self.offset_at] += q  # d gap / d offset = 1
+        dlam = dload / tau
+        de = -(h * e)[..., None] * dlam
+        dm = ((e - m) / lam)[..., None] * dlam
+        return star, e, m, (dstar, de, dm)
+
+    def line_step(self, x, sag, p, u, v, vd, h, c_b, c_s, c_gamma):
+        """One exact step (4.7) of the supply hose's sag from ``sag`` (pu) at the step's start with
+        the chamber at ``p``: (the sag averaged over the step, the sag at its end), no derivatives
+        (open-loop prediction)."""
+        star, e, m, _ = self._line_parts(np.asarray(x, float), p, u, v, vd, h, (c_b, c_s, c_gamma), False)
+        return star + (sag - star) * m, star + (sag - star) * e
+
+    def line(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, reset=None, jacobian=False) -> LineState:
+        """The supply hose's sag along a series of N consecutive steps, driven by the pressure ``p``
+        (N,) and the commands at their starts (a ``supply_droop`` of shape ``hose``, module doc of
+        :mod:`~diegocal.pneumatic.terms`).
+
+        .. math:: \\tau \\dot\\Delta = x (P_c - p) - (1 + x) \\Delta
+
+        is eq. (4.6)'s form, ``dΔ/dt = (Δ* - Δ) λ``: each step is the exact step (4.7) with x and p
+        held, and the chamber reads the sag averaged over the step, Δ* + (Δ_t - Δ*) m. ``reset``
+        (N,) bool: steps where the hose starts at its equilibrium (the series' first, after a gap);
+        default the first only. With ``jacobian`` the derivatives in x (N, P) follow the same
+        recursion (forward sensitivities)."""
+        x = np.asarray(x, float)
+        star, e, m, d = self._line_parts(x, p, u, v, vd, h, (c_b, c_s, c_gamma), jacobian)
+        n = star.size
+        reset = np.zeros(n, bool) if reset is None else np.asarray(reset, bool).copy()
+        if n:
+            reset[0] = True
+        start = np.empty(n)
+        sag = 0.0
+        for t, (st, et, rt) in enumerate(zip(star.tolist(), e.tolist(), reset.tolist(), strict=True)):
+            sag = st if rt else sag
+            start[t] = sag
+            sag = st + (sag - st) * et  # (4.7)
+        mean = star + (start - star) * m
+        if not jacobian:
+            return LineState(mean, start)
+        dstar, de, dm = d
+        off = start - star
+        push = dstar * (1.0 - e)[:, None] + off[:, None] * de  # d(start_{t+1}) = e d(start_t) + push
+        ds = np.empty_like(dstar)
+        row = dstar[0] if n else None
+        for t in range(n):
+            row = dstar[t] if reset[t] else row
+            ds[t] = row
+            row = e[t] * row + push[t]
+        dmean = dstar * (1.0 - m)[:, None] + m[:, None] * ds + off[:, None] * dm
+        return LineState(mean, start, dmean)
+
+    def _exact_step(self, x, p, u, v, vd, h, consts, jacobian, line=None):
         """One exact step (4.7) with the command ``u`` held: p_next, d p_next / d x (or None),
         d p_next / d p, and s and max(r, 0) (for the derivative in the step's length)."""
-        t = self.evaluate(x, p, u, v, vd, h, *consts, jacobian=jacobian)
+        t = self.evaluate(x, p, u, v, vd, h, *consts, jacobian=jacobian, line=line)
         r = np.maximum(t.r, 0.0)
         e = np.exp(-r * h)
         p_next = t.s + (p - t.s) * e
@@ -157,12 +262,14 @@ class ChamberModel:
         dp = e + d_s * t.s_p + np.where(t.r > 0.0, -h * (p - t.s) * e, 0.0) * t.r_p  # d p_next / d p
         return p_next, jac, dp, t.s, r
 
-    def step(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True):
+    def step(self, x, p, u, v, vd, h, c_b, c_s, c_gamma, u_lags=None, jacobian=True, line=None):
         """Exact step over h with s, r held fixed, thesis eq. (4.7): p(t+h) = s + (p - s) exp(-r h).
 
         ``p`` is the pressure reading at the step's start; ``u_lags`` (T, L+1) the commands u_t,
         u_{t-1}, ... (read only by a model with a valve delay, whose step is two exact steps, one
-        per command the valve holds; ``valve_delay`` in :mod:`~diegocal.pneumatic.terms`). Returns
+        per command the valve holds; ``valve_delay`` in :mod:`~diegocal.pneumatic.terms`); ``line``
+        the supply hose's :class:`LineState` over these steps (:meth:`line`; a model with a hose
+        needs it; the sag is held over the step, as the command is). Returns
         (p_next, J) with p_next of the samples' shape and J = d p_next / d x, shape (T, P) (None
         unless ``jacobian``).
 
@@ -172,10 +279,12 @@ class ChamberModel:
         """
         x = np.asarray(x, float)
         consts = (c_b, c_s, c_gamma)
+        if self.hose is not None and line is None:
+            raise ValueError("a model with a supply hose needs its sag over the steps (line)")
         offset = 0.0 if self.offset_at is None else float(x[self.offset_at])
         pm = p if self.offset_at is None else p - offset  # the sensor reads p + offset
         if not self.has_delay:
-            p_next, jac, dp, _, _ = self._exact_step(x, pm, u, v, vd, h, consts, jacobian)
+            p_next, jac, dp, _, _ = self._exact_step(x, pm, u, v, vd, h, consts, jacobian, line)
         else:
             if u_lags is None:
                 raise ValueError("a model with a valve delay needs the lagged commands (u_lags)")
@@ -184,8 +293,8 @@ class ChamberModel:
             f = D - n
             old = np.take_along_axis(u_lags, n[..., None] + 1, axis=-1)[..., 0]  # held first, f h
             new = np.take_along_axis(u_lags, n[..., None], axis=-1)[..., 0]  # then (1 - f) h
-            p_mid, j1, dp1, s1, r1 = self._exact_step(x, pm, old, v, vd, f * h, consts, jacobian)
-            p_next, j2, dp2, s2, r2 = self._exact_step(x, p_mid, new, v, vd, (1.0 - f) * h, consts, jacobian)
+            p_mid, j1, dp1, s1, r1 = self._exact_step(x, pm, old, v, vd, f * h, consts, jacobian, line)
+            p_next, j2, dp2, s2, r2 = self._exact_step(x, p_mid, new, v, vd, (1.0 - f) * h, consts, jacobian, line)
             dp = dp2 * dp1
             if jacobian:
                 jac = j2 + dp2[..., None] * j1
@@ -197,8 +306,8 @@ class ChamberModel:
             p_next = p_next + offset
         if not jacobian:
             return p_next, None
-        if self.offset_at is not None:  # d/d offset = 1 - d p_next / d p
-            jac[..., self.offset_at] = 1.0 - dp
+        if self.offset_at is not None:  # d/d offset = 1 - d p_next / d p (+ the hose's, through its sag)
+            jac[..., self.offset_at] += 1.0 - dp
         return p_next, jac
 
 
@@ -253,16 +362,21 @@ def steady_state(params: ChamberParams, u, v=0.0, vd=0.0):
 def step(params: ChamberParams, p, u, v, vd, h, u_lags=None):
     """p(t+h) by thesis eq. (4.7) for a :class:`ChamberParams`; v, vd raw readings; ``u_lags``
     (T, L+1) the commands u_t, u_{t-1}, ... when the model has a valve delay
-    (:meth:`~diegocal.pneumatic.data.ChamberData.u_lags`)."""
+    (:meth:`~diegocal.pneumatic.data.ChamberData.u_lags`); with a supply hose the samples are one
+    series of consecutive steps, the hose starting at its equilibrium (:meth:`ChamberModel.line`)."""
     model, v, vd, lags = _inputs(params, u, v, vd, u_lags)
-    return model.step(
-        params.full_vector(), p, u, v, vd, h, params.c_b, params.c_s, params.c_gamma, lags, False
-    )[0]
+    x, consts = params.full_vector(), (params.c_b, params.c_s, params.c_gamma)
+    line = None
+    if model.hose is not None:
+        p, u, v, vd, h = (np.atleast_1d(np.asarray(a, float)) for a in np.broadcast_arrays(p, u, v, vd, h))
+        line = model.line(x, p, u, v, vd, h, *consts)
+    return model.step(x, p, u, v, vd, h, *consts, lags, False, line)[0]
 
 
 __all__ = [
     "NAMES",
     "ChamberModel",
+    "LineState",
     "ModelTerms",
     "model_of",
     "pressure_rate",

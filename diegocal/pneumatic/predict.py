@@ -12,7 +12,7 @@ import numpy as np
 
 from diegocal.errors import FitError
 from diegocal.pneumatic.data import ChamberData
-from diegocal.pneumatic.model import model_of
+from diegocal.pneumatic.model import ChamberModel, LineState, model_of
 from diegocal.pneumatic.params import ChamberParams
 
 #: Fig. 4.13: 48 start points per chamber, 2 s horizon.
@@ -53,8 +53,29 @@ class Drift:
         return [float(x) for x in (self.rms / self.span)[idx]]
 
 
+def line_state(model: ChamberModel, x, params: ChamberParams, data: ChamberData, rows=None, jacobian=False):
+    """The supply hose's sag (:meth:`~diegocal.pneumatic.model.ChamberModel.line`) along every step
+    t -> t+1 of ``data`` (T-1 steps), driven by the measured pressure (an observer of the hose; None
+    for a model without one). The hose starts at its equilibrium at the log's start, after each gap
+    and, when ``rows`` (T,) bool is given, at each step that follows one outside them (a block
+    edge: the sag of the fitted rows never reads the pressure of rows outside them); ``x`` the
+    model's packed vector, ``params`` its volume normalisation and constants."""
+    if model.hose is None:
+        return None
+    ok = data.steps.copy()
+    if rows is not None:
+        rows = np.asarray(rows, bool)
+        ok &= rows[:-1] & rows[1:]
+    reset = np.concatenate([[True], ~ok[:-1]])
+    v, vd = params.volume_coordinate(data.v[:-1], data.vd[:-1])
+    consts = (params.c_b, params.c_s, params.c_gamma)
+    return model.line(x, data.p[:-1], data.u[:-1], v, vd, data.h, *consts, reset, jacobian)
+
+
 def integrate_from(params: ChamberParams, data: ChamberData, starts, n_steps: int) -> np.ndarray:
     """Open-loop pressure from each start index for ``n_steps`` steps, vectorised over starts.
+    A supply hose starts from the sag its observer (:func:`line_state`) gives at the start, as the
+    pressure starts from the measured one, and is stepped with the predicted pressure.
 
     Parameters
     ----------
@@ -72,8 +93,15 @@ def integrate_from(params: ChamberParams, data: ChamberData, starts, n_steps: in
     lags = data.u_lags(model.n_lags(float(np.median(h)))) if model.has_delay else None
     out = np.empty((starts.size, n_steps + 1))
     out[:, 0] = data.p[starts]
+    hose = line_state(model, x, params, data)
+    sag = None if hose is None else hose.start[starts]
+    consts = (params.c_b, params.c_s, params.c_gamma)
     for j in range(n_steps):
         i = starts + j
+        line = None
+        if sag is not None:
+            mean, sag = model.line_step(x, sag, out[:, j], data.u[i], v[i], vd[i], h[i], *consts)
+            line = LineState(mean, sag)
         out[:, j + 1] = model.step(
             x,
             out[:, j],
@@ -86,6 +114,7 @@ def integrate_from(params: ChamberParams, data: ChamberData, starts, n_steps: in
             params.c_gamma,
             None if lags is None else lags[i],
             jacobian=False,
+            line=line,
         )[0]
     return out
 
@@ -99,7 +128,8 @@ def next_step(params: ChamberParams, data: ChamberData) -> np.ndarray:
     lags = data.u_lags(model.n_lags(float(np.median(h))))[:-1] if model.has_delay else None
     x = params.full_vector()
     consts = (params.c_b, params.c_s, params.c_gamma)
-    return model.step(x, data.p[:-1], data.u[:-1], v, vd, h, *consts, lags, jacobian=False)[0]
+    line = line_state(model, x, params, data)
+    return model.step(x, data.p[:-1], data.u[:-1], v, vd, h, *consts, lags, jacobian=False, line=line)[0]
 
 
 def horizon_steps(data: ChamberData, horizon_s: float) -> int:

@@ -11,7 +11,7 @@ import numpy as np
 
 from diegocal.io import Log, Truth, make_stream
 from diegocal.pneumatic.data import chamber_data
-from diegocal.pneumatic.model import model_of
+from diegocal.pneumatic.model import LineState, model_of
 
 
 def simulate_model(log: Log, sensors, params: dict, noise: float, seed: int) -> Log:
@@ -36,8 +36,14 @@ def simulate_model(log: Log, sensors, params: dict, noise: float, seed: int) -> 
         lags = d.u_lags(model.n_lags(float(np.median(h))))
         x, consts = c.full_vector(), (c.c_b, c.c_s, c.c_gamma)
         v, vd = c.volume_coordinate(d.v, d.vd)
+        sag, line = None, None  # a supply hose, from its equilibrium
+        if model.hose is not None:
+            sag = model.line(x, p[:1], d.u[:1], v[:1], vd[:1], h[:1], *consts).start[0]
         for t in range(d.n_samples - 1):  # p_{t+1} = step(p_t, ...) + noise (eq. 4.7)
-            p[t + 1] = model.step(x, p[t], d.u[t], v[t], vd[t], h[t], *consts, lags[t], False)[0] + eps[t]
+            if sag is not None:
+                mean, sag = model.line_step(x, sag, p[t], d.u[t], v[t], vd[t], h[t], *consts)
+                line = LineState(mean, sag)
+            p[t + 1] = model.step(x, p[t], d.u[t], v[t], vd[t], h[t], *consts, lags[t], False, line)[0] + eps[t]
     truth = Truth(
         params={"model": "parametric", "chambers": {n: params[n].to_dict(n) for n in names}},
         effects=[],

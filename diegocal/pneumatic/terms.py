@@ -32,7 +32,9 @@ channel = the chamber) keep the form (4.6), so that the exact step (4.7) still a
   orifice's outflow (``extra: {shape: orifice}``) or p - P_r;
 - ``supply_droop`` (droop, pressure unit): the supply sags while the valve draws from it: s loses
   ``f Δ`` with f = (1 + g)/2 the supply's share of the port flow, Δ = droop (``share``) or the sag
-  of a line resistance that carries the port's flow (``extra: {shape: flow}``);
+  of a line resistance that carries the port's flow (``extra: {shape: flow}``), or the sag of a
+  hose that line feeds, a state of its own (``extra: {shape: hose, tau_s: ...}``,
+  :meth:`~diegocal.pneumatic.model.ChamberModel.line`);
 - ``pressure_offset`` (offset, pressure unit): the sensor reads p + offset; the model runs on the
   reading minus the offset;
 - ``sensor_lag`` (lag_s, s; at most one tick): the tick-averaged pressure answers the command a
@@ -71,7 +73,9 @@ class Evaluation:
     state, ``num``/``dnum`` and ``den``/``dden`` the rate's numerator and denominator, ``g``/``dg``
     the valve sigmoid, ``alpha``/``beta`` the flows added to ``pdot`` as ``alpha - beta p`` (None
     until a term adds one), ``s_p`` d s / d p (None: 0), ``factor``/``factor_p``/``dfactor`` a
-    factor of the valve's rate num/den, its derivative in p and in x (None: 1).
+    factor of the valve's rate num/den, its derivative in p and in x (None: 1); ``line``/``dline``
+    (N,), (N, P) the supply hose's sag over each step (pu) and its derivative, an input of a
+    ``supply_droop`` of shape ``hose`` (None: the hose at its equilibrium, the flow shape's sag).
     """
 
     x: np.ndarray
@@ -105,6 +109,8 @@ class Evaluation:
     factor_p: np.ndarray | None = None
     dfactor: np.ndarray | None = None
     shape: tuple = field(default=())
+    line: np.ndarray | None = None
+    dline: np.ndarray | None = None
 
     def value(self, name: str) -> float:
         return float(self.x[self.index[name]])
@@ -308,6 +314,14 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
       divide it as their conductances. c_s w is about 1 at one volt beyond c1, so ``droop`` keeps
       its meaning and unit.
 
+    - ``hose``: the line resistance of ``flow`` feeds a hose of its own volume, whose pressure P_s
+      is a state: the sag Δ = P_c - P_s obeys τ dΔ/dt = x (P_c - p) - (1 + x) Δ (x the flow
+      shape's, τ = ``extra.tau_s`` the hose's volume over the line's conductance), the same
+      first-order form as eq. (4.6), stepped by the same exact step (4.7)
+      (:meth:`~diegocal.pneumatic.model.ChamberModel.line`). The chamber's step reads the sag
+      averaged over the step (``ev.line``); its equilibrium is the flow shape's sag, which is the
+      limit τ -> 0, and as τ grows the sag tends to a constant, the lasting sag of ``share``.
+
     A sag proportional to the flow drawn without the series form (P_c' = P_c - k f n (P_c - p)) was
     tried first on the project's simulator: it fitted worse than a pressure offset.
     """
@@ -315,11 +329,18 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
     f = 0.5 * (1.0 + ev.g)
     at = ev.index["droop"]
     shape = term.extra.get("shape")
-    if shape not in ("flow", "orifice"):
+    if shape not in ("flow", "orifice", "hose"):
         ev.s = ev.s - c * f
         if ev.jacobian:
             ev.ds = ev.ds - 0.5 * c * ev.dg
             ev.ds[..., at] -= f
+        return
+    if shape == "hose" and ev.line is not None:  # the hose's sag over the step, an input
+        ev.s = ev.s - f * ev.line
+        if ev.jacobian:
+            ev.ds = ev.ds - 0.5 * ev.line[..., None] * ev.dg
+            if ev.dline is not None:
+                ev.ds = ev.ds - f[..., None] * ev.dline
         return
     c7 = ev.value("c7")
     gap = ev.supply - ev.p
@@ -340,6 +361,23 @@ def _supply_droop(term: Term, ev: Evaluation) -> None:
         ds = -(0.5 * sag)[..., None] * ev.dg - (f * dq * gap)[..., None] * (c * dwp)
         ds[..., at] -= f * dq * gap * wp
         ev.ds = ev.ds + ds
+
+
+def hose_load(term: Term, ev: Evaluation):
+    """x (N,) of a ``supply_droop``: the valve's supply-port conductance over the line's (the flow
+    shape's x, droop f n / (c7 c_s · 1 V)), and d x / d x (N, P) (None unless ``ev.jacobian``);
+    reads g and n of the baseline (an evaluation run up to the terms that read them)."""
+    c, c7 = ev.value("droop"), ev.value("c7")
+    f = 0.5 * (1.0 + ev.g)
+    w = f * ev.num / (c7 * ev.c_s)
+    x = np.maximum(c * w, 0.0)
+    if not ev.jacobian:
+        return x, None
+    dw = (0.5 * ev.dg * ev.num[..., None] + f[..., None] * ev.dnum) / (c7 * ev.c_s)
+    dw[..., ev.index["c7"]] -= w / c7
+    dx = c * dw
+    dx[..., ev.index["droop"]] += w
+    return x, np.where((c * w > 0.0)[..., None], dx, 0.0)
 
 
 def _pressure_offset(term: Term, ev: Evaluation) -> None:
