@@ -12,9 +12,10 @@ next-step residual p_{t+1} - p̂_{t+1}, kept at sample t (the block of t), in th
 
 Candidates (:mod:`diegocal.pneumatic.terms`):
 
-- ``chamber_leak`` (an orifice to the room, thin-plate flow), ``supply_droop`` in two shapes (a
-  sag that lasts while the supply port is open, or one that follows the flow the port draws, as
-  through a restricted line; one family: the better training fit is tested), ``pressure_offset``:
+- ``chamber_leak`` (an orifice to the room, thin-plate flow), ``supply_droop`` in several shapes (a
+  sag that lasts while the supply port is open, one that follows the flow the port draws, as
+  through a restricted line, or the sag of a hose that line feeds, a state of its own with the
+  time constants :data:`HOSE_TAU_S`; one family: the best training fit is tested), ``pressure_offset``:
   the model refitted with the term (all parameters, nonlinear least squares on the training
   steps, the term started at its resolution); the column is the change of p̂_{t+1} it makes
   (coefficient ≈ 1). A linearisation at θ = 0 was used first: for the sizes that matter (a leak of
@@ -79,7 +80,7 @@ from diegocal.io import save_yaml
 from diegocal.pneumatic.data import ChamberData, chamber_data
 from diegocal.pneumatic.fit import ChamberFit, FitOptions, fit_chamber, step_rows
 from diegocal.pneumatic.model import ChamberModel
-from diegocal.pneumatic.predict import drift, next_step, predict_with_resets
+from diegocal.pneumatic.predict import drift, line_state, next_step, predict_with_resets
 from diegocal.pneumatic.terms import chamber_terms
 from diegocal.terms import make_term
 
@@ -181,10 +182,12 @@ class PneumaticAdapter:
         v, vd = start.volume_coordinate(data.v[sl], data.vd[sl])
         lags = data.u_lags(model.n_lags(float(np.median(h))))[sl]
         consts = (start.c_b, start.c_s, start.c_gamma)
+        line = line_state(model, x, start, data, train)
+        line = None if line is None else line.take(sl)
         best, best_cost = 0.0, np.inf
         for d in np.arange(0.0, MAX_DELAY_S / dt, 0.5):  # every half sample
             x[at] = min(d * dt, MAX_DELAY_S)
-            pred = model.step(x, data.p[sl], data.u[sl], v, vd, h[sl], *consts, lags, False)[0]
+            pred = model.step(x, data.p[sl], data.u[sl], v, vd, h[sl], *consts, lags, False, line)[0]
             cost = float(np.sum((pred - data.p[sl + 1]) ** 2))
             if cost < best_cost:
                 best, best_cost = x[at], cost
@@ -229,7 +232,8 @@ class PneumaticAdapter:
         v, vd = params.volume_coordinate(d.v[:-1], d.vd[:-1])
         lags = d.u_lags(model.n_lags(float(np.median(h))))[:-1] if model.has_delay else None
         consts = (params.c_b, params.c_s, params.c_gamma)
-        pred, J = model.step(x, d.p[:-1], d.u[:-1], v, vd, h, *consts, lags)
+        line = line_state(model, x, params, d, None, True)
+        pred, J = model.step(x, d.p[:-1], d.u[:-1], v, vd, h, *consts, lags, line=line)
         return _pad(pred), _pad(J), model
 
     def candidates(self, fitted: PneumaticFit, residuals: Residuals, train) -> list[Candidate]:
@@ -310,10 +314,11 @@ class PneumaticAdapter:
         v, vd = params.volume_coordinate(d.v[:-1], d.vd[:-1])
         consts = (params.c_b, params.c_s, params.c_gamma)
         x = np.concatenate([params.vector(), *[t.values for t in others], [0.0]])
+        line = line_state(model, x, params, d)
         out = []
         for k in range(1, int(round(MAX_DELAY_S / dt)) + 1):
             x[-1] = k * dt
-            pred = _pad(model.step(x, d.p[:-1], d.u[:-1], v, vd, h, *consts, lags, False)[0])
+            pred = _pad(model.step(x, d.p[:-1], d.u[:-1], v, vd, h, *consts, lags, False, line)[0])
             col = (pred - base) / (k * dt - lag)
             col[~ok] = np.nan
             term = make_term("valve_delay", name, {"delay_s": k * dt})
@@ -382,6 +387,7 @@ FLOORS = {
     "droop": 0.006,
     "droop_flow": 0.024,
     "droop_orifice": 0.024,
+    "droop_hose": 0.024,
     "leak": 2.5,
     "leak_orifice": 1.5,
     "delay_s": 0.005,
@@ -435,6 +441,10 @@ def _physical(cand: Candidate, r: np.ndarray, rows: np.ndarray, floor=None) -> b
     return bool(ok and (floor is None or (np.abs(coef) >= floor).all()))
 
 
+#: The supply hose's time constants tried (s; ``supply_droop`` of shape ``hose``): from a third of a
+#: 10-ms tick, where the hose is nearly the flow shape's bare line, to three ticks.
+HOSE_TAU_S = (0.003, 0.01, 0.03)
+
 #: The candidates other than the delay, as (cause, extra): a leak through an orifice or linear in
 #: p - P_r; a supply sag that lasts, or through a line resistance that is linear or an orifice (the
 #: shapes of a cause share a family: the engine tests the one that fits the training rows better);
@@ -447,13 +457,14 @@ SHAPES = (
     ("supply_droop", {}),
     ("supply_droop", {"shape": "flow"}),
     ("supply_droop", {"shape": "orifice"}),
+    *(("supply_droop", {"shape": "hose", "tau_s": tau}) for tau in HOSE_TAU_S),
     ("pressure_offset", {}),
 )
 
 
 def _key(terms) -> frozenset:
     """The causes and shapes of ``terms`` (a candidate's full fit is cached under it)."""
-    return frozenset((t.cause, t.extra.get("shape")) for t in terms)
+    return frozenset((t.cause, t.extra.get("shape"), t.extra.get("tau_s")) for t in terms)
 
 
 def _value(params, cause: str, default: float = 0.0) -> float:

@@ -1,6 +1,6 @@
 """`diagnose --domain pneumatics` on the independent generator (experiments/pneumatic_generator.py),
 whose faults have their physical shape: a restricted supply line (an orifice before a hose) is
-named ``supply_droop`` with the flow shape, a delayed valve ``valve_delay`` with its delay within
+named ``supply_droop`` with the hose shape, a delayed valve ``valve_delay`` with its delay within
 two standard errors of the truth, and the clean chambers give nothing; a declined offset and a
 drifting zero are not named. Seeds fixed; three 60-s logs, generated together at 1 kHz (10
 sub-steps per tick, half the benches' 20: the suite's time).
@@ -46,12 +46,15 @@ def _found(result, chamber):
     return [f for f in result.findings if f.channel == chamber]
 
 
-def test_a_restricted_supply_line_is_named_supply_droop_with_the_flow_shape(result):
+def test_a_restricted_supply_line_is_named_supply_droop_through_a_hose(result):
+    # the generator's line feeds a hose (its pressure a state): the hose shape, whose sag is a state
+    # of its own, fits it better than the bare line (the flow shape: 29 % of the training error
+    # removed, the hose 48 %) and is named, with the held-out error lowered
     _, res = result
     found = _found(res, "elbow.ext")
     assert found and (found[0].kind, found[0].cause) == ("term", "supply_droop"), [f.cause for f in found]
-    assert found[0].term.extra.get("shape") == "flow"
-    assert found[0].gain()["reduction"] > 0
+    assert found[0].term.extra.get("shape") == "hose" and found[0].term.extra["tau_s"] > 0
+    assert found[0].gain()["reduction"] > 0.2
 
 
 def test_a_delayed_valve_is_named_with_the_valve_delay_within_two_standard_errors(result):
