@@ -246,7 +246,7 @@ class DynamicsAdapter:
         if lags or regions or any(p.shape for t in terms for p in specs(t)):
             sigma = self._joint_sigma(terms, train)  # each joint weighted by its residual std
             if lags:
-                lags = fit_filters(self, terms, lags, train, sigma)
+                lags, sigma = fit_filters(self, terms, lags, train, sigma)
                 terms = tuple(
                     t.with_values([lags[self._key(t)]]) if is_filter(t) and t.channel in self.row_of else t
                     for t in terms

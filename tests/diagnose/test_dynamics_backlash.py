@@ -10,10 +10,14 @@ from typer.testing import CliRunner
 
 from diegocal.cli import app
 from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.diagnose.dynamics import adapters
+from diegocal.diagnose.dynamics_filters import fit_filters
+from diegocal.evaluate import split_blocks
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.robot.resolve import robot_for_log
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.terms import make_term
 from experiments.dynamics_generator import Session, generate, urdf
 
 runner = CliRunner()
@@ -61,6 +65,28 @@ def test_the_independent_generators_backlash_is_named_with_its_half_width():
     assert (top.cause, top.channel) == ("transmission_backlash", hidden["channel"]), [f.term.label for f in d.findings]
     p = top.term.parameters[0]
     assert abs(p.value - hidden["scale"]) < min(3 * p.stderr, 0.05 * hidden["scale"]), (p.value, p.stderr)
+
+
+def test_the_half_width_is_searched_with_the_weights_its_standard_error_assumes(arm3):
+    """The search's first weights are the model's without the play (its joint's residual std
+    several times the noise: under-weighted); it searches again with each joint's residual std at
+    the value found (the noise, as the standard error assumes), and the value it returns is the
+    least training error under those weights (with the first weights alone, half-widths strayed
+    up to 4 SE from the truth: ± coverage 0.86)."""
+    opts = DynamicsOptions(duration=20.0, effects=("transmission_backlash:joint2=0.01",), noise=0.01)
+    log = simulate_dynamics(arm3, opts, np.random.default_rng(6))
+    fit = adapters(log.without_truth(), arm3, DiagnoseOptions(domain="dynamics"))[0]
+    train = split_blocks(log.n_samples, 10).mask("train")
+    term = make_term("transmission_backlash", "joint2", {"half_width": 0.01})
+    key = fit._key(term)
+    first = fit._joint_sigma((term,), train)
+    found, sigma = fit_filters(fit, (term,), {key: 0.01}, train, first)
+    assert first[key[0]] > 2 * 0.01
+    np.testing.assert_allclose(sigma, 0.01, rtol=0.1)
+    b = found[key]
+    cost = [fit._cost((term,), {key: x}, train, sigma) for x in (b - 1e-5, b, b + 1e-5)]
+    assert cost[1] <= min(cost[0], cost[2]), cost
+    assert abs(b - 0.01) < 5e-5, b
 
 
 @pytest.mark.parametrize("size", ["-1", "0.5"])
