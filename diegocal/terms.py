@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from diegocal.causes import CAUSES
+from diegocal.causes import CAUSES, slide_unit
 from diegocal.causes import cause as registry_entry
 from diegocal.errors import InputFileError, UnknownNameError
 from diegocal.io.files import to_plain
@@ -285,3 +285,9 @@ def write_correlated(terms: list, pairs) -> None:
         for name, p in (d.get("parameters") or {}).items():
             if f"{d['channel']}.{name}" in by:
                 p["correlated"] = by[f"{d['channel']}.{name}"]
+
+
+def in_slide_units(term: Term) -> Term:
+    """``term`` with its parameters' units as they read on a prismatic joint (N, m, kg:
+    :func:`diegocal.causes.slide_unit`; the registry's are a revolute joint's)."""
+    return replace(term, parameters=tuple(replace(p, unit=slide_unit(p.unit)) for p in term.parameters))

@@ -58,6 +58,7 @@ from diegocal.sgp.terms import (
     parameter_labels,
     term_columns,
 )
+from diegocal.terms import in_slide_units
 
 LOG = logging.getLogger(__name__)
 #: Samples whose prediction is made at once where a fit scores itself (nmse_in_sample_): about
@@ -230,7 +231,8 @@ class DynamicsModel:
             k = len(t.linear)  # its columns; a shape parameter is held as given
             out.append(t.with_linear_values(par.values[at : at + k], par.stderr[at : at + k]))
             at += k
-        return tuple(out)
+        slides = self.robot.prismatic_joints  # a slide's parameters in N, m, kg
+        return tuple(in_slide_units(t) if t.channel in slides else t for t in out)
 
     def _kernels(self):
         """A GP per fitted joint (``options.gp_joints``: those only; the others PR, W shared)."""
