@@ -31,6 +31,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -45,6 +46,10 @@ from diegocal.sgp.regressor import true_parameters  # noqa: E402
 from diegocal.sim.dynamics import true_friction  # noqa: E402
 from experiments.dynamics_generator import Session, generate  # noqa: E402
 
+#: A payload's parameters: the ten of the body it is on (Pinocchio's order), the truth's from its
+#: point mass at its lever in the parent joint's frame.
+PAYLOAD_NAMES = ("mass", "mc_x", "mc_y", "mc_z", "I_xx", "I_xy", "I_yy", "I_xz", "I_yz", "I_zz")
+
 #: The term parameters compared with the simulator's values, per cause (the simulator's name).
 COMPARED = {
     "torque_offset": {"offset": "offset"},
@@ -56,6 +61,8 @@ COMPARED = {
     "viscous_friction": {"viscous": "viscous"},
     "coulomb_friction": {"coulomb": "coulomb"},
     "position_friction": {"coulomb": "coulomb", "viscous": "viscous"},
+    "coupled_friction": {"coulomb": "coulomb", "viscous": "viscous", "smoothing": "smoothing"},
+    "payload": {name: name for name in PAYLOAD_NAMES},
 }
 
 
@@ -93,14 +100,30 @@ def term_coverage(cause: str, seed: int) -> tuple[int, int] | None:
         overlap = max(0.0, min(r.high, t["high"]) - max(r.low, t["low"]))
         if overlap < 0.5 * (t["high"] - t["low"]):
             return None
+    if cause == "coupled_friction" and (top.term.extra["partner"], top.term.extra["ratio"]) != (
+        effect["partner"],
+        effect["values"]["ratio"],
+    ):
+        return None
+    truth = _payload_truth(robot, effect) if cause == "payload" else effect["values"]
     ok = n = 0
     for name, truth_name in COMPARED[cause].items():
         p = next(p for p in top.term.parameters if p.name == name)
         if not np.isfinite(p.stderr):
             continue
         n += 1
-        ok += abs(p.value - effect["values"][truth_name]) <= 2.0 * p.stderr
+        ok += abs(p.value - truth[truth_name]) <= 2.0 * p.stderr
     return ok, n
+
+
+def _payload_truth(robot, effect) -> dict:
+    """The ten parameters of a simulated point mass (its mass at its lever on the link's frame)
+    as the body of the link's parent joint carries them."""
+    frame = next(f for f in robot.model.frames if f.name == effect["channel"])
+    v = effect["values"]
+    lever = frame.placement.act(np.array([v["x"], v["y"], v["z"]]))
+    params = pin.Inertia(v["mass"], lever, np.zeros((3, 3))).toDynamicParameters()
+    return dict(zip(PAYLOAD_NAMES, params, strict=True))
 
 
 def main(argv=None) -> int:

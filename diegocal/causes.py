@@ -43,7 +43,9 @@ class ParamSpec:
     the column's shape (a velocity scale), held while the linear ones are fitted and searched
     between its bounds by the fit that adds the term. ``nonnegative``: what it measures cannot be
     negative (a friction, a dead band, an inertia, a mass), though a linear fit may make it so: a
-    value significantly below 0 says the term stands in for something else (:func:`unphysical`)."""
+    value significantly below 0 says the term stands in for something else (:func:`unphysical`).
+    ``earlier``: for a parameter added to a cause after files were written with it, the value
+    such a file means (it may lack the parameter); None: every file has it."""
 
     name: str
     unit: str
@@ -54,6 +56,7 @@ class ParamSpec:
     note: str = ""
     shape: bool = False
     nonnegative: bool = False
+    earlier: float | None = None
 
 
 @dataclass(frozen=True)
@@ -92,8 +95,9 @@ class Cause:
         return self.role in ("term", "fault")
 
 
-def _p(name, unit, meaning, lower=-INF, upper=INF, start=0.0, note="", shape=False, nonnegative=False) -> ParamSpec:
-    return ParamSpec(name, unit, lower, upper, start, meaning, note, shape, nonnegative)
+def _p(name, unit, meaning, lower=-INF, upper=INF, start=0.0, note="", shape=False, nonnegative=False,
+       earlier=None) -> ParamSpec:
+    return ParamSpec(name, unit, lower, upper, start, meaning, note, shape, nonnegative, earlier)
 
 
 def _positive(name, unit, meaning) -> ParamSpec:
@@ -125,6 +129,9 @@ MAX_LAG_S = 0.5
 MAX_GAIN_ERROR = 0.5
 #: The largest half-width a transmission_backlash may take, rad (a play of ±6° is a broken gear, not a backlash).
 MAX_BACKLASH_RAD = 0.1
+#: A coupled motor's smallest Coulomb smoothing, rad/s: tanh(v / 1e-4) is sign(v) but within
+#: 1e-4 rad/s of rest (what files written before the smoothing existed mean)
+MIN_SMOOTHING = 1e-4
 
 _CAUSES = (
     # ------------------------------------------------------------------ kinematics (thesis ch. 2)
@@ -192,7 +199,9 @@ _CAUSES = (
           "rotor inertia (a torque proportional to the acceleration)"),
     Cause("coupled_friction", "dynamics", "term", "joint",
           (_positive("coulomb", "N·m", "Coulomb level of the shared motor"),
-           _positive("viscous", "N·m·s/rad", "viscous coefficient of the shared motor")),
+           _positive("viscous", "N·m·s/rad", "viscous coefficient of the shared motor"),
+           _p("smoothing", "rad/s", "the motor's speed over which its Coulomb friction changes sign, "
+              "tanh(v / smoothing)", MIN_SMOOTHING, 2.0, 0.02, shape=True, earlier=MIN_SMOOTHING)),
           "friction of a motor that drives both joints", extra=("partner", "ratio"), partner="partner",
           signed_by="qd"),
     Cause("payload", "dynamics", "term", "link",

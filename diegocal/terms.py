@@ -244,8 +244,10 @@ def term_from_dict(d: dict, where: str = "term", domain: str | None = None) -> T
     given = [read_parameter(n, p, f"{where}: parameter") for n, p in raw.items()]
     if not entry.named_by_model:
         names, got = entry.parameter_names, tuple(p.name for p in given)
-        if got != names:
+        earlier = {s.name: s.earlier for s in entry.parameters if s.earlier is not None and s.name not in got}
+        if got != tuple(n for n in names if n not in earlier):
             raise InputFileError(f"{where}: {entry.id} has parameters {list(names)}, got {list(got)}")
+        given += [Parameter(n, v) for n, v in earlier.items()]  # a file written before the parameter
     values = {p.name: p.value for p in given}
     stderr = {p.name: p.stderr for p in given}
     term = make_term(entry.id, d["channel"], values, Region.from_dict(d.get("region")), dict(d.get("extra") or {}),

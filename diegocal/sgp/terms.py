@@ -155,7 +155,7 @@ def _coupled_friction(term, m, j, out):
     a = m.robot.joint_index(str(term.extra["partner"]))
     ratio = float(term.extra["ratio"])
     v = m.qd[:, j] + ratio * m.qd[:, a]
-    cols = np.stack([np.sign(v), v], axis=1)
+    cols = np.stack([np.tanh(v / term.value("smoothing")), v], axis=1)
     out[:, j, :] = cols
     out[:, a, :] += ratio * cols
 

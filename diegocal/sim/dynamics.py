@@ -148,7 +148,7 @@ class EffectTerm:
             return inside * (v["coulomb"] * np.sign(vj) + v["viscous"] * vj)
         if self.cause == "coupled_friction":
             motor = vj + v["ratio"] * qd[:, int(v["partner_index"])]
-            return v["coulomb"] * np.tanh(motor / COUPLED_SMOOTHING) + v["viscous"] * motor
+            return v["coulomb"] * np.tanh(motor / v.get("smoothing", COUPLED_SMOOTHING)) + v["viscous"] * motor
         # torque_offset (a sensor bias), armature (in the model), torque_lag and torque_gain (the
         # sensor), transmission_backlash (the link's angle: TrueDynamics.link_angles)
         return np.zeros_like(qj)
@@ -335,6 +335,7 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
                 "viscous": (0.1 * v if size is None else 0.5 * size / vscale[j]),
                 "ratio": 1.0,
                 "partner_index": float(partner),
+                "smoothing": COUPLED_SMOOTHING,
             }
         elif req.name == "torque_lag":
             values = {"lag": 0.02 if size is None else size}

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diegocal.causes import causes_of
+from diegocal.causes import MIN_SMOOTHING, causes_of
 from diegocal.errors import InputFileError
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
@@ -56,10 +56,28 @@ def test_term_columns_are_the_torque_each_parameter_adds(arm3):
     np.testing.assert_allclose(spring[:, j, 0], q[:, j] - 0.3)
     arm = columns(make_term("armature", "joint3"), arm3, q, qd, qdd)
     np.testing.assert_array_equal(arm[:, 2, 0], qdd[:, 2])
-    cf = columns(make_term("coupled_friction", "joint3", extra={"partner": "joint2", "ratio": 2.0}), arm3, q, qd, qdd)
+    coupled = make_term("coupled_friction", "joint3", {"smoothing": 0.05}, extra={"partner": "joint2", "ratio": 2.0})
+    cf = columns(coupled, arm3, q, qd, qdd)
     v = qd[:, 2] + 2.0 * qd[:, 1]
-    np.testing.assert_allclose(cf[:, 2, 0], np.sign(v))
+    np.testing.assert_allclose(cf[:, 2, 0], np.tanh(v / 0.05))  # the motor's Coulomb friction, smoothed
     np.testing.assert_allclose(cf[:, 1, 1], 2.0 * v)  # the partner feels ratio × the motor's friction
+
+
+def test_a_coupled_friction_written_before_its_smoothing_reads_as_a_sign(arm3):
+    """A file whose coupled_friction has only coulomb and viscous (written before the smoothing was
+    a parameter) means a Coulomb part that switches with the motor's sign: smoothing 1e-4 rad/s."""
+    _, q, qd, qdd = states(arm3)
+    d = make_term("coupled_friction", "joint3", {"coulomb": 0.2, "viscous": 0.1},
+                  extra={"partner": "joint2", "ratio": 1.0}).to_dict()
+    del d["parameters"]["smoothing"]
+    old = term_from_dict(d, domain="dynamics")
+    assert old.value("smoothing") == MIN_SMOOTHING and old.value("coulomb") == 0.2
+    v = qd[:, 2] + qd[:, 1]
+    moving = np.abs(v) > 1e-2
+    np.testing.assert_allclose(columns(old, arm3, q, qd, qdd)[moving, 2, 0], np.sign(v[moving]))
+    del d["parameters"]["viscous"]  # a parameter that always existed is still required
+    with pytest.raises(InputFileError, match="has parameters"):
+        term_from_dict(d, domain="dynamics")
 
 
 def test_terms_round_trip_through_yaml_and_refuse_bad_input():
