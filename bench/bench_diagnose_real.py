@@ -34,6 +34,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))  # this checkout's diegocal, not whichever one is installed
 
 try:  # two cores shared by many processes: one BLAS thread is much faster than contention
     from threadpoolctl import threadpool_limits
