@@ -9,7 +9,8 @@ Over ``--seeds`` simulated arm3 logs (``diegocal simulate dynamics``'s simulator
 - **each diagnosed term's parameters**: where the top finding names the hidden cause on its joint,
   the share of its parameters within 2 SE of the simulator's value (a position friction only
   where the region found overlaps the true one by more than half, its Coulomb and viscous values
-  being those of the region).
+  being those of the region; a coupled friction only with the true partner and ratio; a payload's
+  ten parameters against its point mass's, under ``--inertia nominal``).
 
 With ``--robot ur5`` (or ``panda``) the PR base parameters are judged on clean logs of the
 independent generator (:mod:`experiments.dynamics_generator`: example-robot-data's inertias, a
