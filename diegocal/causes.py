@@ -273,17 +273,13 @@ KINEMATIC_SIZE_UNITS = {
 
 
 #: A dynamics parameter's unit on a prismatic joint (a slide: force, metres), from its unit on a
-#: revolute one (the registry's), longest first so that N·m·s/rad is not read as N·m.
-SLIDE_UNITS = (("N·m·s/rad", "N·s/m"), ("N·m/rad", "N/m"), ("N·m", "N"), ("rad/s", "m/s"), ("rad", "m"),
-               ("kg·m²", "kg"))
+#: revolute one (the registry's); units of neither (s, 1) read the same on both.
+SLIDE_UNITS = {"N·m·s/rad": "N·s/m", "N·m/rad": "N/m", "N·m": "N", "rad/s": "m/s", "rad": "m", "kg·m²": "kg"}
 
 
 def slide_unit(unit: str) -> str:
     """``unit`` (a revolute joint's: N·m, rad, kg·m², ...) as it reads on a prismatic joint."""
-    for rotary, slide in SLIDE_UNITS:
-        if unit == rotary:
-            return slide
-    return unit
+    return SLIDE_UNITS.get(unit, unit)
 
 
 def cause(name: str) -> Cause:
