@@ -35,13 +35,20 @@ def fit_filters(fit, terms, lags: dict, train, sigma) -> tuple[dict, np.ndarray]
     return _search(fit, terms, lags, train, sigma, plain), sigma
 
 
-def _residual_std(fit, terms, lags: dict, train, sigma, plain) -> np.ndarray:
-    """(k,) each joint's training residual std of the model with ``terms`` at the filter values
-    ``lags`` (the linear parameters solved with the weights ``sigma``)."""
+def _residual(fit, terms, lags: dict, train, sigma, plain) -> np.ndarray:
+    """(training rows, k) the residual of the model with ``terms`` at the filter values ``lags``,
+    its linear parameters solved with the weights ``sigma``; ``plain``: the columns at the logged
+    angles."""
     Aeff = fit._model_columns(terms, lags, plain)
     offset = fit._offset(lags)
     w, _ = fit._solve(Aeff, train, sigma, offset)
-    e = fit.tau[train] - (Aeff @ w + offset)[train]
+    return fit.tau[train] - (Aeff @ w + offset)[train]
+
+
+def _residual_std(fit, terms, lags: dict, train, sigma, plain) -> np.ndarray:
+    """(k,) each joint's training residual std of the model with ``terms`` at the filter values
+    ``lags`` (the linear parameters solved with the weights ``sigma``)."""
+    e = _residual(fit, terms, lags, train, sigma, plain)
     s = np.sqrt(np.nanmean(e * e, axis=0))
     return np.where(np.isfinite(s) & (s > 0), s, sigma)
 
@@ -51,12 +58,7 @@ def _search(fit, terms, lags: dict, train, sigma, plain) -> dict:
     lags = dict(lags)
 
     def cost(key, value):
-        trial = dict(lags)
-        trial[key] = value
-        Aeff = fit._model_columns(terms, trial, plain)
-        offset = fit._offset(trial)
-        w, _ = fit._solve(Aeff, train, sigma, offset)
-        e = (fit.tau[train] - (Aeff @ w + offset)[train]) / sigma
+        e = _residual(fit, terms, lags | {key: value}, train, sigma, plain) / sigma
         return float(np.nansum(e * e))
 
     for _ in range(2 if len(lags) > 1 else 1):
@@ -141,9 +143,6 @@ def _derivative(fit, A, w, key, lags: dict) -> np.ndarray:
     """(T,) the derivative of joint ``key[0]``'s prediction with respect to the filter ``key``'s
     value (central difference within the registry's bounds, the joint's other filters held)."""
     r, cause = key
-    v = lags[key]
-    h = max(1e-4, 0.01 * abs(v))
-    lo = max(v - h, registry_cause(cause).parameters[0].lower)
     own = {(0, c): x for (s, c), x in lags.items() if s == r}
 
     def joint_r(value):  # joint r's prediction with the term at ``value``
@@ -153,20 +152,25 @@ def _derivative(fit, A, w, key, lags: dict) -> np.ndarray:
             out += fit._lagged(fit.tau0[:, r : r + 1], trial)[:, 0]
         return out
 
-    return (joint_r(v + h) - joint_r(lo)) / (v + h - lo)
+    return _central_difference(joint_r, key, lags[key])
 
 
 def _play_derivative(fit, model, w, key, lags: dict) -> np.ndarray:
     """(T, k) the derivative of every joint's prediction with respect to the backlash ``key``'s
     half-width (central difference within the registry's bounds, the other filters held): the
     model's columns evaluated at the link angles of each trial half-width."""
-    v = lags[key]
-    h = max(1e-4, 0.01 * abs(v))
-    lo = max(v - h, registry_cause(key[1]).parameters[0].lower)
 
     def every_joint(value):  # the prediction with the half-width at ``value``
         trial = lags | {key: value}
         A = model.features(fit._angles(trial), fit.qd, fit.qdd, None, sensors=False)  # no time: angles as given
         return fit._lagged(A, trial) @ w + fit._offset(trial)
 
-    return (every_joint(v + h) - every_joint(lo)) / (v + h - lo)
+    return _central_difference(every_joint, key, lags[key])
+
+
+def _central_difference(predict, key, v: float) -> np.ndarray:
+    """The derivative of ``predict(value)`` at the filter ``key``'s value ``v``: a central
+    difference of 1 % of it (at least 1e-4), its lower side kept within the registry's bounds."""
+    h = max(1e-4, 0.01 * abs(v))
+    lo = max(v - h, registry_cause(key[1]).parameters[0].lower)
+    return (predict(v + h) - predict(lo)) / (v + h - lo)
