@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from diegocal.lstsq import TallLstsq
+from diegocal.lstsq import UPDATE_ROWS, TallLstsq
 
 
 def _chunked(X, y, sizes):
@@ -37,3 +37,14 @@ def test_a_rank_deficient_system_gets_the_minimum_norm_solution():
     w, _ = _chunked(X, y, (100, 200)).solve()
     np.testing.assert_allclose(w, np.linalg.lstsq(X, y, rcond=None)[0], rtol=1e-9, atol=1e-12)
     assert w[0] == pytest.approx(w[3])
+
+
+def test_a_chunk_longer_than_one_update_gives_the_same_factor():
+    rng = np.random.default_rng(3)
+    X = rng.standard_normal((2 * UPDATE_ROWS + 77, 5))
+    y = X @ rng.standard_normal(5) + rng.standard_normal(len(X))
+    whole, parts = _chunked(X, y, (len(X),)), _chunked(X, y, (UPDATE_ROWS - 1, 2, len(X) - UPDATE_ROWS - 1))
+    R0 = np.linalg.qr(np.column_stack([X, y]), mode="r")
+    for ls in (whole, parts):
+        np.testing.assert_allclose(np.abs(ls.R), np.abs(R0), rtol=1e-10, atol=1e-10)  # rows' signs are free
+        np.testing.assert_allclose(ls.solve()[0], np.linalg.lstsq(X, y, rcond=None)[0], rtol=1e-11)
