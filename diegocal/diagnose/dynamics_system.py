@@ -368,6 +368,12 @@ def filler(adapter, props, width: dict, slots: list):
     both = list(enumerate(zip(props, slots, strict=True)))
     given = [(i, p.columns, slot) for i, (p, slot) in both if p.columns is not None]
     own = [(i, p.term, slot) for i, (p, slot) in both if p.columns is None]
+    rigid = []
+
+    def rigid_torque() -> np.ndarray:  # every sample's, once: a load_friction's columns read it in every pass
+        if not rigid:
+            rigid.append(Motion(adapter.robot, adapter.q, adapter.qd, adapter.qdd).rigid_torque)
+        return rigid[0]
 
     def fill(rows, keep=None) -> dict:
         out = {r: np.empty((len(rows), w)) for r, w in width.items()}
@@ -375,7 +381,7 @@ def filler(adapter, props, width: dict, slots: list):
             if keep is None or keep[i]:
                 for j, c in cols.items():
                     out[adapter.row_of[j]][:, slot[adapter.row_of[j]]] = c[rows]
-        m = Motion(adapter.robot, adapter.q[rows], adapter.qd[rows], adapter.qdd[rows])
+        m = Motion(adapter.robot, adapter.q[rows], adapter.qd[rows], adapter.qdd[rows], lambda: rigid_torque()[rows])
         for i, term, slot in own:
             if keep is None or keep[i]:
                 X = motion_columns(term, m)

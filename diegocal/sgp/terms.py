@@ -89,16 +89,19 @@ def parameter_labels(term: Term) -> tuple[str, ...]:
 class Motion:
     """The samples a term's columns are computed on: ``robot``, ``q``, ``qd``, ``qdd`` (T, n), and
     what several terms share, computed once when first asked for (the rigid body's torque: every
-    joint's ``load_friction`` reads it)."""
+    joint's ``load_friction`` reads it). ``rigid``: a callable that gives it, where it is known
+    beyond these samples (a chunk of a long log whose every sample's is computed once)."""
 
-    def __init__(self, robot, q, qd, qdd):
+    def __init__(self, robot, q, qd, qdd, rigid=None):
         self.robot = robot
         self.q, self.qd, self.qdd = (np.asarray(x, float) for x in (q, qd, qdd))
-        self._rigid = None
+        self._rigid, self._given = None, rigid
 
     @property
     def rigid_torque(self) -> np.ndarray:
         """(T, n): the inverse dynamics at the URDF's inertias (RNEA, eq. 3.30 with the file's w)."""
+        if self._rigid is None and self._given is not None:
+            self._rigid = self._given()
         if self._rigid is None:
             model = self.robot.model
             data = model.createData()
