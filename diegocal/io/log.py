@@ -80,8 +80,13 @@ class Stream:
             raise UnknownNameError(f"no channel {name!r} in {where} (has {_preview(self.names)})") from None
 
     def select(self, names) -> Stream:
-        """A stream with only the named channels, in the given order."""
+        """A stream with only the named channels, in the given order. Every channel in the stream's
+        own order: the same samples, not a copy (a long log's are hundreds of MB), read-only."""
         idx = [self.index(n) for n in names]
+        if idx == list(range(len(self.names))):
+            data = self.data.view()
+            data.flags.writeable = False
+            return Stream(tuple(names), data, self.label)
         return Stream(tuple(names), self.data[:, idx], self.label)
 
 
