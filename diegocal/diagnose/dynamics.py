@@ -399,6 +399,7 @@ class DynamicsAdapter:
         model subtracted (:func:`~diegocal.diagnose.dynamics_system.project`); one whose columns
         lie in the model's span is not offered."""
         train = np.asarray(train, bool)
+        self._system_of = (None, None)  # a refit builds it again: its joints' regressors go before the columns come
         ctx = Context(
             self.robot,
             self.joints,
