@@ -25,6 +25,11 @@ a physical shape of its own (never a candidate term of ``diagnose``):
 - ``coupled_friction``: a motor turning with v = qd_j + qd_{j-1} (the TX40's wrist, joint j and
   the one before it; the one after for the first joint): a smooth Coulomb c·tanh(v / 0.05) plus
   viscous η v on joint j, the same on its partner (ratio 1);
+- ``stribeck_friction``: static friction above the Coulomb level, a·sign(qd_j)·exp(−|qd_j| / vs)
+  (amplitude a, velocity_scale vs = 0.05 rad/s);
+- ``load_friction``: a gear's friction that grows with the torque it transmits,
+  c·|τ_rb,j|·sign(qd_j), τ_rb the torque the true rigid body applies (``rnea`` at the links'
+  angles with any payload, less the armature's). Prescribed trajectories only;
 - ``torque_lag``: joint j's torque sensor is a first-order low-pass filter (time constant lag);
 - ``torque_gain``: joint j's torque sensor reads (1 + gain_error) x the torque (a miscalibrated
   sensor, a motor's torque constant off where torque is read from current);
@@ -34,10 +39,11 @@ a physical shape of its own (never a candidate term of ``diagnose``):
 - ``payload``: a point mass on a link (default the last).
 
 SIZE is the effect's magnitude: a torque in N·m (Coulomb level, RMS viscous torque on the reference
-excitation, the spring's torque at half the range, the offset, RMS armature torque), the time
-constant in s for ``torque_lag``, the relative gain error for ``torque_gain``, the half-width in
-rad for ``transmission_backlash`` (at most the registry's MAX_BACKLASH_RAD), the mass in kg for
-``payload``. Without it: scaled to the robot (a backlash: 0.02 rad).
+excitation, the spring's torque at half the range, the offset, RMS armature torque, the Stribeck
+amplitude), the time constant in s for ``torque_lag``, the relative gain error for ``torque_gain``,
+the coefficient (dimensionless) for ``load_friction``, the half-width in rad for
+``transmission_backlash`` (at most the registry's MAX_BACKLASH_RAD), the mass in kg for
+``payload``. Without it: scaled to the robot (a backlash: 0.02 rad; a load friction: 0.05).
 """
 
 from __future__ import annotations
@@ -87,7 +93,11 @@ JOINT_EFFECTS = (
     "torque_lag",
     "torque_gain",
     "transmission_backlash",
+    "stribeck_friction",
+    "load_friction",
 )
+#: the Stribeck peak's default velocity scale, rad/s
+STRIBECK_SCALE = 0.05
 
 
 @dataclass(frozen=True)
@@ -212,6 +222,10 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
                 "partner_index": float(partner),
                 "smoothing": COUPLED_SMOOTHING,
             }
+        elif req.name == "stribeck_friction":
+            values = {"amplitude": 0.2 * s if size is None else size, "velocity_scale": STRIBECK_SCALE}
+        elif req.name == "load_friction":
+            values = {"coefficient": 0.05 * g if size is None else size}
         elif req.name == "torque_lag":
             values = {"lag": 0.02 if size is None else size}
         elif req.name == "torque_gain":
@@ -366,8 +380,9 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
         model_rng = np.random.default_rng(options.robot_seed).spawn(3)[0]
     dyn = build_true_dynamics(robot, options, model_rng)
     kind = options.trajectory
-    if kind.startswith("pole-") and any(t.cause == "transmission_backlash" for t in dyn.terms):
-        raise SimOptionError(f"transmission_backlash is simulated on prescribed trajectories, not {kind}")
+    for cause in ("transmission_backlash", "load_friction"):  # the link's angle, its torque: of a known motion
+        if kind.startswith("pole-") and any(t.cause == cause for t in dyn.terms):
+            raise SimOptionError(f"{cause} is simulated on prescribed trajectories, not {kind}")
     if kind == "excitation":
         traj = excitation(robot.lower, robot.upper, time, rng)
     elif kind == "whirl":

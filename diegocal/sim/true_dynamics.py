@@ -13,6 +13,9 @@ from diegocal.sim.kinematic_effects import backlash
 
 #: velocity (rad/s) over which the coupled motor's Coulomb friction changes sign (tanh)
 COUPLED_SMOOTHING = 0.05
+#: the effects whose torque switches with sign(qd): the smooth dynamics (:meth:`TrueDynamics.linearise`)
+#: leave them out, as they leave out the joints' Coulomb friction
+SIGN_LIKE = ("coulomb_friction", "position_friction", "stribeck_friction", "load_friction")
 
 
 @dataclass(frozen=True)
@@ -23,8 +26,9 @@ class EffectTerm:
     j: int
     record: dict
 
-    def torque(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Added torque (T,) N·m on joint ``j`` for q, qd of shape (T, n)."""
+    def torque(self, q: np.ndarray, qd: np.ndarray, load: np.ndarray | None = None) -> np.ndarray:
+        """Added torque (T,) N·m on joint ``j`` for q, qd of shape (T, n); ``load`` (T, n) N·m, the
+        torque the rigid body applies (a ``load_friction`` needs it)."""
         v, qj, vj = self.record["values"], q[:, self.j], qd[:, self.j]
         if self.cause == "coulomb_friction":
             return v["coulomb"] * np.sign(vj)
@@ -39,6 +43,12 @@ class EffectTerm:
         if self.cause == "coupled_friction":
             motor = vj + v["ratio"] * qd[:, int(v["partner_index"])]
             return v["coulomb"] * np.tanh(motor / v.get("smoothing", COUPLED_SMOOTHING)) + v["viscous"] * motor
+        if self.cause == "stribeck_friction":  # the peak of static friction above Coulomb's level
+            return v["amplitude"] * np.sign(vj) * np.exp(-np.abs(vj) / v["velocity_scale"])
+        if self.cause == "load_friction":  # a gear's friction grows with the torque it transmits
+            if load is None:
+                raise ValueError("load_friction needs the rigid body's torque (prescribed trajectories only)")
+            return v["coefficient"] * np.abs(load[:, self.j]) * np.sign(vj)
         # torque_offset (a sensor bias), armature (in the model), torque_lag and torque_gain (the
         # sensor), transmission_backlash (the link's angle: TrueDynamics.link_angles)
         return np.zeros_like(qj)
@@ -63,14 +73,15 @@ class TrueDynamics:
             list(records),
         )
 
-    def extra_torque(self, q, qd, smooth: bool = False) -> np.ndarray:
-        """Friction and effect torques (T, n) N·m; ``smooth`` drops the sign() terms."""
+    def extra_torque(self, q, qd, smooth: bool = False, load: np.ndarray | None = None) -> np.ndarray:
+        """Friction and effect torques (T, n) N·m; ``smooth`` drops the sign() terms (:data:`SIGN_LIKE`);
+        ``load`` (T, n) N·m: the rigid body's torque, which a ``load_friction`` grows with."""
         q, qd = np.atleast_2d(q), np.atleast_2d(qd)
         out = self.viscous * qd + (0.0 if smooth else self.coulomb * np.sign(qd))
         for t in self.terms:
-            if smooth and t.cause in ("coulomb_friction", "position_friction"):
+            if smooth and t.cause in SIGN_LIKE:
                 continue
-            tau = t.torque(q, qd)
+            tau = t.torque(q, qd, load)
             out[:, t.j] += tau
             if t.cause == "coupled_friction":
                 v = t.record["values"]
@@ -107,11 +118,13 @@ class TrueDynamics:
 
     def inverse(self, q, qd, qdd) -> np.ndarray:
         """Applied joint torques (T, n) N·m of a trajectory: ``rnea`` at the links' angles
-        (:meth:`link_angles`) + friction + effects (no sensor offset)."""
+        (:meth:`link_angles`) + friction + effects (no sensor offset). A ``load_friction`` grows
+        with the torque the links apply, ``rnea``'s less the rotors' (an armature turns on the
+        motor's side of the gear: its torque is no load the gear carries)."""
         q, qd, qdd = (np.atleast_2d(np.asarray(a, float)) for a in (q, qd, qdd))
         link = self.link_angles(q)
         rb = np.array([pin.rnea(self.model, self.data, link[t], qd[t], qdd[t]) for t in range(q.shape[0])])
-        return rb + self.extra_torque(q, qd)
+        return rb + self.extra_torque(q, qd, load=rb - self.model.armature * qdd)
 
     def forward(self, q, qd, tau, smooth: bool = False) -> np.ndarray:
         """Accelerations (n,) rad/s² for one state and applied torque (n,): ``aba`` on τ − extra."""
