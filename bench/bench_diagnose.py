@@ -188,9 +188,10 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
 def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, dict]:
     """``cause:joint=size`` on a random joint (not the first, whose armature and the like are the
     first link's own inertia) with a torque U(3, 10) × the noise (a lag sized so that lag · RMS(dτ/dt)
-    is, a gain error so that it times RMS(τ) is, a backlash's half-width so that it times the
-    torque a radian of play moves is, at most the registry's), and for position_friction a random region, a fifth
-    of the joint's visited range."""
+    is, a gain error or a load friction's coefficient so that it times RMS(τ) is, a backlash's
+    half-width so that it times the torque a radian of play moves is, at most the registry's; a
+    Stribeck friction's amplitude, its torque at zero velocity, is), and for position_friction a
+    random region, a fifth of the joint's visited range."""
     from diegocal.causes import MAX_BACKLASH_RAD
     from diegocal.sim.dynamics import simulate_dynamics
 
@@ -203,7 +204,7 @@ def _sized_torque_effect(robot, cause: str, seed: int, options) -> tuple[str, di
     tau = clean.truth.signals["tau"].data[:, j]
     if cause == "torque_lag":
         size /= float(np.sqrt(np.mean(np.gradient(tau, clean.time) ** 2)))
-    elif cause == "torque_gain":  # the gain error times the joint's RMS torque
+    elif cause in ("torque_gain", "load_friction"):  # the gain error (coefficient) times the joint's RMS torque
         size /= float(np.sqrt(np.mean(tau**2)))
     elif cause == "transmission_backlash":  # the half-width times RMS |dτ/dq_j| over the joints
         size = min(size / _angle_sensitivity(robot, clean, j), MAX_BACKLASH_RAD)

@@ -47,8 +47,10 @@ def simulate_dynamics_cmd(
             "--effect",
             help="Dynamics effect NAME[:channel][=SIZE] to inject (repeatable): coulomb_friction, "
             "viscous_friction, position_friction, payload (channel: link; SIZE kg), spring, torque_offset, "
-            "armature, coupled_friction, torque_lag (SIZE s), torque_gain (SIZE the relative gain error), "
-            "transmission_backlash (SIZE the play's half-width, rad, at most 0.1); other SIZEs in N·m.",
+            "armature, coupled_friction, stribeck_friction (SIZE the peak above Coulomb), load_friction "
+            "(SIZE the coefficient, friction per N·m of the rigid body's torque), torque_lag (SIZE s), torque_gain "
+            "(SIZE the relative gain error), transmission_backlash (SIZE the play's half-width, rad, at most 0.1); "
+            "other SIZEs in N·m.",
         ),
     ] = None,
     region: Annotated[

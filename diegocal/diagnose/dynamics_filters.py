@@ -91,29 +91,25 @@ def filter_ses(fit, model, w, lags: dict, pred, train, sigma) -> dict:
             D[:, key[0], f] = _derivative(fit, A, w, key, lags)
         else:  # a backlash: every joint's prediction moves
             D[:, :, f] = _play_derivative(fit, model, w, key, lags)
-    P = X.shape[2] + len(keys)
-    gram = np.zeros((P, P))
-    idx = np.flatnonzero(train)
-    step = max(CHUNK_ROWS // X.shape[1], 1)
-    for i in range(0, idx.size, step):
-        rows = idx[i : i + step]
-        Z = np.concatenate([X[rows], D[rows]], axis=2) / sigma[None, :, None]
-        good = np.isfinite(fit.tau[rows]) & np.isfinite(Z).all(axis=2)
-        Z = np.where(good[:, :, None], Z, 0.0)
-        gram += np.einsum("tkp,tkq->pq", Z, Z)
-    var = _marginal_variances(gram, X.shape[2])
-    s2 = np.zeros(X.shape[1])  # each joint's residual variance, weighted
-    for r in range(X.shape[1]):
+    var = marginal_variances(normal_matrix(X, D, fit.tau, train, sigma), X.shape[2])
+    scale = read_variances(fit, D, pred, train, sigma, [key[0] for key in keys])
+    return {key: float(np.sqrt(scale[f] * var[f])) if var[f] > 0 else float("nan") for f, key in enumerate(keys)}
+
+
+def read_variances(fit, D: np.ndarray, pred: np.ndarray, train: np.ndarray, sigma: np.ndarray, own) -> np.ndarray:
+    """(F,) the residual variance (weighted by ``sigma``) of the joints each of F values is read
+    from, weighted by what each tells of it (its derivative column in D (T, k, F): a sensor's, its
+    own joint's; a backlash's, every joint its play moves); ``own`` (F,) the row of each value's
+    joint, read where its column is zero."""
+    s2 = np.zeros(D.shape[1])  # each joint's residual variance, weighted
+    for r in range(D.shape[1]):
         ok = train & np.isfinite(fit.tau[:, r])
         e = fit.tau[ok, r] - pred[ok, r]
         s2[r] = float(e @ e) / max(ok.sum() - 1, 1) / sigma[r] ** 2
-    out = {}
-    for f, key in enumerate(keys):
-        # the residual variance of the joints the value is read from, weighted by what each tells
-        # of it (a sensor's: its own joint's; a backlash's: every joint its play moves)
+    out = np.zeros(D.shape[2])
+    for f in range(D.shape[2]):
         energy = np.nansum((D[train, :, f] / sigma[None, :]) ** 2, axis=0)
-        scale = float(energy @ s2 / energy.sum()) if energy.sum() > 0 else float(s2[key[0]])
-        out[key] = float(np.sqrt(scale * var[f])) if var[f] > 0 else float("nan")
+        out[f] = float(energy @ s2 / energy.sum()) if energy.sum() > 0 else float(s2[own[f]])
     return out
 
 
@@ -123,7 +119,24 @@ def filter_ses(fit, model, w, lags: dict, pred, train, sigma) -> dict:
 SINGULAR = 1e-9
 
 
-def _marginal_variances(gram: np.ndarray, p: int) -> np.ndarray:
+def normal_matrix(X: np.ndarray, D: np.ndarray, tau: np.ndarray, train: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(P + F, P + F): the normal matrix of the model's columns X (T, k, P) and the derivative
+    columns D (T, k, F), each joint weighted by ``sigma`` (k,), over the ``train`` rows (T,) where
+    the joint's torque ``tau`` (T, k) and the columns are finite, CHUNK_ROWS rows at a time."""
+    P = X.shape[2] + D.shape[2]
+    gram = np.zeros((P, P))
+    idx = np.flatnonzero(train)
+    step = max(CHUNK_ROWS // X.shape[1], 1)
+    for i in range(0, idx.size, step):
+        rows = idx[i : i + step]
+        Z = np.concatenate([X[rows], D[rows]], axis=2) / sigma[None, :, None]
+        good = np.isfinite(tau[rows]) & np.isfinite(Z).all(axis=2)
+        Z = np.where(good[:, :, None], Z, 0.0)
+        gram += np.einsum("tkp,tkq->pq", Z, Z)
+    return gram
+
+
+def marginal_variances(gram: np.ndarray, p: int) -> np.ndarray:
     """(F,) the variances of the last F unknowns of the normal matrix ``gram`` with the first ``p``
     (the model's columns) free: the inverse of their Schur complement's diagonal, infinite for a
     value along a direction the data do not fix."""

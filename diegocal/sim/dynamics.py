@@ -25,6 +25,11 @@ a physical shape of its own (never a candidate term of ``diagnose``):
 - ``coupled_friction``: a motor turning with v = qd_j + qd_{j-1} (the TX40's wrist, joint j and
   the one before it; the one after for the first joint): a smooth Coulomb c·tanh(v / 0.05) plus
   viscous η v on joint j, the same on its partner (ratio 1);
+- ``stribeck_friction``: static friction above the Coulomb level, a·sign(qd_j)·exp(−|qd_j| / vs)
+  (amplitude a, velocity_scale vs = 0.05 rad/s);
+- ``load_friction``: a gear's friction that grows with the torque it transmits,
+  c·|τ_rb,j|·sign(qd_j), τ_rb the torque the true rigid body applies (``rnea`` at the links'
+  angles with any payload, less the armature's). Prescribed trajectories only;
 - ``torque_lag``: joint j's torque sensor is a first-order low-pass filter (time constant lag);
 - ``torque_gain``: joint j's torque sensor reads (1 + gain_error) x the torque (a miscalibrated
   sensor, a motor's torque constant off where torque is read from current);
@@ -34,10 +39,11 @@ a physical shape of its own (never a candidate term of ``diagnose``):
 - ``payload``: a point mass on a link (default the last).
 
 SIZE is the effect's magnitude: a torque in N·m (Coulomb level, RMS viscous torque on the reference
-excitation, the spring's torque at half the range, the offset, RMS armature torque), the time
-constant in s for ``torque_lag``, the relative gain error for ``torque_gain``, the half-width in
-rad for ``transmission_backlash`` (at most the registry's MAX_BACKLASH_RAD), the mass in kg for
-``payload``. Without it: scaled to the robot (a backlash: 0.02 rad).
+excitation, the spring's torque at half the range, the offset, RMS armature torque, the Stribeck
+amplitude), the time constant in s for ``torque_lag``, the relative gain error for ``torque_gain``,
+the coefficient (dimensionless) for ``load_friction``, the half-width in rad for
+``transmission_backlash`` (at most the registry's MAX_BACKLASH_RAD), the mass in kg for
+``payload``. Without it: scaled to the robot (a backlash: 0.02 rad; a load friction: 0.05).
 """
 
 from __future__ import annotations
@@ -54,7 +60,6 @@ from diegocal.io.bundle import LAYOUT
 from diegocal.sgp.regressor import INERTIAL_NAMES
 from diegocal.sim.dynamics_truth import true_friction, true_inertial  # noqa: F401  (importable from here)
 from diegocal.sim.effects import SimOptionError, check_channel, check_effects, effect_record
-from diegocal.sim.kinematic_effects import backlash
 from diegocal.sim.trajectories import (
     excitation,
     figure_eight,
@@ -65,6 +70,7 @@ from diegocal.sim.trajectories import (
     time_base,
     whirl,
 )
+from diegocal.sim.true_dynamics import COUPLED_SMOOTHING, EffectTerm, TrueDynamics
 from diegocal.terms import make_term
 
 TRAJECTORIES = (
@@ -87,9 +93,11 @@ JOINT_EFFECTS = (
     "torque_lag",
     "torque_gain",
     "transmission_backlash",
+    "stribeck_friction",
+    "load_friction",
 )
-#: velocity (rad/s) over which the coupled motor's Coulomb friction changes sign (tanh)
-COUPLED_SMOOTHING = 0.05
+#: the Stribeck peak's default velocity scale, rad/s
+STRIBECK_SCALE = 0.05
 
 
 @dataclass(frozen=True)
@@ -123,129 +131,6 @@ class DynamicsOptions:
     figure8_size: tuple = (0.12, 0.06)  # fractions of the arm's reach
     figure8_period: float = 4.0
     robot_seed: int | None = None
-
-
-@dataclass(frozen=True)
-class EffectTerm:
-    """One injected joint effect: its truth record and which joint column ``j`` it adds to."""
-
-    cause: str
-    j: int
-    record: dict
-
-    def torque(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Added torque (T,) N·m on joint ``j`` for q, qd of shape (T, n)."""
-        v, qj, vj = self.record["values"], q[:, self.j], qd[:, self.j]
-        if self.cause == "coulomb_friction":
-            return v["coulomb"] * np.sign(vj)
-        if self.cause == "viscous_friction":
-            return v["viscous"] * vj
-        if self.cause == "spring":
-            return v["stiffness"] * (qj - v["rest"])
-        if self.cause == "position_friction":
-            r = self.record["region"]
-            inside = (qj >= r["low"]) & (qj <= r["high"])
-            return inside * (v["coulomb"] * np.sign(vj) + v["viscous"] * vj)
-        if self.cause == "coupled_friction":
-            motor = vj + v["ratio"] * qd[:, int(v["partner_index"])]
-            return v["coulomb"] * np.tanh(motor / v.get("smoothing", COUPLED_SMOOTHING)) + v["viscous"] * motor
-        # torque_offset (a sensor bias), armature (in the model), torque_lag and torque_gain (the
-        # sensor), transmission_backlash (the link's angle: TrueDynamics.link_angles)
-        return np.zeros_like(qj)
-
-
-class TrueDynamics:
-    """The simulated robot's true dynamics: a (payload-modified) Pinocchio model, joint friction and
-    physical effect terms, plus the torque sensor's offset.
-
-    Attributes
-    ----------
-    model : pinocchio.Model, viscous (n,) N·m·s/rad, coulomb (n,) N·m, terms : list of EffectTerm,
-    offset (n,) N·m added to measured torques only, records : list of dict (/truth effects).
-    """
-
-    def __init__(self, model, viscous, coulomb, terms, offset, records):
-        self.model, self.data = model, model.createData()
-        self.viscous, self.coulomb = np.asarray(viscous, float), np.asarray(coulomb, float)
-        self.terms, self.offset, self.records = (
-            list(terms),
-            np.asarray(offset, float),
-            list(records),
-        )
-
-    def extra_torque(self, q, qd, smooth: bool = False) -> np.ndarray:
-        """Friction and effect torques (T, n) N·m; ``smooth`` drops the sign() terms."""
-        q, qd = np.atleast_2d(q), np.atleast_2d(qd)
-        out = self.viscous * qd + (0.0 if smooth else self.coulomb * np.sign(qd))
-        for t in self.terms:
-            if smooth and t.cause in ("coulomb_friction", "position_friction"):
-                continue
-            tau = t.torque(q, qd)
-            out[:, t.j] += tau
-            if t.cause == "coupled_friction":
-                v = t.record["values"]
-                out[:, int(v["partner_index"])] += v["ratio"] * tau
-        return out
-
-    def sensor(self, tau: np.ndarray, time: np.ndarray) -> np.ndarray:
-        """What the torque sensors read of the applied torques (T, n): ``torque_lag`` joints
-        through a first-order low-pass filter L·y' + y = τ (exact for a torque linear between
-        samples, so a lag shorter than a sample still delays), ``torque_gain`` joints times
-        (1 + gain_error), + offset."""
-        out = np.array(tau, float, copy=True)
-        for t in self.terms:
-            if t.cause == "torque_gain":
-                out[:, t.j] *= 1.0 + t.record["values"]["gain_error"]
-            if t.cause != "torque_lag":
-                continue
-            lag = t.record["values"]["lag"]
-            x, y = tau[:, t.j], out[:, t.j]
-            for k in range(1, x.size):
-                a = np.exp(-(time[k] - time[k - 1]) / lag)
-                m = (x[k] - x[k - 1]) / (time[k] - time[k - 1])  # the input's slope in the step
-                y[k] = a * (y[k - 1] - x[k - 1] + lag * m) + x[k] - lag * m
-        return out + self.offset
-
-    def link_angles(self, q: np.ndarray) -> np.ndarray:
-        """The links' angles (T, n) of a motor trajectory q (T, n): a ``transmission_backlash``
-        joint's through the simulators' play operator (a dead band of twice the half-width,
-        :func:`~diegocal.sim.kinematic_effects.backlash`); the others' are the motor's."""
-        link = np.array(q, float, copy=True)
-        for t in (t for t in self.terms if t.cause == "transmission_backlash"):
-            link[:, t.j] = backlash(q[:, t.j], 2.0 * t.record["values"]["half_width"])
-        return link
-
-    def inverse(self, q, qd, qdd) -> np.ndarray:
-        """Applied joint torques (T, n) N·m of a trajectory: ``rnea`` at the links' angles
-        (:meth:`link_angles`) + friction + effects (no sensor offset)."""
-        q, qd, qdd = (np.atleast_2d(np.asarray(a, float)) for a in (q, qd, qdd))
-        link = self.link_angles(q)
-        rb = np.array([pin.rnea(self.model, self.data, link[t], qd[t], qdd[t]) for t in range(q.shape[0])])
-        return rb + self.extra_torque(q, qd)
-
-    def forward(self, q, qd, tau, smooth: bool = False) -> np.ndarray:
-        """Accelerations (n,) rad/s² for one state and applied torque (n,): ``aba`` on τ − extra."""
-        extra = self.extra_torque(q[None], qd[None], smooth)[0]
-        return pin.aba(self.model, self.data, q, qd, np.asarray(tau, float) - extra).copy()
-
-    def linearise(self, q_eq: np.ndarray, actuated: np.ndarray, eps: float = 1e-6):
-        """A (2n, 2n), B (2n, m) of ẋ = A x + B u about (q_eq, 0), x = [q − q_eq, qd], by central
-        differences of the smooth true forward dynamics (sign() friction left out)."""
-        n = q_eq.size
-        A, B = np.zeros((2 * n, 2 * n)), np.zeros((2 * n, actuated.size))
-        A[:n, n:] = np.eye(n)
-        zero = np.zeros(n)
-        for i in range(2 * n):
-            d = np.zeros(2 * n)
-            d[i] = eps
-            plus = self.forward(q_eq + d[:n], d[n:], zero, smooth=True)
-            minus = self.forward(q_eq - d[:n], -d[n:], zero, smooth=True)
-            A[n:, i] = (plus - minus) / (2 * eps)
-        for k, j in enumerate(actuated):
-            u = np.zeros(n)
-            u[j] = eps
-            B[n:, k] = (self.forward(q_eq, zero, u, True) - self.forward(q_eq, zero, -u, True)) / (2 * eps)
-        return A, B
 
 
 def robot_scales(robot) -> tuple[np.ndarray, np.ndarray]:
@@ -337,6 +222,10 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
                 "partner_index": float(partner),
                 "smoothing": COUPLED_SMOOTHING,
             }
+        elif req.name == "stribeck_friction":
+            values = {"amplitude": 0.2 * s if size is None else size, "velocity_scale": STRIBECK_SCALE}
+        elif req.name == "load_friction":
+            values = {"coefficient": 0.05 * g if size is None else size}
         elif req.name == "torque_lag":
             values = {"lag": 0.02 if size is None else size}
         elif req.name == "torque_gain":
@@ -491,8 +380,9 @@ def simulate_dynamics(robot, options: DynamicsOptions, rng: np.random.Generator)
         model_rng = np.random.default_rng(options.robot_seed).spawn(3)[0]
     dyn = build_true_dynamics(robot, options, model_rng)
     kind = options.trajectory
-    if kind.startswith("pole-") and any(t.cause == "transmission_backlash" for t in dyn.terms):
-        raise SimOptionError(f"transmission_backlash is simulated on prescribed trajectories, not {kind}")
+    for cause in ("transmission_backlash", "load_friction"):  # the link's angle, its torque: of a known motion
+        if kind.startswith("pole-") and any(t.cause == cause for t in dyn.terms):
+            raise SimOptionError(f"{cause} is simulated on prescribed trajectories, not {kind}")
     if kind == "excitation":
         traj = excitation(robot.lower, robot.upper, time, rng)
     elif kind == "whirl":

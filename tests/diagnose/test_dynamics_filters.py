@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from diegocal.diagnose.dynamics_filters import _marginal_variances
+from diegocal.diagnose.dynamics_filters import marginal_variances
 
 
 def test_the_variances_are_the_inverse_normal_matrix_and_infinite_where_degenerate():
@@ -15,7 +15,7 @@ def test_the_variances_are_the_inverse_normal_matrix_and_infinite_where_degenera
     d = rng.standard_normal((200, 2))
     Z = np.hstack([x, d])
     gram = Z.T @ Z
-    np.testing.assert_allclose(_marginal_variances(gram, 3), np.diag(np.linalg.inv(gram))[3:], rtol=1e-9)
+    np.testing.assert_allclose(marginal_variances(gram, 3), np.diag(np.linalg.inv(gram))[3:], rtol=1e-9)
     d[:, 1] = x @ [1.0, -2.0, 0.5] - d[:, 0]  # the two together are in the model's span
     Z = np.hstack([x, d])
-    assert np.isinf(_marginal_variances(Z.T @ Z, 3)).all()
+    assert np.isinf(marginal_variances(Z.T @ Z, 3)).all()
