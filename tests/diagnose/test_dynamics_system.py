@@ -28,6 +28,7 @@ def adapter():
     opts = DynamicsOptions(duration=8.0, noise=0.01)
     log = simulate_dynamics(robot, opts, np.random.default_rng(3))
     (ad,) = adapters(log, robot, None)
+    ad.tau = ad.tau.copy()  # the log's samples are read-only: the test's own copy to write into
     ad.tau[5, 1] = np.nan  # a missing torque: its row is left out of every fit
     return ad
 
