@@ -35,9 +35,9 @@ from diegocal.sgp.model import PREDICT_SAMPLES
 from diegocal.sgp.regressor import CHUNK, base_regressor
 from diegocal.sgp.terms import Motion, is_filter, joints_of, motion_columns, term_columns
 
-#: Samples per chunk where a fitted model's columns are rebuilt beside every candidate's: half the model's
-#: own prediction chunk, as these chunks hold both (a long log's peak memory)
-SAMPLES = PREDICT_SAMPLES // 2
+#: Samples per chunk where a fitted model's columns are rebuilt beside every candidate's: a quarter of the
+#: model's own prediction chunk, as these chunks hold both (a long log's peak memory)
+SAMPLES = PREDICT_SAMPLES // 4
 #: Below this fraction of a candidate's norm left, its projection's fraction is recomputed from the
 #: residual itself (the difference of squared norms keeps about 8 digits of it: enough above)
 NEAR_SPAN = 1e-3
