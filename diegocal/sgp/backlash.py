@@ -54,16 +54,24 @@ def play(x: np.ndarray, time: np.ndarray | None, half_width: float) -> np.ndarra
         cuts[1:1] = (np.flatnonzero(steps > 1.5 * float(np.median(steps))) + 1).tolist()
     b = float(half_width)
     for s, e in zip(cuts[:-1], cuts[1:], strict=True):
-        lows, highs, y = (x[s:e] - b).tolist(), (x[s:e] + b).tolist(), float(x[s])
-        seg = [0.0] * (e - s)
-        for t, (lo, hi) in enumerate(zip(lows, highs, strict=True)):  # the recursion: a plain loop
-            if y < lo:
-                y = lo
-            elif y > hi:
-                y = hi
-            seg[t] = y
-        out[s:e] = seg
+        low, high = _clamps_so_far(x[s:e] - b, x[s:e] + b)
+        out[s:e] = np.minimum(np.maximum(x[s], low), high)
     return out
+
+
+def _clamps_so_far(low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The recursion y_t = clamp(y_{t−1}, low_t, high_t) as one clamp per sample of the first
+    sample's y: a clamp followed by a clamp is a clamp, [clamp(l₁, l₂, h₂), clamp(h₁, l₂, h₂)],
+    so the clamps of every prefix come from a doubling scan (log₂ T steps of whole-array minima
+    and maxima: exact, as the loop is, and several times faster than a Python loop)."""
+    low, high = low.copy(), high.copy()
+    d = 1
+    while d < low.size:
+        earlier_low = np.minimum(np.maximum(low[:-d], low[d:]), high[d:])
+        earlier_high = np.minimum(np.maximum(high[:-d], low[d:]), high[d:])
+        low[d:], high[d:] = earlier_low, earlier_high
+        d *= 2
+    return low, high
 
 
 def link_angles(terms, robot, q: np.ndarray, time: np.ndarray | None) -> np.ndarray:

@@ -38,6 +38,15 @@ def test_play_follows_the_motor_a_half_width_behind_and_restarts_at_a_gap():
     np.testing.assert_array_equal(play(x, time, 0.0), x)
 
 
+@pytest.mark.parametrize("n", [2, 3, 1000, 4097])
+def test_play_equals_the_recursion_sample_by_sample(n):
+    x = np.cumsum(np.random.default_rng(n).standard_normal(n)) * 0.02
+    y, link = play(x, None, 0.03), float(x[0])
+    for t in range(n):  # y_t = clamp(y_{t-1}, x_t - b, x_t + b), one sample at a time
+        link = min(max(link, x[t] - 0.03), x[t] + 0.03)
+        assert y[t] == link
+
+
 def test_a_backlash_model_predicts_with_the_link_angle_and_needs_the_time(arm3, tmp_path):
     """Held at the simulator's half-width, the model's columns at the link angle fit the torque
     to the noise; the same model without the backlash misses it several times over."""
