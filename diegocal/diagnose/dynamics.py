@@ -258,6 +258,7 @@ class DynamicsAdapter:
         model = DynamicsModel(self.robot, self._options(), self.joints, terms)
         model.fit_arrays(self.q[rows], self.qd[rows], self.qdd[rows], self.tau[rows], time=self.time[rows])
         pred = model.mean_in_chunks(self.q, self.qd, self.qdd, self.time)
+        model.keep_training_mean(pred[rows])
         sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
         w = model.parametric_.values
         se_nan = self._unidentified(model, rows, terms)

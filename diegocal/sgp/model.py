@@ -343,6 +343,14 @@ class DynamicsModel:
             self._nmse = nmse(self.mean_in_chunks(q, qd, qdd, self.time_), self.tau_)
         return self._nmse
 
+    def keep_training_mean(self, mean: np.ndarray) -> None:
+        """Take ``mean`` (T_train, k), the posterior mean on the training samples from a pass the
+        caller made anyway, as :attr:`nmse_in_sample_`'s, sparing that pass. A model with a filter
+        along time (a lag, a play) runs it over the training samples as a series of their own:
+        that one makes its own."""
+        if not any(needs_time(t) for t in self.terms):
+            self._nmse = nmse(mean, self.tau_)
+
     def mean_in_chunks(self, q, qd, qdd, time) -> np.ndarray:
         """(T, k) the posterior mean torque at states (T, n) each, PREDICT_SAMPLES at a time, so
         that a long log's features are never built whole (all at once for a model with a
