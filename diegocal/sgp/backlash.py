@@ -103,9 +103,8 @@ def backlash_proposals(cause: str, ctx) -> list:
         if (cause, j) in ctx.have:
             continue
         i = ctx.robot.joint_index(j)
-        x = np.asarray(ctx.q[:, i], float)
         for b in HALF_WIDTH_GRID:
-            shift = ((play(x, ctx.time, b) - x) / b).astype(np.float32)  # in [-1, 1]
+            shift = ctx.sensitivity.shift(i, ctx.time, b)
             cols = {k: PlayColumn(ctx.sensitivity, r, i, shift) for r, k in enumerate(ctx.joints)}
             out.append(Proposal(make_term(cause, j, {"half_width": b}), f"{cause}:{j}", cols))
     return out
@@ -122,6 +121,16 @@ class AngleSensitivity:
         self.q, self.qd, self.qdd = q, qd, qdd
         self.rows = np.asarray(rows, int)
         self._key, self._value = None, None
+        self._shifts: dict = {}
+
+    def shift(self, i: int, time, half_width: float) -> np.ndarray:
+        """(T,) float32 in [-1, 1]: (play_b(q_i) − q_i) / b of joint index i, made once per joint
+        and half-width (every round of a diagnosis proposes the same)."""
+        key = (i, half_width)
+        if key not in self._shifts:
+            x = np.asarray(self.q[:, i], float)
+            self._shifts[key] = ((play(x, time, half_width) - x) / half_width).astype(np.float32)
+        return self._shifts[key]
 
     def at(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
