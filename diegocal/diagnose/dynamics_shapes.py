@@ -16,6 +16,7 @@ from scipy.optimize import minimize_scalar
 
 from diegocal.causes import cause as registry_entry
 from diegocal.diagnose.dynamics_filters import marginal_variances, normal_matrix, read_variances
+from diegocal.diagnose.dynamics_system import feature_chunks
 from diegocal.sgp.terms import columns, is_filter
 
 #: edges are refined over REGION_STEPS points within REGION_SPAN proposal bins either side
@@ -128,9 +129,8 @@ def with_shape_se(fit, term, model, pred, rows):
     shapes = [p for p in specs(term) if p.shape]
     if r is None or not shapes:
         return term
-    X = model.features(fit.q, fit.qd, fit.qdd, fit.time)  # (T, k, P): the model's columns
     amp = np.array([p.value for p in term.linear])
-    D = np.zeros((X.shape[0], X.shape[1], len(shapes)))
+    D = np.zeros((len(fit.time), len(fit.rows), len(shapes)))
     for f, spec in enumerate(shapes):
         v, h = term.value(spec.name), 0.01 * term.value(spec.name)
         up, down = (
@@ -139,8 +139,11 @@ def with_shape_se(fit, term, model, pred, rows):
         )
         D[:, :, f] = (up - down) @ amp / (2 * h)
     sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
-    gram = normal_matrix(X, D, fit.tau, rows, sigma)
-    P = X.shape[2]
+    gram = sum(  # the model's columns (T, k, P) a chunk of training samples at a time, never whole
+        normal_matrix(A, D[at], fit.tau[at], np.ones(at.size, bool), sigma)
+        for at, A in feature_chunks(model, fit, np.flatnonzero(rows))
+    )
+    P = gram.shape[0] - len(shapes)
     G_xx, G_xd = gram[:P, :P], gram[:P, P:]
     held = np.linalg.pinv(G_xx)
     B = held @ G_xd  # how each column's value moves with the shapes
