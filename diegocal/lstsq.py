@@ -44,8 +44,9 @@ class TallLstsq:
             block = np.empty((min(UPDATE_ROWS, len(y) - i), n), order="F")
             block[:, :-1] = X[i : i + UPDATE_ROWS]
             block[:, -1] = y[i : i + UPDATE_ROWS]
+            # R's strictly lower part is never referenced, so it stays zero
             self.R, _, _, info = lapack.dtpqrt(0, min(32, n), self.R, block, overwrite_a=True, overwrite_b=True)
-            assert info == 0, f"dtpqrt: argument {-info} is illegal"  # the strictly lower part stays zero
+            assert info == 0, f"dtpqrt: argument {-info} is illegal"
         self.rows += len(y)
 
     def solve(self) -> tuple[np.ndarray, float]:

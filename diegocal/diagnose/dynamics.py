@@ -157,7 +157,7 @@ class DynamicsAdapter:
             self.base = base_parameters(robot, self.friction, rows=self.rows if subset else None)
             self.tau0 = np.broadcast_to(0.0, self.tau.shape)  # zeros that take no memory (read-only)
         self._F = None  # (T, k, r) the base regressor of every sample, built only for a torque_lag
-        self._sensitivity = AngleSensitivity(robot, self.q, self.qd, self.qdd, self.rows)  # one for every round
+        self._sensitivity = AngleSensitivity(robot, self.q, self.qd, self.qdd, self.rows, self.time)  # every round's
         self._system_of = (None, None)  # (training mask, its TrainingSystem)
 
     @property

@@ -26,6 +26,8 @@ only for a model with a ``torque_lag``, whose filter runs along the whole log).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.linalg import solve_triangular
 
@@ -369,12 +371,10 @@ def filler(adapter, props, width: dict, slots: list):
     both = list(enumerate(zip(props, slots, strict=True)))
     given = [(i, p.columns, slot) for i, (p, slot) in both if p.columns is not None]
     own = [(i, p.term, slot) for i, (p, slot) in both if p.columns is None]
-    rigid = []
 
+    @functools.cache
     def rigid_torque() -> np.ndarray:  # every sample's, once: a load_friction's columns read it in every pass
-        if not rigid:
-            rigid.append(Motion(adapter.robot, adapter.q, adapter.qd, adapter.qdd).rigid_torque)
-        return rigid[0]
+        return Motion(adapter.robot, adapter.q, adapter.qd, adapter.qdd).rigid_torque
 
     def fill(rows, keep=None) -> dict:
         out = {r: np.empty((len(rows), w)) for r, w in width.items()}

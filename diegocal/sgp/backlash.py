@@ -104,7 +104,7 @@ def backlash_proposals(cause: str, ctx) -> list:
             continue
         i = ctx.robot.joint_index(j)
         for b in HALF_WIDTH_GRID:
-            shift = ctx.sensitivity.shift(i, ctx.time, b)
+            shift = ctx.sensitivity.shift(i, b)
             cols = {k: PlayColumn(ctx.sensitivity, r, i, shift) for r, k in enumerate(ctx.joints)}
             out.append(Proposal(make_term(cause, j, {"half_width": b}), f"{cause}:{j}", cols))
     return out
@@ -114,22 +114,22 @@ class AngleSensitivity:
     """∂τ/∂q (m, k, n) of a motion q, qd, qdd (T, n): the rigid body's at the URDF's inertias
     (pinocchio's RNEA derivatives), torque rows ``rows``, on the samples asked; the last samples'
     kept (the candidates' columns are filled one chunk of samples at a time, every candidate's in
-    turn)."""
+    turn); with its ``time`` (T,) s, each joint's play shifts too (:meth:`shift`)."""
 
-    def __init__(self, robot, q, qd, qdd, rows):
+    def __init__(self, robot, q, qd, qdd, rows, time=None):
         self.model = robot.model
-        self.q, self.qd, self.qdd = q, qd, qdd
+        self.q, self.qd, self.qdd, self.time = q, qd, qdd, time
         self.rows = np.asarray(rows, int)
         self._key, self._value = None, None
         self._shifts: dict = {}
 
-    def shift(self, i: int, time, half_width: float) -> np.ndarray:
-        """(T,) float32 in [-1, 1]: (play_b(q_i) − q_i) / b of joint index i, made once per joint
-        and half-width (every round of a diagnosis proposes the same)."""
+    def shift(self, i: int, half_width: float) -> np.ndarray:
+        """(T,) float32 in [-1, 1]: (play_b(q_i) − q_i) / b of joint index i along the motion's
+        ``time``, made once per joint and half-width (every round of a diagnosis proposes the same)."""
         key = (i, half_width)
         if key not in self._shifts:
             x = np.asarray(self.q[:, i], float)
-            self._shifts[key] = ((play(x, time, half_width) - x) / half_width).astype(np.float32)
+            self._shifts[key] = ((play(x, self.time, half_width) - x) / half_width).astype(np.float32)
         return self._shifts[key]
 
     def at(self, idx) -> np.ndarray:
