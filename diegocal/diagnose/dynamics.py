@@ -135,6 +135,9 @@ class DynamicsAdapter:
     #: channel -> the selection's weight of its rows, set by the engine: the candidates it proposes
     #: are then each family's best variant only (:class:`~diegocal.diagnose.dynamics_system.FamilyRanks`)
     selection_weights = None
+    #: a gain judged on every joint is refitted against its joint's rivals (a fit is cheap here; a
+    #: kinematic one is STAC's alternation): :func:`~diegocal.diagnose.stand_ins.refit_rival`
+    refit_rivals = True
 
     def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS, inertia="identified"):
         self.robot = robot

@@ -19,9 +19,18 @@ import numpy as np
 from diegocal.causes import search_end, unphysical
 from diegocal.diagnose.evidence import curves, direction, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
-from diegocal.diagnose.selection import channel_weights, choose, common_candidates, evaluate_candidates, simplest
+from diegocal.diagnose.selection import (  # noqa: F401  (TWIN, indistinguishable: the engine's words, imported from here)
+    TWIN,
+    channel_weights,
+    choose,
+    common_candidates,
+    evaluate_candidates,
+    indistinguishable,
+    rival_causes,
+    simplest,
+)
 from diegocal.diagnose.show import binned_candidate, region_of, show
-from diegocal.diagnose.stand_ins import declined_rival, outshone, own_channel, spilled, stand_in_finding
+from diegocal.diagnose.stand_ins import declined_rival, outshone, own_channel, refit_rival, spilled, stand_in_finding
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
     Adapter,
@@ -104,6 +113,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
     rival = getattr(adapter, "shape_rival", None)  # a model of another shape, judged on the adapter's own score
+    refits = getattr(adapter, "refit_rivals", False)  # a term judged on several channels against its channel's rival
     for _ in range(options.max_rounds):
         # the last round's columns go before this round's are built (a tested candidate's columns
         # are views of its round's whole block: one kept Tested keeps all of them)
@@ -120,8 +130,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         neighbours = None if spill is None else partial(spill, fitted, train)
         shape = None if rival is None else partial(rival, fitted, train, val, options, exclude)
+        refit = partial(refit_rival, adapter, terms, (train, val), weights, exclude) if refits else None
         best, group, tested = _choose_group(
-            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined, shape
+            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined, shape, refit
         )
         group = [g for g in group if _key(g.term) not in declined]
         candidates = commons = None  # what follows needs the tested terms, not their columns:
@@ -300,7 +311,8 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
 
 
 def _choose_group(
-    tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=(), shape=None
+    tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=(), shape=None,
+    refit=None,
 ) -> tuple:
     """(the best candidate, the terms this round adds, the candidates left in the running): the
     best and the other channels of its cause (no terms when nothing is significant). A best term
@@ -311,7 +323,9 @@ def _choose_group(
     one (``declined``) explained better (:func:`~.stand_ins.declined_rival`), and that of a term a
     model of another shape beats on the adapter's own score (``shape(term)``: the adapter's
     ``shape_rival``, (the rival as tested, its evidence) or None; a chamber's pressure read through
-    a filter, :mod:`.pneumatics_filter`). A common cause whose channels
+    a filter, :mod:`.pneumatics_filter`). A best term that a rival of its channel judged on fewer
+    channels beats once both are refitted (``refit(best, tested)``: :func:`~.stand_ins.refit_rival`,
+    for an adapter with ``refit_rivals``) is declined, and the next best chosen. A common cause whose channels
     have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
     simpler cause does as well (:func:`~.selection.simplest`)."""
     while (best := choose(tested, val)) is not None:
@@ -336,6 +350,11 @@ def _choose_group(
         if flex is None and shape is not None and (found := shape(best.term)) is not None:
             flex, rival = found
             why, evidence = f"{rival['model']} does", {"rival": rival}
+        if flex is None and refit is not None and (found := refit(best, tested)) is not None:
+            declined[_key(best.term)] = found[1]  # the rival's channel's best judged next
+            say(f"{best.term.cause} on {_where(best.term.channel, unit)}: {found[1]}; declined")
+            tested = [replace(t, significant=False) if t is best else t for t in tested]
+            continue
         if flex is None:
             commons = _common(best, tested, declined, res, weights, train, val, options, exclude)
             return best, [best, *commons], tested
@@ -399,43 +418,6 @@ def _where(channel: str, unit: str) -> str:
 
 def _key(term: Term) -> tuple[str, str]:
     return term.cause, term.channel
-
-
-#: Two candidates of one cause whose validation fits differ by less than this share of what the
-#: chosen one removes are one finding to the data (:func:`indistinguishable`).
-TWIN = 0.01
-
-
-def indistinguishable(chosen: Tested, tested) -> list[str]:
-    """The channels on which ``chosen``'s cause fits as well (:func:`_alike`): (nearly) the same
-    columns, as a joint's offset along the axis of the joint before it is that joint's offset; the
-    data cannot tell which channel it is, and the finding says so. A common candidate that holds
-    the chosen channel (``joint2+joint3``) is no other channel: it fits as well by holding it."""
-    ref = next((t for t in tested if _key(t.term) == _key(chosen.term)), chosen)
-    return [t.term.channel for t in _alike(ref, tested)
-            if t.term.cause == ref.term.cause and ref.term.channel not in t.term.channel.split("+")]
-
-
-def rival_causes(chosen: Tested, tested) -> list[str]:
-    """The significant terms of other causes that fit as well as ``chosen`` (:func:`_alike`: a
-    torque offset and a spring on a joint whose angle never nears the spring's rest): the data
-    cannot tell which cause it is, and the finding says so."""
-    return [t.term.label for t in _alike(chosen, tested) if t.significant and t.term.cause != chosen.term.cause]
-
-
-def _alike(ref: Tested, tested) -> list:
-    """The tested candidates that act on ``ref``'s residual channels and fit the validation data as
-    well as it to within TWIN of what it removes."""
-    removed = ref.test.sse_before - ref.test.sse_after
-    if not removed > 0:
-        return []
-    return [
-        t
-        for t in tested
-        if set(t.channels) == set(ref.channels)
-        and np.isclose(t.test.sse_before, ref.test.sse_before)
-        and abs(t.test.sse_after - ref.test.sse_after) <= TWIN * removed
-    ]
 
 
 #: A fitted coefficient is determined by the data when it is at least this many standard errors

@@ -359,3 +359,41 @@ def simplest(best: Tested, tested: list[Tested], validation: np.ndarray) -> Test
     if simpler:
         return min(simpler, key=lambda t: (t.n_params, t.test.sse_after))
     return best
+
+
+#: Two candidates of one cause whose validation fits differ by less than this share of what the
+#: chosen one removes are one finding to the data (:func:`indistinguishable`).
+TWIN = 0.01
+
+
+def indistinguishable(chosen: Tested, tested) -> list[str]:
+    """The channels on which ``chosen``'s cause fits as well (:func:`_alike`): (nearly) the same
+    columns, as a joint's offset along the axis of the joint before it is that joint's offset; the
+    data cannot tell which channel it is, and the finding says so. A common candidate that holds
+    the chosen channel (``joint2+joint3``) is no other channel: it fits as well by holding it."""
+    key = (chosen.term.cause, chosen.term.channel)
+    ref = next((t for t in tested if (t.term.cause, t.term.channel) == key), chosen)
+    return [t.term.channel for t in _alike(ref, tested)
+            if t.term.cause == ref.term.cause and ref.term.channel not in t.term.channel.split("+")]
+
+
+def rival_causes(chosen: Tested, tested) -> list[str]:
+    """The significant terms of other causes that fit as well as ``chosen`` (:func:`_alike`: a
+    torque offset and a spring on a joint whose angle never nears the spring's rest): the data
+    cannot tell which cause it is, and the finding says so."""
+    return [t.term.label for t in _alike(chosen, tested) if t.significant and t.term.cause != chosen.term.cause]
+
+
+def _alike(ref: Tested, tested) -> list:
+    """The tested candidates that act on ``ref``'s residual channels and fit the validation data as
+    well as it to within TWIN of what it removes."""
+    removed = ref.test.sse_before - ref.test.sse_after
+    if not removed > 0:
+        return []
+    return [
+        t
+        for t in tested
+        if set(t.channels) == set(ref.channels)
+        and np.isclose(t.test.sse_before, ref.test.sse_before)
+        and abs(t.test.sse_after - ref.test.sse_after) <= TWIN * removed
+    ]

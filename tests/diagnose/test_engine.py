@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -311,6 +312,41 @@ def test_a_term_weaker_than_a_declined_one_on_its_channel_stands_in_for_it():
     assert declined_rival(droop, [droop, leak, elsewhere], {**declined, ("chamber_leak", "c"): "rose"}) is None
     assert declined_rival(offset, [droop, offset], {("supply_droop", "c"): "rose"}) is None
     assert declined_rival(droop, [droop, wider], {("backlash", "c"): "rose"}) is None
+
+
+def test_a_term_judged_on_several_channels_loses_to_its_channel_s_rival_when_both_are_refitted():
+    """A gain judged on every joint is credited with what the refit of the shared parameters gains on
+    the others, an offset only with its own joint's: the refits judge both on the same channels, and
+    the one that leaves less of their weighted validation error wins (a Z1 shoulder's offset had
+    been named a gain). A rival with more parameters, on another channel, or judged on the same
+    channels is not refitted; a best term on one channel has no such rival."""
+    from diegocal.diagnose.stand_ins import refit_rival
+
+    left = {"gain": [2.0, 1.0], "offset": [1.5, 1.0], "spring": [0.1, 0.1], "lag": [0.1, 0.1]}  # RMSE on c, d
+
+    class Refits:
+        def fit(self, terms, train):
+            return terms[-1].cause
+
+        def score(self, fitted, mask, exclude):
+            return SimpleNamespace(channels=["c", "d"], rmse=np.array(left[fitted]), n_samples=np.array([10, 10]))
+
+    def tested(cause, channels, n_params=1, significant=True, own="c"):
+        test = SimpleNamespace(sse_before=100.0, sse_after=50.0)
+        return SimpleNamespace(term=Term(cause, own, ()), channels=channels, test=test, strongest=None,
+                               significant=significant, n_params=n_params, candidate=SimpleNamespace(members=()))
+
+    gain, offset = tested("gain", ("c", "d")), tested("offset", ("c",))
+    spring, lag = tested("spring", ("c",), n_params=2), tested("lag", ("c", "d"))
+    elsewhere = tested("lag", ("d",), own="d")
+    judge = partial(refit_rival, Refits(), (), (None, None), {"c": 1.0, "d": 1.0}, {})
+    rival, why = judge(gain, [gain, offset, spring, lag, elsewhere])
+    assert rival is offset and "offset:c leaves less of the validation error of c, d" in why
+    assert "(65% of what gain leaves)" in why  # (1.5² + 1) / (2² + 1) of the weighted squares
+    left["offset"] = [2.5, 1.0]
+    assert judge(gain, [gain, offset]) is None
+    assert judge(gain, [gain, tested("offset", ("c",), significant=False)]) is None
+    assert judge(offset, [offset, gain]) is None  # judged on one channel: nothing to credit it with
 
 
 def test_a_term_that_a_model_of_another_shape_beats_on_the_adapter_s_score_stands_in_for_it():
