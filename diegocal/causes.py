@@ -174,10 +174,11 @@ _CAUSES = (
           "the rigid body's base inertial parameters (eq. 3.30)", named_by_model=True),
     Cause("viscous_friction", "dynamics", "term", "joint",
           (_positive("viscous", "N·m·s/rad", "torque per unit velocity"),),
-          "viscous friction (a torque proportional to the velocity)", signed_by="qd"),
+          "viscous friction missing from the model (a torque proportional to the velocity)", signed_by="qd"),
     Cause("coulomb_friction", "dynamics", "term", "joint",
           (_positive("coulomb", "N·m", "torque that follows the sign of the velocity"),),
-          "Coulomb friction (a torque that follows the sign of the velocity)", signed_by="qd"),
+          "Coulomb friction missing from the model (a torque that follows the sign of the velocity)",
+          signed_by="qd"),
     Cause("stribeck_friction", "dynamics", "term", "joint",
           (_p("amplitude", "N·m", "torque at zero velocity beyond Coulomb's (> 0: static friction above "
               "Coulomb, Stribeck; < 0: a smooth, pre-sliding transition through zero velocity)"),

@@ -19,7 +19,7 @@ import numpy as np
 from diegocal.causes import search_end, unphysical
 from diegocal.diagnose.evidence import curves, direction, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
-from diegocal.diagnose.selection import (  # noqa: F401  (TWIN, indistinguishable: the engine's words, imported from here)
+from diegocal.diagnose.selection import (
     TWIN,
     channel_weights,
     choose,

@@ -15,40 +15,19 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from diegocal.diagnose.engine import TWIN
+from diegocal.causes import phrase
 from diegocal.diagnose.output import shifting_channels
+from diegocal.diagnose.selection import TWIN
 from diegocal.io import load_yaml
 from diegocal.report.finding_notes import notes, parameters_text
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
 from diegocal.report.style import COLORS, axes_or_new, save_page
 
-#: What each cause means, in words (DESIGN.md's vocabulary and its extensions).
-PHRASES = {
-    "position_friction": "friction confined to part of the joint's range",
-    "coulomb_friction": "Coulomb friction missing from the model (a torque that follows the sign of the velocity)",
-    "viscous_friction": "viscous friction missing from the model (a torque proportional to the velocity)",
-    "payload": "an unmodelled mass on this link",
-    "spring": "a spring (a torque proportional to the joint angle)",
-    "torque_offset": "a constant offset of the torque sensor",
-    "armature": "rotor inertia (a torque proportional to the acceleration)",
-    "coupled_friction": "friction of a motor that drives both joints",
-    "torque_lag": "the measured torque lags the motion",
-    "torque_gain": "the torque sensor's gain (or the motor's torque constant) is off",
-    "transmission_backlash": "the joint's transmission has play: the link lags the motor's angle",
-    "link_offset": "the joint's origin differs from the URDF",
-    "sensor_nonlinearity": "the pot's transfer curve is not linear",
-    "backlash": "the pot lags by a dead band that depends on the direction of motion",
-    "time_offset": "the mocap and pot clocks are shifted",
-    "marker_slip": "the marker moved on its link during the session",
-    "marker_outliers": "some marker readings are outliers (ghosts, reflections)",
-    "swapped_labels": "two markers' labels are swapped in some frames",
-    "valve_delay": "the pressure answers the valve command late",
-    "chamber_leak": "air escapes the chamber when it is sealed",
-    "supply_droop": "the supply pressure sags under high flow",
-    "pressure_offset": "the pressure sensor's zero drifted",
-    "unexplained": "structured residual that no term of the vocabulary explains",
-}
+
+def meaning(cause: str) -> str:
+    """A cause in plain words: the registry's phrase (:func:`diegocal.causes.phrase`), else its name."""
+    return phrase(cause) or cause.replace("_", " ")
 
 
 def recognise(path: Path) -> bool:
@@ -64,7 +43,7 @@ def describe(path: Path) -> dict:
 
 def sentence(f: dict) -> str:
     """One finding in plain words: where, what, and what fixing it gained on held-out data."""
-    what = PHRASES.get(f["cause"], f["cause"].replace("_", " "))
+    what = meaning(f["cause"])
     r = f.get("region")
     if r:
         end = "on" if r["high"] == float("inf") else f"to {r['high']:.3g}"
@@ -158,7 +137,7 @@ def summary_lines(d: dict) -> list[str]:
     for f in d.get("minor_faults") or []:
         red = (f.get("gain") or {}).get("reduction")
         out.append(
-            f"Minor data fault, no finding: {PHRASES.get(f['cause'], f['cause'])} on {f['channel']} "
+            f"Minor data fault, no finding: {meaning(f['cause'])} on {f['channel']} "
             f"({f.get('readings')} flagged); writing them off changes the held-out error by "
             f"{f'{-red:+.1%}' if red is not None else 'nothing measurable'}, under what a finding must remove"
             + ("; written off all the same." if f.get("written_off") else "; left in the data.")

@@ -433,7 +433,7 @@ def test_no_cause_named_is_not_nothing_significant_when_a_term_was_declined_or_a
 
 
 def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
-    from diegocal.diagnose.engine import TWIN
+    from diegocal.diagnose.selection import TWIN
     from diegocal.report.diagnose import sentence
 
     f = {
