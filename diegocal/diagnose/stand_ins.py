@@ -89,23 +89,24 @@ REFIT_RIVALS = 2
 
 
 def refit_rival(adapter, terms, masks, weights, exclude, best: Tested, tested) -> tuple[Tested, str] | None:
-    """(rival, why in words) when a significant term of another cause on ``best``'s own channel, with
+    """(rival, why in words) when a significant term of another cause on the channel ``best`` names, with
     no more parameters but judged on fewer channels (a joint's torque offset on its joint, a gain on
     every joint), removes more of the weighted validation error of ``best``'s channels once each is
     refitted into the model with ``terms`` (None otherwise). The one-step test credits ``best`` with
     what the refit of the shared parameters gains on its other channels and the rival with its own
     channel's only; the refits judge both on the same rows (a Z1 shoulder's 0.3 N·m offset was
     named a gain of −2 %). ``masks``: train, validation."""
-    if best.candidate.members or len(best.channels) < 2:
-        return None
-    own = own_channel(best)
+    own = best.term.channel
+    if best.candidate.members or len(best.channels) < 2 or own not in best.channels:
+        return None  # a payload's columns are its own on every joint it loads: no credit to even out
     rivals = sorted(
         (
             t
             for t in tested
             if t.significant
+            and not t.candidate.members  # a cause tested on several channels at once is no term to fit
             and t.term.cause != best.term.cause
-            and own_channel(t) == own
+            and t.term.channel == own
             and set(t.channels) < set(best.channels)
             and t.n_params <= best.n_params
         ),

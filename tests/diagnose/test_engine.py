@@ -319,7 +319,8 @@ def test_a_term_judged_on_several_channels_loses_to_its_channel_s_rival_when_bot
     the others, an offset only with its own joint's: the refits judge both on the same channels, and
     the one that leaves less of their weighted validation error wins (a Z1 shoulder's offset had
     been named a gain). A rival with more parameters, on another channel, or judged on the same
-    channels is not refitted; a best term on one channel has no such rival."""
+    channels is not refitted, nor a cause tested on several channels at once; a best term on one
+    channel, or one that names none of its channels (a payload on a link), has no such rival."""
     from diegocal.diagnose.stand_ins import refit_rival
 
     left = {"gain": [2.0, 1.0], "offset": [1.5, 1.0], "spring": [0.1, 0.1], "lag": [0.1, 0.1]}  # RMSE on c, d
@@ -339,14 +340,18 @@ def test_a_term_judged_on_several_channels_loses_to_its_channel_s_rival_when_bot
     gain, offset = tested("gain", ("c", "d")), tested("offset", ("c",))
     spring, lag = tested("spring", ("c",), n_params=2), tested("lag", ("c", "d"))
     elsewhere = tested("lag", ("d",), own="d")
+    common = tested("spring", ("c",))  # one cause tested on several channels at once: no term to refit
+    common.candidate.members = (spring,)
     judge = partial(refit_rival, Refits(), (), (None, None), {"c": 1.0, "d": 1.0}, {})
-    rival, why = judge(gain, [gain, offset, spring, lag, elsewhere])
+    rival, why = judge(gain, [gain, offset, spring, lag, elsewhere, common])
     assert rival is offset and "offset:c leaves less of the validation error of c, d" in why
     assert "(65% of what gain leaves)" in why  # (1.5² + 1) / (2² + 1) of the weighted squares
     left["offset"] = [2.5, 1.0]
     assert judge(gain, [gain, offset]) is None
     assert judge(gain, [gain, tested("offset", ("c",), significant=False)]) is None
     assert judge(offset, [offset, gain]) is None  # judged on one channel: nothing to credit it with
+    payload = tested("payload", ("c", "d"), own="link")
+    assert judge(payload, [payload, offset]) is None
 
 
 def test_a_term_that_a_model_of_another_shape_beats_on_the_adapter_s_score_stands_in_for_it():
