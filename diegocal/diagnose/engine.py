@@ -328,13 +328,19 @@ def _choose_group(
     for an adapter with ``refit_rivals``) is declined, and the next best chosen. A common cause whose channels
     have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
     simpler cause does as well (:func:`~.selection.simplest`)."""
+    beaten, everyone = [], tested  # beaten: best terms a rival beat when both were refitted
+
+    def left():  # the candidates left in the running and the beaten ones, in the order tested
+        kept = {id(t) for t in (*tested, *beaten)}
+        return [t for t in everyone if id(t) in kept]
+
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
             group = _members(best, tested, declined, res, weights, train, val, options, exclude)
             if len(group) == 1 and simplest(group[0], tested, val) is not group[0]:
                 group = []  # its evidence is one channel's, where a simpler cause does as well
             if group:
-                return best, group, tested
+                return best, group, left()
             tested = [t for t in tested if t is not best]
             continue
         own = own_channel(best)
@@ -353,16 +359,16 @@ def _choose_group(
         if flex is None and refit is not None and (found := refit(best, tested)) is not None:
             declined[_key(best.term)] = found[1]  # the rival's channel's best judged next
             say(f"{best.term.cause} on {_where(best.term.channel, unit)}: {found[1]}; declined")
-            tested = [replace(t, significant=False) if t is best else t for t in tested]
+            tested, beaten = [t for t in tested if t is not best], [*beaten, best]  # a runner-up, with why
             continue
         if flex is None:
             commons = _common(best, tested, declined, res, weights, train, val, options, exclude)
-            return best, [best, *commons], tested
+            return best, [best, *commons], left()
         stand_in = (replace(best, candidate=None), replace(flex, candidate=None), evidence)  # no columns kept
         stand_ins.setdefault(own, stand_in)
         say(f"{best.term.cause} on {_where(best.term.channel, unit)} explains less than {why}: {own} left unexplained")
         tested = [t for t in tested if t is not best and own not in t.channels]
-    return None, [], tested
+    return None, [], left()
 
 
 #: A channel of a common cause (one cause tested on several channels at once) is added only with

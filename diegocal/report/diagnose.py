@@ -255,6 +255,8 @@ def _significant(r: dict) -> str:
         return "yes; next round"
     if why.startswith("stood in"):
         return "yes; stood in"
+    if why.startswith("refitted"):
+        return "yes; less refitted"
     return "yes; less on its channel" if why else "yes"
 
 
@@ -338,8 +340,9 @@ RUNNERS_NOTE = (
     "The other candidate terms of the round, fitted on the training blocks and scored on the validation blocks "
     "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
     "which holds the family-wise false-alarm rate over all candidates; a significant one was not added because the "
-    "chosen term explains more of its channel's error (less on its channel) or acts elsewhere and is tested again "
-    "after it (next round)."
+    "chosen term explains more of its channel's error (less on its channel), leaves more of the validation error "
+    "than the chosen one when each is refitted into the model (less refitted), or acts elsewhere and is tested "
+    "again after it (next round)."
 )
 
 

@@ -560,6 +560,9 @@ def test_the_term_that_stood_in_is_listed_as_such_among_the_runners_up():
     assert rows[0][-1] == "yes; stood in"
     _, rows = runners_table({"runners_up": [{**runner, "why_not": "supply_droop explains more of the error"}]})
     assert rows[0][-1] == "yes; less on its channel"
+    refitted = "refitted into the model, torque_offset:joint2 leaves less of the validation error of joint1, joint2"
+    _, rows = runners_table({"runners_up": [{**runner, "why_not": refitted}]})
+    assert rows[0][-1] == "yes; less refitted"
 
 
 def test_only_chambers_beyond_the_thesis_bound_are_still_open(results, tmp_path):
