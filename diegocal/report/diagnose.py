@@ -340,9 +340,8 @@ RUNNERS_NOTE = (
     "The other candidate terms of the round, fitted on the training blocks and scored on the validation blocks "
     "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
     "which holds the family-wise false-alarm rate over all candidates; a significant one was not added because the "
-    "chosen term explains more of its channel's error (less on its channel), leaves more of the validation error "
-    "than the chosen one when each is refitted into the model (less refitted), or acts elsewhere and is tested "
-    "again after it (next round)."
+    "chosen term explains more of its channel's error (less on its channel, or less refitted: both refitted) or "
+    "acts elsewhere (next round)."
 )
 
 
