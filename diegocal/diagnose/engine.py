@@ -314,7 +314,8 @@ def _choose_group(
     tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=(), shape=None,
     refit=None,
 ) -> tuple:
-    """(the best candidate, the terms this round adds, the candidates left in the running): the
+    """(the best candidate, the terms this round adds, the candidates left in the running and those a
+    rival beat once both were refitted, in the order tested): the
     best and the other channels of its cause (no terms when nothing is significant). A best term
     that its channel's state explains far better stands in for structure of another shape: its
     channel goes to ``stand_ins`` (left unexplained) and the next best is chosen; so does the
