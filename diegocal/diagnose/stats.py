@@ -86,9 +86,10 @@ class OutOfSample:
     t, df, p : its cluster-robust t, degrees of freedom (clusters − 1), one-sided p-value
     sse_before, sse_after : Σ r², Σ (r − a)² over the validation rows (weighted units)
     length : the sub-block length (samples) the variance was taken over
-    before, after : Σ r² and Σ (r − a)² per validation sample (the mask's samples in time order,
-        not all T: every tested candidate keeps them), to compare candidates on a common
-        partition (:func:`paired_difference`)
+    after : Σ (r − a)² per validation sample (the mask's samples in time order, not all T: every
+        tested candidate keeps it), to compare candidates on a common partition
+        (:func:`paired_difference`); Σ r² per sample is not kept (nothing compares it, and a
+        round's few hundred tested candidates would hold it for every validation sample)
     """
 
     slope: float
@@ -98,7 +99,6 @@ class OutOfSample:
     sse_before: float
     sse_after: float
     length: int
-    before: np.ndarray
     after: np.ndarray
 
     @property
@@ -136,14 +136,14 @@ def out_of_sample_test(
     r, a = np.asarray(r, float), np.asarray(a, float)
     samples, mask = np.asarray(samples, int), np.asarray(mask, bool)
     T = mask.size
-    before = np.bincount(samples, weights=r * r, minlength=T)
+    sse_before = float(np.bincount(samples, weights=r * r, minlength=T).sum())
     after = np.bincount(samples, weights=(r - a) ** 2, minlength=T)
-    sse_before, sse_after = float(before.sum()), float(after.sum())
-    before, after = before[mask], after[mask]  # kept by every tested candidate: the mask's samples only
+    sse_after = float(after.sum())
+    after = after[mask]  # kept by every tested candidate: the mask's samples only
     saa = float(a @ a)
     floor = _floor(mask)
     if r.size < 3 * floor or saa <= 0 or not np.isfinite(saa):
-        return OutOfSample(0.0, 0.0, 1, 1.0, sse_before, sse_after, floor, before, after)
+        return OutOfSample(0.0, 0.0, 1, 1.0, sse_before, sse_after, floor, after)
     slope = float(a @ r) / saa
     u = r - slope * a
     seen = np.zeros(T, bool)
@@ -159,7 +159,7 @@ def out_of_sample_test(
     C = int(cl.max()) + 1
     if C < 3:
         return OutOfSample(
-            slope, 0.0, max(C - 1, 1), 1.0, sse_before, sse_after, length, before, after
+            slope, 0.0, max(C - 1, 1), 1.0, sse_before, sse_after, length, after
         )
     s = np.bincount(cl, weights=a * u, minlength=C)
     var = float(s @ s) / saa**2 * C / (C - 1)
@@ -167,7 +167,7 @@ def out_of_sample_test(
     t = slope / se if np.isfinite(se) else 0.0
     df = C - 1
     return OutOfSample(
-        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, before, after
+        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, after
     )
 
 
@@ -205,7 +205,7 @@ def _floor(mask: np.ndarray) -> int:
 def paired_difference(x: np.ndarray, y: np.ndarray, mask: np.ndarray, length: int) -> tuple[float, float, int]:
     """Mean and standard error over sub-blocks of ``mask`` (T,) (of ``length`` samples) of the
     per-block sums of ``x − y`` (values on the mask's samples, in time order: :class:`OutOfSample`'s
-    ``before``/``after``); and the number of sub-blocks."""
+    ``after``); and the number of sub-blocks."""
 
     cl = sub_blocks(mask, length)[np.asarray(mask, bool)]
     d = np.bincount(cl, weights=x - y)
