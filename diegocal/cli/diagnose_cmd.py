@@ -127,7 +127,7 @@ def run_diagnose(args: DiagnoseArgs, command: str = "diegocal diagnose", progres
     from diegocal.io import load_log, load_yaml
     from diegocal.robot.resolve import robot_for_log
 
-    data = load_log(args.log)
+    data = load_log(args.log).without_truth()  # never read here: a simulated log's hidden signals go at once
     todo = (args.domain,) if args.domain else domains_of(data)
     if not todo:
         have = ", ".join(sorted(data.streams)) or "none"
