@@ -277,7 +277,7 @@ class KinematicsAdapter:
         if term.cause in POT_CAUSES:
             j = self.pot_names.index(term.channel)
             f = pot_columns(term, self.raw_pots[:, j], fitted.pots[:, j])  # (T, k): a dead band runs along the log
-            return Columns(partial(pot_block, j=j, f=f), span=j, projected=True)
+            return Columns(partial(pot_block, j=j, f=sweep.on_disk(f)), span=j, projected=True)  # read per block
         if term.cause == "link_offset":
             return Columns(partial(Linearised.link_offset_basis, joint=term.channel))
         if term.cause == "time_offset":

@@ -24,7 +24,7 @@ from diegocal.diagnose.kinematics_lin import (
     row_gram,
     weighted_gram,
 )
-from diegocal.diagnose.spill import BlockStore, Spill
+from diegocal.diagnose.spill import BlockStore, DiskArray, Spill, on_disk
 from diegocal.parallel import in_order
 from diegocal.progress import ticker
 from diegocal.stac.loo import batch_projection, frame_slices, pot_sigmas, sigma_of
@@ -85,6 +85,14 @@ class Sweep:
         # back (a few milliseconds) instead of making it again (the forward kinematics, the
         # Jacobians and an n x n inverse per frame: a sixth of a pass)
         self.kept = BlockStore(self.T)
+        self._scratch: Spill | None = None  # :meth:`on_disk`'s file
+
+    def on_disk(self, x: np.ndarray) -> DiskArray:
+        """``x`` (T, ...) in the sweep's scratch file, which its blocks read a block of rows at a time:
+        a round's pot candidates' whole-log ∂p̂/∂θ (2.4 kB a frame on diego) are not held (issue #33)."""
+        if self._scratch is None:
+            self._scratch = Spill()
+        return on_disk(x, spill=self._scratch)[0]
 
     def blocks(self):
         """Each block's :class:`Linearised`, in turn."""

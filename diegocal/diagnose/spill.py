@@ -48,6 +48,20 @@ class Spill:
         return out
 
 
+def on_disk(*arrays: np.ndarray, spill: Spill | None = None) -> tuple:
+    """``arrays`` (each (T, ...)) written to ``spill`` (default: a new one), as DiskArrays: a
+    whole-log array that is read a block of rows at a time (or read back whole now and then) need
+    not be held (issue #33)."""
+    spill = Spill() if spill is None else spill
+    out = []
+    for x in arrays:
+        x = np.asarray(x)
+        d = spill.array(x.shape, x.dtype)
+        d.write(0, x)
+        out.append(d)
+    return tuple(out)
+
+
 class DiskArray:
     """An array (T, ...) in a :class:`Spill`'s file, read by rows: ``x[samples]`` (a slice or
     integer indices) reads the span they cover and returns those rows as a numpy array."""
