@@ -48,6 +48,7 @@ from diegocal.diagnose.kinematics_lin import Linearised, running_median, step_er
 from diegocal.diagnose.kinematics_refine import REFINED, plausible_start, refined
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan, slip_value
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
+from diegocal.diagnose.spill import on_disk
 from diegocal.diagnose.types import Candidate, Fault, Residuals
 from diegocal.evaluate import Score, score
 from diegocal.io import Log, save_yaml
@@ -91,7 +92,7 @@ class KinFit:
     pots: np.ndarray
     markers: np.ndarray
     train: np.ndarray = field(repr=False)
-    deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) residuals of --from others
+    deleted: tuple | None = field(default=None, repr=False)  # (pots, markers) residuals of --from others, on disk
     unconverged: tuple = ()  # what in this fit stopped at a cap before its tolerance, in words
 
 
@@ -433,7 +434,7 @@ class KinematicsAdapter:
         joint's q has a small residual whatever its transfer curve, and a term that corrects it
         moves q back onto the other sensors, so its own residual grows while every other sensor's
         shrinks."""
-        rp, rm = (x.copy() for x in self.deleted(fitted))
+        rp, rm = self.deleted(fitted)  # read back afresh: written into below
         for c, ex in (exclude or {}).items():
             ex = np.asarray(ex, bool)
             if c in self.pot_names:
@@ -456,7 +457,8 @@ class KinematicsAdapter:
 
     def deleted(self, fitted: KinFit) -> tuple:
         """(pots (T, P) V, markers (T, M, 3) m): each reading minus its prediction by the frame's
-        other sensors with the model as saved (:meth:`score`), computed once per fit. Its q is
+        other sensors with the model as saved (:meth:`score`), computed once per fit (kept in a
+        temporary file, :func:`~diegocal.diagnose.spill.on_disk`; each call reads it afresh). Its q is
         tracked from the fit's own (the same model and sensors: the same minimum to the tracking's
         tolerance) rather than from the pots' inversion, which takes many more steps."""
         if fitted.deleted is None:
@@ -465,8 +467,8 @@ class KinematicsAdapter:
             pots = pred.pots[:, [pred.pot_names.index(n) for n in self.pot_names]]
             markers = pred.markers[:, [pred.marker_names.index(n) for n in self.marker_names]]
             readings = relabelled(self.log.stream("markers").data, self.marker_names, fitted.terms)  # labels as read
-            fitted.deleted = (self.raw_pots - pots, readings - markers)
-        return fitted.deleted
+            fitted.deleted = on_disk(self.raw_pots - pots, readings - markers)  # not held: 0.9 kB a frame per fit
+        return tuple(np.asarray(x) for x in fitted.deleted)
 
     def terms(self, fitted: KinFit):
         return tuple(fitted.terms)
