@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from diegocal.diagnose.spill import Spill
 from diegocal.robot.gauges import gauge_axes
 from diegocal.stac.terms import SLIP
 
@@ -74,13 +75,16 @@ class SlipScan:
     """Each training frame's G and b of :func:`slip_samples` for the markers ``names``, gathered from
     the projected position columns a :class:`Sweep` hands :meth:`add` (column sets ``first`` on):
     (T_train, 3, 3) and (T_train, 3) per marker, not the (T, R, 3) columns, nor the other frames'
-    (zero: issue #33, 2.3 kB a frame on diego)."""
+    (zero: issue #33, 2.3 kB a frame on diego), in a temporary file (:class:`~.spill.Spill`) as they
+    come: :meth:`samples` reads one marker's back at a time."""
 
     def __init__(self, train: np.ndarray, names, first: int):
         self.first = first
         self.row = np.cumsum(train) - 1  # each training frame's row
         n = int(np.count_nonzero(train))
-        self.G, self.b = np.zeros((len(names), n, 3, 3)), np.zeros((len(names), n, 3))
+        spill = Spill()
+        self.G = [spill.zeros((n, 3, 3)) for _ in names]
+        self.b = [spill.zeros((n, 3)) for _ in names]
         self._r: tuple | None = None  # (block start, its residual rows and training weights)
 
     def add(self, lin, i: int, cols: np.ndarray) -> None:
@@ -94,12 +98,12 @@ class SlipScan:
         k = np.flatnonzero(lin.train)
         Cw = cols[k] * w[k, :, None]
         Cw = np.swapaxes(Cw, 1, 2)  # (T, 3, R): per-frame products by matmul, not einsum (ten times faster)
-        rows = self.row[lin.start + k]
-        self.G[i - self.first, rows] = Cw @ cols[k]
-        self.b[i - self.first, rows] = (Cw @ r[k, :, None])[..., 0]
+        at = int(self.row[lin.start + k[0]])  # the block's training frames: consecutive rows from here
+        self.G[i - self.first].write(at, Cw @ cols[k])
+        self.b[i - self.first].write(at, (Cw @ r[k, :, None])[..., 0])
 
     def samples(self, m: int, train: np.ndarray) -> list[int]:
-        return change_times(train, self.G[m], self.b[m])
+        return change_times(train, np.asarray(self.G[m]), np.asarray(self.b[m]))
 
 def gain(G: np.ndarray, b: np.ndarray) -> np.ndarray:
     """bᵀ G⁺ b (K,) for stacks G (K, 3, 3), b (K, 3): the weighted sum of squares a least-squares

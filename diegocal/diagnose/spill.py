@@ -47,6 +47,16 @@ class Spill:
         self._end += out.nbytes
         return out
 
+    def zeros(self, shape: tuple, dtype=float) -> DiskArray:
+        """A new array of ``shape`` in the file, zero until rows are written (the file is extended
+        over it: a hole, which reads as zeros and takes no room until written)."""
+        out = self.array(shape, dtype)
+        try:
+            os.ftruncate(self.fd, max(self._end, os.fstat(self.fd).st_size))
+        except OSError as exc:
+            raise _no_room(exc) from None
+        return out
+
 
 def on_disk(*arrays: np.ndarray, spill: Spill | None = None) -> tuple:
     """``arrays`` (each (T, ...)) written to ``spill`` (default: a new one), as DiskArrays: a
