@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from diegocal.diagnose.kinematics_lin import running_median
-from diegocal.diagnose.spill import BlockStore, Spill
+from diegocal.diagnose.spill import BlockStore, Spill, on_disk
 from diegocal.errors import ScratchSpaceError
 
 
@@ -36,6 +36,22 @@ def test_columns_read_back_from_disk_are_the_rows_written():
     assert np.array_equal(pickle.loads(pickle.dumps(b)), marker)  # another process gets the array
     with pytest.raises(ValueError, match="do not fit"):
         a.write(900, pot[:200])
+
+
+def test_whole_log_arrays_on_disk_read_back_bit_for_bit_and_unwritten_rows_as_zeros():
+    """:func:`on_disk` (the pot candidates' ∂p̂/∂θ, a fit's deleted residuals) and
+    :meth:`Spill.zeros` (the slip scan's sums, written a block of rows at a time)."""
+    rng = np.random.default_rng(3)
+    f, r = rng.normal(size=(1000, 2)), rng.normal(size=(1000, 4, 3))
+    spill = Spill()
+    df, dr = on_disk(f, r, spill=spill)
+    assert np.array_equal(df[250:500], f[250:500]) and np.array_equal(np.asarray(dr), r)
+    z = spill.zeros((600, 3, 3))
+    z.write(100, r[:50, :3])  # a block's rows; the rest never written
+    got = np.asarray(z)
+    assert np.array_equal(got[100:150], r[:50, :3]) and not got[:100].any() and not got[150:].any()
+    (alone,) = on_disk(f)  # a file of its own
+    assert np.array_equal(alone[::3], f[::3]) and alone.spill is not spill
 
 
 def test_the_running_median_a_chunk_at_a_time_is_each_frame_s_median():
