@@ -87,12 +87,14 @@ CASES = {
 
 
 #: A cause the default baseline contains is hidden against a baseline without it: friction of a
-#: kind the model already fits per joint is no model error, nor is a payload on a link whose
-#: inertial parameters the identified rigid body fits (its baseline keeps the URDF's inertias).
+#: kind the model already fits per joint is no model error, nor is a payload (or a link's own
+#: inertia error) on a link whose inertial parameters the identified rigid body fits (its baseline
+#: keeps the URDF's inertias).
 BASELINE_FOR = {
     "coulomb_friction": {"friction": ("viscous",)},
     "viscous_friction": {"friction": ("coulomb",)},
     "payload": {"inertia": "nominal"},
+    "link_inertia": {"inertia": "nominal"},
 }
 
 
@@ -172,7 +174,7 @@ def simulate(domain: str, cause: str | None, seed: int, robot_name: str | None =
         from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
         opts = DynamicsOptions(duration=case["duration"], noise=TORQUE_NOISE, **ROBOT_FOR.get(cause, {}))
-        if cause and cause != "payload":
+        if cause and cause not in ("payload", "link_inertia"):  # a body's: the simulator's default size
             request, regions = _sized_torque_effect(robot, cause, seed, opts)
             opts = replace(opts, effects=check_effects([request], domain), regions=regions)
         else:

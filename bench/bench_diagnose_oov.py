@@ -90,7 +90,7 @@ def run_one(shape: str, seed: int, robot: str = "ur5", duration: float = 60.0) -
 def oracle_terms(effect: dict, robot) -> tuple:
     """The hidden effect as the exact term(s) of the vocabulary (its true shape, region and rest
     angle; values fitted): what an extended model could at best be."""
-    from diegocal.sgp.terms import payload_links
+    from diegocal.sgp.bodies import payload_links
     from diegocal.terms import Region, make_term
 
     cause, joint = effect["cause"], effect["channel"]

@@ -1,11 +1,13 @@
 """What does the rigid body + friction model get wrong on real robots? `diagnose` on TX40 and TIAGo.
 
     .venv/bin/python bench/bench_diagnose_real.py [--data DIR] [--tx40-blocks N] [--tiago-blocks N]
+        [--inertia identified|nominal]
 
 The real-robot logs of ``sample_data/real`` (README there; imported by ``diegocal import``; the
 same logs as ``bench_real_identification.py``) are diagnosed in the dynamics domain with the
 library's defaults, as ``diegocal diagnose sample_data/real/tx40.h5`` does (``--*-blocks`` only to
-compare another number of blocks). Printed per robot:
+compare another number of blocks; ``--inertia nominal`` as ``diagnose --inertia nominal``: the URDF's
+inertias kept, friction and the found terms fitted, on the splits too). Printed per robot:
 
 1. the diagnosis (interleaved train / validation / held-out blocks): the baseline's held-out RMSE
    per joint, each finding with its fitted values (± standard error) and its held-out RMSE before
@@ -189,8 +191,8 @@ def friction_check(d, alpha: float = 0.01) -> None:
         print(f"{j:18s} {'  '.join(parts):50s} {'; '.join(tests)} ({thr:.1f})")
 
 
-def pr(split, terms, sgp: bool = False):
-    options = SGPOptions(kind="sgp", **EXTENDED_SGP) if sgp else SGPOptions(kind="pr")
+def pr(split, terms, sgp: bool = False, inertia: str = "identified"):
+    options = SGPOptions(kind="sgp", inertia=inertia, **EXTENDED_SGP) if sgp else SGPOptions(kind="pr", inertia=inertia)
     model = DynamicsModel(split.robot, options, split.tau_joints, terms)
     q, qd, qdd, tau = arrays(split, split.train)
     model.fit_arrays(q, qd, qdd, tau, time=split.train.time)
@@ -198,7 +200,7 @@ def pr(split, terms, sgp: bool = False):
     return model.predict_arrays(q, qd, qdd, split.test.time).tau
 
 
-def judge_splits(splits, terms, tx40: bool, sgp: bool = False) -> None:
+def judge_splits(splits, terms, tx40: bool, sgp: bool = False, inertia: str = "identified") -> None:
     print("\nsplit            model                        RMSE N·m   nMSE per joint")
     for split in splits:
         q, qd, qdd, tau = arrays(split, split.test)
@@ -209,10 +211,14 @@ def judge_splits(splits, terms, tx40: bool, sgp: bool = False) -> None:
         if tx40:
             cases.append(("nominal + published priors", tx40_model(rb, qd, qdd)[:, rows]))
         cases.append(("PR", pr(split, ())))
+        label = "PR" if inertia == "identified" else "PR (URDF inertias)"
+        if inertia != "identified":
+            cases.append((label, pr(split, (), inertia=inertia)))
         if terms:
-            cases.append(("PR + " + ", ".join(f"{t.cause}:{t.channel}" for t in terms), pr(split, terms)))
+            named = ", ".join(f"{t.cause}:{t.channel}" for t in terms)
+            cases.append((f"{label} + {named}", pr(split, terms, inertia=inertia)))
         if sgp:
-            cases.append(("SGP + the terms (the extended model)", pr(split, terms, sgp=True)))
+            cases.append(("SGP + the terms (the extended model)", pr(split, terms, sgp=True, inertia=inertia)))
         for label, pred in cases:
             err = pred - tau
             rmse = float(np.sqrt(np.mean(err[:, cols] ** 2)))
@@ -223,9 +229,10 @@ def judge_splits(splits, terms, tx40: bool, sgp: bool = False) -> None:
             print(f"{split.name:16s} {'FIGAROH 1.0.2 (identified, nominal)':44s} {ref[0]:.2f}, {ref[1]:.2f}")
 
 
-def options(n_blocks: int | None) -> DiagnoseOptions:
+def options(n_blocks: int | None, inertia: str = "identified") -> DiagnoseOptions:
     """The library's defaults (a number of blocks only when one is given)."""
-    return DiagnoseOptions(domain="dynamics") if n_blocks is None else DiagnoseOptions("dynamics", n_blocks=n_blocks)
+    blocks = {} if n_blocks is None else {"n_blocks": n_blocks}
+    return DiagnoseOptions("dynamics", inertia=inertia, **blocks)
 
 
 def main(argv=None) -> int:
@@ -233,6 +240,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--tx40-blocks", type=int, default=None, help="Default: the library's.")
     ap.add_argument("--tiago-blocks", type=int, default=None, help="Default: the library's.")
+    ap.add_argument("--inertia", choices=("identified", "nominal"), default="identified", help="As diagnose's.")
     args = ap.parse_args(argv)
     if not (args.data / "tx40.h5").exists():
         print(f"no real-robot data at {args.data}; skipped")
@@ -242,17 +250,17 @@ def main(argv=None) -> int:
     robot = load_robot(BUNDLED_ROBOTS / "tx40")
     log = load_log(args.data / "tx40.h5")
     t = time.time()
-    d = diagnose(log, robot, options(args.tx40_blocks))
+    d = diagnose(log, robot, options(args.tx40_blocks, args.inertia))
     print(f"TX40: {log.n_samples} samples, {log.time[-1] - log.time[0]:.1f} s; diagnose {time.time() - t:.1f} s wall")
     show_diagnosis("TX40", d, robot.joint_names)
     friction_check(d)
     fitted = d.units[0].fitted
-    judge_splits(tx40_splits(args.data, 1), fitted.terms, tx40=True, sgp=fitted.gp is not None)
+    judge_splits(tx40_splits(args.data, 1), fitted.terms, True, fitted.gp is not None, args.inertia)
     # TIAGo
     robot = load_robot(BUNDLED_ROBOTS / "tiago")
     log = tiago_log(args.data)
     t = time.time()
-    d = diagnose(log, robot, options(args.tiago_blocks))
+    d = diagnose(log, robot, options(args.tiago_blocks, args.inertia))
     print(
         f"\nTIAGo: {log.n_samples} samples, {log.time[-1] - log.time[0]:.1f} s; diagnose {time.time() - t:.1f} s wall"
     )
@@ -260,7 +268,7 @@ def main(argv=None) -> int:
     show_diagnosis("TIAGo", d, split.rmse_joints)
     friction_check(d)
     fitted = d.units[0].fitted
-    judge_splits([split], fitted.terms, tx40=False, sgp=fitted.gp is not None)
+    judge_splits([split], fitted.terms, False, fitted.gp is not None, args.inertia)
     print(f"\ntotal {time.time() - t0:.0f} s")
     return 0
 

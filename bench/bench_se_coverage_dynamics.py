@@ -10,7 +10,8 @@ Over ``--seeds`` simulated arm3 logs (``diegocal simulate dynamics``'s simulator
   the share of its parameters within 2 SE of the simulator's value (a position friction only
   where the region found overlaps the true one by more than half, its Coulomb and viscous values
   being those of the region; a coupled friction only with the true partner and ratio; a payload's
-  ten parameters against its point mass's, under ``--inertia nominal``; a Stribeck friction's
+  ten parameters against its point mass's, under ``--inertia nominal``, and a ``link_inertia``'s
+  (link3's body 30 % lighter than the URDF's) against the truth's change; a Stribeck friction's
   amplitude and velocity scale, a load friction's coefficient, against the simulator's shapes of
   the same form). A family of several parameters has a row per parameter too; the largest
   |estimate − truth| / SE of each family is printed after the table, with the number of logs that
@@ -70,6 +71,7 @@ COMPARED = {
     "stribeck_friction": {"amplitude": "amplitude", "velocity_scale": "velocity_scale"},
     "load_friction": {"coefficient": "coefficient"},
     "payload": {name: name for name in PAYLOAD_NAMES},
+    "link_inertia": {name: name for name in PAYLOAD_NAMES},  # the truth's change of the link's body
 }
 
 

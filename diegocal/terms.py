@@ -51,7 +51,7 @@ class Parameter:
     stderr: float = math.nan
 
     def to_dict(self) -> dict:
-        return {"value": float(self.value), STDERR: _plain(self.stderr), "unit": self.unit}
+        return {"value": _plain(self.value), STDERR: _plain(self.stderr), "unit": self.unit}
 
 
 def parameter_dict(name: str, value, stderr=math.nan, unit: str = "") -> dict:
@@ -64,7 +64,8 @@ def read_parameter(name: str, d, where: str = "parameter") -> Parameter:
     if isinstance(d, dict):
         se = d.get(STDERR, d.get("std"))
         try:
-            return Parameter(str(name), float(d.get("value", 0.0)), str(d.get("unit") or ""),
+            value = d.get("value", 0.0)  # null: not identified
+            return Parameter(str(name), math.nan if value is None else float(value), str(d.get("unit") or ""),
                              stderr=math.nan if se is None else float(se))
         except (TypeError, ValueError):
             raise InputFileError(f"{where} {name!r}: value and stderr must be numbers, got {d!r}") from None

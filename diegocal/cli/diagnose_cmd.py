@@ -293,6 +293,7 @@ def _summary_rows(done: Diagnosed) -> list:
         twins = [f"{f['cause']}:{c}" for c in ev.get("indistinguishable_from", [])]
         rivals = ev.get("indistinguishable_causes", []) + twins
         gain += f"; the data cannot tell it from {', '.join(rivals)}" if rivals else ""
+        gain += f"; {ev['restated']}" if ev.get("restated") else ""
         rows.append((f"  {f['cause']} on {where}", gain))
     rows += [(f"  declined: {d['cause']} on {d['channel']}", d["why"]) for d in declined]
     rows += [

@@ -27,7 +27,7 @@ so an unmodelled payload is no model error there. "nominal": the rigid body is t
 its nominal inertias, a fixed part of the prediction (:func:`diegocal.sgp.model.nominal_torque`,
 Pinocchio's regressor times the URDF's inertial parameters = RNEA), and only the friction is fitted
 (:func:`diegocal.sgp.model.nominal_base`); the candidates add a ``payload`` per moving link (one
-body frame per joint, :func:`diegocal.sgp.terms.payload_links`; channel = that link; columns: the regressor's ten
+body frame per joint, :func:`diegocal.sgp.bodies.payload_links`; channel = that link; columns: the regressor's ten
 inertial columns of its body on every measured joint, mass first: a point mass at a lever has
 second moments too). A payload parameter whose column lies in the span of the others (the mass
 of a link whose origin lies on every earlier joint's axis, a moment along those axes) is reported
@@ -69,6 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
+from diegocal.diagnose import bodies
 from diegocal.diagnose.dynamics_filters import filter_ses, fit_filters
 from diegocal.diagnose.dynamics_shapes import fit_shapes, refine_regions, specs, with_region_se, with_shape_se
 from diegocal.diagnose.dynamics_system import FamilyRanks, TrainingSystem, feature_chunks, filler, layout, project
@@ -90,7 +91,16 @@ from diegocal.sgp.model import (
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import ml2_unconverged, save_model
 from diegocal.sgp.streams import check_angles
-from diegocal.sgp.terms import FILTERS, Context, dynamics_terms, is_filter, proposals, sensor_filter, term_columns
+from diegocal.sgp.terms import (
+    BODIES,
+    FILTERS,
+    Context,
+    dynamics_terms,
+    is_filter,
+    proposals,
+    sensor_filter,
+    term_columns,
+)
 
 UNIT = "N·m"
 #: a candidate column whose residual after projection on its joint's model columns is below this
@@ -311,26 +321,28 @@ class DynamicsAdapter:
         return replace(options, kind="sgp", **EXTENDED_SGP) if kind == "sgp" else options
 
     def _with_nan_se(self, terms, columns: np.ndarray) -> list:
-        """``terms`` with a NaN standard error on the parameters whose model columns are ``columns``."""
+        """``terms`` with a NaN value and standard error on the parameters whose model columns are
+        ``columns`` (not identified: the minimum-norm solution's value means nothing)."""
         out, at = [], self.base.n_base
         for t in terms:
             if is_filter(t):
                 out.append(t)
                 continue
             k = len(t.linear)
-            se = np.array([p.stderr for p in t.linear])
+            value, se = np.array([[p.value, p.stderr] for p in t.linear]).T
+            value[np.isin(np.arange(at, at + k), columns)] = np.nan
             se[np.isin(np.arange(at, at + k), columns)] = np.nan
-            out.append(t.with_linear_values([p.value for p in t.linear], se))
+            out.append(t.with_linear_values(value, se))
             at += k
         return out
 
     def _unidentified(self, model, train, terms) -> np.ndarray:
-        """Indices of A's columns that belong to a ``payload`` and lie in the span of the others on
+        """Indices of A's columns that belong to a body (:data:`BODIES`) and lie in the span of the others on
         the training rows (e.g. the mass of a link whose origin is on every earlier joint's axis:
         only its moments show in the torques): their values are the minimum-norm solution's
         (meaningless), their standard errors NaN (not identified)."""
         out, at = [], self.base.n_base
-        if not any(t.cause == "payload" for t in terms):
+        if not any(t.cause in BODIES for t in terms):
             return np.asarray(out, int)
         X = np.concatenate([A for _, A in feature_chunks(model, self, np.flatnonzero(train))])
         X = X.reshape(-1, X.shape[2])
@@ -339,7 +351,7 @@ class DynamicsAdapter:
             if is_filter(t):
                 continue
             k = len(t.linear)
-            if t.cause == "payload":
+            if t.cause in BODIES:
                 scale = float(np.linalg.norm(X[:, at : at + k], axis=0).max())
                 for p in range(at, at + k):
                     c = X[:, p]
@@ -456,6 +468,10 @@ class DynamicsAdapter:
         if fitted.model is None or fitted.model.converged_ is not False:
             return ()
         return (ml2_unconverged(*fitted.model.ml2_runs_, fitted.model.options.maxiter),)
+
+    def restate(self, term):
+        """A fitted payload no body can be, as ``link_inertia`` (:func:`bodies.restate`), else None."""
+        return bodies.restate(term, self.robot.extent(term.channel)) if term.cause == "payload" else None
 
     def describe(self, fitted: DynamicsFit) -> str:
         base = ("nominal_rigid_body" if self.inertia == "nominal" else "rigid_body") + "".join(

@@ -35,7 +35,7 @@ from diegocal.lstsq import TallLstsq
 from diegocal.progress import ticker
 from diegocal.sgp.model import PREDICT_SAMPLES
 from diegocal.sgp.regressor import CHUNK, base_regressor
-from diegocal.sgp.terms import Motion, is_filter, joints_of, motion_columns, term_columns
+from diegocal.sgp.terms import BODIES, Motion, is_filter, joints_of, motion_columns, term_columns
 
 #: Samples per chunk where a fitted model's columns are rebuilt beside every candidate's: a quarter of the
 #: model's own prediction chunk, as these chunks hold both (a long log's peak memory)
@@ -354,7 +354,7 @@ def layout(adapter, props) -> tuple[dict, list]:
         if p.columns is not None:
             size = {adapter.row_of[j]: int(np.shape(c)[1]) for j, c in p.columns.items()}
         else:
-            joints = adapter.joints if p.term.cause == "payload" else joints_of(p.term)
+            joints = adapter.joints if p.term.cause in BODIES else joints_of(p.term)
             size = {adapter.row_of[j]: len(p.term.linear) for j in joints if j in adapter.row_of}
         slot = {}
         for r, kc in size.items():

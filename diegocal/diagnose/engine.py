@@ -141,6 +141,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             break
         for chosen in group:
             new = adapter.fit(terms + (chosen.term,), train)
+            new, term, restated = _restate(adapter, new, terms, chosen.term, train)
             unplaced = unplaced_span(chosen.term, time, train)
             scored = held if unplaced is None else held & ~unplaced
             before, after = adapter.score(fitted, scored, exclude), adapter.score(new, scored, exclude)
@@ -157,6 +158,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                 "threshold_t": float(chosen.threshold),
                 "variable": variable,
             }
+            if restated:
+                evidence["restated"] = restated
             twins = indistinguishable(chosen, tested)
             if twins:
                 evidence["indistinguishable_from"] = twins
@@ -180,17 +183,17 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             added = {_key(g.term) for g in group} | {_key(best.term)}
             runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]
             new_terms = adapter.terms(new)
-            fitted_term = fitted_form(chosen.term, new_terms)
+            fitted_term = fitted_form(term, new_terms)
             finding = Finding(fitted_term, "term", before, after, evidence, runners)
             why = _decline(finding, options.min_gain)
             if why:
                 declined[_key(chosen.term)] = why
-                say(f"{chosen.term.cause} on {_where(chosen.term.channel, unit)}: {why}; declined")
+                say(f"{term.cause} on {_where(term.channel, unit)}: {why}; declined")
                 continue
             findings.append(finding)
             fitted, terms = new, new_terms
             unconverged.update(dict.fromkeys(f"with {fitted_term.label}: {why}" for why in late(new)))
-            say(f"found {chosen.term.cause} on {_where(chosen.term.channel, unit)} (validation gain {chosen.gain:.0%})")
+            say(f"found {term.cause} on {_where(term.channel, unit)} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
     getattr(adapter, "release", lambda: None)()  # and what the adapter kept for its rounds
@@ -448,6 +451,16 @@ def unplaced_span(term: Term, time, train: np.ndarray) -> np.ndarray | None:
         before, after = np.flatnonzero(train & (time < edge)), np.flatnonzero(train & (time >= edge))
         out[(before[-1] + 1 if before.size else 0) : (after[0] if after.size else time.size)] = True
     return out if out.any() else None
+
+
+def _restate(adapter: Adapter, new, terms, term: Term, train):
+    """The fit with ``term`` (``new``) as its fitted values name it: the adapter's ``restate`` may
+    say they are another cause's (a payload no body can be: the link's own inertias are wrong),
+    refitted so; returns the fit, its term and why in words ("" when as it was)."""
+    other = getattr(adapter, "restate", lambda t: None)(fitted_form(term, adapter.terms(new)))
+    if other is None:
+        return new, term, ""
+    return adapter.fit(terms + (other[0],), train), other[0], other[1]
 
 
 def _decline(finding: Finding, min_gain: float) -> str:

@@ -17,6 +17,7 @@
                                # + heldout_leaves_out: [t0, t1], s (a time region's edge between training blocks)
                                # + indistinguishable_from: [channel, ...] (the same cause there fits the same)
                                # + indistinguishable_causes: [cause:channel, ...] (another cause fits the same)
+                               # + restated: why in words (a payload no body can be, named link_inertia)
                                # + stand_in: {term, validation_gain} (unexplained: the term that stood in),
                                #   with what beat it: declined: {term, why} or rival: {model, tau_s,
                                #   open_loop_validation_gain, term_open_loop_validation_gain}

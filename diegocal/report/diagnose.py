@@ -76,6 +76,9 @@ def sentence(f: dict) -> str:
             f" The data cannot tell it from {', '.join(rivals)} (each fits the validation data the same to "
             f"within {TWIN * 100:g} % of what it removes): either may be the cause."
         )
+    restated = (f.get("evidence") or {}).get("restated")
+    if restated:  # the fitted values named another cause than the candidate's (a payload no body can be)
+        params += f" {restated[0].upper()}{restated[1:]}."
     return f"{f['channel']}: {what}{gain}.{params}{notes(f)}"
 
 

@@ -293,6 +293,14 @@ class Robot:
                 pos[t, k] = rel.translation
         return rot, pos
 
+    def extent(self, link: str) -> float:
+        """m, the farthest any frame of the robot lies from ``link``'s joint at :meth:`neutral`:
+        how far from that joint something the robot carries could plausibly sit."""
+        data = self.model.createData()
+        pin.framesForwardKinematics(self.model, data, self.neutral())
+        joint = data.oMi[self.model.frames[self.frame_id(link)].parentJoint].translation
+        return float(max(np.linalg.norm(f.translation - joint) for f in data.oMf))
+
     def _base_is_fixed(self) -> bool:
         """True when no joint moves the base link (it hangs from the world, §2.5.1)."""
         return self.model.frames[self.base_frame].parentJoint == 0

@@ -25,7 +25,8 @@ Causes (the registry's domain ``dynamics``; their parameters and units are the r
 - ``payload``: an unmodelled point mass on a link (channel: the link): the regressor columns of
   its parent joint's ten inertial parameters (m, m·c, and the second moments about the joint
   frame's origin, Pinocchio's order): a point mass at a lever c has second moments m(|c|²I − ccᵀ),
-  not linear in (m, m·c), so they are parameters of their own;
+  not linear in (m, m·c), so they are parameters of their own; ``link_inertia``: the same
+  columns, named so where the fitted values are no body (the link's own inertias are wrong);
 - ``torque_lag``: the torque sensor of joint j lags (a first-order filter, time constant lag; to
   first order τ_meas ≈ τ − lag · dτ/dt, the column ``diagnose`` proposes). Not a column: the
   model's columns of joint j are filtered (:func:`lag_filter`; linear in the parameters), so it
@@ -49,6 +50,7 @@ from scipy.signal import lfilter
 from diegocal.causes import causes_of
 from diegocal.errors import InputFileError
 from diegocal.sgp.backlash import backlash_proposals, is_input_filter
+from diegocal.sgp.bodies import BODIES, body_columns, payloads, restated_only
 from diegocal.sgp.proposal import Proposal
 from diegocal.terms import Region, Term, make_term
 
@@ -71,7 +73,7 @@ def joints_of(term: Term) -> tuple[str, ...]:
     """The joints whose torque a term changes (a payload: none named here, see :func:`columns`)."""
     if term.cause == "coupled_friction":
         return (term.channel, str(term.extra["partner"]))
-    return () if term.cause == "payload" else (term.channel,)
+    return () if term.cause in BODIES else (term.channel,)
 
 
 def parameter_labels(term: Term) -> tuple[str, ...]:
@@ -163,20 +165,6 @@ def _coupled_friction(term, m, j, out):
     out[:, a, :] += ratio * cols
 
 
-def _payload(term, m, j, out):
-    """The joint-torque regressor's ten columns (m, m·c, second moments; Pinocchio's order) of the
-    body that carries the link (a point mass anywhere on it: moments in the parent joint's frame)."""
-    model = m.robot.model
-    frame = next((f for f in model.frames if f.name == term.channel), None)
-    if frame is None or frame.parentJoint == 0:
-        raise InputFileError(f"payload: {term.channel!r} is not a moving link of robot {m.robot.name!r}")
-    i = frame.parentJoint - 1  # the body's block of ten columns
-    data = model.createData()
-    for t in range(m.q.shape[0]):
-        Y = pin.computeJointTorqueRegressor(model, data, m.q[t], m.qd[t], m.qdd[t])
-        out[t] = Y[:, 10 * i : 10 * i + 10]
-
-
 #: cause -> the function that fills its columns (the registry's dynamics terms; the sensor causes
 #: are filters, :func:`apply_filters`).
 COLUMNS: dict[str, Callable] = {
@@ -189,7 +177,8 @@ COLUMNS: dict[str, Callable] = {
     "torque_offset": _torque_offset,
     "armature": _armature,
     "coupled_friction": _coupled_friction,
-    "payload": _payload,
+    "payload": body_columns,
+    "link_inertia": body_columns,
 }
 
 
@@ -207,7 +196,7 @@ def motion_columns(term: Term, m: Motion) -> np.ndarray:
     if fill is None:
         raise InputFileError(f"{term.cause} is not a dynamics term")
     out = np.zeros((m.q.shape[0], m.q.shape[1], len(term.linear)))
-    j = None if term.cause == "payload" else m.robot.joint_index(term.channel)
+    j = None if term.cause in BODIES else m.robot.joint_index(term.channel)
     fill(term, m, j, out)
     return out
 
@@ -436,25 +425,6 @@ def _coupled(cause: str, ctx: Context) -> list[Proposal]:
     return out
 
 
-def _payloads(cause: str, ctx: Context) -> list[Proposal]:
-    """A point mass on each moving link, where the rigid body is the URDF's (nominal inertias):
-    an identified rigid body already fits a link's inertial parameters."""
-    if ctx.inertia != "nominal":
-        return []
-    return [Proposal(make_term(cause, link)) for link in payload_links(ctx.robot) if (cause, link) not in ctx.have]
-
-
-def payload_links(robot) -> tuple[str, ...]:
-    """The moving links a payload may sit on: per joint, the first body frame it carries (the
-    frames of one joint share its inertial columns, so one of them stands for all)."""
-    out, seen = [], set()
-    for f in robot.model.frames:
-        if f.type == pin.FrameType.BODY and f.parentJoint > 0 and f.parentJoint not in seen:
-            seen.add(f.parentJoint)
-            out.append(f.name)
-    return tuple(out)
-
-
 #: cause -> how diagnose proposes it (the rest: one term per joint, :func:`_per_joint`).
 PROPOSE: dict[str, Callable] = {
     "viscous_friction": _friction,
@@ -466,7 +436,8 @@ PROPOSE: dict[str, Callable] = {
     "transmission_backlash": backlash_proposals,
     "position_friction": _regions,
     "coupled_friction": _coupled,
-    "payload": _payloads,
+    "payload": payloads,
+    "link_inertia": restated_only,
 }
 
 

@@ -36,14 +36,17 @@ a physical shape of its own (never a candidate term of ``diagnose``):
 - ``transmission_backlash``: play of half-width b between joint j's motor (q, the encoder's) and
   its link, which lags it by up to b: ``rnea`` at the links' angles, the motor's velocity and
   acceleration; friction stays the motor's. Prescribed trajectories only;
-- ``payload``: a point mass on a link (default the last).
+- ``payload``: a point mass on a link (default the last);
+- ``link_inertia``: the URDF's inertial parameters of a link's body too large by a fraction (the
+  truth is (1 − fraction) times them: no body added to the link makes the difference).
 
 SIZE is the effect's magnitude: a torque in N·m (Coulomb level, RMS viscous torque on the reference
 excitation, the spring's torque at half the range, the offset, RMS armature torque, the Stribeck
 amplitude), the time constant in s for ``torque_lag``, the relative gain error for ``torque_gain``,
 the coefficient (dimensionless) for ``load_friction``, the half-width in rad for
 ``transmission_backlash`` (at most the registry's MAX_BACKLASH_RAD), the mass in kg for
-``payload``. Without it: scaled to the robot (a backlash: 0.02 rad; a load friction: 0.05).
+``payload``, the fraction (under 1) for ``link_inertia``. Without it: scaled to the robot (a
+backlash: 0.02 rad; a load friction: 0.05).
 """
 
 from __future__ import annotations
@@ -81,7 +84,7 @@ TRAJECTORIES = (
     "pole-down",
     "pole-up",
 )
-#: Joint effects act on one joint's torque; ``payload`` on a link's inertia.
+#: Joint effects act on one joint's torque; ``payload`` and ``link_inertia`` on a link's inertia.
 JOINT_EFFECTS = (
     "coulomb_friction",
     "viscous_friction",
@@ -176,8 +179,9 @@ def build_true_dynamics(robot, options: DynamicsOptions, rng: np.random.Generato
     terms, records, offset = [], [], np.zeros(n)
     g = options.effect_scale
     for req in check_effects(options.effects, "dynamics"):
-        if req.name == "payload":
-            records.append(_add_payload(model, robot, req, effect_rng, g))
+        if req.name in ("payload", "link_inertia"):
+            add = _add_payload if req.name == "payload" else _scale_link
+            records.append(add(model, robot, req, effect_rng, g))
             continue
         joint = (
             check_channel(req, robot.joint_names, "joint")
@@ -252,15 +256,35 @@ def _accel_scale(robot) -> np.ndarray:
     return np.maximum(np.sqrt((ref.qdd**2).mean(0)), 1e-3)
 
 
-def _add_payload(model: pin.Model, robot, req, rng, gain: float) -> dict:
-    """Add a point mass to a link of ``model`` (in place); default: the link the last moving joint
-    carries (its first body frame: the frames of one joint share its inertia, so a payload on the
-    tool flange is one on that link)."""
+def _body_frame(model: pin.Model, req):
+    """The link of a request on a body (default: the link the last moving joint carries, its first
+    body frame: the frames of one joint share its inertia) and its frame."""
     bodies = {f.name: f for f in model.frames if f.type == pin.FrameType.BODY}
     last = max(f.parentJoint for f in bodies.values())
     default = next(name for name, f in bodies.items() if f.parentJoint == last)
     link = check_channel(req, list(bodies), "link") if req.channel else default
-    frame = bodies[link]
+    return link, bodies[link]
+
+
+def _scale_link(model: pin.Model, robot, req, rng, gain: float) -> dict:
+    """Scale the body that carries a link (its joint's ten inertial parameters) by 1 − fraction
+    (in place; default 0.3); the record holds the fraction and the change, truth less URDF, in the
+    registry's names."""
+    link, frame = _body_frame(model, req)
+    fraction = 0.3 * gain if req.size is None else req.size
+    if not 0.0 < fraction < 1.0:
+        raise SimOptionError(f"effect '{req}': a link's inertia scaled by 1 − fraction needs 0 < fraction < 1")
+    params = model.inertias[frame.parentJoint].toDynamicParameters()
+    model.inertias[frame.parentJoint] = pin.Inertia.FromDynamicParameters((1.0 - fraction) * params)
+    names = ("mass",) + INERTIAL_NAMES[1:]  # the registry's names of the ten
+    change = {n: float(x) for n, x in zip(names, -fraction * params, strict=True)}
+    return effect_record("link_inertia", link, {"fraction": float(fraction), **change})
+
+
+def _add_payload(model: pin.Model, robot, req, rng, gain: float) -> dict:
+    """Add a point mass to a link of ``model`` (in place); default: the link the last moving joint
+    carries (a payload on the tool flange is one on that link)."""
+    link, frame = _body_frame(model, req)
     total = sum(model.inertias[i].mass for i in range(1, model.njoints))
     mass = gain * 0.1 * max(total, 1.0) if req.size is None else req.size
     xyz = rng.uniform(-0.05, 0.05, 3)

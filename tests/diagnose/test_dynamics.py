@@ -23,7 +23,7 @@ from diegocal.io import load_log, save_log
 from diegocal.io.bundle import load_bundle
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
-from diegocal.sgp.terms import payload_links
+from diegocal.sgp.bodies import payload_links
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 
 sys.path.insert(0, str(Path(__file__).parents[1]))
