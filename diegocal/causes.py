@@ -106,6 +106,9 @@ def _positive(name, unit, meaning) -> ParamSpec:
 
 
 _XYZ = tuple(_p(a, "m", f"displacement along {a[1]}") for a in ("dx", "dy", "dz"))
+#: A link body's inertial parameters after its mass (Pinocchio's order: about the joint frame).
+_MOMENTS = (*(_p(f"mc_{a}", "kg·m", "first moment") for a in "xyz"),
+            *(_p(f"I_{ab}", "kg·m²", "second moment") for ab in ("xx", "xy", "yy", "xz", "yz", "zz")))
 
 #: Table 4.1 of the thesis; c2 > 0 and c7 > 0 are ours: they fix the sign conventions (s grows
 #: with u, the rate r is positive) that §4.3 states in words ("r() > 0") but the table does not list.
@@ -206,18 +209,9 @@ _CAUSES = (
           "friction of a motor that drives both joints", extra=("partner", "ratio"), partner="partner",
           signed_by="qd"),
     Cause("payload", "dynamics", "term", "link",
-          (_positive("mass", "kg", "mass"), _p("mc_x", "kg·m", "first moment"), _p("mc_y", "kg·m", "first moment"),
-           _p("mc_z", "kg·m", "first moment"), _p("I_xx", "kg·m²", "second moment"),
-           _p("I_xy", "kg·m²", "second moment"), _p("I_yy", "kg·m²", "second moment"),
-           _p("I_xz", "kg·m²", "second moment"), _p("I_yz", "kg·m²", "second moment"),
-           _p("I_zz", "kg·m²", "second moment")),
-          "an unmodelled mass on this link"),
+          (_positive("mass", "kg", "mass"), *_MOMENTS), "an unmodelled mass on this link"),
     Cause("link_inertia", "dynamics", "term", "link",
-          (_p("mass", "kg", "mass"), _p("mc_x", "kg·m", "first moment"), _p("mc_y", "kg·m", "first moment"),
-           _p("mc_z", "kg·m", "first moment"), _p("I_xx", "kg·m²", "second moment"),
-           _p("I_xy", "kg·m²", "second moment"), _p("I_yy", "kg·m²", "second moment"),
-           _p("I_xz", "kg·m²", "second moment"), _p("I_yz", "kg·m²", "second moment"),
-           _p("I_zz", "kg·m²", "second moment")),
+          (_p("mass", "kg", "mass"), *_MOMENTS),
           "the URDF's inertial parameters of this link are wrong (no body added to it explains the difference)"),
     Cause("torque_lag", "dynamics", "term", "joint", (_p("lag", "s", "time constant", 0.0, MAX_LAG_S),),
           "the measured torque lags the motion"),
