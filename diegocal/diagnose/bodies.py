@@ -17,9 +17,9 @@ from diegocal.terms import Term, make_term
 #: A payload is no body when it fails even with each of its parameters this many standard errors
 #: in the body's favour (a point mass sits on the bound of :func:`impossible_body`).
 BODY_Z = 3.0
-#: A payload's mass is below zero when it lies this many standard errors under it (as the
-#: engine's DETERMINED_Z).
-NEGATIVE_Z = 2.0
+#: How far out a payload's centre of mass may lie, in multiples of the robot's extent from its
+#: joint (:meth:`~diegocal.robot.model.Robot.extent`): a tool held out as far again.
+REACH = 2.0
 
 
 def impossible_body(parameters: dict, z: float, reach: float = math.inf) -> str:
@@ -56,18 +56,18 @@ def impossible_body(parameters: dict, z: float, reach: float = math.inf) -> str:
     return ""
 
 
-def restate(term: Term, reach: float) -> tuple[Term, str] | None:
+def restate(term: Term, extent: float) -> tuple[Term, str] | None:
     """``link_inertia`` on the link, with why in words, for a fitted ``payload`` that is no body
-    (:func:`impossible_body` within ``reach`` m of its joint, or a mass significantly below zero);
-    None for a body and for any other cause."""
+    (:func:`impossible_body` within :data:`REACH` × ``extent`` m of its joint, or a mass more than
+    :data:`BODY_Z` standard errors below zero); None for a body and for any other cause."""
     if term.cause != "payload":
         return None
     body = {p.name: (p.value, p.stderr) for p in term.parameters}
     mass, se = body["mass"]
-    if math.isfinite(se) and se > 0 and mass < -NEGATIVE_Z * se:
+    if math.isfinite(se) and mass < -BODY_Z * se:
         why = f"its mass is below zero ({mass:.3g} ± {se:.2g} kg)"
     else:
-        why = impossible_body(body, BODY_Z, reach)
+        why = impossible_body(body, BODY_Z, REACH * extent)
     if not why:
         return None
     return make_term("link_inertia", term.channel), f"fitted as a payload, {why}: the link's own inertias are wrong"

@@ -275,7 +275,7 @@ class DynamicsAdapter:
         model.keep_training_mean(pred[rows])
         sigma = np.sqrt(np.asarray(model.gp_.noise_var_, float)).reshape(-1)
         w = model.parametric_.values
-        se_nan = self._unidentified(model, rows, terms)
+        model.unidentified_ = tuple(self._unidentified(model, rows, terms))  # no value, no SE
         out, ses = [], None  # ses: the filter terms' standard errors, made at the first
         for t in model.fitted_terms():
             if is_filter(t):
@@ -289,8 +289,6 @@ class DynamicsAdapter:
                 out.append(with_shape_se(self, t, model, pred, rows))
             else:
                 out.append(t)
-        if se_nan.size:  # a payload's parameters the torques cannot tell from the others
-            out = self._with_nan_se(out, se_nan)
         if regions:  # a region's edges are estimates too: their uncertainty in the coefficients'
             fitted_terms = tuple(out)
             out = [
@@ -320,27 +318,11 @@ class DynamicsAdapter:
         options = SGPOptions(kind="pr", friction=self.friction, inertia=self.inertia)
         return replace(options, kind="sgp", **EXTENDED_SGP) if kind == "sgp" else options
 
-    def _with_nan_se(self, terms, columns: np.ndarray) -> list:
-        """``terms`` with a NaN value and standard error on the parameters whose model columns are
-        ``columns`` (not identified: the minimum-norm solution's value means nothing)."""
-        out, at = [], self.base.n_base
-        for t in terms:
-            if is_filter(t):
-                out.append(t)
-                continue
-            k = len(t.linear)
-            value, se = np.array([[p.value, p.stderr] for p in t.linear]).T
-            value[np.isin(np.arange(at, at + k), columns)] = np.nan
-            se[np.isin(np.arange(at, at + k), columns)] = np.nan
-            out.append(t.with_linear_values(value, se))
-            at += k
-        return out
-
     def _unidentified(self, model, train, terms) -> np.ndarray:
         """Indices of A's columns that belong to a body (:data:`BODIES`) and lie in the span of the others on
         the training rows (e.g. the mass of a link whose origin is on every earlier joint's axis:
         only its moments show in the torques): their values are the minimum-norm solution's
-        (meaningless), their standard errors NaN (not identified)."""
+        (meaningless); the model gives them none (``DynamicsModel.unidentified_``)."""
         out, at = [], self.base.n_base
         if not any(t.cause in BODIES for t in terms):
             return np.asarray(out, int)

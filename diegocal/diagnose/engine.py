@@ -181,7 +181,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                     res, res_new, primary, variable, shown, length, train, options.n_bins, exclude, signed_by, partner
                 )
             added = {_key(g.term) for g in group} | {_key(best.term)}
-            runners = tuple(_runner_up(t, chosen, declined) for t in tested if _key(t.term) not in added)[:8]
+            runners = tuple(_runner_up(t, chosen, declined, term.cause) for t in tested if _key(t.term) not in added)
+            runners = runners[:8]
             new_terms = adapter.terms(new)
             fitted_term = fitted_form(term, new_terms)
             finding = Finding(fitted_term, "term", before, after, evidence, runners)
@@ -454,9 +455,8 @@ def unplaced_span(term: Term, time, train: np.ndarray) -> np.ndarray | None:
 
 
 def _restate(adapter: Adapter, new, terms, term: Term, train):
-    """The fit with ``term`` (``new``) as its fitted values name it: the adapter's ``restate`` may
-    say they are another cause's (a payload no body can be: the link's own inertias are wrong),
-    refitted so; returns the fit, its term and why in words ("" when as it was)."""
+    """The fit with ``term`` (``new``) as its fitted values name it (the adapter's ``restate``: a
+    payload no body can be is ``link_inertia``), refitted so; the fit, its term, why ("": as it was)."""
     other = getattr(adapter, "restate", lambda t: None)(fitted_form(term, adapter.terms(new)))
     if other is None:
         return new, term, ""
@@ -493,23 +493,25 @@ def _decline(finding: Finding, min_gain: float) -> str:
     return ""
 
 
-def _runner_up(t: Tested, best: Tested, declined: dict) -> dict:
+def _runner_up(t: Tested, best: Tested, declined: dict, named: str = "") -> dict:
     """A tested candidate that was not added, with why, in words, when it was significant (or
-    declined for having no held-out gain)."""
+    declined for having no held-out gain); ``named``: the cause ``best`` was added as (its own
+    unless restated)."""
+    cause = named or best.term.cause
     out = t.to_dict()
     if _key(t.term) in declined:
         out["why_not"] = declined[_key(t.term)]
     elif t.significant:
         if t.term.label in rival_causes(best, [t]):
-            out["why_not"] = (f"the data cannot tell it from {best.term.cause} (the same validation fit to within "
-                              f"{TWIN:.0%} of what {best.term.cause} removes)")
+            out["why_not"] = (f"the data cannot tell it from {cause} (the same validation fit to within "
+                              f"{TWIN:.0%} of what {cause} removes)")
         elif set(t.channels) & set(best.channels):
             out["why_not"] = (
-                f"{best.term.cause} explains more of the validation error of "
+                f"{cause} explains more of the validation error of "
                 f"{', '.join(sorted(set(t.channels) & set(best.channels)))}"
             )
         else:
-            out["why_not"] = f"tested again in the next round, after {best.term.cause} on {best.term.channel}"
+            out["why_not"] = f"tested again in the next round, after {cause} on {best.term.channel}"
     return out
 
 

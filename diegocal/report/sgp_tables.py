@@ -177,7 +177,7 @@ def parameter_table(summary: dict, prismatic: frozenset = frozenset()) -> tuple[
             cause, _, rest = label.rpartition(":")
             channel, _, name = rest.rpartition(".")
             what, unit = f"{name}, {cause.replace('_', ' ')} on {channel}", v.get("unit") or ""
-        rows.append([label, what, f"{v['value']:+.4g}", number(v.get("stderr"), ".2g"), unit])
+        rows.append([label, what, number(v.get("value"), "+.4g"), number(v.get("stderr"), ".2g"), unit])
     columns = [
         Column("parameter", align="left"),
         Column("what it is", align="left"),

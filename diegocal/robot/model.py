@@ -294,12 +294,14 @@ class Robot:
         return rot, pos
 
     def extent(self, link: str) -> float:
-        """m, the farthest any frame of the robot lies from ``link``'s joint at :meth:`neutral`:
-        how far from that joint something the robot carries could plausibly sit."""
-        data = self.model.createData()
-        pin.framesForwardKinematics(self.model, data, self.neutral())
-        joint = data.oMi[self.model.frames[self.frame_id(link)].parentJoint].translation
-        return float(max(np.linalg.norm(f.translation - joint) for f in data.oMf))
+        """m, the farthest any frame or body's centre of mass of the robot lies from ``link``'s
+        joint at :meth:`neutral`: the scale of how far from that joint a carried load could sit."""
+        model, data = self.model, self.model.createData()
+        pin.framesForwardKinematics(model, data, self.neutral())
+        joint = data.oMi[model.frames[self.frame_id(link)].parentJoint].translation
+        points = [f.translation for f in data.oMf]
+        points += [data.oMi[j].act(model.inertias[j].lever) for j in range(1, model.njoints)]
+        return float(max(np.linalg.norm(p - joint) for p in points))
 
     def _base_is_fixed(self) -> bool:
         """True when no joint moves the base link (it hangs from the world, §2.5.1)."""

@@ -29,8 +29,8 @@ def body_columns(term, m, j, out):
     i = frame.parentJoint - 1  # the body's block of ten columns
     data = model.createData()
     for t in range(m.q.shape[0]):
-        Y = pin.computeJointTorqueRegressor(model, data, m.q[t], m.qd[t], m.qdd[t])
-        out[t] = Y[:, 10 * i : 10 * i + 10]
+        Y = pin.computeJointTorqueRegressor(model, data, m.q[t], m.qd[t], m.qdd[t]).reshape(model.nv, -1)
+        out[t] = Y[:, 10 * i : 10 * i + 10]  # (a one-joint robot's comes back flat)
 
 
 def payloads(cause: str, ctx) -> list[Proposal]:

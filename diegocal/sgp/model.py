@@ -219,9 +219,14 @@ class DynamicsModel:
         """The columns of :meth:`features`: base parameters, then the extra terms' parameters."""
         return tuple(self.base_.names) + tuple(n for t in self.terms if not is_filter(t) for n in parameter_labels(t))
 
+    #: Columns (:attr:`parameter_names` order) the training data do not identify, as judged by the
+    #: caller (diagnose: a payload's mass on a link whose origin is on every earlier joint's axis);
+    #: :meth:`fitted_terms` gives them no value (NaN): the minimum-norm one means nothing.
+    unidentified_: tuple = ()
+
     def fitted_terms(self) -> tuple:
         """The extra terms with their fitted values and standard errors (a lag and a shape
-        parameter as given)."""
+        parameter as given; an :attr:`unidentified_` column's NaN)."""
         par = self.parametric_
         out, at = [], self.base_.n_base
         for t in self.terms:
@@ -229,7 +234,10 @@ class DynamicsModel:
                 out.append(t)
                 continue
             k = len(t.linear)  # its columns; a shape parameter is held as given
-            out.append(t.with_linear_values(par.values[at : at + k], par.stderr[at : at + k]))
+            value, se = par.values[at : at + k].copy(), par.stderr[at : at + k].copy()
+            gone = np.isin(np.arange(at, at + k), np.asarray(self.unidentified_, int))
+            value[gone] = se[gone] = np.nan
+            out.append(t.with_linear_values(value, se))
             at += k
         slides = self.robot.prismatic_joints  # a slide's parameters in N, m, kg
         return tuple(in_slide_units(t) if t.channel in slides else t for t in out)

@@ -38,7 +38,7 @@ from diegocal.robot import load_robot
 from diegocal.sgp.gp import Hyperparameters, per_output
 from diegocal.sgp.guard_options import Stages
 from diegocal.sgp.model import DynamicsModel, SGPOptions
-from diegocal.sgp.terms import FRICTION_CAUSE
+from diegocal.sgp.terms import FRICTION_CAUSE, is_filter
 from diegocal.terms import correlated_pairs, make_term, read_parameter, term_from_dict, write_correlated
 
 FORMAT = "diegocal-sgp"
@@ -243,6 +243,16 @@ def load_summary(directory) -> dict:
     return data
 
 
+def _unidentified(model) -> tuple:
+    """The model's columns whose saved value is null: not identified when it was fitted."""
+    out, at = [], model.base_.n_base
+    for t in model.terms:
+        if not is_filter(t):
+            out += [at + i for i, p in enumerate(t.linear) if not np.isfinite(p.value)]
+            at += len(t.linear)
+    return tuple(out)
+
+
 def load_model(directory, robot=None):
     """Rebuild a saved model: same predictions as the one saved (no optimisation is rerun).
 
@@ -281,6 +291,7 @@ def load_model(directory, robot=None):
         selection = tuple(str(c) for c in arrays["stage_selection"])
         state["stages"] = Stages(selection, _unpack_hyper("stage_pr", arrays)[0], stage_res)
     model.fit_arrays(q, qd, qdd, arrays["tau"], state=state, time=arrays.get("time"))
+    model.unidentified_ = _unidentified(model)
     hp = summary.get("hyperparameters") or {}
     choices = [(hp.get(j) or {}).get("guard_choice") for j in model.joint_names]
     if all(choices):  # the guard's cross-validated choice and scores, as fitted (reporting only)

@@ -1,5 +1,7 @@
 """A payload no body can be is named ``link_inertia`` (diegocal.diagnose.bodies): the judgement on
-numbers, the simulator's link whose URDF inertias are too large, and a true payload left alone."""
+numbers, the simulator's link whose URDF inertias are too large (a true payload left alone:
+tests/diagnose/test_dynamics.py's payload tests), a parameter the data do not identify written
+with no value and read back so."""
 
 from __future__ import annotations
 
@@ -7,13 +9,18 @@ import math
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from diegocal.cli import app
 from diegocal.diagnose import DiagnoseOptions, diagnose
 from diegocal.diagnose.bodies import BODY_Z, impossible_body, restate
+from diegocal.io import save_log
+from diegocal.io.bundle import load_bundle
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
+from diegocal.sgp.store import load_model
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
-from diegocal.terms import make_term
+from diegocal.terms import Parameter, make_term, read_parameter
 
 NAMES = ("mass", "mc_x", "mc_y", "mc_z", "I_xx", "I_xy", "I_yy", "I_xz", "I_yz", "I_zz")
 
@@ -65,9 +72,25 @@ def test_without_an_identified_mass_only_the_second_moments_sign_is_judged():
     assert "I_zz is below zero" in impossible_body(body(values, se), BODY_Z, reach=1.0)
 
 
+def test_a_zero_standard_error_does_not_hide_a_negative_mass():
+    fit = make_term("payload", "link3", point_mass(-0.2, [0.1, 0, 0]), stderr=[0.0] * 10)
+    assert restate(fit, 1.0)[0].cause == "link_inertia"
+
+
+def test_the_extent_reaches_a_bodys_centre_of_mass():
+    """The pendulum's bob hangs 0.5 m out on its only joint, with no frame there."""
+    assert load_robot(BUNDLED_ROBOTS / "pendulum").extent("bob") >= 0.5
+
+
+def test_a_value_the_data_do_not_identify_is_written_null_and_read_back_as_none():
+    d = Parameter("mass", math.nan, "kg").to_dict()
+    assert d["value"] is None and d["stderr"] is None
+    assert math.isnan(read_parameter("mass", d).value)
+
+
 def test_restate_names_the_link_for_a_negative_mass_and_leaves_a_body_alone():
     payload = make_term("payload", "link3", point_mass(-0.24, [0.125, 0, 0]), stderr=[0.001] * 10)
-    link, why = restate(payload, reach=1.0)
+    link, why = restate(payload, 1.0)
     assert (link.cause, link.channel) == ("link_inertia", "link3")
     assert "below zero" in why and "own inertias" in why
     assert restate(make_term("payload", "link3", point_mass(0.3, [0.1, 0, 0]), stderr=[0.001] * 10), 1.0) is None
@@ -105,3 +128,24 @@ def test_a_link_cannot_lose_all_its_inertia(arm3):
     with pytest.raises(SimOptionError, match="0 < fraction < 1"):
         simulate_dynamics(arm3, DynamicsOptions(duration=2.0, effects=("link_inertia:link3=1.5",)),
                           np.random.default_rng(0))
+
+
+def test_a_payload_whose_mass_is_not_identified_has_no_value_in_either_file(arm3, tmp_path):
+    """link2's origin lies on joint1's axis: its mass shows in no torque. The diagnosis and the
+    saved extended model write it null, and the model read back gives it no value."""
+    log = simulate_dynamics(arm3, DynamicsOptions(duration=20.0, effects=("payload:link2=0.5",)),
+                            np.random.default_rng(5))
+    path = tmp_path / "run.h5"
+    save_log(log, path)
+    out = str(tmp_path / "d.yaml")
+    args = ["diagnose", str(path), "--inertia", "nominal", "--robot", str(arm3.directory), "-o", out]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    (finding,) = [f for f in load_bundle(tmp_path / "d.yaml").data["findings"] if f["cause"] == "payload"]
+    assert finding["parameters"]["mass"]["value"] is None
+    saved = load_bundle(tmp_path / "d.extended.sgp").data["terms"]
+    assert saved[0]["parameters"]["mass"] == {"value": None, "stderr": None, "unit": "kg"}
+    (term,) = load_model(tmp_path / "d.extended.sgp").fitted_terms()
+    assert math.isnan(term.value("mass")) and np.isfinite(term.value("I_zz"))
+    res = CliRunner().invoke(app, ["report", str(tmp_path / "d.extended.sgp"), "-o", str(tmp_path / "r.pdf")])
+    assert res.exit_code == 0, res.output
