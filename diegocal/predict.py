@@ -96,7 +96,7 @@ def check_log_robot(model: Path, log_path: Path) -> None:
     if not same_robot(record, source):
         raise RobotConfigError(
             f"{log_path} is a log of robot {name} ({source}), but {model} was fitted on {record.get('name')} "
-            f"({record.get('dir')}): their robot.urdf or sensors.yaml differ"
+            f"({record.get('dir')}): their robot.urdf or sensors.yaml differ (--robot DIR names the robot to use)"
         )
 
 
@@ -155,12 +155,13 @@ def _kinematics(path: Path, log: Log, options: PredictOptions) -> Prediction:
 def _dynamics(path: Path, log: Log, options: PredictOptions) -> Prediction:
     """Torques and their predictive std with a dynamics model (thesis eq. 3.8, 3.20)."""
     from diegocal.evaluate import score
-    from diegocal.robot import load_robot, resolve_robot_dir
+    from diegocal.robot import data_joints, load_robot, resolve_robot_dir
     from diegocal.sgp.model import log_arrays
     from diegocal.sgp.store import load_model
     from diegocal.sgp.streams import without_clipped
 
-    robot = load_robot(resolve_robot_dir(options.robot, log.robot)) if options.robot else None
+    # the log's joints, as the fit took them (a gripper's joints that have a torque stream)
+    robot = load_robot(resolve_robot_dir(options.robot, log.robot), joints=data_joints(log)) if options.robot else None
     model = load_model(path, robot=robot)
     pred = model.predict(log)
     names = model.joint_names  # the joints with a fitted torque

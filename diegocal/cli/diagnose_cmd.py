@@ -257,7 +257,7 @@ def diagnose_cmd(
 
 
 def _summary_rows(done: Diagnosed) -> list:
-    from diegocal.diagnose.output import pooled_heldout_rmse, shifting_channels
+    from diegocal.diagnose.output import pooled_heldout_rmse, shifting_channels, weak_structure
 
     domain, mapping, out, extended = done.domain, done.mapping, done.output, done.extended
     base = mapping["baseline"]
@@ -273,6 +273,8 @@ def _summary_rows(done: Diagnosed) -> list:
     declined = [] if mapping["findings"] else mapping.get("declined") or []  # with findings: the runners-up
     shifting = shifting_channels(mapping)
     found = "none named (see below)" if declined or shifting else "none (nothing significant)"
+    if found.endswith("significant)") and (weak := weak_structure(mapping)):
+        found = f"none ({len(weak)} significant binned residual(s), each under the gain a finding needs)"
     rows.append(("findings", str(len(mapping["findings"])) if mapping["findings"] else found))
     for f in mapping["findings"]:
         where = f"{f['channel']}"

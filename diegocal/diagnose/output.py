@@ -180,3 +180,18 @@ def shifting_channels(diagnosis: dict) -> list[tuple[str, float, float | None]]:
             out.append((key, float(least["p"]), least.get("time")))
     return sorted(out, key=lambda x: x[1])
 
+
+def weak_structure(diagnosis: dict) -> list[tuple[str, str, float]]:
+    """(channel, variable, validation gain) of the baseline residual's binned tests that are
+    significant, in a diagnosis without findings: structure too small to pay for a finding (under
+    ``unexplained_min_gain`` of the validation error), said so that "nothing significant" is not."""
+    if diagnosis.get("findings"):
+        return []
+    tests = diagnosis.get("residual_tests") or {}
+    return [
+        (key, var, float(v.get("validation_gain") or 0.0))
+        for key, entry in tests.items()
+        for var, v in ((entry or {}).get("variables") or {}).items()
+        if (v or {}).get("significant")
+    ]
+

@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from diegocal.causes import phrase
-from diegocal.diagnose.output import shifting_channels
+from diegocal.diagnose.output import shifting_channels, weak_structure
 from diegocal.diagnose.selection import TWIN
 from diegocal.io import load_yaml
 from diegocal.report.finding_notes import notes, parameters_text
@@ -115,7 +115,15 @@ def summary_lines(d: dict) -> list[str]:
     ]
     pooled = "; ".join(f"{b:.4g} → {e:.4g} {u}" for u, (b, e) in pooled_rmse(d).items())
     declined, shifting = [] if findings else d.get("declined") or [], shifting_channels(d)
-    if not findings and not declined and not shifting:
+    weak = [] if findings or declined or shifting else weak_structure(d)
+    if weak:  # significant binned structure, each under the gain a finding needs: not "nothing"
+        out.append(
+            f"No cause named (held-out RMSE over all channels {pooled}). Binned structure in the baseline's "
+            "residual is significant on " + ", ".join(f"{c} against {v} ({g:.0%} of the validation error)"
+                                                     for c, v, g in weak)
+            + ", each under the share of the validation error a finding needs (`residual_tests`)."
+        )
+    elif not findings and not declined and not shifting:
         out.append(
             "Nothing significant: no term of the vocabulary and no binned structure against the channels' "
             f"states improves the validation error beyond chance (family-wise false-alarm rate "
@@ -359,7 +367,10 @@ def headline(path: Path, context=None) -> str:
     log = Path(str(d.get("log") or "")).name
     if not findings:
         seen = len(d.get("declined") or []) + len(shifting_channels(d))
+        weak = len(weak_structure(d))
         return f"{d['domain']} ({log}): " + (f"no cause named ({seen} sign(s) of structure)" if seen else
+                                             f"no cause named ({weak} significant binned residual(s), "
+                                             "each under the gain a finding needs)" if weak else
                                              "nothing significant")
     parts = []
     for f in findings:

@@ -268,8 +268,9 @@ def load_model(directory, robot=None):
             arrays = {k: f[k] for k in f.files}
     except (OSError, ValueError) as exc:
         raise InputFileError(f"{npz}: cannot read ({exc})") from None
-    if robot is None:
-        robot = load_robot(directory / "robot")
+    if robot is None:  # the copy, with every joint the model was fitted with (a gripper's too)
+        fitted = [*(summary.get("joints") or []), *(summary.get("joints_without_tau") or [])]
+        robot = load_robot(directory / "robot", joints=fitted)
     options = SGPOptions.from_dict(summary["options"])
     terms = [term_from_dict(t, f"{directory}/sgp.yaml terms", "dynamics") for t in summary.get("terms") or ()]
     model = DynamicsModel(robot, options, tau_joints=summary.get("joints"), terms=terms)

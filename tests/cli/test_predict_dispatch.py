@@ -55,3 +55,28 @@ def test_a_yaml_that_is_no_model_is_one_line_and_exit_1(tmp_path):
     assert result.exit_code == 1
     assert "not a fitted diegocal model" in result.output
     assert "Traceback" not in result.output
+
+
+def test_a_dynamics_model_of_a_robot_with_a_gripper_predicts_with_and_without_robot(tmp_path):
+    """The Panda's fingers have torque streams: the fit keeps their joints, and so must predict,
+    from --robot or from the model's own copy of the robot (a log that names no robot)."""
+    import sys
+    from dataclasses import replace
+
+    sys.path.insert(0, str(Path(__file__).parents[1]))
+    from erd import robot_dir
+
+    from diegocal.io import save_log
+    from experiments.dynamics_generator import Session, generate
+
+    robot = robot_dir(tmp_path, "panda")
+    log = tmp_path / "panda.h5"
+    save_log(replace(generate(Session(robot="panda", duration=8.0, smooth_scale=0.0)), robot=None), log)
+    model = tmp_path / "m.sgp"
+    res = runner.invoke(app, ["sgp-fit", str(log), "--robot", str(robot), "--model", "pr", "-o", str(model)])
+    assert res.exit_code == 0, res.output
+    for extra in (["--robot", str(robot)], []):
+        out = tmp_path / f"p{len(extra)}.h5"
+        res = runner.invoke(app, ["predict", str(model), str(log), "-o", str(out), *extra])
+        assert res.exit_code == 0, res.output
+        assert out.is_file()

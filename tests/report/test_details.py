@@ -432,6 +432,32 @@ def test_no_cause_named_is_not_nothing_significant_when_a_term_was_declined_or_a
     assert "Nothing significant" not in text and f"Declined: armature on joint3: {why}." in text
 
 
+def test_significant_binned_structure_under_the_gain_is_not_nothing_significant(tmp_path):
+    """A user trial's cogging on a Talos wrist: the summary said "nothing significant" while its
+    residual test was significant (8 % of the validation error, under what a finding needs)."""
+    from diegocal.diagnose.output import weak_structure
+    from diegocal.report.diagnose import headline, summary_lines
+
+    test = {"t": 6.06, "threshold_t": 3.84, "validation_gain": 0.08, "significant": True}
+    d = {
+        "domain": "dynamics",
+        "log": "talos.h5",
+        "baseline": {"model": "rigid_body", "heldout_rmse": {"j5": 0.05}, "unit": "N·m"},
+        "extended": {"model": "rigid_body", "heldout_rmse": {"j5": 0.05}, "unit": "N·m"},
+        "findings": [],
+        "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
+        "options": {"alpha": 0.01, "min_gain": 0.05},
+        "residual_tests": {"talos/j5": {"variables": {"q.j5": test, "qd.j5": {**test, "significant": False}}}},
+    }
+    assert weak_structure(d) == [("talos/j5", "q.j5", 0.08)]
+    text = " ".join(summary_lines(d))
+    assert "Nothing significant" not in text and "significant on talos/j5 against q.j5 (8% of the validation" in text
+    save_yaml(d, tmp_path / "d.yaml")
+    assert "1 significant binned residual" in headline(tmp_path / "d.yaml")
+    test["significant"] = False
+    assert weak_structure(d) == [] and "Nothing significant" in " ".join(summary_lines(d))
+
+
 def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
     from diegocal.diagnose.selection import TWIN
     from diegocal.report.diagnose import sentence
