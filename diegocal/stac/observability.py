@@ -35,7 +35,10 @@ class Observability:
         seen, fewer than 10 frames.
         """
         if self.n_markers == 0:
-            raise FitError("STAC needs markers: the log's 'markers' stream has no channels")
+            raise FitError(
+                "STAC needs markers: no marker of the robot's sensors.yaml has a channel in the log "
+                f"(robot {self.robot.name!r}; is it the log's robot? --robot names another)"
+            )
         moving = [self.kin.moves(link) for link in self.marker_links]
         if not any(moving):
             raise FitError(

@@ -115,6 +115,17 @@ def test_log_without_pots(logs, tree_dir, tmp_path):
     assert "no 'pots' stream" in out
 
 
+def test_a_log_whose_markers_the_robot_does_not_name_asks_whether_the_robot_is_right(logs, tree_dir, tmp_path):
+    """A user trial ran stac with another robot's --robot: "the markers stream has no channels"
+    while the log had nine; the error now says none is the robot's and points at --robot."""
+    _, log = logs
+    m = log.streams["markers"]
+    other = synth.make_stream(tuple(f"other_{n}" for n in m.names), m.data)
+    out = _bad(tmp_path, log.with_streams(markers=other).without_truth(), tree_dir)
+    assert "no marker of the robot's sensors.yaml has a channel in the log" in out and "--robot" in out
+    assert not (tmp_path / "bad.calib.yaml").exists()
+
+
 def test_unknown_pot_and_marker_names_are_ignored_with_one_line(logs, tree_dir, tmp_path):
     """Log channels sensors.yaml does not name are left out, with one warning line naming them
     (and the close match of a typo)."""
