@@ -356,9 +356,9 @@ class KinematicsAdapter:
     def _slip_family(self, name: str, refit: dict, samples: list[int]) -> list[Candidate]:
         """A marker's slip candidates: a family over change times (:func:`slip_samples`: the best
         in each run of training frames by a change-point scan of the marker's projected position
-        columns, and the middle of each gap between runs: the training frames cannot place a slip
-        inside a gap more finely; its middle halves the worst error), each its re-fit columns
-        ``refit`` from its change on."""
+        columns, and the first, middle and last frame of each gap between runs: the training
+        frames cannot place a slip inside a gap, so those tie and the validation frames choose),
+        each its re-fit columns ``refit`` from its change on."""
         out = []
         for k in samples:
             cols_k = {c: FromSample(v, k) for c, v in refit.items()}

@@ -36,13 +36,17 @@ class FromSample:
 
 def slip_samples(train: np.ndarray, cols: np.ndarray, r: np.ndarray, w: np.ndarray) -> list[int]:
     """Candidate slip samples of a marker: in each run of training frames the change time that
-    fits best, and the middle of each gap between runs (none in the first and last 5 % of the log).
+    fits best, and the first, middle and last frame of each gap between runs (none in the first and
+    last 5 % of the log): the training frames cannot tell them apart, so all three are tested on
+    the validation frames, which may hold the slip's start (a slip at a training block's end);
+    where they cannot tell them apart either (a gap that is a held-out block), the middle, listed
+    first, halves the worst error.
 
     The scan fits the marker's (projected) position columns ``cols`` (T, R, 3) to the residual rows
     ``r`` (T, R) with weights ``w`` (T, R) (zero off the training frames) separately before and
     after each change time k; the best k maximises the sum of the two fits' weighted gains
     bᵀ G⁻¹ b, from prefix sums of the per-frame G = Cᵀ W C and b = Cᵀ W r (O(T)). A change at a
-    run's first frame is a change in the gap before it: the gap's middle stands for it."""
+    run's first frame is a change in the gap before it: the gap's three frames stand for it."""
     Cw = cols * w[..., None]
     return change_times(train, np.einsum("trk,trl->tkl", Cw, cols), np.einsum("trk,tr->tk", Cw, r))
 
@@ -65,10 +69,10 @@ def change_times(train: np.ndarray, G: np.ndarray, b: np.ndarray) -> list[int]:
     for i, (a, e) in enumerate(runs):
         if e - a > 2:  # a change after the run's first frame and before its last
             out.append(int(a + 1 + np.argmax(fit[row[a] : row[e - 2] + 1])))
-        if i + 1 < len(runs):
-            out.append(int((e + runs[i + 1][0]) // 2))
+        if i + 1 < len(runs):  # the gap's middle, first and last frame: the same training fit
+            out += [int((e + runs[i + 1][0]) // 2), int(e), int(runs[i + 1][0] - 1)]
     lo, hi = int(0.05 * T), int(0.95 * T)
-    return sorted({k for k in out if lo <= k <= hi})
+    return list(dict.fromkeys(k for k in out if lo <= k <= hi))  # in time; a gap's middle first
 
 
 class SlipScan:
