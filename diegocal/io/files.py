@@ -372,6 +372,9 @@ def _load_csv(path: Path, nan_ok: bool = False) -> Log:
             raise LogFormatError(f"{path}: duplicate column {col!r}")
         seen.add(col)
     frame.columns = header
+    last = next(csv.reader([_last_line(path)]), [])
+    if len(frame) and 0 < len(last) < len(header):  # a row cut off: the file ends mid-row
+        raise LogFormatError(f"{path}: its last row has {len(last)} of {len(header)} fields: the file looks cut short")
     try:
         table = frame.apply(pd.to_numeric, errors="raise").to_numpy(dtype=np.float64)
     except (ValueError, TypeError):
@@ -421,3 +424,13 @@ def _nth_line(path: Path, n: int) -> str:
             if i == n:
                 return line.rstrip("\n")
     return ""
+
+
+def _last_line(path: Path) -> str:
+    """The file's last non-empty line (read from its end: a log may be long)."""
+    with open(path, "rb") as fh:
+        fh.seek(0, 2)
+        fh.seek(max(fh.tell() - 65536, 0))
+        lines = [line for line in fh.read().decode(errors="replace").splitlines() if line.strip()]
+    return lines[-1] if lines else ""
+

@@ -183,6 +183,9 @@ def test_csv_duplicates_and_bad_columns(tmp_path):
     (tmp_path / "c.csv").write_text("pots.a\n1\n")
     with pytest.raises(LogFormatError, match="no 'time' column"):
         load_log(tmp_path / "c.csv")
+    (tmp_path / "cut.csv").write_text("time,pots.a,pots.b\n0,1,2\n0.01,1.5")  # a copy cut off mid-row
+    with pytest.raises(LogFormatError, match="last row has 2 of 3 fields: the file looks cut short"):
+        load_log(tmp_path / "cut.csv")
 
 
 def test_nan_in_stream_that_forbids_it_is_reported_with_file(tmp_path):
