@@ -119,8 +119,11 @@ def log_robot(path) -> str | None:
     with open(path, "rb") as fh:
         head = fh.read(8)
     if head == HDF5_SIGNATURE:
-        with h5py.File(path, "r") as f:
-            return _attr_str(f.attrs.get("robot")) or None
+        try:
+            with h5py.File(path, "r") as f:
+                return _attr_str(f.attrs.get("robot")) or None
+        except OSError as exc:  # a truncated copy: as load_log says it
+            raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
     with open(path, errors="replace") as fh:
         first = fh.readline().strip()
     fields = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX) :].split() if "=" in f)

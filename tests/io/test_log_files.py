@@ -251,3 +251,16 @@ def test_a_missing_channel_names_the_stream_it_is_missing_from():
     log = Log(time=np.arange(3) * 0.01, streams={"tau": make_stream(["j1", "j2"], np.zeros((3, 2)))})
     with pytest.raises(UnknownNameError, match="no channel 'joint1' in the log's 'tau' stream \\(has j1, j2\\)"):
         log.stream("tau").select(["joint1"])
+
+
+def test_a_truncated_hdf5_log_is_one_error_line_wherever_it_is_read(tmp_path):
+    """A user trial's `predict MODEL trunc.h5` printed h5py's message without the file's name: the
+    header reader (the robot the log names) says what load_log says."""
+    from diegocal.io.files import log_robot
+
+    save_log(good_log(200), tmp_path / "g.h5")
+    data = (tmp_path / "g.h5").read_bytes()
+    (tmp_path / "cut.h5").write_bytes(data[: len(data) // 2])
+    for read in (load_log, log_robot):
+        with pytest.raises(LogFormatError, match=r"cut.h5: cannot read HDF5 file \("):
+            read(tmp_path / "cut.h5")
