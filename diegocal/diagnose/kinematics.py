@@ -15,8 +15,8 @@ the abduction pot's gain absorbs in part); a pot term by the gains and biases of
 read its joints. A clock shift is a family over shifts (:data:`TIME_SHIFTS`), each variant the
 predicted markers' change over its shift: a shift of many samples is far from its linearisation
 at zero. A marker slip re-fits its marker's position (``refit``); its change time is a family:
-in each run of training frames the time a change-point scan fits best, and the middle of each
-gap between runs (:func:`slip_samples`). Its region is open, ``time`` from the change on: a
+in each run of training frames the time a change-point scan fits best, and the middle, first
+and last frame of each gap between runs (:func:`slip_samples`). Its region is open, ``time`` from the change on: a
 marker that moved stays moved, in this log and in any later one on the same clock.
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames; where one of them is not seen, the other's reading alone)
