@@ -272,9 +272,12 @@ def _summary_rows(done: Diagnosed) -> list:
     rows = [(f"{domain}: baseline", base["model"]), *held]
     declined = [] if mapping["findings"] else mapping.get("declined") or []  # with findings: the runners-up
     shifting = shifting_channels(mapping)
-    found = "none named (see below)" if declined or shifting else "none (nothing significant)"
-    if found.endswith("significant)") and (weak := weak_structure(mapping)):
-        found = f"none ({len(weak)} significant binned residual(s), each under the gain a finding needs)"
+    weak = [] if declined or shifting else weak_structure(mapping)
+    found = (
+        "none named (see below)" if declined or shifting
+        else f"none ({len(weak)} significant binned residual(s), each under the gain a finding needs)" if weak
+        else "none (nothing significant)"
+    )
     rows.append(("findings", str(len(mapping["findings"])) if mapping["findings"] else found))
     for f in mapping["findings"]:
         where = f"{f['channel']}"

@@ -451,9 +451,21 @@ class DynamicsAdapter:
             return ()
         return (ml2_unconverged(*fitted.model.ml2_runs_, fitted.model.options.maxiter),)
 
-    def restate(self, term):
-        """A fitted payload no body can be, as ``link_inertia`` (:func:`bodies.restate`), else None."""
-        return bodies.restate(term, self.robot.extent(term.channel)) if term.cause == "payload" else None
+    def restate(self, fitted: DynamicsFit, term):
+        """A fitted payload no body can be (:func:`bodies.restate`): the fit with it named
+        ``link_inertia``, that term and why; None for a body and any other term. The same columns,
+        so the fit is renamed, not fitted again."""
+        got = bodies.restate(term, self.robot.extent(term.channel)) if term.cause == "payload" else None
+        if got is None:
+            return None
+        other, why = got
+        key = (term.cause, term.channel)
+
+        def renamed(terms):
+            return tuple(replace(t, cause=other.cause) if (t.cause, t.channel) == key else t for t in terms)
+
+        fitted.model.terms = renamed(fitted.model.terms)  # the saved model names it too
+        return replace(fitted, terms=renamed(fitted.terms)), other, why
 
     def describe(self, fitted: DynamicsFit) -> str:
         base = ("nominal_rigid_body" if self.inertia == "nominal" else "rigid_body") + "".join(

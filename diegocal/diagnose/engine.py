@@ -140,8 +140,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         if not group:
             break
         for chosen in group:
-            new = adapter.fit(terms + (chosen.term,), train)
-            new, term, restated = _restate(adapter, new, terms, chosen.term, train)
+            new, term, restated = _restate(adapter, adapter.fit(terms + (chosen.term,), train), chosen.term)
             unplaced = unplaced_span(chosen.term, time, train)
             scored = held if unplaced is None else held & ~unplaced
             before, after = adapter.score(fitted, scored, exclude), adapter.score(new, scored, exclude)
@@ -454,13 +453,11 @@ def unplaced_span(term: Term, time, train: np.ndarray) -> np.ndarray | None:
     return out if out.any() else None
 
 
-def _restate(adapter: Adapter, new, terms, term: Term, train):
+def _restate(adapter: Adapter, new, term: Term):
     """The fit with ``term`` (``new``) as its fitted values name it (the adapter's ``restate``: a
-    payload no body can be is ``link_inertia``), refitted so; the fit, its term, why ("": as it was)."""
-    other = getattr(adapter, "restate", lambda t: None)(fitted_form(term, adapter.terms(new)))
-    if other is None:
-        return new, term, ""
-    return adapter.fit(terms + (other[0],), train), other[0], other[1]
+    payload no body can be is ``link_inertia``); the fit, its term, why ("": as it was)."""
+    got = getattr(adapter, "restate", lambda f, t: None)(new, fitted_form(term, adapter.terms(new)))
+    return (new, term, "") if got is None else got
 
 
 def _decline(finding: Finding, min_gain: float) -> str:

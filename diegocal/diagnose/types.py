@@ -131,8 +131,8 @@ class Adapter(Protocol):
     # Optional: ``absorb(fitted, channels, train) -> fitted | None``, the model extended with a
     # non-parametric part fitted on the training samples for the ``unexplained`` channels (the
     # dynamics SGP's GP); None when the domain has none. See :func:`run_unit`, step 3.
-    # Optional: ``restate(term) -> (term, why) | None``, another cause for a fitted term whose values
-    # its own cause cannot have (a payload no body can be: ``link_inertia``), refitted under it.
+    # Optional: ``restate(fitted, term) -> (fitted, term, why) | None``, the fit with another cause
+    # for a fitted term whose values its own cause cannot have (a payload no body can be: ``link_inertia``).
 
 
 # ----------------------------------------------------------------------------- options and results

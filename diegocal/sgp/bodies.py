@@ -38,7 +38,8 @@ def payloads(cause: str, ctx) -> list[Proposal]:
     an identified rigid body already fits a link's inertial parameters."""
     if ctx.inertia != "nominal":
         return []
-    return [Proposal(make_term(cause, link)) for link in payload_links(ctx.robot) if (cause, link) not in ctx.have]
+    return [Proposal(make_term(cause, link)) for link in payload_links(ctx.robot)
+            if not any((body, link) in ctx.have for body in BODIES)]  # a link_inertia there too
 
 
 def restated_only(cause: str, ctx) -> list[Proposal]:
