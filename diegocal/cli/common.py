@@ -14,6 +14,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from diegocal.cli.choices import LOG_SUFFIXES
@@ -25,7 +26,7 @@ errors = Console(stderr=True)
 
 def warn(message: str) -> None:
     """One warning line on stderr (the CLI's; the library logs instead)."""
-    errors.print(f"[yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+    errors.print(f"[yellow]warning:[/] {escape(str(message))}", highlight=False, soft_wrap=True)
 
 
 def refuse_unconverged(whys, allow: bool, hint: str) -> None:
@@ -99,14 +100,14 @@ def command_line(default: str) -> str:
 
 def fail(message: str) -> typer.Exit:
     """Print one clear line on stderr and return the exit to raise."""
-    errors.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    errors.print(f"[bold red]error:[/] {escape(str(message))}", highlight=False, soft_wrap=True)
     return typer.Exit(1)
 
 
 def usage_error(command: str, message: str) -> typer.Exit:
     """A bad option value found after parsing (it needs the data): one line, exit 2, like the
     parser's own usage errors."""
-    errors.print(f"error: diegocal {command}: {message} (see --help)", highlight=False, soft_wrap=True)
+    errors.print(escape(f"error: diegocal {command}: {message} (see --help)"), highlight=False, soft_wrap=True)
     return typer.Exit(2)
 
 
@@ -245,7 +246,7 @@ def summary(title: str, rows, columns=("quantity", "value"), quiet: bool = False
     """Every command ends with a short summary table (DESIGN.md conventions)."""
     if quiet:
         return
-    table = Table(title=title, title_justify="left")
+    table = Table(title=escape(title), title_justify="left")
     for c in columns:
         table.add_column(str(c))
     for row in rows:
@@ -254,9 +255,10 @@ def summary(title: str, rows, columns=("quantity", "value"), quiet: bool = False
 
 
 def _fmt(v) -> str:
+    """A summary cell as written (a file or column name's brackets are text, not rich markup)."""
     if isinstance(v, float):
         return f"{v:.4g}"
-    return str(v)
+    return escape(str(v))
 
 
 def progress_enabled(quiet: bool) -> bool:

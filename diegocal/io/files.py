@@ -11,6 +11,7 @@ import csv
 import logging
 import math
 import os
+import shlex
 import tempfile
 from pathlib import Path
 
@@ -126,8 +127,7 @@ def log_robot(path) -> str | None:
             raise LogFormatError(f"{path}: cannot read HDF5 file ({exc})") from None
     with open(path, errors="replace") as fh:
         first = fh.readline().strip()
-    fields = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX) :].split() if "=" in f)
-    return fields.get("robot") if first.startswith(CSV_HEADER_PREFIX) else None
+    return header_fields(first).get("robot") if first.startswith(CSV_HEADER_PREFIX) else None
 
 
 def log_streams(path) -> tuple[str, ...]:
@@ -320,10 +320,24 @@ def _attr_str(value) -> str | None:
 
 
 # ----------------------------------------------------------------------------- CSV
+def header_fields(first: str) -> dict:
+    """The ``key=value`` attributes of a CSV log's first line (:data:`CSV_HEADER_PREFIX` ...); a
+    value with a space is single-quoted (:func:`_csv_header`), one without is read as it is (a
+    Windows path's backslashes too)."""
+    text = first[len(CSV_HEADER_PREFIX) :]
+    try:
+        words = shlex.split(text) if "'" in text or '"' in text else text.split()
+    except ValueError:  # an unmatched quote: the words as they stand
+        words = text.split()
+    return dict(w.split("=", 1) for w in words if "=" in w)
+
+
 def _csv_header(log: Log) -> str:
     fields = [f"version={VERSION}"]
     if log.robot:
-        fields.append(f"robot={log.robot}")
+        robot = str(log.robot)
+        plain = not any(c.isspace() or c in "'\"" for c in robot)
+        fields.append(f"robot={robot if plain else shlex.quote(robot)}")
     if log.rate_hz is not None:
         fields.append(f"rate_hz={log.rate_hz!r}")
     return f"{CSV_HEADER_PREFIX} " + " ".join(fields)
@@ -357,7 +371,7 @@ def _load_csv(path: Path, nan_ok: bool = False) -> Log:
         skip = 1
         if not first.startswith(CSV_HEADER_PREFIX):
             raise LogFormatError(f"{path}: header comment is not '{CSV_HEADER_PREFIX} ...'")
-        meta = dict(f.split("=", 1) for f in first[len(CSV_HEADER_PREFIX) :].split() if "=" in f)
+        meta = header_fields(first)
         if meta.get("version", str(VERSION)) != str(VERSION):
             raise LogFormatError(f"{path}: log format version {meta['version']}, this diegocal reads version {VERSION}")
         robot = meta.get("robot")

@@ -212,3 +212,28 @@ def test_a_truncated_c3d_exits_1_and_writes_nothing_or_warns_when_allowed(tmp_pa
     kept = run_ok(["import", tmp_path / "cut.c3d", "--map", mapping, "-o", tmp_path / "cut.h5", "-q"])
     assert "warning:" in kept.output and "importing the 577 frames read" in kept.output
     assert load_log(tmp_path / "cut.h5").n_samples == 577
+
+
+def test_brackets_in_a_message_or_a_column_are_text_not_markup(tmp_path):
+    # a user trial: `t [s]` printed as `t `, and a header `t [/s]` raised rich's MarkupError
+    (tmp_path / "b.csv").write_text("t [/s],x\n0,1\n1,2\n")
+    result = runner.invoke(app, ["import", str(tmp_path / "b.csv"), "-o", str(tmp_path / "o.h5")])
+    assert result.exit_code == 1, result.output
+    assert "columns: t [/s], x" in one_line_error(result) and "internal error" not in result.output
+
+
+def test_a_robot_path_is_stored_absolute_and_read_from_the_maps_folder(tmp_path, csv_file, monkeypatch):
+    # a user trial: the log kept `../docs/example_robot` as typed, usable from that folder only
+    (tmp_path / "lab" / "robot").mkdir(parents=True)
+    urdf = tmp_path / "lab" / "robot" / "one.urdf"
+    urdf.write_text('<robot name="one"><link name="base"/><link name="l1"/><joint name="j1" type="revolute">'
+                    '<parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>'
+                    '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint></robot>')
+    (tmp_path / "lab" / "m.yaml").write_text("robot: robot/one.urdf\n")
+    monkeypatch.chdir(tmp_path)
+    run_ok(["import", csv_file, "--map", tmp_path / "lab" / "m.yaml", "-o", tmp_path / "o.h5"])
+    assert load_log(tmp_path / "o.h5").robot == str(urdf.resolve())
+    run_ok(["import", csv_file, "--robot", "lab/robot/one.urdf", "-o", tmp_path / "p.h5"])
+    assert load_log(tmp_path / "p.h5").robot == str(urdf.resolve())
+    run_ok(["import", csv_file, "--robot", "arm3", "-o", tmp_path / "q.h5"])
+    assert load_log(tmp_path / "q.h5").robot == "arm3"  # a bundled robot keeps its name

@@ -223,6 +223,17 @@ def test_log_robot_reads_the_header_only(tmp_path, suffix):
     assert log_robot(tmp_path / f"b{suffix}") is None
 
 
+@pytest.mark.parametrize("robot", ["/labs/my robot", "C:\\robots\\arm", "it's/arm", "arm3"])
+def test_a_csv_logs_robot_path_with_spaces_or_quotes_reads_back(tmp_path, robot):
+    # a user trial: a robot folder named "my robot" was read back as "/labs/my"
+    from diegocal.io.files import log_robot
+
+    log = Log(np.arange(3) * 0.1, {"pots": make_stream(["p"], np.ones((3, 1)))}, robot=robot)
+    save_log(log, tmp_path / "a.csv")
+    assert log_robot(tmp_path / "a.csv") == robot
+    assert load_log(tmp_path / "a.csv").robot == robot
+
+
 def test_damaged_bytes_anywhere_give_one_error_that_names_the_file(tmp_path):
     """Seeded damage at random places of a small log (object headers, B-trees, chunks, data): reading
     it, or listing its streams as batch does, fails with the library's error naming the file, never

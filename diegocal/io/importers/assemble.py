@@ -33,7 +33,14 @@ from diegocal.io.importers.mapping import (
     number,
     per_channel,
 )
-from diegocal.io.importers.robot_info import RobotInfo, check_marker_names, fold_mimic, robot_info, unit_text
+from diegocal.io.importers.robot_info import (
+    RobotInfo,
+    check_marker_names,
+    fold_mimic,
+    robot_attribute,
+    robot_info,
+    unit_text,
+)
 from diegocal.io.importers.signals import (
     default_max_gap,
     derivatives,
@@ -122,7 +129,7 @@ def import_log(paths, mapping: ImportMap | None = None, rate_hz: float | None = 
         check_marker_names(streams["markers"].names, info)
     time, streams = _window(time, streams, clock_rate, mapping, notes)
     ordered = {k: streams[k] for k in STREAMS if k in streams}
-    log = Log(time=np.ascontiguousarray(time), streams=ordered, robot=robot or mapping.robot,
+    log = Log(time=np.ascontiguousarray(time), streams=ordered, robot=robot_attribute(robot or mapping.robot),
               rate_hz=clock_rate)
     return ImportResult(
         log=log,

@@ -41,7 +41,7 @@ Errors are one line naming the key, with a close match for a misspelt name (diff
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -171,7 +171,11 @@ _STREAM = ("source", "table", "columns", "unit", "side", "scale", "offset", "tor
 def load_map(path) -> ImportMap:
     """Read and check an import map (YAML); one :class:`MapError` line when it is wrong."""
     path = Path(path)
-    return parse_map(load_yaml(path), where=str(path))
+    out = parse_map(load_yaml(path), where=str(path))
+    beside = path.parent / out.robot if out.robot and not Path(out.robot).is_absolute() else None
+    if beside is not None and beside.exists() and not Path(out.robot).exists():
+        out = replace(out, robot=str(beside))  # a robot path in the map is read from the map's folder
+    return out
 
 
 def parse_map(data: dict, where: str | None = None) -> ImportMap:

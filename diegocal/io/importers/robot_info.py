@@ -69,6 +69,17 @@ def robot_info(robot: str | None) -> RobotInfo | None:
     return RobotInfo(str(robot), urdf_joints(urdf), markers)
 
 
+def robot_attribute(robot: str | None) -> str | None:
+    """What the log's ``robot`` attribute holds: a robot given as a path that exists, made absolute
+    (the log is then read the same from any folder); a bundled name, or a path not found, as given."""
+    if not robot:
+        return robot
+    path = Path(robot)
+    if path.exists() and ("/" in str(robot) or path.suffix or path.is_dir()):
+        return str(path.resolve())
+    return robot
+
+
 def _locate(robot: str) -> tuple[Path | None, Path | None]:
     """(URDF or xacro file, sensors.yaml or None) of a robot given as a path or a bundled name."""
     path = Path(robot)
