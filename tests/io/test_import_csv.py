@@ -105,7 +105,8 @@ def test_bad_mappings_of_a_table_are_one_line_errors(tmp_path, streams, error, m
 
 @pytest.mark.parametrize("text, error, message", [
     ("t,a\n0,1\n1,2\n", MapError, "no 'time' column \\(columns: t, a\\); name the time column with `time:`"),
-    ("time,a\n0,1\n0,2\n", LogFormatError, "time is not strictly increasing at row 2 \\(0 then 0\\)"),
+    ("time,a\n0,1\n-1,2\n", LogFormatError, "time goes back at row 2 \\(0.0 then -1.0\\)"),
+    ("time,a\n1700000000.000000001,1\n1699999999.99,2\n", LogFormatError, "\\(1700000000.0 then 1699999999.99\\)"),
     ("time,a\n", LogFormatError, "header but no rows"),
     ("time,a,a\n0,1,2\n", LogFormatError, "duplicate column 'a'"),
     ("time,q.j1\nx,1\n", LogFormatError, "non-numeric"),
@@ -225,3 +226,23 @@ def test_pots_in_millivolts_are_brought_to_volts(tmp_path):
     result = import_log([path], mapping)
     np.testing.assert_allclose(result.log.streams["pots"].data, [[1.5, 1.5, 7.0]] * 5)  # counts stay counts
     assert result.streams[0][3] == "V/mV/counts -> V/counts"
+
+
+def test_lab_csv_quirks_semicolons_header_units_and_repeated_stamps(tmp_path):
+    # a user trial's files: a European export (semicolons, decimal commas), units in the headers
+    # (`[mV]`, which the map then need not repeat), a time stamp a logger wrote twice
+    path = tmp_path / "amp.csv"
+    path.write_text("t [s];elbow [mV];knee [mV]\n0;1500,5;200\n0,01;1501;201\n0,01;1502;202\n0,02;1503;203\n")
+    mapping = parse_map({"streams": {"pots": {"columns": ["elbow [mV]", "knee [mV]"]}},
+                         "sources": {"amp": {"file": "amp.csv", "time": "t [s]"}}})
+    result = import_log([path], mapping)
+    np.testing.assert_allclose(result.log.time, [0.0, 0.01, 0.02])
+    np.testing.assert_allclose(result.log.streams["pots"].data, [[1.5005, 0.2], [1.501, 0.201], [1.503, 0.203]])
+    assert any("1 repeated time stamps dropped (first kept)" in n for n in result.notes)
+    assert result.streams[0][3] == "mV -> V"
+
+
+def test_lowercase_millivolts_are_millivolts(tmp_path):
+    path = _csv(tmp_path / "amp.csv", ["time", "elbow"], [[k * 0.01, 1500.0] for k in range(5)])
+    mapping = parse_map({"streams": {"pots": {"columns": ["elbow"], "unit": "mv"}}})
+    np.testing.assert_allclose(import_log([path], mapping).log.streams["pots"].data, 1.5)

@@ -28,7 +28,7 @@ from diegocal.io.importers.tables import (
     preview,
     sort_unique,
 )
-from diegocal.io.importers.units import close_match, time_factor
+from diegocal.io.importers.units import close_match, header_unit, time_factor
 
 _ROSTOPIC_TIME = "%time"
 _JS_FIELD = re.compile(r"^field\.(name|position|velocity|effort)(\d+)$")
@@ -63,7 +63,8 @@ def read_csv_table(path: Path, spec: SourceSpec) -> Table:
         if time is None:
             raise LogFormatError(f"{path}: time column {time_col!r} holds non-numeric values")
         time = time * time_factor(spec.time_unit or "s")
-    check_increasing(time, f"{path}: column {time_col or 'time'}")
+    check_increasing(time, f"{path}: column {time_col or 'time'}", repeats=True)
+    keep = np.concatenate([[True], np.diff(time) > 0])
     data, text = {}, []
     for col in columns:
         if col == time_col:
@@ -74,11 +75,14 @@ def read_csv_table(path: Path, spec: SourceSpec) -> Table:
         else:
             data[col] = values
     kind = DIEGOCAL if data and all(_diegocal_column(c) for c in data) else GENERIC
-    units = {}
+    units = {c: u for c in data if (u := header_unit(c))}  # `x [mV]`: the unit the map need not repeat
     if kind == DIEGOCAL:  # already in the log's units; only markers need saying (m)
         data = _group_markers(data)
         units = {c: "m" for c in data if c.startswith("markers.")}
     notes = (f"{path.name}: text columns left out: {preview(text)}",) if text else ()
+    if not keep.all():  # a stamp written twice (a logger's resend): the first row kept, as a bag's
+        notes += (f"{path.name}: {int((~keep).sum())} repeated time stamps dropped (first kept)",)
+        time, data = time[keep], {c: v[keep] for c, v in data.items()}
     time = finish_time(time, spec, float(time[0]))
     rate = spec.rate_hz
     return Table(name="", time=time, columns=data, kind=kind, units=units, rate_hz=rate, notes=notes)
@@ -156,10 +160,14 @@ def _read_frame(path: Path):
 
     skip = 0
     with open(path, errors="replace") as fh:
-        if fh.readline().startswith("#"):
+        header = fh.readline()
+        if header.startswith("#"):
             skip = 1  # diegocal's '# diegocal-log ...' header line
+            header = fh.readline()
+        first_row = fh.readline()
+    sep, decimal = _delimiter(header, first_row)
     try:
-        frame = pd.read_csv(path, skiprows=skip, skipinitialspace=False)
+        frame = pd.read_csv(path, skiprows=skip, skipinitialspace=False, sep=sep, decimal=decimal)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise LogFormatError(f"{path}: cannot parse CSV ({str(exc).splitlines()[0]})") from None
     if len(frame) == 0:
@@ -169,6 +177,16 @@ def _read_frame(path: Path):
     if dup:
         raise LogFormatError(f"{path}: duplicate column {dup[0].rsplit('.', 1)[0]!r}")
     return frame
+
+
+def _delimiter(header: str, first_row: str) -> tuple[str, str]:
+    """(column separator, decimal mark) of a CSV from its header and first data row: a comma,
+    or a semicolon or tab where the header has those and no comma (a European lab export,
+    whose numbers may then use a decimal comma)."""
+    if "," in header or not (";" in header or "\t" in header):
+        return ",", "."
+    sep = ";" if header.count(";") >= header.count("\t") else "\t"
+    return sep, "," if "," in first_row else "."
 
 
 def _numeric(series, path: Path, col: str) -> np.ndarray | None:

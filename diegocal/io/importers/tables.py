@@ -143,16 +143,19 @@ def sort_unique(time: np.ndarray, values: list, where: str) -> tuple[np.ndarray,
     return time, values, tuple(notes)
 
 
-def check_increasing(time: np.ndarray, where: str) -> None:
+def check_increasing(time: np.ndarray, where: str, repeats: bool = False) -> None:
+    """One error line unless ``time`` increases (or, with ``repeats``, never decreases): the row
+    (the first data row is 1) and both stamps in full, so that the rows can be found."""
     if time.size == 0:
         raise LogFormatError(f"{where}: no samples")
     if not np.isfinite(time).all():
         raise LogFormatError(f"{where}: NaN or infinite time stamp at row {int(np.argmin(np.isfinite(time))) + 1}")
     steps = np.diff(time)
-    if (steps <= 0).any():
-        i = int(np.argmax(steps <= 0))
-        raise LogFormatError(f"{where}: time is not strictly increasing at row {i + 2} "
-                             f"({time[i]:.9g} then {time[i + 1]:.9g})")
+    wrong = steps < 0 if repeats else steps <= 0
+    if wrong.any():
+        i = int(np.argmax(wrong))
+        what = "goes back" if steps[i] < 0 else "is not strictly increasing"
+        raise LogFormatError(f"{where}: time {what} at row {i + 2} ({float(time[i])!r} then {float(time[i + 1])!r})")
 
 
 def preview(names, n: int = 8) -> str:

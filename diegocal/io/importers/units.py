@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 
 from diegocal.errors import DiegocalError
 
@@ -76,17 +77,37 @@ def factor(stream: str, unit: str) -> float:
     known = STREAM_UNITS[stream]
     unit = str(unit).strip()
     if known is None:
-        return _VOLTAGE.get(unit, 1.0) if stream == "pots" else 1.0
+        return _voltage(unit) or 1.0 if stream == "pots" else 1.0
     if unit in known:
         return known[unit]
     raise UnitError(f"unknown unit {unit!r} for stream '{stream}' (known: {', '.join(known)})"
                     + close_match(unit, known))
 
 
+def _voltage(unit: str) -> float | None:
+    """The factor of a voltage unit to V, its case aside ('mv' is mV: no pot reads megavolts); None
+    for another unit."""
+    folded = {k.lower(): f for k, f in _VOLTAGE.items()}
+    return folded.get(str(unit).strip().lower())
+
+
+#: Every unit name this module knows (a column header's ``[unit]`` is one of them, or not a unit).
+KNOWN_UNITS = frozenset(
+    {u for table in STREAM_UNITS.values() if table for u in table} | set(_VOLTAGE) | set(TIME_UNITS) | set(CURRENT)
+)
+
+
+def header_unit(column: str) -> str | None:
+    """The unit a lab table's column header states at its end, ``x [mV]`` or ``x (mV)``, when it is
+    one this module knows (a header's ``(joint 1)`` is a name, not a unit); else None."""
+    m = re.search(r"[\[(]\s*([^\])]+?)\s*[\])]\s*$", str(column))
+    return m.group(1) if m and m.group(1) in KNOWN_UNITS else None
+
+
 def target_unit(stream: str, unit: str) -> str:
     """The unit ``unit`` becomes in the log, for summaries: V for a pot in mV, else the stream's."""
     if stream == "pots":
-        return "V" if str(unit).strip() in _VOLTAGE else str(unit)
+        return "V" if _voltage(unit) is not None else str(unit)
     return LOG_UNIT[stream]
 
 
