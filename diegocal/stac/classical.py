@@ -44,10 +44,10 @@ from diegocal.errors import FitError, NumericalError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, marker_points
 from diegocal.stac.calibration import Calibration, FitInfo
-from diegocal.stac.model import check_marker_scale
 from diegocal.stac.pot_inverse import batch_kinematics, joint_angles_from_pots, nonlinear_pots
 from diegocal.stac.regression import MarkerRegression, base_points, levenberg_marquardt
 from diegocal.stac.result import IterationRecord, StacOptions, StacResult
+from diegocal.stac.scale import check_marker_scale
 
 _MODES = ("refuse", "constrain", "nominal")
 

@@ -22,20 +22,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
-from diegocal.errors import LogFormatError, UnknownNameError
+from diegocal.errors import UnknownNameError
 from diegocal.io import Log
 from diegocal.robot import PointSet, Robot, anchor_points
 from diegocal.robot.batch import BatchKinematics
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.observability import NO_CHANNEL, Observability
+from diegocal.stac.scale import check_marker_scale, check_pot_scale
 
 LOG = logging.getLogger(__name__)
 
 #: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
 MARKERS = "markers"
-#: How many times the span the robot's markers can have the log's markers may spread before the
-#: log is taken for one in mm (:func:`check_marker_scale`): mm read as m are 1000 times too far apart
-SPAN_FACTOR = 10.0
 
 
 @dataclass(frozen=True)
@@ -172,6 +170,8 @@ class Observation(Observability):
         self.kinds = np.array([p.kind for p in self.pot_specs], dtype=object)
         self.groups = tuple(dict.fromkeys(list(self.kinds))) + ((MARKERS,) if len(self.marker_index) else ())
         self.A = _linear_map(robot, self.pot_specs)  # (P, n): s = A q for rotary/encoder/tendon
+        if len(self.pot_index):
+            check_pot_scale(self.pots, robot, self.pot_specs, self.A)
         self.linear = np.flatnonzero(self.kinds == "linear")
         full = anchor_points(robot)
         lin_all = [i for i, p in enumerate(robot.sensors.pots) if p.kind == "linear"]
@@ -469,49 +469,6 @@ def absent_line(absent, channels, robot, needed_by: str = "stac") -> str:
         f"{len(absent)} marker(s) of {robot.name}'s sensors.yaml not calibrated: {shown} ({NO_CHANNEL}); "
         "their positions keep their nominal values (standard error null)"
     )
-
-
-def marker_spread(markers: np.ndarray) -> float:
-    """How far the recorded markers (T, M, 3) m (NaN = occluded) lie from their centroid, m: the 90th
-    percentile of their distances from the per-axis median (ghost markers and swapped labels, a few
-    percent of the readings, do not count); 0 with fewer than two readings. A spread, not a
-    position: the mocap frame may lie anywhere."""
-    x = markers[np.isfinite(markers).all(axis=-1)]
-    if len(x) < 2:
-        return 0.0
-    return float(np.quantile(np.linalg.norm(x - np.median(x, axis=0), axis=1), 0.9))
-
-
-def marker_span(robot: Robot, specs) -> float:
-    """An upper bound, m, on the distance between two of the markers ``specs`` over every joint
-    angle: the lengths of the joint placements on the links' chains (a prismatic joint's travel
-    added, inf when it has no limit), plus twice the farthest marker from its joint (its link's
-    offset and its nominal position). The markers' centroid lies within it of each of them."""
-    model, joints, reach = robot.model, set(), 0.0
-    for m in specs:
-        frame = model.frames[robot.frame_id(m.link)]
-        joints.update(j for j in model.supports[frame.parentJoint] if j > 0)
-        reach = max(reach, np.linalg.norm(frame.placement.translation) + np.linalg.norm(m.xyz))
-    span = 2.0 * reach
-    for j in joints:
-        span += np.linalg.norm(model.jointPlacements[j].translation)
-        if model.names[j] in robot.prismatic_joints:
-            span += max(abs(robot.lower[j - 1]), abs(robot.upper[j - 1]))  # inf: no limit, no check
-    return float(span)
-
-
-def check_marker_scale(markers: np.ndarray, robot: Robot, specs) -> None:
-    """Raise LogFormatError when the markers (T, M, 3) spread (:func:`marker_spread`) over
-    :data:`SPAN_FACTOR` times what the robot can span between them (:func:`marker_span`): a log in
-    mm (or cm), which would otherwise fit with a 'converged' calibration of markers metres away."""
-    spread = marker_spread(markers)
-    span = marker_span(robot, specs)
-    if spread > SPAN_FACTOR * span:
-        raise LogFormatError(
-            f"the log's markers spread {spread:.4g} m from their centroid, over {SPAN_FACTOR:g}× what robot "
-            f"{robot.name!r} can span between them ({span:.3g} m at most): markers in mm? the log wants m "
-            "(convert them, or import with the mocap file's unit)"
-        )
 
 
 def _close(name: str, choices) -> str:

@@ -18,7 +18,8 @@ from diegocal.cli.testing import one_line_error
 from diegocal.errors import LogFormatError
 from diegocal.io import Stream, load_log, save_log
 from diegocal.robot.resolve import robot_for_log
-from diegocal.stac.model import SPAN_FACTOR, Observation, marker_span, marker_spread
+from diegocal.stac.model import Observation
+from diegocal.stac.scale import POT_FACTOR, SPAN_FACTOR, marker_span, marker_spread, pot_range
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 HINT = "markers in mm? the log wants m (convert them, or import with the mocap file's unit)"
@@ -94,3 +95,32 @@ def test_bundled_sample_data_is_far_inside_the_bound(name):
     spread, span = marker_spread(obs.markers), marker_span(robot, obs.marker_specs)
     assert spread < span < SPAN_FACTOR * span  # a bound on the distance between two markers
     assert 1000 * spread > 10 * SPAN_FACTOR * span  # the same log in mm is far past it
+
+
+def _pots_scaled(log, factor: float):
+    p = log.streams["pots"]
+    return log.with_streams(pots=Stream(p.names, p.data * factor))
+
+
+def test_pots_in_millivolts_are_one_error_line(tree_dir, session, tmp_path):
+    # a user trial: pots in mV against gains in V/rad 'converged' to gains 400 times the truth
+    path = tmp_path / "mv.h5"
+    save_log(_pots_scaled(session, 1000.0), path)
+    out = tmp_path / "out.calib.yaml"
+    line = one_line_error(runner.invoke(app, ["stac", str(path), "--robot", str(tree_dir), "-o", str(out), "-q"]))
+    assert "the log's pots vary" in line and "(mV against V/rad?)" in line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "name", ["diego_kinematics.h5", "diego_kinematics_heldout.h5", "finger_hidden_nonlinearity.h5"]
+)
+def test_bundled_pots_are_far_inside_their_range(name):
+    log = load_log(SAMPLE / name)
+    robot = robot_for_log(None, log)
+    obs = Observation(log, robot)  # no error
+    span = pot_range(robot, obs.pot_specs, obs.A)
+    ok = np.isfinite(span)
+    lo, hi = np.percentile(obs.pots[:, ok], [1, 99], axis=0)
+    ratio = np.median((hi - lo) / span[ok])
+    assert ratio < 2.0 < POT_FACTOR < 1000 * ratio  # the same pots in mV are far past the bound
