@@ -90,7 +90,7 @@ from diegocal.sgp.model import (
 )
 from diegocal.sgp.regressor import FRICTION_KINDS, base_parameters, base_regressor, check_friction
 from diegocal.sgp.store import ml2_unconverged, save_model
-from diegocal.sgp.streams import check_angles
+from diegocal.sgp.streams import check_angles, check_torque_scale
 from diegocal.sgp.terms import (
     BODIES,
     FILTERS,
@@ -518,6 +518,7 @@ def adapters(log, robot, options) -> list[DynamicsAdapter]:
     qd = log.stream("qd").select(robot.joint_names).data if log.has("qd") else _derivative(q, log.time)
     qdd = log.stream("qdd").select(robot.joint_names).data if log.has("qdd") else _derivative(qd, log.time)
     tau, joints = torque_array(log, robot)
+    check_torque_scale(robot, q, qd, qdd, tau, joints)  # mN·m: one error line
     friction = getattr(options, "friction", FRICTION_KINDS)
     inertia = getattr(options, "inertia", "identified")
     return [DynamicsAdapter(robot, log.time, q, qd, qdd, tau, joints, friction, inertia)]

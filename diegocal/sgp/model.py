@@ -49,7 +49,7 @@ from diegocal.sgp.regressor import (
     parameter_names,
     true_parameters,
 )
-from diegocal.sgp.streams import check_angles, log_arrays, torque_array, warn_unused  # noqa: F401
+from diegocal.sgp.streams import check_angles, check_torque_scale, log_arrays, torque_array, warn_unused  # noqa: F401
 from diegocal.sgp.terms import (
     apply_filters,
     dynamics_terms,
@@ -511,6 +511,7 @@ def fit_dynamics(log, robot, options: SGPOptions | None = None, progress=None) -
     log = log.without_truth()
     q, qd, qdd = log_arrays(log, robot, need_tau=False, needed_by="sgp-fit", warn=False)
     tau, joints = torque_array(log, robot, warn=False)
+    check_torque_scale(robot, q, qd, qdd, tau, joints)
     warn_unused(log, robot, INPUT_STREAMS + ("tau",))  # a gripper's channels, a locked joint's
     model = DynamicsModel(robot, options, tau_joints=joints, progress=progress)
     if model.joints_without_tau:

@@ -166,6 +166,44 @@ def check_angles(robot, q: np.ndarray, warn: bool = True) -> None:
         LOG.warning(f"q past the URDF limits of robot {robot.name!r} (rad): {shown}")
 
 
+#: How many times the torque the URDF's rigid body needs for the log's motion (either way) the log's
+#: torques may be, by the median over the joints, before the log is taken for one in another unit:
+#: mN·m read as N·m are 1000 times it; friction and a wrong inertia make it some times it (the TX40's
+#: median 2.6, its friction-bound wrist 96 times), a slow robot the gravity does not load more
+TORQUE_FACTOR = 300.0
+#: Samples of the log the check computes the rigid body's torque on (spread over the whole log)
+TORQUE_CHECK_SAMPLES = 1000
+
+
+def check_torque_scale(robot, q, qd, qdd, tau: np.ndarray, joints) -> None:
+    """Raise LogFormatError when the torques ``tau`` (T, k) of ``joints`` are, by the median over the
+    joints, over :data:`TORQUE_FACTOR` times (or under its inverse) the RMS torque the URDF's rigid
+    body needs for the log's motion (RNEA, no friction): a log in mN·m (or kN·m). Joints whose
+    rigid-body torque is under 1 % of the largest joint's are not compared (a wrist turning about
+    the vertical carries friction only)."""
+    from diegocal.sgp.model import nominal_torque  # lazy: the model imports this module
+
+    T = len(q)
+    rows = np.unique(np.linspace(0, T - 1, min(T, TORQUE_CHECK_SAMPLES)).astype(int))
+    ok = np.isfinite(q[rows]).all(axis=1) & np.isfinite(qd[rows]).all(axis=1) & np.isfinite(qdd[rows]).all(axis=1)
+    rows = rows[ok]
+    if rows.size < 10:
+        return
+    at = [robot.joint_names.index(j) for j in joints]
+    rigid = np.sqrt(np.mean(nominal_torque(robot, q[rows], qd[rows], qdd[rows])[:, at] ** 2, axis=0))
+    measured = np.sqrt(np.nanmean(tau[rows] ** 2, axis=0))
+    use = (rigid > 0.01 * rigid.max()) & np.isfinite(measured) & (measured > 0)
+    if not use.any():
+        return
+    ratio = float(np.median(measured[use] / rigid[use]))
+    if ratio > TORQUE_FACTOR or ratio < 1.0 / TORQUE_FACTOR:
+        raise LogFormatError(
+            f"the log's torques are {ratio:.3g} times what robot {robot.name!r}'s URDF needs for its motion (RMS, "
+            f"the median over the joints): {'mN·m' if ratio > 1 else 'kN·m'}? the log wants N·m (N for a "
+            "prismatic joint); convert them, or import them with their unit"
+        )
+
+
 def _within_as_degrees(lo_q: float, hi_q: float, lo: float, hi: float) -> bool:
     """Whether the span [lo_q, hi_q] read as degrees lies within the limits [lo, hi] rad widened by a
     quarter of their range and 0.3 rad (the margin :class:`~diegocal.stac.model.Observation` allows)."""

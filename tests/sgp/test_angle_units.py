@@ -122,3 +122,39 @@ def test_real_and_sample_logs_pass_without_a_warning(name, caplog):
     with caplog.at_level(logging.WARNING, logger="diegocal.sgp"):
         log_arrays(log, robot_for_log(None, log), need_tau=False, warn=False)
     assert not caplog.records
+
+
+def _scaled_tau(log, factor):
+    s = log.streams["tau"]
+    return log.with_streams(tau=make_stream(s.names, s.data * factor))
+
+
+@pytest.mark.parametrize("factor, unit", [(1000.0, "mN·m"), (0.001, "kN·m")])
+def test_torques_in_another_unit_are_one_error_line(arm2, arm2_dir, simulate, tmp_path, factor, unit):
+    # a user trial: torques in mN·m gave a 'converged' UR5 whose shoulder mc_z was 4432 kg·m
+    good, _ = simulate(arm2, T=120, seed=7)
+    path = tmp_path / "scaled.h5"
+    save_log(_scaled_tau(good, factor), path)
+    for args in (["sgp-fit", str(path), "-m", "pr"], ["diagnose", str(path), "--domain", "dynamics"]):
+        out = tmp_path / "out"
+        res = runner.invoke(app, args + ["--robot", str(arm2_dir), "-o", str(out)])
+        assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+        line = res.output.strip().splitlines()[-1]
+        assert "times what robot" in line and f"{unit}? the log wants N·m" in line
+        assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["real/tx40.h5", "real/tiago.h5", "arm3_dynamics.h5", "arm3_hidden_friction.h5"])
+def test_real_and_sample_torques_are_far_inside_the_bound(name):
+    from diegocal.sgp.streams import TORQUE_FACTOR, check_torque_scale, torque_array
+
+    log = load_log(SAMPLE / name)
+    robot = robot_for_log(None, log)
+    q, qd, qdd = log_arrays(log, robot, need_tau=False, warn=False)
+    tau, joints = torque_array(log, robot, warn=False)
+    check_torque_scale(robot, q, qd, qdd, tau, joints)  # no error
+    with pytest.raises(LogFormatError, match="mN·m"):
+        check_torque_scale(robot, q, qd, qdd, 1000 * tau, joints)
+    with pytest.raises(LogFormatError, match="kN·m"):
+        check_torque_scale(robot, q, qd, qdd, tau / 1000, joints)
+    assert TORQUE_FACTOR < 1000
