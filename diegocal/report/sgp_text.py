@@ -166,28 +166,36 @@ def uncertainty_words(coverage: dict) -> str:
 #: A joint whose learnt noise σ_v is this many times the median of the model's other joints: its
 #: ±2σ band covers the data because the model's error is that large there, not because it is right.
 NOISY = 10.0
+#: ... and whose relative error, √(in-sample nMSE), is this many times theirs: a shoulder that carries
+#: sixty times a wrist's torque has a noisier torque in N·m and is not the worse fitted for it
+WORSE = 3.0
 
 
-def noisy_joints(hyper: dict) -> dict:
+def noisy_joints(hyper: dict, nmse: dict | None = None) -> dict:
     """joint -> (its σ_v, the other joints' median σ_v) where σ_v is NOISY times that median or more
-    (a model of three or more joints; torque sensors of one robot are of one kind)."""
+    (a model of three or more joints) and, given the in-sample ``nmse`` per joint, its relative error
+    √nMSE is WORSE times the others' median too (noise in N·m grows with the torque a joint carries)."""
     sigma = {j: float(h["sigma_v"]) for j, h in hyper.items() if isinstance(h, dict) and h.get("sigma_v")}
+    rel = {j: float(v) ** 0.5 for j, v in (nmse or {}).items() if v is not None and j in sigma}
     out = {}
     for j, v in sigma.items():
         others = [w for k, w in sigma.items() if k != j]
         if len(others) >= 2 and v >= NOISY * float(np.median(others)) > 0:
+            peers = [w for k, w in rel.items() if k != j]
+            if j in rel and peers and rel[j] < WORSE * float(np.median(peers)):
+                continue
             out[j] = (v, float(np.median(others)))
     return out
 
 
-def noisy_words(hyper: dict) -> str:
+def noisy_words(hyper: dict, nmse: dict | None = None) -> str:
     """A sentence on each joint whose learnt noise is far above its siblings' ("" when none is)."""
     return "".join(
         f" But on {j} the noise the model learnt, σ_v {v:.3g}, is {v / rest:.0f} times the other joints' median "
         f"({rest:.3g}): the model's error is that large there, and its ±2σ band wide because of it, not because "
         "the model is right; an effect the model lacks is likely (diegocal diagnose names it), unless that "
         "joint's sensor is that noisy."
-        for j, (v, rest) in noisy_joints(hyper).items()
+        for j, (v, rest) in noisy_joints(hyper, nmse).items()
     )
 
 
@@ -270,7 +278,7 @@ def model_paragraphs(model: Path, context) -> list[str]:
             )
     else:
         text += " No held-out log was given (diegocal report ... --heldout LOG): in-sample numbers only."
-    text += noisy_words(s.get("hyperparameters") or {}) + fine_words(s.get("hyperparameters") or {})
+    text += noisy_words(s.get("hyperparameters") or {}, joints) + fine_words(s.get("hyperparameters") or {})
     out = [text]
     more = []
     hyper = s.get("hyperparameters") or {}

@@ -183,6 +183,22 @@ def test_a_joint_whose_learnt_noise_dwarfs_its_siblings_is_not_called_right():
     hyper["j4"] = {"sigma_v": 0.05}  # five times the others: a noisier sensor is plausible
     assert noisy_words(hyper) == ""
     assert noisy_joints({"a": {"sigma_v": 1.0}, "b": {"sigma_v": 0.01}}) == {}  # two joints: no reference
+    hyper["j4"] = {"sigma_v": 2.96}
+    nmse = {f"j{i}": 0.0002 for i in range(1, 8)}
+    nmse["j4"] = 0.2  # the missing friction: its relative error too is far above the others'
+    assert list(noisy_joints(hyper, nmse)) == ["j4"]
+
+
+def test_a_joint_that_carries_more_torque_is_not_called_noisy():
+    """A user trial: a clean UR5, the model exact, its shoulder's σ_v 0.294 N·m (the true noise 0.290)
+    24 times the other joints' median, every joint's in-sample nMSE 0.0002: noise in N·m that grows
+    with the torque a joint carries, not an effect the model lacks."""
+    from diegocal.report.sgp_text import noisy_words
+
+    hyper = {"pan": {"sigma_v": 0.012}, "lift": {"sigma_v": 0.294}, "elbow": {"sigma_v": 0.11},
+             "w1": {"sigma_v": 0.012}, "w2": {"sigma_v": 0.011}, "w3": {"sigma_v": 0.012}}
+    nmse = dict.fromkeys(hyper, 0.0002)
+    assert "lift" in noisy_words(hyper) and noisy_words(hyper, nmse) == ""
 
 
 def test_a_joint_fitted_worse_than_its_mean_is_said_to_be():
