@@ -23,8 +23,11 @@ of a given fraction of each joint's torque spread. ``hidden`` effects, one per l
   joint from another joint's angle: a cable or hose pulled by the next link), ``drifting_offset``
   (the torque sensor's zero drifting linearly over the session, as its electronics warm).
 
-A second *session* of the same robot is the same ``robot_seed`` (friction and hidden effect's
-parameters) with another ``seed`` (trajectory and noise). Logs carry ``/truth``: the effect, its
+A second *session* of the same robot is the same ``robot_seed``, duration and rate with another
+``seed`` (trajectory and noise): the robot's friction, noise level and hidden effect (its joint,
+size and parameters) are drawn against the torque spread and joint ranges of a reference
+trajectory that ``robot_seed`` alone draws (the session's own when ``seed == robot_seed``), so
+that they do not change with the session's motion. Logs carry ``/truth``: the effect, its
 parameters, and the noise-free torque with and without the hidden effect, for judging only.
 """
 
@@ -115,12 +118,16 @@ def _heavier(model, joint: int, mass: float, lever: np.ndarray):
     return out
 
 
-def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau, applied) -> tuple[np.ndarray, dict]:
+def hidden_torque(
+    name: str, model, q, qd, qdd, time, j: int, rng, base_tau, applied, ref=None
+) -> tuple[np.ndarray, dict]:
     """The hidden effect's torque (T, n) before sizing, and its parameters (shape only);
-    ``base_tau`` the rigid body's torque, ``applied`` with friction."""
+    ``base_tau`` the rigid body's torque, ``applied`` with friction; ``ref`` the reference
+    trajectory's q (T', n), whose ranges place the effect (default: ``q``)."""
     T, n = q.shape
     out = np.zeros((T, n))
-    lo, hi = q[:, j].min(), q[:, j].max()
+    ref = q if ref is None else ref
+    lo, hi = ref[:, j].min(), ref[:, j].max()
     if name == "position_friction":
         start = lo + rng.uniform(0.55, 0.75) * (hi - lo)
         inside = q[:, j] >= start
@@ -162,7 +169,7 @@ def hidden_torque(name: str, model, q, qd, qdd, time, j: int, rng, base_tau, app
         return out, {"shape": "|load| tanh(qd/0.02)"}
     if name == "hose":
         i = (j + 1) % n
-        out[:, j] = q[:, i] - q[:, i].mean()
+        out[:, j] = q[:, i] - ref[:, i].mean()
         return out, {"from_joint": i}
     raise ValueError(f"unknown hidden effect {name!r}; known: {IN_VOCABULARY + OUT_OF_VOCABULARY}")
 
@@ -177,19 +184,35 @@ def generate(session: Session) -> Log:
     time = np.arange(0.0, session.duration, 1.0 / session.rate_hz)
     q, qd, qdd = excitation(model, time, traj_rng)
     base = rnea(model, q, qd, qdd)
-    spread = base.std(axis=0)
+    if session.seed == session.robot_seed:
+        ref_q, ref_qd, ref_base = q, qd, base
+    else:  # the robot's reference trajectory: what its friction, noise and effect are drawn against
+        ref_q, ref_qd, ref_qdd = excitation(model, time, np.random.default_rng(session.robot_seed).spawn(2)[0])
+        ref_base = rnea(model, ref_q, ref_qd, ref_qdd)
+    spread = ref_base.std(axis=0)
     fc = robot_rng.uniform(*session.coulomb) * spread
-    fv = robot_rng.uniform(0.02, 0.05) * spread / np.maximum(qd.std(axis=0), 1e-9)
-    coulomb = np.tanh(qd / session.smooth_scale) if session.smooth_scale > 0 else np.sign(qd)
-    friction = fv * qd + fc * coulomb
+    fv = robot_rng.uniform(0.02, 0.05) * spread / np.maximum(ref_qd.std(axis=0), 1e-9)
+    def coulomb(v):
+        return np.tanh(v / session.smooth_scale) if session.smooth_scale > 0 else np.sign(v)
+
+    friction = fv * qd + fc * coulomb(qd)
     clean = base + friction
     noise = session.noise * spread
     effect = {}
     hidden = np.zeros_like(clean)
     if session.hidden:
         j = session.joint if session.joint is not None else int(robot_rng.integers(1, model.nq))
-        shape, params = hidden_torque(session.hidden, model, q, qd, qdd, time, j, robot_rng, base, clean)
-        rms = np.sqrt(np.mean(shape[:, j] ** 2))
+        fork = np.random.Generator(np.random.PCG64())  # the same draws of the shape's parameters
+        fork.bit_generator.state = robot_rng.bit_generator.state
+        shape, params = hidden_torque(session.hidden, model, q, qd, qdd, time, j, robot_rng, base, clean, ref_q)
+        if session.seed == session.robot_seed:
+            rms = np.sqrt(np.mean(shape[:, j] ** 2))
+        else:  # sized on the reference trajectory, as the robot is
+            ref_clean = ref_base + fv * ref_qd + fc * coulomb(ref_qd)
+            ref_shape, _ = hidden_torque(
+                session.hidden, model, ref_q, ref_qd, ref_qdd, time, j, fork, ref_base, ref_clean, ref_q
+            )
+            rms = np.sqrt(np.mean(ref_shape[:, j] ** 2))
         scale = session.size * noise[j] / rms
         hidden = scale * shape
         if session.hidden == "transmission_backlash":  # the scale is the half-width: the link's RNEA
