@@ -155,6 +155,8 @@ class Log:
             have = ", ".join(sorted(self.streams)) or "none"
             match = close_match(name, self.streams)
             hint = f" — did you mean {match!r}?" if match else ""
+            if name in ("qd", "qdd") and "q" in self.streams:  # a bag's joint states: positions, velocities
+                hint = f"; `diegocal import` derives it from q (`derive: [{name}]` in the import map)"
             raise MissingStreamError(f"log has no '{name}' stream{who}; it has: {have}{hint}")
         found = self.streams[name]
         return found if found.label else replace(found, label=name)

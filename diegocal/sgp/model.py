@@ -40,14 +40,12 @@ from diegocal.sgp.options import (  # noqa: F401
     with_kind,
 )
 from diegocal.sgp.regressor import (
-    CHUNK,
     BaseParameters,
     base_parameters,
     base_regressor,
     check_friction,
-    full_regressor,
+    nominal_torque,
     parameter_names,
-    true_parameters,
 )
 from diegocal.sgp.streams import check_angles, check_torque_scale, log_arrays, torque_array, warn_unused  # noqa: F401
 from diegocal.sgp.terms import (
@@ -101,19 +99,6 @@ class ParametricEstimate:
     values: np.ndarray
     stderr: np.ndarray
     cov: np.ndarray = field(repr=False)
-
-
-def nominal_torque(robot, q, qd, qdd) -> np.ndarray:
-    """(T, n): the rigid body's torque with the URDF's inertias (eq. 3.30 with w = the URDF's
-    inertial parameters, no friction; Pinocchio's regressor times them, i.e. its RNEA)."""
-    n = robot.n_joints
-    w = true_parameters(robot, friction=())[: 10 * n]
-    q, qd, qdd = (robot.check_q(x) for x in (q, qd, qdd))
-    out = np.empty((len(q), n))
-    for i in range(0, len(q), CHUNK):  # a chunk's regressor at a time (regressor.CHUNK)
-        sl = slice(i, i + CHUNK)
-        out[sl] = full_regressor(robot, q[sl], qd[sl], qdd[sl], ())[:, :, : 10 * n] @ w
-    return out
 
 
 def nominal_base(robot, friction) -> BaseParameters:

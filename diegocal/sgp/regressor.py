@@ -198,3 +198,16 @@ def base_parameters(
     beta[np.abs(beta) < 1e-10] = 0.0
     names = parameter_names(robot, friction)
     return BaseParameters(piv[:r].copy(), piv[r:].copy(), beta, tuple(names[i] for i in piv[:r]))
+
+
+def nominal_torque(robot, q, qd, qdd) -> np.ndarray:
+    """(T, n): the rigid body's torque with the URDF's inertias (eq. 3.30 with w = the URDF's
+    inertial parameters, no friction; Pinocchio's regressor times them, i.e. its RNEA)."""
+    n = robot.n_joints
+    w = true_parameters(robot, friction=())[: 10 * n]
+    q, qd, qdd = (robot.check_q(x) for x in (q, qd, qdd))
+    out = np.empty((len(q), n))
+    for i in range(0, len(q), CHUNK):  # a chunk's regressor at a time (regressor.CHUNK)
+        sl = slice(i, i + CHUNK)
+        out[sl] = full_regressor(robot, q[sl], qd[sl], qdd[sl], ())[:, :, : 10 * n] @ w
+    return out

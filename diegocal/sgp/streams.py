@@ -22,6 +22,7 @@ import numpy as np
 
 from diegocal.errors import LogFormatError, MissingStreamError
 from diegocal.sgp.options import INPUT_STREAMS
+from diegocal.sgp.regressor import nominal_torque
 
 LOG = logging.getLogger(__name__)
 #: rad a revolute joint may read past its URDF limits before a warning says so (a sensor zeroed a
@@ -181,8 +182,6 @@ def check_torque_scale(robot, q, qd, qdd, tau: np.ndarray, joints) -> None:
     body needs for the log's motion (RNEA, no friction): a log in mN·m (or kN·m). Joints whose
     rigid-body torque is under 1 % of the largest joint's are not compared (a wrist turning about
     the vertical carries friction only)."""
-    from diegocal.sgp.model import nominal_torque  # lazy: the model imports this module
-
     T = len(q)
     rows = np.unique(np.linspace(0, T - 1, min(T, TORQUE_CHECK_SAMPLES)).astype(int))
     ok = np.isfinite(q[rows]).all(axis=1) & np.isfinite(qd[rows]).all(axis=1) & np.isfinite(qdd[rows]).all(axis=1)

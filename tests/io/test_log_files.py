@@ -197,6 +197,9 @@ def test_nan_in_stream_that_forbids_it_is_reported_with_file(tmp_path):
 def test_missing_stream_names_the_command():
     with pytest.raises(MissingStreamError, match="log has no 'markers' stream \\(needed by stac\\); it has: pots"):
         good_log().stream("markers", needed_by="stac")
+    joints = Log(np.arange(3) * 0.1, {k: make_stream(["j"], np.ones((3, 1))) for k in ("q", "qd", "tau")})
+    with pytest.raises(MissingStreamError, match=r"no 'qdd' stream.*derives it from q \(`derive: \[qdd\]`"):
+        joints.stream("qdd", needed_by="sgp-fit")  # a bag's joint states (a user trial: "did you mean 'qd'?")
 
 
 def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
