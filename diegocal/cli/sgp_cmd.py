@@ -37,6 +37,7 @@ from diegocal.cli.common import (
     refuse_unconverged,
     split_words,
     summary,
+    warn,
 )
 from diegocal.errors import OptionError
 
@@ -317,13 +318,28 @@ def sgp_fit(
     ]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
-    from diegocal.sgp.store import load_summary
+    from diegocal.sgp.store import load_summary, prior_held
+
+    unknown, held = prior_held(fitted)
+    if unknown:
+        rows.append(("not identified (null)", _names(unknown)))
+        warn(f"the log does not identify {len(unknown)} base parameter(s), written null: {_names(unknown)} "
+             "(a joint that never moves has no friction to fit)")
+    if held:
+        rows.append(("held by the prior", _names(held)))
+        warn(f"{len(held)} of {fitted.base_.n_base} base parameters are held by the prior more than by the data "
+             f"({_names(held)}): their values are pulled toward 0 and their ± are mostly the prior's; a longer or "
+             "richer excitation identifies them")
 
     why = unconverged(load_summary(out))
     rows.append(("converged", "yes: every fit to its tolerance" if why is None else "no: see below"))
     summary(f"sgp-fit → {out}", rows, quiet=args.quiet)
     late = () if why is None else (f"{why}; written with converged: false",)
     refuse_unconverged(late, args.allow_unconverged, UNCONVERGED_HINT)
+
+
+def _names(names, n: int = 4) -> str:
+    return ", ".join(names[:n]) + (f" and {len(names) - n} more" if len(names) > n else "")
 
 
 def _guard_text(entry: dict) -> str:

@@ -313,8 +313,7 @@ class DynamicsAdapter:
         return np.where(np.isfinite(s) & (s > 0), s, 1.0)
 
     def _options(self, kind: str = "pr") -> SGPOptions:
-        """The options of the model the diagnosis fits and saves (``kind`` "sgp": the one that
-        absorbs what stays unexplained, :data:`EXTENDED_SGP`)."""
+        """The options of the model the diagnosis fits and saves ("sgp": it absorbs, EXTENDED_SGP)."""
         options = SGPOptions(kind="pr", friction=self.friction, inertia=self.inertia)
         return replace(options, kind="sgp", **EXTENDED_SGP) if kind == "sgp" else options
 
@@ -495,12 +494,18 @@ class DynamicsAdapter:
         return replace(fitted, pred=pred, model=model, gp=gp)
 
     def save(self, fitted: DynamicsFit, path, header: dict) -> Path:
-        model = fitted.model
+        """The extended model as a dynamics bundle; one whose GP absorbs what stays unexplained fitted
+        again on the whole log where that fit converges (its gain was measured with the training blocks'
+        fit; a GP on 60 % of a session predicted a UR5's next one at 1.72 against 0.24 N·m)."""
+        model, on = fitted.model, "training blocks of the diagnosis"
+        whole = DynamicsModel(self.robot, model.options, self.joints, model.terms) if fitted.gp is not None else None
+        if whole is not None and whole.fit_arrays(self.q, self.qd, self.qdd, self.tau, time=self.time).converged_:
+            model, on = whole, "the whole log (its terms, GP joints and gain from the diagnosis's blocks)"
         meta = {
             "log": header.get("log"),
             "command": header.get("command") or "diagnose",
             "created": header.get("created"),
-            "fitted_on": "training blocks of the diagnosis",
+            "fitted_on": on,
             "model": self.describe(fitted),
         }
         return save_model(model, path, meta, header={**header, "kind": "dynamics"})

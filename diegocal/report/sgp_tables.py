@@ -50,7 +50,8 @@ FRICTION_LEAVES = {"viscous_friction": "fv", "coulomb_friction": "fc"}
 PARAMETER_NOTE = (
     "Base parameters (thesis eq. 3.30 reduced by QR with column pivoting): each is the named parameter of the "
     "link that a joint moves plus the combination of the parameters the regressor cannot tell apart from it, so a "
-    "base inertia may be negative. ± SE: one posterior standard deviation."
+    "base inertia may be negative. ± SE: one posterior standard deviation; –: a parameter the log does not identify "
+    "(its posterior is the prior: a joint that never moves)."
 )
 #: Said under the table when the model has terms diagnose added.
 ADDED_NOTE = " Then the parameters of the terms diagnose added (e.g. friction confined to part of a joint's range)."

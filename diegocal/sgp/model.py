@@ -379,6 +379,18 @@ class DynamicsModel:
         return None if runs == 0 else capped == 0
 
     @property
+    def prior_share_(self) -> np.ndarray | None:
+        """(P,) each parametric column's posterior variance over its prior's (σ_w, thesis eq. 3.25):
+        near 0 where the data fix the parameter, 1 where they say nothing of it (a joint that never
+        moves: its friction is the prior's 0 ± σ_w); in between, the share of the way its estimate
+        is pulled toward 0. None for a model without a parametric part."""
+        est = self._param_est
+        if est is None or getattr(est, "hyper_", None) is None:
+            return None
+        prior = (np.exp(est.hyper_.log_sigma_w) / est.f_scale_) ** 2
+        return np.diag(est.w_cov_) / prior
+
+    @property
     def parametric_(self) -> ParametricEstimate | None:
         est = self._param_est
         if est is None:

@@ -132,6 +132,27 @@ def _baseline_dicts(model) -> list[dict]:
     return out
 
 
+#: A base parameter whose posterior variance is this share of its prior's or more is not
+#: identified by the data (:attr:`~diegocal.sgp.model.DynamicsModel.prior_share_`): written null
+PRIOR_ONLY = 0.99
+#: ... and one whose share is over this is held by the prior more than by the data (a warning)
+PRIOR_HELD = 0.5
+
+
+def prior_held(model) -> tuple[list[str], list[str]]:
+    """(names of the base parameters the data do not identify, names of those the prior holds
+    more than the data do): :data:`PRIOR_ONLY`, :data:`PRIOR_HELD`."""
+    share, par = model.prior_share_, model.parametric_
+    if share is None or par is None:
+        return [], []
+    n = model.base_.n_base
+    names = par.names[:n]
+    return (
+        [a for a, s in zip(names, share[:n], strict=True) if s > PRIOR_ONLY],
+        [a for a, s in zip(names, share[:n], strict=True) if PRIOR_HELD < s <= PRIOR_ONLY],
+    )
+
+
 def baseline_terms(model) -> list:
     """The fitted baseline as terms: one ``rigid_body`` term with the base parameters (named after
     the parameter each is led by, ``joint2.I_zz``, in its unit) and a ``viscous_friction`` and
@@ -141,7 +162,11 @@ def baseline_terms(model) -> list:
     prismatic = model.robot.prismatic_joints
     rigid, friction = {}, {}
     n_base = model.base_.n_base
-    for name, v, se in zip(par.names[:n_base], par.values[:n_base], par.stderr[:n_base], strict=True):
+    values, stderr = par.values[:n_base].copy(), par.stderr[:n_base].copy()
+    share = model.prior_share_
+    if share is not None:  # the data say nothing of it: no value (null), not the prior's 0 ± σ_w
+        values[share[:n_base] > PRIOR_ONLY] = stderr[share[:n_base] > PRIOR_ONLY] = np.nan
+    for name, v, se in zip(par.names[:n_base], values, stderr, strict=True):
         kind, joint = _friction_of(name)
         if kind is None:
             leaf = name.rpartition(".")[2]

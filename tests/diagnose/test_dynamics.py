@@ -405,6 +405,8 @@ def test_cli_unexplained_structure_is_absorbed_by_the_sgp(arm3, tmp_path):
     extended = tmp_path / "run.extended.sgp"
     bundle = load_bundle(extended)
     assert bundle.kind == "dynamics" and bundle.data["options"]["kind"] == "sgp"
+    # saved fitted on the whole log (a user trial: the training blocks' GP predicted a new session badly)
+    assert bundle.data["n_samples"] == log.n_samples and "whole log" in bundle.data["meta"]["fitted_on"]
     out = tmp_path / "pred.h5"
     res = runner.invoke(app, ["predict", str(extended), str(path), "-o", str(out)])
     assert res.exit_code == 0, res.output

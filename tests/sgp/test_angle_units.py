@@ -158,3 +158,37 @@ def test_real_and_sample_torques_are_far_inside_the_bound(name):
     with pytest.raises(LogFormatError, match="kN·m"):
         check_torque_scale(robot, q, qd, qdd, tau / 1000, joints)
     assert TORQUE_FACTOR < 1000
+
+
+
+def test_a_joint_that_never_moves_has_no_friction_written(arm2, arm2_dir, tmp_path):
+    # a user trial: a still joint's friction was written 0.0 ± 2.207 (the prior's σ_w, not an estimate)
+    from diegocal.sgp.store import load_summary, parameters_of
+    from tests.sgp.conftest import excitation, make_log, true_torque
+
+    rng = np.random.default_rng(8)
+    t, q, qd, qdd = excitation(arm2, 300, 50.0, rng)
+    q[:, 1], qd[:, 1], qdd[:, 1] = 0.3, 0.0, 0.0  # the elbow held still
+    tau = true_torque(arm2, q, qd, qdd) + 0.05 * rng.standard_normal(q.shape)
+    still = tmp_path / "still.h5"
+    save_log(make_log(arm2, q, qd, qdd, tau, t), still)
+    out = tmp_path / "still.sgp"
+    res = runner.invoke(app, ["sgp-fit", str(still), "--robot", str(arm2_dir), "-m", "pr", "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    assert "the log does not identify 2 base parameter(s), written null" in res.output
+    params = parameters_of(load_summary(out))
+    elbow = [v for k, v in params.items() if k.startswith(("viscous_friction:elbow", "coulomb_friction:elbow"))]
+    assert len(elbow) == 2 and all(v["value"] is None and v["stderr"] is None for v in elbow)
+    assert all(v["value"] is not None for k, v in params.items() if "friction:shoulder" in k)
+
+
+@pytest.mark.parametrize("T, held", [(300, False), (12, True)])
+def test_a_short_log_says_the_prior_holds_its_parameters(arm2, arm2_dir, simulate, tmp_path, T, held):
+    # a user trial: 0.3 s of a UR5 fitted 'converged', its shoulder mc_z pulled to 1.13 against 4.43
+    log, _ = simulate(arm2, T=T, seed=3)
+    path = tmp_path / "log.h5"
+    save_log(log, path)
+    res = runner.invoke(app, ["sgp-fit", str(path), "--robot", str(arm2_dir), "-m", "pr", "-o", str(tmp_path / "m")])
+    assert res.exit_code == 0, res.output
+    assert ("held by the prior more than by the data" in res.output) == held
+    assert "does not identify" not in res.output
