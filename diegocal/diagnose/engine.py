@@ -29,7 +29,7 @@ from diegocal.diagnose.selection import (
     rival_causes,
     simplest,
 )
-from diegocal.diagnose.show import binned_candidate, region_of, show
+from diegocal.diagnose.show import binned_candidate, show, unexplained_region
 from diegocal.diagnose.stand_ins import declined_rival, outshone, own_channel, refit_rival, spilled, stand_in_finding
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
@@ -214,7 +214,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         for t in [t for t in tested if t.significant]:
             if any(f.kind == "unexplained" and f.channel == t.term.channel for f in findings):
                 continue  # one per channel: its most significant variable
-            region = region_of(t)
+            region = unexplained_region(t)
             term = Term("unexplained", t.term.channel, (), region)
             evidence = {
                 "channels": list(t.channels),

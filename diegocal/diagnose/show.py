@@ -179,6 +179,21 @@ def region_of(tested, n_bins_axes: int | None = None) -> Region:
     return Region(term.region.variable, float(edges[lo]), float(edges[hi + 1]))
 
 
+def unexplained_region(tested) -> Region:
+    """Where an ``unexplained`` structure sits: from the first to the last bin whose |mean| is over
+    half the largest (:func:`region_of`'s run when they are contiguous). A structure at both ends of
+    the variable (a hose's torque linear in the next joint's angle) spans its range, not the end
+    where it happens to be largest (a user trial: q.elbow 0.64-1.58 of -1.32-1.58)."""
+    term = tested.term
+    edges = np.asarray(term.extra["edges"], float)
+    B = edges.size - 1
+    if term.values.size % B:
+        return region_of(tested)
+    mag = np.sqrt((term.values.reshape(-1, B) ** 2).sum(axis=0))
+    over = np.flatnonzero(mag > 0.5 * mag.max())
+    return Region(term.region.variable, float(edges[over[0]]), float(edges[over[-1] + 1]))
+
+
 def show(res, weights: dict, train, validation, shown, length: int, options, time=None, exclude=None) -> dict:
     """The Show step on residuals ``res``: per channel, per variable the binned test (fitted on
     ``train``, tested on ``validation``) and the curve (residual mean per bin on the ``shown``

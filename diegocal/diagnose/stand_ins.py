@@ -16,7 +16,7 @@ import numpy as np
 
 from diegocal.diagnose.evidence import curves
 from diegocal.diagnose.selection import evaluate_candidates
-from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, region_of
+from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, unexplained_region
 from diegocal.diagnose.types import EngineOptions, Finding, Tested
 from diegocal.terms import Term
 
@@ -150,7 +150,7 @@ def stand_in_finding(
     single = [binned_candidate(res, channel, v, train, options.n_bins) for v in variables]
     tested = evaluate_candidates(single, res, weights, train, val, options, exclude)
     variable = max(tested, key=lambda t: t.test.gain).term.region.variable if tested else variables[0]
-    region = next((region_of(t) for t in tested if t.term.region.variable == variable), None)
+    region = next((unexplained_region(t) for t in tested if t.term.region.variable == variable), None)
     evidence = {
         "channels": [channel],
         "validation_gain": float(flex.test.gain),

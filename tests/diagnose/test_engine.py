@@ -502,3 +502,24 @@ def test_a_link_offset_starts_its_refinement_at_zero_where_its_linear_estimate_i
     assert plausible_start(far).values.tolist() == [0.0, -1e-5, 0.0]
     near = make_term("link_offset", "joint4", {"dx": 0.008, "dy": 0.0, "dz": -0.007})
     assert plausible_start(near) is near
+
+
+def test_an_unexplained_structure_linear_in_its_variable_spans_its_range():
+    """A user trial: a hose's torque linear in the next joint's angle was given the region where the
+    residual is largest (q.elbow 0.64-1.58 of -1.32-1.58): a structure at both ends spans the range,
+    a bump keeps its bins."""
+    from diegocal.diagnose.show import unexplained_region
+    from diegocal.terms import Region
+
+    edges = np.array([-1.32, -1.06, -0.79, -0.56, -0.2, -0.06, 0.05, 0.26, 0.49, 0.64, 1.58])
+    centre = 0.5 * (edges[:-1] + edges[1:])
+
+    def tested(means):
+        term = SimpleNamespace(extra={"edges": list(edges)}, values=np.asarray(means, float),
+                               region=Region("q.elbow", edges[0], edges[-1]))
+        return SimpleNamespace(term=term)
+
+    hose = unexplained_region(tested([-1.26, -0.43, 0.15, 0.16, -0.04, -0.27, -0.27, -0.13, 0.12, 1.82]))
+    assert (hose.low, hose.high) == (edges[0], edges[-1])  # the trial's fitted bins
+    bump = unexplained_region(tested(np.exp(-(((centre - 0.3) / 0.2) ** 2))))
+    assert edges[0] < bump.low < 0.3 < bump.high < edges[-1]
