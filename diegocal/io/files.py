@@ -11,6 +11,7 @@ import csv
 import logging
 import math
 import os
+import re
 import shlex
 import tempfile
 from pathlib import Path
@@ -322,11 +323,11 @@ def _attr_str(value) -> str | None:
 # ----------------------------------------------------------------------------- CSV
 def header_fields(first: str) -> dict:
     """The ``key=value`` attributes of a CSV log's first line (:data:`CSV_HEADER_PREFIX` ...); a
-    value with a space is single-quoted (:func:`_csv_header`), one without is read as it is (a
-    Windows path's backslashes too)."""
+    value with a space is quoted (:func:`_csv_header`: ``robot='/my robot'``); a value that does
+    not start with a quote is read as it is (a Windows path's backslashes, an apostrophe)."""
     text = first[len(CSV_HEADER_PREFIX) :]
     try:
-        words = shlex.split(text) if "'" in text or '"' in text else text.split()
+        words = shlex.split(text) if re.search(r"=['\"]", text) else text.split()
     except ValueError:  # an unmatched quote: the words as they stand
         words = text.split()
     return dict(w.split("=", 1) for w in words if "=" in w)

@@ -237,3 +237,7 @@ def test_a_robot_path_is_stored_absolute_and_read_from_the_maps_folder(tmp_path,
     assert load_log(tmp_path / "p.h5").robot == str(urdf.resolve())
     run_ok(["import", csv_file, "--robot", "arm3", "-o", tmp_path / "q.h5"])
     assert load_log(tmp_path / "q.h5").robot == "arm3"  # a bundled robot keeps its name
+    (tmp_path / "lab" / "arm3").mkdir()  # a results folder beside the map, named like the robot
+    (tmp_path / "lab" / "n.yaml").write_text("robot: arm3\n")
+    run_ok(["import", csv_file, "--map", tmp_path / "lab" / "n.yaml", "-o", tmp_path / "r.h5"])
+    assert load_log(tmp_path / "r.h5").robot == "arm3"

@@ -246,3 +246,21 @@ def test_lowercase_millivolts_are_millivolts(tmp_path):
     path = _csv(tmp_path / "amp.csv", ["time", "elbow"], [[k * 0.01, 1500.0] for k in range(5)])
     mapping = parse_map({"streams": {"pots": {"columns": ["elbow"], "unit": "mv"}}})
     np.testing.assert_allclose(import_log([path], mapping).log.streams["pots"].data, 1.5)
+
+
+def test_a_header_unit_is_taken_only_where_the_map_leaves_it_and_it_fits(tmp_path):
+    # a review: `knee (A)` is a label, not amperes; a map's scale rules over a header's [deg];
+    # a first row of integers still leaves decimal commas to the rows after it; `[mv]` is mV
+    path = tmp_path / "lab.csv"
+    path.write_text("time,knee (A),knee (B),q1 [deg],pot [mv]\n0,1,2,90,1500\n0.1,1,2,90,1500\n")
+    mapping = parse_map({"streams": {"q": {"columns": {"knee (A)": "j1", "knee (B)": "j2", "q1 [deg]": "j3"},
+                                           "scale": {"j3": 0.0174533, "*": 1.0}},
+                                     "pots": {"columns": {"pot [mv]": "p"}}}})
+    log = import_log([path], mapping).log
+    np.testing.assert_allclose(log.streams["q"].data[0], [1.0, 2.0, 90 * 0.0174533])
+    np.testing.assert_allclose(log.streams["pots"].data[:, 0], 1.5)
+    (tmp_path / "semi.csv").write_text("t;elbow\n0;1500\n0,01;1501,5\n0,02;1502\n")
+    mapping = parse_map({"sources": {"s": {"file": "semi.csv", "time": "t"}},
+                         "streams": {"pots": {"columns": ["elbow"]}}})
+    np.testing.assert_allclose(import_log([tmp_path / "semi.csv"], mapping).log.streams["pots"].data[:, 0],
+                               [1500, 1501.5, 1502])

@@ -237,6 +237,13 @@ def test_a_csv_logs_robot_path_with_spaces_or_quotes_reads_back(tmp_path, robot)
     assert load_log(tmp_path / "a.csv").robot == robot
 
 
+def test_an_older_csv_logs_unquoted_robot_path_reads_as_written():
+    from diegocal.io.files import CSV_HEADER_PREFIX, header_fields
+
+    line = f"{CSV_HEADER_PREFIX} version=1 robot=/data/o'neil's/arm3 rate_hz=100.0"
+    assert header_fields(line) == {"version": "1", "robot": "/data/o'neil's/arm3", "rate_hz": "100.0"}
+
+
 def test_damaged_bytes_anywhere_give_one_error_that_names_the_file(tmp_path):
     """Seeded damage at random places of a small log (object headers, B-trees, chunks, data): reading
     it, or listing its streams as batch does, fails with the library's error naming the file, never

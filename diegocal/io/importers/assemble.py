@@ -53,7 +53,7 @@ from diegocal.io.importers.signals import (
 )
 from diegocal.io.importers.sources import open_sources
 from diegocal.io.importers.tables import DIEGOCAL, JOINT_STATE, POINTS, Source, Table, preview
-from diegocal.io.importers.units import check_joint_unit, close_match, factor, is_current, target_unit
+from diegocal.io.importers.units import UnitError, check_joint_unit, close_match, factor, is_current, target_unit
 from diegocal.io.log import JOINT_STREAMS, NAN_ALLOWED, VECTOR_STREAMS, Log, make_stream
 
 #: Which JointState field gives which stream.
@@ -274,15 +274,34 @@ def _column(stream: str, table: Table, col: str, where: str) -> np.ndarray:
     return table.column(col, where)  # raises with a close match
 
 
+def _header_unit(spec: StreamSpec, unit: str | None, name: str, info: RobotInfo | None) -> str | None:
+    """A column name's unit (``elbow [mV]``) where the map states no unit (nor a scale: the
+    caller) and it fits the stream (a voltage for pots; a joint's family): else None, the name's
+    brackets a label (``knee (A)``)."""
+    if unit is None:
+        return None
+    if spec.stream == "pots":
+        return unit if target_unit("pots", unit) == "V" else None
+    try:
+        factor(spec.stream, unit)
+        if info is not None and spec.side == "joint":
+            check_joint_unit(spec.stream, unit, name, info.kind(name))
+    except UnitError:
+        return None
+    return unit
+
+
 def _convert(spec: StreamSpec, data, names, cols, table: Table, mapping: ImportMap, where: str,
              info: RobotInfo | None):
     """Units, torque constant, transmission, scale, offset (in this order); returns data, words."""
     stream = spec.stream
     units = per_channel(spec.unit, names, None, f"{where}: unit")
+    scaled = [number(v, f"{where}: scale") != 1.0 for v in per_channel(spec.scale, names, 1.0, f"{where}: scale")]
     words, targets, converted = [], [], False
     for k, unit in enumerate(units):
         if unit is None:
-            unit = table.units.get(cols[k])
+            header = None if scaled[k] else table.header_units.get(cols[k])  # a map's scale rules
+            unit = table.units.get(cols[k]) or _header_unit(spec, header, names[k], info)
             if unit is None:
                 if stream == "markers":
                     raise MapError(f"{where}: the file states no unit for marker {names[k]!r}; "

@@ -75,17 +75,18 @@ def read_csv_table(path: Path, spec: SourceSpec) -> Table:
         else:
             data[col] = values
     kind = DIEGOCAL if data and all(_diegocal_column(c) for c in data) else GENERIC
-    units = {c: u for c in data if (u := header_unit(c))}  # `x [mV]`: the unit the map need not repeat
+    units, header = {}, {c: u for c in data if (u := header_unit(c))}  # `x [mV]`: a unit the map need not repeat
     if kind == DIEGOCAL:  # already in the log's units; only markers need saying (m)
         data = _group_markers(data)
-        units = {c: "m" for c in data if c.startswith("markers.")}
+        units, header = {c: "m" for c in data if c.startswith("markers.")}, {}
     notes = (f"{path.name}: text columns left out: {preview(text)}",) if text else ()
     if not keep.all():  # a stamp written twice (a logger's resend): the first row kept, as a bag's
         notes += (f"{path.name}: {int((~keep).sum())} repeated time stamps dropped (first kept)",)
         time, data = time[keep], {c: v[keep] for c, v in data.items()}
     time = finish_time(time, spec, float(time[0]))
     rate = spec.rate_hz
-    return Table(name="", time=time, columns=data, kind=kind, units=units, rate_hz=rate, notes=notes)
+    return Table(name="", time=time, columns=data, kind=kind, units=units, rate_hz=rate, notes=notes,
+                 header_units=header)
 
 
 def _rostopic(path: Path, frame, spec: SourceSpec) -> Table:
@@ -164,8 +165,7 @@ def _read_frame(path: Path):
         if header.startswith("#"):
             skip = 1  # diegocal's '# diegocal-log ...' header line
             header = fh.readline()
-        first_row = fh.readline()
-    sep, decimal = _delimiter(header, first_row)
+    sep, decimal = _delimiter(header)
     try:
         frame = pd.read_csv(path, skiprows=skip, skipinitialspace=False, sep=sep, decimal=decimal)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -179,14 +179,14 @@ def _read_frame(path: Path):
     return frame
 
 
-def _delimiter(header: str, first_row: str) -> tuple[str, str]:
-    """(column separator, decimal mark) of a CSV from its header and first data row: a comma,
-    or a semicolon or tab where the header has those and no comma (a European lab export,
-    whose numbers may then use a decimal comma)."""
+def _delimiter(header: str) -> tuple[str, str]:
+    """(column separator, decimal mark) of a CSV from its header: a comma, or a semicolon or tab
+    where the header has those and no comma (a semicolon-separated export is European: its numbers
+    may use a decimal comma, which pandas reads beside a decimal point)."""
     if "," in header or not (";" in header or "\t" in header):
         return ",", "."
     sep = ";" if header.count(";") >= header.count("\t") else "\t"
-    return sep, "," if "," in first_row else "."
+    return sep, "," if sep == ";" else "."  # pandas still reads "1.5" with decimal=","
 
 
 def _numeric(series, path: Path, col: str) -> np.ndarray | None:

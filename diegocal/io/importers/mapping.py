@@ -172,9 +172,10 @@ def load_map(path) -> ImportMap:
     """Read and check an import map (YAML); one :class:`MapError` line when it is wrong."""
     path = Path(path)
     out = parse_map(load_yaml(path), where=str(path))
-    beside = path.parent / out.robot if out.robot and not Path(out.robot).is_absolute() else None
-    if beside is not None and beside.exists() and not Path(out.robot).exists():
-        out = replace(out, robot=str(beside))  # a robot path in the map is read from the map's folder
+    robot = Path(out.robot) if out.robot else None
+    if robot is not None and not robot.is_absolute() and not robot.exists() and ("/" in out.robot or robot.suffix):
+        if (path.parent / robot).exists():  # a robot path (not a bundled name) read from the map's folder
+            out = replace(out, robot=str(path.parent / robot))
     return out
 
 

@@ -37,6 +37,8 @@ class Table:
     units : dict of str -> str, units the file declares per column (C3D), else empty
     rate_hz : float or None, the nominal rate the file declares (C3D, CSV ``rate_hz``)
     notes : tuple of str, what the reader did (sorted time stamps, dropped duplicates)
+    header_units : dict of str -> str, a unit a lab table's column name ends in (``elbow [mV]``):
+        taken only where the map states no unit and no scale and it fits the stream it feeds
     """
 
     name: str
@@ -46,6 +48,7 @@ class Table:
     units: dict = field(default_factory=dict)
     rate_hz: float | None = None
     notes: tuple[str, ...] = ()
+    header_units: dict = field(default_factory=dict)
 
     def column(self, name: str, where: str) -> np.ndarray:
         if name in self.columns:

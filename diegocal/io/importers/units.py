@@ -101,7 +101,11 @@ def header_unit(column: str) -> str | None:
     """The unit a lab table's column header states at its end, ``x [mV]`` or ``x (mV)``, when it is
     one this module knows (a header's ``(joint 1)`` is a name, not a unit); else None."""
     m = re.search(r"[\[(]\s*([^\])]+?)\s*[\])]\s*$", str(column))
-    return m.group(1) if m and m.group(1) in KNOWN_UNITS else None
+    if m is None:
+        return None
+    unit = m.group(1)
+    volts = {k.lower(): k for k in _VOLTAGE}
+    return unit if unit in KNOWN_UNITS else volts.get(unit.lower())  # `[mv]` is mV, as `unit: mv`
 
 
 def target_unit(stream: str, unit: str) -> str:
