@@ -68,8 +68,10 @@ def pot_range(robot: Robot, specs, A: np.ndarray) -> np.ndarray:
     """(P,) the range each pot's reading can span by its nominal gain over the joints' limits:
     |gain| Σ_j |A_pj| (upper_j − lower_j) for rotary, encoder and tendon pots (``A``: s = A q,
     :func:`~diegocal.stac.model._linear_map`); NaN for a linear pot (its span is the geometry's) and
-    where a joint it reads has no limit."""
+    where a joint it reads has no limit (a continuous joint too)."""
     width = np.asarray(robot.upper, float) - np.asarray(robot.lower, float)
+    for j in getattr(robot, "continuous", ()):  # a wheel's ±π are not limits: it turns without end
+        width[robot.joint_index(j)] = np.inf
     out = np.full(len(specs), np.nan)
     for i, p in enumerate(specs):
         if p.kind == "linear":
@@ -93,7 +95,8 @@ def check_pot_scale(pots: np.ndarray, robot: Robot, specs, A: np.ndarray) -> Non
     ratio = float(np.median((hi - lo) / span[ok]))
     if ratio > POT_FACTOR:
         raise LogFormatError(
-            f"the log's pots vary {ratio:.3g}× the range sensors.yaml's gains allow over {robot.name!r}'s joint "
-            "limits (the median over the pots): readings in another unit than the gains (mV against V/rad?): "
-            "convert them, import them with their unit (`unit: mV`), or state the gains in the readings' unit"
+            f"the log's pots vary {ratio:.3g}× the range sensors.yaml's gains allow over the joint limits of "
+            f"robot {robot.name!r} (the median over the pots): readings in another unit than the gains "
+            "(mV against V/rad?): convert them, import them with their unit (`unit: mV`), or state the gains "
+            "in the readings' unit"
         )

@@ -124,3 +124,39 @@ def test_bundled_pots_are_far_inside_their_range(name):
     lo, hi = np.percentile(obs.pots[:, ok], [1, 99], axis=0)
     ratio = np.median((hi - lo) / span[ok])
     assert ratio < 2.0 < POT_FACTOR < 1000 * ratio  # the same pots in mV are far past the bound
+
+
+TURN_URDF = """<?xml version="1.0"?>
+<robot name="turn">
+  <link name="base"/>
+  <link name="table"><inertial><mass value="1.0"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>
+  </inertial></link>
+  <link name="arm"><inertial><mass value="1.0"/><origin xyz="0.1 0 0"/>
+  <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="spin" type="continuous"><parent link="base"/><child link="table"/><origin xyz="0 0 0.1"/>
+  <axis xyz="0 0 1"/></joint>
+  <joint name="lift" type="revolute"><parent link="table"/><child link="arm"/><origin xyz="0.1 0 0"/>
+  <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="10" velocity="3"/></joint>
+</robot>
+"""
+TURN_SENSORS = """urdf: robot.urdf
+base_link: base
+pots:
+  - {name: spin, kind: encoder, joint: spin}
+markers:
+  - {name: m1, link: arm, xyz: [0.2, 0, 0]}
+"""
+
+
+def test_a_multi_turn_encoder_on_a_continuous_joint_is_not_taken_for_millivolts(tmp_path):
+    # a review: a continuous joint's ±π were taken as limits, and 40 turns as pots in mV
+    from diegocal.io import Log, make_stream
+    from diegocal.robot import load_robot
+
+    (tmp_path / "robot.urdf").write_text(TURN_URDF)
+    (tmp_path / "sensors.yaml").write_text(TURN_SENSORS)
+    robot = load_robot(tmp_path)
+    t = np.arange(500) * 0.02
+    turns = (t * 2 * np.pi * 4.0)[:, None]  # 40 turns in 10 s
+    log = Log(t, {"pots": make_stream(["spin"], turns), "markers": make_stream(["m1"], np.full((500, 1, 3), 0.1))})
+    Observation(log, robot)  # no error
