@@ -140,7 +140,7 @@ def test_torques_in_another_unit_are_one_error_line(arm2, arm2_dir, simulate, tm
         res = runner.invoke(app, args + ["--robot", str(arm2_dir), "-o", str(out)])
         assert res.exit_code == 1 and "Traceback" not in res.output, res.output
         line = res.output.strip().splitlines()[-1]
-        assert "times what robot" in line and f"{unit}? the log wants N·m" in line
+        assert "times what the URDF of robot 'arm2' needs" in line and f"{unit}? the log wants N·m" in line
         assert not out.exists()
 
 
@@ -192,3 +192,19 @@ def test_a_short_log_says_the_prior_holds_its_parameters(arm2, arm2_dir, simulat
     assert res.exit_code == 0, res.output
     assert ("held by the prior more than by the data" in res.output) == held
     assert "does not identify" not in res.output
+
+
+def test_a_urdf_with_placeholder_inertias_gives_no_torque_scale(arm2, simulate, tmp_path):
+    # a review: links of 1 g (a URDF's placeholders) made a log in N·m look 1630 times too large
+    import re
+
+    from diegocal.sgp.streams import check_torque_scale, torque_array
+    from tests.sgp.conftest import ARM2_URDF
+
+    light = load_robot(write_robot(tmp_path, re.sub(r'mass value="[^"]+"', 'mass value="0.001"', ARM2_URDF)))
+    log, _ = simulate(arm2, T=120, seed=7)
+    q, qd, qdd = log_arrays(log, light, need_tau=False, warn=False)
+    tau, joints = torque_array(log, light, warn=False)
+    check_torque_scale(light, q, qd, qdd, tau, joints)  # no scale: no error
+    with pytest.raises(LogFormatError, match="mN·m"):
+        check_torque_scale(arm2, q, qd, qdd, 1000 * tau, joints)
