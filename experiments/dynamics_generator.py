@@ -119,19 +119,21 @@ def _heavier(model, joint: int, mass: float, lever: np.ndarray):
 
 
 def hidden_torque(
-    name: str, model, q, qd, qdd, time, j: int, rng, base_tau, applied, ref=None
+    name: str, model, q, qd, qdd, time, j: int, rng, base_tau, applied, ref=None, ref_qd=None
 ) -> tuple[np.ndarray, dict]:
     """The hidden effect's torque (T, n) before sizing, and its parameters (shape only);
-    ``base_tau`` the rigid body's torque, ``applied`` with friction; ``ref`` the reference
-    trajectory's q (T', n), whose ranges place the effect (default: ``q``)."""
+    ``base_tau`` the rigid body's torque, ``applied`` with friction; ``ref``, ``ref_qd`` the
+    reference trajectory's q and qd (T', n), whose ranges and spread place and shape the effect
+    (default: this session's)."""
     T, n = q.shape
     out = np.zeros((T, n))
     ref = q if ref is None else ref
+    ref_qd = qd if ref_qd is None else ref_qd
     lo, hi = ref[:, j].min(), ref[:, j].max()
     if name == "position_friction":
         start = lo + rng.uniform(0.55, 0.75) * (hi - lo)
         inside = q[:, j] >= start
-        out[:, j] = inside * (np.sign(qd[:, j]) + 0.5 * qd[:, j] / np.std(qd[:, j]))
+        out[:, j] = inside * (np.sign(qd[:, j]) + 0.5 * qd[:, j] / np.std(ref_qd[:, j]))
         return out, {"low": float(start), "high": float(hi)}
     if name == "payload":
         lever = rng.uniform(-0.1, 0.1, 3)
@@ -204,13 +206,15 @@ def generate(session: Session) -> Log:
         j = session.joint if session.joint is not None else int(robot_rng.integers(1, model.nq))
         fork = np.random.Generator(np.random.PCG64())  # the same draws of the shape's parameters
         fork.bit_generator.state = robot_rng.bit_generator.state
-        shape, params = hidden_torque(session.hidden, model, q, qd, qdd, time, j, robot_rng, base, clean, ref_q)
+        shape, params = hidden_torque(
+            session.hidden, model, q, qd, qdd, time, j, robot_rng, base, clean, ref_q, ref_qd
+        )
         if session.seed == session.robot_seed:
             rms = np.sqrt(np.mean(shape[:, j] ** 2))
         else:  # sized on the reference trajectory, as the robot is
             ref_clean = ref_base + fv * ref_qd + fc * coulomb(ref_qd)
             ref_shape, _ = hidden_torque(
-                session.hidden, model, ref_q, ref_qd, ref_qdd, time, j, fork, ref_base, ref_clean, ref_q
+                session.hidden, model, ref_q, ref_qd, ref_qdd, time, j, fork, ref_base, ref_clean, ref_q, ref_qd
             )
             rms = np.sqrt(np.mean(ref_shape[:, j] ** 2))
         scale = session.size * noise[j] / rms
