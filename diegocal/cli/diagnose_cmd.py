@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
+from rich.markup import escape
 
 from diegocal.cli.app import app
 from diegocal.cli.common import (
@@ -247,7 +248,7 @@ def diagnose_cmd(
     args = DiagnoseArgs(**ctx.params)
 
     def progress(text: str) -> None:
-        errors.print(f"[dim]diagnose:[/] {text}", highlight=False)
+        errors.print(f"[dim]diagnose:[/] {escape(text)}", highlight=False)
 
     done = run_diagnose(args, command_line("diegocal diagnose"), None if args.quiet else progress)
     rows = [row for d in done for row in _summary_rows(d)]

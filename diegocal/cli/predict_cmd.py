@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
+from rich.markup import escape
 
 from diegocal.cli.app import app
 from diegocal.cli.choices import SENSOR_TYPES, SOURCE_TYPES
@@ -135,7 +136,7 @@ def predict(
     args = PredictArgs(**ctx.params)
 
     def progress(text: str) -> None:
-        errors.print(f"[dim]predict:[/] {text}", highlight=False)
+        errors.print(f"[dim]predict:[/] {escape(text)}", highlight=False)
 
     result = run_predict(args, command_line("diegocal predict"), None if args.quiet else progress)
     for text in result.warnings:
