@@ -19,6 +19,7 @@ from diegocal.causes import phrase
 from diegocal.diagnose.output import shifting_channels, weak_structure
 from diegocal.diagnose.selection import TWIN
 from diegocal.io import load_yaml
+from diegocal.report.diagnose_notes import CHANNEL_NOTE, NO_CURVE, NO_RUNNERS, NOT_STORED, RUNNERS_NOTE
 from diegocal.report.finding_notes import notes, parameters_text
 from diegocal.report.layout import Column, Sheet, table_sheets
 from diegocal.report.registry import Section, is_bundle, register_section
@@ -64,6 +65,9 @@ def sentence(f: dict) -> str:
         vg, which = ev.get("validation_gain"), "open-loop validation" if ev.get("rival") else "validation"
         gain = f"; it accounts for {vg:.0%} of the {which} error" if vg is not None else ""
     params = parameters_text(f)
+    others = [c for c in (f.get("evidence") or {}).get("gain_channels") or () if c != f.get("channel")]
+    if others and g.get("reduction") is not None:  # a motor shared by two joints: its gain on its own one only
+        params += f" It acts on {', '.join(others)} too (their held-out RMSE in the table of channels)."
     twins = (f.get("evidence") or {}).get("indistinguishable_from")
     if twins:  # the same cause elsewhere fits the data the same: which one, the log cannot say
         params += (
@@ -303,12 +307,6 @@ def _g(v) -> str:
     return "–" if v is None else "0 (exact)" if v < EXACT else f"{v:.4g}"
 
 
-CHANNEL_NOTE = (
-    "RMSE on the held-out blocks, per channel, before and after adding the findings. '0 (exact)': the baseline "
-    "reproduces the channel exactly (a pot that alone fixes its joint's angle), so no relative change is given."
-)
-
-
 def evidence_caption(ax, f: dict) -> str:
     """What finding ``f``'s evidence plot ``ax`` shows, said from what was drawn on it (its legend's
     labels): no colour or region is described that the plot does not hold."""
@@ -347,15 +345,6 @@ def evidence_caption(ax, f: dict) -> str:
     return text
 
 
-RUNNERS_NOTE = (
-    "The other candidate terms of the round, fitted on the training blocks and scored on the validation blocks "
-    "(validation gain: the share of the validation error a candidate removes); significant: t above the threshold, "
-    "which holds the family-wise false-alarm rate over all candidates; a significant one was not added because the "
-    "chosen term explains more of its channel's error (less on its channel, or less refitted: both refitted) or "
-    "acts elsewhere (next round)."
-)
-
-
 def abstract(path: Path, context=None) -> list[str]:
     return summary_lines(load_yaml(path))
 
@@ -389,20 +378,6 @@ def headline(path: Path, context=None) -> str:
 PLOT_HEIGHT, PLOT_MIN = 0.26, 0.17
 
 
-#: Said of a finding whose file does not hold the round's other candidates (``runners_up`` absent).
-NOT_STORED = (
-    "Runners-up: not stored in this file (the diagnosis that wrote it did not keep the round's other candidates)."
-)
-
-
-#: What a finding without an evidence curve shows instead of an empty plot.
-NO_CURVE = (
-    "No residual curve: this finding was not chosen from the residual binned against one variable (a data "
-    "fault whose readings are written off, or a cause tried whole, such as a mocap clock seconds off); its "
-    "held-out RMSE above is its evidence."
-)
-
-
 @dataclass(frozen=True)
 class Drawn:
     """A finding as drawn: the sheets it ends on (more than one only for a runners-up table longer
@@ -432,7 +407,7 @@ def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool
     if "runners_up" not in f:
         sheet.paragraph(NOT_STORED, size=8)
     elif not rows:
-        sheet.paragraph("No other candidate was tested in this round.", size=8)
+        sheet.paragraph(NO_RUNNERS.get(f.get("kind"), NO_RUNNERS["term"]), size=8)
     if not rows:
         return Drawn([sheet], k + 1, caption, False)
     note = f"Columns as in Finding {after.number}'s table above." if after is not None and after.table else RUNNERS_NOTE

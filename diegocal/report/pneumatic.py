@@ -118,7 +118,9 @@ def abstract(path: Path, context) -> list[str]:
     # open: the chambers beyond the thesis's usual 4 % (at most three, the worst first)
     worst = [f"{names[k]} ({drift[k]:.1f} %)" for k in np.argsort(-drift)[:3] if drift[k] >= 4.0]
     skipped = model.meta.get("skipped") or {}
-    wrong = [f"the chambers that drift beyond 4 % are {', '.join(worst)}"] if worst else []
+    beyond = int((drift >= 4.0).sum())
+    which = "are" if beyond == len(worst) else f"are {beyond}, the worst"
+    wrong = [f"the chambers that drift beyond 4 % on the fit's own log {which} {', '.join(worst)}"] if worst else []
     if skipped:
         wrong.append(f"{len(skipped)} chamber(s) not fitted: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
     extra = sorted({t.cause for c in model.chambers.values() for t in c.params.terms})

@@ -86,6 +86,10 @@ def facts_rows(summary: dict, model=None) -> list[list]:
         rows.append(["GP inputs", ", ".join(summary["gp_inputs"]), ""])
     bound = "VFE bound on the log marginal likelihood" if summary.get("n_inducing") else "log marginal likelihood"
     rows.append([bound, f"{summary.get('log_likelihood', np.nan):.6g}", ""])
+    if "converged" in summary:  # ML-II ran (absent from a model saved again without fitting)
+        runs = summary.get("ml2_runs") or {}
+        capped = f"no: {runs.get('stopped_at_cap', '?')} of {runs.get('runs', '?')} ML-II runs stopped at their cap"
+        rows.append(["converged", "yes" if summary["converged"] else capped, ""])
     sw = (summary.get("hyperparameters") or {}).get("sigma_w")
     if sw is not None:
         rows.append(["σ_w, prior std of the parametric weights (unit-RMS columns)", f"{sw:.3g}", "N·m"])
@@ -94,6 +98,19 @@ def facts_rows(summary: dict, model=None) -> list[list]:
         rows.append(["friction in the parametric part", ", ".join(friction), ""])
     rows.append(["created", str(meta.get("created") or summary.get("created") or "–"), ""])
     return rows
+
+
+def slides(summary: dict) -> list[str]:
+    """The model's prismatic joints, read from the units of its baseline's friction (N, N·s/m)."""
+    out = []
+    for t in summary.get("baseline") or ():
+        units = {str(p.get("unit")) for p in (t.get("parameters") or {}).values() if isinstance(p, dict)}
+        if t.get("cause") in ("viscous_friction", "coulomb_friction") and units & {"N", "N·s/m"}:
+            out.append(str(t.get("channel")))
+    return list(dict.fromkeys(out))
+
+
+SLIDE_NOTE = "{}: a prismatic joint, its values in N, m, m/s where the headers and axes say N·m, rad, rad/s."
 
 
 def lengthscale_table(summary: dict) -> tuple[list[Column], list[list], list[str]] | None:
@@ -107,12 +124,15 @@ def lengthscale_table(summary: dict) -> tuple[list[Column], list[list], list[str
     if not joints:
         return None
     inputs = list(hyper[joints[0]]["lengthscales"])
-    units = {"q": "rad", "qd": "rad/s", "qdd": "rad/s²"}
+    units, sliding = {"q": "rad", "qd": "rad/s", "qdd": "rad/s²"}, set(slides(summary))
+    linear = {"q": "m", "qd": "m/s", "qdd": "m/s²"}
+
+    def unit(name: str) -> str:
+        kind, _, joint = name.partition(".")
+        return (linear if joint in sliding else units).get(kind, "")
+
     columns = [Column("GP input", align="left"), Column("unit", align="left")] + [Column(j) for j in joints]
-    rows = [
-        [name, units.get(name.split(".", 1)[0], ""), *(number(hyper[j]["lengthscales"].get(name)) for j in joints)]
-        for name in inputs
-    ]
+    rows = [[name, unit(name), *(number(hyper[j]["lengthscales"].get(name)) for j in joints)] for name in inputs]
     off = [j for j in summary.get("nmse_in_sample") or {} if j not in joints]
     note = (
         "Length-scale of each input in the GP of each joint (the input's unit; m and m/s for a prismatic joint): "

@@ -13,7 +13,7 @@ scores, table and verdict.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +24,7 @@ from diegocal.io import load_log
 from diegocal.io.bundle import load_bundle, robot_of
 from diegocal.report.layout import Column
 from diegocal.report.registry import ReportContext
-from diegocal.report.sgp_tables import GUARD_NOTE, GUARD_WORDS, model_kind, number
+from diegocal.report.sgp_tables import GUARD_NOTE, GUARD_WORDS, SLIDE_NOTE, model_kind, number, slides
 from diegocal.sgp import is_model_dir, load_model, load_summary
 from diegocal.sgp.store import region_text
 
@@ -64,6 +64,7 @@ class HeldOut:
     predicted: np.ndarray
     std: np.ndarray
     parametric: np.ndarray
+    train_rmse: dict = field(default_factory=dict)  # joint -> the model's in-sample RMSE
 
     def of(self, joint: str) -> tuple[float, float, float] | None:
         """(nMSE, RMSE, share inside ±2σ) of a joint."""
@@ -90,7 +91,9 @@ def heldout_prediction(path: str, heldout: tuple[str, ...]) -> HeldOut | None:
         except DiegocalError:
             continue
         sc = score(measured, pred.tau, model.joint_names, std=pred.tau_std, unit="N·m")
-        return HeldOut(str(hpath), sc, log.time, measured, pred.tau, pred.tau_std, pred.tau_parametric)
+        spread = np.nanvar(model.tau_, axis=0)  # in-sample nMSE × the training torque's variance
+        train = dict(zip(model.joint_names, np.sqrt(model.nmse_in_sample_ * spread).tolist(), strict=True))
+        return HeldOut(str(hpath), sc, log.time, measured, pred.tau, pred.tau_std, pred.tau_parametric, train)
     return None
 
 
@@ -165,6 +168,8 @@ def uncertainty_words(coverage: dict) -> str:
 
 #: A joint whose learnt noise σ_v is this many times the median of the model's other joints: its
 #: ±2σ band covers the data because the model's error is that large there, not because it is right.
+#: A held-out RMSE this many times the in-sample one on a joint is said (the model learnt the session)
+WORSE_HELDOUT = 2.0
 NOISY = 10.0
 #: ... and whose relative error, √(in-sample nMSE), is this many times theirs: a shoulder that carries
 #: sixty times a wrist's torque has a noisier torque in N·m and is not the worse fitted for it
@@ -257,6 +262,13 @@ def model_paragraphs(model: Path, context) -> list[str]:
         "torque): " + _joint_list(joints) + "."
     )
     text += worse_than_mean_words(joints)
+    if s.get("converged") is False:
+        runs = s.get("ml2_runs") or {}
+        text += (
+            f" Not converged: {runs.get('stopped_at_cap', '?')} of {runs.get('runs', '?')} hyperparameter runs (ML-II) "
+            "stopped at their iteration cap before their tolerance; the numbers below are those of a fit still moving "
+            "(sgp-fit --max-iterations)."
+        )
     held = heldout(model, context)
     if held is not None:
         scores = {j: held.of(j) for j in joints if held.of(j) is not None}
@@ -269,12 +281,14 @@ def model_paragraphs(model: Path, context) -> list[str]:
             + uncertainty_words({j: v[2] for j, v in scores.items()})
             + "."
         )
-        ratios = {j: v[0] / max(joints.get(j, np.inf), 1e-12) for j, v in scores.items()}
+        inside = {j: held.train_rmse.get(j) for j in scores}  # RMSE, N·m: nMSEs divide by each log's spread
+        ratios = {j: v[1] / inside[j] for j, v in scores.items() if inside[j] and inside[j] > 0}
         worst = max(ratios, key=ratios.get) if ratios else None
-        if worst is not None and ratios[worst] > 3:
+        if worst is not None and ratios[worst] > WORSE_HELDOUT:
             text += (
-                f" Still open: on {worst} the held-out error is {ratios[worst]:.0f} times the in-sample one, so the "
-                "model has learnt more of the training session than carries over."
+                f" Still open: on {worst} the held-out RMSE, {scores[worst][1]:.3g} N·m, is {ratios[worst]:.1f} times "
+                f"the in-sample one ({inside[worst]:.3g}), so the model has learnt more of the training session than "
+                "carries over."
             )
     else:
         text += " No held-out log was given (diegocal report ... --heldout LOG): in-sample numbers only."
@@ -398,6 +412,9 @@ def joint_table(models: list[Path], context) -> tuple[list[Column], list[list], 
         + "σ_v: the sensor noise std the model learnt; σ_z: the GP's prior std (near 0: the GP does nothing)."
         + (" Missed variance: the prior variance per sample that the inducing inputs do not capture." if sparse else "")
     ]
+    sliding = sorted({j for s in summaries.values() for j in slides(s)})
+    if sliding:
+        notes.append(SLIDE_NOTE.format(", ".join(sliding)))
     if any(h.get("guard_choice") for h in entries):
         notes.append(GUARD_NOTE)
     if any(region_text(h) for h in entries):

@@ -227,7 +227,7 @@ def _heldout_words(ev: Evaluation, recorded: list) -> str:
     text = "Held-out test (thesis Table 2.1; joint angles tracked from the pots, no marker used): " + "; ".join(parts)
     if fit is not None:
         ratio = rows[0][2].get("markers", np.nan) / max(np.mean(fit[0]), 1e-12)
-        text += f", {ratio:.1f} times the mean marker residual of the fit itself" + (
+        text += f", {ratio:.1f} times the mean marker residual of the fit itself ({MM * np.mean(fit[0]):.2f} mm)" + (
             ": the calibration carries over to new data" if ratio < 2 else ": part of it does not carry over"
         )
     return text + "."

@@ -345,18 +345,20 @@ def test_a_diagnosis_lists_its_runners_up(results, tmp_path):
     assert "Runners-up of this round" in text
     for r in RUNNERS:
         assert f"{r['cause']} r_elbow.flex {100 * r['validation_gain']:.1f}" in text
-    assert "No other candidate was tested" not in text and "not stored" not in text
+    assert "No runner-up is recorded" not in text and "not stored" not in text
 
 
 def test_runners_up_not_stored_are_not_said_untested(results, tmp_path):
     """A file without runners_up does not say what was tested: "not stored", never "none tested"."""
     text = _pneumatic_diagnosis(results, tmp_path, None)
-    assert "not stored" in text and "No other candidate was tested" not in text
+    assert "not stored" in text and "No runner-up is recorded" not in text
 
 
 def test_no_runners_up_stored_as_none(results, tmp_path):
     text = _pneumatic_diagnosis(results, tmp_path, [])
-    assert "No other candidate was tested in this round." in text and "not stored" not in text
+    # a review: "No other candidate was tested" was said where the round had tested three
+    assert "No runner-up is recorded for this finding" in text and "not stored" not in text
+    assert "No other candidate was tested" not in text
 
 
 # ----------------------------------------------------------------------------- 7. front page
@@ -607,7 +609,7 @@ def test_only_chambers_beyond_the_thesis_bound_are_still_open(results, tmp_path)
     model["chambers"][names[0]]["drift_2s"] = 0.073
     save_yaml(model, tmp_path / "one.pneumatic.yaml")
     text = " ".join(abstract(tmp_path / "one.pneumatic.yaml", ReportContext()))
-    assert f"Still open: the chambers that drift beyond 4 % are {names[0]} (7.3 %)" in text
+    assert f"Still open: the chambers that drift beyond 4 % on the fit's own log are {names[0]} (7.3 %)" in text
 
 
 def test_a_parameter_at_the_end_of_its_search_is_said_to_be_there():
@@ -619,3 +621,28 @@ def test_a_parameter_at_the_end_of_its_search_is_said_to_be_there():
     assert "the end of its search, 0.5: the data want more" in parameters_text(f)
     f["parameters"]["lag"]["value"] = 0.012
     assert "end of its search" not in parameters_text(f)
+
+
+def test_a_shared_motors_finding_names_the_other_joint_it_acts_on():
+    # a report review: coupled friction on joint_6 credited joint_6 alone; joint_5 gained more
+    from diegocal.report.diagnose import sentence
+
+    f = {
+        "cause": "coupled_friction",
+        "channel": "joint_6",
+        "gain": {"reduction": 0.57, "rmse_before": 1.62, "rmse_after": 0.70},
+        "unit": "N·m",
+        "evidence": {"gain_channels": ["joint_6", "joint_5"]},
+    }
+    assert "It acts on joint_5 too (their held-out RMSE in the table of channels)." in sentence(f)
+    assert "It acts on" not in sentence({**f, "evidence": {"gain_channels": ["joint_6"]}})
+
+
+def test_an_sgp_fit_that_did_not_converge_says_so():
+    # a report review: sgp.yaml's converged: false (2 of 29 ML-II runs at their cap) was said nowhere
+    from diegocal.report.sgp_tables import facts_rows
+
+    s = {"converged": False, "ml2_runs": {"runs": 29, "stopped_at_cap": 2}, "n_samples": 10}
+    assert ["converged", "no: 2 of 29 ML-II runs stopped at their cap", ""] in facts_rows(s)
+    assert ["converged", "yes", ""] in facts_rows({**s, "converged": True})
+    assert not [r for r in facts_rows({"n_samples": 10}) if r[0] == "converged"]  # saved again: not said

@@ -80,7 +80,7 @@ def test_small_findings_share_a_page(diagnosis, tmp_path):
     for t in shared:
         captions = t.count("Mean residual on the validation") + t.count("Lines, bands and shading as in Finding")
         assert captions == len(re.findall(r"Finding \d+: ", t)), t
-        assert t.count("No other candidate was tested in this round.") == len(re.findall(r"Finding \d+: ", t))
+        assert t.count("No runner-up is recorded for this finding") == len(re.findall(r"Finding \d+: ", t))
     assert doc.page_count - front_pages(doc) <= (len(d["findings"]) + 2) // 2
 
 
