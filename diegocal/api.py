@@ -20,10 +20,10 @@ calls these same functions.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
-from diegocal.errors import FitError
+from diegocal.errors import FitError, NotFittedError, OptionError
 from diegocal.io import Log, load_log, save_yaml
 from diegocal.io.bundle import header
 from diegocal.predict import Prediction, PredictOptions, predict
@@ -58,6 +58,28 @@ __all__ = [
 
 #: The ``command`` a model fitted from Python records in its header.
 LIBRARY = "diegocal (Python)"
+
+
+class _Estimator:
+    """scikit-learn's parameter protocol for the dataclass estimators (``get_params``,
+    ``set_params``: their fields not starting with ``_``), so that ``sklearn.base.clone`` and a
+    grid search can build them, and the not-fitted error."""
+
+    def get_params(self, deep: bool = True) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self) if not f.name.startswith("_")}
+
+    def set_params(self, **params):
+        unknown = sorted(set(params) - set(self.get_params()))
+        if unknown:
+            have = ", ".join(self.get_params())
+            raise OptionError(f"{type(self).__name__} has no parameter {unknown[0]!r} (has {have})")
+        for name, value in params.items():
+            setattr(self, name, value)
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "robot_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet: call fit(log, robot) first")
 
 
 def robot_for(log: Log, robot=None) -> Robot:
@@ -105,7 +127,7 @@ def calibrate(log: Log, robot: Robot, method: str = "stac", options=None):
 
 
 @dataclass
-class Stac:
+class Stac(_Estimator):
     """Kinematic calibration (thesis ch. 2). ``options``: :class:`~diegocal.stac.result.StacOptions`.
 
     Learnt: ``calibration_`` (:class:`~diegocal.stac.calibration.Calibration`), ``q_`` (T, n) rad
@@ -116,13 +138,14 @@ class Stac:
 
     def fit(self, log, robot=None) -> Stac:
         """Calibrate on ``log`` (a Log or a file; ``robot``: by default the log's); returns self."""
-        log, robot, self.log_path_ = _log_and_robot(log, robot)
+        log, robot, path = _log_and_robot(log, robot)
         result = calibrate(log, robot, self.method, self.options)
-        self.calibration_, self.q_, self.robot_ = result.calibration, result.q, robot
+        self.calibration_, self.q_, self.robot_, self.log_path_ = result.calibration, result.q, robot, path
         return self
 
     def save(self, path, log=None, command: str = LIBRARY) -> Path:
         """Write calib.yaml (with its bundle header: robot, log, command, version)."""
+        self._check_fitted()
         head = header("kinematics", self.robot_, log or self.log_path_, command)
         cal = replace(self.calibration_, header=head)
         save_yaml(cal.to_dict(), path)
@@ -132,13 +155,14 @@ class Stac:
         """Cross-sensor prediction (thesis §2.7.2): :class:`~diegocal.stac.predict.Prediction`."""
         from diegocal.stac.predict import predict as stac_predict
 
+        self._check_fitted()
         log = load_log(log) if isinstance(log, (str, Path)) else log
         return stac_predict(log.without_truth(), self.robot_, self.calibration_, sources, targets)
 
 
 # ----------------------------------------------------------------------------- dynamics
 @dataclass
-class SGP:
+class SGP(_Estimator):
     """Inverse dynamics (thesis ch. 3): PR, GP, PRGP or the semi-parametric GP, by
     ``options.kind`` (:class:`~diegocal.sgp.model.SGPOptions`; default the guarded SGP).
 
@@ -151,13 +175,14 @@ class SGP:
         """Fit the torque model to ``log`` (a Log or a file; ``robot``: by default the log's); returns self."""
         from diegocal.sgp.model import SGPOptions, fit_dynamics
 
-        log, robot, self.log_path_ = _log_and_robot(log, robot)
+        log, robot, path = _log_and_robot(log, robot)
         self.model_ = fit_dynamics(log, robot, self.options or SGPOptions(), progress=progress)
-        self.robot_ = robot
+        self.robot_, self.log_path_ = robot, path
         return self
 
     def predict(self, log):
         """Torques and their predictive std: :class:`~diegocal.sgp.model.TorquePrediction`."""
+        self._check_fitted()
         log = load_log(log) if isinstance(log, (str, Path)) else log
         return self.model_.predict(log.without_truth())
 
@@ -165,6 +190,7 @@ class SGP:
         """Write the model's directory (sgp.yaml, model.npz, a copy of the robot)."""
         from diegocal.sgp.store import save_model
 
+        self._check_fitted()
         log = log or self.log_path_
         meta = {"log": None if log is None else str(Path(log).resolve()), "command": command, **(meta or {})}
         return save_model(self.model_, directory, meta, header=header("dynamics", self.robot_, log, command))
@@ -172,7 +198,7 @@ class SGP:
 
 # ----------------------------------------------------------------------------- pneumatics
 @dataclass
-class Pneumatic:
+class Pneumatic(_Estimator):
     """The 9-parameter valve-chamber model (thesis ch. 4), one fit per chamber.
 
     ``chambers``: names, or one name (empty: every chamber of sensors.yaml the log lets us fit); ``options``:
@@ -190,7 +216,7 @@ class Pneumatic:
         from diegocal.pneumatic.data import chamber_data
         from diegocal.pneumatic.fit import FitOptions, fit_chambers
 
-        log, robot, self.log_path_ = _log_and_robot(log, robot)
+        log, robot, path = _log_and_robot(log, robot)
         asked = (self.chambers,) if isinstance(self.chambers, str) else tuple(self.chambers)  # one name, or several
         names = asked or robot.sensors.chamber_names
         datasets, skipped = [], {}
@@ -204,9 +230,10 @@ class Pneumatic:
         batch = fit_chambers(datasets, self.options or FitOptions(), jobs=self.jobs, progress=progress)
         batch.skipped.update(skipped)
         if not batch.fits:
-            first = next(iter(batch.skipped.values()), "no chamber")
+            first = next(iter(batch.skipped.values()), f"robot {robot.name!r} has no chambers")
             raise FitError(f"no chamber could be fitted ({first})")
         self._batch, self.fits_, self.skipped_, self.robot_ = batch, dict(batch.fits), dict(batch.skipped), robot
+        self.log_path_ = path
         return self
 
     def save(self, path, log=None, command: str = LIBRARY, meta: dict | None = None) -> Path:
@@ -214,6 +241,7 @@ class Pneumatic:
         from diegocal.pneumatic.files import model_dict
         from diegocal.pneumatic.fit import FitOptions
 
+        self._check_fitted()
         log = log or self.log_path_
         meta = {"log": None if log is None else str(Path(log).resolve()),
                 "robot": str(self.robot_.directory or self.robot_.name), **(meta or {})}

@@ -56,3 +56,8 @@ class FitError(DiegocalError, RuntimeError):
 class ScratchSpaceError(DiegocalError, OSError):
     """A temporary file a long run writes (the kinematics diagnosis's candidate columns) does not fit
     where ``TMPDIR`` puts it."""
+
+
+class NotFittedError(DiegocalError, AttributeError):
+    """An estimator asked to save or predict before it was fitted (scikit-learn's NotFittedError
+    is an AttributeError and a ValueError too: this one is the former)."""

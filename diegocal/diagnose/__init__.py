@@ -36,12 +36,18 @@ from diegocal.diagnose.engine import (
 from diegocal.diagnose.output import diagnosis_dict
 from diegocal.domains import DOMAIN_NAMES as DOMAINS
 from diegocal.domains import domain as domain_record
-from diegocal.errors import DiegocalError, MissingStreamError
+from diegocal.errors import DiegocalError, FitError, MissingStreamError, OptionError
 from diegocal.evaluate import Blocks, split_blocks
 from diegocal.io import save_yaml
 from diegocal.io.bundle import header
 from diegocal.parallel import one_blas_thread
 from diegocal.progress import Eta
+
+#: Samples a block needs at least: fewer leave each block's error and its standard error to a handful
+BLOCK_SAMPLES = 5
+#: (option, lowest, highest) of :class:`DiagnoseOptions`, as the command line bounds them
+BOUNDS = (("alpha", 1e-6, 0.5), ("min_gain", 0.0, 0.99), ("max_rounds", 1, 1000), ("n_blocks", 5, 10_000),
+          ("jobs", 1, 1024))
 
 
 @dataclass(frozen=True)
@@ -73,6 +79,14 @@ class DiagnoseOptions:
     jobs: int = 1
     seed: int = 0
     progress: object = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        """The command line's bounds hold for a library caller too: one OptionError line (a log cut
+        into 2 blocks has no held-out block, and its diagnosis would read as a clean bill)."""
+        for name, low, high in BOUNDS:
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not low <= value <= high:
+                raise OptionError(f"diagnose option {name} = {value!r}: expected a number from {low:g} to {high:g}")
 
     def engine(self, n_units: int = 1) -> EngineOptions:
         return EngineOptions(
@@ -168,6 +182,11 @@ def diagnose(log, robot, options: DiagnoseOptions | None = None) -> Diagnosis:
 def _diagnose(log, robot, options: DiagnoseOptions) -> Diagnosis:
     check_domain(log, options.domain)
     log = log.without_truth()
+    if log.n_samples < BLOCK_SAMPLES * options.n_blocks:
+        raise FitError(
+            f"too few samples to diagnose: {log.n_samples} for {options.n_blocks} blocks (train, validation, held "
+            f"out), {BLOCK_SAMPLES} a block at least"
+        )
     blocks = split_blocks(log.n_samples, options.n_blocks)
     # the domain's adapter module, imported when its domain is diagnosed (each loads its model family)
     module = importlib.import_module(f"diegocal.diagnose.{options.domain}")

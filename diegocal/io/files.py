@@ -96,6 +96,8 @@ def load_yaml(path) -> dict:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""
         raise InputFileError(f"{path}: not valid YAML{where}") from None
+    except UnicodeDecodeError:  # a log or another binary file where a YAML one was meant
+        raise InputFileError(f"{path}: not a YAML file (binary: a log in the place of a model?)") from None
     if not isinstance(data, dict):
         raise InputFileError(f"{path}: expected a YAML mapping at the top level")
     return data

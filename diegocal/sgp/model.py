@@ -138,6 +138,9 @@ class DynamicsModel:
                 f"torque joints {unknown or '()'} are not joints of robot {robot.name!r} "
                 f"(joints: {', '.join(robot.joint_names)})"
             )
+        stray = [j for j in options.gp_joints or () if j not in self.joint_names]
+        if stray:  # a misspelt name would leave every joint PR without a word
+            raise UnknownNameError(f"gp_joints {stray} are not fitted joints (joints: {', '.join(self.joint_names)})")
         #: the robot joints whose torque rows are fitted (all joints' states enter the regressor)
         self.rows = [robot.joint_index(j) for j in self.joint_names]
         self.joints_without_tau = tuple(j for j in robot.joint_names if j not in self.joint_names)

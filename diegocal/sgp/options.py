@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
+import numpy as np
+
+from diegocal.errors import OptionError
 from diegocal.sgp.guard_options import Guard
 from diegocal.sgp.inducing import MAX_POINTS, SPARSE_TOLERANCE
 from diegocal.sgp.regressor import check_friction
@@ -136,17 +139,27 @@ class SGPOptions:
     gp_joints: tuple | None = None
 
     def __post_init__(self):
+        """One OptionError line for a value no fit can take (a library caller's too: the command line
+        bounds its own)."""
         if self.inertia not in INERTIA:
-            raise ValueError(f"unknown inertia {self.inertia!r}; expected one of {', '.join(INERTIA)}")
+            raise OptionError(f"unknown inertia {self.inertia!r}; expected one of {', '.join(INERTIA)}")
         if self.kind not in KINDS:
-            raise ValueError(f"unknown model kind {self.kind!r}; expected one of {', '.join(KINDS)}")
+            raise OptionError(f"unknown model kind {self.kind!r}; expected one of {', '.join(KINDS)}")
         if self.inference not in INFERENCE:
-            raise ValueError(f"unknown inference {self.inference!r}; expected one of {', '.join(INFERENCE)}")
-        object.__setattr__(self, "friction", check_friction(self.friction))
+            raise OptionError(f"unknown inference {self.inference!r}; expected one of {', '.join(INFERENCE)}")
+        try:
+            object.__setattr__(self, "friction", check_friction(self.friction))
+        except ValueError as exc:
+            raise OptionError(str(exc)) from None
         if self.gp_inputs is not None:
             bad = [s for s in self.gp_inputs if s not in INPUT_STREAMS]
             if bad or not self.gp_inputs:
-                raise ValueError(f"gp_inputs must be a non-empty subset of {INPUT_STREAMS}, got {self.gp_inputs}")
+                raise OptionError(f"gp_inputs must be a non-empty subset of {INPUT_STREAMS}, got {self.gp_inputs}")
+        for name, low in (("n_inducing", 1), ("restarts", 0), ("jobs", 1), ("hyper_max", 2), ("maxiter", 1),
+                          ("exact_max", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < low:
+                raise OptionError(f"SGP option {name} = {value!r}: expected a whole number of at least {low}")
 
     @property
     def guard_active(self) -> bool:
