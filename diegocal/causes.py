@@ -70,7 +70,9 @@ class Cause:
     is fitted); ``partner``: the name of the ``extra`` key that holds another channel;
     ``signed_by``: the variable (on the term's channel) whose sign the evidence residual is
     multiplied by: friction follows the direction of motion, and its mean residual over an angle the
-    joint crosses both ways averages to nothing.
+    joint crosses both ways averages to nothing; ``shown_against``: the variable (on the term's
+    channel) its evidence is drawn against where it has no region (friction near zero velocity:
+    the velocity, which its shape is a function of).
     """
 
     id: str
@@ -84,6 +86,7 @@ class Cause:
     partner: str | None = None
     named_by_model: bool = False
     signed_by: str | None = None
+    shown_against: str | None = None
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -187,7 +190,8 @@ _CAUSES = (
               "Coulomb, Stribeck; < 0: a smooth, pre-sliding transition through zero velocity)"),
            _p("velocity_scale", "rad/s", "speed over which it decays, e^(−|qd|/scale)", 1e-3, 2.0, 0.02,
               shape=True)),
-          "friction's shape near zero velocity (a Stribeck or smooth transition)", signed_by="qd"),
+          "friction's shape near zero velocity (a Stribeck or smooth transition)", signed_by="qd",
+          shown_against="qd"),
     Cause("load_friction", "dynamics", "term", "joint",
           (_positive("coefficient", "1", "friction torque per unit of the joint's load torque (|τ| sign(qd))"),),
           "friction that grows with the load the joint carries (a gear under torque)", signed_by="qd"),

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from diegocal.causes import CAUSES
+from diegocal.diagnose.show import signed_edges
 from diegocal.diagnose.stats import binned_means, quantile_edges
 from diegocal.diagnose.types import Residuals
 from diegocal.evaluate import sub_blocks
@@ -21,6 +22,9 @@ def evidence_variable(term: Term, res: Residuals, shown: str | None = None) -> s
     that of ``shown``, the channel its evidence is drawn for)."""
     if term.region is not None and term.region.variable in res.variables:
         return term.region.variable
+    against = getattr(CAUSES.get(term.cause), "shown_against", None)
+    if against and f"{against}.{term.channel}" in res.variables:  # friction's shape: against the velocity
+        return f"{against}.{term.channel}"
     for c in [term.channel, *([shown] if shown else []), *res.channels]:
         names = res.channel_variables.get(c)
         if names:
@@ -67,7 +71,8 @@ def curves(
     if motion is not None:  # at rest the direction is unknown: those samples are left out
         sign = np.sign(motion)
         sign[sign == 0] = np.nan
-    edges = quantile_edges(x[train], n_bins)
+    # a velocity: bins that never straddle zero, fine near it (friction's shape there)
+    edges = signed_edges(x[train], n_bins) if variable.startswith("qd.") else quantile_edges(x[train], n_bins)
     cl = sub_blocks(shown, length)
     out = {}
     for name, r in (("before", res), ("after", res_new)):

@@ -523,3 +523,23 @@ def test_an_unexplained_structure_linear_in_its_variable_spans_its_range():
     assert (hose.low, hose.high) == (edges[0], edges[-1])  # the trial's fitted bins
     bump = unexplained_region(tested(np.exp(-(((centre - 0.3) / 0.2) ** 2))))
     assert edges[0] < bump.low < 0.3 < bump.high < edges[-1]
+
+
+def test_friction_near_zero_velocity_is_shown_against_the_velocity():
+    """A report review: TIAGo's Stribeck findings were drawn against the joint's angle, where the
+    residual times the direction of motion follows zero; their shape is a function of the velocity."""
+    from diegocal.diagnose.evidence import curves, evidence_variable
+    from diegocal.diagnose.types import Residuals
+    from diegocal.terms import make_term
+
+    rng = np.random.default_rng(3)
+    qd = rng.normal(0.0, 0.3, 2000)
+    q = np.cumsum(qd) * 0.01
+    r = -2.0 * np.sign(qd) * np.exp(-np.abs(qd) / 0.02) + 0.05 * rng.standard_normal(2000)
+    res = Residuals({"j": r}, {"j": "N·m"}, {"q.j": q, "qd.j": qd}, {"j": ("q.j", "qd.j")})
+    assert evidence_variable(make_term("stribeck_friction", "j"), res) == "qd.j"
+    assert evidence_variable(make_term("viscous_friction", "j"), res) == "q.j"
+    train = np.arange(2000) % 3 == 0
+    out = curves(res, None, "j", "qd.j", ~train, 100, train, 10, None, signed_by="qd")
+    edges = np.asarray(out["before"]["edges"])
+    assert 0.0 in edges and np.sum(np.abs(edges) < 0.02) >= 3  # fine bins on each side of rest
