@@ -118,7 +118,7 @@ def summary_lines(d: dict) -> list[str]:
         f"measured on {held:.1f} s of held-out blocks used for nothing else (contiguous blocks in time, interleaved).",
     ]
     pooled = "; ".join(f"{b:.4g} → {e:.4g} {u}" for u, (b, e) in pooled_rmse(d).items())
-    declined, shifting = [] if findings else d.get("declined") or [], shifting_channels(d)
+    declined, shifting = d.get("declined") or [], shifting_channels(d)
     weak = [] if findings or declined or shifting else weak_structure(d)
     if weak:  # significant binned structure, each under the gain a finding needs: not "nothing"
         out.append(
@@ -252,7 +252,10 @@ def runners_table(f: dict) -> tuple[list[Column], list[list]]:
         Column("significant", align="left"),
     ]
     rows = []
+    later = {(x["cause"], x["channel"]) for x in f.get("declined_later") or ()}  # declined in a later round
     for r in f.get("runners_up") or []:
+        if r["significant"] and (r["cause"], r["channel"]) in later and str(r.get("why_not", "")).startswith("tested"):
+            r = {**r, "why_not": "declined next round"}
         region = r.get("region")
         high = np.inf if region and region["high"] is None else (region or {}).get("high")  # null: open (older files)
         where = r["channel"] + (f" [{region['low']:.3g}..{high:.3g}]" if region else "")
@@ -268,6 +271,8 @@ def _significant(r: dict) -> str:
     why = r.get("why_not") or ""
     if why.startswith("tested again"):
         return "yes; next round"
+    if why == "declined next round":
+        return "yes; declined next round (Declined)"
     if why.startswith("stood in"):
         return "yes; stood in"
     if why.startswith("refitted"):
@@ -457,7 +462,8 @@ def pages(path: Path, pdf, context) -> None:
     sheets = table_sheets(title, *channel_table(d), intro=summary_lines(d), notes=notes)
     drawn = None
     for k, f in enumerate(d.get("findings") or []):
-        drawn = place_finding(sheets, {**f, "domain": d["domain"]}, k, title, drawn)
+        f = {**f, "domain": d["domain"], "declined_later": d.get("declined")}
+        drawn = place_finding(sheets, f, k, title, drawn)
     for sheet in sheets:
         save_page(pdf, sheet.fig)
 

@@ -646,3 +646,17 @@ def test_an_sgp_fit_that_did_not_converge_says_so():
     assert ["converged", "no: 2 of 29 ML-II runs stopped at their cap", ""] in facts_rows(s)
     assert ["converged", "yes", ""] in facts_rows({**s, "converged": True})
     assert not [r for r in facts_rows({"n_samples": 10}) if r[0] == "converged"]  # saved again: not said
+
+
+def test_a_runner_up_declined_in_a_later_round_says_so():
+    # a report review: TIAGo's coupled friction on arm_1 read "yes; next round" in the table, though
+    # the next round declined it (a negative viscous term), which the PDF never said
+    from diegocal.report.diagnose import runners_table
+
+    runner = {"cause": "coupled_friction", "channel": "arm_1_joint", "validation_gain": 0.337, "t": 5.5,
+              "threshold_t": 5.5, "significant": True, "why_not": "tested again in the next round, after x"}
+    declined = [{"cause": "coupled_friction", "channel": "arm_1_joint", "why": "viscous −4.96 ± 0.52"}]
+    _, rows = runners_table({"runners_up": [runner], "declined_later": declined})
+    assert rows[0][-1] == "yes; declined next round (Declined)"
+    _, rows = runners_table({"runners_up": [runner]})
+    assert rows[0][-1] == "yes; next round"
