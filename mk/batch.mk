@@ -37,7 +37,7 @@ DOMAINS := kinematics dynamics pneumatics
 # The logs a command applies to; asked only when a batch goal is being made.
 batch_logs = $(shell $(DIEGOCAL) batch $(1) $(LOGS) --list $(if $(2),-- $(2)) 2>/dev/null)
 stems = $(basename $(notdir $(1)))
-batch_table = $(DIEGOCAL) batch $(1) $(LOGS) -o $(BATCH_OUT) -q -- $(robot_arg) $(BATCH_ARGS)
+batch_table = mkdir -p $(BATCH_OUT) && $(DIEGOCAL) batch $(1) $(LOGS) -o $(BATCH_OUT) -q -- $(robot_arg) $(BATCH_ARGS)
 # A goal: its outputs by a second make that keeps going past a failure (-k), then the table.
 keep_going = +-@$(MAKE) --no-print-directory -k $(1)-outputs
 
