@@ -627,13 +627,9 @@ def test_a_shared_motors_finding_names_the_other_joint_it_acts_on():
     # a report review: coupled friction on joint_6 credited joint_6 alone; joint_5 gained more
     from diegocal.report.diagnose import sentence
 
-    f = {
-        "cause": "coupled_friction",
-        "channel": "joint_6",
-        "gain": {"reduction": 0.57, "rmse_before": 1.62, "rmse_after": 0.70},
-        "unit": "N·m",
-        "evidence": {"gain_channels": ["joint_6", "joint_5"]},
-    }
+    gain = {"reduction": 0.57, "rmse_before": 1.62, "rmse_after": 0.70}
+    f = {"cause": "coupled_friction", "channel": "joint_6", "gain": gain, "unit": "N·m",
+         "evidence": {"gain_channels": ["joint_6", "joint_5"]}}
     assert "It acts on joint_5 too (their held-out RMSE in the table of channels)." in sentence(f)
     assert "It acts on" not in sentence({**f, "evidence": {"gain_channels": ["joint_6"]}})
 
