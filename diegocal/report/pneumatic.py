@@ -232,7 +232,7 @@ def pneumatic_pages(path: Path, pdf, context) -> None:
     sheet = Sheet(f"{title}: steady-state pressure (§4.3.1, §4.5.2)")
     plot_steady_state(model, sweep, ax=sheet.axes(0.36))
     ranked = sorted(model.chambers, key=lambda n: model.chambers[n].raw.get("drift_2s", 0))
-    picks = list(dict.fromkeys([ranked[0], ranked[len(ranked) // 2], ranked[-1]]))
+    picks = list(dict.fromkeys([ranked[0], _typical(model), ranked[-1]]))  # the median: the next page's chamber
     plot_steady_state(model, sweep, names=picks, ax=sheet.axes(0.3))
     sheet.caption(
         "The pressure each chamber settles to at a constant valve command with the joint at rest (mid travel, "
