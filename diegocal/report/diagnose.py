@@ -409,6 +409,9 @@ def draw_finding(sheet: Sheet, f: dict, k: int, plot_height: float, repeat: bool
     same = after is not None and after.caption == caption
     sheet.caption(f"Lines, bands and shading as in Finding {after.number}'s figure above." if same else caption)
     columns, rows = runners_table(f)
+    if rows and f.get("runners_as"):  # the same round's table, drawn for an earlier finding
+        sheet.paragraph(f"Runners-up of this round: as in Finding {f['runners_as']}'s table.", size=8)
+        return Drawn([sheet], k + 1, caption, False)
     if "runners_up" not in f:
         sheet.paragraph(NOT_STORED, size=8)
     elif not rows:
@@ -460,9 +463,11 @@ def pages(path: Path, pdf, context) -> None:
         (CHANNEL_NOTE,) if any(_g(v) == "0 (exact)" for v in (d["baseline"].get("heldout_rmse") or {}).values()) else ()
     )
     sheets = table_sheets(title, *channel_table(d), intro=summary_lines(d), notes=notes)
-    drawn = None
+    drawn, tables = None, {}  # a runners-up table already drawn -> the finding it was drawn for
     for k, f in enumerate(d.get("findings") or []):
-        f = {**f, "domain": d["domain"], "declined_later": d.get("declined")}
+        key = repr(f.get("runners_up"))
+        f = {**f, "domain": d["domain"], "declined_later": d.get("declined"), "runners_as": tables.get(key)}
+        tables.setdefault(key, k + 1)
         drawn = place_finding(sheets, f, k, title, drawn)
     for sheet in sheets:
         save_page(pdf, sheet.fig)

@@ -124,3 +124,17 @@ def test_a_gain_against_identified_inertias_says_it_is_relative():
     assert "against the other joints'" not in sentence(f)  # against the URDF's inertias: absolute
     said = sentence(f | {"extra": {"relative": True}})
     assert "joint2's gain against the other joints'" in said and "--inertia nominal" in said
+
+
+def test_findings_of_one_round_show_its_runners_up_once(diagnosis, tmp_path):
+    """A report review: TIAGo's three findings, chosen in one round, each repeated the same table."""
+    from diegocal.io import save_yaml
+
+    d, _ = diagnosis
+    shared = d["findings"][0]["runners_up"]
+    same = {**d, "findings": [{**f, "runners_up": shared} for f in d["findings"]]}
+    save_yaml(same, tmp_path / "same.diagnosis.yaml")
+    _cli("report", tmp_path / "same.diagnosis.yaml", "-o", tmp_path / "same.pdf", "-q")
+    text = " ".join(page_texts(pymupdf.open(tmp_path / "same.pdf")))
+    assert text.count("Runners-up of this round") == len(d["findings"])  # one table, then references
+    assert "Runners-up of this round: as in Finding 1's table." in text
