@@ -203,7 +203,8 @@ def plot_evidence(f: dict, ax=None):
     )
     magnitude = " (magnitude)" if curves.get("before") and _is_norm(f) else ""
     signed = f" × sign({curves['signed_by']})" if curves.get("signed_by") else ""
-    ax.set_ylabel(f"mean residual{magnitude}{signed} [{unit}]")
+    label = f"mean residual{magnitude}{signed} [{unit}]"
+    ax.set_ylabel(label.replace(" × ", "\n× ") if len(label) > 40 else label)  # a long one on two lines
     ax.set_title(f"{f['cause']} on {f['channel']}: residual on the validation and held-out blocks")
     ax.legend(fontsize=6)
     return ax
