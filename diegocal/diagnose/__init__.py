@@ -17,6 +17,7 @@ domain gives it an adapter: :mod:`.dynamics`, :mod:`.kinematics`, :mod:`.pneumat
 from __future__ import annotations
 
 import importlib
+import numbers
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -85,7 +86,7 @@ class DiagnoseOptions:
         into 2 blocks has no held-out block, and its diagnosis would read as a clean bill)."""
         for name, low, high in BOUNDS:
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not low <= value <= high:
+            if not isinstance(value, numbers.Real) or not low <= value <= high:
                 raise OptionError(f"diagnose option {name} = {value!r}: expected a number from {low:g} to {high:g}")
 
     def engine(self, n_units: int = 1) -> EngineOptions:
