@@ -255,13 +255,14 @@ def runners_table(f: dict) -> tuple[list[Column], list[list]]:
     rows = []
     later = {(x["cause"], x["channel"]) for x in f.get("declined_later") or ()}  # declined in a later round
     for r in f.get("runners_up") or []:
-        if r["significant"] and (r["cause"], r["channel"]) in later and str(r.get("why_not", "")).startswith("tested"):
-            r = {**r, "why_not": "declined next round"}
+        verdict = _significant(r)
+        if verdict == "yes; next round" and (r["cause"], r["channel"]) in later:
+            verdict = "yes; declined next round (Declined)"
         region = r.get("region")
         high = np.inf if region and region["high"] is None else (region or {}).get("high")  # null: open (older files)
         where = r["channel"] + (f" [{region['low']:.3g}..{high:.3g}]" if region else "")
         score = [f"{100 * r['validation_gain']:.1f}", f"{r['t']:.1f}", f"{r['threshold_t']:.1f}"]
-        rows.append([r["cause"], where, *score, _significant(r)])
+        rows.append([r["cause"], where, *score, verdict])
     return columns, rows
 
 
@@ -272,8 +273,6 @@ def _significant(r: dict) -> str:
     why = r.get("why_not") or ""
     if why.startswith("tested again"):
         return "yes; next round"
-    if why == "declined next round":
-        return "yes; declined next round (Declined)"
     if why.startswith("stood in"):
         return "yes; stood in"
     if why.startswith("refitted"):

@@ -26,7 +26,7 @@ from diegocal.report.layout import Column
 from diegocal.report.registry import ReportContext
 from diegocal.report.sgp_tables import GUARD_NOTE, GUARD_WORDS, SLIDE_NOTE, model_kind, number, slides
 from diegocal.sgp import is_model_dir, load_model, load_summary
-from diegocal.sgp.store import region_text
+from diegocal.sgp.store import ml2_unconverged, region_text
 
 #: The streams a held-out log needs: the joint angles (and their rates) and the measured torque.
 HELDOUT_STREAMS = ("q", "tau")
@@ -166,10 +166,10 @@ def uncertainty_words(coverage: dict) -> str:
     return "the ±2σ band is " + "; ".join(parts)
 
 
-#: A joint whose learnt noise σ_v is this many times the median of the model's other joints: its
-#: ±2σ band covers the data because the model's error is that large there, not because it is right.
 #: A held-out RMSE this many times the in-sample one on a joint is said (the model learnt the session)
 WORSE_HELDOUT = 2.0
+#: A joint whose learnt noise σ_v is this many times the median of the model's other joints: its
+#: ±2σ band covers the data because the model's error is that large there, not because it is right.
 NOISY = 10.0
 #: ... and whose relative error, √(in-sample nMSE), is this many times theirs: a shoulder that carries
 #: sixty times a wrist's torque has a noisier torque in N·m and is not the worse fitted for it
@@ -262,12 +262,12 @@ def model_paragraphs(model: Path, context) -> list[str]:
         "torque): " + _joint_list(joints) + "."
     )
     text += worse_than_mean_words(joints)
-    if s.get("converged") is False:
+    if s.get("converged") is False:  # sgp-fit's own words for it
         runs = s.get("ml2_runs") or {}
+        cap = (s.get("options") or {}).get("maxiter", "?")
         text += (
-            f" Not converged: {runs.get('stopped_at_cap', '?')} of {runs.get('runs', '?')} hyperparameter runs (ML-II) "
-            "stopped at their iteration cap before their tolerance; the numbers below are those of a fit still moving "
-            "(sgp-fit --max-iterations)."
+            f" Not converged: {ml2_unconverged(runs.get('runs', '?'), runs.get('stopped_at_cap', '?'), cap)}; the "
+            "numbers below are those of a fit still moving (sgp-fit --max-iterations)."
         )
     held = heldout(model, context)
     if held is not None:

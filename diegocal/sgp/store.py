@@ -165,7 +165,8 @@ def baseline_terms(model) -> list:
     values, stderr = par.values[:n_base].copy(), par.stderr[:n_base].copy()
     share = model.prior_share_
     if share is not None:  # the data say nothing of it: no value (null), not the prior's 0 ± σ_w
-        values[share[:n_base] > PRIOR_ONLY] = stderr[share[:n_base] > PRIOR_ONLY] = np.nan
+        prior_only = share[:n_base] > PRIOR_ONLY
+        values[prior_only] = stderr[prior_only] = np.nan
     for name, v, se in zip(par.names[:n_base], values, stderr, strict=True):
         kind, joint = _friction_of(name)
         if kind is None:

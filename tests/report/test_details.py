@@ -403,6 +403,14 @@ def test_a_minor_fault_is_said_but_is_no_finding():
     assert "by -0.0%" in text and "written off all the same" in text
 
 
+def _no_finding(domain: str, model: str, heldout: dict, unit: str, residual_tests: dict) -> dict:
+    """A diagnosis.yaml mapping with no finding: the baseline is the extended model."""
+    fit = {"model": model, "heldout_rmse": heldout, "unit": unit}
+    return {"domain": domain, "baseline": fit, "extended": dict(fit), "findings": [],
+            "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
+            "options": {"alpha": 0.01, "min_gain": 0.05}, "residual_tests": residual_tests}
+
+
 def test_no_cause_named_is_not_nothing_significant_when_a_term_was_declined_or_a_residual_shifts():
     """A user trial's pot whose gain drifted (CUSUM p 1e-29 on pot3) and a cogging whose best terms
     wanted a negative friction both printed "nothing significant ... as good as this log can tell".
@@ -411,15 +419,7 @@ def test_no_cause_named_is_not_nothing_significant_when_a_term_was_declined_or_a
     from diegocal.report.diagnose import summary_lines
 
     tests = {f"pot{k}": {"change_point": {"p": 0.02, "time": 3.0}} for k in range(18)}
-    d = {
-        "domain": "kinematics",
-        "baseline": {"model": "stac", "heldout_rmse": {"pot3": 0.02}, "unit": "V"},
-        "extended": {"model": "stac", "heldout_rmse": {"pot3": 0.02}, "unit": "V"},
-        "findings": [],
-        "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
-        "options": {"alpha": 0.01, "min_gain": 0.05},
-        "residual_tests": tests,
-    }
+    d = _no_finding("kinematics", "stac", {"pot3": 0.02}, "V", tests)
     assert shifting_channels(d) == [] and "Nothing significant" in " ".join(summary_lines(d))
     tests["pot3"] = {"change_point": {"p": 1.2e-29, "time": 21.3}}
     text = " ".join(summary_lines(d))
@@ -441,16 +441,8 @@ def test_significant_binned_structure_under_the_gain_is_not_nothing_significant(
     from diegocal.report.diagnose import headline, summary_lines
 
     test = {"t": 6.06, "threshold_t": 3.84, "validation_gain": 0.08, "significant": True}
-    d = {
-        "domain": "dynamics",
-        "log": "talos.h5",
-        "baseline": {"model": "rigid_body", "heldout_rmse": {"j5": 0.05}, "unit": "N·m"},
-        "extended": {"model": "rigid_body", "heldout_rmse": {"j5": 0.05}, "unit": "N·m"},
-        "findings": [],
-        "blocks": {"train": [[0, 6]], "validation": [[6, 8]], "heldout": [[8, 10]]},
-        "options": {"alpha": 0.01, "min_gain": 0.05},
-        "residual_tests": {"talos/j5": {"variables": {"q.j5": test, "qd.j5": {**test, "significant": False}}}},
-    }
+    tests = {"talos/j5": {"variables": {"q.j5": test, "qd.j5": {**test, "significant": False}}}}
+    d = {**_no_finding("dynamics", "rigid_body", {"j5": 0.05}, "N·m", tests), "log": "talos.h5"}
     assert weak_structure(d) == [("talos/j5", "q.j5", 0.08)]
     text = " ".join(summary_lines(d))
     assert "Nothing significant" not in text and "significant on talos/j5 against q.j5 (8% of the validation" in text

@@ -84,11 +84,14 @@ def factor(stream: str, unit: str) -> float:
                     + close_match(unit, known))
 
 
+#: A voltage unit's name by its lower case ('mv' is mV: no pot reads megavolts).
+_VOLT_NAMES = {k.lower(): k for k in _VOLTAGE}
+
+
 def _voltage(unit: str) -> float | None:
-    """The factor of a voltage unit to V, its case aside ('mv' is mV: no pot reads megavolts); None
-    for another unit."""
-    folded = {k.lower(): f for k, f in _VOLTAGE.items()}
-    return folded.get(str(unit).strip().lower())
+    """The factor of a voltage unit to V, its case aside; None for another unit."""
+    name = _VOLT_NAMES.get(str(unit).strip().lower())
+    return None if name is None else _VOLTAGE[name]
 
 
 #: Every unit name this module knows (a column header's ``[unit]`` is one of them, or not a unit).
@@ -104,8 +107,7 @@ def header_unit(column: str) -> str | None:
     if m is None:
         return None
     unit = m.group(1)
-    volts = {k.lower(): k for k in _VOLTAGE}
-    return unit if unit in KNOWN_UNITS else volts.get(unit.lower())  # `[mv]` is mV, as `unit: mv`
+    return unit if unit in KNOWN_UNITS else _VOLT_NAMES.get(unit.lower())  # `[mv]` is mV, as `unit: mv`
 
 
 def target_unit(stream: str, unit: str) -> str:
