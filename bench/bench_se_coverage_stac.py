@@ -21,7 +21,14 @@ slipped marker (``dx, dy, dz`` from its slip time; both generators: the offsim s
 0.2-0.5 s and the term's time is the middle of the slide) and a pot's quadratic transfer
 (``c2, c3``; the project's simulator, whose curve is the term's: c2 = its departure at the ends of
 the term's range through the model's fitted gain, which takes the curve's part linear in the
-reading, c3 = 0). The term's structure (cause, channel, slip time) is the truth's, so
+reading, c3 = 0), a link offset (``dx, dy, dz``, the joint origin's shift in its parent's frame;
+both generators: the project's in a random direction, the offsim's along the link; a component
+the calibration takes up, e.g. along a joint axis the markers' positions absorb or across a link
+whose ends' pots' biases turn it, has an infinite SE and is not counted) and a pot's dead band
+(``half_width``, its dead band ``extra.width`` the true one on the reading; both generators: the
+project's pot reads the link through the play, half_width = +width / 2; the offsim's reads the
+motor, which leads the link, half_width = −width / 2). The term's structure (cause, channel, slip
+time, dead band) is the truth's, so
 the count is of the standard errors, not of the naming. A slip of a marker that takes up a leaf
 gauge is placed turned about the gauge joint's axis (the fit's gauge, not the truth's frame): its
 length and its component along that axis (``extra.gauge``, which the gauge leaves alone) are
@@ -98,7 +105,8 @@ def run_one(task) -> dict:
 
 
 TERM_CASES = (("offsim", "time_offset"), ("project", "time_offset"), ("offsim", "marker_slip"),
-              ("project", "marker_slip"), ("project", "sensor_nonlinearity"))
+              ("project", "marker_slip"), ("project", "sensor_nonlinearity"), ("offsim", "link_offset"),
+              ("project", "link_offset"), ("offsim", "backlash"), ("project", "backlash"))
 
 
 def term_one(task) -> dict:
@@ -127,19 +135,22 @@ def term_one(task) -> dict:
     if cause == "marker_slip":
         t0 = v["time"] + 0.5 * v.get("transition_s", 0.0)
         region = Region("time", float(log.time[np.searchsorted(log.time, t0)]), float("inf"))
+    extra = {"width": v["width_reading"]} if cause == "backlash" else None
     adapter = KinematicsAdapter(log, robot)
     train = split_blocks(log.n_samples, 10).mask("train")
     start = time.process_time()
-    fitted = adapter.fit((make_term(cause, ch, region=region),), train)
+    fitted = adapter.fit((make_term(cause, ch, region=region, extra=extra),), train)
     term = fitted.terms[0]
     if cause == "time_offset":
         truth = [v["seconds"]]
-    elif cause == "marker_slip":
+    elif cause in ("marker_slip", "link_offset"):  # a link offset's part the calibration takes up: SE inf
         truth = v["dxyz"]
+    elif cause == "backlash":  # offsim's pot reads the motor, which leads the link: the reading leads
+        truth = [0.5 * v["width_reading"] * (-1.0 if generator == "offsim" else 1.0)]
     else:  # the model's gain: the curve's part linear in the reading is the gain's, not the term's
         g = fitted.cal.gain[fitted.cal.pot_names.index(ch)]
         truth = [v["c2"] * (term.extra["half"] / g) ** 2, 0.0]
-    z = (term.values - np.asarray(truth, float)) / term.stderrs
+    z = np.where(np.isfinite(term.stderrs), (term.values - np.asarray(truth, float)) / term.stderrs, np.nan)
     gauge = term.extra.get("gauge")
     if gauge:  # its components in the gauge the fit fixed: what the gauge leaves alone instead
         d, a = np.asarray(truth, float), np.asarray(gauge["axis"], float)
