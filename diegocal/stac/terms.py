@@ -9,8 +9,9 @@ the one place that says how, and both ``diagnose`` and ``predict`` use it:
   normalised ``u = (ŷ − center) / half`` (center and half range of the training readings in
   ``extra``): the pot's transfer curve is not linear.
 - ``backlash:POT`` (half_width, V; ``extra.width`` W, V): ``p = ŷ − half_width · dir_t`` with
-  ŷ = gain s + bias and dir_t = (ŷ − play(ŷ, W)) / (W / 2) in [−1, 1] (:func:`direction`): the
-  reading lags the joint by a dead band (exactly the play operator when half_width = W / 2).
+  ŷ = gain s + bias and dir_t = (ŷ − play(ŷ, W)) / (W / 2) in [−1, 1] (:func:`direction`), ŷ
+  smoothed first (:data:`DIRECTION_SMOOTH`): the reading lags the joint by a dead band (the play
+  operator when half_width = W / 2).
 - ``link_offset:JOINT`` (dx, dy, dz, m): the joint's origin is translated in its parent joint's
   frame (the URDF's ``<origin xyz>`` is off).
 - ``joint_geometry:JOINT`` (dx, dy, dz, m; rx, ry, rz, rad): the joint's placement is composed
@@ -36,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.signal import savgol_filter
 
 from diegocal.causes import CAUSES as CAUSE_REGISTRY
 from diegocal.causes import causes_of
@@ -53,6 +55,13 @@ SLIP = "~slip"
 #: Width of the dead band (in pot noise σ) that tells a pot's direction of motion: the noise
 #: rarely drags it, a real motion does.
 BAND_SIGMAS = 6.0
+#: Samples of the centred quadratic (Savitzky-Golay) smoother a dead band's direction is read
+#: through. The model's reading at a tracked q carries the reading's own noise where the pot alone
+#: fixes its joint (a wrist whose markers lie near its axis), and that noise, dragging the band
+#: near each reversal, entered the direction column and the residual alike: half widths 20-30 %
+#: short, 2.6-3.7 SE (UR5 wrists, the true band given). A quadratic keeps a smooth reversal's shape
+#: and time.
+DIRECTION_SMOOTH = 11
 
 
 # ----------------------------------------------------------------------------- pot terms
@@ -81,8 +90,16 @@ def pot_columns(term: Term, p: np.ndarray, model: np.ndarray | None = None) -> n
         u = (x - e["center"]) / e["half"]
         return np.stack([u * u, u * u * u], axis=1)
     if term.cause == "backlash":
-        return -direction(x, e["width"])[:, None]
+        return -direction(smoothed(x), e["width"])[:, None]
     raise ValueError(f"{term.cause} is not a pot term")
+
+
+def smoothed(x: np.ndarray) -> np.ndarray:
+    """A reading (T,) through the :data:`DIRECTION_SMOOTH`-sample centred quadratic smoother (as it
+    is where it is shorter, or not finite)."""
+    if x.size < DIRECTION_SMOOTH or not np.isfinite(x).all():
+        return x
+    return savgol_filter(x, DIRECTION_SMOOTH, 2)
 
 
 def pot_extra(cause: str, p: np.ndarray, sigma: float) -> dict:
