@@ -140,16 +140,25 @@ def marginal_variances(gram: np.ndarray, p: int) -> np.ndarray:
     """(F,) the variances of the last F unknowns of the normal matrix ``gram`` with the first ``p``
     (the model's columns) free: the inverse of their Schur complement's diagonal, infinite for a
     value along a direction the data do not fix."""
+    return marginal_covariance(gram, p)[1]
+
+
+def marginal_covariance(gram: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
+    """((F, F), (F,)): the covariance of the last F unknowns of ``gram`` with the first ``p`` free,
+    taken over the directions the data fix (their Schur complement's eigenvalues above SINGULAR of
+    the largest; zero along the others, so it is never indefinite), and their variances as
+    :func:`marginal_variances` gives them (infinite along a direction not fixed)."""
     G_xx, G_xd, G_dd = gram[:p, :p], gram[:p, p:], gram[p:, p:]
     S = G_dd - G_xd.T @ np.linalg.pinv(G_xx) @ G_xd
     vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
     top = max(float(vals[-1]), 0.0)
-    fixed = vals > SINGULAR * top
     if top <= 0:
-        return np.full(S.shape[0], np.inf)
+        return np.zeros_like(S), np.full(S.shape[0], np.inf)
+    fixed = vals > SINGULAR * top
     var = (vecs[:, fixed] ** 2 / vals[fixed]) @ np.ones(int(fixed.sum()))
     loose = np.abs(vecs[:, ~fixed]).max(axis=1) > 1e-6 if (~fixed).any() else np.zeros(S.shape[0], bool)
-    return np.where(loose, np.inf, var)
+    cov = (vecs[:, fixed] / vals[fixed]) @ vecs[:, fixed].T
+    return cov, np.where(loose, np.inf, var)
 
 
 def _derivative(fit, A, w, key, lags: dict) -> np.ndarray:

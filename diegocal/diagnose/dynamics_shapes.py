@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from diegocal.causes import cause as registry_entry
-from diegocal.diagnose.dynamics_filters import marginal_variances, normal_matrix, read_variances
+from diegocal.diagnose.dynamics_filters import marginal_covariance, normal_matrix, read_variances
 from diegocal.diagnose.dynamics_system import feature_chunks
 from diegocal.sgp.terms import columns, is_filter
 
@@ -147,10 +147,12 @@ def with_shape_se(fit, term, model, pred, rows):
     G_xx, G_xd = gram[:P, :P], gram[:P, P:]
     held = np.linalg.pinv(G_xx)
     B = held @ G_xd  # how each column's value moves with the shapes
-    S = gram[P:, P:] - G_xd.T @ B  # the shapes' information, the model's columns free
-    var = marginal_variances(gram, P)
+    # the shapes' covariance, the model's columns free, and their variances from one Schur complement
+    # (two products of it in different orders had disagreed in sign where the shape's derivative is
+    # nearly a model column: a negative widening, a NaN ±)
+    S_inv, var = marginal_covariance(gram, P)
     s2 = read_variances(fit, D, pred, rows, sigma, [r] * len(shapes))
-    S_inv = np.linalg.pinv(S) if np.isfinite(var).all() else np.zeros_like(S)
+    S_inv = S_inv if np.isfinite(var).all() else np.zeros_like(S_inv)
     at = _columns_at(model, term)
     lin = slice(at, at + len(term.linear))
     added = np.einsum("if,fg,ig->i", B[lin], S_inv, B[lin])  # the linear parameters' variance the shapes add
