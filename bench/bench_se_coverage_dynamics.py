@@ -92,19 +92,29 @@ def base_coverage(seed: int, robot_name: str = "arm3", smooth: float = 0.0) -> t
     if robot_name == "arm3":
         log, robot = simulate("dynamics", None, seed)
         friction = true_friction(log.truth.params)
+        per_joint = {k: np.array([friction[k][j] for j in robot.joint_names]) for k in friction}
+        truth_full = true_parameters(robot, per_joint)
     else:
-        log = generate(Session(robot=robot_name, hidden=None, seed=seed, robot_seed=seed, smooth_scale=smooth))
-        robot = robot_for_log(None, log)
-        friction = {k: log.truth.params[k] for k in ("viscous", "coulomb")}
-    truth_full = true_parameters(robot, {k: np.array([friction[k][j] for j in robot.joint_names]) for k in friction})
+        log, robot, truth_full = _generated(seed, robot_name, smooth)
     q, qd, qdd = log_arrays(log, robot, need_tau=False)
     tau, joints = torque_array(log, robot)
-    model = DynamicsModel(robot, SGPOptions(kind="pr"), joints).fit_arrays(q, qd, qdd, tau)
-    truth = model.base_.from_full(truth_full)
-    par = model.parametric_
+    z = _base_z(DynamicsModel(robot, SGPOptions(kind="pr"), joints).fit_arrays(q, qd, qdd, tau), truth_full)
+    return int(np.sum(z <= 2.0)), z.size
+
+
+def _generated(seed: int, robot_name: str, smooth: float):
+    """(log, robot, full parameters' truth) of a clean log of the independent generator."""
+    log = generate(Session(robot=robot_name, hidden=None, seed=seed, robot_seed=seed, smooth_scale=smooth))
+    robot = robot_for_log(None, log)
+    friction = {k: np.array([log.truth.params[k][j] for j in robot.joint_names]) for k in ("viscous", "coulomb")}
+    return log, robot, true_parameters(robot, friction)
+
+
+def _base_z(model, truth_full: np.ndarray) -> np.ndarray:
+    """|estimate − truth| / SE of a fitted model's base parameters."""
     n = model.base_.n_base
-    z = np.abs(par.values[:n] - truth) / par.stderr[:n]
-    return int(np.sum(z <= 2.0)), n
+    par = model.parametric_
+    return np.abs(par.values[:n] - model.base_.from_full(truth_full)) / par.stderr[:n]
 
 
 #: The parts of the base parameters ``--extended`` counts apart (:func:`extended_z`).
@@ -117,10 +127,7 @@ def extended_z(seed: int, robot_name: str, smooth: float, min_gain: float = 0.05
     (``"plain"``); ``"part"``: per base parameter, "rigid body", "friction, shape named" (a friction
     coefficient of a joint the extended model gives a ``stribeck_friction``) or "friction, shape not
     named"; ``"terms"``: the extended model's terms."""
-    log = generate(Session(robot=robot_name, hidden=None, seed=seed, robot_seed=seed, smooth_scale=smooth))
-    robot = robot_for_log(None, log)
-    friction = {k: np.array([log.truth.params[k][j] for j in robot.joint_names]) for k in ("viscous", "coulomb")}
-    truth_full = true_parameters(robot, friction)
+    log, robot, truth_full = _generated(seed, robot_name, smooth)
     fitted = diagnose(log, robot, DiagnoseOptions(domain="dynamics", min_gain=min_gain)).units[0].fitted
     ext, rows = fitted.model, fitted.train
     q, qd, qdd = log_arrays(log, robot, need_tau=False)
@@ -131,11 +138,7 @@ def extended_z(seed: int, robot_name: str, smooth: float, min_gain: float = 0.05
         "part": np.array([_part(name, shaped) for name in ext.base_.names]),
         "terms": tuple(f"{t.cause}:{t.channel}" for t in ext.fitted_terms()),
     }
-    for key, model in (("extended", ext), ("plain", plain)):
-        n = model.base_.n_base
-        par = model.parametric_
-        out[key] = np.abs(par.values[:n] - model.base_.from_full(truth_full)) / par.stderr[:n]
-    return out
+    return out | {"extended": _base_z(ext, truth_full), "plain": _base_z(plain, truth_full)}
 
 
 def _part(name: str, shaped: set) -> str:
