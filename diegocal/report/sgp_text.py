@@ -91,8 +91,11 @@ def heldout_prediction(path: str, heldout: tuple[str, ...]) -> HeldOut | None:
         except DiegocalError:
             continue
         sc = score(measured, pred.tau, model.joint_names, std=pred.tau_std, unit="N·m")
-        spread = np.nanvar(model.tau_, axis=0)  # in-sample nMSE × the training torque's variance
-        train = dict(zip(model.joint_names, np.sqrt(model.nmse_in_sample_ * spread).tolist(), strict=True))
+        # the in-sample nMSE sgp.yaml holds (a loaded model would predict its training log again)
+        nmse = load_summary(Path(path))["nmse_in_sample"]
+        spread = np.nanvar(model.tau_, axis=0)  # × the training torque's variance
+        rmse = np.sqrt(np.array([nmse[j] for j in model.joint_names], float) * spread)
+        train = dict(zip(model.joint_names, rmse.tolist(), strict=True))
         return HeldOut(str(hpath), sc, log.time, measured, pred.tau, pred.tau_std, pred.tau_parametric, train)
     return None
 
