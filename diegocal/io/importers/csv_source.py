@@ -64,7 +64,6 @@ def read_csv_table(path: Path, spec: SourceSpec) -> Table:
             raise LogFormatError(f"{path}: time column {time_col!r} holds non-numeric values")
         time = time * time_factor(spec.time_unit or "s")
     check_increasing(time, f"{path}: column {time_col or 'time'}", repeats=True)
-    keep = np.concatenate([[True], np.diff(time) > 0])
     data, text = {}, []
     for col in columns:
         if col == time_col:
@@ -80,9 +79,9 @@ def read_csv_table(path: Path, spec: SourceSpec) -> Table:
         data = _group_markers(data)
         units, header = {c: "m" for c in data if c.startswith("markers.")}, {}
     notes = (f"{path.name}: text columns left out: {preview(text)}",) if text else ()
-    if not keep.all():  # a stamp written twice (a logger's resend): the first row kept, as a bag's
-        notes += (f"{path.name}: {int((~keep).sum())} repeated time stamps dropped (first kept)",)
-        time, data = time[keep], {c: v[keep] for c, v in data.items()}
+    # a stamp written twice (a logger's resend): the first row kept, as a bag's (never out of order here)
+    time, values, dropped = sort_unique(time, list(data.values()), path.name)
+    data, notes = dict(zip(data, values, strict=True)), notes + dropped
     time = finish_time(time, spec, float(time[0]))
     rate = spec.rate_hz
     return Table(name="", time=time, columns=data, kind=kind, units=units, rate_hz=rate, notes=notes,
