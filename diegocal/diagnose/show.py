@@ -166,10 +166,8 @@ def region_of(tested, n_bins_axes: int | None = None) -> Region:
     """Where a significant binned term departs most: the contiguous run of bins around the bin
     of largest |mean|, extended while the neighbours exceed half of it (edges of the variable)."""
     term = tested.term
-    edges = np.asarray(term.extra["edges"], float)
-    B = edges.size - 1
-    vals = term.values.reshape(-1, B) if term.values.size % B == 0 else term.values[None, :B]
-    mag = np.sqrt((vals**2).sum(axis=0))
+    edges, mag, _ = _bin_magnitudes(term)
+    B = mag.size
     k = int(np.argmax(mag))
     lo = hi = k
     while lo > 0 and mag[lo - 1] > 0.5 * mag[k]:
@@ -185,13 +183,21 @@ def unexplained_region(tested) -> Region:
     the variable (a hose's torque linear in the next joint's angle) spans its range, not the end
     where it happens to be largest (a user trial: q.elbow 0.64-1.58 of -1.32-1.58)."""
     term = tested.term
-    edges = np.asarray(term.extra["edges"], float)
-    B = edges.size - 1
-    if term.values.size % B:
+    edges, mag, whole = _bin_magnitudes(term)
+    if not whole:
         return region_of(tested)
-    mag = np.sqrt((term.values.reshape(-1, B) ** 2).sum(axis=0))
     over = np.flatnonzero(mag > 0.5 * mag.max())
     return Region(term.region.variable, float(edges[over[0]]), float(edges[over[-1] + 1]))
+
+
+def _bin_magnitudes(term) -> tuple[np.ndarray, np.ndarray, bool]:
+    """A binned term's edges (B + 1,), each bin's magnitude over its channels (B,), and whether its
+    values are whole rows of B bins (else the first B values are read as one row)."""
+    edges = np.asarray(term.extra["edges"], float)
+    B = edges.size - 1
+    whole = term.values.size % B == 0
+    vals = term.values.reshape(-1, B) if whole else term.values[None, :B]
+    return edges, np.sqrt((vals**2).sum(axis=0)), whole
 
 
 def show(res, weights: dict, train, validation, shown, length: int, options, time=None, exclude=None) -> dict:
