@@ -159,22 +159,11 @@ def run_sgp(args: SgpArgs, command: str = "diegocal sgp-fit", progress=None) -> 
 UNCONVERGED_HINT = "raise --max-iterations, or pass --allow-unconverged to accept it"
 
 
-def unconverged(summary: dict) -> str | None:
-    """In words, why a fit (its sgp.yaml ``summary``) did not converge; None when it did."""
-    from diegocal.sgp.store import ml2_unconverged
-
-    if summary.get("converged", True):
-        return None
-    runs = summary.get("ml2_runs") or {}
-    cap = (summary.get("options") or {}).get("maxiter", "?")
-    return ml2_unconverged(runs.get("runs", "?"), runs.get("stopped_at_cap", "?"), cap)
-
-
 def written_verdict(args: SgpArgs) -> str | None:
-    """:func:`unconverged` of the sgp.yaml a run wrote (batch's check of a job's output)."""
+    """:func:`~diegocal.sgp.store.unconverged` of the sgp.yaml a run wrote (batch's check of a job's output)."""
     if args.allow_unconverged:
         return None
-    from diegocal.sgp.store import load_summary
+    from diegocal.sgp.store import load_summary, unconverged
 
     why = unconverged(load_summary(args.out))
     return None if why is None else f"{why} (converged: false in {args.out}/sgp.yaml); {UNCONVERGED_HINT}"
@@ -318,7 +307,7 @@ def sgp_fit(
     ]
     if fitted.joints_without_tau:
         rows.append(("not fitted (no tau)", ", ".join(fitted.joints_without_tau)))
-    from diegocal.sgp.store import load_summary, prior_held
+    from diegocal.sgp.store import load_summary, prior_held, unconverged
 
     unknown, held = prior_held(fitted)
     if unknown:

@@ -26,7 +26,7 @@ from diegocal.report.layout import Column
 from diegocal.report.registry import ReportContext
 from diegocal.report.sgp_tables import GUARD_NOTE, GUARD_WORDS, SLIDE_NOTE, model_kind, number, slides
 from diegocal.sgp import is_model_dir, load_model, load_summary
-from diegocal.sgp.store import ml2_unconverged, region_text
+from diegocal.sgp.store import region_text, unconverged
 
 #: The streams a held-out log needs: the joint angles (and their rates) and the measured torque.
 HELDOUT_STREAMS = ("q", "tau")
@@ -266,11 +266,9 @@ def model_paragraphs(model: Path, context) -> list[str]:
     )
     text += worse_than_mean_words(joints)
     if s.get("converged") is False:  # sgp-fit's own words for it
-        runs = s.get("ml2_runs") or {}
-        cap = (s.get("options") or {}).get("maxiter", "?")
         text += (
-            f" Not converged: {ml2_unconverged(runs.get('runs', '?'), runs.get('stopped_at_cap', '?'), cap)}; the "
-            "numbers below are those of a fit still moving (sgp-fit --max-iterations)."
+            f" Not converged: {unconverged(s)}; the numbers below are those of a fit still moving "
+            "(sgp-fit --max-iterations)."
         )
     held = heldout(model, context)
     if held is not None:

@@ -77,6 +77,15 @@ def ml2_unconverged(runs: int, capped: int, cap) -> str:
     )
 
 
+def unconverged(summary: dict) -> str | None:
+    """In words, why a fit (its sgp.yaml ``summary``) did not converge; None when it did."""
+    if summary.get("converged", True):
+        return None
+    runs = summary.get("ml2_runs") or {}
+    cap = (summary.get("options") or {}).get("maxiter", "?")
+    return ml2_unconverged(runs.get("runs", "?"), runs.get("stopped_at_cap", "?"), cap)
+
+
 def summary_dict(model, meta: dict | None = None) -> dict:
     """The content of sgp.yaml."""
     par = model.parametric_
