@@ -159,7 +159,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             }
             if restated:
                 evidence["restated"] = restated
-            twins = indistinguishable(chosen, tested)
+            twins = indistinguishable(chosen, tested, val)
             if twins:
                 evidence["indistinguishable_from"] = twins
             if rivals := rival_causes(chosen, tested):

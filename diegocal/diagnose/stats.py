@@ -86,10 +86,11 @@ class OutOfSample:
     t, df, p : its cluster-robust t, degrees of freedom (clusters − 1), one-sided p-value
     sse_before, sse_after : Σ r², Σ (r − a)² over the validation rows (weighted units)
     length : the sub-block length (samples) the variance was taken over
-    after : Σ (r − a)² per validation sample (the mask's samples in time order, not all T: every
-        tested candidate keeps it), to compare candidates on a common partition
-        (:func:`paired_difference`); Σ r² per sample is not kept (nothing compares it, and a
-        round's few hundred tested candidates would hold it for every validation sample)
+    removed : Σ r² − Σ (r − a)² per validation sample (the mask's samples in time order, not all
+        T: every tested candidate keeps it), to compare candidates on a common partition
+        (:func:`paired_difference`): what one candidate removes beyond another is the difference of
+        their ``removed`` whether or not they act on the same channels (the channels only one acts
+        on keep their error under the other)
     """
 
     slope: float
@@ -99,7 +100,7 @@ class OutOfSample:
     sse_before: float
     sse_after: float
     length: int
-    after: np.ndarray
+    removed: np.ndarray
 
     @property
     def gain(self) -> float:
@@ -136,14 +137,14 @@ def out_of_sample_test(
     r, a = np.asarray(r, float), np.asarray(a, float)
     samples, mask = np.asarray(samples, int), np.asarray(mask, bool)
     T = mask.size
-    sse_before = float(np.bincount(samples, weights=r * r, minlength=T).sum())
+    before = np.bincount(samples, weights=r * r, minlength=T)
     after = np.bincount(samples, weights=(r - a) ** 2, minlength=T)
-    sse_after = float(after.sum())
-    after = after[mask]  # kept by every tested candidate: the mask's samples only
+    sse_before, sse_after = float(before.sum()), float(after.sum())
+    removed = (before - after)[mask]  # kept by every tested candidate: the mask's samples only
     saa = float(a @ a)
     floor = _floor(mask)
     if r.size < 3 * floor or saa <= 0 or not np.isfinite(saa):
-        return OutOfSample(0.0, 0.0, 1, 1.0, sse_before, sse_after, floor, after)
+        return OutOfSample(0.0, 0.0, 1, 1.0, sse_before, sse_after, floor, removed)
     slope = float(a @ r) / saa
     u = r - slope * a
     seen = np.zeros(T, bool)
@@ -159,7 +160,7 @@ def out_of_sample_test(
     C = int(cl.max()) + 1
     if C < 3:
         return OutOfSample(
-            slope, 0.0, max(C - 1, 1), 1.0, sse_before, sse_after, length, after
+            slope, 0.0, max(C - 1, 1), 1.0, sse_before, sse_after, length, removed
         )
     s = np.bincount(cl, weights=a * u, minlength=C)
     var = float(s @ s) / saa**2 * C / (C - 1)
@@ -167,7 +168,7 @@ def out_of_sample_test(
     t = slope / se if np.isfinite(se) else 0.0
     df = C - 1
     return OutOfSample(
-        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, after
+        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, removed
     )
 
 
@@ -203,15 +204,19 @@ def _floor(mask: np.ndarray) -> int:
 
 
 def paired_difference(x: np.ndarray, y: np.ndarray, mask: np.ndarray, length: int) -> tuple[float, float, int]:
-    """Mean and standard error over sub-blocks of ``mask`` (T,) (of ``length`` samples) of the
-    per-block sums of ``x − y`` (values on the mask's samples, in time order: :class:`OutOfSample`'s
-    ``after``); and the number of sub-blocks."""
-
-    cl = sub_blocks(mask, length)[np.asarray(mask, bool)]
-    d = np.bincount(cl, weights=x - y)
-    if d.size < 3:
-        return float(d.mean()) if d.size else 0.0, float("inf"), int(d.size)
-    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size)), int(d.size)
+    """Mean and standard error over sub-blocks of ``mask`` (T,) of the per-block sums of ``x − y``
+    (values on the mask's samples, in time order: :class:`OutOfSample`'s ``removed``); and the
+    number of sub-blocks. The sub-blocks are ``length`` samples, or CORRELATION_TIMES correlation
+    times of ``x − y`` where that is longer (up to the longest a run of the mask allows): two
+    corrections differ by a function of the state, which moves slower than either's residual."""
+    mask = np.asarray(mask, bool)
+    d = np.asarray(x, float) - np.asarray(y, float)
+    own = np.ceil(CORRELATION_TIMES * autocorrelation_time(d))
+    length = int(max(length, min(own, _longest_sub_block(mask))))
+    sums = np.bincount(sub_blocks(mask, length)[mask], weights=d)
+    if sums.size < 3:
+        return float(sums.mean()) if sums.size else 0.0, float("inf"), int(sums.size)
+    return float(sums.mean()), float(sums.std(ddof=1) / np.sqrt(sums.size)), int(sums.size)
 
 
 @dataclass(frozen=True)
