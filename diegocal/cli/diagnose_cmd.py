@@ -258,6 +258,7 @@ def diagnose_cmd(
 
 
 def _summary_rows(done: Diagnosed) -> list:
+    from diegocal.diagnose.limits import limits_words
     from diegocal.diagnose.output import pooled_heldout_rmse, shifting_channels, weak_structure
 
     domain, mapping, out, extended = done.domain, done.mapping, done.output, done.extended
@@ -307,6 +308,8 @@ def _summary_rows(done: Diagnosed) -> list:
          + ": structure no term names")
         for channel, p, t in shifting
     ]
+    if words := limits_words(mapping.get("detection_limits") or []):
+        rows.append(("detection limits (80 % found)", words))
     late = unconverged(done)
     rows.append((f"{domain}: converged", "yes: every kept fit to its tolerance" if late is None else "no: see below"))
     rows += [("diagnosis", str(out)), ("extended model", str(extended))]

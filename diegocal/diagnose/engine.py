@@ -19,6 +19,7 @@ import numpy as np
 from diegocal.causes import search_end, unphysical
 from diegocal.diagnose.evidence import curves, direction, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
+from diegocal.diagnose.limits import detection_limits, unseen
 from diegocal.diagnose.selection import (
     TWIN,
     channel_weights,
@@ -110,6 +111,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
         adapter.selection_exclude = exclude
     stand_ins: dict = {}  # channel -> (the term that stood in, the test that beat it, its evidence or None)
+    limits = ()  # what the last round could not have seen
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
     rival = getattr(adapter, "shape_rival", None)  # a model of another shape, judged on the adapter's own score
@@ -126,6 +128,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         commons = common_candidates(tested)
         if commons:  # the common causes beside the winners: one family-wise rate for all
             tested = evaluate_candidates(commons, res, weights, train, val, options, exclude, alongside=tested)
+        limits = detection_limits(tested, res.units)  # the last round's stand (:mod:`.limits`)
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         neighbours = None if spill is None else partial(spill, fitted, train)
@@ -265,6 +268,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         tuple(minor),
         tuple(unconverged),
         tuple({"cause": cause, "channel": channel, "why": why} for (cause, channel), why in declined.items()),
+        unseen(limits, findings),
     )
 
 
@@ -502,11 +506,8 @@ def _runner_up(t: Tested, best: Tested, declined: dict, named: str = "") -> dict
         if t.term.label in rival_causes(best, [t]):
             out["why_not"] = (f"the data cannot tell it from {cause} (the same validation fit to within "
                               f"{TWIN:.0%} of what {cause} removes)")
-        elif set(t.channels) & set(best.channels):
-            out["why_not"] = (
-                f"{cause} explains more of the validation error of "
-                f"{', '.join(sorted(set(t.channels) & set(best.channels)))}"
-            )
+        elif shared := ", ".join(sorted(set(t.channels) & set(best.channels))):
+            out["why_not"] = f"{cause} explains more of the validation error of {shared}"
         else:
             out["why_not"] = f"tested again in the next round, after {cause} on {best.term.channel}"
     return out

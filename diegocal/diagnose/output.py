@@ -31,6 +31,10 @@
     residual_tests: {channel: {correlation_time_s, change_point: {p, time}, variables: {...}}}
                                # + change_point_signed (a joint: the residual times sign(qd), friction's share)
     declined: [{cause, channel, why}]  # significant on validation, not added (why in words)
+    detection_limits:          # per tested cause and channel no finding names, least detectable first:
+      - {cause, channel, on, rms, unit, of_residual, by}   # the smallest effect found 80 % of the time:
+                               # its RMS on channel ``on``, the same over that channel's residual RMS,
+                               # and the bar that sets it (power: the test's; min_gain: the gain a finding needs)
     converged: true            # false: a kept fit stopped at a cap before its tolerance
     unconverged: []            # which, in words (STAC's iterations, a term's refinement, a chamber's budget)
 
@@ -124,9 +128,15 @@ def diagnosis_dict(diag, extended_model: str | None = None) -> dict:
         "options": {"alpha": o.alpha, "min_gain": o.min_gain, "max_rounds": o.max_rounds, "n_blocks": o.n_blocks},
         "residual_tests": _clean({(f"{u.unit}/{c}" if u.unit else c): v for u in units for c, v in u.show.items()}),
         "declined": [dict(d) for u in units for d in u.declined],
+        "detection_limits": [_limit(d) for u in units for d in u.detection_limits],
         "converged": not any(u.unconverged for u in units),
         "unconverged": [f"{u.unit}: {why}" if u.unit else why for u in units for why in u.unconverged],
     }
+
+
+def _limit(d: dict) -> dict:
+    """A detection limit (:mod:`.limits`) at four significant digits."""
+    return {**d, "rms": float(f"{d['rms']:.4g}"), "of_residual": float(f"{d['of_residual']:.4g}")}
 
 
 def _minor_fault(f) -> dict:

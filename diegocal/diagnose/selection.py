@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from diegocal.diagnose.limits import detectable
 from diegocal.diagnose.stats import autocorrelation_time, critical_t, out_of_sample_test, paired_difference
 from diegocal.diagnose.types import Candidate, EngineOptions, Residuals, Tested, column_rows
 from diegocal.lstsq import TallLstsq
@@ -188,6 +189,21 @@ def _own_gain(cand: Candidate, predicted: dict) -> tuple[float | None, tuple | N
     return (gains[j] if energy[j] >= energy[i] else None), None, gains[j]
 
 
+def _limit(cand: Candidate, predicted: dict, test, threshold: float, weights: dict, min_gain: float) -> tuple | None:
+    """``Tested.detectable``: on the candidate's own channel, its gain's there, else on the channel
+    its correction acts on most, its gain's over all its channels (:func:`~.limits.detectable`)."""
+    if not predicted:
+        return None
+    on = cand.term.channel
+    if on in predicted:
+        error = float(predicted[on][0] @ predicted[on][0])
+    else:
+        on = max(predicted, key=lambda c: float(predicted[c][1] @ predicted[c][1]))
+        error = test.sse_before
+    r, a, _ = predicted[on]
+    return (on, *detectable(test.se, threshold, r, a, error, weights.get(on, 1.0), min_gain))
+
+
 def _candidate_channels(cand: Candidate) -> tuple[str, ...]:
     names = list(cand.columns)
     for c in cand.refit or {}:
@@ -244,7 +260,8 @@ def evaluate_candidates(
         gain = test.gain if own is None else max(own, test.gain)
         sig = bool(test.t > thr and gain >= options.min_gain)
         own_gain = None if own is None else gain
-        return Tested(term, tuple(cand.columns), test, thr, sig, k, cand, own_gain, strongest, on_own)
+        return Tested(term, tuple(cand.columns), test, thr, sig, k, cand, own_gain, strongest, on_own,
+                      _limit(cand, predicted, test, thr, weights, options.min_gain))
 
     def rejudged(t: Tested) -> Tested:
         thr = critical_t(options.alpha, n_tests, t.test.df)

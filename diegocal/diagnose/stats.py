@@ -85,6 +85,8 @@ class OutOfSample:
     slope : regression of the validation residual on the correction (1 = the correction is right)
     t, df, p : its cluster-robust t, degrees of freedom (clusters − 1), one-sided p-value
     sse_before, sse_after : Σ r², Σ (r − a)² over the validation rows (weighted units)
+    se : the slope's cluster-robust standard error (inf where there is no test): an effect k times
+        the correction is found when k / se passes the threshold (:mod:`.limits`)
     length : the sub-block length (samples) the variance was taken over
     removed : Σ r² − Σ (r − a)² per validation sample (the mask's samples in time order, not all
         T: every tested candidate keeps it), to compare candidates on a common partition
@@ -101,6 +103,7 @@ class OutOfSample:
     sse_after: float
     length: int
     removed: np.ndarray
+    se: float = float("inf")
 
     @property
     def gain(self) -> float:
@@ -168,7 +171,7 @@ def out_of_sample_test(
     t = slope / se if np.isfinite(se) else 0.0
     df = C - 1
     return OutOfSample(
-        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, removed
+        slope, float(t), df, float(stats.t.sf(t, df)), sse_before, sse_after, length, removed, float(se)
     )
 
 

@@ -187,6 +187,9 @@ class Tested:
         term on several channels that names none of them (a payload on a link); None otherwise
     own_gain : the validation gain on the term's own channel, for a term on several channels that
         names one of them, whichever it acts on most (None otherwise)
+    detectable : (channel, RMS in its unit, over its residual RMS, the bar that sets it) of the
+        smallest effect shaped like the correction that is found 80 % of the time, on the term's
+        own channel or the one it acts on most (:mod:`.limits`); None where not computed
     """
 
     term: Term
@@ -199,6 +202,7 @@ class Tested:
     channel_gain: float | None = None
     strongest: tuple | None = None
     own_gain: float | None = None
+    detectable: tuple | None = None
 
     @property
     def gain(self) -> float:
@@ -276,6 +280,7 @@ class UnitDiagnosis:
     minor_faults: tuple[Finding, ...] = ()  # detected, writing-off removed under min_gain (evidence.written_off)
     unconverged: tuple[str, ...] = ()  # the baseline's and the kept fits' stops at a cap, in words
     declined: tuple[dict, ...] = ()  # significant terms not added: {cause, channel, why}, why in words
+    detection_limits: tuple[dict, ...] = ()  # what it could not have seen (:mod:`.limits`), least detectable first
 
 
 def pooled(score: Score, channels) -> float:

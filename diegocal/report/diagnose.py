@@ -16,6 +16,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from diegocal.causes import phrase
+from diegocal.diagnose.limits import limits_words
 from diegocal.diagnose.output import shifting_channels, weak_structure
 from diegocal.diagnose.selection import TWIN
 from diegocal.io import load_yaml
@@ -103,6 +104,12 @@ def pooled_rmse(d: dict) -> dict:
     return out
 
 
+def limits_lines(d: dict) -> list[str]:
+    """What the data could not have shown, in words (:mod:`diegocal.diagnose.limits`)."""
+    words = limits_words(d.get("detection_limits") or [])
+    return [f"Detection limits (an effect found 80 % of the time; `detection_limits`): {words}."] if words else []
+
+
 def summary_lines(d: dict) -> list[str]:
     """The section's opening paragraphs: what was fitted on what, the findings, what they gained."""
     base, ext = d["baseline"], d["extended"]
@@ -144,6 +151,8 @@ def summary_lines(d: dict) -> list[str]:
         )
         out += [f"{k + 1}. " + sentence(f) for k, f in enumerate(findings)]
     out += [f"Declined: {x['cause']} on {x['channel']}: {x['why']}." for x in declined]
+    if not findings:  # with findings, after them (:func:`pages`)
+        out += limits_lines(d)
     out += [
         f"The residual of {channel} shifts in time (CUSUM test p {p:.1g}{f', at {t:.3g} s' if t is not None else ''}): "
         "structure no term names, a drift or an effect that part of the session's motion excites."
@@ -469,6 +478,10 @@ def pages(path: Path, pdf, context) -> None:
         f = {**f, "domain": d["domain"], "declined_later": d.get("declined"), "runners_as": tables.get(key)}
         tables.setdefault(key, k + 1)
         drawn = place_finding(sheets, f, k, title, drawn)
+    for text in limits_lines(d) if d.get("findings") else ():  # below the last finding, or on a page of its own
+        if not sheets[-1].paragraph(text):
+            sheets.append(Sheet(f"{title}: detection limits"))
+            sheets[-1].paragraph(text)
     for sheet in sheets:
         save_page(pdf, sheet.fig)
 

@@ -1,0 +1,78 @@
+"""What a diagnosis could not have seen: the smallest effect of each tested cause it would find.
+
+"Nothing significant" is only as strong as the test's power on that channel: a pot's curve on a
+joint that the pot alone fixes is taken up by the tracked angle, and a friction on a joint that
+barely moves leaves no trace. A tested candidate's validation test regresses the residual on the
+correction a fitted on the training rows (:func:`~.stats.out_of_sample_test`): an effect k·a is
+found, t = k / se above the candidate's threshold, about 80 % of the time when
+k ≥ (threshold + Z_POWER)·se; and it must remove ``min_gain`` of the validation (and held-out)
+mean squared error it is judged on, which an effect of RMS e on n rows does when
+n e² ≥ min_gain / (1 − min_gain) Σ r² (over its own channel's rows, or all its channels'). The
+larger of the two RMS, on the channel the candidate acts on most (its own where it has one), is
+the candidate's *detection limit*. It is taken in the last round, on the residual of the model
+with every finding (an effect beside those found), and is conditional on the correction's shape,
+which for a cause absent from the data is the training noise's: a guide to what the data could
+have shown, not a bound.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: One-sided normal quantile of 80 % power.
+Z_POWER = 0.8416
+
+
+def detectable(se: float, threshold: float, r: np.ndarray, a: np.ndarray, error: float, weight: float,
+               min_gain: float):
+    """(RMS in the channel's unit, the same over that channel's residual RMS, the bar that sets it:
+    "power" or "min_gain") of the smallest effect shaped like ``a`` that a test of standard error
+    ``se`` and critical t ``threshold`` finds with 80 % power and that removes ``min_gain`` of
+    ``error`` (Σ r² over the rows the candidate's gain is taken on); ``r``, ``a``: one channel's
+    weighted residual and correction on its validation rows (``weight``: the channel's weight).
+    inf without a test."""
+    r, a = np.asarray(r, float), np.asarray(a, float)
+    sigma = float(np.sqrt(np.mean(r * r))) if r.size else 0.0
+    if not np.isfinite(se) or a.size == 0 or not error > 0 or sigma == 0:
+        return float("inf"), float("inf"), "power"
+    tested = (threshold + Z_POWER) * se * float(np.sqrt(np.mean(a * a)))
+    paid = float(np.sqrt(min_gain / (1.0 - min_gain) * error / a.size))
+    multiple, by = (tested, "power") if tested > paid else (paid, "min_gain")
+    return multiple / weight, multiple / sigma, by
+
+
+def detection_limits(tested, units: dict) -> list[dict]:
+    """{cause, channel, on, rms, unit, of_residual, by} per tested candidate that names one channel
+    (a common cause's is its members'), least detectable first (largest ``of_residual``: over the
+    channel's residual RMS, the model's with every finding)."""
+    out = []
+    for t in tested:
+        if t.detectable is None or t.candidate.members:
+            continue
+        on, rms, multiple, by = t.detectable
+        if np.isfinite(rms):
+            out.append({"cause": t.term.cause, "channel": t.term.channel, "on": on, "rms": rms,
+                        "unit": units.get(on, ""), "of_residual": multiple, "by": by})
+    return sorted(out, key=lambda d: -d["of_residual"])
+
+
+def unseen(limits, findings) -> tuple[dict, ...]:
+    """The limits of the (cause, channel) pairs no finding names."""
+    named = {(f.cause, f.channel) for f in findings}
+    return tuple(d for d in limits if (d["cause"], d["channel"]) not in named)
+
+
+def limits_words(limits, shown: int = 3) -> str:
+    """The detection limits in a sentence (the command's summary, the report): how many the gain a
+    finding needs sets and how many the data's power, their span, and the ``shown`` least
+    detectable."""
+    limits = list(limits)
+    if not limits:
+        return ""
+    power = sum(d.get("by") == "power" for d in limits)
+    low, high = (f"{min(d['of_residual'] for d in limits):.2g}", f"{max(d['of_residual'] for d in limits):.2g}")
+    least = ", ".join(f"{d['cause']} on {d['channel']} ({d['rms']:.2g} {d['unit']} RMS on {d['on']}, "
+                      f"{d['of_residual']:.2g}× the residual there)" for d in limits[:shown])
+    return (f"{len(limits)} tested cause-channel pairs, {len(limits) - power} limited by the gain a finding needs and "
+            f"{power} by the data's power, are found once their effect is {low if low == high else f'{low}-{high}'}× "
+            f"the residual RMS on its channel" + (f"; least detectable: {least}" if least else ""))
