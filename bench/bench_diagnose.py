@@ -19,7 +19,10 @@ minor fault; *found* counts the named logs and those. A hidden effect
 not named is compared with its clean twin (the same run without it): *taken up by the baseline*
 when the baseline's held-out error on its channel is within ``TAKEN_UP`` of the twin's (an
 identified baseline can hold an effect in its own parameters: an armature in a link's inertia);
-counted apart, still a miss.
+counted apart, still a miss. ``--verbose`` prints beside a miss ``left`` (that excess, a share of
+the twin's MSE) and ``limit²``: the square of the diagnosis's detection limit of the hidden cause on
+its channel over the residual (``detection_limits``): a miss with ``left`` under ``limit²`` was
+below what the log could show.
 Printed per domain and per cause: the naming rate, the false-alarm rate and the wall time per log
 (load average beside it).
 
@@ -126,6 +129,7 @@ class Outcome:
     minor: tuple = ()  # "cause:channel" of each minor fault (found, no finding: it removed under min_gain)
     twins: tuple = ()  # channels the top finding's data cannot tell from its own (its evidence)
     left: float = float("nan")  # not named: the baseline's held-out MSE on its channel over its clean twin's, − 1
+    limit: float = float("nan")  # the diagnosis's detection limit of the hidden cause on its channel, over its residual
 
     @property
     def minor_fault(self) -> bool:
@@ -328,6 +332,8 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
         gain = float(findings[0].gain().get("reduction", float("nan")))
     minor = tuple(f"{f.cause}:{f.channel}" for u in result.units for f in u.minor_faults)
     twins = tuple(findings[0].evidence.get("indistinguishable_from", ())) if findings else ()
+    limit = next((d["of_residual"] for u in result.units for d in u.detection_limits
+                  if (d["cause"], d["channel"], d["on"]) == (cause, channel, channel)), float("nan"))
     outcome = Outcome(
         domain,
         cause,
@@ -341,6 +347,7 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
         ratio=ratio,
         minor=minor,
         twins=twins,
+        limit=limit,
     )
     if cause and not outcome.named:  # a miss: what did the baseline leave of the effect?
         twin, _ = simulate(domain, None, seed, robot_name)
@@ -435,7 +442,8 @@ def main(argv=None) -> int:
             verdict = "named" if o.named else ("alarm" if (o.cause is None and o.n_findings) else "")
             print(
                 f"{o.domain:10s} {str(o.cause):20s} {str(o.channel):16s} seed {o.seed:<12d} top {o.top or '-':40s} "
-                f"gain {o.gain:6.2f} {o.seconds:6.1f} s size/noise {o.ratio:5.1f} left {o.left:6.3f} {verdict} "
+                f"gain {o.gain:6.2f} {o.seconds:6.1f} s size/noise {o.ratio:5.1f} left {o.left:6.3f} "
+                f"limit² {o.limit**2:6.3f} {verdict} "
                 f"{o.error}"
             )
     print(table(outcomes))
