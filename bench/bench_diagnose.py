@@ -333,7 +333,7 @@ def run_one(domain: str, cause: str | None, seed: int, robot_name: str | None = 
     minor = tuple(f"{f.cause}:{f.channel}" for u in result.units for f in u.minor_faults)
     twins = tuple(findings[0].evidence.get("indistinguishable_from", ())) if findings else ()
     limit = next((d["of_residual"] for u in result.units for d in u.detection_limits
-                  if (d["cause"], d["channel"], d["on"]) == (cause, channel, channel)), float("nan"))
+                  if (d["cause"], d["channel"], d["seen_on"]) == (cause, channel, channel)), float("nan"))
     outcome = Outcome(
         domain,
         cause,

@@ -148,6 +148,7 @@ class DynamicsAdapter:
     #: a gain judged on every joint is refitted against its joint's rivals (a fit is cheap here; a
     #: kinematic one is STAC's alternation): :func:`~diegocal.diagnose.stand_ins.refit_rival`
     refit_rivals = True
+    in_span: tuple = ()  # (cause, channel) the last round left unoffered in the model's span (:mod:`.limits`)
 
     def __init__(self, robot, time, q, qd, qdd, tau, joints, friction=FRICTION_KINDS, inertia="identified"):
         self.robot = robot
@@ -422,10 +423,12 @@ class DynamicsAdapter:
             families = FamilyRanks(rows, weights, [p.family for p in props])
         B, left, slots = project(self, fitted, train, width, slots, fill, self.progress, families)
         props = [(p.term, p.family) for p in props]
-        out = []
+        out, self.in_span = [], ()
         for (term, family), slot, f in zip(props, slots, left, strict=True):
             if slot is not None and f > SPAN_TOL:  # each column a view of its joint's block (float32)
                 out.append(Candidate(term, {self.joints[r]: B[r][:, sl] for r, sl in slot.items()}, family=family))
+            elif slot is not None:
+                self.in_span += ((term.cause, term.channel),)
         return out
 
     # ------------------------------------------------------------------ scores and output

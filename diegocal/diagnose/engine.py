@@ -128,7 +128,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         commons = common_candidates(tested)
         if commons:  # the common causes beside the winners: one family-wise rate for all
             tested = evaluate_candidates(commons, res, weights, train, val, options, exclude, alongside=tested)
-        limits = detection_limits(tested, res.units)  # the last round's stand (:mod:`.limits`)
+        limits = detection_limits(tested, res.units, getattr(adapter, "in_span", ()))  # the last round's
         tested = [t for t in tested if not set(t.channels) & set(stand_ins)]
         tested = [replace(t, significant=False) if _key(t.term) in declined else t for t in tested]
         neighbours = None if spill is None else partial(spill, fitted, train)

@@ -41,17 +41,20 @@ def detectable(se: float, threshold: float, r: np.ndarray, a: np.ndarray, error:
     return multiple / weight, multiple / sigma, by
 
 
-def detection_limits(tested, units: dict) -> list[dict]:
-    """{cause, channel, on, rms, unit, of_residual, by} per tested candidate that names one channel
+def detection_limits(tested, units: dict, in_span=()) -> list[dict]:
+    """{cause, channel, seen_on, rms, unit, of_residual, by} per tested candidate that names one channel
     (a common cause's is its members'), least detectable first (largest ``of_residual``: over the
-    channel's residual RMS, the model's with every finding)."""
-    out = []
+    channel's residual RMS, the model's with every finding); a (cause, channel) of ``in_span``, a
+    candidate the adapter did not offer because the model's own parameters take it up whole (an
+    armature in an identified rigid body), has an infinite limit, set by "span"."""
+    out = [{"cause": c, "channel": ch, "seen_on": ch, "rms": float("inf"), "unit": units.get(ch, ""),
+            "of_residual": float("inf"), "by": "span"} for c, ch in dict.fromkeys(in_span)]
     for t in tested:
         if t.detectable is None or t.candidate.members:
             continue
         on, rms, multiple, by = t.detectable
         if np.isfinite(rms):
-            out.append({"cause": t.term.cause, "channel": t.term.channel, "on": on, "rms": rms,
+            out.append({"cause": t.term.cause, "channel": t.term.channel, "seen_on": on, "rms": rms,
                         "unit": units.get(on, ""), "of_residual": multiple, "by": by})
     return sorted(out, key=lambda d: -d["of_residual"])
 
@@ -64,15 +67,22 @@ def unseen(limits, findings) -> tuple[dict, ...]:
 
 def limits_words(limits, shown: int = 3) -> str:
     """The detection limits in a sentence (the command's summary, the report): how many the gain a
-    finding needs sets and how many the data's power, their span, and the ``shown`` least
-    detectable."""
+    finding needs sets and how many the data's power, their span, the ``shown`` least detectable,
+    and the causes the model's own parameters take up whole."""
     limits = list(limits)
-    if not limits:
-        return ""
-    power = sum(d.get("by") == "power" for d in limits)
-    low, high = (f"{min(d['of_residual'] for d in limits):.2g}", f"{max(d['of_residual'] for d in limits):.2g}")
-    least = ", ".join(f"{d['cause']} on {d['channel']} ({d['rms']:.2g} {d['unit']} RMS on {d['on']}, "
-                      f"{d['of_residual']:.2g}× the residual there)" for d in limits[:shown])
-    return (f"{len(limits)} tested cause-channel pairs, {len(limits) - power} limited by the gain a finding needs and "
-            f"{power} by the data's power, are found once their effect is {low if low == high else f'{low}-{high}'}× "
-            f"the residual RMS on its channel" + (f"; least detectable: {least}" if least else ""))
+    unseeable = [d for d in limits if d.get("by") == "span"]
+    limits = [d for d in limits if d.get("by") != "span"]
+    out = []
+    if limits:
+        power = sum(d.get("by") == "power" for d in limits)
+        low, high = (f"{min(d['of_residual'] for d in limits):.2g}", f"{max(d['of_residual'] for d in limits):.2g}")
+        least = ", ".join(f"{d['cause']} on {d['channel']} ({d['rms']:.2g} {d['unit']} RMS on {d['seen_on']}, "
+                          f"{d['of_residual']:.2g}× the residual there)" for d in limits[:shown])
+        out.append(f"{len(limits)} tested cause-channel pairs, {len(limits) - power} limited by the gain a finding "
+                   f"needs and {power} by the data's power, are found once their effect is "
+                   f"{low if low == high else f'{low}-{high}'}× the residual RMS on its channel"
+                   + (f"; least detectable: {least}" if least else ""))
+    if unseeable:
+        out.append("not testable, the model's own parameters taking them up whole: "
+                   + ", ".join(f"{d['cause']} on {d['channel']}" for d in unseeable))
+    return "; ".join(out)

@@ -32,9 +32,10 @@
                                # + change_point_signed (a joint: the residual times sign(qd), friction's share)
     declined: [{cause, channel, why}]  # significant on validation, not added (why in words)
     detection_limits:          # per tested cause and channel no finding names, least detectable first:
-      - {cause, channel, on, rms, unit, of_residual, by}   # the smallest effect found 80 % of the time:
-                               # its RMS on channel ``on``, the same over that channel's residual RMS,
-                               # and the bar that sets it (power: the test's; min_gain: the gain a finding needs)
+      - {cause, channel, seen_on, rms, unit, of_residual, by}   # the smallest effect found 80 % of the time:
+                               # its RMS on channel ``seen_on``, the same over that channel's residual RMS,
+                               # and the bar that sets it (power: the test's; min_gain: the gain a finding needs;
+                               # span: not testable, the model's own parameters take it up whole; rms .inf)
     converged: true            # false: a kept fit stopped at a cap before its tolerance
     unconverged: []            # which, in words (STAC's iterations, a term's refinement, a chamber's budget)
 

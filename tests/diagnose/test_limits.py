@@ -76,9 +76,9 @@ def test_the_limit_is_the_larger_of_the_tests_power_and_the_gain_a_finding_needs
 
 def test_the_limits_in_words_say_which_bar_sets_them_and_name_the_least_detectable():
     limits = [
-        {"cause": "sensor_nonlinearity", "channel": "wrist_pot", "on": "hand_m0", "rms": 2.7e-4, "unit": "m",
+        {"cause": "sensor_nonlinearity", "channel": "wrist_pot", "seen_on": "hand_m0", "rms": 2.7e-4, "unit": "m",
          "of_residual": 1.8, "by": "power"},
-        {"cause": "spring", "channel": "joint1", "on": "joint1", "rms": 0.002, "unit": "N·m", "of_residual": 0.23,
+        {"cause": "spring", "channel": "joint1", "seen_on": "joint1", "rms": 0.002, "unit": "N·m", "of_residual": 0.23,
          "by": "min_gain"},
     ]
     words = limits_words(limits)
@@ -87,3 +87,23 @@ def test_the_limits_in_words_say_which_bar_sets_them_and_name_the_least_detectab
     least = "least detectable: sensor_nonlinearity on wrist_pot (0.00027 m RMS on hand_m0, 1.8× the residual there)"
     assert least in words
     assert limits_words([]) == ""
+
+
+def test_an_armature_the_identified_rigid_body_takes_up_is_said_not_testable():
+    """arm3's joint2 armature lies in the identified rigid body's span: no candidate is offered and
+    nothing is named; the limits say it cannot be tested, where a joint3 armature gets a finite one."""
+    from diegocal.diagnose import DiagnoseOptions, diagnose
+    from diegocal.robot import load_robot
+    from diegocal.robot.model import BUNDLED_ROBOTS
+    from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+
+    robot = load_robot(BUNDLED_ROBOTS / "arm3")
+    opts = DynamicsOptions(duration=20.0, effects=("armature:joint2=0.05",), noise=0.01)
+    log = simulate_dynamics(robot, opts, np.random.default_rng(4))
+    d = diagnose(log, robot, DiagnoseOptions(domain="dynamics"))
+    assert not any(f.cause == "armature" for f in d.findings)
+    limits = {(x["cause"], x["channel"]): x for u in d.units for x in u.detection_limits}
+    assert limits[("armature", "joint2")]["by"] == "span" and limits[("armature", "joint2")]["rms"] == float("inf")
+    assert np.isfinite(limits[("armature", "joint3")]["rms"])
+    words = limits_words(d.units[0].detection_limits)
+    assert "not testable, the model's own parameters taking them up whole: " in words and "armature on joint2" in words
