@@ -67,8 +67,8 @@ def unseen(limits, findings) -> tuple[dict, ...]:
 
 def limits_words(limits, shown: int = 3) -> str:
     """The detection limits in a sentence (the command's summary, the report): how many the gain a
-    finding needs sets and how many the data's power, their span, the ``shown`` least detectable,
-    and the causes the model's own parameters take up whole."""
+    finding needs sets and how many the data's power, their span, the ``shown`` least detectable
+    (none where all tie at the lowest), and the causes the model's own parameters take up whole."""
     limits = list(limits)
     unseeable = [d for d in limits if d.get("by") == "span"]
     limits = [d for d in limits if d.get("by") != "span"]
@@ -76,8 +76,9 @@ def limits_words(limits, shown: int = 3) -> str:
     if limits:
         power = sum(d.get("by") == "power" for d in limits)
         low, high = (f"{min(d['of_residual'] for d in limits):.2g}", f"{max(d['of_residual'] for d in limits):.2g}")
+        above = [d for d in limits if f"{d['of_residual']:.2g}" != low][:shown]  # ties at the lowest say nothing
         least = ", ".join(f"{d['cause']} on {d['channel']} ({d['rms']:.2g} {d['unit']} RMS on {d['seen_on']}, "
-                          f"{d['of_residual']:.2g}× the residual there)" for d in limits[:shown])
+                          f"{d['of_residual']:.2g}× the residual there)" for d in above)
         out.append(f"{len(limits)} tested cause-channel pairs, {len(limits) - power} limited by the gain a finding "
                    f"needs and {power} by the data's power, are found once their effect is "
                    f"{low if low == high else f'{low}-{high}'}× the residual RMS on its channel"

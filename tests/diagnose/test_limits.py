@@ -87,6 +87,8 @@ def test_the_limits_in_words_say_which_bar_sets_them_and_name_the_least_detectab
     least = "least detectable: sensor_nonlinearity on wrist_pot (0.00027 m RMS on hand_m0, 1.8× the residual there)"
     assert least in words
     assert limits_words([]) == ""
+    tied = limits_words([limits[1], {**limits[1], "channel": "joint2"}])
+    assert tied.endswith("are found once their effect is 0.23× the residual RMS on its channel")  # no ties listed
 
 
 def test_an_armature_the_identified_rigid_body_takes_up_is_said_not_testable():
