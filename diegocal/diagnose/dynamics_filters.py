@@ -144,12 +144,17 @@ def marginal_variances(gram: np.ndarray, p: int) -> np.ndarray:
 
 
 def marginal_covariance(gram: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
-    """((F, F), (F,)): the covariance of the last F unknowns of ``gram`` with the first ``p`` free,
-    taken over the directions the data fix (their Schur complement's eigenvalues above SINGULAR of
-    the largest; zero along the others, so it is never indefinite), and their variances as
-    :func:`marginal_variances` gives them (infinite along a direction not fixed)."""
+    """((F, F), (F,)): the covariance and variances of the last F unknowns of ``gram`` with the first
+    ``p`` free (:func:`complement_covariance` of their Schur complement)."""
     G_xx, G_xd, G_dd = gram[:p, :p], gram[:p, p:], gram[p:, p:]
-    S = G_dd - G_xd.T @ np.linalg.pinv(G_xx) @ G_xd
+    return complement_covariance(G_dd - G_xd.T @ np.linalg.pinv(G_xx) @ G_xd)
+
+
+def complement_covariance(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((F, F), (F,)): the inverse of a Schur complement ``S`` taken over the directions the data fix
+    (eigenvalues above SINGULAR of the largest; zero along the others, so it is never indefinite),
+    and the variances as :func:`marginal_variances` gives them (infinite along a direction not
+    fixed): both from one decomposition."""
     vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
     top = max(float(vals[-1]), 0.0)
     if top <= 0:

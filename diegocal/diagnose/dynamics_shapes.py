@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from diegocal.causes import cause as registry_entry
-from diegocal.diagnose.dynamics_filters import marginal_covariance, normal_matrix, read_variances
+from diegocal.diagnose.dynamics_filters import complement_covariance, normal_matrix, read_variances
 from diegocal.diagnose.dynamics_system import feature_chunks
 from diegocal.sgp.terms import columns, is_filter
 
@@ -150,7 +150,7 @@ def with_shape_se(fit, term, model, pred, rows):
     # the shapes' covariance, the model's columns free, and their variances from one Schur complement
     # (two products of it in different orders had disagreed in sign where the shape's derivative is
     # nearly a model column: a negative widening, a NaN ±)
-    S_inv, var = marginal_covariance(gram, P)
+    S_inv, var = complement_covariance(gram[P:, P:] - G_xd.T @ B)
     s2 = read_variances(fit, D, pred, rows, sigma, [r] * len(shapes))
     S_inv = S_inv if np.isfinite(var).all() else np.zeros_like(S_inv)
     at = _columns_at(model, term)

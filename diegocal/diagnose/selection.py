@@ -400,7 +400,8 @@ def indistinguishable(chosen: Tested, tested, validation: np.ndarray | None = No
     ref = next((t for t in tested if (t.term.cause, t.term.channel) == key), chosen)
     alike = _alike(ref, tested)
     if validation is not None:
-        alike += [t for t in tested if t not in alike and _removes_as_much(t, ref, validation)]
+        seen = {id(t) for t in alike}  # by identity: a Tested compares its arrays by value
+        alike += [t for t in tested if id(t) not in seen and _removes_as_much(t, ref, validation)]
     return [t.term.channel for t in alike
             if t.term.cause == ref.term.cause and ref.term.channel not in t.term.channel.split("+")]
 
