@@ -476,9 +476,9 @@ def _decline(finding: Finding, min_gain: float) -> str:
     friction, an inertia, a mass) is significantly so: it would stand in for something else."""
     for p in finding.term.parameters:
         if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
-            return f"its {p.name} ends at the end of its search ({spec.upper:g} {spec.unit}): the data want more"
+            return f"its {p.name} ends at the end of its search ({spec.upper:g} {p.unit or spec.unit}): the data want more"
         if (spec := unphysical(finding.term.cause, p.name, p.value, p.stderr, DETERMINED_Z)) is not None:
-            return (f"its {p.name} is negative ({p.value:.3g} ± {p.stderr:.2g} {spec.unit}), which "
+            return (f"its {p.name} is negative ({p.value:.3g} ± {p.stderr:.2g} {p.unit or spec.unit}), which "
                     f"{finding.term.cause} cannot be: it stands in for something else")
     coef = [(p.value, p.stderr) for p in finding.term.linear if np.isfinite(p.stderr) and p.stderr > 0]
     # a coefficient the data do not fix alone (infinite SE) may belong to a combination they do fix

@@ -327,6 +327,22 @@ def test_a_term_that_removes_little_held_out_error_is_declined():
     assert "rose" in _decline(finding(1.02), 0.05)
 
 
+def test_a_declined_term_on_a_slide_says_its_bound_in_the_slides_unit():
+    """A Stribeck scale at the end of its search on a Panda's finger (a prismatic joint) read
+    "2 rad/s": the reason takes the term's own unit (m/s on a slide), not the registry's."""
+    from diegocal.diagnose.engine import _decline
+    from diegocal.diagnose.types import Finding
+    from diegocal.terms import Parameter
+
+    y = np.random.default_rng(2).normal(size=(400, 1))
+    params = (Parameter("amplitude", -0.01, "N", stderr=0.001), Parameter("velocity_scale", 2.0, "m/s", stderr=0.1))
+    term = Term("stribeck_friction", "panda_finger_joint1", params)
+    before = score(y, np.zeros_like(y), ("panda_finger_joint1",), unit="N")
+    after = score(y, y * 0.5, ("panda_finger_joint1",), unit="N")
+    why = _decline(Finding(term, "term", before, after, {"channels": ["panda_finger_joint1"]}), 0.05)
+    assert "velocity_scale ends at the end of its search (2 m/s)" in why
+
+
 def test_a_term_weaker_than_a_declined_one_on_its_channel_stands_in_for_it():
     """A pressure offset that the held-out rows did not confirm, then a supply sag that a constant
     offset partly mimics (offsim, seed 3783616092: 74 % of the validation error against 48 %): the
