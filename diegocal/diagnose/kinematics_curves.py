@@ -5,8 +5,11 @@ neighbours, where a named cause of theirs (a backlash on the next pot) explains 
 engine then asks whether a flexible model of a neighbour explains more
 (:meth:`KinematicsAdapter.spill_candidates <diegocal.diagnose.kinematics.KinematicsAdapter.spill_candidates>`):
 its *curve*, a piecewise-linear function of its model reading with CURVE_KNOTS knots at the
-quantiles of its training readings, and its *mixing row*, a linear function of the angles of the
-joints on its chain. Each is linearised like any pot term (projected out of q and of the pots'
+quantiles of its training readings, its *mixing row*, a linear function of the angles of the
+joints on its chain, and its *lag*, the reading through a first-order filter (an RC on the pot's
+line: an error in proportion to its speed, which a dead band's column, the direction of motion,
+takes up in part; offered for a pot term's own pot too: a user trial's 15-30 ms lag on a Baxter
+elbow pot was named ``backlash``). Each is linearised like any pot term (projected out of q and of the pots'
 gains and biases, :class:`~diegocal.diagnose.kinematics_sweep.Sweep`); its term is
 ``unexplained``: a shape, never a cause.
 """
@@ -16,6 +19,7 @@ from __future__ import annotations
 from functools import partial
 
 import numpy as np
+from scipy.signal import savgol_filter
 
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
 from diegocal.diagnose.stats import quantile_edges
@@ -24,6 +28,8 @@ from diegocal.terms import Parameter, Term
 
 #: Knots of a pot's flexible curve: enough for a runout of six periods over the visited range.
 CURVE_KNOTS = 13
+#: Samples of the centred quadratic (Savitzky-Golay) smoother a reading's rate is the slope of.
+RATE_SMOOTH = 11
 
 
 def hat_basis(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -41,16 +47,20 @@ def hat_basis(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
 
 def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, term: Term, channels=()) -> list[Candidate]:
     """The flexible models (module docstring) of each pot near ``term`` (:func:`neighbour_pots`)
-    or among ``channels``, its own pot left out, as Candidates made in one sweep: its curve (none
-    when its training readings take fewer than three distinct values) and its mixing row (none for
-    a pot on no chain); none that the calibration takes up entirely. ``sweep``: the linearisation
-    at ``fitted`` (the round's, whose blocks are kept)."""
+    or among ``channels``, as Candidates made in one sweep: its lag, its curve (none when its
+    training readings take fewer than three distinct values) and its mixing row (none for a pot on
+    no chain); of a pot term's own pot its lag alone; none that the calibration takes up entirely.
+    ``sweep``: the linearisation at ``fitted`` (the round's, whose blocks are kept)."""
     adapter, obs, names = sweep.adapter, sweep.obs, sweep.obs.pot_names
     pots = set(neighbour_pots(obs, adapter.robot, term)) | {names.index(c) for c in channels if c in names}
     terms, cols = [], []
-    for i in sorted(pots - {_own(obs, term)}):
+    own = _own(obs, term)
+    for i in sorted(pots | ({own} if own is not None else set())):
         j = adapter.pot_names.index(names[i])
-        for made, f in (_curve(names[i], fitted.pots[:, j], train), _mixing(obs, i, fitted.q, train)):
+        shapes = [_lag(names[i], adapter.time, fitted.pots[:, j])]  # its own pot too: read through a filter
+        if i != own:
+            shapes += [_curve(names[i], fitted.pots[:, j], train), _mixing(obs, i, fitted.q, train)]
+        for made, f in shapes:
             if made is not None:
                 terms.append(made)
                 cols.append(Columns(partial(pot_block, j=j, f=f), span=j, projected=True))
@@ -58,6 +68,24 @@ def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, term: Term, channe
         return []
     made = sweep.channels(cols)
     return [Candidate(t, c) for t, c in zip(terms, made, strict=True) if c is not None]
+
+
+def reading_rate(time: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(T,) the rate of a reading x (T,) at ``time`` (T,) s, in its unit per second: the derivative
+    of a :data:`RATE_SMOOTH`-sample centred quadratic at the median sample step (a finite
+    difference where the log is shorter); x not finite: zero."""
+    x = np.nan_to_num(np.asarray(x, float))
+    dt = float(np.median(np.diff(time))) if len(time) > 1 else 1.0
+    if x.size < RATE_SMOOTH:
+        return np.gradient(x, dt) if x.size > 1 else np.zeros_like(x)
+    return savgol_filter(x, RATE_SMOOTH, 2, deriv=1, delta=dt)
+
+
+def _lag(name: str, time: np.ndarray, x: np.ndarray) -> tuple:
+    """(term, ∂p̂/∂θ (T, 1)) of a pot read through a first-order filter of time constant ``lag``
+    (s): p = ŷ(t − lag) ≈ ŷ − lag dŷ/dt, ŷ its model reading x (T,) at ``time`` (T,) s."""
+    term = Term("unexplained", name, (Parameter("lag", unit="s"),), None, {"model": "first-order lag"})
+    return term, -reading_rate(time, x)[:, None]
 
 
 def _curve(name: str, x: np.ndarray, train: np.ndarray) -> tuple:
