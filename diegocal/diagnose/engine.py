@@ -199,6 +199,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             say(f"found {term.cause} on {_where(term.channel, unit)} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
+    # each finding's values as the last fit, with every term, left them (a later term moves them)
+    findings = [replace(f, term=fitted_form(f.term, terms)) if f.kind == "term" else f for f in findings]
     getattr(adapter, "release", lambda: None)()  # and what the adapter kept for its rounds
     # what remains: the channels whose best term was a stand-in, then significant binned
     # structure that no candidate explained
