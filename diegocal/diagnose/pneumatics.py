@@ -38,6 +38,9 @@ the two apart.
 
 Standard errors are the fit's cluster-robust ones (:func:`diegocal.pneumatic.fit.covariance`); a pressure
 offset's carries the model's own error in it as well (:data:`~diegocal.diagnose.pneumatics_terms.MODEL_OFFSET`).
+A leak's or a sag's does not: eq. (4.10)'s own error biases the trade with the valve's centre c1 (a
+leak came out 0.13-1.3 of the orifice's rate on the independent generator); the correlations are
+written beside it (:func:`~diegocal.diagnose.pneumatics_terms.with_trades`).
 
 A candidate smaller than its resolution (:data:`FLOORS`: about twice what the 9-parameter model's
 own error puts into that term on clean simulated chambers) or outside its bounds is not offered:
@@ -72,7 +75,13 @@ import numpy as np
 
 from diegocal.causes import MAX_DELAY_S, MAX_SENSOR_LAG_S, causes_of
 from diegocal.diagnose.pneumatics_filter import filter_rival
-from diegocal.diagnose.pneumatics_terms import MODEL_OFFSET, with_model_error, with_sensor_lag, with_span_error
+from diegocal.diagnose.pneumatics_terms import (
+    MODEL_OFFSET,
+    with_model_error,
+    with_sensor_lag,
+    with_span_error,
+    with_trades,
+)
 from diegocal.diagnose.types import Candidate, Residuals
 from diegocal.errors import DiegocalError, FitError
 from diegocal.evaluate import Score, score
@@ -162,6 +171,8 @@ class PneumaticAdapter:
             fit = with_model_error(fit, span)
         if any(t.cause == "supply_droop" and not t.extra.get("shape") for t in terms):
             fit = replace(fit, params=with_span_error(fit.params, span))
+        for cause in {t.cause for t in terms} & {"chamber_leak", "supply_droop"}:
+            fit = with_trades(fit, cause)  # the valve's parameters it trades with (pneumatics_terms)
         out = PneumaticFit(fit, train.copy())
         if base is None and not found and start_from is None:
             self._baseline = out

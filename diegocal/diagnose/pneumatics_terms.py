@@ -8,6 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from diegocal.pneumatic.params import NAMES
+
 #: The 9-parameter model's own error in a pressure offset, as a fraction of P_c - P_r: the RMS of
 #: the offset the model refitted with the term finds on clean chambers (the project's thin-plate
 #: simulator, diego, three 60-s logs of 76 chambers: 0.68-0.70 kPa at P_c - P_r = 520 kPa, mean
@@ -39,6 +41,33 @@ def with_model_error(fit, span: float):
     i = list(fit.params.names()).index("offset")
     cov[i, i] += sd**2
     return _with_covariance(fit, cov, "pressure_offset", {"model_error": round(sd, 4)})
+
+
+#: The valve's parameters whose correlation with a leak's or a sag's estimate is written beside it
+#: (``extra.correlation``) when at least this in size: the trade the ± (joint over c1..c9, so
+#: already marginal over them) cannot show as a bias (:func:`with_trades`).
+TRADE_MIN = 0.3
+
+
+def with_trades(fit, cause: str):
+    """``fit`` with the correlations of the ``cause`` term's first parameter with the baseline's
+    c1..c9 that are at least :data:`TRADE_MIN` in size written into the term's ``extra``
+    (``correlation: {c1: ρ, ...}``).
+
+    Why: on the independent thin-plate generator a chamber leak's ± (cluster-robust, over all
+    parameters: no conditional one) covered the orifice's rate in 0 of 32 logs: refitted with the
+    leak held at its true rate, the model fits the log worse than with a quarter of it and the
+    valve's centre c1 moved 0.1-0.2 V, which takes the rest (eq. 4.10's own error, not sampling,
+    decides the trade). The correlation says which parameter the estimate trades with."""
+    if fit.covariance is None:
+        return fit
+    term = next((t for t in fit.params.terms if t.cause == cause), None)
+    if term is None:
+        return fit
+    mine = term.parameters[0].name
+    pairs = {n: fit.correlation(mine, n) for n in NAMES}
+    pairs = {n: round(r, 3) for n, r in pairs.items() if np.isfinite(r) and abs(r) >= TRADE_MIN}
+    return replace(fit, params=_with_extra(fit.params, cause, {"correlation": pairs}))
 
 
 def _with_covariance(fit, cov: np.ndarray, cause: str, extra: dict):

@@ -95,6 +95,10 @@ def test_chamber_leak_is_named(droop_and_leak):
     _, result = droop_and_leak
     top = assert_named(result, "shoulder.flex", "chamber_leak")
     assert top.term.values[0] > 1.0  # 1/s
+    # the valve's parameters it trades with, beside its ± (pneumatics_terms.with_trades)
+    corr = top.term.extra["correlation"]
+    valve = {f"c{i}" for i in range(1, 10)}
+    assert corr and all(name in valve and 0.3 <= abs(r) <= 1 for name, r in corr.items()), corr
 
 
 def test_clean_chambers_give_no_findings(delay_and_offset, droop_and_leak, robot):
