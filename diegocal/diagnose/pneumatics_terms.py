@@ -55,10 +55,11 @@ def with_trades(fit, cause: str):
     (``correlation: {c1: ρ, ...}``).
 
     Why: on the independent thin-plate generator a chamber leak's ± (cluster-robust, over all
-    parameters: no conditional one) covered the orifice's rate in 0 of 32 logs: refitted with the
-    leak held at its true rate, the model fits the log worse than with a quarter of it and the
-    valve's centre c1 moved 0.1-0.2 V, which takes the rest (eq. 4.10's own error, not sampling,
-    decides the trade). The correlation says which parameter the estimate trades with."""
+    parameters: no conditional one) covered the orifice's rate in 0 of 32 logs (the orifice shape
+    gave 0.13-0.41 of it, the linear 0.28-1.32): refitted with an orifice leak held at its true
+    rate, two such logs fit worse than with a quarter of it, with c1 0.09-0.13 V lower; the valve's
+    centre takes the rest (eq. 4.10's own error, not sampling, decides the trade). The correlation
+    says which parameter the estimate trades with."""
     if fit.covariance is None:
         return fit
     term = next((t for t in fit.params.terms if t.cause == cause), None)
