@@ -21,7 +21,6 @@ from diegocal.diagnose.evidence import curves, direction, evidence_variable
 from diegocal.diagnose.faults import heldout_removed, write_off
 from diegocal.diagnose.limits import detection_limits, unseen
 from diegocal.diagnose.selection import (
-    TWIN,
     channel_weights,
     choose,
     common_candidates,
@@ -165,7 +164,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             twins = indistinguishable(chosen, tested, val)
             if twins:
                 evidence["indistinguishable_from"] = twins
-            if rivals := rival_causes(chosen, tested):
+            if rivals := rival_causes(chosen, tested, val):
                 evidence["indistinguishable_causes"] = rivals
             if unplaced is not None and (held & unplaced).any():
                 edges = time[np.flatnonzero(unplaced)[[0, -1]]]
@@ -183,7 +182,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
                     res, res_new, primary, variable, shown, length, train, options.n_bins, exclude, signed_by, partner
                 )
             added = {_key(g.term) for g in group} | {_key(best.term)}
-            runners = tuple(_runner_up(t, chosen, declined, term.cause) for t in tested if _key(t.term) not in added)
+            runners = tuple(_runner_up(t, chosen, declined, term.cause, rivals) for t in tested
+                            if _key(t.term) not in added)
             runners = runners[:8]
             new_terms = adapter.terms(new)
             fitted_term = fitted_form(term, new_terms)
@@ -478,7 +478,8 @@ def _decline(finding: Finding, min_gain: float) -> str:
     friction, an inertia, a mass) is significantly so: it would stand in for something else."""
     for p in finding.term.parameters:
         if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
-            return f"its {p.name} ends at the end of its search ({spec.upper:g} {p.unit or spec.unit}): the data want more"
+            end = f"{spec.upper:g} {p.unit or spec.unit}"
+            return f"its {p.name} ends at the end of its search ({end}): the data want more"
         if (spec := unphysical(finding.term.cause, p.name, p.value, p.stderr, DETERMINED_Z)) is not None:
             return (f"its {p.name} is negative ({p.value:.3g} ± {p.stderr:.2g} {p.unit or spec.unit}), which "
                     f"{finding.term.cause} cannot be: it stands in for something else")
@@ -496,18 +497,17 @@ def _decline(finding: Finding, min_gain: float) -> str:
     return ""
 
 
-def _runner_up(t: Tested, best: Tested, declined: dict, named: str = "") -> dict:
+def _runner_up(t: Tested, best: Tested, declined: dict, named: str = "", rivals=()) -> dict:
     """A tested candidate that was not added, with why, in words, when it was significant (or
     declined for having no held-out gain); ``named``: the cause ``best`` was added as (its own
-    unless restated)."""
+    unless restated); ``rivals``: the labels of the causes the data cannot tell from it."""
     cause = named or best.term.cause
     out = t.to_dict()
     if _key(t.term) in declined:
         out["why_not"] = declined[_key(t.term)]
     elif t.significant:
-        if t.term.label in rival_causes(best, [t]):
-            out["why_not"] = (f"the data cannot tell it from {cause} (the same validation fit to within "
-                              f"{TWIN:.0%} of what {cause} removes)")
+        if t.term.label in rivals:
+            out["why_not"] = f"the data cannot tell it from {cause} (the same validation fit, to within the noise)"
         elif shared := ", ".join(sorted(set(t.channels) & set(best.channels))):
             out["why_not"] = f"{cause} explains more of the validation error of {shared}"
         else:

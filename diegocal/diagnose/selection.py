@@ -406,20 +406,34 @@ def indistinguishable(chosen: Tested, tested, validation: np.ndarray | None = No
             if t.term.cause == ref.term.cause and ref.term.channel not in t.term.channel.split("+")]
 
 
-def _removes_as_much(t: Tested, ref: Tested, validation: np.ndarray) -> bool:
-    """``t``, a significant candidate of ``ref``'s cause on channels overlapping ``ref``'s, removes
-    the validation error ``ref`` removes to within TWIN_SE paired standard errors."""
-    if t is ref or not t.significant or t.term.cause != ref.term.cause or not set(t.channels) & set(ref.channels):
+def _removes_as_much(t: Tested, ref: Tested, validation: np.ndarray, same_cause: bool = True) -> bool:
+    """``t``, a significant candidate (of ``ref``'s cause unless not ``same_cause``) on channels
+    overlapping ``ref``'s, removes the validation error ``ref`` removes to within TWIN_SE paired
+    standard errors."""
+    if t is ref or not t.significant or not set(t.channels) & set(ref.channels):
+        return False
+    if same_cause and t.term.cause != ref.term.cause:
         return False
     mean, se, n = paired_difference(ref.test.removed, t.test.removed, validation, ref.test.length)
     return n >= 3 and abs(mean) <= TWIN_SE * se
 
 
-def rival_causes(chosen: Tested, tested) -> list[str]:
+def rival_causes(chosen: Tested, tested, validation: np.ndarray | None = None) -> list[str]:
     """The significant terms of other causes that fit as well as ``chosen`` (:func:`_alike`: a
     torque offset and a spring on a joint whose angle never nears the spring's rest): the data
-    cannot tell which cause it is, and the finding says so."""
-    return [t.term.label for t in _alike(chosen, tested) if t.significant and t.term.cause != chosen.term.cause]
+    cannot tell which cause it is, and the finding says so. With the ``validation`` mask, also one
+    on overlapping channels (not a common cause) that removes as much, to within SIMPLER_SHARE of
+    what ``chosen`` removes and within TWIN_SE paired standard errors (user
+    trials: an offset named a spring with 1.1 % less removed; a spring near the arm's upright pose
+    named a payload on the link beyond, which acts on more joints)."""
+    alike = [t for t in _alike(chosen, tested) if t.significant and t.term.cause != chosen.term.cause]
+    if validation is not None:
+        seen, removed = {id(t) for t in alike}, chosen.test.sse_before - chosen.test.sse_after
+        alike += [t for t in tested if id(t) not in seen and t.term.cause != chosen.term.cause
+                  and "+" not in t.term.channel  # a common cause is one cause on several channels
+                  and abs(t.test.sse_before - t.test.sse_after - removed) <= SIMPLER_SHARE * removed
+                  and _removes_as_much(t, chosen, validation, same_cause=False)]
+    return [t.term.label for t in alike]
 
 
 def _alike(ref: Tested, tested) -> list:
