@@ -426,7 +426,7 @@ class DynamicsAdapter:
         out, self.in_span = [], ()
         for (term, family), slot, f in zip(props, slots, left, strict=True):
             if slot is not None and f > SPAN_TOL:  # each column a view of its joint's block (float32)
-                out.append(Candidate(term, {self.joints[r]: B[r][:, sl] for r, sl in slot.items()}, family=family))
+                out.append(Candidate(term, {self.joints[r]: B[r][:, sl] for r, sl in slot.items()}, family, visible=f))
             elif slot is not None:
                 self.in_span += ((term.cause, term.channel),)
         return out

@@ -191,7 +191,8 @@ def _own_gain(cand: Candidate, predicted: dict) -> tuple[float | None, tuple | N
 
 def _limit(cand: Candidate, predicted: dict, test, threshold: float, weights: dict, min_gain: float) -> tuple | None:
     """``Tested.detectable``: on the candidate's own channel, its gain's there, else on the channel
-    its correction acts on most, its gain's over all its channels (:func:`~.limits.detectable`)."""
+    its correction acts on most, its gain's over all its channels (:func:`~.limits.detectable`);
+    over ``cand.visible``, the share of its columns the model's own parameters left."""
     if not predicted:
         return None
     on = cand.term.channel
@@ -201,7 +202,8 @@ def _limit(cand: Candidate, predicted: dict, test, threshold: float, weights: di
         on = max(predicted, key=lambda c: float(predicted[c][1] @ predicted[c][1]))
         error = test.sse_before
     r, a, _ = predicted[on]
-    return (on, *detectable(test.se, threshold, r, a, error, weights.get(on, 1.0), min_gain))
+    rms, multiple, by = detectable(test.se, threshold, r, a, error, weights.get(on, 1.0), min_gain)
+    return on, rms / cand.visible, multiple / cand.visible, by  # the effect's, before the model takes its part
 
 
 def _candidate_channels(cand: Candidate) -> tuple[str, ...]:

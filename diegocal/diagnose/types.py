@@ -55,6 +55,9 @@ class Candidate:
         together with the term (so that it does not merely take over a baseline term's part)
     members : for one cause on several channels tested as one (:func:`~diegocal.diagnose.
         selection.common_candidates`), the tested candidates it joins; () otherwise
+    visible : the share of the term's own columns' norm that ``columns`` keep, where the adapter
+        projected the model's span out of them (1: not projected): an effect of RMS e leaves
+        about visible × e to test, so its detection limit is the correction's over it
     """
 
     term: Term
@@ -62,6 +65,7 @@ class Candidate:
     family: str = ""
     refit: dict | None = None
     members: tuple = ()
+    visible: float = 1.0
 
     @property
     def n_params(self) -> int:

@@ -109,3 +109,27 @@ def test_an_armature_the_identified_rigid_body_takes_up_is_said_not_testable():
     assert np.isfinite(limits[("armature", "joint3")]["rms"])
     words = limits_words(d.units[0].detection_limits)
     assert "not testable, the model's own parameters taking them up whole: " in words and "armature on joint2" in words
+
+
+def test_a_limit_is_the_effect_s_before_the_model_takes_its_part():
+    """A user trial's Kinova spring: the identified rigid body took up 99.7 % of it, and the limit
+    (the correction's RMS) said 0.074 N·m where the spring's own torque needed 1.7 N·m RMS. An
+    adapter that projects the model's span out of a candidate says how much of its columns are left
+    (``Candidate.visible``), and the limit is the correction's over that share."""
+    from diegocal.diagnose.selection import evaluate_candidates
+    from diegocal.diagnose.types import Candidate, Residuals
+    from diegocal.terms import Parameter, Term
+
+    rng = np.random.default_rng(5)
+    T = 3000
+    train, val = np.zeros(T, bool), np.zeros(T, bool)
+    train[:1500], val[1500:] = True, True
+    column = np.sin(np.linspace(0.0, 40.0, T))[:, None]
+    res = Residuals({"j": rng.normal(0.0, 0.1, T)}, {"j": "N·m"}, {"time": np.arange(T) * 0.01}, {"j": ()})
+    limits = [
+        evaluate_candidates([Candidate(Term("spring", "j", (Parameter("k"),)), {"j": column}, visible=v)], res, {"j": 1.0},
+                            train, val, EngineOptions())[0].detectable
+        for v in (1.0, 0.1)
+    ]
+    assert limits[0][0] == limits[1][0] == "j" and limits[0][3] == limits[1][3]
+    assert limits[1][1] == pytest.approx(10.0 * limits[0][1]) and limits[1][2] == pytest.approx(10.0 * limits[0][2])
