@@ -30,7 +30,16 @@ from diegocal.diagnose.selection import (
     simplest,
 )
 from diegocal.diagnose.show import binned_candidate, show, unexplained_region
-from diegocal.diagnose.stand_ins import declined_rival, outshone, own_channel, refit_rival, spilled, stand_in_finding
+from diegocal.diagnose.stand_ins import (
+    declined_rival,
+    members_kept,
+    outshone,
+    own_channel,
+    refit_rival,
+    same_cause_beside,
+    spilled,
+    stand_in_finding,
+)
 from diegocal.diagnose.stats import cluster_length
 from diegocal.diagnose.types import (
     Adapter,
@@ -346,7 +355,7 @@ def _choose_group(
 
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
-            group = _members(best, tested, declined, res, weights, train, val, options, exclude)
+            group = members_kept(best, tested, declined, res, weights, train, val, options, exclude, stand_ins)
             if len(group) == 1 and simplest(group[0], tested, val) is not group[0]:
                 group = []  # its evidence is one channel's, where a simpler cause does as well
             if group:
@@ -372,58 +381,13 @@ def _choose_group(
             tested, beaten = [t for t in tested if t is not best], [*beaten, best]  # a runner-up, with why
             continue
         if flex is None:
-            commons = _common(best, tested, declined, res, weights, train, val, options, exclude)
+            commons = same_cause_beside(best, tested, declined, res, weights, train, val, options, exclude, stand_ins)
             return best, [best, *commons], left()
         stand_in = (replace(best, candidate=None), replace(flex, candidate=None), evidence)  # no columns kept
         stand_ins.setdefault(own, stand_in)
         say(f"{best.term.cause} on {_where(best.term.channel, unit)} explains less than {why}: {own} left unexplained")
         tested = [t for t in tested if t is not best and own not in t.channels]
     return None, [], left()
-
-
-#: A channel of a common cause (one cause tested on several channels at once) is added only with
-#: at least this t of its own (about a 5 % two-sided level for one test).
-MEMBER_T = 2.0
-
-
-def _common(best: Tested, tested, declined, res, weights, train, val, options, exclude) -> list[Tested]:
-    """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
-    (friction's shape on every joint at once): one cause, added in the same round rather than a
-    round per channel; each passes the stand-in tests of its own channel, against its flexible
-    model and a declined term there (one that fails is left to a later round, where the best term
-    of its channel is judged: it is not that channel's best)."""
-    out, used = [], set(best.channels)
-    for t in tested:
-        if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
-            continue
-        if _stands_in(t, tested, declined, res, weights, train, val, options, exclude):
-            continue
-        out.append(t)
-        used |= set(t.channels)
-    return out
-
-
-def _members(best: Tested, tested, declined, res, weights, train, val, options, exclude) -> list[Tested]:
-    """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
-    their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
-    test holds the family-wise rate, not each channel's) and pass the stand-in tests of their own
-    channel (:func:`_stands_in`)."""
-    out = []
-    for t in best.candidate.members:
-        if t.test.t < MEMBER_T or t.gain < options.min_gain:  # carried by the others, not its own evidence
-            continue
-        if _stands_in(t, tested, declined, res, weights, train, val, options, exclude):
-            continue
-        out.append(t)
-    return out
-
-
-def _stands_in(t: Tested, tested, declined, res, weights, train, val, options, exclude) -> bool:
-    """Whether a channel's term added beside a round's best fails a stand-in test of its channel:
-    a declined term there explained more, or its flexible model far more."""
-    if declined_rival(t, tested, declined) is not None:
-        return True
-    return outshone(t, res, weights, train, val, options, exclude) is not None
 
 
 def _where(channel: str, unit: str) -> str:

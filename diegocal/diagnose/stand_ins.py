@@ -12,6 +12,8 @@ channel alone, when both are refitted into the model (:func:`refit_rival`): the 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from diegocal.diagnose.evidence import curves
@@ -49,6 +51,61 @@ def outshone(best: Tested, res, weights, train, val, options: EngineOptions, exc
     else:  # over all its channels, or on its own (the flexible model's) where that is larger
         gain = max(best.test.gain, best.own_gain if best.own_gain is not None else -np.inf)
     return flex if gain < STAND_IN_SHARE * flex.test.gain else None
+
+
+#: A channel of a common cause (one cause tested on several channels at once) is added only with
+#: at least this t of its own (about a 5 % two-sided level for one test).
+MEMBER_T = 2.0
+
+
+def same_cause_beside(best: Tested, tested, declined, res, weights, train, val, options, exclude,
+                      stood: dict | None = None) -> list[Tested]:
+    """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
+    (friction's shape on every joint at once): one cause, added in the same round rather than a
+    round per channel; each passes the stand-in tests of its own channel (:func:`stands_in`); one
+    that fails leaves its channel ``unexplained`` (in ``stood``, the engine's stand-ins, as the
+    round's best would)."""
+    out, used = [], set(best.channels)
+    for t in tested:
+        if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
+            continue
+        if stands_in(t, tested, declined, res, weights, train, val, options, exclude, stood):
+            continue
+        out.append(t)
+        used |= set(t.channels)
+    return out
+
+
+def members_kept(best: Tested, tested, declined, res, weights, train, val, options, exclude,
+                 stood: dict | None = None) -> list[Tested]:
+    """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
+    their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
+    test holds the family-wise rate, not each channel's; not declined in an earlier round) and pass
+    the stand-in tests of their own channel (:func:`stands_in`; one that fails goes to ``stood``).
+    A user trial's hose on a Kinova's joint 2 left a Stribeck member there that its flexible model
+    beat 0.67 to 0.11, and nothing was said of the joint."""
+    out = []
+    for t in best.candidate.members:
+        if (t.term.cause, t.term.channel) in declined or t.test.t < MEMBER_T or t.gain < options.min_gain:
+            continue  # not its own evidence
+        if stands_in(t, tested, declined, res, weights, train, val, options, exclude, stood):
+            continue
+        out.append(t)
+    return out
+
+
+def stands_in(t: Tested, tested, declined, res, weights, train, val, options, exclude, stood=None) -> bool:
+    """Whether a channel's term added beside a round's best fails a stand-in test of its channel:
+    a declined term there explained more, or its flexible model far more; the channel and what beat
+    it go to ``stood`` (channel -> (term, rival, evidence), the engine's stand-ins) when given."""
+    evidence = None
+    if (rival := declined_rival(t, tested, declined)) is not None:
+        evidence = {"declined": {"term": rival.term.label, "why": declined[(rival.term.cause, rival.term.channel)]}}
+    elif (rival := outshone(t, res, weights, train, val, options, exclude)) is None:
+        return False
+    if stood is not None:
+        stood.setdefault(own_channel(t), (replace(t, candidate=None), replace(rival, candidate=None), evidence))
+    return True
 
 
 def spilled(best: Tested, models, res, weights, train, val, options: EngineOptions, exclude) -> Tested | None:

@@ -5,7 +5,7 @@ measures the gain on held-out blocks only."""
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
@@ -456,20 +456,30 @@ def test_a_term_that_a_model_of_another_shape_beats_on_the_adapter_s_score_stand
 def test_a_common_cause_leaves_out_a_channel_where_a_declined_term_explains_more(monkeypatch):
     """The same cause added on other channels in one round (friction on every joint) is held to
     the declined-rival test of each channel, as the round's best is."""
-    from diegocal.diagnose import engine
+    from diegocal.diagnose import stand_ins
 
-    monkeypatch.setattr(engine, "outshone", lambda *args: None)  # no flexible model beats any of them
+    monkeypatch.setattr(stand_ins, "outshone", lambda *args: None)  # no flexible model beats any of them
+
+    @dataclass(frozen=True)
+    class Tested:  # what the stand-in tests read of a selection.Tested
+        term: Term
+        channels: tuple
+        test: SimpleNamespace
+        strongest: None = None
+        significant: bool = True
+        candidate: object = None
 
     def tested(cause, channel, sse_after):
-        test = SimpleNamespace(sse_before=100.0, sse_after=sse_after)
-        term = Term(cause, channel, ())
-        return SimpleNamespace(term=term, channels=(channel,), test=test, strongest=None, significant=True)
+        return Tested(Term(cause, channel, ()), (channel,), SimpleNamespace(sse_before=100.0, sse_after=sse_after))
 
     best, other = tested("viscous_friction", "j1", 40.0), tested("viscous_friction", "j2", 60.0)
     lag = tested("torque_lag", "j2", 30.0)
     args = (None, None, None, None, EngineOptions(), {})
-    assert engine._common(best, [best, other, lag], {}, *args) == [other]
-    assert engine._common(best, [best, other, lag], {("torque_lag", "j2"): "rose held out"}, *args) == []
+    assert stand_ins.same_cause_beside(best, [best, other, lag], {}, *args) == [other]
+    stood = {}
+    declined = {("torque_lag", "j2"): "rose held out"}
+    assert stand_ins.same_cause_beside(best, [best, other, lag], declined, *args, stood) == []
+    assert list(stood) == ["j2"] and stood["j2"][2] == {"declined": {"term": "torque_lag:j2", "why": "rose held out"}}
 
 
 def test_a_progress_line_names_the_unit_in_brackets_after_the_channel():

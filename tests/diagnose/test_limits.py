@@ -126,9 +126,10 @@ def test_a_limit_is_the_effect_s_before_the_model_takes_its_part():
     train[:1500], val[1500:] = True, True
     column = np.sin(np.linspace(0.0, 40.0, T))[:, None]
     res = Residuals({"j": rng.normal(0.0, 0.1, T)}, {"j": "N·m"}, {"time": np.arange(T) * 0.01}, {"j": ()})
+    term = Term("spring", "j", (Parameter("k"),))
     limits = [
-        evaluate_candidates([Candidate(Term("spring", "j", (Parameter("k"),)), {"j": column}, visible=v)], res, {"j": 1.0},
-                            train, val, EngineOptions())[0].detectable
+        evaluate_candidates([Candidate(term, {"j": column}, visible=v)], res, {"j": 1.0}, train, val,
+                            EngineOptions())[0].detectable
         for v in (1.0, 0.1)
     ]
     assert limits[0][0] == limits[1][0] == "j" and limits[0][3] == limits[1][3]
