@@ -119,6 +119,7 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
     if hasattr(adapter, "selection_exclude"):  # (as selection_weights) the readings the selection leaves out
         adapter.selection_exclude = exclude
     stand_ins: dict = {}  # channel -> (the term that stood in, the test that beat it, its evidence or None)
+    pending: dict = {}  # a common cause's member that stood in: channel -> (as stand_ins, findings made then)
     limits = ()  # what the last round could not have seen
     declined: dict = {}  # (cause, channel) -> why, in words: significant, but no held-out gain
     spill = getattr(adapter, "spill_candidates", None)  # flexible curves of a term's neighbours
@@ -142,9 +143,12 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
         neighbours = None if spill is None else partial(spill, fitted, train)
         shape = None if rival is None else partial(rival, fitted, train, val, options, exclude)
         refit = partial(refit_rival, adapter, terms, (train, val), weights, exclude) if refits else None
+        stood: dict = {}
         best, group, tested = _choose_group(
-            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined, shape, refit
+            tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours, declined, shape,
+            refit, stood,
         )
+        pending |= {c: (s, len(findings)) for c, s in stood.items() if c not in pending}
         group = [g for g in group if _key(g.term) not in declined]
         candidates = commons = None  # what follows needs the tested terms, not their columns:
         best, group, tested = _without_columns(best, group, tested)  # the refits run without them
@@ -208,6 +212,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             say(f"found {term.cause} on {_where(term.channel, unit)} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
+    for channel, (stood, made) in pending.items():  # unexplained unless a later finding took up its channel
+        if channel not in stand_ins and not any(channel in f.evidence.get("channels", ()) for f in findings[made:]):
+            stand_ins[channel] = stood
     # each finding's values as the last fit, with every term, left them (a later term moves them)
     findings = [replace(f, term=fitted_form(f.term, terms)) if f.kind == "term" else f for f in findings]
     getattr(adapter, "release", lambda: None)()  # and what the adapter kept for its rounds
@@ -330,7 +337,7 @@ def _absorb(adapter, fitted, findings, masks, exclude, options: EngineOptions, u
 
 def _choose_group(
     tested, res, weights, train, val, options, exclude, stand_ins, say, unit, neighbours=None, declined=(), shape=None,
-    refit=None,
+    refit=None, stood=None,
 ) -> tuple:
     """(the best candidate, the terms this round adds, the candidates left in the running and those a
     rival beat once both were refitted, in the order tested): the
@@ -346,7 +353,10 @@ def _choose_group(
     channels beats once both are refitted (``refit(best, tested)``: :func:`~.stand_ins.refit_rival`,
     for an adapter with ``refit_rivals``) is declined, and the next best chosen. A common cause whose channels
     have no evidence of their own is dropped, and so is one whose evidence is one channel's where a
-    simpler cause does as well (:func:`~.selection.simplest`)."""
+    simpler cause does as well (:func:`~.selection.simplest`). A member or a same-cause term that
+    stands in goes to ``stood`` (its channel ``unexplained`` at the end unless a later round's
+    finding takes it up: a spring on joint1 beside one on joint2 stood in for a torque offset
+    named on joint1 the round after)."""
     beaten, everyone = [], tested  # beaten: best terms a rival beat when both were refitted
 
     def left():  # the candidates left in the running and the beaten ones, in the order tested
@@ -355,7 +365,7 @@ def _choose_group(
 
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
-            group = members_kept(best, tested, declined, res, weights, train, val, options, exclude, stand_ins)
+            group = members_kept(best, tested, declined, res, weights, train, val, options, exclude, stood)
             if len(group) == 1 and simplest(group[0], tested, val) is not group[0]:
                 group = []  # its evidence is one channel's, where a simpler cause does as well
             if group:
@@ -381,7 +391,7 @@ def _choose_group(
             tested, beaten = [t for t in tested if t is not best], [*beaten, best]  # a runner-up, with why
             continue
         if flex is None:
-            commons = same_cause_beside(best, tested, declined, res, weights, train, val, options, exclude, stand_ins)
+            commons = same_cause_beside(best, tested, declined, res, weights, train, val, options, exclude, stood)
             return best, [best, *commons], left()
         stand_in = (replace(best, candidate=None), replace(flex, candidate=None), evidence)  # no columns kept
         stand_ins.setdefault(own, stand_in)
