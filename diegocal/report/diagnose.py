@@ -18,7 +18,7 @@ import numpy as np
 from diegocal.causes import phrase
 from diegocal.diagnose.limits import limits_words
 from diegocal.diagnose.output import shifting_channels, weak_structure
-from diegocal.diagnose.selection import TWIN
+from diegocal.diagnose.selection import SIMPLER_SHARE, TWIN, TWIN_SE
 from diegocal.io import load_yaml
 from diegocal.report.diagnose_notes import CHANNEL_NOTE, NO_CURVE, NO_RUNNERS, NOT_STORED, RUNNERS_NOTE
 from diegocal.report.finding_notes import notes, parameters_text
@@ -72,14 +72,15 @@ def sentence(f: dict) -> str:
     twins = (f.get("evidence") or {}).get("indistinguishable_from")
     if twins:  # the same cause elsewhere fits the data the same: which one, the log cannot say
         params += (
-            f" The data cannot tell it from the same cause on {', '.join(twins)} (each fits the validation "
-            f"data the same to within {TWIN * 100:g} % of what it removes)."
+            f" The data cannot tell it from the same cause on {', '.join(twins)} (each removes as much of "
+            f"the validation error, to within {TWIN * 100:g} % or {TWIN_SE:g} paired standard errors)."
         )
     rivals = (f.get("evidence") or {}).get("indistinguishable_causes")
     if rivals:  # another cause fits the data the same: which one, the log cannot say
         params += (
-            f" The data cannot tell it from {', '.join(rivals)} (each fits the validation data the same to "
-            f"within {TWIN * 100:g} % of what it removes): either may be the cause."
+            f" The data cannot tell it from {', '.join(rivals)} (each removes as much of the validation error, "
+            f"to within {TWIN * 100:g} %, or {SIMPLER_SHARE * 100:g} % and {TWIN_SE:g} paired standard errors): "
+            "either may be the cause."
         )
     restated = (f.get("evidence") or {}).get("restated")
     if restated:  # the fitted values named another cause than the candidate's (a payload no body can be)

@@ -465,7 +465,7 @@ def test_a_finding_the_data_cannot_place_says_where_else_it_fits():
     }
     text = sentence(f)
     assert "cannot tell it from the same cause on l_knee" in text
-    assert f"within {TWIN * 100:g} % of what it removes" in text
+    assert f"to within {TWIN * 100:g} % or 2 paired standard errors" in text
     assert "cannot tell" not in sentence({**f, "evidence": {}})
     other = sentence({**f, "evidence": {"indistinguishable_causes": ["marker_slip:m2"]}})
     assert "The data cannot tell it from marker_slip:m2" in other and "either may be the cause" in other
