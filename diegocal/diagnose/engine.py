@@ -212,9 +212,9 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             say(f"found {term.cause} on {_where(term.channel, unit)} (validation gain {chosen.gain:.0%})")
 
     candidates = tested = commons = best = group = chosen = None  # the last round's columns
-    for channel, (stood, made) in pending.items():  # unexplained unless a later finding took up its channel
+    for channel, (entry, made) in pending.items():  # unexplained unless a later finding took up its channel
         if channel not in stand_ins and not any(channel in f.evidence.get("channels", ()) for f in findings[made:]):
-            stand_ins[channel] = stood
+            stand_ins[channel] = entry
     # each finding's values as the last fit, with every term, left them (a later term moves them)
     findings = [replace(f, term=fitted_form(f.term, terms)) if f.kind == "term" else f for f in findings]
     getattr(adapter, "release", lambda: None)()  # and what the adapter kept for its rounds

@@ -63,8 +63,8 @@ def same_cause_beside(best: Tested, tested, declined, res, weights, train, val, 
     """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
     (friction's shape on every joint at once): one cause, added in the same round rather than a
     round per channel; each passes the stand-in tests of its own channel (:func:`stands_in`); one
-    that fails leaves its channel ``unexplained`` (in ``stood``, the engine's stand-ins, as the
-    round's best would)."""
+    that fails goes to ``stood``: its channel is left to later rounds, and ``unexplained`` at the
+    end unless a later finding takes it up (the engine's ``pending``)."""
     out, used = [], set(best.channels)
     for t in tested:
         if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
@@ -97,7 +97,7 @@ def members_kept(best: Tested, tested, declined, res, weights, train, val, optio
 def stands_in(t: Tested, tested, declined, res, weights, train, val, options, exclude, stood=None) -> bool:
     """Whether a channel's term added beside a round's best fails a stand-in test of its channel:
     a declined term there explained more, or its flexible model far more; the channel and what beat
-    it go to ``stood`` (channel -> (term, rival, evidence), the engine's stand-ins) when given."""
+    it go to ``stood`` (channel -> (term, rival, evidence), as the engine's stand-ins) when given."""
     evidence = None
     if (rival := declined_rival(t, tested, declined)) is not None:
         evidence = {"declined": {"term": rival.term.label, "why": declined[(rival.term.cause, rival.term.channel)]}}
