@@ -31,6 +31,7 @@ from diegocal.diagnose.selection import (
 )
 from diegocal.diagnose.show import binned_candidate, show, unexplained_region
 from diegocal.diagnose.stand_ins import (
+    declined_evidence,
     declined_rival,
     members_kept,
     outshone,
@@ -381,7 +382,7 @@ def _choose_group(
                 own, why = flex.term.channel, f"a flexible model of {flex.term.channel} does"
         if flex is None and (flex := declined_rival(best, tested, declined)) is not None:
             why = f"{flex.term.cause} (declined) did"
-            evidence = {"declined": {"term": flex.term.label, "why": declined[_key(flex.term)]}}
+            evidence = declined_evidence(flex, declined)
         if flex is None and shape is not None and (found := shape(best.term)) is not None:
             flex, rival = found
             why, evidence = f"{rival['model']} does", {"rival": rival}

@@ -100,7 +100,7 @@ def stands_in(t: Tested, tested, declined, res, weights, train, val, options, ex
     it go to ``stood`` (channel -> (term, rival, evidence), as the engine's stand-ins) when given."""
     evidence = None
     if (rival := declined_rival(t, tested, declined)) is not None:
-        evidence = {"declined": {"term": rival.term.label, "why": declined[(rival.term.cause, rival.term.channel)]}}
+        evidence = declined_evidence(rival, declined)
     elif (rival := outshone(t, res, weights, train, val, options, exclude)) is None:
         return False
     if stood is not None:
@@ -120,6 +120,11 @@ def spilled(best: Tested, models, res, weights, train, val, options: EngineOptio
     tested = [t for t in evaluate_candidates(models, res, weights, train, val, options, exclude) if t.significant]
     top = max(tested, key=removed, default=None)
     return top if top is not None and removed(top) > removed(best) else None
+
+
+def declined_evidence(rival: Tested, declined: dict) -> dict:
+    """A stand-in's evidence where a declined term (:func:`declined_rival`) explained more."""
+    return {"declined": {"term": rival.term.label, "why": declined[(rival.term.cause, rival.term.channel)]}}
 
 
 def declined_rival(best: Tested, tested, declined: dict) -> Tested | None:
