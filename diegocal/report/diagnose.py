@@ -287,6 +287,8 @@ def _significant(r: dict) -> str:
         return "yes; stood in"
     if why.startswith("refitted"):
         return "yes; less refitted"
+    if why.startswith("the data cannot tell"):
+        return "yes; the same fit"
     return "yes; less on its channel" if why else "yes"
 
 

@@ -583,6 +583,9 @@ def test_the_term_that_stood_in_is_listed_as_such_among_the_runners_up():
     refitted = "refitted into the model, torque_offset:joint2 leaves less of the validation error of joint1, joint2"
     _, rows = runners_table({"runners_up": [{**runner, "why_not": refitted}]})
     assert rows[0][-1] == "yes; less refitted"
+    twin = "the data cannot tell it from spring (the same validation fit, to within the noise)"
+    _, rows = runners_table({"runners_up": [{**runner, "why_not": twin}]})
+    assert rows[0][-1] == "yes; the same fit"  # not "less on its channel": it removed as much
 
 
 def test_only_chambers_beyond_the_thesis_bound_are_still_open(results, tmp_path):
