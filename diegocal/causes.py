@@ -40,10 +40,12 @@ INF = math.inf
 class ParamSpec:
     """One parameter of a cause: name, unit, bounds, start value, meaning (and where its bounds
     come from, ``note``). ``shape``: not the coefficient of a regressor column but a parameter of
-    the column's shape (a velocity scale), held while the linear ones are fitted and searched
-    between its bounds by the fit that adds the term. ``nonnegative``: what it measures cannot be
-    negative (a friction, a dead band, an inertia, a mass), though a linear fit may make it so: a
-    value significantly below 0 says the term stands in for something else (:func:`unphysical`).
+    the column's shape (a velocity scale, a spring's rest angle), held while the linear ones are
+    fitted and searched by the fit that adds the term: between its bounds where they are positive
+    (in log space), else over the range the data give it (:mod:`diegocal.diagnose.dynamics_shapes`).
+    ``nonnegative``: what it measures cannot be negative (a friction, a dead band, an inertia, a
+    mass), though a linear fit may make it so: a value significantly below 0 says the term stands
+    in for something else (:func:`unphysical`).
     ``earlier``: for a parameter added to a cause after files were written with it, the value
     such a file means (it may lack the parameter); None: every file has it."""
 
@@ -199,7 +201,9 @@ _CAUSES = (
           (_p("coulomb", "N·m", "Coulomb level inside the region, beyond the joint's own (< 0: less there)"),
            _p("viscous", "N·m·s/rad", "viscous coefficient inside the region, beyond the joint's own")),
           "friction confined to part of the joint's range", region="required", signed_by="qd"),
-    Cause("spring", "dynamics", "term", "joint", (_p("stiffness", "N·m/rad", "torque per radian"),),
+    Cause("spring", "dynamics", "term", "joint",
+          (_p("stiffness", "N·m/rad", "torque per radian"),
+           _p("rest_angle", "rad", "the angle at which the spring exerts no torque", shape=True, earlier=0.0)),
           "a spring (a torque proportional to the joint angle)"),
     Cause("torque_offset", "dynamics", "term", "joint", (_p("offset", "N·m", "constant torque"),),
           "a constant offset of the torque sensor"),

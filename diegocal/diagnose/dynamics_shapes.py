@@ -94,25 +94,45 @@ def linear_values(fit, terms, i: int, lags: dict, train, sigma) -> np.ndarray:
 
 
 def fit_shapes(fit, terms, lags: dict, train, sigma) -> tuple:
-    """Each shape parameter of ``terms`` (:mod:`diegocal.causes`: a Stribeck velocity scale) by
-    a bounded 1-D search, in log space, of the weighted training error with the linear
-    parameters re-solved at every trial (one sweep per parameter, two when there are several)."""
+    """Each shape parameter of ``terms`` (:mod:`diegocal.causes`: a Stribeck velocity scale, a
+    spring's rest angle) by a bounded 1-D search of the weighted training error with the linear
+    parameters re-solved at every trial (one sweep per parameter, two when there are several): a
+    scale in log space between its bounds, an angle over the joint's training range widened by
+    its width either side. A shape the model cannot tell (:func:`held_shapes`) keeps its value."""
     terms = list(terms)
-    slots = [(i, p) for i, t in enumerate(terms) for p in specs(t) if p.shape]
+    slots = [(i, p) for i, t in enumerate(terms) for p in specs(t) if p.shape and p.name not in held_shapes(t, terms)]
 
-    def cost(i, name, log_value):
+    def cost(i, name, x, log):
         trial = list(terms)
-        trial[i] = with_value(trial[i], name, float(np.exp(log_value)))
+        trial[i] = with_value(trial[i], name, float(np.exp(x) if log else x))
         return fit._cost(trial, lags, train, sigma)
 
     for _ in range(2 if len(slots) > 1 else 1):
         for i, spec in slots:
-            bounds = (np.log(spec.lower), np.log(spec.upper))
+            log = spec.lower > 0
+            if log:
+                bounds, xatol = (np.log(spec.lower), np.log(spec.upper)), 1e-3
+            else:
+                x = fit.q[train, fit.robot.joint_index(terms[i].channel)]
+                lo, hi = float(np.min(x)), float(np.max(x))
+                bounds, xatol = (2 * lo - hi, 2 * hi - lo), 1e-4 * max(hi - lo, 1e-3)
             res = minimize_scalar(
-                lambda x, i=i, n=spec.name: cost(i, n, x), bounds=bounds, method="bounded", options={"xatol": 1e-3}
+                lambda x, i=i, n=spec.name, g=log: cost(i, n, x, g),
+                bounds=bounds,
+                method="bounded",
+                options={"xatol": xatol},
             )
-            terms[i] = with_value(terms[i], spec.name, float(np.exp(res.x)))
+            terms[i] = with_value(terms[i], spec.name, float(np.exp(res.x) if log else res.x))
     return tuple(terms)
+
+
+def held_shapes(term, terms) -> frozenset:
+    """The shape parameters of ``term`` that ``terms`` leave undetermined: a spring's rest angle
+    beside a torque offset on its joint (moving the rest shifts the spring's torque by a constant,
+    which the offset takes back)."""
+    if term.cause == "spring" and any(t.cause == "torque_offset" and t.channel == term.channel for t in terms):
+        return frozenset({"rest_angle"})
+    return frozenset()
 
 
 def with_shape_se(fit, term, model, pred, rows):
@@ -126,13 +146,15 @@ def with_shape_se(fit, term, model, pred, rows):
     shape found instead, a Stribeck velocity scale's ± ignored its trade-off with the amplitude
     (their errors run opposite ways): ± coverage 0.78 over 49 logs."""
     r = fit.row_of.get(term.channel)
-    shapes = [p for p in specs(term) if p.shape]
+    fixed = held_shapes(term, model.terms)
+    shapes = [p for p in specs(term) if p.shape and p.name not in fixed]
     if r is None or not shapes:
         return term
     amp = np.array([p.value for p in term.linear])
     D = np.zeros((len(fit.time), len(fit.rows), len(shapes)))
     for f, spec in enumerate(shapes):
-        v, h = term.value(spec.name), 0.01 * term.value(spec.name)
+        v = term.value(spec.name)
+        h = 0.01 * v if spec.lower > 0 else 0.01  # a scale's step relative; an angle's in rad
         up, down = (
             columns(with_value(term, spec.name, x), fit.robot, fit.q, fit.qd, fit.qdd)[:, fit.rows]
             for x in (v + h, v - h)

@@ -359,14 +359,14 @@ def choose(tested: list[Tested], validation: np.ndarray) -> Tested | None:
 
 
 def simplest(best: Tested, tested: list[Tested], validation: np.ndarray) -> Tested:
-    """``best``, unless a significant simpler candidate (fewer parameters) on the same channels is
-    within one standard error of it (paired over the validation sub-blocks of its test) or removes
-    all but SIMPLER_SHARE of what it removes: then the simplest such (the one-SE rule, and
-    practical significance)."""
+    """``best``, unless a significant simpler candidate (fewer parameters, :attr:`Tested.dof`) on
+    the same channels is within one standard error of it (paired over the validation sub-blocks
+    of its test) or removes all but SIMPLER_SHARE of what it removes: then the simplest such (the
+    one-SE rule, and practical significance)."""
     removed = best.test.sse_before - best.test.sse_after
     simpler = []
     for t in tested:
-        if t is best or not t.significant or t.n_params >= best.n_params or set(t.channels) != set(best.channels):
+        if t is best or not t.significant or t.dof >= best.dof or set(t.channels) != set(best.channels):
             continue
         same_rows = np.isclose(t.test.sse_before, best.test.sse_before)  # its errors comparable
         if same_rows and t.test.sse_after - best.test.sse_after <= SIMPLER_SHARE * removed:
@@ -376,7 +376,7 @@ def simplest(best: Tested, tested: list[Tested], validation: np.ndarray) -> Test
         if n >= 3 and mean <= se:  # the simpler one is worse by at most one standard error
             simpler.append(t)
     if simpler:
-        return min(simpler, key=lambda t: (t.n_params, t.test.sse_after))
+        return min(simpler, key=lambda t: (t.dof, t.test.sse_after))
     return best
 
 

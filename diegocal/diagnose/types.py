@@ -209,6 +209,12 @@ class Tested:
     detectable: tuple | None = None
 
     @property
+    def dof(self) -> int:
+        """What the fit that adds it adjusts: its columns' coefficients and its shape parameters (a
+        spring's rest angle, which makes a spring whose rest lies far off a torque offset)."""
+        return self.n_params + len(self.term.parameters) - len(self.term.linear)
+
+    @property
     def gain(self) -> float:
         """Fraction of the validation error removed: over all its channels, or on its own channel
         where it has one and that is larger."""

@@ -13,10 +13,12 @@ Causes (the registry's domain ``dynamics``; their parameters and units are the r
 - ``viscous_friction`` / ``coulomb_friction``: η_v qd_j, η_c sign(qd_j) on joint j;
 - ``position_friction``: the same, only while q_j is in the term's region (cables, a tube
   rubbing near a limit: thesis §3.4.4);
-- ``spring``: stiffness · (q_j − reference) (an elastic element, a gravity compensator; ``extra``
-  reference, rad, default 0; ``diagnose`` tries the joint's zero and its mean angle, the rest angle
-  being no linear parameter); a spring at rest angle q0 is this plus a ``torque_offset`` of
-  stiffness · (reference − q0);
+- ``spring``: stiffness · (q_j − rest_angle) (an elastic element, a gravity compensator). The
+  rest angle is a shape parameter: ``diagnose`` proposes the joint's zero and its mean training
+  angle and the fit that adds the spring searches it; a spring at rest q0 and a ``torque_offset``
+  of stiffness · (q0 − q0') beside a spring at q0' are the same torque, so the rest angle is held
+  where the joint has an offset. ``extra`` reference (rad): the origin of files written before the
+  rest angle was a parameter (their rest angle reads 0);
 - ``torque_offset``: a constant bias of joint j's torque sensor;
 - ``armature``: the rotor's reflected inertia, inertia · qdd_j;
 - ``coupled_friction``: one motor that drives two joints (the TX40's wrist: motor 6 turns with
@@ -145,7 +147,7 @@ def _position_friction(term, m, j, out):
 
 
 def _spring(term, m, j, out):
-    out[:, j, 0] = m.q[:, j] - float(term.extra.get("reference", 0.0))
+    out[:, j, 0] = m.q[:, j] - term.value("rest_angle") - float(term.extra.get("reference", 0.0))
 
 
 def _torque_offset(term, m, j, out):
@@ -241,6 +243,8 @@ COUPLING_RATIOS = (1.0, -1.0, 0.5, -0.5, 2.0, -2.0)
 #: torque_lag variants: the column of lag L is (filter_L(τ̂) − τ̂) / L (its coefficient ≈ the lag;
 #: → −dτ̂/dt as L → 0)
 LAG_GRID = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+#: spring variants beside the joint's zero and mean angle: rest angles at these shares of its training range
+SPRING_RESTS = (0.0, 0.25, 0.75, 1.0)
 #: stribeck_friction variants: velocity scales, rad/s (the fit that adds it refines the scale)
 VELOCITY_SCALES = (0.003, 0.01, 0.03, 0.1, 0.3)
 
@@ -298,13 +302,17 @@ def _friction(cause: str, ctx: Context) -> list[Proposal]:
 
 
 def _springs(cause: str, ctx: Context) -> list[Proposal]:
-    """Springs about the joint's zero and about its mean training angle: the rest angle is not a
-    linear parameter, and a spring at rest elsewhere is one of these + a torque_offset."""
+    """Springs at rest at the joint's zero, its mean training angle and SPRING_RESTS of its
+    training range: the rest angle is not a linear parameter (the fit that adds the spring
+    searches it from the best of these), and a spring proposed at rest far from its own is a
+    spring beside a constant torque that a torque offset would take first."""
     out = []
     for j in ctx.joints:
         if (cause, j) not in ctx.have:
-            for ref in (0.0, float(np.mean(ctx.column(ctx.q, j, ctx.train)))):
-                out.append(Proposal(make_term(cause, j, extra={"reference": ref}), f"spring:{j}"))
+            q = ctx.column(ctx.q, j, ctx.train)
+            lo, hi = float(np.min(q)), float(np.max(q))
+            for rest in (0.0, float(np.mean(q)), *(lo + f * (hi - lo) for f in SPRING_RESTS)):
+                out.append(Proposal(make_term(cause, j, {"rest_angle": rest}), f"spring:{j}"))
     return out
 
 

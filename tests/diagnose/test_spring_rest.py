@@ -1,0 +1,56 @@
+"""A spring whose rest angle is neither the joint's zero nor its mean is one spring with its rest
+angle fitted, not a spring beside a torque offset; a torque offset is not named a spring.
+
+The torques are the arm3 simulator's with a spring (or an offset) added by hand on joint2, so that
+its rest angle lies where no proposal puts it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.io.log import make_stream
+from diegocal.robot import load_robot
+from diegocal.robot.model import BUNDLED_ROBOTS
+from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+
+NOISE = 0.01  # N·m, the simulator's default torque noise
+
+
+@pytest.fixture(scope="module")
+def arm3():
+    return load_robot(BUNDLED_ROBOTS / "arm3")
+
+
+def with_torque(robot, added, seed=3):
+    """A clean arm3 log (20 s) with ``added(q)`` (T,) N·m on joint2's measured torque."""
+    log = simulate_dynamics(robot, DynamicsOptions(duration=20.0, noise=NOISE), np.random.default_rng(seed))
+    tau = log.stream("tau")
+    data = tau.data.copy()
+    data[:, 1] += added(log.stream("q").data[:, 1])
+    return replace(log, streams={**log.streams, "tau": make_stream(tau.names, data)}), log.stream("q").data[:, 1]
+
+
+def test_a_spring_at_rest_off_the_joints_zero_and_mean_is_one_spring(arm3):
+    clean, q = with_torque(arm3, lambda q: 0.0)
+    lo, hi = np.quantile(q, [0.0, 1.0])
+    rest = float(lo + 0.8 * (hi - lo))
+    stiffness = 8 * NOISE / float(np.sqrt(np.mean((q - rest) ** 2)))  # RMS torque 8 × the noise
+    log, _ = with_torque(arm3, lambda x: stiffness * (x - rest))
+    d = diagnose(log, arm3, DiagnoseOptions(domain="dynamics"))
+    assert [(f.cause, f.channel) for f in d.findings] == [("spring", "joint2")]
+    p = {x.name: x for x in d.findings[0].term.parameters}
+    assert abs(p["stiffness"].value - stiffness) < 3 * p["stiffness"].stderr, p
+    assert abs(p["rest_angle"].value - rest) < 3 * p["rest_angle"].stderr, (p, rest)
+
+
+def test_a_torque_offset_is_not_named_a_spring(arm3):
+    log, _ = with_torque(arm3, lambda q: np.full_like(q, 6 * NOISE))
+    d = diagnose(log, arm3, DiagnoseOptions(domain="dynamics"))
+    assert [(f.cause, f.channel) for f in d.findings] == [("torque_offset", "joint2")]
+    offset = d.findings[0].term.parameters[0]
+    assert abs(offset.value - 6 * NOISE) < 3 * offset.stderr
