@@ -68,7 +68,7 @@ PAYLOAD_NAMES = ("mass", "mc_x", "mc_y", "mc_z", "I_xx", "I_xy", "I_yy", "I_xz",
 #: The term parameters compared with the simulator's values, per cause (the simulator's name).
 COMPARED = {
     "torque_offset": {"offset": "offset"},
-    "spring": {"stiffness": "stiffness"},
+    "spring": {"stiffness": "stiffness", "rest_angle": "rest"},
     "armature": {"inertia": "inertia"},
     "torque_lag": {"lag": "lag"},
     "torque_gain": {"gain_error": "gain_error"},

@@ -52,8 +52,13 @@ def test_term_columns_are_the_torque_each_parameter_adds(arm3):
     np.testing.assert_array_equal(pf[:, j, 0], inside * np.sign(qd[:, j]))
     np.testing.assert_array_equal(pf[:, j, 1], inside * qd[:, j])
     assert not pf[:, [0, 2]].any()  # only its joint
-    spring = columns(make_term("spring", "joint2", extra={"reference": 0.3}), arm3, q, qd, qdd)
+    spring = columns(make_term("spring", "joint2", {"rest_angle": 0.3}), arm3, q, qd, qdd)
     np.testing.assert_allclose(spring[:, j, 0], q[:, j] - 0.3)
+    # a file written before the rest angle was a parameter: its origin in extra, its rest angle 0
+    old = term_from_dict({"cause": "spring", "channel": "joint2", "extra": {"reference": 0.3},
+                          "parameters": {"stiffness": {"value": 2.0, "stderr": 0.1}}})
+    assert old.value("rest_angle") == 0.0
+    np.testing.assert_allclose(columns(old, arm3, q, qd, qdd)[:, j, 0], q[:, j] - 0.3)
     arm = columns(make_term("armature", "joint3"), arm3, q, qd, qdd)
     np.testing.assert_array_equal(arm[:, 2, 0], qdd[:, 2])
     coupled = make_term("coupled_friction", "joint3", {"smoothing": 0.05}, extra={"partner": "joint2", "ratio": 2.0})
