@@ -12,7 +12,25 @@ from diegocal.causes import search_end
 
 def notes(f: dict) -> str:
     """Every note of finding ``f`` (a diagnosis.yaml finding), each a sentence or more, in order."""
-    return gauge_text(f) + stand_in_text(f) + span_error_text(f) + relative_gain_text(f)
+    return gauge_text(f) + stand_in_text(f) + span_error_text(f) + relative_gain_text(f) + trade_text(f)
+
+
+#: Causes whose ``extra.correlation`` is a trade with the baseline's parameters that their ± cannot
+#: show as a bias (a valve delay's with the sensor lag is in its ±: :mod:`~diegocal.diagnose.pneumatics_terms`).
+TRADING = ("chamber_leak", "supply_droop")
+
+
+def trade_text(f: dict) -> str:
+    """What a leak's or a supply sag's estimate trades with (``extra.correlation``: the valve's
+    parameters c1..c9 it correlates with): its ± is marginal over them, but
+    an error of the model's own that moves them moves it too (a leak's ± covered an orifice's rate
+    in none of 32 logs of an independent generator, the valve's centre c1 taking the rest)."""
+    pairs = (f.get("extra") or {}).get("correlation") or {}
+    if not pairs or f.get("cause") not in TRADING:
+        return ""
+    listed = ", ".join(f"{name} (ρ = {rho:+.2f})" for name, rho in sorted(pairs.items(), key=lambda x: -abs(x[1])))
+    return (f" Its estimate trades with {listed}: where the model's own error moves those, it moves this "
+            "value too, by more than its ± says.")
 
 
 def relative_gain_text(f: dict) -> str:
