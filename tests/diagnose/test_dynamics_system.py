@@ -17,7 +17,7 @@ from diegocal.diagnose.types import EngineOptions
 from diegocal.progress import Eta
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
-from diegocal.sgp.terms import term_columns
+from diegocal.sgp.terms import SPRING_RESTS, term_columns
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
 from diegocal.terms import Region, make_term
 
@@ -152,8 +152,8 @@ def test_each_family_keeps_the_variant_the_selection_tests(adapter, train, offse
     """With the engine's weights set, the adapter holds each family's best variant, ranked from
     the projection's sums (and any within a tie of it), with the same projected columns: the
     selection then keeps the very variant it keeps when it fits all of them. With a torque offset
-    on every joint the two springs of a joint (about 0 and about the mean angle) tie exactly: both
-    are held, and the selection's first-of-equals decides as before."""
+    on every joint a joint's springs (their rest angles differ by a constant torque) tie exactly:
+    all are held, and the selection's first-of-equals decides as before."""
     terms = tuple(make_term("torque_offset", j) for j in adapter.joints) if offsets else ()
     fitted = adapter.fit(terms, train)
     res = adapter.residuals(fitted)
@@ -171,8 +171,9 @@ def test_each_family_keeps_the_variant_the_selection_tests(adapter, train, offse
     assert len(held) < len(everything) / 2  # lags, scales, regions, ratios: about one of each kept
     again = {t.candidate.family: t for t in evaluate_candidates(held, res, weights, train, validation, EngineOptions())}
 
-    def variant(term):
-        return term.cause, term.channel, term.region, sorted(term.extra.items())
+    def variant(term):  # a variant's shape (a spring's rest angle, a velocity scale) is a parameter
+        shape = [(p.name, p.value) for p in term.parameters if p not in term.linear]
+        return term.cause, term.channel, term.region, sorted(term.extra.items()), shape
 
     for family, t in best.items():
         if not family:  # a family of its own: held whatever its fit
@@ -183,5 +184,5 @@ def test_each_family_keeps_the_variant_the_selection_tests(adapter, train, offse
             whole = t.candidate.columns[joint]
             np.testing.assert_allclose(cols, whole, rtol=1e-6, atol=1e-6 * np.abs(whole).max())
     springs = [c for c in held if c.term.cause == "spring"]
-    if offsets:  # every joint's two springs tie
-        assert len(springs) == 2 * len(adapter.joints)
+    if offsets:  # every joint's springs (at its zero, its mean and SPRING_RESTS of its range) tie
+        assert len(springs) == (2 + len(SPRING_RESTS)) * len(adapter.joints)
