@@ -146,7 +146,9 @@ def with_shape_se(fit, term, model, pred, rows):
     shape found instead, a Stribeck velocity scale's ± ignored its trade-off with the amplitude
     (their errors run opposite ways): ± coverage 0.78 over 49 logs."""
     r = fit.row_of.get(term.channel)
-    fixed = held_shapes(term, model.terms)
+    fixed = held_shapes(term, model.terms)  # no standard error: the data do not determine them
+    term = replace(term, parameters=tuple(replace(p, stderr=float("nan")) if p.name in fixed else p
+                                          for p in term.parameters))
     shapes = [p for p in specs(term) if p.shape and p.name not in fixed]
     if r is None or not shapes:
         return term

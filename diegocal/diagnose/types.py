@@ -211,7 +211,10 @@ class Tested:
     @property
     def dof(self) -> int:
         """What the fit that adds it adjusts: its columns' coefficients and its shape parameters (a
-        spring's rest angle, which makes a spring whose rest lies far off a torque offset)."""
+        spring's rest angle, which makes a spring whose rest lies far off a torque offset); a
+        cause tested on several channels at once, its members' together."""
+        if self.candidate.members:
+            return sum(m.dof for m in self.candidate.members)
         return self.n_params + len(self.term.parameters) - len(self.term.linear)
 
     @property

@@ -13,12 +13,12 @@ Causes (the registry's domain ``dynamics``; their parameters and units are the r
 - ``viscous_friction`` / ``coulomb_friction``: η_v qd_j, η_c sign(qd_j) on joint j;
 - ``position_friction``: the same, only while q_j is in the term's region (cables, a tube
   rubbing near a limit: thesis §3.4.4);
-- ``spring``: stiffness · (q_j − rest_angle) (an elastic element, a gravity compensator). The
-  rest angle is a shape parameter: ``diagnose`` proposes the joint's zero and its mean training
-  angle and the fit that adds the spring searches it; a spring at rest q0 and a ``torque_offset``
-  of stiffness · (q0 − q0') beside a spring at q0' are the same torque, so the rest angle is held
-  where the joint has an offset. ``extra`` reference (rad): the origin of files written before the
-  rest angle was a parameter (their rest angle reads 0);
+- ``spring``: stiffness · (q_j − rest_angle − reference) (an elastic element, a gravity
+  compensator). The rest angle is a shape parameter: ``diagnose`` proposes the joint's zero, its
+  mean training angle and points across its range, and the fit that adds the spring searches it;
+  a spring at rest q0 is a spring at q0' beside a ``torque_offset`` of stiffness · (q0' − q0), so
+  the rest angle is held where the joint has an offset. ``extra`` reference (rad, default 0): the
+  origin of files written before the rest angle was a parameter (their rest angle reads 0);
 - ``torque_offset``: a constant bias of joint j's torque sensor;
 - ``armature``: the rotor's reflected inertia, inertia · qdd_j;
 - ``coupled_friction``: one motor that drives two joints (the TX40's wrist: motor 6 turns with
@@ -304,8 +304,8 @@ def _friction(cause: str, ctx: Context) -> list[Proposal]:
 def _springs(cause: str, ctx: Context) -> list[Proposal]:
     """Springs at rest at the joint's zero, its mean training angle and SPRING_RESTS of its
     training range: the rest angle is not a linear parameter (the fit that adds the spring
-    searches it from the best of these), and a spring proposed at rest far from its own is a
-    spring beside a constant torque that a torque offset would take first."""
+    searches it), and a spring proposed at rest far from its own is a spring beside a constant
+    torque that a torque offset would take first."""
     out = []
     for j in ctx.joints:
         if (cause, j) not in ctx.have:

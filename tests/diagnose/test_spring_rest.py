@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 
 from diegocal.diagnose import DiagnoseOptions, diagnose
+from diegocal.diagnose.dynamics import adapters
 from diegocal.io.log import make_stream
 from diegocal.robot import load_robot
 from diegocal.robot.model import BUNDLED_ROBOTS
 from diegocal.sim.dynamics import DynamicsOptions, simulate_dynamics
+from diegocal.terms import make_term
 
 NOISE = 0.01  # N·m, the simulator's default torque noise
 
@@ -54,3 +56,29 @@ def test_a_torque_offset_is_not_named_a_spring(arm3):
     assert [(f.cause, f.channel) for f in d.findings] == [("torque_offset", "joint2")]
     offset = d.findings[0].term.parameters[0]
     assert abs(offset.value - 6 * NOISE) < 3 * offset.stderr
+
+
+def test_the_simpler_of_an_offset_and_a_spring_that_fit_as_well_is_named(arm3):
+    """An offset beside a slope of 1.5 × the noise RMS: a spring with its rest angle and a torque
+    offset remove the same held-out error to within the noise; the offset, which has one parameter
+    to the spring's two (stiffness and rest angle), is named, the spring said beside it."""
+    _, q = with_torque(arm3, lambda q: 0.0, seed=4)
+    slope = 1.5 * NOISE / float(np.sqrt(np.mean((q - q.mean()) ** 2)))
+    log, _ = with_torque(arm3, lambda x: 6 * NOISE + slope * (x - q.mean()), seed=4)
+    d = diagnose(log, arm3, DiagnoseOptions(domain="dynamics"))
+    top = d.findings[0]
+    assert (top.cause, top.channel) == ("torque_offset", "joint2")
+    assert "spring:joint2" in top.evidence.get("indistinguishable_causes", [])
+
+
+def test_a_rest_angle_an_offset_on_its_joint_leaves_undetermined_has_no_standard_error(arm3):
+    """Beside a torque offset on its joint the rest angle only moves a constant the offset takes
+    back: it is held, and its standard error is unknown (NaN), not the one it had alone."""
+    log, _ = with_torque(arm3, lambda x: 0.5 * (x - 0.3))
+    (adapter,) = adapters(log, arm3, None)
+    train = np.arange(len(adapter.time)) < 0.6 * len(adapter.time)
+    spring = make_term("spring", "joint2", {"rest_angle": 0.1}, stderr={"rest_angle": 0.01})
+    alone = {t.cause: t for t in adapter.fit((spring,), train).terms}["spring"]
+    assert np.isfinite(alone.parameters[1].stderr) and abs(alone.value("rest_angle") - 0.3) < 0.05
+    both = {t.cause: t for t in adapter.fit((spring, make_term("torque_offset", "joint2")), train).terms}
+    assert both["spring"].value("rest_angle") == 0.1 and np.isnan(both["spring"].parameters[1].stderr)

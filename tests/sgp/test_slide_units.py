@@ -30,4 +30,6 @@ def test_a_fitted_term_on_a_slide_has_its_units(tmp_path):
              make_term("spring", "elbow", {"stiffness": 0.0}))
     model = DynamicsModel(robot, SGPOptions(kind="pr"), robot.joint_names, terms).fit_arrays(q, qd, qdd, tau)
     units = {(t.cause, t.channel): [p.unit for p in t.parameters] for t in model.fitted_terms()}
-    assert units == {("spring", "slide"): ["N/m", "m"], ("armature", "slide"): ["kg"], ("spring", "elbow"): ["N·m/rad", "rad"]}
+    assert units == {
+        ("spring", "slide"): ["N/m", "m"], ("armature", "slide"): ["kg"], ("spring", "elbow"): ["N·m/rad", "rad"]
+    }
