@@ -374,7 +374,7 @@ def _choose_group(
             tested = [t for t in tested if t is not best]
             continue
         own = own_channel(best)
-        flex = outshone(best, res, weights, train, val, options, exclude)
+        flex = outshone(best, res, weights, train, val, options, exclude, tested)
         why, evidence = "its state does", None
         if flex is None and neighbours is not None:
             flex = spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
