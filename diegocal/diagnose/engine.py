@@ -38,6 +38,7 @@ from diegocal.diagnose.stand_ins import (
     own_channel,
     refit_rival,
     same_cause_beside,
+    searched_out,
     spilled,
     stand_in_finding,
 )
@@ -205,6 +206,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             why = _decline(finding, options.min_gain)
             if why:
                 declined[_key(chosen.term)] = why
+                if (entry := searched_out(fitted_term, chosen, why)) is not None:  # its structure stays: unexplained
+                    stand_ins.setdefault(primary, entry)
                 say(f"{term.cause} on {_where(term.channel, unit)}: {why}; declined")
                 continue
             findings.append(finding)

@@ -17,6 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from diegocal.causes import search_end
 from diegocal.diagnose.evidence import curves
 from diegocal.diagnose.selection import evaluate_candidates
 from diegocal.diagnose.show import binned_candidate, flexible_candidate, flexible_variables, unexplained_region
@@ -173,6 +174,21 @@ def spilled(best: Tested, models, res, weights, train, val, options: EngineOptio
     return top if top is not None and removed(top) > removed(best) else None
 
 
+def searched_out(term, chosen: Tested, why: str) -> tuple | None:
+    """A stand-in entry (the engine's: term, what beat it, evidence) for a term declined because a
+    parameter ends at the end of its search (``term``: as fitted; ``why``: the decline in words);
+    None for any other. The structure it fits is real (its validation test stands), but the value
+    the data want lies beyond what the cause describes (the registry's bound: a backlash's
+    half-width of 0.1 rad, over which a play is a broken gear): its channel is ``unexplained``,
+    its evidence the term's own test and why it was declined, and no later term stands in for that
+    structure there. A user trial's backlash at that bound was declined with nothing said of its
+    joint."""
+    if not any(search_end(term.cause, p.name, p.value) is not None for p in term.parameters):
+        return None
+    stood = replace(chosen, candidate=None)
+    return stood, stood, {"declined": {"term": term.label, "why": why}}
+
+
 def declined_evidence(rival: Tested, declined: dict) -> dict:
     """A stand-in's evidence where a declined term (:func:`declined_rival`) explained more."""
     return {"declined": {"term": rival.term.label, "why": declined[(rival.term.cause, rival.term.channel)]}}
@@ -274,14 +290,16 @@ def stand_in_finding(
         **(why or {}),
         "curves": curves(res, None, channel, variable, shown, length, train, options.n_bins, exclude),
     }
-    runner = {**stood.to_dict(), "why_not": stood_in_why(channel, flex, why)}
+    runner = {**stood.to_dict(), "why_not": stood_in_why(channel, flex, why, stood.term.label)}
     return Finding(Term("unexplained", channel, (), region), "unexplained", None, None, evidence, (runner,))
 
 
-def stood_in_why(channel, flex: Tested, why: dict | None) -> str:
-    """Why the term that stood in was not named, in words, for its row among the runners-up (its
-    scores there are the one-step test's; a rival's open-loop ones are said here)."""
+def stood_in_why(channel, flex: Tested, why: dict | None, stood: str = "") -> str:
+    """Why the term that stood in (``stood``, its label) was not named, in words, for its row among
+    the runners-up (its scores there are the one-step test's; a rival's open-loop ones are said here)."""
     why = why or {}
+    if (declined := why.get("declined")) and declined["term"] == stood:  # declined itself (searched_out)
+        return f"declined: {declined['why']}"
     if rival := why.get("rival"):
         term = rival.get("term_open_loop_validation_gain")
         return (f"stood in: {rival['model']} removes {rival['open_loop_validation_gain']:.0%} of the open-loop "
