@@ -452,8 +452,9 @@ def _decline(finding: Finding, min_gain: float) -> str:
     squared error: the bar its validation gain cleared, and a fault's (a pot's
     drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out); or a
     parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
-    0.5 s), where the data want more than the cause describes, or one that cannot be negative (a
-    friction, an inertia, a mass) is significantly so: it would stand in for something else."""
+    0.5 s), where the data want more than the cause describes (its channel is then ``unexplained``:
+    :func:`~.stand_ins.searched_out`), or one that cannot be negative (a friction, an inertia, a
+    mass) is significantly so: it would stand in for something else."""
     for p in finding.term.parameters:
         if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
             end = f"{spec.upper:g} {p.unit or spec.unit}"
