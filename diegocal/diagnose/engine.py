@@ -38,6 +38,7 @@ from diegocal.diagnose.stand_ins import (
     own_channel,
     refit_rival,
     same_cause_beside,
+    searched_out,
     spilled,
     stand_in_finding,
 )
@@ -205,6 +206,8 @@ def run_unit(adapter: Adapter, blocks, options: EngineOptions | None = None) -> 
             why = _decline(finding, options.min_gain)
             if why:
                 declined[_key(chosen.term)] = why
+                if (entry := searched_out(fitted_term, chosen, why)) is not None:  # its structure stays: unexplained
+                    stand_ins.setdefault(primary, entry)
                 say(f"{term.cause} on {_where(term.channel, unit)}: {why}; declined")
                 continue
             findings.append(finding)
@@ -374,7 +377,7 @@ def _choose_group(
             tested = [t for t in tested if t is not best]
             continue
         own = own_channel(best)
-        flex = outshone(best, res, weights, train, val, options, exclude)
+        flex = outshone(best, res, weights, train, val, options, exclude, tested)
         why, evidence = "its state does", None
         if flex is None and neighbours is not None:
             flex = spilled(best, neighbours(best.term, best.channels), res, weights, train, val, options, exclude)
@@ -449,8 +452,9 @@ def _decline(finding: Finding, min_gain: float) -> str:
     squared error: the bar its validation gain cleared, and a fault's (a pot's
     drift or a sibling pot's anomaly gives a backlash that pays on validation, not held out); or a
     parameter ends at the upper end of its search (the registry's bound: a torque sensor's lag of
-    0.5 s), where the data want more than the cause describes, or one that cannot be negative (a
-    friction, an inertia, a mass) is significantly so: it would stand in for something else."""
+    0.5 s), where the data want more than the cause describes (its channel is then ``unexplained``:
+    :func:`~.stand_ins.searched_out`), or one that cannot be negative (a friction, an inertia, a
+    mass) is significantly so: it would stand in for something else."""
     for p in finding.term.parameters:
         if (spec := search_end(finding.term.cause, p.name, p.value)) is not None:
             end = f"{spec.upper:g} {p.unit or spec.unit}"

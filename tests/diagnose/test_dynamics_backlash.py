@@ -55,6 +55,22 @@ def test_a_lag_is_still_a_lag_and_a_clean_log_gives_nothing(arm3):
     assert not _run(arm3, [], 12)[1].findings
 
 
+
+def test_a_backlash_at_the_end_of_its_search_leaves_its_joint_unexplained(arm3):
+    """A play at the search's bound (0.1 rad, over which the registry calls it a broken gear) is
+    declined, its half-width where the data want more; a user trial's was declined with nothing
+    said of its joint (and a torque lag was named there). The structure is real: the joint is
+    ``unexplained``, with the backlash as the term that stood in and why it was declined."""
+    _, d = _run(arm3, ["transmission_backlash:joint2=0.1"], 3)
+    declined = {(x["cause"], x["channel"]): x["why"] for u in d.units for x in u.declined}
+    assert "end of its search" in declined[("transmission_backlash", "joint2")]
+    on_joint = [f for f in d.findings if f.channel == "joint2"]
+    assert [f.cause for f in on_joint] == ["unexplained"], [f.term.label for f in d.findings]
+    ev = on_joint[0].evidence
+    assert ev["stand_in"]["term"] == ev["declined"]["term"] == "transmission_backlash:joint2"
+    assert ev["validation_gain"] == ev["stand_in"]["validation_gain"] > 0.5  # the term's own test
+    assert on_joint[0].runners_up[0]["why_not"].startswith("declined: its half_width ends at the end of its search")
+
 @pytest.mark.skipif(not urdf("ur5").is_file(), reason="example-robot-data is not installed")
 def test_the_independent_generators_backlash_is_named_with_its_half_width():
     """The generator's own play (RNEA at the link angle, the motor's logged) on a UR5 shoulder."""

@@ -320,6 +320,57 @@ def test_a_term_is_weighed_against_the_flexible_model_on_its_own_channel():
     assert _outshone(t, res, weights, train, val, options, {}) is None
 
 
+def _hose_like(seed: int = 4, T: int = 4000):
+    """A joint whose residual is a hose's torque, linear in another joint's angle (context), with a
+    candidate whose column hangs partly on that angle (a gain's: the joint's own torque), and a
+    friction-like candidate of the joint's own velocity."""
+    from diegocal.diagnose.types import Candidate, Residuals
+    from diegocal.terms import Parameter
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(T) * 0.01
+    q1, q2 = np.sin(2 * np.pi * 0.31 * t), np.sin(2 * np.pi * 0.47 * t + 1.0)
+    qd1 = np.gradient(q1, t)
+    gain_column = q2 + 0.7 * q1  # its own angle's part and the other joint's
+    variables = {"time": t, "q.j1": q1, "qd.j1": qd1, "q.j2": q2}
+
+    def residuals(r):
+        return Residuals({"j1": r + rng.normal(0, 0.05, T)}, {"j1": "N·m"}, variables, {"j1": ("q.j1", "qd.j1")},
+                         {"j1": ("q.j2",)})
+
+    gain = Candidate(Term("torque_gain", "j1", (Parameter("gain_error"),)), {"j1": gain_column[:, None]})
+    shape = np.tanh(qd1 / 0.1)
+    friction = Candidate(Term("stribeck_friction", "j1", (Parameter("amplitude"),)), {"j1": shape[:, None]})
+    return residuals, gain_column, q2, shape, gain, friction
+
+
+def test_a_term_that_leaves_most_of_its_channel_s_structure_to_the_flexible_model_stands_in():
+    """A user trial's hose on a Kinova's joint 2 (a torque linear in q3) was named a torque gain
+    there: the gain's column hangs on q3, so it removed 76 % of the joint's validation error, more
+    than half of the flexible model's 92 %, and left the flexible model most of the rest. Such a
+    term stands in; a true gain beside a friction's shape that another term of the round takes up
+    is named."""
+    from diegocal.diagnose.stand_ins import STAND_IN_SHARE, outshone
+
+    residuals, _, q2, _, gain, friction = _hose_like()
+    res = residuals(q2)
+    blocks = split_blocks(len(q2))
+    train, val = blocks.mask("train"), blocks.mask("validation")
+    weights, options = {"j1": 1.0}, EngineOptions()
+    tested = evaluate_candidates([gain, friction], res, weights, train, val, options)
+    best = next(t for t in tested if t.term.cause == "torque_gain")
+    flex = outshone(best, res, weights, train, val, options, {}, tested)
+    assert flex is not None and best.gain >= STAND_IN_SHARE * flex.test.gain  # more than half, and yet
+    # a true gain beside a friction's shape that no term of the round takes up stands in too ...
+    residuals, column, _, shape, gain, friction = _hose_like()
+    res = residuals(0.5 * column + 0.3 * shape)
+    best, other = evaluate_candidates([gain, friction], res, weights, train, val, options)
+    assert best.term.cause == "torque_gain" and not other.significant
+    assert outshone(best, res, weights, train, val, options, {}, [best, other]) is not None
+    # ... which the friction term of the round, significant, takes up: the gain is named
+    other = replace(other, significant=True)
+    assert outshone(best, res, weights, train, val, options, {}, [best, other]) is None
+
 def test_a_term_that_removes_little_held_out_error_is_declined():
     """Significant on validation is not enough: a term must remove ``min_gain`` of the held-out mean
     squared error on its channel, as a fault must (a warming pot was named a backlash on its
