@@ -487,6 +487,8 @@ def _runner_up(t: Tested, best: Tested, declined: dict, named: str = "", rivals=
     elif t.significant:
         if t.term.label in rivals:
             out["why_not"] = f"the data cannot tell it from {cause} (the same validation fit, to within the noise)"
+        elif t.dof > best.dof and t.test.sse_after < best.test.sse_after and set(t.channels) == set(best.channels):
+            out["why_not"] = f"{cause} has fewer parameters and fits as well (within 5 % or one paired SE)"
         elif shared := ", ".join(sorted(set(t.channels) & set(best.channels))):
             out["why_not"] = f"{cause} explains more of the validation error of {shared}"
         else:

@@ -69,7 +69,7 @@ def gauge_text(f: dict) -> str:
 def stand_in_text(f: dict) -> str:
     """Why an ``unexplained`` finding names no cause although a term was significant: the term
     explained far less than a flexible function of the channel's own state, or less than a term
-    declined on it (a stand-in)."""
+    declined on it (a stand-in), or was itself declined for a value beyond its search."""
     ev = f.get("evidence") or {}
     if not (stood := ev.get("stand_in")):
         return ""
@@ -79,6 +79,10 @@ def stand_in_text(f: dict) -> str:
                 f"{rival['term_open_loop_validation_gain']:.0%} of the open-loop validation error where "
                 f"{rival['model']}, a shape no cause names, removes {rival['open_loop_validation_gain']:.0%}: "
                 "it would stand in for it, so no cause is named.")
+    if declined and declined["term"] == stood["term"]:  # declined itself: a value beyond its search
+        return (f" {stood['term']} explains {stood['validation_gain']:.0%} of the validation error but was declined "
+                f"({declined['why']}): the structure is real, the value it wants beyond what the cause describes, "
+                "so no cause is named.")
     beaten = (f"{declined['term']} explained {gain:.0%} and was declined ({declined['why']}): it would stand in "
               "for what that term fits" if declined else f"a flexible function of {f['channel']}'s own state "
               f"explains {gain:.0%}: it would stand in for structure of another shape")

@@ -82,3 +82,19 @@ def test_a_rest_angle_an_offset_on_its_joint_leaves_undetermined_has_no_standard
     assert np.isfinite(alone.parameters[1].stderr) and abs(alone.value("rest_angle") - 0.3) < 0.05
     both = {t.cause: t for t in adapter.fit((spring, make_term("torque_offset", "joint2")), train).terms}
     assert both["spring"].value("rest_angle") == 0.1 and np.isnan(both["spring"].parameters[1].stderr)
+
+
+def test_a_runner_up_that_removed_more_but_has_more_parameters_says_so():
+    """The one-SE rule's choice is said as such, not as 'explains more'."""
+    from diegocal.diagnose.engine import _runner_up
+    from diegocal.diagnose.stats import OutOfSample
+    from diegocal.diagnose.types import Candidate, Tested
+
+    def tested(term, sse_after):
+        test = OutOfSample(1.0, 20.0, 10, 0.0, 100.0, sse_after, 5, np.zeros(3))
+        return Tested(term, ("joint2",), test, 4.0, True, 1, Candidate(term, {}))
+
+    spring = tested(make_term("spring", "joint2", {"rest_angle": 0.2}), 10.0)
+    offset = tested(make_term("torque_offset", "joint2"), 10.4)
+    assert "fewer parameters and fits as well" in _runner_up(spring, offset, {})["why_not"]
+    assert "explains more" in _runner_up(offset, spring, {})["why_not"]
