@@ -21,9 +21,10 @@ marker that moved stays moved, in this log and in any later one on the same cloc
 Data faults (``faults``): ``swapped_labels`` (two markers whose readings fit each other's
 prediction over runs of frames; where one of them is not seen, the other's reading alone)
 and ``marker_outliers`` (readings far off their neighbours' trend, by a threshold with a
-family-wise false-alarm rate; on a static-pose log, whose neighbours are other poses, the poses
-whose markers are not their own: :func:`.geometry.foreign_poses`, and the fits leave the
-writing-off to that fault instead of doing it themselves).
+family-wise false-alarm rate, save those a pot's spike carried: :mod:`.kinematics_outliers`;
+on a static-pose log, whose neighbours are other poses, the poses whose markers are not their
+own: :func:`.geometry.foreign_poses`, and the fits leave the writing-off to that fault instead
+of doing it themselves).
 
 Held-out score: RMSE per channel of reading − prediction on the held-out frames, q tracked from
 every sensor with θ fixed. The extended model is a calib.yaml (kind ``calibration``) whose
@@ -32,7 +33,6 @@ every sensor with θ fixed. The extended model is a calib.yaml (kind ``calibrati
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
@@ -44,7 +44,8 @@ from diegocal.diagnose import geometry
 from diegocal.diagnose.kinematics_clock import clock_fault, far_clock
 from diegocal.diagnose.kinematics_curves import curve_candidates, pot_block
 from diegocal.diagnose.kinematics_families import FamilyRanks
-from diegocal.diagnose.kinematics_lin import Linearised, running_median, step_errors
+from diegocal.diagnose.kinematics_lin import Linearised, step_errors
+from diegocal.diagnose.kinematics_outliers import outlier_flags, pot_carried, retracked
 from diegocal.diagnose.kinematics_refine import REFINED, plausible_start, refined
 from diegocal.diagnose.kinematics_slip import FromSample, SlipScan, slip_value
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
@@ -62,17 +63,8 @@ from diegocal.stac.static import static_poses
 from diegocal.stac.terms import POT_CAUSES, SLIP, Applied, apply_terms, pot_columns, pot_extra, relabelled, shift_clock
 from diegocal.terms import Region, Term, make_term
 
-#: Half width (samples) of the running median a marker outlier is measured against.
-OUTLIER_WINDOW = 8
 #: Dead-band widths tried for a backlash (a family), in multiples of BAND_SIGMAS pot σ.
 BAND_SCALES = (0.33, 0.6, 1.0, 1.7, 2.8, 5.0)
-#: A marker outlier is at least this many σ (its marker's own scale) off its neighbours' trend:
-#: the chi² level of a family-wise 1 % assumes Gaussian residuals, and the tracked residuals' tails
-#: are heavier on a large robot (clean 60-s Diego San logs: 12-16 readings beyond 5 σ where chi²
-#: expects 2, the largest at 5.6-5.8 σ against chi²'s 6.0 σ); on the finger they are chi²'s (the
-#: largest of 30 s at 4.8-5.3 σ against 5.6 σ). A practical margin over Diego San's largest, not
-#: a derived level. Ghosts and reflections are centimetres off (tens of σ).
-OUTLIER_SIGMAS = 7.0
 #: Clock shifts tried for a time offset (a family, both signs), s: a shift of several samples
 #: moves the markers by far more than their linearisation at zero predicts (a PID-driven joint
 #: turns through a radian in a quarter second), so each variant is the change of the predicted
@@ -235,7 +227,7 @@ class KinematicsAdapter:
         return tuple(out)
 
     # ------------------------------------------------------------------ residuals
-    def _merge(self, applied: Applied, x: np.ndarray) -> np.ndarray:
+    def merged(self, applied: Applied, x: np.ndarray) -> np.ndarray:
         """Mapped markers (T, M', ...) -> the log's markers (T, M, ...), slips merged back."""
         names = list(applied.log.stream("markers").names)
         out = x[:, [names.index(n) for n in self.marker_names]].copy()
@@ -243,15 +235,15 @@ class KinematicsAdapter:
             out[k:, self.marker_names.index(orig)] = x[k:, names.index(name)]
         return out
 
-    def _marker_arrays(self, fitted: KinFit):
+    def marker_arrays(self, fitted: KinFit):
         """(readings, predictions), each (T, M, 3) on the log's markers: a prediction on every
         frame, seen or not (a reading is NaN where the cameras lost it)."""
         a = fitted.applied
-        return self._merge(a, np.asarray(a.log.stream("markers").data, float)), self._merge(a, fitted.markers)
+        return self.merged(a, np.asarray(a.log.stream("markers").data, float)), self.merged(a, fitted.markers)
 
     def residuals(self, fitted: KinFit) -> Residuals:
         rp = np.asarray(fitted.applied.log.stream("pots").data, float) - fitted.pots
-        xm, pred = self._marker_arrays(fitted)
+        xm, pred = self.marker_arrays(fitted)
         rm = xm - pred
         channels = {n: rp[:, i] for i, n in enumerate(self.pot_names)}
         channels.update({n: rm[:, i] for i, n in enumerate(self.marker_names)})
@@ -370,7 +362,7 @@ class KinematicsAdapter:
     # ------------------------------------------------------------------ faults
     def faults(self, fitted: KinFit, residuals: Residuals) -> list[Fault]:
         """A clock seconds off (:func:`clock_fault`), swapped labels, marker outliers, on the baseline's residuals."""
-        xm, pred = self._marker_arrays(fitted)
+        xm, pred = self.marker_arrays(fitted)
         rm = xm - pred
         T, M = rm.shape[:2]
         n_tests = max(T * M, 1)
@@ -404,24 +396,23 @@ class KinematicsAdapter:
                     swapped[frames, m] = swapped[frames, k] = True
         if self.poses is not None:  # a static-pose log: its poses judged, not a trend between them
             return out + [f for f in (geometry.foreign_poses(self, fitted, swapped),) if f is not None]
-        # outliers: the residual against its running median (a smooth model error is no outlier)
-        e = rm - running_median(rm, OUTLIER_WINDOW)
-        e2 = np.einsum("tmi,tmi->tm", e, e)
-        ok = np.isfinite(e2)
-        # each marker's own scale: the q tracking leaves markers on different links more or less
-        # of their noise (on Diego San the scales spread over ±15 %)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a marker never seen: no scale
-            scale = np.nanmedian(np.where(ok, e2, np.nan), axis=0) / chi2.median(3)
-        scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.inf)
-        z2 = max(chi2.isf(0.01 / n_tests, 3), OUTLIER_SIGMAS**2)
-        flag = ok & (e2 > z2 * scale) & ~swapped
+        flag, z, scale = outlier_flags(rm, n_tests, swapped)
+        flag, pots = pot_carried(self, fitted.applied, fitted.cal, (fitted.q, fitted.pots), flag, scale, z)
+        if pots:  # their readings raised the pots' σ: the markers' residuals judged at a q that weighs them less
+            bad = np.zeros(T, bool)
+            bad[[k for f in pots.values() for k in f]] = True
+            cal, tracked, rm = retracked(self, fitted, bad)
+            flag, z, scale = outlier_flags(rm, n_tests, swapped)
+            flag, pots = pot_carried(self, fitted.applied, cal, tracked, flag, scale, z)
+        say = self.progress or (lambda _: None)
+        for name, frames in pots.items():  # no pot fault in the vocabulary: said, left in
+            say(f"{name}: {len(frames)} reading(s) far off the q the markers fit: no marker outliers there")
         if flag.sum() >= 1:
             frames = {self.marker_names[m]: np.flatnonzero(flag[:, m]).tolist() for m in range(M) if flag[:, m].any()}
             ch = next(iter(frames)) if len(frames) == 1 else "markers"
             term = make_term("marker_outliers", ch, extra={"frames": frames})
             readings = {n: flag[:, self.marker_names.index(n)] for n in frames}
-            ev = {"readings": int(flag.sum()), "threshold_sigma": float(np.sqrt(z2))}
+            ev = {"readings": int(flag.sum()), "threshold_sigma": z}
             out.append(Fault(term, readings, exclude=True, evidence=ev))
         return out
 

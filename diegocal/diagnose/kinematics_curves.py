@@ -9,9 +9,13 @@ quantiles of its training readings, its *mixing row*, a linear function of the a
 joints on its chain, and its *lag*, the reading through a first-order filter (an RC on the pot's
 line: an error in proportion to its speed, which a dead band's column, the direction of motion,
 takes up in part; offered for a pot term's own pot too: a user trial's 15-30 ms lag on a Baxter
-elbow pot was named ``backlash``). Each is linearised like any pot term (projected out of q and of the pots'
-gains and biases, :class:`~diegocal.diagnose.kinematics_sweep.Sweep`); its term is
-``unexplained``: a shape, never a cause.
+elbow pot was named ``backlash``). A pot term's own pot also has its *load curve*, an error in
+proportion to the gravity torque on its joint, scaled linearly along its reading (a belt or
+tendon stretching under the joint's load; a user trial's 2 % belt stretch on a G1 elbow was named
+``sensor_nonlinearity``, whose u², u³ take up the part that follows the elbow's own angle).
+Each is linearised like any pot term (projected out of q and of the pots' gains and biases,
+:class:`~diegocal.diagnose.kinematics_sweep.Sweep`); its term is ``unexplained``: a shape, never
+a cause.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from __future__ import annotations
 from functools import partial
 
 import numpy as np
+import pinocchio as pin
 from scipy.signal import savgol_filter
 
 from diegocal.diagnose.kinematics_sweep import Columns, Sweep
@@ -49,7 +54,8 @@ def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, term: Term, channe
     """The flexible models (module docstring) of each pot near ``term`` (:func:`neighbour_pots`)
     or among ``channels``, as Candidates made in one sweep: its lag, its curve (none when its
     training readings take fewer than three distinct values) and its mixing row (none for a pot on
-    no chain); of a pot term's own pot its lag alone; none that the calibration takes up entirely.
+    no chain); of a pot term's own pot its lag and its load curve (none for a joint gravity does
+    not load); none that the calibration takes up entirely.
     ``sweep``: the linearisation at ``fitted`` (the round's, whose blocks are kept)."""
     adapter, obs, names = sweep.adapter, sweep.obs, sweep.obs.pot_names
     pots = set(neighbour_pots(obs, adapter.robot, term)) | {names.index(c) for c in channels if c in names}
@@ -60,6 +66,8 @@ def curve_candidates(sweep: Sweep, fitted, train: np.ndarray, term: Term, channe
         shapes = [_lag(names[i], adapter.time, fitted.pots[:, j])]  # its own pot too: read through a filter
         if i != own:
             shapes += [_curve(names[i], fitted.pots[:, j], train), _mixing(obs, i, fitted.q, train)]
+        else:
+            shapes += [_load(obs, i, fitted.q, fitted.pots[:, j], train)]
         for made, f in shapes:
             if made is not None:
                 terms.append(made)
@@ -112,6 +120,26 @@ def _mixing(obs, i: int, q: np.ndarray, train: np.ndarray) -> tuple:
     params = tuple(Parameter(f"q.{n}") for n in names)
     f = q[:, idx] - np.nanmean(q[np.asarray(train, bool)][:, idx], axis=0)
     return Term("unexplained", obs.pot_names[i], params, None, {"mixing": names}), np.nan_to_num(f)
+
+
+def _load(obs, i: int, q: np.ndarray, x: np.ndarray, train: np.ndarray) -> tuple:
+    """(term, ∂p̂/∂θ (T, 2)) of pot i's load curve: an error in proportion to the gravity torque
+    on the joint it reads (the URDF's inertias at the tracked q), its compliance a linear function
+    of the reading ``x``: a belt or tendon that stretches under the joint's load; (None, None) for
+    a pot that reads no joint directly or a joint gravity does not load."""
+    k = np.flatnonzero(np.asarray(obs.A)[i] != 0)
+    model = obs.robot.model
+    if k.size != 1 or model.nq != q.shape[1]:
+        return None, None
+    data = model.createData()
+    g = np.array([pin.computeGeneralizedGravity(model, data, qq)[k[0]] for qq in np.nan_to_num(q)])
+    if not np.any(g[train]):
+        return None, None
+    g = g / np.max(np.abs(g[train]))
+    u = (x - np.nanmean(x[train])) / max(float(np.nanstd(x[train])), 1e-12)
+    params = (Parameter("c0"), Parameter("c1"))
+    term = Term("unexplained", obs.pot_names[i], params, None, {"model": "load"})
+    return term, np.nan_to_num(np.column_stack([g, g * u]))
 
 
 def neighbour_pots(obs, robot, term: Term) -> list[int]:
