@@ -369,7 +369,7 @@ def _choose_group(
 
     while (best := choose(tested, val)) is not None:
         if best.candidate.members:  # one cause on several channels: each channel's term
-            group = members_kept(best, tested, declined, res, weights, train, val, options, exclude, stood)
+            group = members_kept(best, tested, declined, res, weights, train, val, options, exclude, stood, neighbours)
             if len(group) == 1 and simplest(group[0], tested, val) is not group[0]:
                 group = []  # its evidence is one channel's, where a simpler cause does as well
             if group:
@@ -395,7 +395,9 @@ def _choose_group(
             tested, beaten = [t for t in tested if t is not best], [*beaten, best]  # a runner-up, with why
             continue
         if flex is None:
-            commons = same_cause_beside(best, tested, declined, res, weights, train, val, options, exclude, stood)
+            commons = same_cause_beside(
+                best, tested, declined, res, weights, train, val, options, exclude, stood, neighbours
+            )
             return best, [best, *commons], left()
         stand_in = (replace(best, candidate=None), replace(flex, candidate=None), evidence)  # no columns kept
         stand_ins.setdefault(own, stand_in)

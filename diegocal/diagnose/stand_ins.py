@@ -111,7 +111,7 @@ MEMBER_T = 2.0
 
 
 def same_cause_beside(best: Tested, tested, declined, res, weights, train, val, options, exclude,
-                      stood: dict | None = None) -> list[Tested]:
+                      stood: dict | None = None, neighbours=None) -> list[Tested]:
     """The other significant candidates of ``best``'s cause on channels ``best`` does not act on
     (friction's shape on every joint at once): one cause, added in the same round rather than a
     round per channel; each passes the stand-in tests of its own channel (:func:`stands_in`); one
@@ -121,7 +121,7 @@ def same_cause_beside(best: Tested, tested, declined, res, weights, train, val, 
     for t in tested:
         if t is best or not t.significant or t.term.cause != best.term.cause or set(t.channels) & used:
             continue
-        if stands_in(t, tested, declined, res, weights, train, val, options, exclude, stood):
+        if stands_in(t, tested, declined, res, weights, train, val, options, exclude, stood, neighbours):
             continue
         out.append(t)
         used |= set(t.channels)
@@ -129,7 +129,7 @@ def same_cause_beside(best: Tested, tested, declined, res, weights, train, val, 
 
 
 def members_kept(best: Tested, tested, declined, res, weights, train, val, options, exclude,
-                 stood: dict | None = None) -> list[Tested]:
+                 stood: dict | None = None, neighbours=None) -> list[Tested]:
     """The channels' terms of a common cause (``best.candidate.members``) that have evidence of
     their own (t at least MEMBER_T on their channel's validation rows and ``min_gain``: the common
     test holds the family-wise rate, not each channel's; not declined in an earlier round) and pass
@@ -140,23 +140,32 @@ def members_kept(best: Tested, tested, declined, res, weights, train, val, optio
     for t in best.candidate.members:
         if (t.term.cause, t.term.channel) in declined or t.test.t < MEMBER_T or t.gain < options.min_gain:
             continue  # not its own evidence
-        if stands_in(t, tested, declined, res, weights, train, val, options, exclude, stood):
+        if stands_in(t, tested, declined, res, weights, train, val, options, exclude, stood, neighbours):
             continue
         out.append(t)
     return out
 
 
-def stands_in(t: Tested, tested, declined, res, weights, train, val, options, exclude, stood=None) -> bool:
+def stands_in(t: Tested, tested, declined, res, weights, train, val, options, exclude, stood=None,
+              neighbours=None) -> bool:
     """Whether a channel's term added beside a round's best fails a stand-in test of its channel:
-    a declined term there explained more, or its flexible model far more; the channel and what beat
-    it go to ``stood`` (channel -> (term, rival, evidence), as the engine's stand-ins) when given."""
-    evidence = None
+    a declined term there explained more, or its flexible model far more, or (``neighbours``: the
+    adapter's neighbours' flexible models, as the round's best faces them, :func:`spilled`) a
+    neighbouring sensor's model removes more, that sensor then the one left unexplained (a lagging
+    pot was a member of a common backlash). The channel and what beat it go to ``stood`` (channel
+    -> (term, rival, evidence), as the engine's stand-ins) when given."""
+    evidence, own = None, own_channel(t)
     if (rival := declined_rival(t, tested, declined)) is not None:
         evidence = declined_evidence(rival, declined)
     elif (rival := outshone(t, res, weights, train, val, options, exclude, tested)) is None:
-        return False
+        if neighbours is None:
+            return False
+        rival = spilled(t, neighbours(t.term, t.channels), res, weights, train, val, options, exclude)
+        if rival is None:
+            return False
+        own = rival.term.channel  # a neighbour's flexible model: that sensor is unexplained
     if stood is not None:
-        stood.setdefault(own_channel(t), (replace(t, candidate=None), replace(rival, candidate=None), evidence))
+        stood.setdefault(own, (replace(t, candidate=None), replace(rival, candidate=None), evidence))
     return True
 
 

@@ -44,3 +44,13 @@ def test_a_pot_behind_a_filter_is_unexplained_not_a_backlash():
     d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
     assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", "fdp")]
     assert d.findings[0].evidence["stand_in"]["term"] == "backlash:fdp"
+
+
+def test_a_lagging_pot_is_no_member_of_a_common_backlash():
+    """mcp_abd behind a 30-ms RC (seed 3): the dead bands of six pots tested as one common backlash,
+    whose mcp_abd member was added without the neighbours' test a single pot term runs; its lag
+    removes more, so mcp_abd is ``unexplained`` with the dead band as stand-in."""
+    log, robot = low_passed(3, "mcp_abd", 0.03)
+    d = diagnose(log, robot, DiagnoseOptions(domain="kinematics"))
+    assert [(f.cause, f.channel) for f in d.findings] == [("unexplained", "mcp_abd")]
+    assert d.findings[0].evidence["stand_in"]["term"] == "backlash:mcp_abd"
