@@ -36,14 +36,30 @@ def test_stac_without_the_kept_linearisation_is_the_same_fit(tree_robot, monkeyp
     assert [h["cost"] for h in b.history] == [h["cost"] for h in a.history]
 
 
-def test_a_lean_state_holds_no_linearisation(tree_robot, monkeypatch):
-    _, obs, _, _, q0, _ = synth.q_step_start(tree_robot, 60)
+def test_a_lean_state_is_stepped_in_place_as_q_step_steps(tree_robot, monkeypatch):
+    """On more than KEEP_FRAMES frames the State holds no linearisation; the in-place step on it
+    takes q_step's step (frames accepted and rejected alike), and :func:`relinearise` writes the
+    State at q over it."""
+    _, obs, params, noise, q0, lam = synth.q_step_start(tree_robot, 600)
     full = obs.state(q0, 25, keep=True)
-    monkeypatch.setattr(model, "KEEP_FRAMES", 50)
+    ref = qphase.q_step(obs, params, noise, q0, lam, 7, 2, True, obs.state(q0, 500, keep=True))
+    for mod in (model, inplace):
+        monkeypatch.setattr(mod, "KEEP_FRAMES", 500)
     lean = obs.state(q0, 25, keep=True)
     assert full.xi is not None and lean.xi is None and lean.ds_lin is None
     for name in ("s", "Rl", "pl"):
         np.testing.assert_array_equal(getattr(lean, name), getattr(full, name))
+    got = inplace.q_step_in_place(obs, params, noise, q0, lam, lean, 7, 2, True)
+    assert got[2] is lean and 0 < np.sum(ref[1] > lam) < obs.n_frames  # some steps rejected
+    for x, y in zip((ref[0], ref[1], ref[3]), (got[0], got[1], got[3]), strict=True):
+        np.testing.assert_array_equal(y, x)
+    assert got[4] == ref[4]
+    for name in ("s", "Rl", "pl"):
+        np.testing.assert_array_equal(getattr(lean, name), getattr(ref[2], name))
+    back = inplace.relinearise(obs, q0, lean, 7, 2)
+    assert back is lean and back.xi is None
+    for name in ("s", "Rl", "pl"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(full, name))
 
 
 def test_the_start_from_the_pots_steps_over_one_state(tree_robot, monkeypatch):
