@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from diegocal.stac.loo import frame_slices
-from diegocal.stac.model import Observation, Params, State
+from diegocal.stac.model import KEEP_FRAMES, Observation, Params, State
 from diegocal.stac.qphase import Noise, _lm_batch, _put, frame_cost, kinematics_batch, map_batches, q_step
 
 
@@ -42,24 +42,27 @@ def q_step_in_place(
 
     Returns (q (T, n), λ (T,), ``st`` (now at the new q), cost (T,), redundancy {group: Σ tr_g}
     at the old q, empty unless ``want_red``). q and λ are not changed. A State without room for the
-    linearisation (Anderson's mix, :func:`~diegocal.stac.stac._alternate`) goes to ``q_step``.
+    linearisation goes to ``q_step`` (Anderson's mix, :func:`~diegocal.stac.stac._alternate`) or,
+    on more than :data:`~diegocal.stac.model.KEEP_FRAMES` frames, is stepped in place, each slice
+    linearised again at q (its s and poses are those the State holds: the same numbers).
     ``trial`` (T,): filled with each frame's cost at its step's candidate, taken or not.
     """
-    if st is None or st.xi is None:  # (a State without room for the linearisation: Anderson's mix)
-        return q_step(obs, params, noise, q, lam, batch, jobs, want_red, st, trial=trial)
     T = q.shape[0]
+    lean = st is not None and st.xi is None and T > KEEP_FRAMES  # its steps linearise at q themselves
+    if st is None or (st.xi is None and not lean):  # (Anderson's mix)
+        return q_step(obs, params, noise, q, lam, batch, jobs, want_red, st, trial=trial)
     cand, c0, c1 = np.empty_like(q), np.empty(T), np.empty(T) if trial is None else trial
     unit = batch * -(-kinematics_batch(batch) // batch)  # whole slices of ``batch`` frames
 
     def step(sl: slice) -> list:
         # Alg. of q_step: the damped steps of the unit's slices from st's rows at q ...
         reds = [
-            _lm_batch(obs, params, noise, q, lam, s, want_red, st, cand, c0, None)
+            _lm_batch(obs, params, noise, q, lam, s, want_red, None if lean else st, cand, c0, None)
             for s in frame_slices(sl.stop - sl.start, batch)
             for s in (slice(sl.start + s.start, sl.start + s.stop),)
         ]
         # ... the forward kinematics at the candidates, then the accepted rows over st's
-        lin = obs.linearise(cand[sl])
+        lin = obs.poses_at(cand[sl]) if lean else obs.linearise(cand[sl])
         c1[sl] = frame_cost(obs, params, noise, lin.s, lin.Rl, lin.pl, obs.pots[sl], obs.markers[sl], obs.valid[sl])
         ok = c1[sl] <= c0[sl]
         if ok.all():
@@ -81,8 +84,11 @@ def q_step_in_place(
 def relinearise(obs: Observation, q: np.ndarray, st: State, batch: int = 250, jobs: int = 1) -> State:
     """``st`` (a State of T frames with room for the linearisation) overwritten by the State at
     q (T, n), its linearisation kept: :meth:`~diegocal.stac.model.Observation.state` without a second
-    State, the forward kinematics :func:`~diegocal.stac.qphase.kinematics_batch` frames at a time."""
-    if st.xi is None:
+    State, the forward kinematics :func:`~diegocal.stac.qphase.kinematics_batch` frames at a time.
+    A State without that room: on more than :data:`~diegocal.stac.model.KEEP_FRAMES` frames its s
+    and poses overwritten, else a new State with the linearisation."""
+    if st.xi is None and q.shape[0] <= KEEP_FRAMES:
         return obs.state(q, kinematics_batch(batch), keep=True)
-    map_batches(lambda sl: _put(st, sl, obs.linearise(q[sl])), q.shape[0], kinematics_batch(batch), jobs)
+    at = obs.linearise if st.xi is not None else obs.poses_at  # a lean State: s and poses only
+    map_batches(lambda sl: _put(st, sl, at(q[sl])), q.shape[0], kinematics_batch(batch), jobs)
     return st

@@ -34,6 +34,12 @@ LOG = logging.getLogger(__name__)
 
 #: sensor groups that share one noise level σ (§2.3.5): each pot kind, and the markers
 MARKERS = "markers"
+#: A State keeps its linearisation (:class:`State`; the joint twists and ∂s/∂q of the linear pots
+#: are 2.3 of diego's 4.9 kB per frame) on at most this many frames. Above it (issue #33: a long
+#: log's STAC) it holds s and the link poses only, and each step linearises its frames again: the
+#: same numbers (the kinematics of a frame does not depend on its batch) for two more passes of
+#: the forward kinematics per iteration.
+KEEP_FRAMES = 30_000
 
 
 @dataclass(frozen=True)
@@ -310,35 +316,30 @@ class Observation(Observability):
         Rl, pl = self.kin.link_poses(poses, self.marker_links)
         return Linearisation(s, Rl, pl, xi, ds_lin)
 
+    def poses_at(self, q: np.ndarray) -> Linearisation:
+        """s and the marker link poses at q (B, n) as :meth:`evaluate` gives them, without the
+        rest of the linearisation (``xi``, ``ds_lin`` None)."""
+        s, _, Rl, pl, _ = self.evaluate(q)
+        return Linearisation(s, Rl, pl, None, None)
+
     def state(self, q: np.ndarray, batch: int = 2000, keep: bool = False) -> State:
-        """s(q) and link poses for every frame, in batches; with ``keep`` also the rest of the
-        linearisation (twists, ∂s/∂q of the linear pots: :class:`State`) for the q-phase."""
-        if keep:  # each batch written into the State's arrays (no list of parts to concatenate)
-            out = None
-            for i in range(0, q.shape[0], batch):
-                sl = slice(i, i + batch)
-                lin = self.linearise(q[sl])
-                if out is None:
-                    T = q.shape[0]
-                    out = State(
-                        *(np.empty((T, *getattr(lin, k).shape[1:])) for k in ("s", "Rl", "pl")),
-                        np.empty((6, T, lin.xi.shape[2])),
-                        np.empty((T, *lin.ds_lin.shape[1:])),
-                    )
-                out.s[sl], out.Rl[sl], out.pl[sl], out.xi[:, sl], out.ds_lin[sl] = (
-                    lin.s,
-                    lin.Rl,
-                    lin.pl,
-                    lin.xi,
-                    lin.ds_lin,
-                )
-            return out
-        parts = [self.evaluate(q[i : i + batch]) for i in range(0, q.shape[0], batch)]
-        return State(
-            np.concatenate([p[0] for p in parts]),
-            np.concatenate([p[2] for p in parts]),
-            np.concatenate([p[3] for p in parts]),
-        )
+        """s(q) and link poses for every frame, in batches, each written into the State's arrays
+        (no list of parts to concatenate); with ``keep`` also the rest of the linearisation
+        (twists, ∂s/∂q of the linear pots: :class:`State`) for the q-phase, on at most
+        :data:`KEEP_FRAMES` frames (above, the steps linearise again where they need it)."""
+        T, out = q.shape[0], None
+        keep = keep and T <= KEEP_FRAMES
+        for i in range(0, T, batch):
+            sl = slice(i, i + batch)
+            lin = self.linearise(q[sl]) if keep else self.poses_at(q[sl])
+            if out is None:
+                arrays = (np.empty((T, *getattr(lin, k).shape[1:])) for k in ("s", "Rl", "pl"))
+                kept = (np.empty((6, T, lin.xi.shape[2])), np.empty((T, *lin.ds_lin.shape[1:]))) if keep else ()
+                out = State(*arrays, *kept)
+            out.s[sl], out.Rl[sl], out.pl[sl] = lin.s, lin.Rl, lin.pl
+            if keep:
+                out.xi[:, sl], out.ds_lin[sl] = lin.xi, lin.ds_lin
+        return out
 
     # ------------------------------------------------------------------ parameters
     def nominal(self, marker_seed: str = "origin") -> Params:

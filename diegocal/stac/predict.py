@@ -21,11 +21,11 @@ from diegocal.robot import Robot
 from diegocal.stac.calibration import Calibration
 from diegocal.stac.loo import deleted_from_others, frame_slices
 from diegocal.stac.model import MARKERS, Observation
-from diegocal.stac.qphase import Noise
+from diegocal.stac.qphase import Noise, kinematics_batch
 from diegocal.stac.result import StacOptions
 from diegocal.stac.stac import initial_q
 from diegocal.stac.terms import POT_CAUSES, apply_terms, pot_columns, to_log_markers, with_slip_markers
-from diegocal.stac.track import track
+from diegocal.stac.track import track, track_in_blocks
 
 #: accepted sensor-type names: the pot kinds, all pots, and the markers; as a source, ``others``:
 #: each reading from all the other sensors of its frame
@@ -37,6 +37,10 @@ SOURCE_TYPES = (*SENSOR_TYPES, OTHERS)
 #: log in parts (its start from the pots included) keeps only one part's forward kinematics
 #: (kilobytes per frame) in memory. A log of at most this many frames is tracked whole.
 TRACK_FRAMES = 20_000
+#: Frames whose State is held at a time within a part (:func:`~diegocal.stac.track.track_in_blocks`:
+#: the same q; diego's State is 4.9 kB per frame; issue #33). A part of at most this many frames
+#: is tracked whole.
+TRACK_BLOCK = 2_000
 
 
 @dataclass(frozen=True)
@@ -170,20 +174,33 @@ def predict(
 def _tracked(obs: Observation, params, noise: Noise, start, max_steps: int, options: StacOptions, progress):
     """q tracked (:func:`~diegocal.stac.track.track`) TRACK_FRAMES at a time, each part from
     ``start(part, frames)`` (its Observation and slice: the pots' inversion steps on the part
-    too), and the pots (T, P) and markers (T, M, 3) the calibration predicts at it. Progress is
-    told per part, its time left the part's."""
+    too), a part of more than TRACK_BLOCK frames a block at a time, and the pots (T, P) and
+    markers (T, M, 3) the calibration predicts at it. Progress is told per part (and block), its
+    time left the part's (block's)."""
     T = obs.n_frames
     parts = frame_slices(T, TRACK_FRAMES)
     q = np.empty((T, obs.robot.n_joints))
     pots, markers = np.empty((T, obs.n_pots)), np.empty((T, obs.n_markers, 3))
     for i, sl in enumerate(parts):
         part, told = (obs, progress) if len(parts) == 1 else (obs.subset(sl), _part_progress(progress, i, len(parts)))
-        q[sl], st = track(part, params, noise, start(part, sl), max_steps, options.batch_size, options.jobs, told)
-        pots[sl] = params.gain * st.s + params.bias
-        xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
-        markers[sl] = xb @ params.R.T + params.T
-        del st  # let this part's States go before the next part's are made
+        if part.n_frames <= TRACK_BLOCK:
+            q[sl], st = track(part, params, noise, start(part, sl), max_steps, options.batch_size, options.jobs, told)
+            pots[sl], markers[sl] = _readings(params, st)
+            del st  # let this part's States go before the next part's are made
+            continue
+        q[sl] = track_in_blocks(
+            part, params, noise, start(part, sl), max_steps, TRACK_BLOCK, options.batch_size, options.jobs, told
+        )
+        for b in frame_slices(part.n_frames, TRACK_BLOCK):  # the readings at q, a block at a time
+            at = slice(sl.start + b.start, sl.start + b.stop)
+            pots[at], markers[at] = _readings(params, obs.subset(at).state(q[at], kinematics_batch(options.batch_size)))
     return q, pots, markers
+
+
+def _readings(params, st) -> tuple:
+    """The pots (B, P) and markers (B, M, 3) θ predicts from a State of B frames (eq. 2.11-2.20)."""
+    xb = np.einsum("tmij,mj->tmi", st.Rl, params.xyz) + st.pl
+    return params.gain * st.s + params.bias, xb @ params.R.T + params.T
 
 
 def _part_progress(progress, i: int, n: int):

@@ -290,8 +290,11 @@ def _try_batch(obs: Observation, params: Params, noise: Noise, cand, sl, new: St
 
 
 def _put(st: State, sl: slice, lin) -> None:
-    """Write a Linearisation of the frames ``sl`` into the State ``st`` (T frames)."""
-    st.s[sl], st.Rl[sl], st.pl[sl], st.xi[:, sl], st.ds_lin[sl] = lin.s, lin.Rl, lin.pl, lin.xi, lin.ds_lin
+    """Write a Linearisation of the frames ``sl`` into the State ``st`` (T frames; its s and poses
+    only where ``st`` keeps no linearisation)."""
+    st.s[sl], st.Rl[sl], st.pl[sl] = lin.s, lin.Rl, lin.pl
+    if st.xi is not None:
+        st.xi[:, sl], st.ds_lin[sl] = lin.xi, lin.ds_lin
 
 
 def _blank(obs: Observation, T: int) -> State:

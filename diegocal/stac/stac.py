@@ -82,7 +82,6 @@ from diegocal.stac.qphase import (
     irls_weight,
     kinematics_batch,
     pot_sigmas,
-    q_step,
     residuals,
     resolvable,
     rho,
@@ -144,12 +143,11 @@ def initial_q(obs: Observation, params: Params, options: StacOptions, use: np.nd
         scale = np.where(use, np.maximum(np.std(obs.pots, axis=0), 1e-6), np.inf)
         noise = Noise(scale, 1.0, use_markers=False)
         lam = np.full(obs.n_frames, 1e-2)
-        prev, st, spare = np.inf, None, None
-        for _ in range(10):
-            q, lam, st_new, cost, _ = q_step(
-                obs, params, noise, q, lam, options.batch_size, options.jobs, False, st, spare
+        prev, st = np.inf, obs.state(q, kinematics_batch(options.batch_size), keep=True)
+        for _ in range(10):  # the steps written over one State (inplace.py)
+            q, lam, st, cost, _ = q_step_in_place(
+                obs, params, noise, q, lam, st, options.batch_size, options.jobs, False
             )
-            spare, st = st, st_new
             if cost.sum() > 0.99 * prev:
                 break
             prev = cost.sum()

@@ -126,3 +126,45 @@ def test_a_long_log_is_tracked_in_parts(tree_robot, monkeypatch):
     np.testing.assert_allclose(again.q, whole.q, rtol=0, atol=1e-6)
     np.testing.assert_allclose(parts.markers, whole.markers, rtol=0, atol=1e-7)
     np.testing.assert_allclose(parts.pots, whole.pots, rtol=0, atol=1e-7)
+
+
+def test_tracking_in_blocks_takes_the_steps_of_tracking_whole(tree_robot):
+    """:func:`track_in_blocks` holds one block's State at a time and ends at ``track``'s q, to the
+    bit; tracking each block on its own does not (its frames turn to the untracked ones alone at
+    another step: a tracked frame's later steps still move it by rounding)."""
+    from diegocal.stac.track import track_in_blocks
+
+    log, obs, params, noise = _case(tree_robot)
+    q0 = log.truth.signals["q"].data + np.random.default_rng(4).normal(0.0, 0.2, (obs.n_frames, tree_robot.n_joints))
+    q0 = np.clip(q0, obs.lower, obs.upper)
+    whole, _ = track(obs, params, noise, q0.copy(), max_steps=40, batch=7)
+    alone = np.concatenate(
+        [track(obs.subset(slice(i, i + 9)), params, noise, q0[i : i + 9].copy(), 40, 7)[0] for i in range(0, 40, 9)]
+    )
+    assert not np.array_equal(alone, whole)
+    for block in (9, 16, 40):
+        np.testing.assert_array_equal(track_in_blocks(obs, params, noise, q0.copy(), 40, block, 7), whole)
+
+
+def test_predict_tracks_a_part_in_blocks_to_the_bit(tree_robot, monkeypatch):
+    """``predict`` tracks a part of more than TRACK_BLOCK frames block by block (one block's State
+    held): the same q and predicted readings, to the bit, from the pots or from a given q."""
+    import importlib
+
+    predict_mod = importlib.import_module("diegocal.stac.predict")  # the package exports its function
+    log, obs, _, _ = _case(tree_robot)
+    cal = Calibration.from_dict(log.truth.params)
+    both = ("pots", "markers")
+    whole = predict_mod.predict(log, tree_robot, cal, both, both)
+    warm = predict_mod.predict(log, tree_robot, cal, both, both, q_init=whole.q + 0.05)
+    blocks = []
+    step = tracking._until_tracked
+    monkeypatch.setattr(predict_mod, "TRACK_BLOCK", 9)
+    monkeypatch.setattr(tracking, "_until_tracked", lambda o, *a: blocks.append(o.n_frames) or step(o, *a))
+    cold = predict_mod.predict(log, tree_robot, cal, both, both)
+    again = predict_mod.predict(log, tree_robot, cal, both, both, q_init=whole.q + 0.05)
+    monkeypatch.undo()
+    assert blocks == [9, 9, 9, 9, 4] * 2
+    for a, b in ((whole, cold), (warm, again)):
+        for name in ("q", "pots", "markers"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
