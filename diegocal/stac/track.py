@@ -57,10 +57,7 @@ def track(
             )
             q[todo] = q_at
             st.put(todo, sub)
-        accepted = new_lam < lam[at]
-        was = cost[at]
-        done = np.where(accepted, np.isfinite(was) & (was - c <= TRACK_TOL * was), tried - c <= TRACK_TOL * c)
-        tracked[at] |= (new_lam >= 1e3) | done
+        tracked[at] |= _settled(new_lam, lam[at], cost[at], c, tried)
         lam[at], cost[at] = new_lam, c
         if np.all(tracked):
             break
@@ -117,10 +114,7 @@ def _until_tracked(obs: Observation, params: Params, noise: Noise, q, max_steps:
         )
         q[todo] = q_at
         st.put(todo, sub)
-        accepted = new_lam < lam[todo]
-        was = cost[todo]
-        done = np.where(accepted, np.isfinite(was) & (was - c <= TRACK_TOL * was), tried - c <= TRACK_TOL * c)
-        at[todo[(new_lam >= 1e3) | done]] = k
+        at[todo[_settled(new_lam, lam[todo], cost[todo], c, tried)]] = k
         lam[todo], cost[todo] = new_lam, c
         if np.all(at <= max_steps):
             break
@@ -128,6 +122,14 @@ def _until_tracked(obs: Observation, params: Params, noise: Noise, q, max_steps:
             progress(f"tracking q: step {k}, {int(np.sum(at <= max_steps)):,}/{T:,} frames tracked, "
                      f"{duration(eta.elapsed())} so far, at most {duration(eta.left(k))} left")
     return q, lam, at
+
+
+def _settled(new_lam, lam, was, c, tried) -> np.ndarray:
+    """The frames a step leaves tracked: λ at its cap, or the step, taken or only tried, lowering
+    the cost by at most TRACK_TOL of it."""
+    accepted = new_lam < lam
+    done = np.where(accepted, np.isfinite(was) & (was - c <= TRACK_TOL * was), tried - c <= TRACK_TOL * c)
+    return (new_lam >= 1e3) | done
 
 
 def _step_on(obs: Observation, params: Params, noise: Noise, q, lam, more, batch: int, jobs: int) -> None:
